@@ -1,0 +1,47 @@
+"""The ``piste`` command line.
+
+Each subcommand lives in ``piste.commands.<name>`` with two functions, ``add_arguments(parser)`` and
+``run(args) -> int``; modules are imported lazily so that ``piste stats`` never loads OpenGL.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from piste.errors import PisteError
+
+#: subcommand -> (module, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "demo": ("piste.commands.demo", "render the default course (PNG, and MP4 with --frames)"),
+    "stats": ("piste.commands.stats", "print the talk's terrain statistics table for a net and camera"),
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="piste", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for name, (module, help_) in COMMANDS.items():
+        p = sub.add_parser(name, help=help_, description=help_)
+        p.set_defaults(_module=module)
+        importlib.import_module(module).add_arguments(p)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(importlib.import_module(args._module).run(args) or 0)
+    except PisteError as exc:
+        print(f"piste {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

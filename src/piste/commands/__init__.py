@@ -1,0 +1,1 @@
+"""Subcommands of the ``piste`` CLI, one module each (see :mod:`piste.cli`)."""
