@@ -1,0 +1,83 @@
+"""Newell's Bézier patch text format (``.bpt``), as used for the Utah teapot.
+
+Layout::
+
+    <patch count>
+    3 3                 <- per patch: the degrees in u and v (only bicubic is supported)
+    x y z               <- 16 control points, row-major 4x4
+    ...
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from piste.errors import FormatError
+
+
+def read_bpt(path) -> np.ndarray:
+    """Read a ``.bpt`` file.
+
+    Returns
+    -------
+    (n, 4, 4, 3) float64 control points, ``P[i, j]`` = the ``4*i + j``-th point of a patch.
+
+    Raises
+    ------
+    FormatError naming the file and line of the first problem.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise FormatError(path, "no such file") from None
+    except UnicodeDecodeError as exc:
+        raise FormatError(path, f"not a text file ({exc.reason})") from None
+    lines = [(no, line.split()) for no, line in enumerate(text.splitlines(), 1) if line.strip()]
+    if not lines:
+        raise FormatError(path, "empty file: expected a patch count", line=1)
+    it = iter(lines)
+
+    def numbers(expected: int, what: str, conv=float):
+        try:
+            no, parts = next(it)
+        except StopIteration:
+            raise FormatError(path, f"unexpected end of file: expected {what}", line=len(text.splitlines()) + 1) from None
+        if len(parts) != expected:
+            raise FormatError(path, f"expected {what} ({expected} numbers), got {' '.join(parts)!r}", line=no)
+        try:
+            vals = [conv(p) for p in parts]
+        except ValueError:
+            raise FormatError(path, f"expected {what}, got {' '.join(parts)!r}", line=no) from None
+        if conv is float and not np.all(np.isfinite(vals)):
+            raise FormatError(path, f"expected finite {what}, got {' '.join(parts)!r}", line=no)
+        return no, vals
+
+    no, (count,) = numbers(1, "the patch count", int)
+    if count <= 0:
+        raise FormatError(path, f"expected a positive patch count, got {count}", line=no)
+    cp = np.empty((count, 16, 3), dtype=np.float64)
+    for p in range(count):
+        no, deg = numbers(2, f"the degrees of patch {p} ('3 3')", int)
+        if deg != [3, 3]:
+            raise FormatError(path, f"patch {p}: only bicubic patches ('3 3') are supported, got {deg}", line=no)
+        for k in range(16):
+            _, cp[p, k] = numbers(3, f"control point {k} of patch {p} as 'x y z'")
+    extra = next(it, None)
+    if extra is not None:
+        raise FormatError(path, f"trailing data after {count} patches", line=extra[0])
+    return cp.reshape(count, 4, 4, 3)
+
+
+def write_bpt(path, control_points) -> None:
+    """Write ``(n, 4, 4, 3)`` control points as a ``.bpt`` file (atomically)."""
+    from piste.formats.atomic import write_bytes_atomic
+
+    cp = np.asarray(control_points, dtype=np.float64).reshape(-1, 16, 3)
+    out = [str(len(cp))]
+    for patch in cp:
+        out.append("3 3")
+        out.extend(" ".join(repr(float(x)) for x in pt) for pt in patch)
+    write_bytes_atomic(path, ("\n".join(out) + "\n").encode())

@@ -1,0 +1,370 @@
+"""PatchNet: a curve net of bicubic Bézier patches with computed topology.
+
+Conventions
+-----------
+Control points ``P[i, j]``: ``i`` runs along ``u``, ``j`` along ``v``.  Corners and sides::
+
+    c3 (0,1) ---- side 2 (v=1) ---> c2 (1,1)
+      ^                              ^
+    side 3 (u=0)                  side 1 (u=1)
+      |                              |
+    c0 (0,0) ---- side 0 (v=0) ---> c1 (1,0)
+
+Each side runs in the direction of increasing parameter (arrows).  Sides are welded into edges:
+a side's four control points are welded to point ids (within ``tol``); an edge is the set of sides
+with the same ids in either direction.  ``side_flip`` says whether a side runs against its edge's
+canonical direction.  Welding snaps coincident boundary control points to one value, so shared
+edges are exactly equal in both patches (the basis of bit-identical, crack-free tessellation).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from piste.errors import FormatError, ValidationError
+
+#: control-point indices (i, j) of each side, in the side's own direction: (4 sides, 4 points, 2)
+SIDE_INDEX = np.array(
+    [
+        [(0, 0), (1, 0), (2, 0), (3, 0)],  # side 0: v = 0, u increasing
+        [(3, 0), (3, 1), (3, 2), (3, 3)],  # side 1: u = 1, v increasing
+        [(0, 3), (1, 3), (2, 3), (3, 3)],  # side 2: v = 1, u increasing
+        [(0, 0), (0, 1), (0, 2), (0, 3)],  # side 3: u = 0, v increasing
+    ]
+)
+#: control-point indices (i, j) of the four corners c0..c3
+CORNER_INDEX = np.array([(0, 0), (3, 0), (3, 3), (0, 3)])
+#: the corners at the start and end of each side
+SIDE_CORNERS = np.array([(0, 1), (1, 2), (3, 2), (0, 3)])
+SIDE_NAMES = ("v=0", "u=1", "v=1", "u=0")
+#: relative gap (of the edge chord) under which two sides with welded end points are taken as one
+#: shared edge that fails C0, rather than two distinct open edges
+C0_NEAR_MISS = 0.05
+_BOUNDARY = np.zeros((4, 4), dtype=bool)
+_BOUNDARY[[0, 3], :] = True
+_BOUNDARY[:, [0, 3]] = True
+
+
+def _side_str(patch: int, side: int) -> str:
+    return f"patch {patch} edge {side} ({SIDE_NAMES[side]})"
+
+
+def weld_points(points: np.ndarray, tol: float) -> np.ndarray:
+    """Cluster points closer than ``tol`` (transitively); returns ``(m,)`` int ids, numbered by
+    first occurrence, so the result is deterministic.
+
+    Parameters
+    ----------
+    points : (m, 3) float64
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    m = len(points)
+    pairs = cKDTree(points).query_pairs(tol, output_type="ndarray") if m else np.zeros((0, 2), int)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(m, m))
+    _, labels = connected_components(graph, directed=False)
+    # renumber by first occurrence
+    _, first = np.unique(labels, return_index=True)
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return rank[labels]
+
+
+@dataclass
+class PatchNet:
+    """A net of ``n`` bicubic Bézier patches.
+
+    Attributes
+    ----------
+    control_points : (n, 4, 4, 3) float64, welded (shared boundary points exactly equal)
+    uv : (n, 4, 2) float32, base-texture UV at the corners c0..c3
+    lightmap_rect : (n, 4) float32, ``(u0, v0, u1, v1)`` of each patch's light-map tile in the atlas
+        (texel-centre mapping: parameter (0, 0) maps to (u0, v0), (1, 1) to (u1, v1))
+    tol : welding tolerance in model units
+    name : a label for messages
+
+    Topology (computed in ``__post_init__``)
+    ----------------------------------------
+    side_edge : (n, 4) int32, edge id of each side
+    side_flip : (n, 4) bool, side runs against its edge's canonical direction
+    edge_cp : (e, 4, 3) float64, canonical edge control points
+    edge_patches, edge_sides : (e, 2) int32, the (up to two) patch sides on each edge, -1 if none
+    edge_degenerate : (e,) bool, a collapsed edge (all four control points welded together)
+    corner_ids : (n, 4) int32, welded point id of each corner
+    """
+
+    control_points: np.ndarray
+    uv: np.ndarray | None = None
+    lightmap_rect: np.ndarray | None = None
+    tol: float | None = None
+    name: str = "net"
+    side_edge: np.ndarray = field(init=False, repr=False)
+    side_flip: np.ndarray = field(init=False, repr=False)
+    edge_cp: np.ndarray = field(init=False, repr=False)
+    edge_patches: np.ndarray = field(init=False, repr=False)
+    edge_sides: np.ndarray = field(init=False, repr=False)
+    edge_degenerate: np.ndarray = field(init=False, repr=False)
+    corner_ids: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self):
+        cp = np.array(self.control_points, dtype=np.float64)
+        if cp.ndim != 4 or cp.shape[1:] != (4, 4, 3):
+            raise ValidationError(f"{self.name}: control_points must have shape (n, 4, 4, 3), got {cp.shape}")
+        if len(cp) == 0:
+            raise ValidationError(f"{self.name}: a patch net needs at least one patch")
+        bad = ~np.isfinite(cp).all(axis=-1)
+        if bad.any():
+            p, i, j = (int(x) for x in np.argwhere(bad)[0])
+            sides = [s for s in range(4) if any((i, j) == tuple(ij) for ij in SIDE_INDEX[s])]
+            where = f"edge {sides[0]} ({SIDE_NAMES[sides[0]]}), " if sides else "interior, "
+            raise ValidationError(
+                f"{self.name}: patch {p} {where}control point [{i}][{j}] is {cp[p, i, j].tolist()}: "
+                "expected finite coordinates"
+            )
+        n = len(cp)
+        if self.tol is None:
+            diag = float(np.linalg.norm(cp.reshape(-1, 3).max(0) - cp.reshape(-1, 3).min(0)))
+            self.tol = max(diag, 1.0) * 1e-6
+        self.tol = float(self.tol)
+        if self.uv is None:
+            self.uv = np.broadcast_to(np.array([(0, 0), (1, 0), (1, 1), (0, 1)], np.float32), (n, 4, 2)).copy()
+        self.uv = np.asarray(self.uv, dtype=np.float32).reshape(n, 4, 2)
+        if self.lightmap_rect is None:
+            self.lightmap_rect = default_lightmap_rects(n, 8)
+        self.lightmap_rect = np.asarray(self.lightmap_rect, dtype=np.float32).reshape(n, 4)
+        self.control_points = cp
+        self._build_topology()
+
+    # ------------------------------------------------------------------ topology
+    def _build_topology(self) -> None:
+        cp = self.control_points
+        n = len(cp)
+        bpts = cp[:, _BOUNDARY]  # (n, 12, 3)
+        ids = weld_points(bpts.reshape(-1, 3), self.tol)
+        # snap every welded point to its cluster's first member
+        flat = bpts.reshape(-1, 3)
+        first = np.full(ids.max() + 1, -1)
+        first[ids[::-1]] = np.arange(len(ids))[::-1]
+        cp[:, _BOUNDARY] = flat[first[ids]].reshape(n, 12, 3)
+        pid = np.full((n, 4, 4), -1, dtype=np.int64)
+        pid[:, _BOUNDARY] = ids.reshape(n, 12)
+        self.corner_ids = pid[:, CORNER_INDEX[:, 0], CORNER_INDEX[:, 1]].astype(np.int32)
+
+        keys = pid[:, SIDE_INDEX[..., 0], SIDE_INDEX[..., 1]].reshape(n * 4, 4)  # (n*4, 4)
+        flip = (keys[:, 0] > keys[:, 3]) | ((keys[:, 0] == keys[:, 3]) & (keys[:, 1] > keys[:, 2]))
+        canon = np.where(flip[:, None], keys[:, ::-1], keys)
+        degenerate = (canon == canon[:, :1]).all(axis=1)
+        # degenerate sides never pair: give each a unique key
+        canon = canon.copy()
+        side_no = np.arange(n * 4)
+        canon[degenerate] = np.stack([-1 - side_no[degenerate]] * 4, axis=1)
+        uniq, inverse, counts = np.unique(canon, axis=0, return_inverse=True, return_counts=True)
+        inverse = inverse.ravel()
+        over = np.nonzero(counts > 2)[0]
+        if len(over):
+            sides = np.nonzero(inverse == over[0])[0]
+            names = ", ".join(_side_str(s // 4, s % 4) for s in sides)
+            raise ValidationError(f"{self.name}: an edge is shared by more than two patches: {names}")
+        self._check_c0(canon, degenerate, keys)
+
+        e = len(uniq)
+        edge_patches = np.full((e, 2), -1, dtype=np.int32)
+        edge_sides = np.full((e, 2), -1, dtype=np.int32)
+        order = np.argsort(inverse, kind="stable")
+        sorted_e = inverse[order]
+        slot = np.zeros(n * 4, dtype=np.int64)
+        starts = np.searchsorted(sorted_e, sorted_e, side="left")
+        slot[order] = np.arange(n * 4) - starts
+        edge_patches[inverse, slot] = side_no // 4
+        edge_sides[inverse, slot] = side_no % 4
+        # canonical control points: from the first side, reversed if that side is flipped
+        p0, s0 = edge_patches[:, 0], edge_sides[:, 0]
+        ecp = cp[p0[:, None], SIDE_INDEX[s0][..., 0], SIDE_INDEX[s0][..., 1]]  # (e, 4, 3)
+        f0 = flip[p0 * 4 + s0]
+        ecp[f0] = ecp[f0, ::-1]
+        self.side_edge = inverse.reshape(n, 4).astype(np.int32)
+        self.side_flip = flip.reshape(n, 4)
+        self.edge_cp = ecp
+        self.edge_patches = edge_patches
+        self.edge_sides = edge_sides
+        self.edge_degenerate = degenerate[order][np.searchsorted(sorted_e, np.arange(e))]
+
+    def _check_c0(self, canon: np.ndarray, degenerate: np.ndarray, keys: np.ndarray) -> None:
+        """Sides that share both end points and nearly, but not within ``tol``, their middle
+        control points are a shared edge that breaks C0.
+
+        "Nearly" is a gap of at most ``C0_NEAR_MISS`` of the edge's chord: two open sides that merely
+        meet at their ends (the teapot's handle halves) differ by far more and stay boundaries.
+        """
+        ok = ~degenerate & (canon[:, 0] != canon[:, 3])
+        idx = np.nonzero(ok)[0]
+        if len(idx) < 2:
+            return
+        ends = np.sort(canon[idx][:, [0, 3]], axis=1)
+        order = np.lexsort((ends[:, 1], ends[:, 0]))
+        same = (ends[order][1:] == ends[order][:-1]).all(axis=1)
+        a_all, b_all = idx[order][:-1][same], idx[order][1:][same]
+        differ = (canon[a_all] != canon[b_all]).any(axis=1)
+        for a, b in zip(a_all[differ], b_all[differ]):
+            pa = self._side_points(a // 4, a % 4, keys[a][0] > keys[a][3])
+            pb = self._side_points(b // 4, b % 4, keys[b][0] > keys[b][3])
+            gap = float(np.abs(pa - pb).max())
+            chord = float(np.linalg.norm(pa[3] - pa[0]))
+            if gap <= C0_NEAR_MISS * chord:
+                raise ValidationError(
+                    f"{self.name}: {_side_str(a // 4, a % 4)} and {_side_str(b // 4, b % 4)} share their end points "
+                    f"but their middle control points differ by {gap:.6g} (tolerance {self.tol:.3g}): "
+                    "C0 continuity violated"
+                )
+
+    def _side_points(self, p: int, s: int, flipped: bool) -> np.ndarray:
+        pts = self.control_points[p, SIDE_INDEX[s][:, 0], SIDE_INDEX[s][:, 1]]
+        return pts[::-1] if flipped else pts
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def n_patches(self) -> int:
+        return len(self.control_points)
+
+    def __len__(self) -> int:
+        return len(self.control_points)
+
+    @property
+    def n_edges(self) -> int:
+        return len(self.edge_cp)
+
+    @property
+    def boundary_edges(self) -> np.ndarray:
+        """Ids of non-degenerate edges with a single patch (the net's true boundary), ``(b,)``."""
+        return np.nonzero((self.edge_patches[:, 1] < 0) & ~self.edge_degenerate)[0]
+
+    @property
+    def shared_edges(self) -> np.ndarray:
+        """Ids of edges shared by two patches, ``(s,)``."""
+        return np.nonzero(self.edge_patches[:, 1] >= 0)[0]
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Axis-aligned bounds of all control points (which contain the surface): ``(min (3,), max (3,))``."""
+        pts = self.control_points.reshape(-1, 3)
+        return pts.min(0), pts.max(0)
+
+    @property
+    def patch_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per-patch control-point bounds (convex-hull property): ``(min (n,3), max (n,3))``."""
+        pts = self.control_points.reshape(len(self), 16, 3)
+        return pts.min(1), pts.max(1)
+
+    @property
+    def patch_size(self) -> np.ndarray:
+        """A size per patch: the longest corner-to-corner diagonal, ``(n,)`` float64."""
+        c = self.control_points[:, CORNER_INDEX[:, 0], CORNER_INDEX[:, 1]]
+        return np.maximum(np.linalg.norm(c[:, 2] - c[:, 0], axis=-1), np.linalg.norm(c[:, 3] - c[:, 1], axis=-1))
+
+    def edge_midpoints(self) -> np.ndarray:
+        """Point of every edge curve at t = 0.5, ``(e, 3)`` float64."""
+        c = self.edge_cp
+        return (c[:, 0] + 3.0 * c[:, 1] + 3.0 * c[:, 2] + c[:, 3]) / 8.0
+
+    # ------------------------------------------------------------------ evaluation, LOD
+    def evaluate(self, u, v, normals: bool = True):
+        """Positions (and normals) of every patch at parameters ``(u[s], v[s])``: ``(n, s, 3)`` float64."""
+        from piste.terrain.bezier import evaluate
+
+        return evaluate(self.control_points, u, v, normals=normals)
+
+    def edge_levels(self, eye, **kwargs) -> np.ndarray:
+        """Vertices per edge (4, 6 or 8) for a camera at ``eye``: ``(e,)`` int8.  See :func:`piste.terrain.lod.edge_levels`."""
+        from piste.terrain.lod import edge_levels
+
+        return edge_levels(self, eye, **kwargs)
+
+    # ------------------------------------------------------------------ I/O
+    @classmethod
+    def from_bpt(cls, path, **kwargs) -> "PatchNet":
+        """Read Newell's patch text format (see :mod:`piste.formats.bpt`)."""
+        from piste.formats.bpt import read_bpt
+
+        return cls(read_bpt(path), name=Path(path).name, **kwargs)
+
+    @classmethod
+    def from_heightfield(cls, z, spacing, **kwargs) -> "PatchNet":
+        """Fit a C0 net to a height field by least squares (see :func:`piste.terrain.fit.fit_heightfield`)."""
+        from piste.terrain.fit import fit_heightfield
+
+        return fit_heightfield(z, spacing, **kwargs)
+
+    def save(self, path) -> None:
+        """Write the net losslessly to ``path`` (``.npz``), atomically."""
+        from piste.formats.atomic import atomic_path
+
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez_compressed(
+                    fh,
+                    format=np.array("piste.PatchNet/1"),
+                    control_points=self.control_points,
+                    uv=self.uv,
+                    lightmap_rect=self.lightmap_rect,
+                    tol=np.float64(self.tol),
+                    name=np.array(self.name),
+                )
+
+    @classmethod
+    def load(cls, path) -> "PatchNet":
+        """Read a net written by :meth:`save`."""
+        path = Path(path)
+        try:
+            data = np.load(path, allow_pickle=False)
+        except FileNotFoundError:
+            raise FormatError(path, "no such file") from None
+        except Exception as exc:  # zipfile/pickle errors: not an npz
+            raise FormatError(path, f"not a piste .npz patch net ({exc})") from None
+        with data:
+            for key in ("control_points", "uv", "lightmap_rect", "tol"):
+                if key not in data.files:
+                    raise FormatError(path, "missing array", field=key)
+            fmt = str(data["format"]) if "format" in data.files else "?"
+            if fmt != "piste.PatchNet/1":
+                raise FormatError(path, f"expected format 'piste.PatchNet/1', got {fmt!r}", field="format")
+            try:
+                return cls(
+                    data["control_points"],
+                    uv=data["uv"],
+                    lightmap_rect=data["lightmap_rect"],
+                    tol=float(data["tol"]),
+                    name=str(data["name"]) if "name" in data.files else path.name,
+                )
+            except ValidationError as exc:
+                raise FormatError(path, str(exc), field="control_points") from None
+
+    def subset(self, patches) -> "PatchNet":
+        """A new net of the selected patches (topology recomputed)."""
+        patches = np.asarray(patches)
+        return PatchNet(
+            self.control_points[patches], self.uv[patches], self.lightmap_rect[patches], self.tol, self.name
+        )
+
+
+def default_lightmap_rects(n: int, res: int = 8, gutter: int = 1) -> np.ndarray:
+    """Light-map tiles for ``n`` patches in a square atlas of ``res x res`` tiles with gutters.
+
+    Each tile occupies ``res + 2 * gutter`` texels; parameter (0, 0) maps to the centre of the
+    tile's first texel and (1, 1) to the centre of its last, so bilinear filtering never reads a
+    neighbour's texels.  Returns ``(n, 4)`` float32 ``(u0, v0, u1, v1)``.
+    """
+    cell = res + 2 * gutter
+    cols = int(np.ceil(np.sqrt(n)))
+    rows = int(np.ceil(n / cols))
+    w, h = cols * cell, rows * cell
+    k = np.arange(n)
+    tx, ty = k % cols, k // cols
+    x0 = tx * cell + gutter + 0.5
+    y0 = ty * cell + gutter + 0.5
+    return np.stack([x0 / w, y0 / h, (x0 + res - 1) / w, (y0 + res - 1) / h], axis=1).astype(np.float32)
