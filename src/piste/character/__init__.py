@@ -11,6 +11,7 @@ blend_morphs(mesh, weights), morphs_to_null_bones(mesh, n_bones)                
 
 from piste.character.model import Camera, Clip, Light, Model, Pose, Skeleton, SkinnedMesh, Track
 from piste.character.morph import blend_morphs, vertex_normals
+from piste.formats.gltf import load_gltf
 
 __all__ = [
     "Camera",
@@ -22,5 +23,6 @@ __all__ = [
     "SkinnedMesh",
     "Track",
     "blend_morphs",
+    "load_gltf",
     "vertex_normals",
 ]
