@@ -1,0 +1,295 @@
+"""Skinning, three ways: exact linear blend skinning, SSX post-transform weighting, SSX Tricky
+blended (palette) matrices.
+
+All three take *skin matrices* ``(b, 4, 4)`` (``Skeleton.skin_matrices(pose)`` =
+``world @ inverse_bind``: bind-space vertex -> posed world, column vectors) and return
+``positions (v, 3) float32`` and unit ``normals (v, 3) float32``.
+
+Schemes
+-------
+``exact`` (the reference)
+    Per vertex the blended matrix ``A = sum_i w_i S_i`` (all influences, float64); positions
+    ``A @ [p, 1]``; normals by the inverse-transpose of A's 3x3 (computed as its cofactor
+    matrix, sign-corrected by ``det``), renormalised. Correct also for scaled bones.
+``post_transform`` (SSX)
+    A precomputed :class:`PostTransformMesh` stores each vertex in the local space of each of its
+    influencing bones, ``(v, k, 3)`` with ``v_Bi = inverse_bind_i @ p``. Per frame the bone
+    matrices ``M_Bi = S_i @ inverse(inverse_bind_i)`` (bone -> world) transform each copy and the
+    results are weighted: ``v = sum_i w_i (M_Bi v_Bi)``. Normals are **not** weighted: they are
+    stored in the dominant (largest-weight) bone's space and transformed by that bone only.
+``blended`` (SSX Tricky)
+    Weights quantized to ``step`` with at most ``max_bones`` bones (:func:`palette`); per frame
+    one weighted matrix per palette entry; each vertex (position and normal) is transformed by
+    its single palette matrix's 3x4 (normals by its 3x3, then renormalised). The per-frame
+    transform is one sparse matrix-vector product: a constant CSR matrix (built once) maps the
+    flattened palette ``(p*12,)`` to all positions and normals, which is the gather + 3x4
+    multiply of every vertex in one call (scipy; a numpy gather + einsum fallback exists).
+
+Positions agree exactly between ``exact`` and ``post_transform`` (up to float32 rounding);
+``blended`` departs by the weight quantization (CesiumMan: ~1-3 % of its height).
+
+API
+---
+- ``skin(mesh, bone_matrices, scheme="exact", step=0.25, max_bones=3, inverse_bind=None)``
+- ``skin_exact(mesh, bone_matrices)``
+- ``PostTransformMesh.build(mesh, inverse_bind=None)``, ``.apply(bone_matrices)``
+- ``BlendedMesh.build(mesh, step, max_bones)``, ``.apply(bone_matrices)``
+- ``SCHEMES``
+"""
+
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+
+from piste.character.palette import Palette, _top_weights, palette as _palette
+from piste.errors import ConfigError, ValidationError
+
+__all__ = ["skin", "skin_exact", "PostTransformMesh", "BlendedMesh", "SCHEMES", "normalize_rows"]
+
+SCHEMES = ("exact", "post_transform", "blended")
+
+
+def normalize_rows(n: np.ndarray) -> np.ndarray:
+    """Normalise the rows of ``n (v, 3)`` in place (zero rows stay zero); returns ``n``."""
+    s = n * n
+    length = s[:, 0] + s[:, 1] + s[:, 2]
+    np.sqrt(length, out=length)
+    length[length == 0] = 1.0
+    np.divide(1.0, length, out=length)
+    n *= length[:, None]
+    return n
+
+
+def _check_matrices(bone_matrices, mesh) -> np.ndarray:
+    m = np.asarray(bone_matrices)
+    if m.ndim != 3 or m.shape[1:] not in ((4, 4), (3, 4)):
+        raise ValidationError(f"bone matrices must be (b, 4, 4), got shape {m.shape}")
+    if mesh.joints.size and int(mesh.joints.max()) >= m.shape[0]:
+        # only influences with weight > 0 must be in range
+        used = mesh.weights > 0
+        if used.any() and int(mesh.joints[used].max()) >= m.shape[0]:
+            raise ValidationError(f"mesh {getattr(mesh, 'name', '')!r} uses bone {int(mesh.joints[used].max())} "
+                                  f"but only {m.shape[0]} bone matrices were given")
+    return m
+
+
+def _cofactor3(a: np.ndarray) -> np.ndarray:
+    """Cofactor matrices ``(..., 3, 3)`` (= det * inverse-transpose) of ``a (..., 3, 3)``."""
+    c0, c1, c2 = a[..., :, 0], a[..., :, 1], a[..., :, 2]
+    return np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=-1)
+
+
+def skin_exact(mesh, bone_matrices):
+    """Reference linear blend skinning (float64 inside, all influences).
+
+    Returns ``positions (v, 3) float32`` and unit ``normals (v, 3) float32`` (inverse-transpose
+    of each vertex's blended 3x3, renormalised).
+    """
+    m = _check_matrices(bone_matrices, mesh).astype(np.float64)[:, :3, :]
+    j = mesh.joints.astype(np.intp)
+    w = mesh.weights.astype(np.float64)
+    total = w.sum(1, keepdims=True)
+    total[total == 0] = 1.0
+    w = w / total
+    safe_j = np.where(w > 0, j, 0)
+    a = np.einsum("vk,vkij->vij", w, m[safe_j])  # (v, 3, 4)
+    p = mesh.positions.astype(np.float64)
+    pos = np.einsum("vij,vj->vi", a[:, :, :3], p) + a[:, :, 3]
+    cof = _cofactor3(a[:, :, :3])
+    det = np.einsum("vi,vi->v", a[:, :, 0], np.cross(a[:, :, 1], a[:, :, 2]))
+    nrm = np.einsum("vij,vj->vi", cof, mesh.normals.astype(np.float64)) * np.sign(det + (det == 0))[:, None]
+    nrm = normalize_rows(nrm)
+    return pos.astype(np.float32), nrm.astype(np.float32)
+
+
+@dataclass
+class PostTransformMesh:
+    """SSX post-transform weighting data, precomputed once per mesh.
+
+    Attributes
+    ----------
+    bone_positions : (v, k, 3) float32   the vertex in each influencing bone's local space
+    bone_normals : (v, 3) float32        the normal in the dominant bone's space
+    bones : (v, k) int32                 influencing bones, by descending weight (slot 0 dominant)
+    weights : (v, k) float32             their weights (renormalised, unused slots 0)
+    bind_world : (b, 4, 4) float64       ``inverse(inverse_bind)``: converts skin matrices to bone
+                                         matrices (bone -> world)
+    """
+
+    bone_positions: np.ndarray
+    bone_normals: np.ndarray
+    bones: np.ndarray
+    weights: np.ndarray
+    bind_world: np.ndarray
+
+    @classmethod
+    def build(cls, mesh, inverse_bind=None, max_bones: int = 4) -> "PostTransformMesh":
+        """Store ``mesh``'s vertices in bone space.
+
+        ``inverse_bind (b, 4, 4)``: the skeleton's inverse bind matrices (bind -> bone space).
+        None uses identities for every bone used: "bone space" is then the bind space and the
+        arithmetic (transform by each bone, then weight; dominant-bone normals) is unchanged.
+        """
+        bones, w = _top_weights(mesh.joints, mesh.weights, max_bones)
+        nb = int(bones.max()) + 1 if bones.size else 1
+        if inverse_bind is None:
+            ib = np.broadcast_to(np.eye(4), (nb, 4, 4)).copy()
+        else:
+            ib = np.asarray(inverse_bind, dtype=np.float64)
+            if ib.ndim != 3 or ib.shape[1:] != (4, 4):
+                raise ValidationError(f"inverse_bind must be (b, 4, 4), got {ib.shape}")
+            if ib.shape[0] < nb:
+                raise ValidationError(f"mesh uses bone {nb - 1} but inverse_bind has {ib.shape[0]} bones")
+        bones = np.where(w > 0, bones, bones[:, :1]).astype(np.int32)
+        p = mesh.positions.astype(np.float64)
+        mats = ib[bones]  # (v, k, 4, 4)
+        bp = np.einsum("vkij,vj->vki", mats[..., :3, :3], p) + mats[..., :3, 3]
+        dom = ib[bones[:, 0], :3, :3]
+        cof = _cofactor3(dom)
+        bn = normalize_rows(np.einsum("vij,vj->vi", cof, mesh.normals.astype(np.float64)))
+        det = np.linalg.det(ib[:, :3, :3])
+        bind_world = np.linalg.inv(ib) if np.all(np.abs(det) > 1e-12) else np.linalg.pinv(ib)
+        return cls(bp.astype(np.float32), bn.astype(np.float32), bones, w.astype(np.float32), bind_world)
+
+    def bone_matrices(self, skin_matrices) -> np.ndarray:
+        """Bone -> world matrices ``(b, 3, 4) float32`` from skin matrices ``(b, 4, 4)``."""
+        s = np.asarray(skin_matrices, dtype=np.float64)
+        b = self.bind_world.shape[0]
+        return np.matmul(s[:b, :3, :], self.bind_world).astype(np.float32)
+
+    def apply(self, skin_matrices):
+        """Skin one frame: ``positions (v, 3) float32``, ``normals (v, 3) float32``."""
+        mb = self.bone_matrices(skin_matrices)
+        g = mb[self.bones]  # (v, k, 3, 4)
+        pos = np.einsum("vkij,vkj->vki", g[..., :3], self.bone_positions)
+        pos += g[..., 3]
+        pos = np.einsum("vk,vki->vi", self.weights, pos)
+        dom = g[:, 0, :, :3]
+        nrm = normalize_rows(np.einsum("vij,vj->vi", dom, self.bone_normals))
+        return pos.astype(np.float32, copy=False), nrm
+
+
+class BlendedMesh:
+    """SSX Tricky blended-matrix skinning of one mesh, precomputed once.
+
+    Attributes
+    ----------
+    palette : Palette            quantized weight combinations and each vertex's entry
+    n_vertices : int
+    """
+
+    def __init__(self, palette: Palette, positions, normals, use_sparse: bool | None = None):
+        self.palette = palette
+        p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
+        n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
+        v = p.shape[0]
+        if palette.index.shape[0] != v or n.shape[0] != v:
+            raise ValidationError(f"palette has {palette.index.shape[0]} vertices, positions {v}, normals {n.shape[0]}")
+        self.n_vertices = v
+        self._pos_h = np.concatenate([p, np.ones((v, 1), np.float32)], axis=1)  # (v, 4)
+        self._nrm_h = np.concatenate([n, np.zeros((v, 1), np.float32)], axis=1)  # (v, 4)
+        self._matrices = np.empty((palette.size, 3, 4), np.float32)
+        self._sparse = None
+        if use_sparse is None or use_sparse:
+            try:
+                import scipy.sparse as sp
+            except ImportError:  # pragma: no cover - scipy is in the dev environment
+                if use_sparse:
+                    raise ConfigError("use_sparse=True needs scipy") from None
+            else:
+                self._sparse = self._build_sparse(sp, palette.index, p, n)
+
+    @staticmethod
+    def _build_sparse(sp, index, p, n):
+        """CSR ``(6v, 12p) float32``: rows ``3*i + r`` give position coordinate r of vertex i,
+        rows ``3v + 3*i + r`` the (unnormalised) normal; columns index the flattened palette."""
+        v = p.shape[0]
+        psize = int(index.max()) + 1 if v else 0
+        base = index.astype(np.int64)[:, None, None] * 12 + np.arange(3)[None, :, None] * 4
+        cols_p = (base + np.arange(4)[None, None, :]).reshape(-1)
+        cols_n = (base + np.arange(3)[None, None, :]).reshape(-1)
+        data_p = np.broadcast_to(np.concatenate([p, np.ones((v, 1), np.float32)], 1)[:, None, :], (v, 3, 4)).reshape(-1)
+        data_n = np.broadcast_to(n[:, None, :], (v, 3, 3)).reshape(-1)
+        indptr = np.concatenate([np.arange(0, 12 * v, 4), 12 * v + np.arange(0, 9 * v + 1, 3)])
+        itype = np.int32 if 21 * v < 2**31 and 12 * psize < 2**31 else np.int64
+        return sp.csr_matrix((np.concatenate([data_p, data_n]).astype(np.float32),
+                              np.concatenate([cols_p, cols_n]).astype(itype), indptr.astype(itype)),
+                             shape=(6 * v, 12 * max(psize, 1)))
+
+    @classmethod
+    def build(cls, mesh, step: float = 0.25, max_bones: int = 3, use_sparse: bool | None = None) -> "BlendedMesh":
+        """Quantize ``mesh``'s weights into a palette and precompute the per-vertex mapping."""
+        return cls(_palette(mesh, step, max_bones), mesh.positions, mesh.normals, use_sparse)
+
+    def apply(self, skin_matrices, normalize: bool = True):
+        """Skin one frame: generate the palette ``(p, 3, 4)`` then transform every vertex by its
+        entry. Returns ``positions (v, 3) float32`` and ``normals (v, 3) float32`` (unit if
+        ``normalize``)."""
+        m = self.palette.matrices(skin_matrices, out=self._matrices)
+        v = self.n_vertices
+        if self._sparse is not None:
+            out = self._sparse @ m.reshape(-1)
+            pos = out[: 3 * v].reshape(v, 3)
+            nrm = out[3 * v:].reshape(v, 3)
+        else:
+            g = m[self.palette.index]
+            pos = np.einsum("vij,vj->vi", g, self._pos_h)
+            nrm = np.einsum("vij,vj->vi", g, self._nrm_h)
+        if normalize:
+            normalize_rows(nrm)
+        return pos, nrm
+
+
+# ---------------------------------------------------------------------------------- skin()
+_CACHE: dict = {}
+
+
+def _cached(mesh, key, make):
+    """Precomputed data for ``mesh`` (weakly keyed by identity, invalidated when its arrays are
+    replaced)."""
+    stamp = (id(mesh.positions), id(mesh.normals), id(mesh.joints), id(mesh.weights))
+    k = (id(mesh),) + key
+    hit = _CACHE.get(k)
+    if hit is not None and hit[0] == stamp:
+        return hit[1]
+    obj = make()
+    try:
+        ref = weakref.ref(mesh, lambda _r, k=k: _CACHE.pop(k, None))
+    except TypeError:  # not weak-referenceable: do not cache
+        return obj
+    _CACHE[k] = (stamp, obj, ref)
+    return obj
+
+
+def skin(mesh, bone_matrices, scheme: str = "exact", step: float = 0.25, max_bones: int = 3,
+         inverse_bind=None, normalize: bool = True):
+    """Skin ``mesh`` with skin matrices ``bone_matrices (b, 4, 4)``.
+
+    Parameters
+    ----------
+    mesh : SkinnedMesh           ``positions``, ``normals``, ``joints (v,4)``, ``weights (v,4)``
+    bone_matrices : (b, 4, 4)    ``Skeleton.skin_matrices(pose)``
+    scheme : "exact" | "post_transform" | "blended"   (see the module docstring)
+    step, max_bones              weight quantization of ``blended``
+    inverse_bind : (b, 4, 4)     bone spaces of ``post_transform`` (None: identities)
+    normalize : bool             renormalise ``blended`` normals
+
+    Returns ``positions (v, 3) float32``, ``normals (v, 3) float32``. The per-mesh precomputation
+    of ``post_transform`` and ``blended`` is cached on the mesh object (by identity); use
+    :class:`PostTransformMesh` / :class:`BlendedMesh` directly to hold it yourself.
+    """
+    if scheme == "exact":
+        return skin_exact(mesh, bone_matrices)
+    m = _check_matrices(bone_matrices, mesh)
+    if scheme == "post_transform":
+        ib_key = None if inverse_bind is None else np.asarray(inverse_bind).tobytes()
+        pt = _cached(mesh, ("post", ib_key), lambda: PostTransformMesh.build(mesh, inverse_bind))
+        return pt.apply(m)
+    if scheme == "blended":
+        bm = _cached(mesh, ("blended", float(step), int(max_bones)),
+                     lambda: BlendedMesh.build(mesh, step, max_bones))
+        return bm.apply(m, normalize=normalize)
+    raise ConfigError(f"skinning scheme must be one of {SCHEMES}, got {scheme!r}")
