@@ -34,3 +34,40 @@ def gltf_model():
         return _load_gltf_cached(str(files[0]))
 
     return get
+
+
+# ------------------------------------------------------------------------------------ OpenGL
+# One headless context (EGL; Mesa llvmpipe without a GPU) for the whole session.  Tests that
+# use it are skipped, with the reason, only when no context can be created at all; set
+# PISTE_REQUIRE_GL=1 (CI) to make that a failure instead.
+
+
+@pytest.fixture(scope="session")
+def gl_context():
+    from piste.errors import RenderError
+    from piste.render.context import create_context
+
+    try:
+        ctx = create_context()
+    except RenderError as exc:
+        if os.environ.get("PISTE_REQUIRE_GL"):
+            pytest.fail(f"PISTE_REQUIRE_GL is set but no OpenGL context: {exc}")
+        pytest.skip(f"no headless OpenGL context can be created here: {exc}")
+    yield ctx
+    ctx.release()
+
+
+@pytest.fixture
+def gl(gl_context):
+    """The shared moderngl context; asserts there is no pending GL error before and after the test."""
+    err = gl_context.error
+    assert err == "GL_NO_ERROR", f"GL error {err} left over before the test"
+    yield gl_context
+    err = gl_context.error
+    assert err == "GL_NO_ERROR", f"the test left GL error {err}"
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if "gl" in getattr(item, "fixturenames", ()) or "gl_context" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.gl)

@@ -1,0 +1,133 @@
+"""OpenGL contexts (headless EGL) and off-screen framebuffers with pixel read-back.
+
+On a machine without a GPU, ``moderngl.create_standalone_context(backend="egl")`` runs on Mesa's
+llvmpipe (GL 4.5 core).  It needs the Debian packages ``libegl1 libgl1 libgl1-mesa-dri``.
+
+API
+---
+create_context      a headless moderngl context, or RenderError saying what to install
+Offscreen           colour RGBA8 + depth framebuffer of W x H with ``read() -> (H, W, 4) uint8``
+save_png            write an (H, W, 3|4) uint8 image atomically
+load_shader         the text of a shader in ``piste/render/shaders``
+check_gl_error      raise RenderError if the context has a pending GL error
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from piste.errors import RenderError
+
+__all__ = ["create_context", "Offscreen", "save_png", "load_shader", "check_gl_error", "APT_PACKAGES"]
+
+#: Debian/Ubuntu packages that provide headless OpenGL through EGL (Mesa llvmpipe without a GPU)
+APT_PACKAGES = ("libegl1", "libgl1", "libgl1-mesa-dri")
+SHADER_DIR = Path(__file__).parent / "shaders"
+
+
+def create_context(backend: str = "egl", require: tuple[int, int] = (3, 3)):
+    """A standalone (window-less) moderngl context.
+
+    Parameters
+    ----------
+    backend : "egl" (headless, the default) or None for the platform default (GLX/WGL/CGL)
+    require : the minimum OpenGL version (major, minor)
+
+    Raises
+    ------
+    RenderError naming the packages to install when no context can be created.
+    """
+    try:
+        import moderngl
+    except ImportError as exc:  # pragma: no cover - moderngl is a hard dependency
+        raise RenderError(f"moderngl is not installed ({exc}); run `pip install moderngl`") from None
+    kwargs = {"require": require[0] * 100 + require[1] * 10}
+    if backend:
+        kwargs["backend"] = backend
+    try:
+        return moderngl.create_standalone_context(**kwargs)
+    except Exception as exc:
+        raise RenderError(
+            f"cannot create a headless OpenGL {require[0]}.{require[1]} context (backend={backend!r}): {exc}. "
+            f"On Debian/Ubuntu install the Mesa EGL driver: "
+            f"`sudo apt-get install -y --no-install-recommends {' '.join(APT_PACKAGES)}` "
+            "(`make demo` does this for you)."
+        ) from None
+
+
+def check_gl_error(ctx, where: str = "") -> None:
+    """Raise :class:`RenderError` if ``ctx.error`` is not ``GL_NO_ERROR``."""
+    err = ctx.error
+    if err != "GL_NO_ERROR":
+        raise RenderError(f"OpenGL error {err}" + (f" after {where}" if where else ""))
+
+
+@lru_cache(maxsize=None)
+def load_shader(name: str) -> str:
+    """Source of ``piste/render/shaders/<name>``."""
+    path = SHADER_DIR / name
+    try:
+        return path.read_text()
+    except FileNotFoundError:
+        raise RenderError(f"{path}: shader not found (is the package installed with its data files?)") from None
+
+
+class Offscreen:
+    """An off-screen render target: colour RGBA8 (+ depth 24) of ``size = (W, H)``.
+
+    ``read()`` returns the colour buffer as ``(H, W, 4) uint8`` with row 0 at the top of the image.
+    """
+
+    def __init__(self, ctx, size: tuple[int, int], depth: bool = True):
+        w, h = int(size[0]), int(size[1])
+        if w < 1 or h < 1 or w > 16384 or h > 16384:
+            raise RenderError(f"framebuffer size must be between 1x1 and 16384x16384, got {w}x{h}")
+        self.ctx = ctx
+        self.size = (w, h)
+        self.color = ctx.renderbuffer((w, h), 4)
+        self.depth = ctx.depth_renderbuffer((w, h)) if depth else None
+        self.fbo = ctx.framebuffer(color_attachments=[self.color], depth_attachment=self.depth)
+        self._buf = np.empty((h, w, 4), dtype=np.uint8)
+
+    @property
+    def width(self) -> int:
+        return self.size[0]
+
+    @property
+    def height(self) -> int:
+        return self.size[1]
+
+    def use(self) -> None:
+        self.fbo.use()
+        self.ctx.viewport = (0, 0, *self.size)
+
+    def clear(self, rgba=(0.0, 0.0, 0.0, 1.0), depth: float = 1.0) -> None:
+        self.fbo.clear(*rgba, depth=depth)
+
+    def read(self) -> np.ndarray:
+        """The colour buffer, ``(H, W, 4) uint8``, top row first (a fresh array)."""
+        self.fbo.read_into(self._buf, components=4, alignment=1)
+        return self._buf[::-1].copy()
+
+    def release(self) -> None:
+        for obj in (self.fbo, self.color, self.depth):
+            if obj is not None:
+                obj.release()
+
+
+def save_png(path, image) -> Path:
+    """Write ``image`` ``(H, W, 3|4) uint8`` (or ``(H, W)``) to ``path`` as PNG, atomically."""
+    from PIL import Image
+
+    from piste.formats.atomic import atomic_path
+
+    img = np.asarray(image)
+    if img.dtype != np.uint8 or img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (3, 4)):
+        raise RenderError(f"save_png({path}): expected an (H, W, 3|4) uint8 image, got {img.shape} {img.dtype}")
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        Image.fromarray(np.ascontiguousarray(img)).save(tmp, format="PNG")
+    return path

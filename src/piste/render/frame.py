@@ -1,0 +1,211 @@
+"""One frame of terrain, as the talk does it: camera -> per-edge LOD -> frustum cull -> tessellate
+the visible patches -> upload -> draw (sky, terrain passes) -> read back.
+
+API
+---
+TerrainRenderer     owns a context, an off-screen target, the sky and terrain passes
+Frame               one rendered frame: image, what was drawn, timings (ms)
+summarize           the talk's statistics over many frames (a dict for ``terrain.format_stats``)
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from piste.errors import ConfigError
+from piste.render.context import Offscreen, check_gl_error, create_context
+from piste.render.sky_pass import HORIZON, SkyPass
+from piste.render.terrain_pass import TerrainPass
+
+__all__ = ["TerrainRenderer", "Frame", "summarize", "DEFAULT_FOG_DENSITY"]
+
+#: fog density per metre (about 45 % haze at 1 km)
+DEFAULT_FOG_DENSITY = 6e-4
+
+
+@dataclass
+class Frame:
+    """One rendered frame.
+
+    Attributes
+    ----------
+    image : (H, W, 4) uint8, top row first (None when not read back)
+    patches : patches drawn (after culling), patches_total : patches in the net
+    kind_counts : {4: n, 6: n, 8: n, 0: n (glue), -1: n (uniform at other levels)}
+    triangles, vertices : drawn
+    timings : ms per stage: ``lod``, ``cull``, ``tessellate``, ``upload`` (CPU), ``draw`` (GL calls +
+        glFinish), ``readback``; plus ``cpu`` and ``gpu`` sums and ``total``
+    """
+
+    image: np.ndarray | None
+    patches: int
+    patches_total: int
+    kind_counts: dict
+    triangles: int
+    vertices: int
+    timings: dict = field(default_factory=dict)
+
+
+class TerrainRenderer:
+    """Renders a :class:`piste.terrain.PatchNet` off-screen.
+
+    Parameters
+    ----------
+    net : PatchNet
+    size : (W, H) pixels
+    ctx : a moderngl context to share (default: a new headless EGL context)
+    lightmap : "placeholder" (normals lit by a fixed sun, :func:`placeholder_lightmap`), an atlas
+        ``(H, W, 3|4) uint8`` laid out by ``net.lightmap_rect`` (e.g. a baked one), or None (unlit)
+    base_texture : (N, N, 3|4) uint8 (default: procedural snow)
+    lod_near, lod_far : per-edge LOD distance thresholds (default: the terrain core's)
+    """
+
+    def __init__(self, net, size=(640, 448), ctx=None, lightmap="placeholder", base_texture=None,
+                 lod_near: float | None = None, lod_far: float | None = None):
+        self.net = net
+        self.ctx = ctx if ctx is not None else create_context()
+        self.target = Offscreen(self.ctx, size)
+        if isinstance(lightmap, str):
+            if lightmap != "placeholder":
+                raise ConfigError(f"lightmap must be 'placeholder', an atlas image or None, got {lightmap!r}")
+            from piste.render.textures import placeholder_lightmap
+
+            lightmap = placeholder_lightmap(net)
+        self.terrain = TerrainPass(self.ctx, lightmap=lightmap, base_texture=base_texture)
+        self.sky = SkyPass(self.ctx)
+        self.lod_kwargs = {k: v for k, v in (("near", lod_near), ("far", lod_far)) if v is not None}
+        self.bounds = net.patch_bounds
+        self.mesh = None
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return self.target.size
+
+    def set_lightmap(self, atlas) -> None:
+        """Plug in another light-map atlas ``(H, W, 3|4) uint8`` (e.g. a baked one)."""
+        self.terrain.set_lightmap(atlas)
+
+    # ------------------------------------------------------------------ CPU side
+    def levels(self, camera, lod: bool = True):
+        """Vertices per edge for ``camera``: ``(e,)`` int array, or the int 8 with ``lod=False``."""
+        return self.net.edge_levels(camera.eye, **self.lod_kwargs) if lod else 8
+
+    def visible(self, camera) -> np.ndarray:
+        """Patches whose control-point boxes meet the view frustum, ``(p,)`` int64 (vectorised)."""
+        from piste.terrain.lod import cull_boxes
+
+        lo, hi = self.bounds
+        return np.nonzero(cull_boxes(lo, hi, camera.view_projection()))[0]
+
+    def prepare(self, camera, lod: bool = True, levels=None, timings: dict | None = None):
+        """LOD, cull and tessellate for ``camera``; returns the :class:`TerrainMesh`.
+
+        ``levels`` overrides the LOD (an ``(e,)`` array or one int for every edge).
+        """
+        from piste.terrain.tessellate import tessellate
+
+        t = timings if timings is not None else {}
+        t0 = time.perf_counter()
+        if levels is None:
+            levels = self.levels(camera, lod)
+        t1 = time.perf_counter()
+        pids = self.visible(camera)
+        t2 = time.perf_counter()
+        mesh = tessellate(self.net, levels, patches=pids)
+        t3 = time.perf_counter()
+        t.update(lod=(t1 - t0) * 1e3, cull=(t2 - t1) * 1e3, tessellate=(t3 - t2) * 1e3)
+        return mesh
+
+    # ------------------------------------------------------------------ a frame
+    def render(self, camera, lod: bool = True, lightmap_mode: str = "modulate", debug: str | None = None,
+               fog: float | None = DEFAULT_FOG_DENSITY, sky: bool = True, clear=(0.0, 0.0, 0.0, 1.0),
+               levels=None, read: bool = True) -> Frame:
+        """Render one frame of the terrain seen by ``camera`` (its aspect is set to the target's).
+
+        Parameters
+        ----------
+        lod : per-edge distance LOD (False: every patch 8x8)
+        lightmap_mode : "modulate" (one pass) or "ps2" (base pass + blended light-map pass)
+        debug : None, "base", "lightmap", "lod" (patches coloured by LOD + wireframe), "wire"
+        fog : density per metre (None or 0: no fog); debug views have no fog
+        sky : draw the gradient sky (else the clear colour shows)
+        levels : override the LOD levels (``(e,)`` or an int)
+        read : read the image back
+        """
+        camera = replace(camera, aspect=self.size[0] / self.size[1])
+        t: dict = {}
+        mesh = self.prepare(camera, lod=lod, levels=levels, timings=t)
+        t0 = time.perf_counter()
+        self.terrain.upload(mesh, kinds=debug == "lod")
+        t1 = time.perf_counter()
+        vp = camera.view_projection()
+        self.target.use()
+        self.target.clear(clear)
+        if sky:
+            self.sky.draw(vp)
+        fog_rgba = None if not fog or debug is not None else (*HORIZON, float(fog))
+        self.terrain.draw(vp, camera.eye, lightmap_mode=lightmap_mode, debug=debug, fog=fog_rgba)
+        self.ctx.finish()
+        t2 = time.perf_counter()
+        image = self.target.read() if read else None
+        t3 = time.perf_counter()
+        check_gl_error(self.ctx, "drawing the terrain")
+        t.update(upload=(t1 - t0) * 1e3, draw=(t2 - t1) * 1e3, readback=(t3 - t2) * 1e3)
+        t["cpu"] = t["lod"] + t["cull"] + t["tessellate"] + t["upload"]
+        t["gpu"] = t["draw"] + t["readback"]
+        t["total"] = t["cpu"] + t["gpu"]
+        kind = np.asarray(mesh.patch_kind)
+        counts = {k: int(np.count_nonzero(kind == k)) for k in (4, 6, 8, 0)}
+        counts[-1] = int(len(kind) - sum(counts.values()))
+        self.mesh = mesh
+        return Frame(image, len(kind), len(self.net), counts, int(mesh.n_triangles), int(mesh.n_vertices), t)
+
+    def release(self) -> None:
+        self.terrain.release()
+        self.sky.release()
+        self.target.release()
+
+
+def summarize(frames: list[Frame]) -> dict:
+    """The talk's statistics over ``frames`` (all patches drawn, summed), as a dict with the keys
+    of :func:`piste.terrain.stats` (so :func:`piste.terrain.format_stats` prints it), plus mean
+    timings ``lod_ms``, ``cull_ms``, ``tess_ms``, ``upload_ms``, ``cpu_ms``, ``draw_ms``,
+    ``readback_ms``, ``frame_ms`` and ``fps``."""
+    if not frames:
+        raise ConfigError("summarize: no frames")
+    p = sum(f.patches for f in frames)
+    polys = sum(f.triangles for f in frames)
+    kc = {k: sum(f.kind_counts[k] for f in frames) for k in (4, 6, 8, 0, -1)}
+    pct = (lambda k: 100.0 * kc[k] / p) if p else (lambda k: 0.0)
+    mean = {k: float(np.mean([f.timings[k] for f in frames])) for k in frames[0].timings}
+    no_lod = 98 * p
+    tess_s = sum(f.timings["tessellate"] for f in frames) / 1e3
+    return {
+        "frames": len(frames),
+        "patches": round(p / len(frames)),
+        "patches_total": frames[0].patches_total,
+        "pct_4": pct(4),
+        "pct_6": pct(6),
+        "pct_8": pct(8),
+        "pct_other": pct(-1),
+        "pct_nonuniform": pct(0),
+        "polys": round(polys / len(frames)),
+        "vertices": round(sum(f.vertices for f in frames) / len(frames)),
+        "avg_polys_per_patch": polys / p if p else 0.0,
+        "tess_ms": mean["tessellate"],
+        "mpolys_per_s": polys / tess_s / 1e6 if tess_s > 0 else float("inf"),
+        "polys_no_lod": round(no_lod / len(frames)),
+        "no_lod_ratio": no_lod / polys if polys else 0.0,
+        "pct_more": 100.0 * (no_lod / polys - 1.0) if polys else 0.0,
+        "lod_ms": mean["lod"],
+        "cull_ms": mean["cull"],
+        "upload_ms": mean["upload"],
+        "cpu_ms": mean["cpu"],
+        "draw_ms": mean["draw"],
+        "readback_ms": mean["readback"],
+        "frame_ms": mean["total"],
+        "fps": 1e3 / mean["total"] if mean["total"] > 0 else float("inf"),
+    }

@@ -1,0 +1,37 @@
+#version 330 core
+// The terrain's first pass.  u_mode: 0 modulate (Cd x CL, what modern GPUs do), 1 base texture
+// only (Cd, the first pass of the PS2 scheme), 2 light map only (CL), 3 LOD colours, 4 flat colour
+// (wireframe lines).  Fog (u_fog.a = density per metre) mixes towards the horizon colour.
+uniform sampler2D u_base;
+uniform sampler2D u_light;
+uniform int u_mode;
+uniform vec3 u_eye;
+uniform vec4 u_fog;
+uniform vec3 u_color;
+uniform vec3 u_lod_colors[4];  // glue, 4x4, 6x6, 8x8
+in vec2 v_uv;
+in vec2 v_uvl;
+in vec3 v_world;
+flat in float v_kind;
+out vec4 f_color;
+void main() {
+    vec3 c;
+    if (u_mode == 0) {
+        c = texture(u_base, v_uv).rgb * texture(u_light, v_uvl).rgb;
+    } else if (u_mode == 1) {
+        c = texture(u_base, v_uv).rgb;
+    } else if (u_mode == 2) {
+        c = texture(u_light, v_uvl).rgb;
+    } else if (u_mode == 3) {
+        int k = int(v_kind + 0.5);
+        vec3 lod = k == 4 ? u_lod_colors[1] : k == 6 ? u_lod_colors[2] : k == 8 ? u_lod_colors[3] : u_lod_colors[0];
+        c = lod * (0.35 + 0.65 * texture(u_light, v_uvl).rgb);
+    } else {
+        c = u_color;
+    }
+    if (u_fog.a > 0.0 && u_mode != 4) {
+        float f = 1.0 - exp(-u_fog.a * distance(v_world, u_eye));
+        c = mix(c, u_fog.rgb, f);
+    }
+    f_color = vec4(c, 1.0);
+}

@@ -1,0 +1,44 @@
+"""A gradient sky drawn as one full-screen triangle behind everything."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from piste.render.context import load_shader
+from piste.render.textures import SUN_DIRECTION
+
+__all__ = ["SkyPass", "HORIZON", "ZENITH"]
+
+#: sky colours (linear 0..1 RGB): hazy horizon, deep blue zenith
+HORIZON = (0.80, 0.86, 0.93)
+ZENITH = (0.22, 0.42, 0.76)
+
+
+class SkyPass:
+    """Sky gradient by the view ray's elevation, with a soft glow around the sun."""
+
+    def __init__(self, ctx, horizon=HORIZON, zenith=ZENITH, sun=SUN_DIRECTION):
+        self.ctx = ctx
+        self.prog = ctx.program(vertex_shader=load_shader("sky.vert.glsl"), fragment_shader=load_shader("sky.frag.glsl"))
+        self.vao = ctx.vertex_array(self.prog, [])
+        self.prog["u_horizon"].value = tuple(horizon)
+        self.prog["u_zenith"].value = tuple(zenith)
+        sun = np.asarray(sun, dtype=np.float64)
+        self.prog["u_sun"].value = tuple(sun / np.linalg.norm(sun))
+
+    def draw(self, view_projection) -> None:
+        """Fill the bound framebuffer with the sky (no depth test, no depth write)."""
+        import moderngl
+
+        inv = np.linalg.inv(np.asarray(view_projection, dtype=np.float64))
+        self.prog["u_inv_vp"].write(inv.astype(np.float32).T.tobytes())
+        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+        self.ctx.depth_mask = False
+        try:
+            self.vao.render(moderngl.TRIANGLES, vertices=3)
+        finally:
+            self.ctx.depth_mask = True
+
+    def release(self) -> None:
+        self.vao.release()
+        self.prog.release()

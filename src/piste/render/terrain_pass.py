@@ -1,0 +1,253 @@
+"""The terrain draw: GPU buffers for a TerrainMesh, base texture, light-map atlas, and the passes.
+
+Light-map modes
+---------------
+``modulate``  one pass, ``Cd x CL`` in the fragment shader (what modern GPUs do).
+``ps2``       the talk's two passes for hardware that cannot multiply by the frame buffer: the
+              base texture ``Cd`` first, then ``(Cd - Cs) x As`` by blending
+              (``FUNC_REVERSE_SUBTRACT``, ``SRC_ALPHA, SRC_ALPHA``; alpha kept by separate alpha
+              blending), with ``As = max(CL.r, CL.g, CL.b)`` and ``Cs = Cd - Cd x CL / As``.
+
+Debug views (``debug=``): ``base`` (Cd only), ``lightmap`` (CL only), ``lod`` (patches coloured by
+kind, 4x4 / 6x6 / 8x8 / glue, over the light map, with a wireframe overlay), ``wire`` (the lit
+terrain with a wireframe overlay).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from piste.errors import ConfigError, RenderError
+from piste.render.context import load_shader
+from piste.render.textures import LOD_COLORS, snow_texture
+
+__all__ = ["TerrainPass", "LIGHTMAP_MODES", "DEBUG_VIEWS"]
+
+LIGHTMAP_MODES = ("modulate", "ps2")
+DEBUG_VIEWS = (None, "base", "lightmap", "lod", "wire")
+_MODE_ID = {"modulate": 0, "base": 1, "lightmap": 2, "lod": 3, "flat": 4}
+
+
+class _Stream:
+    """A GPU buffer that grows by doubling and is orphaned before every rewrite."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.buffer = None
+
+    def write(self, data: np.ndarray) -> bool:
+        """Upload ``data``; returns True when the buffer object was replaced (VAOs must be rebuilt)."""
+        nbytes = data.nbytes
+        if self.buffer is None or self.buffer.size < nbytes:
+            if self.buffer is not None:
+                self.buffer.release()
+            cap = max(nbytes, 4096, int(self.buffer.size * 2) if self.buffer is not None else 0)
+            self.buffer = self.ctx.buffer(reserve=cap, dynamic=True)
+            self.buffer.write(np.ascontiguousarray(data))
+            return True
+        self.buffer.orphan(self.buffer.size)
+        self.buffer.write(np.ascontiguousarray(data))
+        return False
+
+    def release(self):
+        if self.buffer is not None:
+            self.buffer.release()
+            self.buffer = None
+
+
+class TerrainPass:
+    """Draws tessellated terrain with a base texture and a light-map atlas.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context
+    lightmap : (H, W, 3|4) uint8 atlas (see :mod:`piste.render.textures` for the layout), or None
+        for a 1x1 white map (unlit)
+    base_texture : (N, N, 3|4) uint8 tileable base texture, default :func:`snow_texture`
+    """
+
+    def __init__(self, ctx, lightmap=None, base_texture=None):
+        self.ctx = ctx
+        vs = load_shader("terrain.vert.glsl")
+        self.prog = ctx.program(vertex_shader=vs, fragment_shader=load_shader("terrain.frag.glsl"))
+        self.prog_ps2 = ctx.program(vertex_shader=vs, fragment_shader=load_shader("ps2_lightmap.frag.glsl"))
+        self.prog_fog = ctx.program(vertex_shader=vs, fragment_shader=load_shader("fog.frag.glsl"))
+        for p in (self.prog, self.prog_ps2):
+            p["u_base"].value = 0
+            p["u_light"].value = 1
+        cols = [LOD_COLORS[k] for k in (0, 4, 6, 8)]
+        self.prog["u_lod_colors"].value = [tuple(c / 255.0 for c in col) for col in cols]
+        self.base = None
+        self.light = None
+        self.set_base_texture(snow_texture() if base_texture is None else base_texture)
+        self.set_lightmap(lightmap)
+        self._streams = {k: _Stream(ctx) for k in ("pos", "uv", "uvl", "kind", "index")}
+        self._vaos: dict[str, object] = {}
+        self.n_indices = 0
+        self.has_kind = False
+
+    # ------------------------------------------------------------------ textures
+    def _texture(self, image, name: str):
+        img = np.asarray(image)
+        if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] not in (3, 4):
+            raise RenderError(f"{name}: expected an (H, W, 3|4) uint8 image, got {img.shape} {img.dtype}")
+        if img.shape[2] == 3:
+            img = np.concatenate([img, np.full(img.shape[:2] + (1,), 255, np.uint8)], axis=2)
+        h, w = img.shape[:2]
+        return self.ctx.texture((w, h), 4, np.ascontiguousarray(img).tobytes(), alignment=1)
+
+    def set_base_texture(self, image) -> None:
+        """Use ``image`` ``(N, N, 3|4) uint8`` (tileable) as the base texture, mip-mapped and repeated."""
+        import moderngl
+
+        if self.base is not None:
+            self.base.release()
+        self.base = self._texture(image, "base texture")
+        self.base.build_mipmaps()
+        self.base.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self.base.repeat_x = self.base.repeat_y = True
+        self.base.anisotropy = 8.0
+
+    def set_lightmap(self, atlas) -> None:
+        """Use a light-map atlas ``(H, W, 3|4) uint8`` (``None``: white, i.e. unlit).
+
+        Rows are texture ``v`` from 0 up (no flip); sampled bilinearly, clamped, no mip-maps (tiles
+        have gutters, mip-maps would bleed between patches).
+        """
+        import moderngl
+
+        if atlas is None:
+            atlas = np.full((1, 1, 4), 255, np.uint8)
+        if self.light is not None:
+            self.light.release()
+        self.light = self._texture(atlas, "light-map atlas")
+        self.light.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.light.repeat_x = self.light.repeat_y = False
+
+    # ------------------------------------------------------------------ geometry
+    def upload(self, mesh, kinds: bool = False) -> None:
+        """Upload a :class:`piste.terrain.TerrainMesh` (buffers are reused and orphaned).
+
+        ``kinds``: also upload each vertex's patch kind (for the LOD debug view).
+        """
+        s = self._streams
+        changed = s["pos"].write(np.asarray(mesh.positions, dtype=np.float32))
+        changed |= s["uv"].write(np.asarray(mesh.uv, dtype=np.float32))
+        changed |= s["uvl"].write(np.asarray(mesh.uv_lightmap, dtype=np.float32))
+        changed |= s["index"].write(np.asarray(mesh.indices, dtype=np.uint32))
+        if kinds:
+            kind = np.asarray(mesh.patch_kind, dtype=np.float32)[mesh.vertex_patch]
+            changed |= s["kind"].write(kind)
+        if changed or (kinds and not self.has_kind):
+            self._build_vaos(kinds)
+        self.n_indices = int(np.asarray(mesh.indices).size)
+
+    def _build_vaos(self, kinds: bool) -> None:
+        for vao in self._vaos.values():
+            vao.release()
+        s = self._streams
+        content = [(s["pos"].buffer, "3f", "in_pos"), (s["uv"].buffer, "2f", "in_uv"), (s["uvl"].buffer, "2f", "in_uvl")]
+        if kinds:
+            content.append((s["kind"].buffer, "1f", "in_kind"))
+        self._vaos = {
+            name: self.ctx.vertex_array(prog, content, s["index"].buffer, index_element_size=4, skip_errors=True)
+            for name, prog in (("main", self.prog), ("ps2", self.prog_ps2), ("fog", self.prog_fog))
+        }
+        self.has_kind = kinds
+
+    # ------------------------------------------------------------------ drawing
+    def draw(self, mvp, eye, lightmap_mode: str = "modulate", debug: str | None = None, fog=None) -> None:
+        """Draw the uploaded terrain into the bound framebuffer (depth test on).
+
+        Parameters
+        ----------
+        mvp : (4, 4) view-projection matrix (column vectors)
+        eye : (3,) camera position (for fog)
+        lightmap_mode : "modulate" or "ps2"
+        debug : None, "base", "lightmap", "lod" or "wire"
+        fog : None or (r, g, b, density per metre)
+        """
+        import moderngl
+
+        if lightmap_mode not in LIGHTMAP_MODES:
+            raise ConfigError(f"lightmap mode must be one of {', '.join(LIGHTMAP_MODES)}, got {lightmap_mode!r}")
+        if debug not in DEBUG_VIEWS:
+            raise ConfigError(f"debug view must be one of {', '.join(str(d) for d in DEBUG_VIEWS[1:])}, got {debug!r}")
+        if debug == "lod" and not self.has_kind:
+            raise RenderError("the LOD view needs the mesh uploaded with kinds=True")
+        if self.n_indices == 0:
+            return
+        ctx = self.ctx
+        mvp_bytes = np.asarray(mvp, dtype=np.float32).T.tobytes()  # column-major for GLSL
+        fog = (0.0, 0.0, 0.0, 0.0) if fog is None else tuple(float(x) for x in fog)
+        eye = tuple(float(x) for x in eye)
+        self.base.use(0)
+        self.light.use(1)
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
+        ctx.depth_func = "<"
+        p = self.prog
+        p["u_mvp"].write(mvp_bytes)
+        p["u_depth_bias"].value = 0.0
+        p["u_eye"].value = eye
+        ps2 = lightmap_mode == "ps2" and debug in (None, "wire")
+        first = {None: "modulate", "wire": "modulate", "base": "base", "lightmap": "lightmap", "lod": "lod"}[debug]
+        if ps2:
+            first = "base"
+        p["u_mode"].value = _MODE_ID[first]
+        p["u_fog"].value = (0.0, 0.0, 0.0, 0.0) if ps2 else fog
+        self._vaos["main"].render(moderngl.TRIANGLES, vertices=self.n_indices)
+        if ps2:
+            self._draw_ps2(mvp_bytes, eye, fog)
+        if debug in ("lod", "wire"):
+            p["u_mode"].value = _MODE_ID["flat"]
+            p["u_color"].value = (0.08, 0.08, 0.12) if debug == "lod" else (0.35, 0.38, 0.45)
+            p["u_depth_bias"].value = 2e-4
+            ctx.depth_func = "<="
+            ctx.wireframe = True
+            try:
+                self._vaos["main"].render(moderngl.TRIANGLES, vertices=self.n_indices)
+            finally:
+                ctx.wireframe = False
+                ctx.depth_func = "<"
+                p["u_depth_bias"].value = 0.0
+
+    def _draw_ps2(self, mvp_bytes: bytes, eye, fog) -> None:
+        import moderngl
+
+        ctx = self.ctx
+        q = self.prog_ps2
+        q["u_mvp"].write(mvp_bytes)
+        q["u_depth_bias"].value = 0.0
+        ctx.depth_func = "=="
+        ctx.depth_mask = False
+        ctx.enable(moderngl.BLEND)
+        # colour: dst*As - src*As = (Cd - Cs) x As;  alpha: dst*1 + src*0 (destination alpha kept)
+        ctx.blend_equation = (moderngl.FUNC_REVERSE_SUBTRACT, moderngl.FUNC_ADD)
+        ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.SRC_ALPHA, moderngl.ZERO, moderngl.ONE)
+        try:
+            self._vaos["ps2"].render(moderngl.TRIANGLES, vertices=self.n_indices)
+            if fog[3] > 0.0:
+                f = self.prog_fog
+                f["u_mvp"].write(mvp_bytes)
+                f["u_depth_bias"].value = 0.0
+                f["u_eye"].value = eye
+                f["u_fog"].value = fog
+                ctx.blend_equation = moderngl.FUNC_ADD
+                ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ZERO, moderngl.ONE)
+                self._vaos["fog"].render(moderngl.TRIANGLES, vertices=self.n_indices)
+        finally:
+            ctx.blend_equation = moderngl.FUNC_ADD
+            ctx.blend_func = moderngl.DEFAULT_BLENDING
+            ctx.disable(moderngl.BLEND)
+            ctx.depth_mask = True
+            ctx.depth_func = "<"
+
+    def release(self) -> None:
+        for vao in self._vaos.values():
+            vao.release()
+        self._vaos = {}
+        for s in self._streams.values():
+            s.release()
+        for obj in (self.base, self.light, self.prog, self.prog_ps2, self.prog_fog):
+            obj.release()

@@ -1,0 +1,131 @@
+"""Textures the renderer makes itself: a procedural snow base texture and a placeholder light map.
+
+Light-map atlas convention (shared with the light-map baker): an atlas is an ``(H, W, 3|4) uint8``
+image whose element ``[y, x]`` is the texel at texture coordinate ``((x + 0.5) / W, (y + 0.5) / H)``
+(row 0 is ``v = 0``; no vertical flip).  Patch ``k``'s tile is ``net.lightmap_rect[k] = (u0, v0,
+u1, v1)``: patch parameter ``(0, 0)`` samples the centre of texel ``(u0 W - 0.5, v0 H - 0.5)`` and
+``(1, 1)`` the centre of ``(u1 W - 0.5, v1 H - 0.5)``.
+
+API
+---
+snow_texture             (N, N, 4) uint8 tileable procedural snow
+placeholder_lightmap     (H, W, 4) uint8 atlas lit by a fixed sun from the surface normals
+                         (a stand-in until baked light maps exist)
+lightmap_atlas_size      (W, H) of the atlas a net's ``lightmap_rect`` describes
+LOD_COLORS               debug colours of 4x4, 6x6, 8x8 and glue patches
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from piste.errors import ValidationError
+
+__all__ = ["snow_texture", "placeholder_lightmap", "lightmap_atlas_size", "LOD_COLORS", "SUN_DIRECTION"]
+
+#: debug colours (RGB uint8) by patch kind: 4x4 green, 6x6 yellow, 8x8 red, glue (non-uniform) blue
+LOD_COLORS = {
+    4: (70, 190, 90),
+    6: (235, 200, 60),
+    8: (220, 70, 60),
+    0: (70, 120, 230),
+}
+#: the placeholder light map's sun: from the south-west, 40 degrees up (unit vector towards the sun)
+SUN_DIRECTION = np.array([-0.55, -0.45, 0.70]) / np.linalg.norm([-0.55, -0.45, 0.70])
+
+
+def _periodic_noise(n: int, rng: np.random.Generator, beta: float, lo: int, hi: int) -> np.ndarray:
+    """Tileable noise ``(n, n) float64`` in [-1, 1] with a power spectrum ~ 1/f^beta between
+    frequencies ``lo`` and ``hi`` (cycles per tile); periodic by construction (built in Fourier space)."""
+    f = np.fft.fftfreq(n) * n
+    fr = np.hypot(f[:, None], f[None, :])
+    amp = np.where((fr >= lo) & (fr <= hi), np.maximum(fr, 1.0) ** (-beta / 2.0), 0.0)
+    spec = np.fft.fft2(rng.standard_normal((n, n))) * amp
+    out = np.real(np.fft.ifft2(spec))
+    return out / max(np.abs(out).max(), 1e-12)
+
+
+def snow_texture(size: int = 256, seed: int = 0) -> np.ndarray:
+    """A tileable snow texture: soft drifts, fine grain and a few sparkles.
+
+    Returns ``(size, size, 4) uint8`` RGBA (alpha 255).  Deterministic for a seed.
+    """
+    if size < 8 or size & (size - 1):
+        raise ValidationError(f"snow_texture: size must be a power of two >= 8, got {size}")
+    rng = np.random.default_rng(seed)
+    drifts = _periodic_noise(size, rng, 3.0, 1, size // 8)
+    grain = _periodic_noise(size, rng, 1.0, size // 16, size // 2)
+    sparkle = rng.random((size, size)) > 0.997
+    lum = 0.90 + 0.05 * drifts + 0.025 * grain + 0.06 * sparkle
+    tint = np.array([0.97, 0.985, 1.0])  # snow is faintly blue
+    rgb = np.clip(lum[..., None] * tint, 0.0, 1.0)
+    out = np.empty((size, size, 4), dtype=np.uint8)
+    out[..., :3] = np.round(rgb * 255.0)
+    out[..., 3] = 255
+    return out
+
+
+def lightmap_atlas_size(net, res: int = 8) -> tuple[int, int]:
+    """``(W, H)`` of the atlas described by ``net.lightmap_rect`` for tiles of ``res x res`` texels.
+
+    A tile spans ``res - 1`` texels between its first and last texel centres, so
+    ``W = (res - 1) / (u1 - u0)``.
+    """
+    rect = np.asarray(net.lightmap_rect, dtype=np.float64)
+    du, dv = rect[:, 2] - rect[:, 0], rect[:, 3] - rect[:, 1]
+    if (du <= 0).any() or (dv <= 0).any():
+        k = int(np.nonzero((du <= 0) | (dv <= 0))[0][0])
+        raise ValidationError(f"{net.name}: lightmap_rect of patch {k} is {rect[k].tolist()}: expected u1 > u0, v1 > v0")
+    w = np.round((res - 1) / du)
+    h = np.round((res - 1) / dv)
+    if (w != w[0]).any() or (h != h[0]).any():
+        raise ValidationError(f"{net.name}: lightmap_rect tiles are not all {res}x{res} texels of one atlas")
+    return int(w[0]), int(h[0])
+
+
+def placeholder_lightmap(net, res: int = 8, sun=SUN_DIRECTION, gutter: int = 1) -> np.ndarray:
+    """PLACEHOLDER light map: each patch's tile shaded from its surface normals by a fixed sun.
+
+    Not a baked light map (no shadows, no bounce): it stands in until ``piste.lighting`` bakes one.
+    Normals are evaluated on each patch's ``res x res`` tile grid and shaded with a sky ambient plus
+    a Lambertian sun; tiles are laid out with ``net.lightmap_rect`` and their border texels copied
+    into ``gutter`` texels around them so bilinear filtering never bleeds between tiles.
+
+    Returns ``(H, W, 4) uint8`` (alpha 255), see the module docstring for the layout.
+    """
+    from piste.terrain.bezier import grid_params
+
+    W, H = lightmap_atlas_size(net, res)
+    u, v = grid_params(res)  # index j*res + i is (u_i, v_j)
+    _, nrm = net.evaluate(u, v)  # (n, res*res, 3)
+    n = len(nrm)
+    nrm = nrm.reshape(n, res, res, 3)  # [k, j (v), i (u)]
+    sun = np.asarray(sun, dtype=np.float64)
+    sun = sun / np.linalg.norm(sun)
+    ndl = np.clip(nrm @ sun, 0.0, 1.0)
+    sky = 0.5 + 0.5 * np.clip(nrm[..., 2], -1.0, 1.0)  # hemisphere ambient: up-facing sees the sky
+    amb = np.array([0.36, 0.40, 0.48])
+    sun_col = np.array([0.72, 0.68, 0.60])
+    rgb = sky[..., None] * amb + ndl[..., None] * sun_col
+    tiles = np.round(np.clip(rgb, 0.0, 1.0) * 255.0).astype(np.uint8)  # (n, res, res, 3)
+    g = int(gutter)
+    if g:
+        tiles = np.pad(tiles, ((0, 0), (g, g), (g, g), (0, 0)), mode="edge")
+    rect = np.asarray(net.lightmap_rect, dtype=np.float64)
+    x0 = np.round(rect[:, 0] * W - 0.5).astype(np.int64) - g
+    y0 = np.round(rect[:, 1] * H - 0.5).astype(np.int64) - g
+    t = res + 2 * g
+    xs = x0[:, None, None] + np.arange(t)[None, None, :]  # (n, 1, t)
+    ys = y0[:, None, None] + np.arange(t)[None, :, None]  # (n, t, 1)
+    xs, ys = np.broadcast_arrays(xs, ys)
+    ok = (xs >= 0) & (xs < W) & (ys >= 0) & (ys < H)
+    atlas = np.zeros((H, W, 4), dtype=np.uint8)
+    atlas[..., 3] = 255
+    atlas[ys[ok], xs[ok], :3] = tiles[ok]
+    # tile interiors win over neighbours' gutters: write them last
+    if g:
+        inner = np.zeros((t, t), dtype=bool)
+        inner[g:-g, g:-g] = True
+        sel = ok & inner[None]
+        atlas[ys[sel], xs[sel], :3] = tiles[sel]
+    return atlas

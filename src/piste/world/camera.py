@@ -1,0 +1,185 @@
+"""Cameras: view and projection matrices, view frusta, and a camera that flies down a track.
+
+Conventions: Z up, metres, OpenGL clip space (column vectors, ``clip = P @ V @ [x, y, z, 1]``,
+camera looks down its local -Z).  Pure numpy; the renderer turns these into uniforms.
+
+API
+---
+Camera                    eye, target, up, fov_y, near, far, aspect (+ matrices, frustum planes)
+look_at, perspective, orthographic   4x4 float64 matrices
+frustum_planes            (6, 4) planes of a view-projection matrix, normals pointing inside
+track_camera              a Camera riding down a centre line (k, 3) at fraction t
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from piste.errors import ConfigError
+
+__all__ = ["Camera", "look_at", "perspective", "orthographic", "frustum_planes", "track_camera"]
+
+
+def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """View matrix ``(4, 4) float64`` of a camera at ``eye`` looking at ``target``."""
+    eye = np.asarray(eye, dtype=np.float64)
+    f = np.asarray(target, dtype=np.float64) - eye
+    fn = np.linalg.norm(f)
+    if not fn > 0:
+        raise ConfigError(f"camera: eye {eye.tolist()} and target are the same point")
+    f = f / fn
+    up = np.asarray(up, dtype=np.float64)
+    s = np.cross(f, up)
+    if np.linalg.norm(s) < 1e-9:  # looking straight along up: pick any side vector
+        s = np.cross(f, np.array([0.0, 1.0, 0.0]) if abs(f[1]) < 0.9 else np.array([1.0, 0.0, 0.0]))
+    s = s / np.linalg.norm(s)
+    u = np.cross(s, f)
+    m = np.eye(4)
+    m[0, :3], m[1, :3], m[2, :3] = s, u, -f
+    m[:3, 3] = -m[:3, :3] @ eye
+    return m
+
+
+def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
+    """OpenGL perspective projection ``(4, 4) float64`` (vertical field of view in degrees)."""
+    if not (0 < near < far):
+        raise ConfigError(f"camera: need 0 < near < far, got near={near}, far={far}")
+    if not (0 < fov_y_deg < 180):
+        raise ConfigError(f"camera: fov_y must be in (0, 180) degrees, got {fov_y_deg}")
+    f = 1.0 / np.tan(np.radians(fov_y_deg) / 2.0)
+    m = np.zeros((4, 4))
+    m[0, 0] = f / aspect
+    m[1, 1] = f
+    m[2, 2] = (far + near) / (near - far)
+    m[2, 3] = 2.0 * far * near / (near - far)
+    m[3, 2] = -1.0
+    return m
+
+
+def orthographic(left, right, bottom, top, near, far) -> np.ndarray:
+    """OpenGL orthographic projection ``(4, 4) float64``."""
+    m = np.eye(4)
+    m[0, 0] = 2.0 / (right - left)
+    m[1, 1] = 2.0 / (top - bottom)
+    m[2, 2] = -2.0 / (far - near)
+    m[0, 3] = -(right + left) / (right - left)
+    m[1, 3] = -(top + bottom) / (top - bottom)
+    m[2, 3] = -(far + near) / (far - near)
+    return m
+
+
+def frustum_planes(view_projection) -> np.ndarray:
+    """The six planes (left, right, bottom, top, near, far) of a view frustum.
+
+    Returns ``(6, 4) float64`` rows ``(a, b, c, d)`` with unit normals pointing into the frustum:
+    a point ``p`` is inside when ``a*x + b*y + c*z + d >= 0`` for all six.
+    """
+    m = np.asarray(view_projection, dtype=np.float64)
+    r0, r1, r2, r3 = m
+    planes = np.stack([r3 + r0, r3 - r0, r3 + r1, r3 - r1, r3 + r2, r3 - r2])
+    return planes / np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
+
+
+@dataclass
+class Camera:
+    """A pinhole camera (or an orthographic one when ``ortho_height`` is set).
+
+    Attributes
+    ----------
+    eye, target : (3,) float64 world positions
+    up : (3,) float64, the world's up (Z)
+    fov_y : vertical field of view in degrees
+    near, far : clip distances in metres
+    aspect : width / height
+    ortho_height : height of the view volume in metres for an orthographic camera, else None
+    """
+
+    eye: np.ndarray
+    target: np.ndarray
+    up: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    fov_y: float = 60.0
+    near: float = 0.5
+    far: float = 4000.0
+    aspect: float = 640.0 / 448.0
+    ortho_height: float | None = None
+
+    def __post_init__(self):
+        self.eye = np.asarray(self.eye, dtype=np.float64).reshape(3)
+        self.target = np.asarray(self.target, dtype=np.float64).reshape(3)
+        self.up = np.asarray(self.up, dtype=np.float64).reshape(3)
+
+    @property
+    def forward(self) -> np.ndarray:
+        """Unit view direction ``(3,)``."""
+        d = self.target - self.eye
+        return d / np.linalg.norm(d)
+
+    def view_matrix(self) -> np.ndarray:
+        return look_at(self.eye, self.target, self.up)
+
+    def projection_matrix(self) -> np.ndarray:
+        if self.ortho_height is not None:
+            h = self.ortho_height / 2.0
+            w = h * self.aspect
+            return orthographic(-w, w, -h, h, self.near, self.far)
+        return perspective(self.fov_y, self.aspect, self.near, self.far)
+
+    def view_projection(self) -> np.ndarray:
+        """``P @ V``, ``(4, 4) float64``."""
+        return self.projection_matrix() @ self.view_matrix()
+
+    def frustum_planes(self) -> np.ndarray:
+        """``(6, 4) float64`` inward planes, see :func:`frustum_planes`."""
+        return frustum_planes(self.view_projection())
+
+    def with_aspect(self, width: int, height: int) -> "Camera":
+        return replace(self, aspect=float(width) / float(height))
+
+
+def _arc_length_point(points: np.ndarray, s) -> np.ndarray:
+    """Points at arc lengths ``s`` (clamped) along a polyline ``(k, 3)``."""
+    seg = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    s = np.clip(np.asarray(s, dtype=np.float64), 0.0, cum[-1])
+    return np.stack([np.interp(s, cum, points[:, k]) for k in range(3)], axis=-1)
+
+
+def track_camera(
+    centerline,
+    t: float,
+    height: float = 7.0,
+    behind: float = 14.0,
+    look_ahead: float = 45.0,
+    fov_y: float = 60.0,
+    aspect: float = 640.0 / 448.0,
+    near: float = 0.5,
+    far: float = 4000.0,
+) -> Camera:
+    """A chase camera riding down a track.
+
+    Parameters
+    ----------
+    centerline : (k, 3) float, points down the track (the rider's line)
+    t : position along the track as a fraction of its length, in [0, 1]
+    height : metres above the line
+    behind : metres back along the line from the rider's point
+    look_ahead : metres ahead along the line to the look-at point (slightly below it, so the
+        camera looks down the slope)
+    """
+    pts = np.asarray(centerline, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2:
+        raise ConfigError(f"track_camera: centerline must have shape (k>=2, 3), got {pts.shape}")
+    length = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+    s = float(np.clip(t, 0.0, 1.0)) * length
+    eye = _arc_length_point(pts, s - behind) + np.array([0.0, 0.0, height])
+    if s - behind < 0:  # before the start: extrapolate backwards along the first segment
+        d = pts[1] - pts[0]
+        eye = eye - d / np.linalg.norm(d) * (behind - s)
+    target = _arc_length_point(pts, s + look_ahead)
+    if s + look_ahead > length:
+        d = pts[-1] - pts[-2]
+        target = target + d / np.linalg.norm(d) * (s + look_ahead - length)
+    target = target + np.array([0.0, 0.0, 0.25 * height])
+    return Camera(eye, target, fov_y=fov_y, aspect=aspect, near=near, far=far)

@@ -1,0 +1,57 @@
+"""Headless context, off-screen target and PNG output."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from piste.errors import RenderError
+from piste.render import Offscreen, create_context, save_png
+from piste.render.context import check_gl_error, load_shader
+
+
+def test_context_is_gl33_or_better(gl):
+    assert gl.version_code >= 330
+
+
+def test_offscreen_read_is_top_down(gl):
+    target = Offscreen(gl, (8, 6))
+    try:
+        target.use()
+        target.clear((0.0, 0.0, 1.0, 1.0))
+        # GL's origin is bottom-left: clear the top two rows red
+        target.fbo.clear(1.0, 0.0, 0.0, 1.0, viewport=(0, 4, 8, 2))
+        img = target.read()
+        assert img.shape == (6, 8, 4) and img.dtype == np.uint8
+        assert (img[:2, :, :3] == (255, 0, 0)).all()
+        assert (img[2:, :, :3] == (0, 0, 255)).all()
+    finally:
+        target.release()
+
+
+def test_offscreen_rejects_bad_size(gl):
+    with pytest.raises(RenderError, match="between 1x1"):
+        Offscreen(gl, (0, 10))
+
+
+def test_bad_backend_names_packages():
+    with pytest.raises(RenderError, match="libgl1-mesa-dri"):
+        create_context(backend="no-such-backend")
+
+
+def test_save_png_roundtrip_and_atomic(tmp_path):
+    img = np.random.default_rng(0).integers(0, 256, (5, 7, 4), dtype=np.uint8)
+    path = save_png(tmp_path / "sub" / "a.png", img)
+    assert np.array_equal(np.asarray(Image.open(path)), img)
+    assert [p.name for p in path.parent.iterdir()] == ["a.png"]  # no temp file left
+    with pytest.raises(RenderError, match="uint8"):
+        save_png(tmp_path / "b.png", img.astype(np.float32))
+    assert not (tmp_path / "b.png").exists()
+
+
+def test_shaders_ship_and_gl_errors_are_raised(gl):
+    assert "#version 330" in load_shader("terrain.vert.glsl")
+    with pytest.raises(RenderError, match="not found"):
+        load_shader("nope.glsl")
+    check_gl_error(gl)  # no pending error

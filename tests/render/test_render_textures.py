@@ -1,0 +1,68 @@
+"""Procedural snow texture and the placeholder light-map atlas."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from piste.errors import ValidationError
+from piste.render.textures import SUN_DIRECTION, lightmap_atlas_size, placeholder_lightmap, snow_texture
+from piste.terrain import PatchNet
+
+
+def test_snow_is_bright_deterministic_and_tileable():
+    a = snow_texture(64, seed=3)
+    assert a.shape == (64, 64, 4) and a.dtype == np.uint8
+    assert np.array_equal(a, snow_texture(64, seed=3))
+    assert not np.array_equal(a, snow_texture(64, seed=4))
+    lum = a[..., :3].astype(float)
+    assert 200 < lum.mean() < 245 and (a[..., 3] == 255).all()
+    # tileable: the step across the wrap-around seam is no larger than steps inside the texture
+    # (the sparkles are single texels, so compare the median steps)
+    inner = np.median(np.abs(np.diff(lum, axis=1)))
+    seam = np.median(np.abs(lum[:, 0] - lum[:, -1]))
+    assert seam <= 2.0 * inner + 1.0
+    with pytest.raises(ValidationError, match="power of two"):
+        snow_texture(100)
+
+
+def _flat_net(n=3, tilt=0.0):
+    cp = np.zeros((n, 4, 4, 3))
+    i, j = np.meshgrid(np.arange(4), np.arange(4), indexing="ij")
+    for k in range(n):
+        cp[k, ..., 0] = i + 3 * k
+        cp[k, ..., 1] = j
+        cp[k, ..., 2] = tilt * cp[k, ..., 0]
+    return PatchNet(cp)
+
+
+def test_placeholder_lightmap_layout_and_shading():
+    net = _flat_net(3)
+    w, h = lightmap_atlas_size(net)
+    atlas = placeholder_lightmap(net)
+    assert atlas.shape == (h, w, 4) and atlas.dtype == np.uint8
+    # a flat, up-facing net is lit the same everywhere, gutters included
+    rect = net.lightmap_rect
+    x0 = np.round(rect[:, 0] * w - 0.5).astype(int)
+    y0 = np.round(rect[:, 1] * h - 0.5).astype(int)
+    tiles = np.stack([atlas[y - 1 : y + 9, x - 1 : x + 9, :3] for x, y in zip(x0, y0)])
+    assert (tiles == tiles[0, 0, 0]).all()
+    expect = np.clip(np.array([0.36, 0.40, 0.48]) + SUN_DIRECTION[2] * np.array([0.72, 0.68, 0.60]), 0, 1) * 255
+    assert np.allclose(tiles[0, 0, 0], expect, atol=1)
+    # cells outside every tile stay black
+    assert atlas[..., :3].sum(axis=-1).min() == 0
+
+
+def test_placeholder_lightmap_follows_normals():
+    # patch 0 tilts towards the sun (x down-slope faces -x, where the sun is), the others are flat
+    net = _flat_net(1, tilt=0.5)
+    flat = placeholder_lightmap(_flat_net(1))
+    tilted = placeholder_lightmap(net)
+    assert tilted[..., :3].astype(int).sum() > flat[..., :3].astype(int).sum()
+
+
+def test_lightmap_atlas_size_rejects_bad_rects():
+    net = _flat_net(2)
+    net.lightmap_rect[1] = (0.5, 0.5, 0.4, 0.6)
+    with pytest.raises(ValidationError, match="patch 1"):
+        lightmap_atlas_size(net)
