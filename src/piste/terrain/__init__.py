@@ -11,6 +11,13 @@ default_course      the seeded default snowboard course
 """
 
 from piste.terrain.bezier import BEZIER_M, blend_tables, evaluate, eval_power_form
+from piste.terrain.lod import cull_boxes, edge_levels, look_at, perspective, visible_patches
 from piste.terrain.net import PatchNet
+from piste.terrain.stats import format_stats, stats
+from piste.terrain.tessellate import TerrainMesh, decode_strips, get_shape, tessellate
 
-__all__ = ["PatchNet", "BEZIER_M", "blend_tables", "evaluate", "eval_power_form"]
+__all__ = [
+    "PatchNet", "TerrainMesh", "tessellate", "edge_levels", "visible_patches", "cull_boxes", "look_at",
+    "perspective", "stats", "format_stats", "get_shape", "decode_strips",
+    "BEZIER_M", "blend_tables", "evaluate", "eval_power_form",
+]

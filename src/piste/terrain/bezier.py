@@ -154,10 +154,10 @@ def unit_normals(du: np.ndarray, dv: np.ndarray) -> tuple[np.ndarray, np.ndarray
     """
     n = np.cross(du, dv)
     length = np.sqrt(np.einsum("...i,...i->...", n, n))
-    scale = np.maximum(
-        np.sqrt(np.einsum("...i,...i->...", du, du)) * np.sqrt(np.einsum("...i,...i->...", dv, dv)), 1e-30
-    )
-    ok = length > 1e-6 * scale
+    # degenerate when |du x dv| is tiny against the larger tangent squared: a collapsed edge has
+    # one tangent that is pure rounding noise, which a test relative to |du| |dv| would miss
+    big = np.maximum(np.einsum("...i,...i->...", du, du), np.einsum("...i,...i->...", dv, dv))
+    ok = length > 1e-7 * np.maximum(big, 1e-300)
     n = n / np.where(ok, length, 1.0)[..., None]
     n[~ok] = 0.0
     return n, ok
@@ -233,8 +233,11 @@ def eval_edges(edge_cp: np.ndarray, n: int, interior: bool = True) -> np.ndarray
     b = edge_table(n).astype(edge_cp.dtype)
     if interior:
         b = b[1:-1]
-    p0, p1, p2, p3 = (edge_cp[:, None, i, :] for i in range(4))
-    return (b[None, :, 0, None] * p0 + b[None, :, 3, None] * p3) + (b[None, :, 1, None] * p1 + b[None, :, 2, None] * p2)
+    c = np.moveaxis(np.asarray(edge_cp), 1, 0).copy()  # (4, e, 3): each control point contiguous
+    out = np.empty((len(b), *c.shape[1:]), dtype=c.dtype)
+    for k, (b0, b1, b2, b3) in enumerate(b):
+        np.add(b0 * c[0] + b3 * c[3], b1 * c[1] + b2 * c[2], out=out[k])
+    return np.moveaxis(out, 0, 1)
 
 
 def eval_power_form(cp: np.ndarray, u, v) -> np.ndarray:

@@ -294,6 +294,29 @@ class PatchNet:
         return cls(read_bpt(path), name=Path(path).name, **kwargs)
 
     @classmethod
+    def from_control_grid(cls, grid, **kwargs) -> "PatchNet":
+        """A rectangular net from a shared control-point grid.
+
+        Parameters
+        ----------
+        grid : (3R + 1, 3C + 1, 3) control points; patch (r, c) takes ``grid[3r:3r+4, 3c:3c+4]``
+            with ``i`` (u) along the second axis and ``j`` (v) along the first, so for a grid laid
+            out in x (columns) and y (rows) the patches face +z.
+
+        Returns
+        -------
+        PatchNet of ``R * C`` patches (row-major), C0 by construction.
+        """
+        g = np.asarray(grid, dtype=np.float64)
+        if g.ndim != 3 or g.shape[2] != 3 or (g.shape[0] - 1) % 3 or (g.shape[1] - 1) % 3 or min(g.shape[:2]) < 4:
+            raise ValidationError(f"control grid must have shape (3R+1, 3C+1, 3), got {g.shape}")
+        rows, cols = (g.shape[0] - 1) // 3, (g.shape[1] - 1) // 3
+        r = 3 * np.arange(rows)[:, None, None, None] + np.arange(4)[None, None, None, :]  # j -> grid row
+        c = 3 * np.arange(cols)[None, :, None, None] + np.arange(4)[None, None, :, None]  # i -> grid col
+        cp = g[r, c]  # (R, C, 4 i, 4 j, 3)
+        return cls(cp.reshape(rows * cols, 4, 4, 3), **kwargs)
+
+    @classmethod
     def from_heightfield(cls, z, spacing, **kwargs) -> "PatchNet":
         """Fit a C0 net to a height field by least squares (see :func:`piste.terrain.fit.fit_heightfield`)."""
         from piste.terrain.fit import fit_heightfield

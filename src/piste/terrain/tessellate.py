@@ -1,0 +1,639 @@
+"""Tessellation of a PatchNet at per-edge levels: uniform patches and non-uniform glue patches.
+
+A patch whose four edges have the same level ``n`` is tessellated as a uniform ``n x n`` grid
+(``2 (n-1)^2`` triangles: 18, 50, 98 for 4, 6, 8).  Any other patch is a *glue patch* (the talk's
+"non-uniform mesh"): a uniform inner mesh at ``m = max(levels)`` (its ``(m-2) x (m-2)`` interior
+points) plus four glue strips, each zipping the inner ring to that edge's own ``n`` vertices.
+
+Vertices on an edge are computed once per edge per frame from the edge's canonical control points
+(:func:`piste.terrain.bezier.eval_edges`) and copied into both patches, and corners are the
+welded control points themselves, so a shared edge is bit-identical in both patches whatever
+their levels: no cracks by construction.  Normals on edges and corners are the average of the
+adjacent patches' normals, so they agree too (smooth shading across C0 seams).
+
+Per-patch vertex block layout (local indices)::
+
+    0..3                       corners c0..c3
+    4 + side_off[s] + k        interior vertices of side s (k = 0..n_s-3), in the side's direction
+    inner_off + (j-1)(m-2) + (i-1)   inner grid point (i/(m-1), j/(m-1)), i, j = 1..m-2
+
+Everything per frame is a handful of whole-batch numpy operations: one blend-table product per
+inner level, one per (side, level) for edge normals, and ragged gathers of cached per-shape
+index buffers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from piste.errors import ValidationError
+from piste.terrain.bezier import (
+    _limit_normals,
+    blend_tables,
+    eval_edges,
+    eval_packed,
+    pack_control_points,
+    params,
+    unit_normals,
+)
+from piste.terrain.net import CORNER_INDEX, SIDE_CORNERS, PatchNet
+
+RESTART = np.uint32(0xFFFFFFFF)
+MAX_LEVEL = 64
+
+
+@dataclass
+class TerrainMesh:
+    """The tessellated terrain of one frame.
+
+    Attributes
+    ----------
+    positions : (m, 3) float32
+    normals : (m, 3) float32, unit
+    uv : (m, 2) float32, base texture (corner UVs interpolated bilinearly)
+    uv_lightmap : (m, 2) float32, light-map atlas (each patch's tile, ``net.lightmap_rect``)
+    uv_projected : (m, 2) float32, planar world-xy coordinates for projected textures
+        (``(x, y) / projection_scale``)
+    param : (m, 2) float32, the patch parameter (u, v) of each vertex
+    indices : (t, 3) uint32, counter-clockwise seen from the normal (``du x dv``) side
+    patch_ids : (p,) int64, the patches tessellated
+    patch_kind : (p,) int8, 4 / 6 / 8 (or any level) for uniform patches, 0 for glue patches
+    patch_levels : (p, 4) int16, vertices per edge of each side
+    vertex_patch : (m,) int32, index into ``patch_ids`` of each vertex
+    vertex_start, tri_start : (p + 1,) int64, the vertices / triangles of the k-th tessellated patch
+    strips : (s,) uint32 or None, triangle strips with primitive restart ``0xFFFFFFFF``
+    """
+
+    positions: np.ndarray
+    normals: np.ndarray
+    uv: np.ndarray
+    uv_lightmap: np.ndarray
+    uv_projected: np.ndarray
+    param: np.ndarray
+    indices: np.ndarray
+    patch_ids: np.ndarray
+    patch_kind: np.ndarray
+    patch_levels: np.ndarray
+    vertex_patch: np.ndarray
+    vertex_start: np.ndarray
+    tri_start: np.ndarray
+    strips: np.ndarray | None = None
+
+    @property
+    def n_triangles(self) -> int:
+        return len(self.indices)
+
+    @property
+    def n_vertices(self) -> int:
+        return len(self.positions)
+
+
+# ---------------------------------------------------------------------------------------- shapes
+@dataclass(frozen=True)
+class Shape:
+    """Cached tessellation of one combination of edge levels (its local vertex layout and triangles)."""
+
+    levels: tuple
+    m: int
+    n_verts: int
+    side_off: np.ndarray  # (4,) offset of each side's interior block after the 4 corners
+    inner_off: int
+    param: np.ndarray  # (n_verts, 2) float32
+    tris: np.ndarray  # (t, 3) int64, local
+    strip: np.ndarray  # (s,) int64, local, -1 = restart
+
+    @property
+    def uniform(self) -> bool:
+        return len(set(self.levels)) == 1
+
+
+def _side_uv(s: int, t: np.ndarray) -> np.ndarray:
+    """Parameter points along side ``s`` at side parameters ``t``: ``(k, 2)``."""
+    one, zero = np.ones_like(t), np.zeros_like(t)
+    return np.stack([(t, zero), (one, t), (t, one), (zero, t)][s], axis=1)
+
+
+def _orient(tris: np.ndarray, param: np.ndarray) -> np.ndarray:
+    """Flip triangles that are clockwise in (u, v)."""
+    a, b, c = param[tris[:, 0]], param[tris[:, 1]], param[tris[:, 2]]
+    area = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    tris = tris.copy()
+    tris[area < 0] = tris[area < 0][:, [0, 2, 1]]
+    return tris
+
+
+def _zipper(outer: np.ndarray, t_outer: np.ndarray, inner: np.ndarray, t_inner: np.ndarray) -> list:
+    """Triangulate the band between two vertex rows by merging them in parameter order."""
+    tris = []
+    i = j = 0
+    while i < len(outer) - 1 or j < len(inner) - 1:
+        adv_outer = j == len(inner) - 1 or (i < len(outer) - 1 and t_outer[i + 1] <= t_inner[j + 1])
+        if adv_outer:
+            tris.append((outer[i], outer[i + 1], inner[j]))
+            i += 1
+        else:
+            tris.append((outer[i], inner[j + 1], inner[j]))
+            j += 1
+    return tris
+
+
+def _strip_rows(rows: list[tuple[np.ndarray, np.ndarray]]) -> list:
+    """Strips for bands between pairs of rows of equal length (a grid): one strip per band."""
+    out = []
+    for lo, hi in rows:
+        seq = np.empty(2 * len(lo), dtype=np.int64)
+        seq[0::2], seq[1::2] = hi, lo
+        out.extend(seq.tolist())
+        out.append(-1)
+    return out
+
+
+def _strip_zipper(outer, t_outer, inner, t_inner) -> list:
+    """One strip for a zipper band.
+
+    The zipper's consecutive triangles share an edge; a strip appends one vertex per triangle and
+    keeps the last two as the shared edge, so where the vertex that must stay is not the last one
+    a swap (a repeat of the second-last vertex, a degenerate triangle) is inserted first.
+    """
+    seq = [int(inner[0]), int(outer[0])]
+    i = j = 0
+    while i < len(outer) - 1 or j < len(inner) - 1:
+        if j == len(inner) - 1 or (i < len(outer) - 1 and t_outer[i + 1] <= t_inner[j + 1]):
+            stay, i = inner[j], i + 1
+            nxt = outer[i]
+        else:
+            stay, j = outer[i], j + 1
+            nxt = inner[j]
+        if seq[-1] != stay:
+            seq.append(seq[-2])
+        seq.append(int(nxt))
+    return seq + [-1]
+
+
+def _fix_parity(strip: list, param: np.ndarray) -> list:
+    """Make every restart-separated strip start counter-clockwise in (u, v) (prepend a repeat if not)."""
+    out, seg = [], []
+    for x in strip + [-1]:
+        if x != -1:
+            seg.append(x)
+            continue
+        for k in range(len(seg) - 2):
+            a, b, c = (param[seg[k + d]] for d in range(3))
+            area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+            if abs(area) > 1e-12:
+                if (area < 0) == (k % 2 == 0):
+                    seg = [seg[0]] + seg
+                break
+        out.extend(seg + [-1])
+        seg = []
+    return out[:-1]
+
+
+@lru_cache(maxsize=None)
+def get_shape(levels: tuple) -> Shape:
+    """The cached :class:`Shape` of a patch with ``levels = (n0, n1, n2, n3)`` vertices per side."""
+    levels = tuple(int(x) for x in levels)
+    if any(n < 2 or n > MAX_LEVEL for n in levels):
+        raise ValidationError(f"vertices per edge must be in 2..{MAX_LEVEL}, got {levels}")
+    m = max(levels)
+    uniform = len(set(levels)) == 1
+    side_len = np.array([n - 2 for n in levels])
+    side_off = np.concatenate([[0], np.cumsum(side_len)[:-1]])
+    inner_off = 4 + int(side_len.sum())
+    mi = max(m - 2, 0)
+    n_verts = inner_off + mi * mi
+    param = np.zeros((n_verts, 2))
+    param[:4] = [(0, 0), (1, 0), (1, 1), (0, 1)]
+    side_seq, side_t = [], []
+    for s, n in enumerate(levels):
+        t = params(n)
+        idx = 4 + side_off[s] + np.arange(n - 2)
+        param[idx] = _side_uv(s, t[1:-1])
+        a, b = SIDE_CORNERS[s]
+        side_seq.append(np.concatenate([[a], idx, [b]]))
+        side_t.append(t)
+    ti = params(m)[1:-1]
+    grid = inner_off + np.arange(mi * mi).reshape(mi, mi)  # grid[j-1, i-1]
+    vv, uu = np.meshgrid(ti, ti, indexing="ij")
+    param[inner_off:] = np.stack([uu.ravel(), vv.ravel()], axis=1)
+
+    if uniform:
+        n = m
+        full = np.empty((n, n), dtype=np.int64)  # full[j, i]
+        full[1:-1, 1:-1] = grid
+        full[0, :], full[:, -1] = side_seq[0], side_seq[1]
+        full[-1, :], full[:, 0] = side_seq[2], side_seq[3]
+        a, b, c, d = full[:-1, :-1], full[:-1, 1:], full[1:, 1:], full[1:, :-1]
+        tris = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+        strip = _strip_rows([(full[j], full[j + 1]) for j in range(n - 1)])
+    else:
+        a, b, c, d = grid[:-1, :-1], grid[:-1, 1:], grid[1:, 1:], grid[1:, :-1]
+        tris = [np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)]
+        strip = _strip_rows([(grid[j], grid[j + 1]) for j in range(mi - 1)])
+        inner_rows = [grid[0, :], grid[:, -1], grid[-1, :], grid[:, 0]]
+        for s in range(4):
+            z = _zipper(side_seq[s], side_t[s], inner_rows[s], ti)
+            tris.append(np.array(z, dtype=np.int64).reshape(-1, 3))
+            strip += _strip_zipper(side_seq[s], side_t[s], inner_rows[s], ti)
+        tris = np.concatenate(tris)
+    tris = _orient(tris.astype(np.int64), param)
+    strip = np.array(_fix_parity(strip[:-1], param), dtype=np.int64)
+    for arr in (param, tris, strip, side_off):
+        arr.setflags(write=False)
+    return Shape(levels, m, n_verts, side_off, inner_off, param.astype(np.float32), tris, strip)
+
+
+def decode_strips(strips: np.ndarray, restart=RESTART) -> np.ndarray:
+    """Triangles of a strip index buffer (restart-separated), degenerate ones dropped: ``(t, 3)``.
+
+    Odd triangles of a strip are flipped, as the GPU does, so windings match the indexed triangles.
+    """
+    strips = np.asarray(strips).astype(np.int64)
+    restart = np.int64(restart) if restart != -1 else -1
+    a, b, c = strips[:-2], strips[1:-1], strips[2:]
+    valid = (a != restart) & (b != restart) & (c != restart)
+    # parity within each strip: position since the last restart
+    pos = np.arange(len(strips))
+    last = np.maximum.accumulate(np.where(strips == restart, pos, -1))
+    parity = (pos - last - 1)[:-2] % 2
+    tri = np.stack([a, b, c], 1)
+    tri[parity == 1] = tri[parity == 1][:, [1, 0, 2]]
+    keep = valid & (a != b) & (b != c) & (a != c)
+    return tri[keep]
+
+
+# ---------------------------------------------------------------------------------------- net cache
+class _NetCache:
+    """Per-net data that does not change with the levels (packed control points, corner normals)."""
+
+    def __init__(self, net: PatchNet):
+        cp = net.control_points
+        self.origin = cp.reshape(-1, 3).mean(0)
+        rel = cp - self.origin
+        self.packed = pack_control_points(rel, np.float32)  # (n, 3, 16)
+        self.edge_cp = (net.edge_cp - self.origin).astype(np.float32)  # (e, 4, 3)
+        self.corners = rel[:, CORNER_INDEX[:, 0], CORNER_INDEX[:, 1]].astype(np.float32)  # (n, 4, 3)
+        self.corner_normals = self._corner_normals(net)
+        self.origin32 = self.origin.astype(np.float32)
+        self.edge_normals: dict[int, np.ndarray] = {}
+        self.scale4 = (net.patch_size.astype(np.float32) ** 4).astype(np.float32)
+        lo, hi = net.bounds
+        self.proj_origin = lo[:2].astype(np.float32)
+        self.proj_scale = np.float32(max(float(np.max(hi[:2] - lo[:2])), 1e-12))
+
+    def _corner_normals(self, net: PatchNet) -> np.ndarray:
+        """Corner normals averaged over every patch meeting at the welded corner, ``(n, 4, 3)`` float32."""
+        packed64 = pack_control_points(net.control_points - self.origin, np.float64)
+        cu = tuple(float(x) for x in (0, 1, 1, 0))
+        cv = tuple(float(x) for x in (0, 0, 1, 1))
+        _, tu, tv = blend_tables(cu, cv, "float64")
+        nrm, ok = unit_normals(eval_packed(packed64, tu), eval_packed(packed64, tv))
+        if not ok.all():
+            nrm = _limit_normals(packed64, np.array(cu), np.array(cv), nrm, ok, "float64")
+        ids = net.corner_ids.ravel()
+        acc = np.zeros((ids.max() + 1, 3))
+        np.add.at(acc, ids, nrm.reshape(-1, 3))
+        length = np.linalg.norm(acc, axis=1)
+        avg = acc / np.where(length > 1e-12, length, 1.0)[:, None]
+        out = np.where((length > 1e-12)[ids, None], avg[ids], nrm.reshape(-1, 3))
+        return out.reshape(-1, 4, 3).astype(np.float32)
+
+
+def _cache(net: PatchNet) -> _NetCache:
+    c = net.__dict__.get("_tess_cache")
+    if c is None:
+        c = _NetCache(net)
+        net.__dict__["_tess_cache"] = c
+    return c
+
+
+@lru_cache(maxsize=None)
+def _side_tables(s: int, n: int):
+    """Derivative blend tables at the interior points of side ``s`` with ``n`` vertices: ``(16, n-2)`` x2."""
+    t = params(n)[1:-1]
+    uv = _side_uv(s, t)
+    _, tu, tv = blend_tables(tuple(uv[:, 0]), tuple(uv[:, 1]), "float32")
+    return tu, tv, uv
+
+
+def _edge_normals(net: PatchNet, cache: _NetCache, edges: np.ndarray, n: int) -> np.ndarray:
+    """Normals at the interior vertices of ``edges`` at level ``n``, averaged over the adjacent
+    patches, in each edge's canonical direction: ``(k, n - 2, 3)`` float32."""
+    acc = np.zeros((len(edges), n - 2, 3), dtype=np.float32)
+    first = None
+    for slot in (0, 1):
+        pat = net.edge_patches[edges, slot]
+        side = net.edge_sides[edges, slot]
+        for s in range(4):
+            sel = np.nonzero((pat >= 0) & (side == s))[0]
+            if not len(sel):
+                continue
+            p = pat[sel]
+            tu, tv, uv = _side_tables(s, n)
+            pk = cache.packed[p]
+            nrm, ok = unit_normals(eval_packed(pk, tu), eval_packed(pk, tv))
+            if not ok.all():
+                nrm = _limit_normals(pk, uv[:, 0], uv[:, 1], nrm, ok, "float32").astype(np.float32)
+            flip = net.side_flip[p, s]
+            nrm[flip] = nrm[flip, ::-1]
+            acc[sel] += nrm
+            if slot == 0:
+                first = first if first is not None else np.zeros_like(acc)
+                first[sel] = nrm
+    length = np.linalg.norm(acc, axis=-1, keepdims=True)
+    good = length > 1e-6
+    return np.where(good, acc / np.where(good, length, 1.0), first)
+
+
+def _as_levels(net: PatchNet, levels) -> np.ndarray:
+    if np.isscalar(levels) or np.ndim(levels) == 0:
+        lv = np.full(net.n_edges, int(levels), dtype=np.int16)
+    else:
+        lv = np.asarray(levels)
+        if lv.shape != (net.n_edges,):
+            raise ValidationError(
+                f"{net.name}: levels must be one int or one per edge, shape ({net.n_edges},), got {lv.shape}"
+            )
+        lv = lv.astype(np.int16)
+    if lv.min() < 2 or lv.max() > MAX_LEVEL:
+        raise ValidationError(f"{net.name}: vertices per edge must be in 2..{MAX_LEVEL}, got {lv.min()}..{lv.max()}")
+    return lv
+
+
+def _normals_cm(du: np.ndarray, dv: np.ndarray, scale4: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit ``du x dv`` for coordinate-major ``(k, 3, s)`` float32 derivatives (contiguous rows,
+    so each step is one fast whole-array operation).
+
+    ``scale4`` is ``(k,)``: the fourth power of each patch's size; a normal shorter than
+    ``1e-4 * size^2`` is degenerate (a collapsed edge).  Returns ``(normals (k, 3, s), ok (k, s))``.
+    """
+    ax, ay, az = du[:, 0], du[:, 1], du[:, 2]
+    bx, by, bz = dv[:, 0], dv[:, 1], dv[:, 2]
+    n = np.empty_like(du)
+    np.subtract(ay * bz, az * by, out=n[:, 0])
+    np.subtract(az * bx, ax * bz, out=n[:, 1])
+    np.subtract(ax * by, ay * bx, out=n[:, 2])
+    len2 = n[:, 0] * n[:, 0]
+    len2 += n[:, 1] * n[:, 1]
+    len2 += n[:, 2] * n[:, 2]
+    ok = len2 > (1e-8 * scale4)[:, None]
+    inv = 1.0 / np.sqrt(np.where(ok, len2, 1.0))
+    n *= inv[:, None, :]
+    return n, ok
+
+
+def _edge_normal_cache(net: PatchNet, cache: _NetCache, n: int) -> np.ndarray:
+    """Averaged normals at the interior vertices of every edge at level ``n``, ``(e, n-2, 3)``
+    float32, computed on first use and kept (they depend only on the net and the level)."""
+    store = cache.edge_normals
+    if n not in store:
+        store[n] = _edge_normals(net, cache, np.arange(net.n_edges), n)
+    return store[n]
+
+
+def _ragged_arange(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Concatenation of ``arange(s, s + c)`` for each pair, vectorised: ``(counts.sum(),)`` int64."""
+    counts = np.asarray(counts, dtype=np.int64)
+    nz = counts > 0
+    starts, counts = np.asarray(starts, dtype=np.int64)[nz], counts[nz]
+    total = int(counts.sum())
+    if total == 0:
+        return np.zeros(0, dtype=np.int64)
+    step = np.ones(total, dtype=np.int64)
+    ends = np.cumsum(counts)
+    step[0] = starts[0]
+    step[ends[:-1]] = starts[1:] - (starts[:-1] + counts[:-1] - 1)
+    return np.cumsum(step)
+
+
+class _Frame:
+    """Per-frame evaluation shared by the uniform and glue paths: each edge at its level once,
+    inner grids by one blend-table product per (block, level)."""
+
+    def __init__(self, net: PatchNet, cache: _NetCache, lv: np.ndarray, pids: np.ndarray, used_levels):
+        self.net, self.cache = net, cache
+        self.edge_pos, self.edge_nrm, self.edge_row = {}, {}, {}
+        needed = np.zeros(net.n_edges, dtype=bool)
+        needed[net.side_edge[pids]] = True
+        for n in used_levels:
+            n = int(n)
+            if n <= 2 or n in self.edge_row:
+                continue
+            en = np.flatnonzero((lv == n) & needed)
+            row = np.full(net.n_edges, -1, dtype=np.int64)
+            row[en] = np.arange(len(en))
+            self.edge_row[n] = row
+            self.edge_pos[n] = eval_edges(cache.edge_cp[en], n)  # (k, n-2, 3)
+            self.edge_nrm[n] = _edge_normal_cache(net, cache, n)[en]
+
+    def side(self, pids: np.ndarray, s: int, n: int):
+        """Positions and normals of side ``s`` (level ``n``) of ``pids`` in the side's direction: 2x ``(k, n-2, 3)``."""
+        rows = self.edge_row[n][self.net.side_edge[pids, s]]
+        kk = np.arange(n - 2)
+        flat = (rows * (n - 2))[:, None] + np.where(self.net.side_flip[pids, s][:, None], kk[::-1], kk)
+        return (self.edge_pos[n].reshape(-1, 3).take(flat, axis=0),
+                self.edge_nrm[n].reshape(-1, 3).take(flat, axis=0))
+
+    def inner(self, pids: np.ndarray, mm: int):
+        """Inner grid positions and normals at level ``mm``: 2x ``(k, (mm-2)^2, 3)`` (transposed views)."""
+        ti = params(mm)[1:-1]
+        vv, uu = np.meshgrid(ti, ti, indexing="ij")
+        t, tu, tv = blend_tables(tuple(uu.ravel()), tuple(vv.ravel()), "float32")
+        k = len(pids)
+        pk = self.cache.packed[pids]
+        flat = pk.reshape(k * 3, 16)
+        p_in = (flat @ t).reshape(k, 3, -1)
+        n_in, ok = _normals_cm((flat @ tu).reshape(k, 3, -1), (flat @ tv).reshape(k, 3, -1), self.cache.scale4[pids])
+        n_in = n_in.transpose(0, 2, 1)
+        if not ok.all():
+            n_in = _limit_normals(pk, uu.ravel(), vv.ravel(), n_in, ok, "float32").astype(np.float32)
+        return p_in.transpose(0, 2, 1), n_in
+
+
+def _bilinear_weights(prm: np.ndarray) -> np.ndarray:
+    """Weights of corners c0..c3 at parameters ``(s, 2)``: ``(s, 4)``."""
+    u, v = prm[:, 0], prm[:, 1]
+    return np.stack([(1 - u) * (1 - v), u * (1 - v), u * v, (1 - u) * v], axis=1).astype(np.float32)
+
+
+def tessellate(net: PatchNet, levels, patches=None, strips: bool = False) -> TerrainMesh:
+    """Tessellate ``net`` with per-edge ``levels``.
+
+    Parameters
+    ----------
+    net : PatchNet
+    levels : int or (e,) int array, vertices per edge (4, 6, 8 are the talk's; any 2..64 works)
+    patches : (p,) int array, optional: tessellate only these patches (e.g. after frustum culling)
+    strips : also build ``mesh.strips`` (triangle strips with primitive restart)
+
+    Returns
+    -------
+    TerrainMesh.  Patches come out uniform ones first, grouped by level, then the glue patches
+    grouped by shape (``mesh.patch_ids`` gives the order).  Uniform groups are written with
+    contiguous slice operations from cached index buffers; glue patches, typically a few percent,
+    in one ragged pass over all their shapes.
+    """
+    cache = _cache(net)
+    lv = _as_levels(net, levels)
+    pids = np.arange(len(net), dtype=np.int64) if patches is None else np.asarray(patches, dtype=np.int64).ravel()
+    if len(pids) and (pids.min() < 0 or pids.max() >= len(net)):
+        raise ValidationError(f"{net.name}: patch ids must be in 0..{len(net) - 1}")
+    side_lv = lv[net.side_edge[pids]].astype(np.int64)  # (p, 4)
+    m = side_lv.max(axis=1) if len(pids) else np.zeros(0, np.int64)
+    glue = (side_lv != m[:, None]).any(axis=1)
+    key = ((((glue * 65 + m) * 65 + side_lv[:, 0]) * 65 + side_lv[:, 1]) * 65 + side_lv[:, 2]) * 65 + side_lv[:, 3]
+    order = np.argsort(key, kind="stable")
+    pids, side_lv, m, key, glue = pids[order], side_lv[order], m[order], key[order], glue[order]
+    ukeys, first_of, shape_of = np.unique(key, return_index=True, return_inverse=True)
+    shape_of = shape_of.ravel()
+    shapes = [get_shape(tuple(side_lv[i])) for i in first_of]
+    s_nv = np.array([sh.n_verts for sh in shapes], dtype=np.int64)
+    s_nt = np.array([len(sh.tris) for sh in shapes], dtype=np.int64)
+    nv_p, nt_p = s_nv[shape_of], s_nt[shape_of]
+    vertex_start = np.concatenate([[0], np.cumsum(nv_p)]).astype(np.int64)
+    tri_start = np.concatenate([[0], np.cumsum(nt_p)]).astype(np.int64)
+    V, T = int(vertex_start[-1]), int(tri_start[-1])
+    n_uniform = int(np.count_nonzero(~glue))
+
+    pos = np.empty((V, 3), dtype=np.float32)
+    nrm = np.empty((V, 3), dtype=np.float32)
+    param = np.empty((V, 2), dtype=np.float32)
+    uv = np.empty((V, 2), dtype=np.float32)
+    uv_lm = np.empty((V, 2), dtype=np.float32)
+    indices = np.empty((T, 3), dtype=np.uint32)
+    frame = _Frame(net, cache, lv, pids, np.unique(side_lv))
+    # per-patch corner attributes (p, 4 attrs, 4 corners): base u, v and light-map u, v at c0..c3
+    r = net.lightmap_rect[pids]
+    lm_corners = np.stack([r[:, [0, 2, 2, 0]], r[:, [1, 1, 3, 3]]], axis=1)  # (p, 2, 4)
+    corner_attr = np.concatenate([net.uv[pids].transpose(0, 2, 1), lm_corners], axis=1)  # (p, 4, 4)
+
+    # uniform patches: one contiguous block per level
+    for g in range(len(shapes)):
+        a = int(first_of[g])
+        if glue[a] if len(glue) else True:
+            continue
+        sh = shapes[g]
+        b = a + int(np.count_nonzero(shape_of == g))
+        k, nv, nt, n = b - a, sh.n_verts, len(sh.tris), sh.m
+        vs, ve = vertex_start[a], vertex_start[b]
+        P, N = pos[vs:ve].reshape(k, nv, 3), nrm[vs:ve].reshape(k, nv, 3)
+        sub = pids[a:b]
+        P[:, :4] = cache.corners[sub]
+        N[:, :4] = cache.corner_normals[sub]
+        for s in range(4):
+            if n > 2:
+                o = 4 + int(sh.side_off[s])
+                P[:, o:o + n - 2], N[:, o:o + n - 2] = frame.side(sub, s, n)
+        if n > 2:
+            P[:, sh.inner_off:], N[:, sh.inner_off:] = frame.inner(sub, n)
+        prm = sh.param
+        param[vs:ve].reshape(k, nv, 2)[:] = prm
+        attr = (corner_attr[a:b].reshape(k * 4, 4) @ _bilinear_weights(prm).T).reshape(k, 4, nv)
+        uv[vs:ve].reshape(k, nv, 2)[:] = attr[:, :2].transpose(0, 2, 1)
+        uv_lm[vs:ve].reshape(k, nv, 2)[:] = attr[:, 2:].transpose(0, 2, 1)
+        firstv = vs + np.arange(k, dtype=np.int64) * nv
+        indices[tri_start[a]:tri_start[b]].reshape(k, nt, 3)[:] = sh.tris[None] + firstv[:, None, None]
+
+    # glue patches: one ragged pass over all of them, whatever their shapes
+    if n_uniform < len(pids):
+        a = n_uniform
+        gp = np.arange(a, len(pids))
+        sub = pids[a:]
+        base = vertex_start[a:-1]
+        gshapes = np.unique(shape_of[a:])
+        s_vstart = np.zeros(len(shapes), np.int64)
+        s_tstart = np.zeros(len(shapes), np.int64)
+        s_vstart[gshapes] = np.concatenate([[0], np.cumsum(s_nv[gshapes])[:-1]])
+        s_tstart[gshapes] = np.concatenate([[0], np.cumsum(s_nt[gshapes])[:-1]])
+        all_param = np.concatenate([shapes[g].param for g in gshapes])
+        all_tris = np.concatenate([shapes[g].tris for g in gshapes])
+        so = shape_of[a:]
+        dst = base[:, None] + np.arange(4)
+        pos[dst] = cache.corners[sub]
+        nrm[dst] = cache.corner_normals[sub]
+        off = np.stack([shapes[g].side_off for g in range(len(shapes))])[so]  # (q, 4)
+        lvq = side_lv[a:]
+        for s in range(4):
+            for n in np.unique(lvq[:, s]):
+                n = int(n)
+                if n <= 2:
+                    continue
+                rows = np.flatnonzero(lvq[:, s] == n)
+                dst = (base[rows] + 4 + off[rows, s])[:, None] + np.arange(n - 2)
+                pos[dst], nrm[dst] = frame.side(sub[rows], s, n)
+        inner_off = np.array([sh.inner_off for sh in shapes])[so]
+        mq = m[a:]
+        for mm in np.unique(mq):
+            mm = int(mm)
+            rows = np.flatnonzero(mq == mm)
+            dst = (base[rows] + inner_off[rows])[:, None] + np.arange((mm - 2) ** 2)
+            pos[dst], nrm[dst] = frame.inner(sub[rows], mm)
+        vs = vertex_start[a]
+        vsrc = _ragged_arange(s_vstart[so], nv_p[a:])
+        prm = all_param[vsrc]
+        param[vs:] = prm
+        vp = np.repeat(np.arange(len(sub)), nv_p[a:])
+        attr = np.einsum("sc,sxc->sx", _bilinear_weights(prm), corner_attr[a:][vp])  # (vq, 4)
+        uv[vs:], uv_lm[vs:] = attr[:, :2], attr[:, 2:]
+        tsrc = _ragged_arange(s_tstart[so], nt_p[a:])
+        indices[tri_start[a]:] = all_tris[tsrc] + np.repeat(base, nt_p[a:])[:, None]
+        del gp
+
+    pos += cache.origin32
+    uv_proj = (pos[:, :2] - cache.proj_origin) / cache.proj_scale
+    vpatch = np.repeat(np.arange(len(pids), dtype=np.int32), nv_p)
+
+    strip_buf = None
+    if strips:
+        parts = []
+        for i in range(len(pids)):
+            st = np.append(shapes[shape_of[i]].strip, -1)
+            parts.append(np.where(st < 0, -1, st + vertex_start[i]))
+        sb = np.concatenate(parts)[:-1] if parts else np.zeros(0, np.int64)
+        strip_buf = np.where(sb < 0, RESTART, sb).astype(np.uint32)
+
+    return TerrainMesh(
+        positions=pos,
+        normals=nrm,
+        uv=uv,
+        uv_lightmap=uv_lm,
+        uv_projected=uv_proj.astype(np.float32),
+        param=param,
+        indices=indices,
+        patch_ids=pids,
+        patch_kind=np.where(glue, 0, m).astype(np.int8),
+        patch_levels=side_lv.astype(np.int16),
+        vertex_patch=vpatch,
+        vertex_start=vertex_start,
+        tri_start=tri_start,
+        strips=strip_buf,
+    )
+
+
+# ---------------------------------------------------------------------------------------- checks
+def weld_exact(positions: np.ndarray) -> np.ndarray:
+    """Ids of bit-identical positions, ``(m,)`` int64 (vertices with the same float32 bits share an id)."""
+    bits = np.ascontiguousarray(positions, dtype=np.float32).view(np.uint32).reshape(-1, 3)
+    _, ids = np.unique(bits, axis=0, return_inverse=True)
+    return ids.ravel()
+
+
+def open_edges(mesh: TerrainMesh) -> np.ndarray:
+    """Mesh edges used by exactly one non-degenerate triangle, after welding bit-identical vertices.
+
+    Returns ``(k, 2)`` int64 pairs of vertex indices (into ``mesh.positions``).  On a crack-free
+    tessellation these lie only on the net's true boundary.
+    """
+    ids = weld_exact(mesh.positions)
+    t = ids[mesh.indices.astype(np.int64)]
+    keep = (t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])
+    tri = mesh.indices.astype(np.int64)[keep]
+    t = t[keep]
+    e_ids = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    e_vtx = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    key = np.sort(e_ids, axis=1)
+    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    return e_vtx[cnt[inv.ravel()] == 1]
