@@ -113,6 +113,10 @@ class Offscreen:
         return self._buf[::-1].copy()
 
     def release(self) -> None:
+        # unbind first: moderngl re-binds the "current" framebuffer when it creates the next one,
+        # and binding a deleted one is GL_INVALID_OPERATION
+        if self.ctx.fbo is self.fbo:
+            (self.ctx.screen or self.ctx.detect_framebuffer(0)).use()
         for obj in (self.fbo, self.color, self.depth):
             if obj is not None:
                 obj.release()
@@ -130,4 +134,5 @@ def save_png(path, image) -> Path:
     path = Path(path)
     with atomic_path(path) as tmp:
         Image.fromarray(np.ascontiguousarray(img)).save(tmp, format="PNG")
+        tmp.chmod(0o644)  # mkstemp makes 0600 files; an image is for everyone
     return path

@@ -138,6 +138,17 @@ class TerrainRenderer:
         camera = replace(camera, aspect=self.size[0] / self.size[1])
         t: dict = {}
         mesh = self.prepare(camera, lod=lod, levels=levels, timings=t)
+        return self.draw(camera, mesh, lightmap_mode=lightmap_mode, debug=debug, fog=fog, sky=sky, clear=clear,
+                         read=read, timings=t)
+
+    def draw(self, camera, mesh, lightmap_mode: str = "modulate", debug: str | None = None,
+             fog: float | None = DEFAULT_FOG_DENSITY, sky: bool = True, clear=(0.0, 0.0, 0.0, 1.0),
+             read: bool = True, timings: dict | None = None) -> Frame:
+        """Upload and draw a given :class:`TerrainMesh` (any mesh with its fields) for ``camera``;
+        the second half of :meth:`render`."""
+        camera = replace(camera, aspect=self.size[0] / self.size[1])
+        t = {"lod": 0.0, "cull": 0.0, "tessellate": 0.0}
+        t.update(timings or {})
         t0 = time.perf_counter()
         self.terrain.upload(mesh, kinds=debug == "lod")
         t1 = time.perf_counter()

@@ -39,9 +39,9 @@ class _Stream:
         """Upload ``data``; returns True when the buffer object was replaced (VAOs must be rebuilt)."""
         nbytes = data.nbytes
         if self.buffer is None or self.buffer.size < nbytes:
+            cap = max(nbytes, 4096, int(self.buffer.size * 2) if self.buffer is not None else 0)
             if self.buffer is not None:
                 self.buffer.release()
-            cap = max(nbytes, 4096, int(self.buffer.size * 2) if self.buffer is not None else 0)
             self.buffer = self.ctx.buffer(reserve=cap, dynamic=True)
             self.buffer.write(np.ascontiguousarray(data))
             return True
