@@ -13,8 +13,8 @@ from piste.errors import ConfigError
 
 #: default thresholds for a course in metres: edges nearer than ``near`` get 8 vertices, nearer
 #: than ``far`` 6, the rest 4 (tuned so a view down the default course gives the talk's mix)
-DEFAULT_NEAR = 35.0
-DEFAULT_FAR = 80.0
+DEFAULT_NEAR = 60.0
+DEFAULT_FAR = 180.0
 LEVELS = (4, 6, 8)
 
 
