@@ -1,0 +1,1 @@
+from piste.world.course import default_course, track_centerline  # noqa: E402
