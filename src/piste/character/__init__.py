@@ -8,12 +8,25 @@ Skeleton.world_matrices(pose), Clip.sample(t, skeleton=None, loop=False, retarge
 compress_clip(clip, skeleton, max_error, virtual_distance) -> CompressedClip   (compress.py)
 compression_report(model), clip_error(a, b, skeleton, virtual_distance)
 blend_morphs(mesh, weights), morphs_to_null_bones(mesh, n_bones), morph_report  (morph.py)
+skin(mesh, bone_matrices, scheme="exact"|"post_transform"|"blended", step, max_bones),
+PostTransformMesh, BlendedMesh                                                  (skinning.py)
+palette(mesh, step, max_bones) -> Palette, quantize_weights                     (palette.py)
+make_batches, batch_mesh, check_batches, frame_bytes, Budget, BUDGETS           (batches.py)
+stripify, unstripify, strip_stats                                               (strips.py)
+make_lods, simplify_mesh, LOD                                                   (lod.py)
+default_rider(seed=0) -> Model                                                  (rider.py)
 """
 
 from piste.character.model import Camera, Clip, Light, Model, Pose, Skeleton, SkinnedMesh, Track
 from piste.character.compress import CompressedClip, clip_error, compress_clip, compression_report
 from piste.character.morph import NullBoneRig, blend_morphs, morph_report, morphs_to_null_bones, vertex_normals
 from piste.formats.gltf import load_gltf
+from piste.character.skinning import BlendedMesh, PostTransformMesh, skin
+from piste.character.palette import Palette, palette, quantize_weights
+from piste.character.batches import BUDGETS, Batch, Budget, batch_mesh, check_batches, frame_bytes, make_batches
+from piste.character.strips import strip_stats, stripify, unstripify
+from piste.character.lod import LOD, make_lods, simplify_mesh
+from piste.character.rider import default_rider
 
 __all__ = [
     "Camera",
@@ -34,4 +47,24 @@ __all__ = [
     "morph_report",
     "morphs_to_null_bones",
     "vertex_normals",
+    "skin",
+    "PostTransformMesh",
+    "BlendedMesh",
+    "palette",
+    "Palette",
+    "quantize_weights",
+    "make_batches",
+    "batch_mesh",
+    "check_batches",
+    "frame_bytes",
+    "Budget",
+    "BUDGETS",
+    "Batch",
+    "stripify",
+    "unstripify",
+    "strip_stats",
+    "make_lods",
+    "simplify_mesh",
+    "LOD",
+    "default_rider",
 ]
