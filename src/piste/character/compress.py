@@ -488,14 +488,8 @@ def _compress_weight(name, tr, grid, tol):
 
 
 def _raw_bytes(clip) -> int:
-    """Bytes of the clip as glTF stores it: float32 values (3 per key for CUBICSPLINE) plus each
-    distinct key-time array once (exporters share input accessors)."""
-    n = 0
-    times = {}
-    for tr in [tr for bt in clip.tracks.values() for tr in bt.values()] + list(clip.weight_tracks.values()):
-        n += 4 * tr.values.size * (3 if tr.interpolation == "CUBICSPLINE" else 1)
-        times[tr.times.tobytes()] = tr.times.size
-    return n + 4 * sum(times.values())
+    """Bytes of the clip as glTF stores it (:attr:`Clip.nbytes`)."""
+    return clip.nbytes
 
 
 def compression_report(clips, skeleton=None, max_error=None, virtual_distance=None, **kw) -> list:

@@ -256,9 +256,14 @@ class Clip:
 
     @property
     def nbytes(self) -> int:
-        """Raw bytes of all tracks stored as float32 (as in a glTF buffer)."""
-        n = sum(tr.nbytes for bt in self.tracks.values() for tr in bt.values())
-        return n + sum(tr.nbytes for tr in self.weight_tracks.values())
+        """Bytes of the clip as glTF stores it: float32 values (plus tangents for CUBICSPLINE) and
+        each distinct key-time array once (exporters share input accessors between channels)."""
+        n = 0
+        times = {}
+        for tr in [tr for bt in self.tracks.values() for tr in bt.values()] + list(self.weight_tracks.values()):
+            n += 4 * tr.values.size * (3 if tr.interpolation == "CUBICSPLINE" else 1)
+            times[tr.times.tobytes()] = tr.times.size
+        return n + 4 * sum(times.values())
 
     @property
     def bones(self) -> list:
