@@ -75,12 +75,13 @@ def test_glue_patch_structure():
     seed=st.integers(0, 2**31 - 1),
     choices=st.sampled_from([(4, 6, 8), (2, 3, 4, 5, 6, 7, 8), (4, 8)]),
     big=st.booleans(),
+    cache=st.booleans(),
 )
-def test_random_nets_are_crack_free(rows, cols, seed, choices, big):
+def test_random_nets_are_crack_free(rows, cols, seed, choices, big, cache):
     offset = (3.1e4, -2.7e4, 1.2e3) if big else (0, 0, 0)
     net = grid_net(rows, cols, seed=seed, offset=offset)
     levels = np.random.default_rng(seed).choice(choices, net.n_edges).astype(np.int16)
-    mesh = tessellate(net, levels)
+    mesh = tessellate(net, levels, cache=cache)
     check_crack_free(net, levels, mesh)
     assert np.isfinite(mesh.positions).all()
     assert np.allclose(np.linalg.norm(mesh.normals, axis=1), 1, atol=1e-5)
@@ -152,3 +153,28 @@ def test_weld_exact():
     p = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 0]], np.float32)
     ids = weld_exact(p)
     assert ids[0] == ids[2] != ids[1]
+
+
+def test_vertex_cache_matches_evaluation():
+    """Cached and evaluated tessellations agree: corners and edges bit for bit, inner points to
+    float32 rounding (BLAS may sum a batch of a different size in another order)."""
+    net = PatchNet.from_bpt(TEAPOT)
+    for seed in range(3):
+        levels = np.random.default_rng(seed).choice([4, 6, 8], net.n_edges)
+        a = tessellate(net, levels, cache=False)
+        b = tessellate(net, levels, cache=True)
+        for f in ("uv", "uv_lightmap", "param", "indices", "patch_ids"):
+            assert np.array_equal(getattr(a, f), getattr(b, f)), f
+        assert np.allclose(a.positions, b.positions, atol=1e-5) and np.allclose(a.normals, b.normals, atol=1e-5)
+        p = a.param
+        on_edge = (p == 0).any(axis=1) | (p == 1).any(axis=1)
+        assert np.array_equal(a.positions[on_edge], b.positions[on_edge])
+
+
+def test_vertex_cache_follows_uv_changes():
+    net = grid_net(2, 2, flips=False)
+    before = tessellate(net, 4, cache=True).uv_lightmap.copy()
+    net.lightmap_rect[:] = [0.25, 0.25, 0.5, 0.5]
+    after = tessellate(net, 4, cache=True)
+    assert not np.array_equal(before, after.uv_lightmap)
+    assert np.array_equal(after.uv_lightmap, tessellate(net, 4, cache=False).uv_lightmap)

@@ -279,10 +279,37 @@ class _NetCache:
         self.corner_normals = self._corner_normals(net)
         self.origin32 = self.origin.astype(np.float32)
         self.edge_normals: dict[int, np.ndarray] = {}
+        self.grid_levels, self.grid_flat, self.grid_offset, self.grid_snapshot = {}, None, {}, None
         self.scale4 = (net.patch_size.astype(np.float32) ** 4).astype(np.float32)
         lo, hi = net.bounds
         self.proj_origin = lo[:2].astype(np.float32)
         self.proj_scale = np.float32(max(float(np.max(hi[:2] - lo[:2])), 1e-12))
+
+    def grids(self, net: PatchNet, levels) -> tuple[np.ndarray, dict]:
+        """The vertex cache: every patch tessellated uniformly at each of ``levels``, as one flat
+        float32 array of ``VERTEX_FLOATS``-float vertices, and each level's offset (in floats).
+
+        Rebuilt when the net's corner UVs or light-map rects change (nets are otherwise immutable).
+        """
+        snap = (net.uv.tobytes(), net.lightmap_rect.tobytes())
+        if snap != self.grid_snapshot:
+            self.grid_levels, self.grid_flat, self.grid_offset = {}, None, {}
+            self.grid_snapshot = snap
+        want = sorted(set(int(n) for n in levels) | set(self.grid_levels))
+        if self.grid_flat is None or any(n not in self.grid_levels for n in want):
+            for n in want:
+                if n not in self.grid_levels:
+                    mesh = tessellate(net, n, cache=False)
+                    self.grid_levels[n] = np.concatenate(
+                        [mesh.positions, mesh.normals, mesh.param, mesh.uv, mesh.uv_lightmap, mesh.uv_projected], axis=1
+                    ).astype(np.float32)
+            parts, offset, o = [], {}, 0
+            for n in want:
+                offset[n] = o
+                parts.append(self.grid_levels[n].ravel())
+                o += parts[-1].size
+            self.grid_flat, self.grid_offset = np.concatenate(parts), offset
+        return self.grid_flat, self.grid_offset
 
     def _corner_normals(self, net: PatchNet) -> np.ndarray:
         """Corner normals averaged over every patch meeting at the welded corner, ``(n, 4, 3)`` float32."""
@@ -459,7 +486,7 @@ def _bilinear_weights(prm: np.ndarray) -> np.ndarray:
     return np.stack([(1 - u) * (1 - v), u * (1 - v), u * v, (1 - u) * v], axis=1).astype(np.float32)
 
 
-def tessellate(net: PatchNet, levels, patches=None, strips: bool = False) -> TerrainMesh:
+def tessellate(net: PatchNet, levels, patches=None, strips: bool = False, cache: bool | None = None) -> TerrainMesh:
     """Tessellate ``net`` with per-edge ``levels``.
 
     Parameters
@@ -468,6 +495,11 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False) -> Ter
     levels : int or (e,) int array, vertices per edge (4, 6, 8 are the talk's; any 2..64 works)
     patches : (p,) int array, optional: tessellate only these patches (e.g. after frustum culling)
     strips : also build ``mesh.strips`` (triangle strips with primitive restart)
+    cache : use the net's vertex cache (each patch evaluated once per level, then every frame is
+        gathers of cached vertices: a memory-for-speed trade, ~56 bytes a vertex, 16 MB for the
+        default course at levels 4, 6 and 8).  ``False`` evaluates everything this frame with the
+        blend tables.  Default: on when the cache stays under 512 MB.  Both give bit-identical
+        corners and edges (so both are crack-free); inner points agree to float32 rounding.
 
     Returns
     -------
@@ -476,7 +508,6 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False) -> Ter
     contiguous slice operations from cached index buffers; glue patches, typically a few percent,
     in one ragged pass over all their shapes.
     """
-    cache = _cache(net)
     lv = _as_levels(net, levels)
     pids = np.arange(len(net), dtype=np.int64) if patches is None else np.asarray(patches, dtype=np.int64).ravel()
     if len(pids) and (pids.min() < 0 or pids.max() >= len(net)):
@@ -497,13 +528,132 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False) -> Ter
     tri_start = np.concatenate([[0], np.cumsum(nt_p)]).astype(np.int64)
     V, T = int(vertex_start[-1]), int(tri_start[-1])
     n_uniform = int(np.count_nonzero(~glue))
+    if cache is None:
+        cache = len(net) * 116 * VERTEX_FLOATS * 4 < 512 * 2**20
+    indices = np.empty((T, 3), dtype=np.uint32)
+    if cache:
+        vert = _gather_cached(net, pids, side_lv, m, glue, shapes, shape_of, first_of, vertex_start, n_uniform)
+        pos, nrm, param = vert[:, 0:3], vert[:, 3:6], vert[:, 6:8]
+        uv, uv_lm, uv_proj = vert[:, 8:10], vert[:, 10:12], vert[:, 12:14]
+    else:
+        pos, nrm, param, uv, uv_lm, uv_proj = _evaluate_frame(
+            net, lv, pids, side_lv, m, glue, shapes, shape_of, first_of, vertex_start, n_uniform)
+    _write_indices(indices, shapes, shape_of, first_of, vertex_start, tri_start, n_uniform)
+    vpatch = np.repeat(np.arange(len(pids), dtype=np.int32), nv_p)
+    strip_buf = _strips(shapes, shape_of, vertex_start) if strips else None
+    return TerrainMesh(
+        positions=pos,
+        normals=nrm,
+        uv=uv,
+        uv_lightmap=uv_lm,
+        uv_projected=uv_proj,
+        param=param,
+        indices=indices,
+        patch_ids=pids,
+        patch_kind=np.where(glue, 0, m).astype(np.int8),
+        patch_levels=side_lv.astype(np.int16),
+        vertex_patch=vpatch,
+        vertex_start=vertex_start,
+        tri_start=tri_start,
+        strips=strip_buf,
+    )
+
+
+#: floats per cached vertex: position 3, normal 3, param 2, uv 2, light-map uv 2, projected uv 2
+VERTEX_FLOATS = 14
+
+
+def _strips(shapes, shape_of, vertex_start) -> np.ndarray:
+    parts = []
+    for i in range(len(shape_of)):
+        st = np.append(shapes[shape_of[i]].strip, -1)
+        parts.append(np.where(st < 0, -1, st + vertex_start[i]))
+    sb = np.concatenate(parts)[:-1] if parts else np.zeros(0, np.int64)
+    return np.where(sb < 0, RESTART, sb).astype(np.uint32)
+
+
+def _write_indices(indices, shapes, shape_of, first_of, vertex_start, tri_start, n_uniform) -> None:
+    """Cached index buffers, offset per patch: one broadcast per uniform level, one ragged
+    gather for all glue patches."""
+    for g, sh in enumerate(shapes):
+        a = int(first_of[g])
+        if a >= n_uniform:
+            continue
+        k = int(np.count_nonzero(shape_of == g))
+        firstv = vertex_start[a:a + k]
+        indices[tri_start[a]:tri_start[a + k]].reshape(k, len(sh.tris), 3)[:] = sh.tris[None] + firstv[:, None, None]
+    if n_uniform < len(shape_of):
+        so = shape_of[n_uniform:]
+        gshapes = np.unique(so)
+        s_nt = np.array([len(sh.tris) for sh in shapes], dtype=np.int64)
+        s_tstart = np.zeros(len(shapes), np.int64)
+        s_tstart[gshapes] = np.concatenate([[0], np.cumsum(s_nt[gshapes])[:-1]])
+        all_tris = np.concatenate([shapes[g].tris for g in gshapes])
+        nt = s_nt[so]
+        tsrc = _ragged_arange(s_tstart[so], nt)
+        indices[tri_start[n_uniform]:] = all_tris[tsrc] + np.repeat(vertex_start[n_uniform:-1], nt)[:, None]
+
+
+@lru_cache(maxsize=None)
+def _glue_sources(levels: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """For a glue shape: the level and the slot in that level's uniform grid of every vertex."""
+    sh = get_shape(levels)
+    lvl = np.full(sh.n_verts, sh.m, dtype=np.int64)
+    slot = np.empty(sh.n_verts, dtype=np.int64)
+    slot[:4] = np.arange(4)
+    for s, n in enumerate(levels):
+        o = 4 + int(sh.side_off[s])
+        lvl[o:o + n - 2] = n
+        slot[o:o + n - 2] = 4 + s * (n - 2) + np.arange(n - 2)
+    mi = (sh.m - 2) ** 2
+    slot[sh.inner_off:] = 4 + 4 * (sh.m - 2) + np.arange(mi)
+    return lvl, slot
+
+
+def _gather_cached(net, pids, side_lv, m, glue, shapes, shape_of, first_of, vertex_start, n_uniform) -> np.ndarray:
+    """Vertices ``(V, VERTEX_FLOATS)`` float32 gathered from the net's per-level vertex cache."""
+    cache = _cache(net)
+    flat, offset = cache.grids(net, np.unique(side_lv))
+    vert = np.empty((int(vertex_start[-1]), VERTEX_FLOATS), dtype=np.float32)
+    for g, sh in enumerate(shapes):
+        a = int(first_of[g])
+        if a >= n_uniform:
+            continue
+        k, n = int(np.count_nonzero(shape_of == g)), sh.m
+        grid = flat[offset[n]:offset[n] + len(net) * n * n * VERTEX_FLOATS].reshape(len(net), n * n, VERTEX_FLOATS)
+        np.take(grid, pids[a:a + k], axis=0, out=vert[vertex_start[a]:vertex_start[a + k]].reshape(k, n * n, -1))
+    if n_uniform < len(pids):
+        so = shape_of[n_uniform:]
+        gshapes = np.unique(so)
+        src = [_glue_sources(shapes[g].levels) for g in gshapes]
+        nv = np.array([shapes[g].n_verts for g in gshapes], dtype=np.int64)
+        start = np.zeros(len(shapes), np.int64)
+        start[gshapes] = np.concatenate([[0], np.cumsum(nv)[:-1]])
+        lvl = np.concatenate([x[0] for x in src])
+        slot = np.concatenate([x[1] for x in src])
+        nv_p = np.array([sh.n_verts for sh in shapes], dtype=np.int64)[so]
+        vsrc = _ragged_arange(start[so], nv_p)
+        pid = np.repeat(pids[n_uniform:], nv_p)
+        lv_v = lvl[vsrc]
+        off = np.zeros(MAX_LEVEL + 1, np.int64)
+        for n, o in offset.items():
+            off[n] = o
+        rows = (off[lv_v] // VERTEX_FLOATS) + pid * lv_v * lv_v + slot[vsrc]
+        np.take(flat.reshape(-1, VERTEX_FLOATS), rows, axis=0, out=vert[vertex_start[n_uniform]:])
+    return vert
+
+
+def _evaluate_frame(net, lv, pids, side_lv, m, glue, shapes, shape_of, first_of, vertex_start, n_uniform):
+    """Evaluate every vertex of this frame with the blend tables (no vertex cache)."""
+    cache = _cache(net)
+    V = int(vertex_start[-1])
+    nv_p = np.array([sh.n_verts for sh in shapes], dtype=np.int64)[shape_of]
 
     pos = np.empty((V, 3), dtype=np.float32)
     nrm = np.empty((V, 3), dtype=np.float32)
     param = np.empty((V, 2), dtype=np.float32)
     uv = np.empty((V, 2), dtype=np.float32)
     uv_lm = np.empty((V, 2), dtype=np.float32)
-    indices = np.empty((T, 3), dtype=np.uint32)
     frame = _Frame(net, cache, lv, pids, np.unique(side_lv))
     # per-patch corner attributes (p, 4 attrs, 4 corners): base u, v and light-map u, v at c0..c3
     r = net.lightmap_rect[pids]
@@ -517,7 +667,7 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False) -> Ter
             continue
         sh = shapes[g]
         b = a + int(np.count_nonzero(shape_of == g))
-        k, nv, nt, n = b - a, sh.n_verts, len(sh.tris), sh.m
+        k, nv, n = b - a, sh.n_verts, sh.m
         vs, ve = vertex_start[a], vertex_start[b]
         P, N = pos[vs:ve].reshape(k, nv, 3), nrm[vs:ve].reshape(k, nv, 3)
         sub = pids[a:b]
@@ -534,22 +684,17 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False) -> Ter
         attr = (corner_attr[a:b].reshape(k * 4, 4) @ _bilinear_weights(prm).T).reshape(k, 4, nv)
         uv[vs:ve].reshape(k, nv, 2)[:] = attr[:, :2].transpose(0, 2, 1)
         uv_lm[vs:ve].reshape(k, nv, 2)[:] = attr[:, 2:].transpose(0, 2, 1)
-        firstv = vs + np.arange(k, dtype=np.int64) * nv
-        indices[tri_start[a]:tri_start[b]].reshape(k, nt, 3)[:] = sh.tris[None] + firstv[:, None, None]
 
     # glue patches: one ragged pass over all of them, whatever their shapes
     if n_uniform < len(pids):
         a = n_uniform
-        gp = np.arange(a, len(pids))
         sub = pids[a:]
         base = vertex_start[a:-1]
         gshapes = np.unique(shape_of[a:])
+        s_nv = np.array([sh.n_verts for sh in shapes], dtype=np.int64)
         s_vstart = np.zeros(len(shapes), np.int64)
-        s_tstart = np.zeros(len(shapes), np.int64)
         s_vstart[gshapes] = np.concatenate([[0], np.cumsum(s_nv[gshapes])[:-1]])
-        s_tstart[gshapes] = np.concatenate([[0], np.cumsum(s_nt[gshapes])[:-1]])
         all_param = np.concatenate([shapes[g].param for g in gshapes])
-        all_tris = np.concatenate([shapes[g].tris for g in gshapes])
         so = shape_of[a:]
         dst = base[:, None] + np.arange(4)
         pos[dst] = cache.corners[sub]
@@ -578,39 +723,10 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False) -> Ter
         vp = np.repeat(np.arange(len(sub)), nv_p[a:])
         attr = np.einsum("sc,sxc->sx", _bilinear_weights(prm), corner_attr[a:][vp])  # (vq, 4)
         uv[vs:], uv_lm[vs:] = attr[:, :2], attr[:, 2:]
-        tsrc = _ragged_arange(s_tstart[so], nt_p[a:])
-        indices[tri_start[a]:] = all_tris[tsrc] + np.repeat(base, nt_p[a:])[:, None]
-        del gp
 
     pos += cache.origin32
-    uv_proj = (pos[:, :2] - cache.proj_origin) / cache.proj_scale
-    vpatch = np.repeat(np.arange(len(pids), dtype=np.int32), nv_p)
-
-    strip_buf = None
-    if strips:
-        parts = []
-        for i in range(len(pids)):
-            st = np.append(shapes[shape_of[i]].strip, -1)
-            parts.append(np.where(st < 0, -1, st + vertex_start[i]))
-        sb = np.concatenate(parts)[:-1] if parts else np.zeros(0, np.int64)
-        strip_buf = np.where(sb < 0, RESTART, sb).astype(np.uint32)
-
-    return TerrainMesh(
-        positions=pos,
-        normals=nrm,
-        uv=uv,
-        uv_lightmap=uv_lm,
-        uv_projected=uv_proj.astype(np.float32),
-        param=param,
-        indices=indices,
-        patch_ids=pids,
-        patch_kind=np.where(glue, 0, m).astype(np.int8),
-        patch_levels=side_lv.astype(np.int16),
-        vertex_patch=vpatch,
-        vertex_start=vertex_start,
-        tri_start=tri_start,
-        strips=strip_buf,
-    )
+    uv_proj = ((pos[:, :2] - cache.proj_origin) / cache.proj_scale).astype(np.float32)
+    return pos, nrm, param, uv, uv_lm, uv_proj
 
 
 # ---------------------------------------------------------------------------------------- checks
