@@ -1,13 +1,132 @@
-"""``piste stats``: the talk's terrain statistics table (filled in by the terrain core)."""
+"""``piste demo``: render the default course from a camera flying down the track.
+
+Writes ``out/demo.png`` (the first frame); with ``--frames N --video out/demo.mp4`` also an MP4 of
+the flight.  Prints the talk's statistics table over the frames shown and the frame times.
+"""
 
 from __future__ import annotations
 
+import argparse
+
+
+def _size(text: str) -> int:
+    v = int(text)
+    if not 16 <= v <= 8192:
+        raise argparse.ArgumentTypeError(f"size must be between 16 and 8192 pixels, got {v}")
+    return v
+
+
+def _positive(text: str) -> int:
+    v = int(text)
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
+    return v
+
 
 def add_arguments(parser) -> None:
-    parser.add_argument("net", nargs="?", help="a .bpt or .npz patch net (default: the default course)")
-    parser.add_argument("--eye", nargs=3, type=float, metavar=("X", "Y", "Z"), help="camera position")
-    parser.add_argument("--target", nargs=3, type=float, metavar=("X", "Y", "Z"), help="camera target")
+    parser.add_argument("--size", nargs=2, type=_size, default=(640, 448), metavar=("W", "H"),
+                        help="image size in pixels (default: 640 448, the PS2's)")
+    parser.add_argument("--out", default="out/demo.png", help="PNG of the first frame (default: out/demo.png)")
+    parser.add_argument("--frames", type=_positive, default=1, help="frames to render along the track (default: 1)")
+    parser.add_argument("--video", metavar="MP4", help="also write the frames as an H.264 MP4 (e.g. out/demo.mp4)")
+    parser.add_argument("--fps", type=_positive, default=30, help="video frame rate (default: 30)")
+    parser.add_argument("--start", type=float, default=0.12, help="camera start along the track, 0..1 (default: 0.12)")
+    parser.add_argument("--end", type=float, default=0.45, help="camera end along the track, 0..1 (default: 0.45)")
+    parser.add_argument("--lod", choices=("on", "off"), default="on",
+                        help="per-edge LOD (off: every patch 8x8, for comparison)")
+    parser.add_argument("--lightmap", choices=("modulate", "ps2"), default="modulate",
+                        help="light-map mode: one pass Cd x CL, or the PS2's two-pass (Cd - Cs) x As blend")
+    parser.add_argument("--lighting", choices=("placeholder", "baked", "none"), default="placeholder",
+                        help="light-map atlas: a placeholder lit from the normals (default), the baked one "
+                             "(piste.lighting; baked once, then cached), or none")
+    parser.add_argument("--debug", choices=("lod", "wire", "base", "lightmap"),
+                        help="debug view: lod = patches coloured by tessellation (4x4 green, 6x6 yellow, 8x8 red, "
+                             "glue blue) with wireframe; wire = wireframe over the lit terrain; base / lightmap = one texture")
+    parser.add_argument("--seed", type=int, default=0, help="course seed (default: 0)")
+    parser.add_argument("--fov", type=float, default=60.0, help="vertical field of view in degrees (default: 60)")
+    parser.add_argument("--height", type=float, default=9.0, help="camera height above the track in metres (default: 9)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def lightmap_for(net, lighting: str):
+    """The atlas for ``--lighting``: returns ``(net, atlas or "placeholder" or None, scale)``."""
+    if lighting == "none":
+        return net, None, 1.0
+    if lighting == "placeholder":
+        return net, "placeholder", 1.0
+    from piste.lighting.baker import load_or_bake_default_lightmap
+
+    lm = load_or_bake_default_lightmap(net, progress=True)
+    return lm.apply(net), lm.atlas, 1.0
 
 
 def run(args) -> int:
-    raise NotImplementedError
+    import sys
+    import time
+    from pathlib import Path
+
+    import numpy as np
+
+    from piste.errors import ConfigError
+    from piste.render import TerrainRenderer, save_png, summarize
+    from piste.render.video import VideoWriter
+    from piste.terrain import format_stats
+    from piste.world.camera import track_camera
+    from piste.world.course import default_course, track_centerline
+
+    w, h = args.size
+    if args.video and (w % 2 or h % 2):
+        raise ConfigError(f"--size {w} {h}: H.264 video needs an even width and height")
+    if not (0.0 <= args.start <= 1.0 and 0.0 <= args.end <= 1.0):
+        raise ConfigError(f"--start/--end must be fractions of the track in [0, 1], got {args.start}, {args.end}")
+    t0 = time.perf_counter()
+    net = default_course(args.seed)
+    line = track_centerline(args.seed)
+    net, atlas, _ = lightmap_for(net, args.lighting)
+    renderer = TerrainRenderer(net, size=(w, h), lightmap=atlas)
+    lod_on = args.lod == "on"
+    # warm-up (not timed): shader compilation, tessellation caches
+    renderer.render(track_camera(line, args.start, height=args.height, fov_y=args.fov), lod=lod_on,
+                    lightmap_mode=args.lightmap, debug=args.debug, read=False)
+    setup_s = time.perf_counter() - t0
+    ts = np.linspace(args.start, args.end, args.frames) if args.frames > 1 else np.array([args.start])
+    frames = []
+    video = VideoWriter(args.video, fps=args.fps) if args.video else None
+    try:
+        from tqdm import tqdm
+
+        bar = tqdm(ts, desc="rendering", unit="frame", disable=args.no_progress or args.frames < 2, file=sys.stderr)
+        for i, t in enumerate(bar):
+            cam = track_camera(line, float(t), height=args.height, fov_y=args.fov)
+            frame = renderer.render(cam, lod=lod_on, lightmap_mode=args.lightmap, debug=args.debug)
+            if i == 0:
+                out = save_png(args.out, frame.image[..., :3])
+            if video is not None:
+                video.append(frame.image[..., :3])
+            frame.image = None  # keep memory flat over long flights
+            frames.append(frame)
+        if video is not None:
+            video.close()
+    except BaseException:
+        if video is not None:
+            video.abort()
+        raise
+    finally:
+        renderer.release()
+    s = summarize(frames)
+    lod = "on" if args.lod == "on" else "off (all 8x8)"
+    title = (f"Terrain statistics: {net.name}, {len(frames)} frame(s) at {w}x{h}, LOD {lod}, "
+             f"light map {args.lightmap}, lighting {args.lighting}" + (f", debug {args.debug}" if args.debug else ""))
+    print(format_stats(s, title=title))
+    print()
+    print(f"frame times (mean over {len(frames)} frame(s), llvmpipe/EGL):")
+    print(f"  LOD + cull + tessellation  {s['lod_ms'] + s['cull_ms'] + s['tess_ms']:7.2f} ms"
+          f"  (LOD {s['lod_ms']:.2f}, cull {s['cull_ms']:.2f}, tessellate {s['tess_ms']:.2f})")
+    print(f"  upload                     {s['upload_ms']:7.2f} ms")
+    print(f"  CPU side                   {s['cpu_ms']:7.2f} ms")
+    print(f"  draw (GL + finish)         {s['draw_ms']:7.2f} ms")
+    print(f"  read back                  {s['readback_ms']:7.2f} ms")
+    print(f"  frame                      {s['frame_ms']:7.2f} ms = {s['fps']:.1f} fps")
+    print(f"  (set-up, not in the frame times: course, light map, GL context, shaders: {setup_s:.2f} s)")
+    print(f"wrote {out}" + (f" and {args.video} ({len(frames)} frames at {args.fps} fps)" if args.video else ""))
+    return 0

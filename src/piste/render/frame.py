@@ -20,7 +20,7 @@ from piste.render.context import Offscreen, check_gl_error, create_context
 from piste.render.sky_pass import HORIZON, SkyPass
 from piste.render.terrain_pass import TerrainPass
 
-__all__ = ["TerrainRenderer", "Frame", "summarize", "DEFAULT_FOG_DENSITY"]
+__all__ = ["TerrainRenderer", "Frame", "summarize", "cull_boxes", "DEFAULT_FOG_DENSITY"]
 
 #: fog density per metre (about 45 % haze at 1 km)
 DEFAULT_FOG_DENSITY = 6e-4
@@ -58,7 +58,8 @@ class TerrainRenderer:
     size : (W, H) pixels
     ctx : a moderngl context to share (default: a new headless EGL context)
     lightmap : "placeholder" (normals lit by a fixed sun, :func:`placeholder_lightmap`), an atlas
-        ``(H, W, 3|4) uint8`` laid out by ``net.lightmap_rect`` (e.g. a baked one), or None (unlit)
+        ``(H, W, 3|4)`` laid out by ``net.lightmap_rect``, float linear light (e.g. a baked
+        ``LightMap.atlas``) or uint8 (255 = 1.0), or None (unlit)
     base_texture : (N, N, 3|4) uint8 (default: procedural snow)
     lod_near, lod_far : per-edge LOD distance thresholds (default: the terrain core's)
     """
@@ -78,15 +79,18 @@ class TerrainRenderer:
         self.sky = SkyPass(self.ctx)
         self.lod_kwargs = {k: v for k, v in (("near", lod_near), ("far", lod_far)) if v is not None}
         self.bounds = net.patch_bounds
+        lo, hi = self.bounds
+        self._centre = np.ascontiguousarray(((lo + hi) / 2.0).T)  # (3, n): boxes as centre +- half
+        self._half = np.ascontiguousarray(((hi - lo) / 2.0).T)
         self.mesh = None
 
     @property
     def size(self) -> tuple[int, int]:
         return self.target.size
 
-    def set_lightmap(self, atlas) -> None:
-        """Plug in another light-map atlas ``(H, W, 3|4) uint8`` (e.g. a baked one)."""
-        self.terrain.set_lightmap(atlas)
+    def set_lightmap(self, atlas, half_bright: bool = False) -> None:
+        """Plug in another light-map atlas (see :meth:`TerrainPass.set_lightmap`)."""
+        self.terrain.set_lightmap(atlas, half_bright=half_bright)
 
     # ------------------------------------------------------------------ CPU side
     def levels(self, camera, lod: bool = True):
@@ -95,10 +99,7 @@ class TerrainRenderer:
 
     def visible(self, camera) -> np.ndarray:
         """Patches whose control-point boxes meet the view frustum, ``(p,)`` int64 (vectorised)."""
-        from piste.terrain.lod import cull_boxes
-
-        lo, hi = self.bounds
-        return np.nonzero(cull_boxes(lo, hi, camera.view_projection()))[0]
+        return np.nonzero(cull_boxes(self._centre, self._half, camera.frustum_planes()))[0]
 
     def prepare(self, camera, lod: bool = True, levels=None, timings: dict | None = None):
         """LOD, cull and tessellate for ``camera``; returns the :class:`TerrainMesh`.
@@ -178,6 +179,24 @@ class TerrainRenderer:
         self.terrain.release()
         self.sky.release()
         self.target.release()
+
+
+def cull_boxes(centre: np.ndarray, half: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """Which boxes meet a frustum (conservative: a box is dropped only when it lies wholly outside
+    one plane).
+
+    Parameters
+    ----------
+    centre, half : (3, n) float64 box centres and half extents (coordinate-major for two GEMVs)
+    planes : (6, 4) float64 inward planes (:func:`piste.world.camera.frustum_planes`)
+
+    Returns
+    -------
+    (n,) bool
+    """
+    dist = planes[:, :3] @ centre + planes[:, 3:4]  # (6, n) signed distance of the centres
+    reach = np.abs(planes[:, :3]) @ half  # (6, n) the boxes' extent along each normal
+    return (dist + reach >= 0.0).all(axis=0)
 
 
 def summarize(frames: list[Frame]) -> dict:

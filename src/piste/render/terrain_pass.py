@@ -61,8 +61,8 @@ class TerrainPass:
     Parameters
     ----------
     ctx : moderngl.Context
-    lightmap : (H, W, 3|4) uint8 atlas (see :mod:`piste.render.textures` for the layout), or None
-        for a 1x1 white map (unlit)
+    lightmap : (H, W, 3|4) atlas, float linear light or uint8 (see :meth:`set_lightmap`;
+        layout in :mod:`piste.render.textures`), or None for a 1x1 white map (unlit)
     base_texture : (N, N, 3|4) uint8 tileable base texture, default :func:`snow_texture`
     """
 
@@ -106,21 +106,38 @@ class TerrainPass:
         self.base.build_mipmaps()
         self.base.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self.base.repeat_x = self.base.repeat_y = True
-        self.base.anisotropy = 8.0
+        # anisotropic filtering triples the fill cost on llvmpipe (15 -> 42 ms a frame): off
 
-    def set_lightmap(self, atlas) -> None:
-        """Use a light-map atlas ``(H, W, 3|4) uint8`` (``None``: white, i.e. unlit).
+    def set_lightmap(self, atlas, half_bright: bool = False) -> None:
+        """Use a light-map atlas (``None``: white, i.e. unlit).
 
-        Rows are texture ``v`` from 0 up (no flip); sampled bilinearly, clamped, no mip-maps (tiles
-        have gutters, mip-maps would bleed between patches).
+        Parameters
+        ----------
+        atlas : (H, W, 3|4) float (linear light, 1.0 = full, over-bright allowed, e.g. a baked
+            ``LightMap.atlas``) or uint8 (255 = 1.0, or 128 = 1.0 with ``half_bright``, the PS2's
+            storage).  Rows are texture ``v`` from 0 up (no flip).
+        half_bright : uint8 texels are ``round(128 c)``
+
+        Uploaded as a half-float texture, sampled bilinearly, clamped, without mip-maps (tiles have
+        gutters; mip-maps would bleed between patches).  In ``ps2`` mode light above 1.0 saturates
+        (As is clamped to 1 on an 8-bit target).
         """
         import moderngl
 
         if atlas is None:
-            atlas = np.full((1, 1, 4), 255, np.uint8)
+            atlas = np.ones((1, 1, 3), np.float32)
+        a = np.asarray(atlas)
+        if a.ndim != 3 or a.shape[2] not in (3, 4) or not (a.dtype == np.uint8 or a.dtype.kind == "f"):
+            raise RenderError(f"light-map atlas: expected an (H, W, 3|4) uint8 or float image, got {a.shape} {a.dtype}")
+        if a.dtype == np.uint8:
+            a = a.astype(np.float32) / (128.0 if half_bright else 255.0)
+        elif not np.isfinite(a).all():
+            raise RenderError("light-map atlas: values must be finite")
+        rgb = np.clip(a[..., :3], 0.0, 65000.0).astype(np.float16)
         if self.light is not None:
             self.light.release()
-        self.light = self._texture(atlas, "light-map atlas")
+        h, w = rgb.shape[:2]
+        self.light = self.ctx.texture((w, h), 3, np.ascontiguousarray(rgb).tobytes(), dtype="f2", alignment=1)
         self.light.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.light.repeat_x = self.light.repeat_y = False
 

@@ -12,7 +12,7 @@ void main() {
     vec3 d = normalize(b.xyz / b.w - a.xyz / a.w);
     float h = clamp(d.z, 0.0, 1.0);
     vec3 c = mix(u_horizon, u_zenith, pow(h, 0.45));
-    c = mix(c, u_horizon * 0.92, clamp(-d.z * 4.0, 0.0, 1.0));
+    c = mix(c, u_horizon * 0.9, 1.0 - exp(min(d.z, 0.0) * 3.0));  // a little darker below the horizon
     float s = max(dot(d, u_sun), 0.0);
     c += vec3(1.0, 0.95, 0.85) * (0.25 * pow(s, 24.0) + 0.6 * pow(s, 900.0));
     f_color = vec4(min(c, vec3(1.0)), 1.0);

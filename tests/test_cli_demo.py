@@ -1,0 +1,46 @@
+"""``piste demo`` end to end at a small size: PNG, MP4 and the printed tables."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from piste.cli import main
+
+
+def test_demo_writes_png_and_mp4(gl_context, tmp_path, capsys):
+    png, mp4 = tmp_path / "out" / "demo.png", tmp_path / "out" / "demo.mp4"
+    rc = main(["demo", "--size", "96", "64", "--frames", "2", "--out", str(png), "--video", str(mp4), "--no-progress"])
+    assert rc == 0
+    img = np.asarray(Image.open(png))
+    assert img.shape == (64, 96, 3)
+    assert img.std() > 5  # not a blank frame
+    assert mp4.stat().st_size > 1000 and mp4.read_bytes()[4:8] == b"ftyp"
+    import imageio.v2 as imageio
+
+    with imageio.get_reader(mp4) as reader:
+        frames = [f for f in reader]
+    assert len(frames) == 2 and frames[0].shape == (64, 96, 3)
+    out = capsys.readouterr().out
+    for text in ("4x4 patches", "average polygons per patch", "LOD + cull + tessellation", "draw", "fps"):
+        assert text in out
+    assert sorted(p.name for p in png.parent.iterdir()) == ["demo.mp4", "demo.png"]  # no temp files
+
+
+@pytest.mark.parametrize("extra", [["--lod", "off", "--lightmap", "ps2"], ["--debug", "lod"]])
+def test_demo_options(gl_context, tmp_path, capsys, extra):
+    png = tmp_path / "d.png"
+    assert main(["demo", "--size", "64", "48", "--out", str(png), "--no-progress", *extra]) == 0
+    out = capsys.readouterr().out
+    assert png.exists()
+    if "off" in extra:
+        line = next(ln for ln in out.splitlines() if ln.startswith("8x8 patches"))
+        assert "100.0 %" in line
+
+
+def test_demo_rejects_bad_arguments(tmp_path, capsys):
+    assert main(["demo", "--size", "97", "64", "--video", str(tmp_path / "a.mp4"), "--out", str(tmp_path / "a.png")]) == 2
+    assert "even width and height" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["demo", "--lightmap", "multiply"])
