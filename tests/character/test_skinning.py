@@ -189,3 +189,17 @@ def rider_model():
     from piste.character.rider import default_rider
 
     return default_rider()
+
+
+def test_apply_many_matches_apply(rider_model):
+    sk = rider_model.skeleton
+    mesh = rider_model.meshes[0]
+    poses = [rider_model.clips[n].sample(0.4, loop=True) for n in ("ride", "grab", "spin")]
+    mats = np.stack([sk.skin_matrices(p) for p in poses])
+    for sparse in (True, False):
+        bm = BlendedMesh.build(mesh, 0.25, 3, use_sparse=sparse)
+        pos, nrm = bm.apply_many(mats)
+        assert pos.shape == (3, mesh.n_vertices, 3)
+        for i in range(3):
+            p, n = bm.apply(mats[i])
+            assert np.abs(pos[i] - p).max() < 1e-5 and np.abs(nrm[i] - n).max() < 1e-5

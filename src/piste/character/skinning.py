@@ -33,7 +33,8 @@ API
 - ``skin(mesh, bone_matrices, scheme="exact", step=0.25, max_bones=3, inverse_bind=None)``
 - ``skin_exact(mesh, bone_matrices)``
 - ``PostTransformMesh.build(mesh, inverse_bind=None)``, ``.apply(bone_matrices)``
-- ``BlendedMesh.build(mesh, step, max_bones)``, ``.apply(bone_matrices)``
+- ``BlendedMesh.build(mesh, step, max_bones)``, ``.apply(bone_matrices)``,
+  ``.apply_many((n, b, 4, 4))`` (several instances in one call)
 - ``SCHEMES``
 """
 
@@ -192,6 +193,11 @@ class BlendedMesh:
         self._pos_h = np.concatenate([p, np.ones((v, 1), np.float32)], axis=1)  # (v, 4)
         self._nrm_h = np.concatenate([n, np.zeros((v, 1), np.float32)], axis=1)  # (v, 4)
         self._matrices = np.empty((palette.size, 3, 4), np.float32)
+        # palette generation as one small GEMM: (p, b) weights @ (b, 12) bone matrices
+        nb = int(palette.bones.max()) + 1 if palette.size else 1
+        self._weights = np.zeros((palette.size, nb), np.float32)
+        rows = np.repeat(np.arange(palette.size), palette.bones.shape[1])
+        np.add.at(self._weights, (rows, palette.bones.reshape(-1)), palette.weights.reshape(-1))
         self._sparse = None
         if use_sparse is None or use_sparse:
             try:
@@ -224,11 +230,41 @@ class BlendedMesh:
         """Quantize ``mesh``'s weights into a palette and precompute the per-vertex mapping."""
         return cls(_palette(mesh, step, max_bones), mesh.positions, mesh.normals, use_sparse)
 
+    def palette_matrices(self, skin_matrices) -> np.ndarray:
+        """This frame's palette ``(p, 3, 4) float32`` (``(n, p, 3, 4)`` for ``(n, b, 4, 4)`` input):
+        ``sum_i w_i * skin_matrices[bone_i]`` for every entry, as one ``(p, b) @ (b, 12)`` GEMM."""
+        m = np.asarray(skin_matrices)
+        nb = self._weights.shape[1]
+        if m.ndim < 3 or m.shape[-2:] not in ((4, 4), (3, 4)) or m.shape[-3] < nb:
+            raise ValidationError(f"expected skin matrices (b >= {nb}, 4, 4), got shape {m.shape}")
+        m12 = m[..., :nb, :3, :].astype(np.float32).reshape(m.shape[:-3] + (nb, 12))
+        return np.matmul(self._weights, m12).reshape(m.shape[:-3] + (self.palette.size, 3, 4))
+
+    def apply_many(self, skin_matrices, normalize: bool = True):
+        """Skin ``n`` instances at once (e.g. six riders in different poses): ``skin_matrices
+        (n, b, 4, 4)`` -> ``positions (n, v, 3)``, ``normals (n, v, 3)`` float32. With scipy this is
+        one sparse x dense product over all instances."""
+        pal = self.palette_matrices(skin_matrices)  # (n, p, 3, 4)
+        n = pal.shape[0]
+        v = self.n_vertices
+        if self._sparse is not None:
+            out = np.ascontiguousarray((self._sparse @ pal.reshape(n, -1).T).T)  # (n, 6v)
+            pos = out[:, : 3 * v].reshape(n, v, 3)
+            nrm = out[:, 3 * v:].reshape(n, v, 3)
+        else:
+            g = pal[:, self.palette.index]  # (n, v, 3, 4)
+            pos = np.einsum("nvij,vj->nvi", g, self._pos_h)
+            nrm = np.einsum("nvij,vj->nvi", g, self._nrm_h)
+        if normalize:
+            for i in range(n):  # per instance: each nrm[i] is a contiguous (v, 3) view
+                normalize_rows(nrm[i])
+        return pos, nrm
+
     def apply(self, skin_matrices, normalize: bool = True):
         """Skin one frame: generate the palette ``(p, 3, 4)`` then transform every vertex by its
         entry. Returns ``positions (v, 3) float32`` and ``normals (v, 3) float32`` (unit if
         ``normalize``)."""
-        m = self.palette.matrices(skin_matrices, out=self._matrices)
+        m = self.palette_matrices(skin_matrices)
         v = self.n_vertices
         if self._sparse is not None:
             out = self._sparse @ m.reshape(-1)
