@@ -1,0 +1,86 @@
+"""World lighting: lights, the lighting equation, baked per-patch light maps, the PS2 blend.
+
+Public API
+----------
+AmbientLight, DirectionalLight, PointLight, SpotLight   light types (negative intensity darkens)
+Lights                      an ordered collection; ``load_lights(path)`` reads TOML,
+                            ``default_lights()`` the default course's lights
+shade                       the lighting equation at (k, 3) points -> (k, 3) float32
+light_terms                 per-light Lambert x attenuation x cone factors, (k, m)
+atlas_layout, AtlasLayout   light-map atlas tiles (texel-centre UVs, gutters)
+with_lightmap_layout        a net whose ``lightmap_rect`` points at a layout's tiles
+sample_points               a net's light-map sample points and seam-consistent normals
+sample_atlas                point / bilinear atlas sampling (numpy, like the GPU)
+LightMap                    a baked atlas (+ rects, manifest); ``.sample``, ``.apply(net)``
+bake_lightmap               the baker (shadows, chunks, process pool, resumable)
+write_lightmap, load_lightmap   the on-disk form (PNG half-bright, .npz float, manifest.json)
+load_or_bake_default_lightmap   cached bake of the default course for the renderer
+ps2_source, ps2_blend, modulate, ps2_error_report   the PS2 light-map blend trick
+"""
+
+from piste.lighting.baker import (
+    bake_lightmap,
+    lightmap_cache_dir,
+    load_lightmap,
+    load_or_bake_default_lightmap,
+    write_lightmap,
+)
+from piste.lighting.lightmap import (
+    AtlasLayout,
+    LightMap,
+    assemble_atlas,
+    atlas_layout,
+    decode_half_bright,
+    encode_half_bright,
+    lightmap_uv,
+    sample_atlas,
+    sample_points,
+    with_lightmap_layout,
+)
+from piste.lighting.lights import (
+    AmbientLight,
+    DirectionalLight,
+    Lights,
+    PointLight,
+    SpotLight,
+    default_lights,
+    dumps_lights,
+    light_terms,
+    load_lights,
+    loads_lights,
+    shade,
+)
+from piste.lighting.ps2 import modulate, ps2_blend, ps2_error_report, ps2_source
+
+__all__ = [
+    "AmbientLight",
+    "DirectionalLight",
+    "PointLight",
+    "SpotLight",
+    "Lights",
+    "load_lights",
+    "loads_lights",
+    "dumps_lights",
+    "default_lights",
+    "shade",
+    "light_terms",
+    "AtlasLayout",
+    "atlas_layout",
+    "with_lightmap_layout",
+    "sample_points",
+    "sample_atlas",
+    "lightmap_uv",
+    "assemble_atlas",
+    "encode_half_bright",
+    "decode_half_bright",
+    "LightMap",
+    "bake_lightmap",
+    "write_lightmap",
+    "load_lightmap",
+    "lightmap_cache_dir",
+    "load_or_bake_default_lightmap",
+    "ps2_source",
+    "ps2_blend",
+    "modulate",
+    "ps2_error_report",
+]

@@ -1,0 +1,85 @@
+"""``piste bake``: bake per-patch light maps (with terrain shadows) into an atlas.
+
+Writes ``lightmap.png`` (half-bright 8-bit RGB, 128 = 1.0), ``lightmap.npz`` (float32 atlas,
+``rects`` = each patch's ``lightmap_rect``) and ``manifest.json`` into ``--out``, each atomically.
+Finished chunks are kept in ``OUT/.partial/`` until the bake completes, so an interrupted bake
+started again resumes where it stopped and ends with the same bytes.
+"""
+
+from __future__ import annotations
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("net", nargs="?", help="a .bpt or .npz patch net (default: the default course)")
+    parser.add_argument("--lights", metavar="TOML", help="lights file (default: the default course's lights)")
+    parser.add_argument("--res", type=int, default=8, choices=(8, 16), help="texels per patch side (default 8)")
+    parser.add_argument("--out", metavar="DIR", default="out/lightmap", help="output folder (default out/lightmap)")
+    parser.add_argument("--jobs", type=int, default=0, help="worker processes (default 0 = every core)")
+    parser.add_argument("--no-shadows", action="store_true", help="skip shadow rays (unshadowed lighting)")
+    parser.add_argument("--chunk-size", type=int, default=64, help="patches per chunk (unit of resuming)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _load_net(path):
+    from pathlib import Path
+
+    from piste.errors import ConfigError
+    from piste.terrain import PatchNet
+
+    if path is None:
+        from piste.world.course import default_course
+
+        return default_course()
+    p = Path(path)
+    if p.suffix.lower() == ".bpt":
+        return PatchNet.from_bpt(p)
+    if p.suffix.lower() == ".npz":
+        return PatchNet.load(p)
+    raise ConfigError(f"{path}: expected a .bpt or .npz patch net")
+
+
+def run(args) -> int:
+    import shutil
+    import sys
+    import time
+    from pathlib import Path
+
+    from piste.errors import ConfigError
+    from piste.lighting import bake_lightmap, default_lights, load_lights, write_lightmap
+
+    if args.jobs < 0:
+        raise ConfigError(f"--jobs must be >= 0, got {args.jobs}")
+    if args.chunk_size < 1:
+        raise ConfigError(f"--chunk-size must be >= 1, got {args.chunk_size}")
+    net = _load_net(args.net)
+    lights = load_lights(args.lights) if args.lights else default_lights()
+    out = Path(args.out)
+    partial = out / ".partial"
+    t0 = time.perf_counter()
+    lm = bake_lightmap(
+        net,
+        lights,
+        res=args.res,
+        shadows=not args.no_shadows,
+        jobs=args.jobs,
+        chunk_size=args.chunk_size,
+        partial_dir=partial,
+        progress=not args.quiet and sys.stderr.isatty(),
+    )
+    paths = write_lightmap(lm, out)
+    shutil.rmtree(partial / lm.manifest["key"], ignore_errors=True)
+    try:
+        partial.rmdir()
+    except OSError:
+        pass
+    dt = time.perf_counter() - t0
+    m = lm.manifest
+    st = m.get("stats", {})
+    resumed = getattr(lm, "resumed_chunks", 0)
+    print(
+        f"baked {m['patches']} patches at {m['res']}x{m['res']} ({m['samples']:,} samples, "
+        f"{st.get('rays', 0):,} shadow rays, {st.get('rays_occluded', 0):,} occluded) in {dt:.2f} s "
+        f"({m['samples'] / max(dt, 1e-9):,.0f} samples/s)" + (f", {resumed} chunks resumed" if resumed else "")
+    )
+    print(f"atlas {m['atlas_size'][0]}x{m['atlas_size'][1]}: {paths['png']}, {paths['npz']}, {paths['manifest']}")
+    return 0

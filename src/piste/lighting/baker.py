@@ -1,0 +1,369 @@
+"""The light-map baker: a deterministic, resumable, parallel pipeline step.
+
+:func:`bake_lightmap` evaluates every patch's ``res x res`` sample points
+(:func:`~piste.lighting.lightmap.sample_points`), casts shadow rays
+(:func:`~piste.lighting.shadows.shadow_visibility`) and runs the lighting equation
+(:func:`~piste.lighting.lights.shade`) in chunks of patches, in a process pool when ``jobs > 1``.
+
+* **Deterministic**: a chunk's result depends only on its patches, the net and the lights (never on
+  the worker, the order or the number of jobs); files carry no timestamps; the same input gives
+  byte-identical ``lightmap.png``, ``lightmap.npz`` and ``manifest.json``.
+* **Resumable**: each finished chunk is written (atomically) to ``partial_dir/<key>/chunk_NNNNN.npy``
+  where ``key`` hashes every input; a bake killed half-way and started again reuses those files
+  and ends with the same bytes.  The folder is removed after a successful bake.
+* **Atomic**: :func:`write_lightmap` writes each file to a temporary name and renames it.
+
+:func:`load_or_bake_default_lightmap` is the renderer's entry point: the default course's light
+map for the default lights, baked once and cached on disk.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import shutil
+import zipfile
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from pathlib import Path
+
+import numpy as np
+
+from piste.errors import FormatError, ValidationError
+from piste.lighting.lightmap import LightMap, assemble_atlas, atlas_layout, encode_half_bright, inputs_key, sample_points
+from piste.lighting.lights import Lights, light_terms, shade
+
+__all__ = [
+    "BAKE_VERSION",
+    "bake_lightmap",
+    "write_lightmap",
+    "load_lightmap",
+    "lightmap_cache_dir",
+    "load_or_bake_default_lightmap",
+]
+
+#: bumped whenever the baker's output for the same input changes
+BAKE_VERSION = "piste.lightmap-bake/1"
+MANIFEST_FORMAT = "piste.lightmap/1"
+
+# --------------------------------------------------------------------------- chunk work
+_STATE: dict = {}
+
+
+def _init_worker(state: dict) -> None:
+    _STATE.clear()
+    _STATE.update(state)
+    if state.get("shadows"):
+        from piste.lighting.shadows import HeightBound
+
+        _STATE["bound"] = HeightBound.build(state["net"]) if state.get("pretest", True) else None
+
+
+def _bake_chunk(chunk: int) -> tuple[int, np.ndarray, dict]:
+    """Lighting of the patches of one chunk: ``(chunk, (c, res, res, 3) float32, stats)``."""
+    s = _STATE
+    lo = chunk * s["chunk_size"]
+    hi = min(lo + s["chunk_size"], len(s["positions"]))
+    res = s["res"]
+    pos = s["positions"][lo:hi].reshape(-1, 3)
+    nrm = s["normals"][lo:hi].reshape(-1, 3)
+    lights = s["lights"]
+    stats: dict = {}
+    shadow = None
+    if s["shadows"] and any(light.shadows for light in lights.direct):
+        from piste.lighting.shadows import shadow_visibility
+
+        terms = light_terms(lights, pos, nrm)
+        shadow = shadow_visibility(s["net"], lights, pos, nrm, terms, bound=s.get("bound"), stats=stats)
+    colors = shade(lights, pos, nrm, shadow)
+    return chunk, colors.reshape(hi - lo, res, res, 3), stats
+
+
+# --------------------------------------------------------------------------- the bake
+def bake_lightmap(
+    net,
+    lights: Lights,
+    res: int = 8,
+    gutter: int = 1,
+    shadows: bool = True,
+    jobs: int = 1,
+    chunk_size: int = 64,
+    partial_dir=None,
+    progress: bool = False,
+    on_chunk=None,
+    pretest: bool = True,
+) -> LightMap:
+    """Bake a light-map atlas for ``net`` under ``lights``.
+
+    Parameters
+    ----------
+    net : PatchNet
+    lights : Lights
+    res : samples (texels) per tile side, 8 or 16 in the talk (any >= 2 works)
+    gutter : texels replicated around each tile
+    shadows : cast shadow rays against the net (terrain self-shadowing)
+    jobs : worker processes (1 = in this process; 0 or None = every core)
+    chunk_size : patches per chunk (the unit of work and of resuming)
+    partial_dir : folder for finished chunks (resuming); None keeps nothing
+    progress : show a tqdm progress bar
+    on_chunk : optional ``callable(chunk_index, chunks_done, chunks_total)`` called after each
+        chunk is stored (tests use it to interrupt a bake)
+    pretest : use the conservative :class:`~piste.lighting.shadows.HeightBound` ray pre-test
+
+    Returns
+    -------
+    LightMap (``atlas (H, W, 3) float32``, ``rects (n, 4) float32``, manifest with statistics).
+    """
+    res, gutter, chunk_size = int(res), int(gutter), int(chunk_size)
+    if chunk_size < 1:
+        raise ValidationError(f"bake: chunk_size must be >= 1, got {chunk_size}")
+    layout = atlas_layout(len(net), res, gutter)
+    key = inputs_key(net, lights, res, gutter, shadows, chunk_size, BAKE_VERSION)
+    positions, normals = sample_points(net, res)
+    n = len(net)
+    n_chunks = (n + chunk_size - 1) // chunk_size
+    tiles = np.zeros((n, res, res, 3), dtype=np.float32)
+    done = np.zeros(n_chunks, dtype=bool)
+    stats: dict = {}
+    part = None
+    if partial_dir is not None:
+        part = Path(partial_dir) / key
+        part.mkdir(parents=True, exist_ok=True)
+        for c in range(n_chunks):
+            f = part / f"chunk_{c:05d}.npy"
+            fs = part / f"chunk_{c:05d}.json"
+            if f.exists() and fs.exists():
+                try:
+                    arr = np.load(f, allow_pickle=False)
+                    st = json.loads(fs.read_text())
+                except Exception:  # a corrupt leftover: redo that chunk
+                    continue
+                lo, hi = c * chunk_size, min((c + 1) * chunk_size, n)
+                if arr.shape == (hi - lo, res, res, 3) and arr.dtype == np.float32:
+                    tiles[lo:hi] = arr
+                    done[c] = True
+                    for k_, v_ in st.items():
+                        stats[k_] = stats.get(k_, 0) + int(v_)
+    resumed = int(done.sum())
+    state = dict(
+        net=net, lights=lights, res=res, chunk_size=chunk_size, positions=positions, normals=normals,
+        shadows=bool(shadows), pretest=bool(pretest),
+    )
+    todo = [int(c) for c in np.nonzero(~done)[0]]
+    if jobs is None or jobs <= 0:
+        jobs = os.cpu_count() or 1
+    jobs = max(1, min(int(jobs), len(todo) or 1))
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n_chunks, initial=resumed, unit="chunk", desc=f"bake {res}x{res}", dynamic_ncols=True)
+
+    n_done = resumed
+
+    def store(c: int, arr: np.ndarray, st: dict) -> None:
+        nonlocal n_done
+        lo = c * chunk_size
+        tiles[lo : lo + len(arr)] = arr
+        for k_, v_ in st.items():
+            stats[k_] = stats.get(k_, 0) + v_
+        if part is not None:
+            from piste.formats.atomic import write_bytes_atomic
+
+            write_bytes_atomic(part / f"chunk_{c:05d}.json", json.dumps(st, sort_keys=True).encode())
+            _save_npy_atomic(part / f"chunk_{c:05d}.npy", arr)
+        n_done += 1
+        if bar is not None:
+            bar.update(1)
+        if on_chunk is not None:
+            on_chunk(c, n_done, n_chunks)
+
+    try:
+        if jobs == 1 or len(todo) <= 1:
+            _init_worker(state)
+            try:
+                for c in todo:
+                    store(*_bake_chunk(c))
+            finally:
+                _STATE.clear()
+        else:
+            import multiprocessing as mp
+
+            with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn"), initializer=_init_worker, initargs=(state,)) as pool:
+                pending = {pool.submit(_bake_chunk, c) for c in todo}
+                try:
+                    while pending:
+                        finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                        for fut in sorted(finished, key=lambda f: f.result()[0]):
+                            store(*fut.result())
+                except BaseException:
+                    for fut in pending:
+                        fut.cancel()
+                    raise
+    finally:
+        if bar is not None:
+            bar.close()
+
+    atlas = assemble_atlas(tiles, layout)
+    manifest = {
+        "format": MANIFEST_FORMAT,
+        "bake": BAKE_VERSION,
+        "key": key,
+        "net": str(getattr(net, "name", "net")),
+        "patches": n,
+        "res": res,
+        "gutter": gutter,
+        "atlas_size": [layout.width, layout.height],
+        "layout": {"cols": layout.cols, "rows": layout.rows, "cell": layout.cell},
+        "encoding": "lightmap.png: half-bright 8-bit RGB, linear light = texel / 128 (128 = 1.0); "
+        "lightmap.npz 'atlas': float32 linear light",
+        "uv": "patch parameter (u, v) -> atlas (u0 + u (u1 - u0), v0 + v (v1 - v0)); "
+        "row y of the image is v = (y + 0.5) / H",
+        "shadows": bool(shadows),
+        "chunk_size": chunk_size,
+        "chunks": n_chunks,
+        "samples": int(n * res * res),
+        "lights": lights.to_dict(),
+    }
+    manifest["stats"] = {k_: int(v_) for k_, v_ in sorted(stats.items())}
+    lm = LightMap(atlas=atlas, rects=layout.rects(), res=res, gutter=gutter, manifest=manifest)
+    lm.resumed_chunks = resumed  # type: ignore[attr-defined]
+    lm.stats = dict(stats)  # type: ignore[attr-defined]
+    return lm
+
+
+def _save_npy_atomic(path: Path, arr: np.ndarray) -> None:
+    from piste.formats.atomic import atomic_path
+
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.lib.format.write_array(fh, np.ascontiguousarray(arr), allow_pickle=False)
+
+
+# --------------------------------------------------------------------------- files
+def _npz_bytes(arrays: dict) -> bytes:
+    """A .npz (zip of .npy) with fixed timestamps and order: byte-identical for equal arrays."""
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for name in sorted(arrays):
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = 0o644 << 16
+            data = io.BytesIO()
+            np.lib.format.write_array(data, np.ascontiguousarray(arrays[name]), allow_pickle=False)
+            zf.writestr(info, data.getvalue())
+    return buf.getvalue()
+
+
+def _png_bytes(image: np.ndarray) -> bytes:
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(image), mode="RGB").save(buf, format="PNG", optimize=False, compress_level=6)
+    return buf.getvalue()
+
+
+def write_lightmap(lm: LightMap, out_dir) -> dict:
+    """Write ``lightmap.png`` (half-bright 8-bit), ``lightmap.npz`` (``atlas`` float32, ``rects``,
+    ``res``, ``gutter``) and ``manifest.json`` into ``out_dir``, each atomically.
+
+    Returns ``{"png": path, "npz": path, "manifest": path}``.
+    """
+    import hashlib
+
+    from piste.formats.atomic import write_bytes_atomic
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    png = _png_bytes(lm.to_uint8())
+    npz = _npz_bytes(
+        {
+            "atlas": lm.atlas.astype(np.float32),
+            "rects": lm.rects.astype(np.float32),
+            "res": np.int32(lm.res),
+            "gutter": np.int32(lm.gutter),
+        }
+    )
+    manifest = dict(lm.manifest)
+    manifest["files"] = {
+        "lightmap.png": hashlib.sha256(png).hexdigest(),
+        "lightmap.npz": hashlib.sha256(npz).hexdigest(),
+    }
+    paths = {"png": out / "lightmap.png", "npz": out / "lightmap.npz", "manifest": out / "manifest.json"}
+    write_bytes_atomic(paths["png"], png)
+    write_bytes_atomic(paths["npz"], npz)
+    # the manifest goes last: its presence means the other two are complete
+    write_bytes_atomic(paths["manifest"], (json.dumps(manifest, indent=2, sort_keys=True) + "\n").encode())
+    return paths
+
+
+def load_lightmap(out_dir) -> LightMap:
+    """Read a light map written by :func:`write_lightmap` (float atlas from the .npz)."""
+    out = Path(out_dir)
+    mpath = out / "manifest.json"
+    try:
+        manifest = json.loads(mpath.read_text())
+    except FileNotFoundError:
+        raise FormatError(mpath, "no such file (not a baked light-map folder?)") from None
+    except json.JSONDecodeError as exc:
+        raise FormatError(mpath, f"not valid JSON: {exc.msg}", line=exc.lineno) from None
+    if manifest.get("format") != MANIFEST_FORMAT:
+        raise FormatError(mpath, f"expected format {MANIFEST_FORMAT!r}, got {manifest.get('format')!r}", field="format")
+    npath = out / "lightmap.npz"
+    try:
+        with np.load(npath, allow_pickle=False) as data:
+            for k in ("atlas", "rects", "res", "gutter"):
+                if k not in data.files:
+                    raise FormatError(npath, "missing array", field=k)
+            return LightMap(
+                atlas=data["atlas"].astype(np.float32),
+                rects=data["rects"].astype(np.float32),
+                res=int(data["res"]),
+                gutter=int(data["gutter"]),
+                manifest=manifest,
+            )
+    except FileNotFoundError:
+        raise FormatError(npath, "no such file") from None
+
+
+def lightmap_cache_dir() -> Path:
+    """Where cached bakes live: ``$PISTE_CACHE_DIR`` or ``~/.cache/piste``, then ``lightmaps/``."""
+    base = os.environ.get("PISTE_CACHE_DIR") or os.path.join(os.path.expanduser("~"), ".cache", "piste")
+    return Path(base) / "lightmaps"
+
+
+def load_or_bake_default_lightmap(
+    net=None, lights: Lights | None = None, res: int = 8, shadows: bool = True, cache_dir=None, jobs: int = 0,
+    progress: bool = False,
+) -> LightMap:
+    """The light map of ``net`` (default: the default course) under ``lights`` (default:
+    :func:`~piste.lighting.lights.default_lights`), from the disk cache or baked and cached.
+
+    The cache entry is ``cache_dir/<inputs hash>/`` (default :func:`lightmap_cache_dir`), so any
+    change to the net, the lights or ``res`` bakes anew.  Set the result on the net with
+    ``lm.apply(net)`` (``lightmap_rect``) and upload ``lm.atlas`` (float) or ``lm.to_uint8()``
+    (half-bright) as the light-map texture.
+    """
+    if net is None:
+        from piste.world.course import default_course
+
+        net = default_course()
+    if lights is None:
+        from piste.lighting.lights import default_lights
+
+        lights = default_lights()
+    cache = Path(cache_dir) if cache_dir is not None else lightmap_cache_dir()
+    key = inputs_key(net, lights, res, 1, shadows, 64, BAKE_VERSION)
+    entry = cache / key
+    if (entry / "manifest.json").exists():
+        try:
+            lm = load_lightmap(entry)
+            if lm.manifest.get("key") == key and lm.rects.shape == (len(net), 4):
+                return lm
+        except FormatError:
+            pass
+    lm = bake_lightmap(net, lights, res=res, shadows=shadows, jobs=jobs, partial_dir=cache / ".partial", progress=progress)
+    write_lightmap(lm, entry)
+    shutil.rmtree(cache / ".partial" / key, ignore_errors=True)
+    return lm
