@@ -16,6 +16,7 @@ from piste.errors import PisteError
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("piste.commands.demo", "render the default course (PNG, and MP4 with --frames)"),
     "stats": ("piste.commands.stats", "print the talk's terrain statistics table for a net and camera"),
+    "bake": ("piste.commands.bake", "bake per-patch light maps with terrain shadows into an atlas"),
 }
 
 
