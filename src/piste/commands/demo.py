@@ -72,7 +72,7 @@ def run(args) -> int:
     from piste.render.video import VideoWriter
     from piste.terrain import format_stats
     from piste.world.camera import track_camera
-    from piste.world.course import default_course, track_centerline
+    from piste.world.course import TRACK_HALF_WIDTH, default_course, track_centerline
 
     w, h = args.size
     if args.video and (w % 2 or h % 2):
@@ -83,7 +83,7 @@ def run(args) -> int:
     net = default_course(args.seed)
     line = track_centerline(args.seed)
     net, atlas, _ = lightmap_for(net, args.lighting)
-    renderer = TerrainRenderer(net, size=(w, h), lightmap=atlas)
+    renderer = TerrainRenderer(net, size=(w, h), lightmap=atlas, track=line, track_half_width=TRACK_HALF_WIDTH)
     lod_on = args.lod == "on"
     # warm-up (not timed): shader compilation, tessellation caches
     renderer.render(track_camera(line, args.start, height=args.height, fov_y=args.fov), lod=lod_on,

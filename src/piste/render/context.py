@@ -67,12 +67,22 @@ def check_gl_error(ctx, where: str = "") -> None:
 
 @lru_cache(maxsize=None)
 def load_shader(name: str) -> str:
-    """Source of ``piste/render/shaders/<name>``."""
+    """Source of ``piste/render/shaders/<name>``, with ``#include "file"`` lines replaced by the
+    text of that file (one level, from the same folder)."""
     path = SHADER_DIR / name
     try:
-        return path.read_text()
+        text = path.read_text()
     except FileNotFoundError:
         raise RenderError(f"{path}: shader not found (is the package installed with its data files?)") from None
+    lines = []
+    for line in text.splitlines():
+        if line.startswith("#include"):
+            inc = line.split('"')[1] if line.count('"') == 2 else ""
+            if not inc or inc == name:
+                raise RenderError(f"{path}: bad include line {line!r}")
+            line = load_shader(inc)
+        lines.append(line)
+    return "\n".join(lines) + "\n"
 
 
 class Offscreen:

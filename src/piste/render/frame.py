@@ -62,10 +62,13 @@ class TerrainRenderer:
         ``LightMap.atlas``) or uint8 (255 = 1.0), or None (unlit)
     base_texture : (N, N, 3|4) uint8 (default: procedural snow)
     lod_near, lod_far : per-edge LOD distance thresholds (default: the terrain core's)
+    track : (k, 3) centre line of a groomed track to mark on the snow (projected texture), or None
+    track_half_width : metres from the centre line to the track's dye lines
     """
 
     def __init__(self, net, size=(640, 448), ctx=None, lightmap="placeholder", base_texture=None,
-                 lod_near: float | None = None, lod_far: float | None = None):
+                 lod_near: float | None = None, lod_far: float | None = None, track=None,
+                 track_half_width: float = 16.0):
         self.net = net
         self.ctx = ctx if ctx is not None else create_context()
         self.target = Offscreen(self.ctx, size)
@@ -76,6 +79,10 @@ class TerrainRenderer:
 
             lightmap = placeholder_lightmap(net)
         self.terrain = TerrainPass(self.ctx, lightmap=lightmap, base_texture=base_texture)
+        if track is not None:
+            from piste.render.textures import track_field
+
+            self.terrain.set_track(*track_field(track, net.bounds), half_width=track_half_width)
         self.sky = SkyPass(self.ctx)
         self.lod_kwargs = {k: v for k, v in (("near", lod_near), ("far", lod_far)) if v is not None}
         self.bounds = net.patch_bounds

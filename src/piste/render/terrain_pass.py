@@ -77,8 +77,12 @@ class TerrainPass:
             p["u_light"].value = 1
         cols = [LOD_COLORS[k] for k in (0, 4, 6, 8)]
         self.prog["u_lod_colors"].value = [tuple(c / 255.0 for c in col) for col in cols]
+        for p in (self.prog, self.prog_ps2):
+            p["u_track"].value = 2
+            p["u_track_on"].value = 0
         self.base = None
         self.light = None
+        self.track = None
         self.set_base_texture(snow_texture() if base_texture is None else base_texture)
         self.set_lightmap(lightmap)
         self._streams = {k: _Stream(ctx) for k in ("pos", "uv", "uvl", "kind", "index")}
@@ -141,6 +145,38 @@ class TerrainPass:
         self.light.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.light.repeat_x = self.light.repeat_y = False
 
+    def set_track(self, field, rect, half_width: float = 16.0) -> None:
+        """Mark a groomed track (corduroy, dye lines on its lips) as a projected texture.
+
+        Parameters
+        ----------
+        field : (H, W) float signed distance across the track in metres (see
+            :func:`piste.render.textures.track_field`), or None to remove the track
+        rect : (x0, y0, x1, y1) world rectangle of the field
+        half_width : metres from the centre line to the dye lines
+        """
+        import moderngl
+
+        if self.track is not None:
+            self.track.release()
+            self.track = None
+        if field is None:
+            for p in (self.prog, self.prog_ps2):
+                p["u_track_on"].value = 0
+            return
+        f = np.clip(np.asarray(field, dtype=np.float32), -1000.0, 1000.0).astype(np.float16)
+        if f.ndim != 2:
+            raise RenderError(f"track field: expected an (H, W) array, got {f.shape}")
+        h, w = f.shape
+        self.track = self.ctx.texture((w, h), 1, np.ascontiguousarray(f).tobytes(), dtype="f2", alignment=1)
+        self.track.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.track.repeat_x = self.track.repeat_y = False
+        x0, y0, x1, y1 = (float(v) for v in rect)
+        for p in (self.prog, self.prog_ps2):
+            p["u_track_on"].value = 1
+            p["u_track_rect"].value = (x0, y0, 1.0 / (x1 - x0), 1.0 / (y1 - y0))
+            p["u_track_half"].value = float(half_width)
+
     # ------------------------------------------------------------------ geometry
     def upload(self, mesh, kinds: bool = False) -> None:
         """Upload a :class:`piste.terrain.TerrainMesh` (buffers are reused and orphaned).
@@ -200,6 +236,8 @@ class TerrainPass:
         eye = tuple(float(x) for x in eye)
         self.base.use(0)
         self.light.use(1)
+        if self.track is not None:
+            self.track.use(2)
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         ctx.depth_func = "<"
@@ -266,5 +304,6 @@ class TerrainPass:
         self._vaos = {}
         for s in self._streams.values():
             s.release()
-        for obj in (self.base, self.light, self.prog, self.prog_ps2, self.prog_fog):
-            obj.release()
+        for obj in (self.base, self.light, self.track, self.prog, self.prog_ps2, self.prog_fog):
+            if obj is not None:
+                obj.release()

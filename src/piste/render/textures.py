@@ -12,6 +12,7 @@ snow_texture             (N, N, 4) uint8 tileable procedural snow
 placeholder_lightmap     (H, W, 4) uint8 atlas lit by a fixed sun from the surface normals
                          (a stand-in until baked light maps exist)
 lightmap_atlas_size      (W, H) of the atlas a net's ``lightmap_rect`` describes
+track_field              (H, W) float32 signed distance across a track (metres), a projected texture
 LOD_COLORS               debug colours of 4x4, 6x6, 8x8 and glue patches
 """
 
@@ -21,7 +22,7 @@ import numpy as np
 
 from piste.errors import ValidationError
 
-__all__ = ["snow_texture", "placeholder_lightmap", "lightmap_atlas_size", "LOD_COLORS", "SUN_DIRECTION"]
+__all__ = ["snow_texture", "placeholder_lightmap", "lightmap_atlas_size", "track_field", "LOD_COLORS", "SUN_DIRECTION"]
 
 #: debug colours (RGB uint8) by patch kind: 4x4 green, 6x6 yellow, 8x8 red, glue (non-uniform) blue
 LOD_COLORS = {
@@ -129,3 +130,55 @@ def placeholder_lightmap(net, res: int = 8, sun=SUN_DIRECTION, gutter: int = 1) 
         sel = ok & inner[None]
         atlas[ys[sel], xs[sel], :3] = tiles[sel]
     return atlas
+
+
+def track_field(centerline, bounds, texel: float = 0.75) -> tuple[np.ndarray, np.ndarray]:
+    """Signed horizontal distance (metres) from the track's centre line, sampled on a world x-y grid.
+
+    Parameters
+    ----------
+    centerline : (k, 3) float, points down the track
+    bounds : ((3,), (3,)) world box the field covers (e.g. ``net.bounds``)
+    texel : grid spacing in metres
+
+    Returns
+    -------
+    field : (H, W) float32, row ``y`` / column ``x`` at world ``(x0 + (x + 0.5) texel, y0 + (y + 0.5) texel)``,
+        positive to the right of the direction of travel
+    rect : (4,) float64 ``(x0, y0, x1, y1)`` the world rectangle the texture spans
+    """
+    pts = np.asarray(centerline, dtype=np.float64)[:, :2]
+    if pts.ndim != 2 or len(pts) < 2:
+        raise ValidationError(f"track_field: centerline must have shape (k>=2, 3), got {np.shape(centerline)}")
+    lo, hi = (np.asarray(b, dtype=np.float64)[:2] for b in bounds)
+    w = max(int(np.ceil((hi[0] - lo[0]) / texel)), 2)
+    h = max(int(np.ceil((hi[1] - lo[1]) / texel)), 2)
+    xs = lo[0] + (np.arange(w) + 0.5) * texel
+    ys = lo[1] + (np.arange(h) + 0.5) * texel
+    dy = np.diff(pts[:, 1])
+    if (dy > 0).all() or (dy < 0).all():
+        # the usual course: the line runs monotonically down y, so x_c(y) is a function and the
+        # distance across is (x - x_c(y)) cos(heading)
+        order = np.argsort(pts[:, 1])
+        xc = np.interp(ys, pts[order, 1], pts[order, 0])
+        slope = np.gradient(xc, ys)
+        sign = 1.0 if dy[0] > 0 else -1.0
+        field = sign * (xs[None, :] - xc[:, None]) / np.sqrt(1.0 + slope * slope)[:, None]
+        rect = np.array([lo[0], lo[1], lo[0] + w * texel, lo[1] + h * texel])
+        return field.astype(np.float32), rect
+    # any other line: nearest point of the densely resampled line by k-d tree, side by the tangent
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    s = np.linspace(0.0, cum[-1], max(int(cum[-1] / (0.5 * texel)), 2))
+    dense = np.stack([np.interp(s, cum, pts[:, 0]), np.interp(s, cum, pts[:, 1])], axis=1)
+    tangent = np.gradient(dense, axis=0)
+    from scipy.spatial import cKDTree
+
+    gx, gy = np.meshgrid(xs, ys)
+    q = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    dist, idx = cKDTree(dense).query(q, workers=-1)
+    rel = q - dense[idx]
+    side = np.sign(rel[:, 0] * tangent[idx, 1] - rel[:, 1] * tangent[idx, 0])
+    field = (dist * np.where(side == 0, 1.0, side)).reshape(h, w).astype(np.float32)
+    rect = np.array([lo[0], lo[1], lo[0] + w * texel, lo[1] + h * texel])
+    return field, rect

@@ -151,7 +151,8 @@ def track_camera(
     t: float,
     height: float = 7.0,
     behind: float = 14.0,
-    look_ahead: float = 45.0,
+    look_ahead: float = 60.0,
+    lift: float = 0.5,
     fov_y: float = 60.0,
     aspect: float = 640.0 / 448.0,
     near: float = 0.5,
@@ -165,8 +166,9 @@ def track_camera(
     t : position along the track as a fraction of its length, in [0, 1]
     height : metres above the line
     behind : metres back along the line from the rider's point
-    look_ahead : metres ahead along the line to the look-at point (slightly below it, so the
-        camera looks down the slope)
+    look_ahead : metres ahead along the line to the look-at point
+    lift : the look-at point is ``lift * height`` above the line there (below 1: the camera looks
+        down the slope at the track)
     """
     pts = np.asarray(centerline, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2:
@@ -181,5 +183,5 @@ def track_camera(
     if s + look_ahead > length:
         d = pts[-1] - pts[-2]
         target = target + d / np.linalg.norm(d) * (s + look_ahead - length)
-    target = target + np.array([0.0, 0.0, 0.25 * height])
+    target = target + np.array([0.0, 0.0, lift * height])
     return Camera(eye, target, fov_y=fov_y, aspect=aspect, near=near, far=far)

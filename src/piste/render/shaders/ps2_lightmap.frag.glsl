@@ -6,13 +6,14 @@
 // this pass samples the same base texture to derive Cs per texel and outputs (Cs, As).  The
 // blend is set up by the renderer: FUNC_REVERSE_SUBTRACT with SRC_ALPHA, SRC_ALPHA for colour
 // (dst x As - src x As) and ZERO, ONE for alpha (destination alpha kept).
-uniform sampler2D u_base;
+#include "base_color.glsl"
 uniform sampler2D u_light;
 in vec2 v_uv;
 in vec2 v_uvl;
+in vec3 v_world;
 out vec4 f_color;
 void main() {
-    vec3 cd = texture(u_base, v_uv).rgb;
+    vec3 cd = base_color(v_uv, v_world);
     vec3 cl = texture(u_light, v_uvl).rgb;
     float as_ = max(cl.r, max(cl.g, cl.b));
     vec3 cs = as_ > 0.0 ? cd - cd * cl / as_ : vec3(0.0);

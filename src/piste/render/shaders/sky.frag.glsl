@@ -11,7 +11,7 @@ void main() {
     vec4 b = u_inv_vp * vec4(v_ndc, 1.0, 1.0);
     vec3 d = normalize(b.xyz / b.w - a.xyz / a.w);
     float h = clamp(d.z, 0.0, 1.0);
-    vec3 c = mix(u_horizon, u_zenith, pow(h, 0.45));
+    vec3 c = mix(u_horizon, u_zenith, 1.0 - exp(-2.2 * h));
     c = mix(c, u_horizon * 0.9, 1.0 - exp(min(d.z, 0.0) * 3.0));  // a little darker below the horizon
     float s = max(dot(d, u_sun), 0.0);
     c += vec3(1.0, 0.95, 0.85) * (0.25 * pow(s, 24.0) + 0.6 * pow(s, 900.0));

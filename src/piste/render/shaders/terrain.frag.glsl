@@ -2,7 +2,7 @@
 // The terrain's first pass.  u_mode: 0 modulate (Cd x CL, what modern GPUs do), 1 base texture
 // only (Cd, the first pass of the PS2 scheme), 2 light map only (CL), 3 LOD colours, 4 flat colour
 // (wireframe lines).  Fog (u_fog.a = density per metre) mixes towards the horizon colour.
-uniform sampler2D u_base;
+#include "base_color.glsl"
 uniform sampler2D u_light;
 uniform int u_mode;
 uniform vec3 u_eye;
@@ -17,9 +17,9 @@ out vec4 f_color;
 void main() {
     vec3 c;
     if (u_mode == 0) {
-        c = texture(u_base, v_uv).rgb * texture(u_light, v_uvl).rgb;
+        c = base_color(v_uv, v_world) * texture(u_light, v_uvl).rgb;
     } else if (u_mode == 1) {
-        c = texture(u_base, v_uv).rgb;
+        c = base_color(v_uv, v_world);
     } else if (u_mode == 2) {
         c = texture(u_light, v_uvl).rgb;
     } else if (u_mode == 3) {
