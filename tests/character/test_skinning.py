@@ -203,3 +203,12 @@ def test_apply_many_matches_apply(rider_model):
         for i in range(3):
             p, n = bm.apply(mats[i])
             assert np.abs(pos[i] - p).max() < 1e-5 and np.abs(nrm[i] - n).max() < 1e-5
+
+
+def test_skinning_report(gltf_model):
+    from piste.character.skinning import skinning_report
+
+    rows = skinning_report(gltf_model("CesiumMan"), times=[0.5])
+    assert [r["palette"] for r in rows] == [269, 130, 94]
+    assert all(r["post_pos_max"] < 1e-5 and 0 < r["pos_max"] < 0.04 for r in rows)
+    assert skinning_report(gltf_model("AnimatedMorphCube")) == []

@@ -9,7 +9,7 @@ compress_clip(clip, skeleton, max_error, virtual_distance) -> CompressedClip   (
 compression_report(model), clip_error(a, b, skeleton, virtual_distance)
 blend_morphs(mesh, weights), morphs_to_null_bones(mesh, n_bones), morph_report  (morph.py)
 skin(mesh, bone_matrices, scheme="exact"|"post_transform"|"blended", step, max_bones),
-PostTransformMesh, BlendedMesh                                                  (skinning.py)
+PostTransformMesh, BlendedMesh, skinning_report(model, steps)                   (skinning.py)
 palette(mesh, step, max_bones) -> Palette, quantize_weights                     (palette.py)
 make_batches, batch_mesh, check_batches, frame_bytes, Budget, BUDGETS           (batches.py)
 stripify, unstripify, strip_stats                                               (strips.py)
@@ -21,7 +21,7 @@ from piste.character.model import Camera, Clip, Light, Model, Pose, Skeleton, Sk
 from piste.character.compress import CompressedClip, clip_error, compress_clip, compression_report
 from piste.character.morph import NullBoneRig, blend_morphs, morph_report, morphs_to_null_bones, vertex_normals
 from piste.formats.gltf import load_gltf
-from piste.character.skinning import BlendedMesh, PostTransformMesh, skin
+from piste.character.skinning import BlendedMesh, PostTransformMesh, skin, skinning_report
 from piste.character.palette import Palette, palette, quantize_weights
 from piste.character.batches import BUDGETS, Batch, Budget, batch_mesh, check_batches, frame_bytes, make_batches
 from piste.character.strips import strip_stats, stripify, unstripify
@@ -48,6 +48,7 @@ __all__ = [
     "morphs_to_null_bones",
     "vertex_normals",
     "skin",
+    "skinning_report",
     "PostTransformMesh",
     "BlendedMesh",
     "palette",
