@@ -66,3 +66,25 @@ def test_lightmap_atlas_size_rejects_bad_rects():
     net.lightmap_rect[1] = (0.5, 0.5, 0.4, 0.6)
     with pytest.raises(ValidationError, match="patch 1"):
         lightmap_atlas_size(net)
+
+
+def test_track_field_signed_distance():
+    from piste.render.textures import track_field
+
+    y = np.linspace(0.0, 100.0, 40)
+    line = np.stack([50.0 + 5.0 * np.sin(y / 15.0), y, -y], axis=1)
+    bounds = (np.array([0.0, 0.0, -100.0]), np.array([100.0, 100.0, 0.0]))
+    field, rect = track_field(line, bounds, texel=1.0)
+    assert field.shape == (100, 100) and rect.tolist() == [0.0, 0.0, 100.0, 100.0]
+    # travelling +y, +x is on the right: positive
+    row = 50  # world y = 50.5
+    xc = 50.0 + 5.0 * np.sin(50.5 / 15.0)
+    xs = np.arange(100) + 0.5
+    near = np.abs(xs - xc) < 15
+    slope = 5.0 / 15.0 * np.cos(50.5 / 15.0)
+    expect = (xs - xc) / np.sqrt(1 + slope**2)
+    assert np.allclose(field[row, near], expect[near], atol=0.15)
+    # a line that doubles back takes the general (k-d tree) path and agrees near the line
+    hook = np.concatenate([line, line[-1] + np.array([[10.0, -5.0, 0.0], [20.0, -10.0, 0.0]])])
+    general, _ = track_field(hook, bounds, texel=1.0)
+    assert np.allclose(general[20:80][np.abs(field[20:80]) < 8], field[20:80][np.abs(field[20:80]) < 8], atol=0.3)

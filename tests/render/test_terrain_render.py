@@ -112,10 +112,13 @@ def test_bad_modes_are_config_errors(gl, wavy):
     ("hill_modulate", dict(lightmap_mode="modulate")),
     ("hill_ps2", dict(lightmap_mode="ps2")),
     ("hill_lod", dict(debug="lod")),
+    ("hill_track_ps2", dict(lightmap_mode="ps2")),
 ])
 def test_reference_images(gl, grid_net, reference_image, name, kw):
     net = grid_net(4, 4, size=10.0, relief=5.0)
-    r = TerrainRenderer(net, size=(96, 64), ctx=gl, lod_near=14.0, lod_far=30.0)
+    y = np.linspace(0.0, 40.0, 30)
+    track = np.stack([20.0 + 4.0 * np.sin(y / 8.0), y, np.zeros_like(y)], axis=1) if "track" in name else None
+    r = TerrainRenderer(net, size=(96, 64), ctx=gl, lod_near=14.0, lod_far=30.0, track=track, track_half_width=4.0)
     try:
         frame = r.render(Camera([4.0, -6.0, 12.0], [22.0, 22.0, 0.0], fov_y=60), **kw)
     finally:
