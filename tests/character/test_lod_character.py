@@ -46,3 +46,10 @@ def test_compact_mesh_keeps_attributes_per_vertex():
         simplify_mesh(mesh, 0)
     with pytest.raises(ConfigError):
         make_lods(mesh, ratios=(1.0, 1.5), steps=0.1)
+
+
+def test_lods_weld_flat_shaded_meshes(gltf_model):
+    mesh = gltf_model("Fox").meshes[0]  # 3 vertices a triangle: nothing shared before welding
+    lods = make_lods(mesh)
+    assert lods[2].n_triangles <= 0.3 * mesh.n_triangles
+    assert lods[0].n_matrices > lods[1].n_matrices > lods[2].n_matrices

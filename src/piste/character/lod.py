@@ -70,25 +70,40 @@ def compact_mesh(mesh, indices):
     )
 
 
-def simplify_mesh(mesh, target_triangles: int, target_error: float = 0.05, lock_border: bool = False):
+def simplify_mesh(mesh, target_triangles: int, target_error: float = 0.05, lock_border: bool = False,
+                  weld: bool = True):
     """Simplify ``mesh`` to about ``target_triangles`` with meshoptimizer (indices only), then
     compact the vertices. Returns ``(mesh, error)`` where ``error`` is meshoptimizer's relative
-    error (fraction of the mesh extent)."""
+    error (fraction of the mesh extent).
+
+    ``weld``: simplify the mesh welded by position (vertices split for UV or normal seams, or
+    flat-shaded meshes with 3 vertices a triangle, would otherwise be borders the simplifier
+    cannot collapse); each welded vertex is then represented by the first original vertex at
+    that position, whose attributes it keeps.
+    """
     import meshoptimizer
 
     target = int(target_triangles)
     if target < 1:
         raise ConfigError(f"target_triangles must be >= 1, got {target_triangles}")
-    src = np.ascontiguousarray(mesh.indices.reshape(-1), dtype=np.uint32)
     if target >= mesh.n_triangles:
         return compact_mesh(mesh, mesh.indices), 0.0
+    idx = mesh.indices.astype(np.int64)
+    positions = np.ascontiguousarray(mesh.positions, dtype=np.float32)
+    rep = np.arange(mesh.n_vertices)
+    if weld and mesh.n_vertices:
+        upos, first, inverse = np.unique(positions, axis=0, return_index=True, return_inverse=True)
+        idx = inverse.reshape(-1)[idx]
+        positions = np.ascontiguousarray(upos, dtype=np.float32)
+        rep = first
+    src = np.ascontiguousarray(idx.reshape(-1), dtype=np.uint32)
     dst = np.zeros_like(src)
     err = np.zeros(1, np.float32)
     opts = meshoptimizer.SIMPLIFY_LOCK_BORDER if lock_border else 0
-    count = meshoptimizer.simplify(dst, src, np.ascontiguousarray(mesh.positions, dtype=np.float32),
-                                   target_index_count=3 * target, target_error=float(target_error),
-                                   options=opts, result_error=err)
-    return compact_mesh(mesh, dst[:count].reshape(-1, 3)), float(err[0])
+    count = meshoptimizer.simplify(dst, src, positions, target_index_count=3 * target,
+                                   target_error=float(target_error), options=opts, result_error=err)
+    tris = rep[dst[:count].astype(np.int64)].reshape(-1, 3)
+    return compact_mesh(mesh, tris), float(err[0])
 
 
 def make_lods(mesh, ratios=(1.0, 0.5, 0.25), steps=(0.1, 0.2, 0.25), max_bones: int = 3,
