@@ -212,3 +212,10 @@ def test_skinning_report(gltf_model):
     assert [r["palette"] for r in rows] == [269, 130, 94]
     assert all(r["post_pos_max"] < 1e-5 and 0 < r["pos_max"] < 0.04 for r in rows)
     assert skinning_report(gltf_model("AnimatedMorphCube")) == []
+
+
+def test_post_transform_checks_matrix_count():
+    mesh, sk = _tube()
+    mats = sk.skin_matrices(sk.rest_pose())
+    with pytest.raises(ValidationError):
+        skin(mesh, mats[:2], "post_transform", inverse_bind=sk.inverse_bind)

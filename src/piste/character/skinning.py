@@ -160,6 +160,8 @@ class PostTransformMesh:
         """Bone -> world matrices ``(b, 3, 4) float32`` from skin matrices ``(b, 4, 4)``."""
         s = np.asarray(skin_matrices, dtype=np.float64)
         b = self.bind_world.shape[0]
+        if s.ndim != 3 or s.shape[1:] not in ((4, 4), (3, 4)) or s.shape[0] < b:
+            raise ValidationError(f"expected skin matrices (b >= {b}, 4, 4), got shape {s.shape}")
         return np.matmul(s[:b, :3, :], self.bind_world).astype(np.float32)
 
     def apply(self, skin_matrices):
@@ -320,7 +322,7 @@ def skin(mesh, bone_matrices, scheme: str = "exact", step: float = 0.25, max_bon
     """
     if scheme == "exact":
         return skin_exact(mesh, bone_matrices)
-    m = _check_matrices(bone_matrices, mesh)
+    m = np.asarray(bone_matrices)  # the precomputed objects check the shape and bone count
     if scheme == "post_transform":
         ib_key = None if inverse_bind is None else np.asarray(inverse_bind).tobytes()
         pt = _cached(mesh, ("post", ib_key), lambda: PostTransformMesh.build(mesh, inverse_bind))
