@@ -17,6 +17,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("piste.commands.demo", "render the default course (PNG, and MP4 with --frames)"),
     "stats": ("piste.commands.stats", "print the talk's terrain statistics table for a net and camera"),
     "bake": ("piste.commands.bake", "bake per-patch light maps with terrain shadows into an atlas"),
+    "view": ("piste.commands.view", "fly over the default course in a window (LOD follows the camera)"),
 }
 
 

@@ -66,3 +66,19 @@ def test_track_camera_rides_above_the_line_looking_ahead():
         # the eye is ~height above the line at its own y
         z_line = np.interp(cam.eye[1], line[:, 1], line[:, 2])
         assert 6.0 < cam.eye[2] - z_line < 14.0
+
+
+def test_fly_camera_moves_and_turns():
+    from piste.world.camera import FlyCamera
+
+    cam = track_camera(np.array([[0.0, 0.0, 100.0], [0.0, 100.0, 60.0]]), 0.5)
+    fly = FlyCamera.from_camera(cam, speed=10.0)
+    assert np.allclose(fly.forward, cam.forward)
+    start = fly.position.copy()
+    fly.move(1.0, 0.0, 0.0, 0.5)
+    assert np.allclose(fly.position - start, 5.0 * cam.forward)
+    fly.look(np.pi / 2, 0.0)
+    assert fly.forward[0] > 0.9 * np.cos(fly.pitch)  # turned right: now looking along +x
+    fly.look(0.0, 10.0)
+    assert np.degrees(fly.pitch) == pytest.approx(89.0)
+    assert np.allclose(fly.camera().forward, fly.forward)

@@ -100,7 +100,21 @@ class Offscreen:
         self.color = ctx.renderbuffer((w, h), 4)
         self.depth = ctx.depth_renderbuffer((w, h)) if depth else None
         self.fbo = ctx.framebuffer(color_attachments=[self.color], depth_attachment=self.depth)
+        self._owned = True
         self._buf = np.empty((h, w, 4), dtype=np.uint8)
+
+    @classmethod
+    def wrap(cls, ctx, fbo) -> "Offscreen":
+        """Use an existing framebuffer (e.g. a window's ``ctx.screen``) as the target; it is not
+        released by :meth:`release`."""
+        self = cls.__new__(cls)
+        self.ctx = ctx
+        self.size = tuple(fbo.size)
+        self.color = self.depth = None
+        self.fbo = fbo
+        self._owned = False
+        self._buf = np.empty((self.size[1], self.size[0], 4), dtype=np.uint8)
+        return self
 
     @property
     def width(self) -> int:
@@ -123,6 +137,8 @@ class Offscreen:
         return self._buf[::-1].copy()
 
     def release(self) -> None:
+        if not self._owned:
+            return
         # unbind first: moderngl re-binds the "current" framebuffer when it creates the next one,
         # and binding a deleted one is GL_INVALID_OPERATION
         if self.ctx.fbo is self.fbo:

@@ -9,6 +9,7 @@ Camera                    eye, target, up, fov_y, near, far, aspect (+ matrices,
 look_at, perspective, orthographic   4x4 float64 matrices
 frustum_planes            (6, 4) planes of a view-projection matrix, normals pointing inside
 track_camera              a Camera riding down a centre line (k, 3) at fraction t
+FlyCamera                 position + yaw/pitch, moved by keys and mouse (``piste view``)
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 
 from piste.errors import ConfigError
 
-__all__ = ["Camera", "look_at", "perspective", "orthographic", "frustum_planes", "track_camera"]
+__all__ = ["Camera", "FlyCamera", "look_at", "perspective", "orthographic", "frustum_planes", "track_camera"]
 
 
 def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
@@ -185,3 +186,56 @@ def track_camera(
         target = target + d / np.linalg.norm(d) * (s + look_ahead - length)
     target = target + np.array([0.0, 0.0, lift * height])
     return Camera(eye, target, fov_y=fov_y, aspect=aspect, near=near, far=far)
+
+
+@dataclass
+class FlyCamera:
+    """A free-flying camera for interactive viewing: position, yaw and pitch.
+
+    Attributes
+    ----------
+    position : (3,) float64 metres
+    yaw : radians about Z, 0 looks along +y, positive turns towards +x
+    pitch : radians above the horizontal (clamped to +-89 degrees)
+    speed : metres per second for :meth:`move`
+    """
+
+    position: np.ndarray
+    yaw: float = 0.0
+    pitch: float = 0.0
+    speed: float = 40.0
+    fov_y: float = 60.0
+    near: float = 0.5
+    far: float = 4000.0
+
+    def __post_init__(self):
+        self.position = np.asarray(self.position, dtype=np.float64).reshape(3).copy()
+
+    @classmethod
+    def from_camera(cls, cam: Camera, **kwargs) -> "FlyCamera":
+        f = cam.forward
+        return cls(cam.eye, yaw=float(np.arctan2(f[0], f[1])), pitch=float(np.arcsin(np.clip(f[2], -1, 1))),
+                   fov_y=cam.fov_y, near=cam.near, far=cam.far, **kwargs)
+
+    @property
+    def forward(self) -> np.ndarray:
+        cp = np.cos(self.pitch)
+        return np.array([cp * np.sin(self.yaw), cp * np.cos(self.yaw), np.sin(self.pitch)])
+
+    @property
+    def right(self) -> np.ndarray:
+        return np.array([np.cos(self.yaw), -np.sin(self.yaw), 0.0])
+
+    def move(self, forward: float, right: float, up: float, dt: float) -> None:
+        """Fly ``forward``/``right``/``up`` (each -1..1, scaled by ``speed``) for ``dt`` seconds."""
+        d = forward * self.forward + right * self.right + up * np.array([0.0, 0.0, 1.0])
+        self.position = self.position + d * self.speed * dt
+
+    def look(self, dyaw: float, dpitch: float) -> None:
+        """Turn by ``dyaw`` and ``dpitch`` radians."""
+        self.yaw = float(self.yaw + dyaw)
+        self.pitch = float(np.clip(self.pitch + dpitch, -np.radians(89.0), np.radians(89.0)))
+
+    def camera(self, aspect: float = 640.0 / 448.0) -> Camera:
+        return Camera(self.position, self.position + self.forward, fov_y=self.fov_y, near=self.near, far=self.far,
+                      aspect=aspect)
