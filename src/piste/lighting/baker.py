@@ -45,6 +45,10 @@ __all__ = [
 #: bumped whenever the baker's output for the same input changes
 BAKE_VERSION = "piste.lightmap-bake/1"
 MANIFEST_FORMAT = "piste.lightmap/1"
+#: with ``jobs=0`` a bake uses a process pool only from this many samples on
+AUTO_PARALLEL_SAMPLES = 300_000
+#: environment for worker processes: one BLAS thread each (the pool provides the parallelism)
+_WORKER_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 # --------------------------------------------------------------------------- chunk work
 _STATE: dict = {}
@@ -53,10 +57,6 @@ _STATE: dict = {}
 def _init_worker(state: dict) -> None:
     _STATE.clear()
     _STATE.update(state)
-    if state.get("shadows"):
-        from piste.lighting.shadows import HeightBound
-
-        _STATE["bound"] = HeightBound.build(state["net"]) if state.get("pretest", True) else None
 
 
 def _bake_chunk(chunk: int) -> tuple[int, np.ndarray, dict]:
@@ -74,7 +74,7 @@ def _bake_chunk(chunk: int) -> tuple[int, np.ndarray, dict]:
         from piste.lighting.shadows import shadow_visibility
 
         terms = light_terms(lights, pos, nrm)
-        shadow = shadow_visibility(s["net"], lights, pos, nrm, terms, bound=s.get("bound"), stats=stats)
+        shadow = shadow_visibility(s["net"], lights, pos, nrm, terms, stats=stats)
     colors = shade(lights, pos, nrm, shadow)
     return chunk, colors.reshape(hi - lo, res, res, 3), stats
 
@@ -91,7 +91,6 @@ def bake_lightmap(
     partial_dir=None,
     progress: bool = False,
     on_chunk=None,
-    pretest: bool = True,
 ) -> LightMap:
     """Bake a light-map atlas for ``net`` under ``lights``.
 
@@ -102,13 +101,13 @@ def bake_lightmap(
     res : samples (texels) per tile side, 8 or 16 in the talk (any >= 2 works)
     gutter : texels replicated around each tile
     shadows : cast shadow rays against the net (terrain self-shadowing)
-    jobs : worker processes (1 = in this process; 0 or None = every core)
+    jobs : worker processes (1 = in this process; 0 or None = every core when there are at least
+        ``AUTO_PARALLEL_SAMPLES`` samples to bake, else 1: starting workers costs ~1 s)
     chunk_size : patches per chunk (the unit of work and of resuming)
     partial_dir : folder for finished chunks (resuming); None keeps nothing
     progress : show a tqdm progress bar
     on_chunk : optional ``callable(chunk_index, chunks_done, chunks_total)`` called after each
         chunk is stored (tests use it to interrupt a bake)
-    pretest : use the conservative :class:`~piste.lighting.shadows.HeightBound` ray pre-test
 
     Returns
     -------
@@ -147,11 +146,11 @@ def bake_lightmap(
     resumed = int(done.sum())
     state = dict(
         net=net, lights=lights, res=res, chunk_size=chunk_size, positions=positions, normals=normals,
-        shadows=bool(shadows), pretest=bool(pretest),
+        shadows=bool(shadows),
     )
     todo = [int(c) for c in np.nonzero(~done)[0]]
     if jobs is None or jobs <= 0:
-        jobs = os.cpu_count() or 1
+        jobs = (os.cpu_count() or 1) if len(todo) * chunk_size * res * res >= AUTO_PARALLEL_SAMPLES else 1
     jobs = max(1, min(int(jobs), len(todo) or 1))
 
     bar = None
@@ -190,8 +189,18 @@ def bake_lightmap(
         else:
             import multiprocessing as mp
 
-            with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn"), initializer=_init_worker, initargs=(state,)) as pool:
+            saved = {k_: os.environ.get(k_) for k_ in _WORKER_ENV}
+            os.environ.update(_WORKER_ENV)  # inherited by the spawned workers
+            try:
+                pool = ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn"), initializer=_init_worker, initargs=(state,))
                 pending = {pool.submit(_bake_chunk, c) for c in todo}
+            finally:
+                for k_, v_ in saved.items():
+                    if v_ is None:
+                        os.environ.pop(k_, None)
+                    else:
+                        os.environ[k_] = v_
+            with pool:
                 try:
                     while pending:
                         finished, pending = wait(pending, return_when=FIRST_COMPLETED)
