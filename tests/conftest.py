@@ -71,3 +71,16 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "gl" in getattr(item, "fixturenames", ()) or "gl_context" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.gl)
+
+
+@pytest.fixture(scope="session")
+def _piste_cache_dir(tmp_path_factory):
+    return tmp_path_factory.mktemp("piste-cache")
+
+
+@pytest.fixture
+def piste_cache(_piste_cache_dir, monkeypatch):
+    """``PISTE_CACHE_DIR`` pointed at a per-session temporary folder (baked light maps land there,
+    not in the user's ~/.cache)."""
+    monkeypatch.setenv("PISTE_CACHE_DIR", str(_piste_cache_dir))
+    return _piste_cache_dir

@@ -9,7 +9,7 @@ from PIL import Image
 from piste.cli import main
 
 
-def test_demo_writes_png_and_mp4(gl_context, tmp_path, capsys):
+def test_demo_writes_png_and_mp4(gl_context, piste_cache, tmp_path, capsys):
     png, mp4 = tmp_path / "out" / "demo.png", tmp_path / "out" / "demo.mp4"
     rc = main(["demo", "--size", "96", "64", "--frames", "2", "--out", str(png), "--video", str(mp4), "--no-progress"])
     assert rc == 0
@@ -23,6 +23,7 @@ def test_demo_writes_png_and_mp4(gl_context, tmp_path, capsys):
         frames = [f for f in reader]
     assert len(frames) == 2 and frames[0].shape == (64, 96, 3)
     out = capsys.readouterr().out
+    assert "lighting baked" in out
     for text in ("4x4 patches", "average polygons per patch", "LOD + cull + tessellation", "draw", "fps"):
         assert text in out
     assert sorted(p.name for p in png.parent.iterdir()) == ["demo.mp4", "demo.png"]  # no temp files
@@ -31,7 +32,7 @@ def test_demo_writes_png_and_mp4(gl_context, tmp_path, capsys):
 @pytest.mark.parametrize("extra", [["--lod", "off", "--lightmap", "ps2"], ["--debug", "lod"]])
 def test_demo_options(gl_context, tmp_path, capsys, extra):
     png = tmp_path / "d.png"
-    assert main(["demo", "--size", "64", "48", "--out", str(png), "--no-progress", *extra]) == 0
+    assert main(["demo", "--size", "64", "48", "--out", str(png), "--no-progress", "--lighting", "placeholder", *extra]) == 0
     out = capsys.readouterr().out
     assert png.exists()
     if "off" in extra:

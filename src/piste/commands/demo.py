@@ -36,9 +36,10 @@ def add_arguments(parser) -> None:
                         help="per-edge LOD (off: every patch 8x8, for comparison)")
     parser.add_argument("--lightmap", choices=("modulate", "ps2"), default="modulate",
                         help="light-map mode: one pass Cd x CL, or the PS2's two-pass (Cd - Cs) x As blend")
-    parser.add_argument("--lighting", choices=("placeholder", "baked", "none"), default="placeholder",
-                        help="light-map atlas: a placeholder lit from the normals (default), the baked one "
-                             "(piste.lighting; baked once, then cached), or none")
+    parser.add_argument("--lighting", choices=("baked", "placeholder", "none"), default="baked",
+                        help="light-map atlas: baked with terrain shadows (piste.lighting; baked once, ~2 s, then "
+                             "cached in $PISTE_CACHE_DIR or ~/.cache/piste), a placeholder lit from the normals "
+                             "without shadows, or none")
     parser.add_argument("--debug", choices=("lod", "wire", "base", "lightmap"),
                         help="debug view: lod = patches coloured by tessellation (4x4 green, 6x6 yellow, 8x8 red, "
                              "glue blue) with wireframe; wire = wireframe over the lit terrain; base / lightmap = one texture")
@@ -56,7 +57,7 @@ def lightmap_for(net, lighting: str):
         return net, "placeholder", 1.0
     from piste.lighting.baker import load_or_bake_default_lightmap
 
-    lm = load_or_bake_default_lightmap(net, progress=True)
+    lm = load_or_bake_default_lightmap(net)
     return lm.apply(net), lm.atlas, 1.0
 
 

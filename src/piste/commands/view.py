@@ -14,6 +14,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="course seed (default: 0)")
     parser.add_argument("--start", type=float, default=0.1, help="start along the track, 0..1 (default: 0.1)")
     parser.add_argument("--lightmap", choices=("modulate", "ps2"), default="modulate", help="light-map mode (M toggles)")
+    parser.add_argument("--lighting", choices=("baked", "placeholder", "none"), default="baked",
+                        help="light-map atlas (see `piste demo --help`)")
     parser.add_argument("--debug", choices=("lod",), help="start in the LOD view (L toggles)")
     parser.add_argument("--frames", type=_positive, help="quit after N frames (for scripted runs)")
     parser.add_argument("--out", default="out/view.png",
@@ -27,8 +29,11 @@ def run(args) -> int:
     from piste.world.camera import track_camera
     from piste.world.course import TRACK_HALF_WIDTH, default_course, track_centerline
 
+    from piste.commands.demo import lightmap_for
+
     net = default_course(args.seed)
     line = track_centerline(args.seed)
+    net, atlas, _ = lightmap_for(net, args.lighting)
     w, h = args.size
     cam = track_camera(line, args.start, aspect=w / h)
     if not has_display():
@@ -36,7 +41,7 @@ def run(args) -> int:
 
         print("piste view: no display (DISPLAY / WAYLAND_DISPLAY unset), so no window; rendering one frame "
               f"off-screen to {args.out} instead (run under a desktop or `xvfb-run piste view`)", file=sys.stderr)
-        r = TerrainRenderer(net, size=(w, h), track=line, track_half_width=TRACK_HALF_WIDTH)
+        r = TerrainRenderer(net, size=(w, h), lightmap=atlas, track=line, track_half_width=TRACK_HALF_WIDTH)
         try:
             frame = r.render(cam, lightmap_mode=args.lightmap, debug=args.debug)
         finally:
@@ -45,7 +50,7 @@ def run(args) -> int:
         return 0
     print("piste view: W/S/A/D fly, Q/E down/up, Shift fast, arrows or mouse drag look, "
           "L LOD view, M light-map mode, O LOD on/off, P screenshot, Esc quit", file=sys.stderr)
-    n = run_window(net, cam, size=(w, h), track=line, track_half_width=TRACK_HALF_WIDTH, lightmap_mode=args.lightmap,
+    n = run_window(net, cam, size=(w, h), lightmap=atlas, track=line, track_half_width=TRACK_HALF_WIDTH, lightmap_mode=args.lightmap,
                    debug=args.debug, frames=args.frames, screenshot=args.out if args.frames else None)
     print(f"{n} frames" + (f"; wrote {args.out}" if args.frames else ""))
     return 0

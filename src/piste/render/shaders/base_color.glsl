@@ -18,7 +18,7 @@ vec3 base_color(vec2 uv, vec3 world) {
         float groomed = 1.0 - smoothstep(u_track_half - 1.0, u_track_half, ad);
         float stripes = 0.5 + 0.5 * sin(d * 6.2831853 / 1.2);
         float aa = clamp(1.5 - w / 0.3, 0.0, 1.0);  // fade the corduroy out where it would alias
-        c *= mix(vec3(1.0), vec3(0.95, 0.97, 1.0) * (1.0 - 0.04 * stripes * aa), groomed);
+        c *= mix(vec3(1.0), vec3(0.95, 0.97, 1.0) * (1.0 - 0.03 * stripes * aa), groomed);
         float hw = 0.3;
         float line = clamp((hw - abs(ad - u_track_half)) / w + 0.5, 0.0, 1.0) * min(1.0, 2.0 * hw / w);
         c = mix(c, vec3(0.18, 0.32, 0.85), 0.85 * line);
