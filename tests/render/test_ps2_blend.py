@@ -98,3 +98,16 @@ def test_ps2_pass_keeps_destination_alpha(frames):
     terrain = ~(frames["base"] == (255, 0, 255)).all(axis=-1)
     assert (frames["ps2_alpha"][terrain] == 255).all()
     assert (np.abs(frames["ps2_alpha"][~terrain].astype(int) - 128) <= 1).all()
+
+
+def test_agrees_with_the_gs_arithmetic_of_piste_lighting(frames):
+    """The GL passes against ``piste.lighting.ps2``'s 8-bit GS model (half-bright, 128 = 1.0)."""
+    gs = pytest.importorskip("piste.lighting.ps2")
+    cd, cl = frames["base"], frames["lightmap"]
+    terrain = ~(cd == (255, 0, 255)).all(axis=-1)
+    cd, cl = cd[terrain], cl[terrain]
+    cl_hb = np.round(cl.astype(np.float64) * 128.0 / 255.0).astype(np.uint8)
+    cs, a = gs.ps2_source(cd, cl_hb)
+    expect = gs.ps2_blend(cd, cs, a).astype(int)
+    diff = np.abs(frames["ps2"][terrain].astype(int) - expect)
+    assert diff.max() <= 3 and diff.mean() < 1.0
