@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 
 from piste.terrain import PatchNet
 
-TEAPOT = "../shared/data/patches/teapot.bpt"
+DATA = Path(os.environ.get("PISTE_DATA", Path(__file__).resolve().parents[3] / "shared" / "data"))
+TEAPOT = str(DATA / "patches" / "teapot.bpt")
 
 
 def grid_net(rows: int, cols: int, seed: int = 0, size: float = 10.0, offset=(0.0, 0.0, 0.0), flips=True) -> PatchNet:
