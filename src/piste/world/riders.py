@@ -1,0 +1,284 @@
+"""Riders on the course: six snowboarders playing their clips while they follow the track.
+
+Each rider has a clip (``ride``, ``crouch``, ``grab``, ``spin``), a phase in it, a place in the
+pack (metres ahead along the track, metres across it) and a carving rhythm (S-turns across the
+track).  At time ``t`` (seconds) :meth:`RiderSet.state` gives, for all riders at once:
+
+* the anchor: the point of the **exact** terrain surface under the rider
+  (:func:`piste.terrain.query.height_at`), with the surface normal ``dQ/du x dQ/dv`` there;
+* the rider's matrix ``(4, 4)`` (rider space -> world): the rider model is +Y up, board along +X
+  (the nose, the travel direction), facing +Z (toe edge); the matrix maps +Y to the surface
+  normal, +X to the track direction projected onto the surface's tangent plane, +Z to X x Y,
+  and the origin (the board's base) to the anchor.  So the board stands on the surface and is
+  oriented to the slope;
+* the skin matrices of each rider's pose, already in world space: ``M_rider @ world_matrices(pose)
+  @ inverse_bind`` (``(n, b, 4, 4)``), ready for the blended-matrix palette
+  (:meth:`piste.character.BlendedMesh.apply_many`).
+
+Animation cost: :class:`ClipTable` resamples each clip once, at ``rate`` Hz, into local
+translation / rotation / scale tables with :meth:`piste.character.Clip.sample` (the reference);
+each frame all riders' poses are one vectorised gather + lerp / nlerp + batched hierarchy product
+(~0.1 ms for six riders instead of ~1.4 ms a rider sampling clips one by one).  The table agrees
+with ``Clip.sample`` to well under a millimetre at 60 Hz (tested).
+
+:func:`follow_camera` puts a chase camera behind a rider, above the snow.
+
+API
+---
+RiderSet.default(net, centerline, model=None, n=6)   the pack
+RiderSet.state(t) -> RiderState                      anchors, normals, matrices, skin matrices
+ClipTable(model, rate=60)                            pre-sampled clips; ``.local(clip_ids, times)``
+follow_camera(state, i, ...) -> piste.world.camera.Camera
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from piste.errors import ConfigError, ValidationError
+
+__all__ = ["RiderSet", "RiderState", "ClipTable", "follow_camera", "surface_frame", "DEFAULT_PACK"]
+
+#: the default pack: (clip, phase in [0, 1), metres ahead of rider 0, metres across the track,
+#: carving amplitude in metres, carving period in seconds)
+DEFAULT_PACK = (
+    ("ride", 0.00, 0.0, -1.0, 2.5, 3.2),
+    ("crouch", 0.30, 9.0, 3.5, 2.0, 2.8),
+    ("grab", 0.10, 17.0, -4.0, 1.5, 3.6),
+    ("ride", 0.55, 24.0, 1.5, 3.0, 3.0),
+    ("spin", 0.20, 33.0, -1.5, 1.0, 4.0),
+    ("crouch", 0.75, 41.0, 4.0, 2.5, 3.4),
+)
+
+
+def _unit(v):
+    v = np.asarray(v, dtype=np.float64)
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(n > 0, n, 1.0)
+
+
+class ClipTable:
+    """Clips of a model resampled at ``rate`` Hz into local-pose tables (see the module docstring).
+
+    Attributes
+    ----------
+    names : list of clip names (``clip_ids`` index it)
+    translation : list of (F_c, b, 3);  rotation : list of (F_c, b, 4) xyzw (sign-continuous);
+    scale : list of (F_c, b, 3) float64 — one table per clip, ``F_c = ceil(duration * rate) + 1``
+    duration : (c,) float64
+    """
+
+    def __init__(self, model, rate: float = 60.0):
+        if model.skeleton is None or not model.clips:
+            raise ValidationError(f"ClipTable: model {model.name!r} needs a skeleton and clips")
+        self.skeleton = model.skeleton
+        self.rate = float(rate)
+        self.names = list(model.clips)
+        self.duration = np.array([model.clips[n].duration for n in self.names], dtype=np.float64)
+        b = self.skeleton.n_bones
+        fmax = int(np.ceil(self.duration.max() * self.rate)) + 1
+        # one padded table for all clips: (c, F, b, ...) so all riders gather in one call
+        self.frames = np.zeros(len(self.names), dtype=np.int64)
+        self._t = np.zeros((len(self.names), fmax, b, 3))
+        self._r = np.zeros((len(self.names), fmax, b, 4))
+        self._s = np.ones((len(self.names), fmax, b, 3))
+        for c, name in enumerate(self.names):  # set-up only: a few hundred samples
+            clip = model.clips[name]
+            f = int(np.ceil(clip.duration * self.rate)) + 1
+            times = np.minimum(np.arange(f) / self.rate, clip.duration)
+            for k, tt in enumerate(times):
+                pose = clip.sample(float(tt), skeleton=self.skeleton)
+                self._t[c, k], self._r[c, k], self._s[c, k] = pose.translation, pose.rotation, pose.scale
+            r = self._r[c, :f]
+            for k in range(1, f):  # keep neighbouring keys in the same hemisphere (nlerp)
+                flip = (r[k] * r[k - 1]).sum(-1) < 0
+                r[k, flip] *= -1
+            self.frames[c] = f
+
+    def clip_index(self, name: str) -> int:
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise ConfigError(f"no clip {name!r}: the model has {', '.join(self.names)}") from None
+
+    def local(self, clip_ids, times, loop: bool = True):
+        """Local poses of ``n`` instances: ``translation (n, b, 3)``, ``rotation (n, b, 4)``,
+        ``scale (n, b, 3)`` of clip ``clip_ids[i]`` at ``times[i]`` seconds (looping)."""
+        c = np.asarray(clip_ids, dtype=np.int64)
+        t = np.asarray(times, dtype=np.float64)
+        dur = self.duration[c]
+        t = np.mod(t, dur) if loop else np.clip(t, 0.0, dur)
+        x = t * self.rate
+        f0 = np.minimum(np.floor(x).astype(np.int64), self.frames[c] - 2)
+        a = (x - f0)[:, None, None]
+        t0, t1 = self._t[c, f0], self._t[c, f0 + 1]
+        r0, r1 = self._r[c, f0], self._r[c, f0 + 1]
+        s0, s1 = self._s[c, f0], self._s[c, f0 + 1]
+        r1 = np.where(((r0 * r1).sum(-1) < 0)[..., None], -r1, r1)
+        r = _unit(r0 + a * (r1 - r0))
+        return t0 + a * (t1 - t0), r, s0 + a * (s1 - s0)
+
+    def skin_matrices(self, clip_ids, times, model_matrices=None, loop: bool = True) -> np.ndarray:
+        """Skin matrices ``(n, b, 4, 4)`` (bind space -> world when ``model_matrices (n, 4, 4)``
+        is given, else -> model space)."""
+        from piste.character.skeleton import world_from_local
+        from piste.transforms import compose_trs
+
+        tr, rot, sc = self.local(clip_ids, times, loop)
+        sk = self.skeleton
+        world = world_from_local(compose_trs(tr, rot, sc), sk.parents, sk.levels)
+        if model_matrices is not None:
+            world = np.asarray(model_matrices, dtype=np.float64)[:, None] @ world
+        return world @ sk.inverse_bind
+
+
+def surface_frame(net, xy, heading):
+    """Anchors, normals and frames on the exact surface of ``net``.
+
+    Parameters
+    ----------
+    net : PatchNet (a height field over x-y)
+    xy : (n, 2) float positions
+    heading : (n, 2) or (n, 3) float travel directions (projected onto the tangent plane)
+
+    Returns
+    -------
+    anchor (n, 3), normal (n, 3) unit (z > 0), forward (n, 3) unit tangent, all float64;
+    raises ValidationError for points off the terrain.
+    """
+    from piste.terrain.query import eval_points, height_at
+
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    z, hit, patch, uv = height_at(net, xy)
+    if not np.all(hit):
+        raise ValidationError(f"riders: {int((~hit).sum())} rider position(s) lie off the terrain: {xy[~hit][:3].tolist()}")
+    q, du, dv = eval_points(net.control_points[patch], uv[:, 0], uv[:, 1])
+    n = _unit(np.cross(du, dv))
+    n = np.where(n[:, 2:3] < 0, -n, n)
+    h = np.asarray(heading, dtype=np.float64)
+    if h.shape[-1] == 2:
+        h = np.concatenate([h, np.zeros(h.shape[:-1] + (1,))], -1)
+    f = _unit(h - (h * n).sum(-1, keepdims=True) * n)
+    return np.stack([xy[:, 0], xy[:, 1], z], 1), n, f
+
+
+@dataclass
+class RiderState:
+    """All riders at one instant.
+
+    t : seconds;  anchor (n, 3) on the surface;  normal (n, 3);  forward (n, 3);
+    matrix (n, 4, 4) rider -> world;  skin (n, b, 4, 4) bind space -> world;
+    clip (n,) clip names;  along (n,) metres along the track
+    """
+
+    t: float
+    anchor: np.ndarray
+    normal: np.ndarray
+    forward: np.ndarray
+    matrix: np.ndarray
+    skin: np.ndarray
+    clip: tuple
+    along: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.anchor)
+
+
+class RiderSet:
+    """A pack of riders sharing one model (see the module docstring).
+
+    Parameters
+    ----------
+    net : PatchNet;  centerline : (k, 3) float down the track
+    model : a character Model with clips (default: :func:`piste.character.default_rider`)
+    pack : rows ``(clip, phase, ahead_m, across_m, carve_amplitude_m, carve_period_s)``
+    start : metres along the track of rider 0 at ``t = 0``;  speed : metres a second
+    rate : clip table rate in Hz
+    """
+
+    def __init__(self, net, centerline, model=None, pack=DEFAULT_PACK, start: float = 150.0, speed: float = 11.0,
+                 rate: float = 60.0):
+        if model is None:
+            from piste.character import default_rider
+
+            model = default_rider(0)
+        self.net = net
+        self.model = model
+        self.table = ClipTable(model, rate)
+        line = np.asarray(centerline, dtype=np.float64)
+        if line.ndim != 2 or line.shape[1] != 3 or len(line) < 2:
+            raise ConfigError(f"riders: centerline must have shape (k >= 2, 3), got {line.shape}")
+        self.line = line
+        seg = np.linalg.norm(np.diff(line[:, :2], axis=0), axis=1)
+        self._cum = np.concatenate([[0.0], np.cumsum(seg)])
+        self.length = float(self._cum[-1])
+        pack = list(pack)
+        if not pack:
+            raise ConfigError("riders: the pack is empty")
+        self.clips = tuple(str(p[0]) for p in pack)
+        self.clip_ids = np.array([self.table.clip_index(c) for c in self.clips])
+        arr = np.array([p[1:] for p in pack], dtype=np.float64)
+        self.phase, self.ahead, self.across, self.carve_amp, self.carve_period = arr.T
+        self.start = float(start)
+        self.speed = float(speed)
+
+    def __len__(self) -> int:
+        return len(self.clips)
+
+    def _track(self, s):
+        s = np.clip(s, 0.0, self.length)
+        cum, line = self._cum, self.line
+        p = np.stack([np.interp(s, cum, line[:, 0]), np.interp(s, cum, line[:, 1])], 1)
+        a, b = np.maximum(s - 2.0, 0.0), np.minimum(s + 2.0, self.length)
+        d = np.stack([np.interp(b, cum, line[:, k]) - np.interp(a, cum, line[:, k]) for k in range(2)], 1)
+        d = _unit(d)
+        return p, d, np.stack([d[:, 1], -d[:, 0]], 1)  # side: to the right of the travel direction
+
+    def state(self, t: float) -> RiderState:
+        """Every rider at ``t`` seconds (see :class:`RiderState`)."""
+        t = float(t)
+        s = self.start + self.ahead + self.speed * t
+        s = np.clip(s, 0.0, self.length - 1.0)
+        p, d, side = self._track(s)
+        w = 2 * np.pi / self.carve_period
+        ph = 2 * np.pi * self.phase
+        lat = self.across + self.carve_amp * np.sin(w * t + ph)
+        dlat = self.carve_amp * w * np.cos(w * t + ph) / max(self.speed, 1e-6)  # metres across per metre along
+        xy = p + side * lat[:, None]
+        heading = d + side * dlat[:, None]
+        anchor, normal, fwd = surface_frame(self.net, xy, heading)
+        z_axis = np.cross(fwd, normal)
+        n = len(self)
+        m = np.zeros((n, 4, 4))
+        m[:, :3, 0], m[:, :3, 1], m[:, :3, 2], m[:, :3, 3] = fwd, normal, z_axis, anchor
+        m[:, 3, 3] = 1.0
+        times = self.phase * self.table.duration[self.clip_ids] + t
+        skin = self.table.skin_matrices(self.clip_ids, times, m)
+        return RiderState(t, anchor, normal, fwd, m, skin, self.clips, s)
+
+    @classmethod
+    def default(cls, net, centerline, model=None, **kw) -> "RiderSet":
+        return cls(net, centerline, model=model, **kw)
+
+
+def follow_camera(state: RiderState, i: int = 0, behind: float = 7.0, height: float = 3.0, look_ahead: float = 10.0,
+                  net=None, clearance: float = 1.5, **camera_kw):
+    """A chase camera behind rider ``i``: ``behind`` metres back along its travel direction,
+    ``height`` above it, looking at a point ``look_ahead`` metres ahead, 1 m above the snow;
+    kept ``clearance`` metres above the terrain of ``net`` when given."""
+    from piste.world.camera import Camera
+
+    f = state.forward[i].copy()
+    f[2] = 0.0
+    f = _unit(f)
+    eye = state.anchor[i] - behind * f + np.array([0.0, 0.0, height])
+    if net is not None:
+        from piste.terrain.query import height_at
+
+        z, hit, _, _ = height_at(net, eye[None, :2])
+        if hit[0]:
+            eye[2] = max(eye[2], z[0] + clearance)
+    target = state.anchor[i] + look_ahead * state.forward[i] + np.array([0.0, 0.0, 1.0])
+    return Camera(eye=eye, target=target, **camera_kw)
