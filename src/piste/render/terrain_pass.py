@@ -146,7 +146,7 @@ class TerrainPass:
         self.light.repeat_x = self.light.repeat_y = False
 
     def set_track(self, field, rect, half_width: float = 16.0) -> None:
-        """Mark a groomed track (corduroy, dye lines on its lips) as a projected texture.
+        """Mark a groomed track (cooler groomed snow, dye lines on its lips) as a projected texture.
 
         Parameters
         ----------

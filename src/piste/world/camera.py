@@ -150,7 +150,7 @@ def _arc_length_point(points: np.ndarray, s) -> np.ndarray:
 def track_camera(
     centerline,
     t: float,
-    height: float = 7.0,
+    height: float = 12.0,
     behind: float = 14.0,
     look_ahead: float = 60.0,
     lift: float = 0.5,

@@ -1,5 +1,5 @@
 // The terrain's base colour Cd: the tiled snow texture, plus (when a track is given) a groomed
-// piste: corduroy stripes along the track and blue dye lines on its lips.  The track is a
+// piste: slightly cooler snow on the track and blue dye lines on its lips.  The track is a
 // projected texture (the talk's third UV set): a signed distance across the track in metres,
 // looked up by world x-y.  Shared by the first pass and the PS2 light-map pass (which must see
 // the same Cd).
@@ -16,9 +16,7 @@ vec3 base_color(vec2 uv, vec3 world) {
         float ad = abs(d);
         float w = max(fwidth(d), 1e-4);
         float groomed = 1.0 - smoothstep(u_track_half - 1.0, u_track_half, ad);
-        float stripes = 0.5 + 0.5 * sin(d * 6.2831853 / 1.2);
-        float aa = clamp(1.5 - w / 0.3, 0.0, 1.0);  // fade the corduroy out where it would alias
-        c *= mix(vec3(1.0), vec3(0.95, 0.97, 1.0) * (1.0 - 0.03 * stripes * aa), groomed);
+        c *= mix(vec3(1.0), vec3(0.95, 0.97, 1.0), groomed);  // groomed snow: a little cooler
         float hw = 0.3;
         float line = clamp((hw - abs(ad - u_track_half)) / w + 0.5, 0.0, 1.0) * min(1.0, 2.0 * hw / w);
         c = mix(c, vec3(0.18, 0.32, 0.85), 0.85 * line);
