@@ -163,10 +163,10 @@ class TerrainRenderer:
         vp = camera.view_projection()
         self.target.use()
         self.target.clear(clear)
-        if sky:
-            self.sky.draw(vp)
         fog_rgba = None if not fog or debug is not None else (*HORIZON, float(fog))
         self.terrain.draw(vp, camera.eye, lightmap_mode=lightmap_mode, debug=debug, fog=fog_rgba)
+        if sky:
+            self.sky.draw(vp)  # last: only where no terrain was drawn
         self.ctx.finish()
         t2 = time.perf_counter()
         image = self.target.read() if read else None

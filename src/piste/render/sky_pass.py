@@ -27,17 +27,22 @@ class SkyPass:
         self.prog["u_sun"].value = tuple(sun / np.linalg.norm(sun))
 
     def draw(self, view_projection) -> None:
-        """Fill the bound framebuffer with the sky (no depth test, no depth write)."""
+        """Fill the pixels of the bound framebuffer that still hold the cleared depth (1.0) with
+        the sky: draw it after the opaque geometry (depth test LEQUAL, no depth write), so it
+        shades only what is left."""
         import moderngl
 
         inv = np.linalg.inv(np.asarray(view_projection, dtype=np.float64))
         self.prog["u_inv_vp"].write(inv.astype(np.float32).T.tobytes())
-        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+        self.ctx.disable(moderngl.BLEND)
+        self.ctx.enable(moderngl.DEPTH_TEST)
+        self.ctx.depth_func = "<="
         self.ctx.depth_mask = False
         try:
             self.vao.render(moderngl.TRIANGLES, vertices=3)
         finally:
             self.ctx.depth_mask = True
+            self.ctx.depth_func = "<"
 
     def release(self) -> None:
         self.vao.release()
