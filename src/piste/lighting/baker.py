@@ -260,7 +260,8 @@ def _npz_bytes(arrays: dict) -> bytes:
             info.compress_type = zipfile.ZIP_DEFLATED
             info.external_attr = 0o644 << 16
             data = io.BytesIO()
-            np.lib.format.write_array(data, np.ascontiguousarray(arrays[name]), allow_pickle=False)
+            arr = np.asarray(arrays[name])
+            np.lib.format.write_array(data, arr if arr.flags.c_contiguous else arr.copy(), allow_pickle=False)
             zf.writestr(info, data.getvalue())
     return buf.getvalue()
 
