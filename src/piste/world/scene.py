@@ -1,0 +1,192 @@
+"""The completed real-time scene (the talk's last demo): course + riders + objects + lights + camera.
+
+:class:`Scene` holds everything that does not change from frame to frame (the course net, its
+centre line, the world's lights, the rider model with its three LODs and their blended-matrix
+skinners, the pack of riders, the placed objects).  :meth:`Scene.update` does the per-frame CPU
+work that is not the terrain's (the renderer's :class:`piste.render.TerrainRenderer` does terrain
+LOD, culling and tessellation):
+
+1. **animation**: every rider's pose from the pre-sampled clip tables, rider matrices on the exact
+   surface (:class:`piste.world.riders.RiderSet`);
+2. **character LOD**: ``high`` / ``medium`` / ``low`` by distance to the camera (``lod_distances``);
+3. **skinning** on the CPU with the SSX Tricky blended-matrix palette (one palette per LOD, the
+   rider's world matrix folded into the palette, so vertices come out in world space): the riders
+   of one LOD in one call; every rider also at the low LOD for its projected shadow;
+4. **lights**: each rider's 1 ambient + 3 directional lights chosen at its position;
+5. **objects**: the instances whose bounding spheres meet the view frustum.
+
+Pure numpy (no OpenGL): the render passes take a :class:`SceneFrame`.
+
+API
+---
+Scene.default(seed=0, lights=None, n_objects="default")   the default course scene
+Scene.update(t, aspect=640/448) -> SceneFrame
+SceneFrame                                                one frame's CPU results + timings (ms)
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from piste.errors import ConfigError
+
+__all__ = ["Scene", "SceneFrame", "LOD_DISTANCES", "sun_light"]
+
+#: camera distances (metres) where riders switch from high to medium and from medium to low
+LOD_DISTANCES = (14.0, 35.0)
+
+
+def sun_light(lights):
+    """The strongest directional light of ``lights`` (the one that casts projected shadows), or None."""
+    from piste.lighting.lights import DirectionalLight
+
+    d = [x for x in lights.direct if isinstance(x, DirectionalLight)]
+    if not d:
+        return None
+    return max(d, key=lambda x: abs(x.intensity) * float(np.abs(np.asarray(x.color)).sum()))
+
+
+@dataclass
+class SceneFrame:
+    """The CPU side of one frame.
+
+    Attributes
+    ----------
+    t : seconds;  camera : piste.world.camera.Camera
+    riders : piste.world.riders.RiderState
+    rider_lod : (n,) int, 0 high / 1 medium / 2 low
+    skinned : list (per LOD) of ``(rider indices (k,), positions (k, v, 3) float32, normals (k, v, 3) float32)``
+        in world space
+    shadow : ``(positions (n, v_low, 3), normals)`` every rider at the low LOD (shadow casters)
+    rider_lights : VertexLights batch (n)
+    objects_visible : (m,) int64 instances of ``scene.objects`` in the view frustum
+    timings : ms: ``animation`` (poses, rider matrices, camera), ``lod_skinning``, ``lights``,
+        ``objects`` (culling), ``cpu`` (their sum)
+    """
+
+    t: float
+    camera: object
+    riders: object
+    rider_lod: np.ndarray
+    skinned: list
+    shadow: tuple
+    rider_lights: object
+    objects_visible: np.ndarray
+    timings: dict = field(default_factory=dict)
+
+
+class Scene:
+    """The default course with six riders, objects and the world's lights (see the module docstring).
+
+    Parameters
+    ----------
+    net : PatchNet;  centerline : (k, 3);  lights : piste.lighting.Lights
+    model : the rider Model (default: :func:`piste.character.default_rider`)
+    objects : an ObjectSet (or None for none)
+    follow : the rider the camera chases
+    lod_distances : (high -> medium, medium -> low) metres
+    riders_kw : passed to :class:`piste.world.riders.RiderSet` (``start``, ``speed``, ``pack``)
+    """
+
+    def __init__(self, net, centerline, lights, model=None, objects=None, follow: int = 0,
+                 lod_distances=LOD_DISTANCES, camera_kw=None, **riders_kw):
+        from piste.character import BlendedMesh, default_rider, make_lods
+        from piste.world.riders import RiderSet
+
+        self.net = net
+        self.line = np.asarray(centerline, dtype=np.float64)
+        self.lights = lights
+        self.sun = sun_light(lights)
+        self.model = model if model is not None else default_rider(0)
+        self.lods = make_lods(self.model.meshes[0])
+        # the LOD's own palette (quantized weights) drives the blended-matrix skinning
+        self.skinners = [BlendedMesh(lod.palette, lod.mesh.positions, lod.mesh.normals) for lod in self.lods]
+        self.riders = RiderSet(net, self.line, model=self.model, **riders_kw)
+        if not 0 <= int(follow) < len(self.riders):
+            raise ConfigError(f"scene: follow must name one of the {len(self.riders)} riders, got {follow}")
+        self.follow = int(follow)
+        self.objects = objects
+        self.lod_distances = tuple(float(x) for x in lod_distances)
+        self.camera_kw = dict(camera_kw or {})
+
+    @classmethod
+    def default(cls, seed: int = 0, lights=None, objects: bool = True, model=None, **kw) -> "Scene":
+        """The default course of ``seed`` with its default lights (:func:`piste.lighting.default_lights`),
+        six riders and the placed objects."""
+        from piste.lighting.lights import default_lights
+        from piste.world.course import TRACK_HALF_WIDTH, default_course, track_centerline
+        from piste.world.objects import place_objects
+
+        net = default_course(seed)
+        line = track_centerline(seed)
+        lights = lights if lights is not None else default_lights()
+        objs = place_objects(net, line, lights, seed=seed, track_half_width=TRACK_HALF_WIDTH) if objects else None
+        return cls(net, line, lights, model=model, objects=objs, **kw)
+
+    # ------------------------------------------------------------------ stats
+    def character_stats(self) -> list[dict]:
+        """Per LOD: name, triangles, vertices, bones, palette matrices (the talk: ~250 / 150 / 75)."""
+        from piste.character import make_batches
+
+        out = []
+        for lod in self.lods:
+            batches = make_batches(lod.mesh.indices, lod.palette.index)
+            out.append({
+                "lod": lod.name,
+                "triangles": lod.n_triangles,
+                "vertices": int(lod.mesh.n_vertices),
+                "bones": int(self.model.skeleton.n_bones),
+                "palette": lod.n_matrices,
+                "step": lod.step,
+                "batches": len(batches),
+            })
+        return out
+
+    # ------------------------------------------------------------------ a frame
+    def camera(self, state, aspect: float = 640.0 / 448.0, fov_y: float = 60.0):
+        from piste.world.riders import follow_camera
+
+        kw = {"behind": 7.0, "height": 3.0, "look_ahead": 10.0}
+        kw.update(self.camera_kw)
+        return follow_camera(state, self.follow, net=self.net, aspect=aspect, fov_y=fov_y, far=4000.0, **kw)
+
+    def update(self, t: float, aspect: float = 640.0 / 448.0, fov_y: float = 60.0, camera=None) -> SceneFrame:
+        """The CPU work of one frame at ``t`` seconds (see the module docstring).  ``camera``
+        overrides the chase camera."""
+        from piste.lighting.vertex import choose_lights_many
+
+        tm = {}
+        t0 = time.perf_counter()
+        st = self.riders.state(t)
+        cam = camera if camera is not None else self.camera(st, aspect, fov_y)
+        t1 = time.perf_counter()
+        d = np.linalg.norm(st.anchor - cam.eye, axis=1)
+        lod = np.searchsorted(np.asarray(self.lod_distances), d)  # 0, 1, 2
+        skinned = []
+        for level, sk in enumerate(self.skinners):
+            idx = np.nonzero(lod == level)[0]
+            if len(idx):
+                pos, nrm = sk.apply_many(st.skin[idx])
+            else:
+                pos = nrm = np.zeros((0, sk.n_vertices, 3), np.float32)
+            skinned.append((idx, pos, nrm))
+        low_idx, low_pos, low_nrm = skinned[-1]
+        if len(low_idx) == len(st):
+            shadow = (low_pos, low_nrm)
+        else:
+            shadow = self.skinners[-1].apply_many(st.skin, normalize=False)
+        t2 = time.perf_counter()
+        lights = choose_lights_many(self.lights, st.anchor + st.normal)  # at the rider's middle
+        t3 = time.perf_counter()
+        if self.objects is not None:
+            vis = self.objects.visible(cam.frustum_planes(), max_distance=cam.far, eye=cam.eye)
+        else:
+            vis = np.zeros(0, np.int64)
+        t4 = time.perf_counter()
+        tm.update(animation=(t1 - t0) * 1e3, lod_skinning=(t2 - t1) * 1e3, lights=(t3 - t2) * 1e3,
+                  objects=(t4 - t3) * 1e3)
+        tm["cpu"] = sum(tm.values())
+        return SceneFrame(float(t), cam, st, lod, skinned, shadow, lights, vis, tm)
