@@ -19,16 +19,28 @@ import time
 import numpy as np
 
 
-def run_config(renderer, cameras, **kw) -> dict:
+def run_configs(renderer, cameras, configs: dict) -> dict:
+    """Render every camera in every configuration, interleaved (config A, B, C for camera 1, then
+    camera 2, ...) so that load from other processes hits all configurations alike."""
     from piste.render import summarize
 
-    renderer.render(cameras[0], read=False, **kw)  # warm-up (shaders, caches)
-    frames = [renderer.render(cam, **kw) for cam in cameras]
-    for f in frames:
-        f.image = None
-    med = {k: float(np.median([f.timings[k] for f in frames])) for k in frames[0].timings}
-    s = summarize(frames)
-    return {"median": med, "tris": s["polys"], "patches": s["patches"], "polys_per_patch": s["avg_polys_per_patch"]}
+    for kw in configs.values():
+        renderer.render(cameras[0], read=False, **kw)  # warm-up (shaders, caches)
+    frames = {name: [] for name in configs}
+    for cam in cameras:
+        for name, kw in configs.items():
+            f = renderer.render(cam, **kw)
+            f.image = None
+            frames[name].append(f)
+    out = {}
+    for name, fs in frames.items():
+        s = summarize(fs)
+        out[name] = {
+            "median": {k: float(np.median([f.timings[k] for f in fs])) for k in fs[0].timings},
+            "best": {k: float(np.min([f.timings[k] for f in fs])) for k in fs[0].timings},
+            "tris": s["polys"],
+        }
+    return out
 
 
 def main() -> None:
@@ -55,7 +67,7 @@ def main() -> None:
         "LOD on, ps2 (2 passes)": dict(lod=True, lightmap_mode="ps2"),
         "LOD off (all 8x8), modulate": dict(lod=False, lightmap_mode="modulate"),
     }
-    results = {name: run_config(r, cams, **kw) for name, kw in configs.items()}
+    results = run_configs(r, cams, configs)
 
     # no culling: tessellate the whole net at the LOD every frame (CPU side only)
     t_nocull = []
@@ -68,24 +80,29 @@ def main() -> None:
 
     cols = ("lod", "cull", "tessellate", "upload", "cpu", "draw", "readback", "gpu", "total")
     head = f"{'configuration':30s} {'tris':>7s} " + " ".join(f"{c:>10s}" for c in cols) + f" {'fps':>6s}"
-    print()
-    print("median ms per frame")
-    print(head)
-    print("-" * len(head))
-    for name, res in results.items():
-        med = res["median"]
-        print(f"{name:30s} {res['tris']:7d} " + " ".join(f"{med[c]:10.2f}" for c in cols) + f" {1e3 / med['total']:6.1f}")
-    base = results["LOD on, modulate"]["median"]
+    for stat, what in (("median", "median"), ("best", "best (least disturbed by other processes)")):
+        print()
+        print(f"{what} ms per frame")
+        print(head)
+        print("-" * len(head))
+        for name, res in results.items():
+            t = res[stat]
+            print(f"{name:30s} {res['tris']:7d} " + " ".join(f"{t[c]:10.2f}" for c in cols) + f" {1e3 / t['total']:6.1f}")
+    base = results["LOD on, modulate"]
     off = results["LOD off (all 8x8), modulate"]
-    ps2 = results["LOD on, ps2 (2 passes)"]["median"]
+    ps2 = results["LOD on, ps2 (2 passes)"]
     print()
-    print(f"target 60 fps = 16.7 ms/frame: LOD on {base['total']:.1f} ms ({1e3 / base['total']:.1f} fps); "
-          f"CPU side {base['cpu']:.2f} ms (target < 4 ms: {'met' if base['cpu'] < 4.0 else 'missed'})")
-    print(f"LOD off draws {off['tris'] / results['LOD on, modulate']['tris']:.2f}x the triangles; "
-          f"frame {off['median']['total'] / base['total']:.2f}x as long, CPU side {off['median']['cpu'] / base['cpu']:.2f}x")
-    print(f"ps2 two-pass light map: draw {ps2['draw'] / base['draw']:.2f}x the one-pass modulate draw")
+    for stat in ("median", "best"):
+        b = base[stat]
+        print(f"{stat}: target 60 fps = 16.7 ms/frame: LOD on {b['total']:.1f} ms ({1e3 / b['total']:.1f} fps, "
+              f"{'met' if b['total'] <= 16.7 else 'missed'}); CPU side {b['cpu']:.2f} ms "
+              f"(target < 4 ms: {'met' if b['cpu'] < 4.0 else 'missed'})")
+    print(f"LOD off draws {off['tris'] / base['tris']:.2f}x the triangles; median frame "
+          f"{off['median']['total'] / base['median']['total']:.2f}x as long, CPU side "
+          f"{off['median']['cpu'] / base['median']['cpu']:.2f}x (llvmpipe at this size is bound by pixels, not triangles)")
+    print(f"ps2 two-pass light map: median draw {ps2['median']['draw'] / base['median']['draw']:.2f}x the one-pass modulate draw")
     print(f"without culling the whole net ({len(net)} patches, {m.n_triangles} tris) tessellates in "
-          f"{np.median(t_nocull):.2f} ms vs {base['tessellate']:.2f} ms for the visible patches")
+          f"{np.median(t_nocull):.2f} ms vs {base['median']['tessellate']:.2f} ms for the visible patches")
 
 
 if __name__ == "__main__":
