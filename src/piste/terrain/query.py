@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from piste.errors import ValidationError
-from piste.terrain.bezier import bernstein, bernstein_derivative
+from piste.terrain.bezier import bernstein, bernstein_derivative, evaluate
 
 __all__ = ["height_at", "ray_intersect", "RayHits", "PatchBVH", "PatchGrid", "clear_cache", "eval_points"]
 
@@ -163,8 +163,9 @@ class PatchGrid:
 
     def candidates(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(query, patch) pairs whose padded xy bounds contain the query point: two ``(p,)`` int64 arrays."""
-        c = np.floor((xy - self.lo) / self.cell).astype(np.int64)
-        inside = ((c >= 0) & (c < self.dims)).all(axis=1) & np.isfinite(xy).all(axis=1)
+        finite = np.isfinite(xy).all(axis=1)
+        c = np.floor((np.where(finite[:, None], xy, self.lo) - self.lo) / self.cell).astype(np.int64)
+        inside = ((c >= 0) & (c < self.dims)).all(axis=1) & finite
         cid = np.where(inside, c[:, 1] * self.dims[0] + c[:, 0], 0)
         s0, s1 = self.starts[cid], self.starts[cid + 1]
         cnt = np.where(inside, s1 - s0, 0)
@@ -313,22 +314,42 @@ class PatchBVH:
     level_lo, level_hi : list of (2^d, 3) node boxes per level d (NaN for empty nodes)
     """
 
-    def __init__(self, net, split: int = 2):
+    def __init__(self, net, split="auto"):
         cp = net.control_points
         n = len(cp)
-        self.split = int(split)
         self.scale = _scale(net)
         self.n_patches = n
-        k = self.split
-        r = np.stack([_restriction(a / k, (a + 1) / k) for a in range(k)])  # (k, 4, 4)
-        sub = np.einsum("aik,bjl,nklc->nabijc", r, r, cp).reshape(n * k * k, 4, 4, 3)
-        pa = np.repeat(np.arange(n), k * k)
-        ab = np.tile(np.stack(np.meshgrid(np.arange(k), np.arange(k), indexing="ij"), -1).reshape(k * k, 2), (n, 1))
+        if split == "auto":
+            ks = _auto_split(cp)
+        else:
+            if int(split) < 1:
+                raise ValidationError(f"PatchBVH: split must be 'auto' or a positive integer, got {split!r}")
+            ks = np.full(n, int(split))
+        self.split = split
+        subs, pas, uv0, du = [], [], [], []
+        for k in np.unique(ks):
+            sel = np.nonzero(ks == k)[0]
+            r = np.stack([_restriction(a / k, (a + 1) / k) for a in range(k)])  # (k, 4, 4)
+            subs.append(np.einsum("aik,bjl,nklc->nabijc", r, r, cp[sel]).reshape(len(sel) * k * k, 4, 4, 3))
+            pas.append(np.repeat(sel, k * k))
+            ab = np.stack(np.meshgrid(np.arange(k), np.arange(k), indexing="ij"), -1).reshape(k * k, 2)
+            uv0.append(np.tile(ab, (len(sel), 1)) / k)
+            du.append(np.full(len(sel) * k * k, 1.0 / k))
+        sub, pa, uv0, du = (np.concatenate(x) for x in (subs, pas, uv0, du))
         # share each sub-patch's boundary with its parent (exact corners keep seams watertight)
         pts = sub.reshape(-1, 16, 3)
-        lo, hi = pts.min(1), pts.max(1)
-        pad = 1e-7 * self.scale + 1e-9 * np.abs(np.concatenate([lo, hi], 1)).max(1, keepdims=True)
-        lo, hi = lo - pad, hi + pad
+        pad = 1e-7 * self.scale + 1e-9 * np.abs(pts).max((1, 2))[:, None]
+        # boxes live in the principal frame of the control points (for a course on a slope: aligned
+        # with the slope, so far tighter than world-aligned boxes)
+        allp = cp.reshape(-1, 3)
+        self.frame_origin = allp.mean(0)
+        _, vec = np.linalg.eigh(np.cov((allp - self.frame_origin).T) + 1e-30 * np.eye(3))
+        frame = vec[:, ::-1].T.copy()  # rows: largest, middle, smallest (normal) principal axis
+        if np.linalg.det(frame) < 0:
+            frame[1] = -frame[1]
+        self.frame = frame
+        fp = (pts - self.frame_origin) @ frame.T
+        lo, hi = fp.min(1) - pad, fp.max(1) + pad
         c = sub[:, [0, 3, 3, 0], [0, 0, 3, 3]]  # corners (L, 4, 3)
         nrm = np.cross(c[:, 2] - c[:, 0], c[:, 3] - c[:, 1])
         ln = np.linalg.norm(nrm, axis=1)
@@ -345,9 +366,12 @@ class PatchBVH:
         order = slots[slots >= 0]
         self.leaf_cp = np.ascontiguousarray(sub[order])
         self.leaf_patch = pa[order]
-        self.leaf_uv0 = ab[order] / k
+        self.leaf_uv0 = uv0[order]
+        self.leaf_du = du[order]
         self.leaf_normal = nrm[order]
         self.leaf_slab = slab[order]
+        self._graph_info(order)
+        self._normal_cones()
         full = 1 << depth
         real = slots >= 0
         llo = np.full((full, 3), np.nan)
@@ -363,26 +387,93 @@ class PatchBVH:
             self.level_lo.insert(0, llo)
             self.level_hi.insert(0, lhi)
         self.root_lo, self.root_hi = self.level_lo[0][0], self.level_hi[0][0]
+        self.level_box = [np.ascontiguousarray(np.concatenate([a, b], axis=1)) for a, b in zip(self.level_lo, self.level_hi)]
+        # per level, groups of four siblings laid out (n/4, 6, 4) for the two-level traversal step
+        self.level_box4 = [
+            np.ascontiguousarray(b.reshape(-1, 4, 6).transpose(0, 2, 1)) if len(b) >= 4 else None for b in self.level_box
+        ]
+
+    def _graph_info(self, order: np.ndarray) -> None:
+        """Mark sub-patches that are graphs ``z = f(x, y)`` over an axis-aligned xy rectangle (x linear in
+        u only, y linear in v only, as in fitted height fields) and bound their slopes.
+
+        ``leaf_graph (L,)`` bool; ``leaf_rect (L, 4)`` = x0, x1, y0, y1; ``leaf_grad (L, 4)`` =
+        min/max of dz/dx, min/max of dz/dy over the sub-patch (hodograph bounds).  A ray rising faster
+        than the surface can along its own horizontal direction, and above the surface where it
+        enters the rectangle, cannot meet the sub-patch: :func:`ray_intersect` skips such pairs
+        without Newton (most shadow rays leaving their own sub-patch).
+        """
+        cp = self.leaf_cp
+        x, y, z = cp[..., 0], cp[..., 1], cp[..., 2]
+        x0, x1 = x[:, 0, 0], x[:, 3, 0]
+        y0, y1 = y[:, 0, 0], y[:, 0, 3]
+        ii = np.arange(4) / 3.0
+        xe = x0[:, None, None] + (x1 - x0)[:, None, None] * ii[None, :, None]
+        ye = y0[:, None, None] + (y1 - y0)[:, None, None] * ii[None, None, :]
+        tol = 1e-9 * self.scale
+        lx, ly = x1 - x0, y1 - y0
+        graph = (np.abs(x - xe).max((1, 2)) <= tol) & (np.abs(y - ye).max((1, 2)) <= tol) & (lx > tol) & (ly > tol)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            gx = 3.0 * np.diff(z, axis=1) / lx[:, None, None]  # (L, 3, 4)
+            gy = 3.0 * np.diff(z, axis=2) / ly[:, None, None]  # (L, 4, 3)
+        self.leaf_graph = graph
+        self.leaf_rect = np.stack([x0, x1, y0, y1], 1)
+        self.leaf_grad = np.stack([gx.min((1, 2)), gx.max((1, 2)), gy.min((1, 2)), gy.max((1, 2))], 1)
+        self.leaf_grad[~graph] = np.nan
+
+    def _normal_cones(self, m: int = 5) -> None:
+        """``leaf_cone (L,)``: sine of a bound on the angle between the sub-patch's normals and its
+        corner normal (normals sampled on an ``m x m`` grid, the largest angle widened by half plus
+        0.01 rad).  A ray meeting the corner plane more steeply than that crosses the sub-patch once
+        at most; degenerate sub-patches get 1 (never assumed single)."""
+        t = np.linspace(0.0, 1.0, m)
+        v, u = np.meshgrid(t, t, indexing="ij")
+        nr = np.asarray(evaluate(self.leaf_cp, u.ravel(), v.ravel(), normals=True)[1])  # (L, m*m, 3)
+        cosang = np.clip(np.einsum("lsc,lc->ls", nr, self.leaf_normal).min(1), -1.0, 1.0)
+        ang = np.arccos(cosang) * 1.5 + 0.01
+        self.leaf_cone = np.where(ang < np.pi / 2, np.sin(np.minimum(ang, np.pi / 2)), 1.0)
 
     # -------------------------------------------------------------- traversal
     def candidates(self, o, inv, tmin, tmax):
         """Breadth-first traversal: (ray, leaf, t_enter, t_exit) of every leaf box a ray crosses within
-        ``[tmin, tmax]``; ``o (k, 3)``, ``inv (k, 3)`` = 1 / direction (zeros replaced by huge values)."""
-        r = np.arange(len(o))
-        node = np.zeros(len(o), dtype=np.int64)
-        for level in range(self.depth + 1):
-            lo, hi = self.level_lo[level][node], self.level_hi[level][node]
-            oo, ii = o[r], inv[r]
-            t1 = (lo - oo) * ii
-            t2 = (hi - oo) * ii
-            tn = np.maximum(np.minimum(t1, t2).max(1), tmin[r])
-            tf = np.minimum(np.maximum(t1, t2).min(1), tmax[r])
-            keep = tn <= tf  # False for NaN (empty) nodes
-            r, node = r[keep], node[keep]
-            if level < self.depth:
-                r = np.repeat(r, 2)
-                node = (2 * node[:, None] + np.arange(2)).ravel()
-        return r, self.slot_leaf[node], tn[keep], tf[keep]
+        ``[tmin, tmax]``; ``o (k, 3)``, ``inv (k, 3)`` = 1 / direction (zeros replaced by huge values).
+
+        Steps two levels at a time (the four grandchildren of every surviving (ray, node) pair are
+        tested together); empty (NaN) boxes never pass.
+        """
+        k = len(o)
+        rays = np.concatenate([o, inv, tmin[:, None], tmax[:, None]], axis=1)  # (k, 8): one gather per step
+        start = self.depth % 2
+        width = 1 << start
+        r = np.repeat(np.arange(k), width)
+        node = np.tile(np.arange(width), k)
+        box = self.level_box[start][node][:, :, None]  # (m, 6, 1)
+        tn, tf = _slabs(box, rays[r])
+        keep = tn[:, 0] <= tf[:, 0]
+        r, node, tn, tf = r[keep], node[keep], tn[keep, 0], tf[keep, 0]
+        for level in range(start + 2, self.depth + 1, 2):
+            box = self.level_box4[level][node]  # (m, 6, 4): the four grandchildren
+            tn, tf = _slabs(box, rays[r])
+            pi, ci = np.nonzero(tn <= tf)
+            tn, tf = tn[pi, ci], tf[pi, ci]
+            r = r[pi]
+            node = 4 * node[pi] + ci
+        return r, self.slot_leaf[node], tn, tf
+
+
+def _slabs(box: np.ndarray, ray: np.ndarray):
+    """Slab test of ``(m, 6, c)`` boxes (lo xyz, hi xyz) against ``(m, 8)`` rays (o, 1/d, tmin, tmax):
+    ``(t_enter, t_exit)``, each ``(m, c)``; NaN boxes give NaN (never ``t_enter <= t_exit``)."""
+    tn = ray[:, 6, None]
+    tf = ray[:, 7, None]
+    for a in range(3):
+        o = ray[:, a, None]
+        inv = ray[:, 3 + a, None]
+        t1 = (box[:, a] - o) * inv
+        t2 = (box[:, 3 + a] - o) * inv
+        tn = np.maximum(tn, np.minimum(t1, t2))
+        tf = np.minimum(tf, np.maximum(t1, t2))
+    return tn, tf
 
 
 def _median_split_order(cen: np.ndarray, depth: int) -> np.ndarray:
@@ -413,7 +504,7 @@ def _median_split_order(cen: np.ndarray, depth: int) -> np.ndarray:
     return slots
 
 
-def _bvh(net, split: int = 2) -> PatchBVH:
+def _bvh(net, split="auto") -> PatchBVH:
     c = _cache(net)
     key = ("bvh", split)
     if key not in c:
@@ -440,17 +531,22 @@ def _newton_ray(cp, o, d, s, w, t, scale, max_iter=12):
         c = -dd
         bxc = np.cross(b, c)
         det = np.einsum("mc,mc->m", a, bxc)
-        good = np.abs(det) > 1e-300
+        scale3 = np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1) * np.linalg.norm(c, axis=1)
+        good = np.abs(det) > 1e-14 * scale3
         det = np.where(good, det, 1.0)
         rhs = -f
         ds = np.einsum("mc,mc->m", rhs, bxc) / det
         dw = np.einsum("mc,mc->m", a, np.cross(rhs, c)) / det
         dt = np.einsum("mc,mc->m", a, np.cross(b, rhs)) / det
+        # a singular Jacobian (a collapsed edge, a tangent ray): step a tenth of the way to the centre
+        ds = np.where(good, ds, 0.1 * (s[active] - 0.5))
+        dw = np.where(good, dw, 0.1 * (w[active] - 0.5))
+        dt = np.where(good, dt, 0.0)
         s[active] += ds
         w[active] += dw
         t[active] += dt
-        # leave the pair when it diverges far outside the sub-patch (or hits a singular Jacobian)
-        stay = good & (s[active] > -2) & (s[active] < 3) & (w[active] > -2) & (w[active] < 3) & np.isfinite(t[active])
+        # leave the pair when it diverges far outside the sub-patch
+        stay = (s[active] > -2) & (s[active] < 3) & (w[active] > -2) & (w[active] < 3) & np.isfinite(t[active])
         active = active[stay]
     return s, w, t, conv
 
@@ -512,8 +608,8 @@ def ray_intersect(
     if hit.any():
         leaf = hit_leaf[hit]
         pp = bvh.leaf_patch[leaf]
-        uu = np.clip(bvh.leaf_uv0[leaf, 0] + hit_s[hit] / bvh.split, 0.0, 1.0)
-        vv = np.clip(bvh.leaf_uv0[leaf, 1] + hit_w[hit] / bvh.split, 0.0, 1.0)
+        uu = np.clip(bvh.leaf_uv0[leaf, 0] + hit_s[hit] * bvh.leaf_du[leaf], 0.0, 1.0)
+        vv = np.clip(bvh.leaf_uv0[leaf, 1] + hit_w[hit] * bvh.leaf_du[leaf], 0.0, 1.0)
         cp = net.control_points[pp]
         patch[hit], u[hit], v[hit] = pp, uu, vv
         pos[hit] = eval_points(cp, uu, vv, derivatives=False)
@@ -525,10 +621,10 @@ def ray_intersect(
 def _trace_batch(bvh: PatchBVH, o, d, t_min, t_max, any_hit, best_t, best_leaf, best_s, best_w):
     k = len(o)
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
-        dsafe = np.where(d == 0.0, 1e-300, d)
-        inv = 1.0 / dsafe
-        inv = np.clip(inv, -1e300, 1e300)
-        r, leaf, tn, tf = bvh.candidates(o, inv, np.full(k, t_min), t_max)
+        of = (o - bvh.frame_origin) @ bvh.frame.T
+        df = d @ bvh.frame.T
+        inv = np.clip(1.0 / np.where(df == 0.0, 1e-300, df), -1e300, 1e300)
+        r, leaf, tn, tf = bvh.candidates(of, inv, np.full(k, t_min), t_max)
         # fat-plane slab of each sub-patch
         nrm = bvh.leaf_normal[leaf]
         dn = np.einsum("mc,mc->m", d[r], nrm)
@@ -543,6 +639,10 @@ def _trace_batch(bvh: PatchBVH, o, d, t_min, t_max, any_hit, best_t, best_leaf, 
     r, leaf, t0, t1 = r[keep], leaf[keep], t0[keep], t1[keep]
     if len(r) == 0:
         return
+    keep = ~_rises_clear(bvh, o, d, r, leaf, t0, t1)
+    r, leaf, t0, t1 = r[keep], leaf[keep], t0[keep], t1[keep]
+    if len(r) == 0:
+        return
     # nearest entry first, per ray
     order = np.lexsort((t0, r))
     r, leaf, t0, t1 = r[order], leaf[order], t0[order], t1[order]
@@ -550,7 +650,6 @@ def _trace_batch(bvh: PatchBVH, o, d, t_min, t_max, any_hit, best_t, best_leaf, 
     rank = np.arange(len(r)) - first
     lo_rank = 0
     width = 1
-    eps_uv = 1e-9
     while True:
         sel = (rank >= lo_rank) & (rank < lo_rank + width)
         if not sel.any():
@@ -564,11 +663,7 @@ def _trace_batch(bvh: PatchBVH, o, d, t_min, t_max, any_hit, best_t, best_leaf, 
         width *= 2
         if len(idx) == 0:
             continue
-        s, w, t, ok = _solve_pairs(bvh, o, d, rr, leaf[idx], t0[idx], t1[idx])
-        u = bvh.leaf_uv0[leaf[idx], 0] + s / bvh.split
-        v = bvh.leaf_uv0[leaf[idx], 1] + w / bvh.split
-        ok &= (u >= -eps_uv) & (u <= 1 + eps_uv) & (v >= -eps_uv) & (v <= 1 + eps_uv)
-        ok &= (t >= t_min) & (t <= t_max[rr])
+        s, w, t, ok = _solve_pairs(bvh, o, d, rr, leaf[idx], t0[idx], t1[idx], t_min, t_max[rr])
         if not ok.any():
             continue
         rr, lf, s, w, t = rr[ok], leaf[idx][ok], s[ok], w[ok], t[ok]
@@ -582,39 +677,140 @@ def _trace_batch(bvh: PatchBVH, o, d, t_min, t_max, any_hit, best_t, best_leaf, 
         best_t[rr], best_leaf[rr], best_s[rr], best_w[rr] = t, lf, s, w
 
 
-def _solve_pairs(bvh: PatchBVH, o, d, r, leaf, t0, t1):
-    """Newton for (ray, sub-patch) pairs from the ray's crossing of the sub-patch's mid plane.
+def _rises_clear(bvh: PatchBVH, o, d, r, leaf, t0, t1) -> np.ndarray:
+    """(ray, sub-patch) pairs the ray provably misses: the sub-patch is a graph, the ray rises faster
+    than the surface can along the ray's horizontal direction, and the ray is above the surface where
+    its interval ``[t0, t1]`` enters the sub-patch's xy rectangle.  ``(m,)`` bool."""
+    out = np.zeros(len(r), dtype=bool)
+    g = bvh.leaf_graph[leaf]
+    if not g.any():
+        return out
+    idx = np.nonzero(g)[0]
+    lf = leaf[idx]
+    dd, oo = d[r[idx]], o[r[idx]]
+    gr = bvh.leaf_grad[lf]
+    climb = np.maximum(dd[:, 0] * gr[:, 0], dd[:, 0] * gr[:, 1]) + np.maximum(dd[:, 1] * gr[:, 2], dd[:, 1] * gr[:, 3])
+    margin = 1e-9 * (np.abs(dd).sum(1))
+    fast = dd[:, 2] > climb + margin
+    idx, lf, dd, oo = idx[fast], lf[fast], dd[fast], oo[fast]
+    if len(idx) == 0:
+        return out
+    rect = bvh.leaf_rect[lf]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ax = (rect[:, 0] - oo[:, 0]) / dd[:, 0]
+        bx = (rect[:, 1] - oo[:, 0]) / dd[:, 0]
+        ay = (rect[:, 2] - oo[:, 1]) / dd[:, 1]
+        by = (rect[:, 3] - oo[:, 1]) / dd[:, 1]
+    ex = np.where(dd[:, 0] == 0, -np.inf, np.minimum(ax, bx))
+    ey = np.where(dd[:, 1] == 0, -np.inf, np.minimum(ay, by))
+    ta = np.maximum(np.maximum(ex, ey), t0[idx])
+    ta = np.minimum(ta, t1[idx])
+    p = oo + ta[:, None] * dd
+    s = np.clip((p[:, 0] - rect[:, 0]) / (rect[:, 1] - rect[:, 0]), 0.0, 1.0)
+    w = np.clip((p[:, 1] - rect[:, 2]) / (rect[:, 3] - rect[:, 2]), 0.0, 1.0)
+    # height of the surface at the entry point (clamped into the rectangle: if the ray never enters
+    # it within [t0, t1], the pair is a miss anyway unless the clamped test below keeps it)
+    zf = eval_points(bvh.leaf_cp[lf], s, w, derivatives=False)[:, 2]
+    inside = (p[:, 0] >= rect[:, 0]) & (p[:, 0] <= rect[:, 1]) & (p[:, 1] >= rect[:, 2]) & (p[:, 1] <= rect[:, 3])
+    clear = inside & (p[:, 2] > zf + 1e-9 * bvh.scale)
+    out[idx[clear]] = True
+    return out
 
-    A pair whose first root is unusable (no convergence, or ``t`` before the slab interval, as for
-    a ray starting on the surface) is retried from the far end of its slab interval.
+
+def _solve_pairs(bvh: PatchBVH, o, d, r, leaf, t0, t1, t_min, t_max):
+    """Newton for (ray, sub-patch) pairs; returns local ``(s, w, t, ok)`` of the nearest root found
+    inside the sub-patch with ``t_min <= t <= t_max`` (a root outside the sub-patch belongs to a
+    neighbour, which finds it itself).
+
+    Where the ray meets the sub-patch's normal cone at a steep enough angle the sub-patch can be
+    crossed once at most: Newton starts where the ray crosses the sub-patch's mid plane, and again
+    from the ends of the ray's slab interval only if that does not converge.  Other (grazing) pairs
+    may cross twice: Newton runs from the interval's entry, middle and exit and the nearest root wins.
+    Roots where the ray is tangent to the surface (``|d . n| < 1e-9``) are not hits.
     """
-    cp_all = bvh.leaf_cp[leaf]
-    s_out = np.full(len(r), np.nan)
-    w_out = np.full(len(r), np.nan)
-    t_out = np.full(len(r), np.nan)
-    ok_out = np.zeros(len(r), dtype=bool)
-    todo = np.arange(len(r))
-    for far in (False, True):
+    m = len(r)
+    s_out = np.full(m, np.nan)
+    w_out = np.full(m, np.nan)
+    t_out = np.full(m, np.inf)
+    dd_all = d[r]
+    dn = np.abs(np.einsum("mc,mc->m", dd_all, bvh.leaf_normal[leaf])) / np.linalg.norm(dd_all, axis=1)
+    single = dn > bvh.leaf_cone[leaf]
+    mid = 0.5 * (t0 + t1)
+    tried = np.zeros(m, dtype=bool)  # some start converged (to any root)
+    starts = (
+        (lambda: single, mid),
+        (lambda: ~single, t0),
+        (lambda: ~single, mid),
+        (lambda: ~single, t1),
+        (lambda: single & ~tried, t0),
+        (lambda: single & ~tried, t1),
+    )
+    for mask, tstart in starts:
+        todo = np.nonzero(mask())[0]
         if len(todo) == 0:
-            break
-        cp, oo, dd, a0, a1 = cp_all[todo], o[r[todo]], d[r[todo]], t0[todo], t1[todo]
-        tt = a1 if far else 0.5 * (a0 + a1)
-        tt = np.where(np.isfinite(tt), tt, a0)
-        p = oo + tt[:, None] * dd
-        # start at the point of the corner parallelogram nearest to the ray's point
-        c = cp[:, [0, 3, 0], [0, 0, 3]]  # c0, c1, c3
-        e1, e2, rel = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0], p - c[:, 0]
-        a11 = np.einsum("mc,mc->m", e1, e1)
-        a12 = np.einsum("mc,mc->m", e1, e2)
-        a22 = np.einsum("mc,mc->m", e2, e2)
-        b1 = np.einsum("mc,mc->m", e1, rel)
-        b2 = np.einsum("mc,mc->m", e2, rel)
-        det = a11 * a22 - a12 * a12
-        det = np.where(np.abs(det) > 1e-300, det, 1.0)
-        s = np.clip((b1 * a22 - b2 * a12) / det, 0.0, 1.0)
-        w = np.clip((a11 * b2 - a12 * b1) / det, 0.0, 1.0)
-        s, w, t, ok = _newton_ray(cp, oo, dd, s, w, tt.copy(), bvh.scale)
-        ok &= (s >= -1.0) & (s <= 2.0) & (w >= -1.0) & (w <= 2.0) & (t >= a0 - 1e-6 * bvh.scale)
-        s_out[todo], w_out[todo], t_out[todo], ok_out[todo] = s, w, t, ok
-        todo = todo[~ok]
+            continue
+        cp = bvh.leaf_cp[leaf[todo]]
+        oo, dd = o[r[todo]], dd_all[todo]
+        tt = np.where(np.isfinite(tstart[todo]), tstart[todo], t0[todo])
+        sw = _project_start(cp, oo + tt[:, None] * dd)
+        s, w, t, conv = _newton_ray(cp, oo, dd, sw[:, 0].copy(), sw[:, 1].copy(), tt.copy(), bvh.scale)
+        tried[todo[conv]] = True
+        eps = 1e-9
+        ok = conv & (s >= -eps) & (s <= 1 + eps) & (w >= -eps) & (w <= 1 + eps) & (t >= t_min) & (t <= t_max[todo])
+        if ok.any():
+            # tangent contact is not a hit
+            k = np.nonzero(ok)[0]
+            _, qu, qv = eval_points(cp[k], np.clip(s[k], 0, 1), np.clip(w[k], 0, 1))
+            nn = np.cross(qu, qv)
+            cosang = np.abs(np.einsum("mc,mc->m", nn, dd[k])) / np.maximum(
+                np.linalg.norm(nn, axis=1) * np.linalg.norm(dd[k], axis=1), 1e-300
+            )
+            ok[k[cosang < 1e-9]] = False
+        better = ok & (t < t_out[todo])
+        idx = todo[better]
+        s_out[idx], w_out[idx], t_out[idx] = np.clip(s[better], 0, 1), np.clip(w[better], 0, 1), t[better]
+    ok_out = np.isfinite(t_out)
     return s_out, w_out, t_out, ok_out
+
+
+def _project_start(cp, p):
+    """Parameters of the point of each sub-patch's corner parallelogram nearest to ``p``: ``(m, 2)`` in [0, 1]."""
+    c = cp[:, [0, 3, 3, 0], [0, 0, 3, 3]]  # c0, c1, c2, c3
+    # the longer of each pair of opposite sides (a collapsed side, as at the teapot's apex, is zero)
+    ea, eb = c[:, 1] - c[:, 0], c[:, 2] - c[:, 3]
+    e1 = np.where((np.einsum("mc,mc->m", ea, ea) >= np.einsum("mc,mc->m", eb, eb))[:, None], ea, eb)
+    ea, eb = c[:, 3] - c[:, 0], c[:, 2] - c[:, 1]
+    e2 = np.where((np.einsum("mc,mc->m", ea, ea) >= np.einsum("mc,mc->m", eb, eb))[:, None], ea, eb)
+    rel = p - c[:, 0]
+    a11 = np.einsum("mc,mc->m", e1, e1)
+    a12 = np.einsum("mc,mc->m", e1, e2)
+    a22 = np.einsum("mc,mc->m", e2, e2)
+    b1 = np.einsum("mc,mc->m", e1, rel)
+    b2 = np.einsum("mc,mc->m", e2, rel)
+    det = a11 * a22 - a12 * a12
+    good = np.abs(det) > 1e-12 * np.maximum(a11 * a22, 1e-300)
+    det = np.where(good, det, 1.0)
+    sw = np.stack([(b1 * a22 - b2 * a12) / det, (a11 * b2 - a12 * b1) / det], 1)
+    sw[~good] = 0.5
+    return np.clip(sw, 0.0, 1.0)
+
+
+def _auto_split(cp: np.ndarray, flatness: float = 0.05, max_split: int = 4) -> np.ndarray:
+    """Sub-patches per side for each patch (1, 2, 4 or 8): enough that each sub-patch's fat-plane slab
+    is thinner than ``flatness`` times its size (the slab thins with the square of the split)."""
+    c = cp[:, [0, 3, 3, 0], [0, 0, 3, 3]]
+    nrm = np.cross(c[:, 2] - c[:, 0], c[:, 3] - c[:, 1])
+    ln = np.linalg.norm(nrm, axis=1)
+    size = np.maximum(np.linalg.norm(c[:, 2] - c[:, 0], axis=1), np.linalg.norm(c[:, 3] - c[:, 1], axis=1))
+    size = np.maximum(size, 1e-300)
+    nrm = np.where(ln[:, None] > 1e-12 * size[:, None] ** 2, nrm / np.maximum(ln, 1e-300)[:, None], [0.0, 0.0, 1.0])
+    proj = np.einsum("nijc,nc->nij", cp, nrm)
+    ratio = (proj.max((1, 2)) - proj.min((1, 2))) / size
+    degenerate = ln <= 1e-12 * size**2
+    k = np.ones(len(cp), dtype=np.int64)
+    while True:
+        more = ((ratio / (k * k) > flatness) | (degenerate & (k < 4))) & (k < max_split)
+        if not more.any():
+            break
+        k[more] *= 2
+    return k
