@@ -50,11 +50,11 @@ def add_arguments(parser) -> None:
 
 
 def lightmap_for(net, lighting: str):
-    """The atlas for ``--lighting``: returns ``(net, atlas or "placeholder" or None, scale)``."""
+    """The atlas for ``--lighting``: returns ``(net, atlas or "placeholder" or None, what was used)``."""
     if lighting == "none":
-        return net, None, 1.0
+        return net, None, "none"
     if lighting == "placeholder":
-        return net, "placeholder", 1.0
+        return net, "placeholder", "placeholder"
     import sys
 
     from piste.lighting.baker import load_or_bake_default_lightmap
@@ -64,8 +64,8 @@ def lightmap_for(net, lighting: str):
     except Exception as exc:  # the demo must still render: say so and fall back
         print(f"warning: no baked light map ({type(exc).__name__}: {exc}); using the placeholder lighting",
               file=sys.stderr)
-        return net, "placeholder", 1.0
-    return lm.apply(net), lm.atlas, 1.0
+        return net, "placeholder", "placeholder (bake failed)"
+    return lm.apply(net), lm.atlas, "baked"
 
 
 def run(args) -> int:
@@ -90,7 +90,7 @@ def run(args) -> int:
     t0 = time.perf_counter()
     net = default_course(args.seed)
     line = track_centerline(args.seed)
-    net, atlas, _ = lightmap_for(net, args.lighting)
+    net, atlas, lighting = lightmap_for(net, args.lighting)
     renderer = TerrainRenderer(net, size=(w, h), lightmap=atlas, track=line, track_half_width=TRACK_HALF_WIDTH)
     lod_on = args.lod == "on"
     # warm-up (not timed): shader compilation, tessellation caches
@@ -124,7 +124,7 @@ def run(args) -> int:
     s = summarize(frames)
     lod = "on" if args.lod == "on" else "off (all 8x8)"
     title = (f"Terrain statistics: {net.name}, {len(frames)} frame(s) at {w}x{h}, LOD {lod}, "
-             f"light map {args.lightmap}, lighting {args.lighting}" + (f", debug {args.debug}" if args.debug else ""))
+             f"light map {args.lightmap}, lighting {lighting}" + (f", debug {args.debug}" if args.debug else ""))
     print(format_stats(s, title=title))
     print()
     print(f"frame times (mean over {len(frames)} frame(s), llvmpipe/EGL):")
