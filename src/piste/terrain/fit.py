@@ -25,12 +25,15 @@ normal equations separate into two small sparse banded SPD systems,
 default).  ``method="sparse"`` assembles the full ``(H' W', Ny Nx)`` sparse matrix and solves its
 normal equations with ``spsolve``: the same solution, for checks (and slower).
 
-``smooth=True`` fits a uniform cubic B-spline (C2, knots at the patch boundaries) instead and
-converts it exactly to Bézier form: the net is then C2 (no slope jumps across seams, so no creases
-in baked lighting) at the price of fewer degrees of freedom (higher RMSE).
+``smooth`` raises the continuity across seams: ``True`` / ``"c1"`` ties each seam's neighbouring
+control points to be collinear and evenly spaced (C1: no slope jumps, so no creases in baked
+lighting); ``"c2"`` fits a uniform cubic B-spline (knots at the patch boundaries) and converts it
+exactly to Bézier form.  Both keep the separable structure (the Bézier sample matrix times a sparse
+continuity map) and have fewer degrees of freedom, hence a higher RMSE.
 
-Measured on matplotlib's ``jacksboro_fault_dem.npz`` (344 x 403 samples, 8,500 patches of 4x4
-sample intervals): C0 RMSE 2.03 m, max 22.6 m; C2 RMSE 5.5 m (see ``tests/terrain/test_fit.py``).
+Measured on matplotlib's ``jacksboro_fault_dem.npz`` (344 x 403 samples, ~75 x 93 m, 840 m relief;
+8,500 patches of 4x4 sample intervals, every covered sample counted once): C0 RMSE 2.00 m, max
+14.1 m (0.3 s); C1 RMSE 3.8 m; C2 RMSE 10.4 m (see ``tests/terrain/test_fit.py``).
 """
 
 from __future__ import annotations
