@@ -9,16 +9,22 @@ TerrainRenderer       camera -> LOD -> cull -> tessellate -> upload -> draw -> r
 Frame, summarize      one frame's image, counts and timings; the talk's statistics over frames
 TerrainPass           the terrain draw: base texture x light map, ``modulate`` or ``ps2`` passes
 SkyPass               gradient sky
+cull_boxes            vectorised frustum culling of boxes (centre +- half extents)
+VideoWriter           atomic H.264 MP4 output (imageio-ffmpeg)
 snow_texture          procedural tileable snow base texture
 placeholder_lightmap  PLACEHOLDER light-map atlas from the normals and a fixed sun
+track_field           signed distance across a track on a world x-y grid (projected texture)
 LOD_COLORS            debug colours of 4x4 / 6x6 / 8x8 / glue patches
+
+Interactive window: :func:`piste.render.window.run_window` (pyglet, imported lazily).
 """
 
 from piste.render.context import Offscreen, create_context, save_png
-from piste.render.frame import Frame, TerrainRenderer, summarize
+from piste.render.frame import Frame, TerrainRenderer, cull_boxes, summarize
 from piste.render.sky_pass import SkyPass
 from piste.render.terrain_pass import DEBUG_VIEWS, LIGHTMAP_MODES, TerrainPass
-from piste.render.textures import LOD_COLORS, lightmap_atlas_size, placeholder_lightmap, snow_texture
+from piste.render.textures import LOD_COLORS, lightmap_atlas_size, placeholder_lightmap, snow_texture, track_field
+from piste.render.video import VideoWriter
 
 __all__ = [
     "create_context",
@@ -27,6 +33,9 @@ __all__ = [
     "TerrainRenderer",
     "Frame",
     "summarize",
+    "cull_boxes",
+    "VideoWriter",
+    "track_field",
     "TerrainPass",
     "SkyPass",
     "LIGHTMAP_MODES",
