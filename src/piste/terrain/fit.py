@@ -33,7 +33,7 @@ continuity map) and have fewer degrees of freedom, hence a higher RMSE.
 
 Measured on matplotlib's ``jacksboro_fault_dem.npz`` (344 x 403 samples, ~75 x 93 m, 840 m relief;
 8,500 patches of 4x4 sample intervals, every covered sample counted once): C0 RMSE 2.00 m, max
-14.1 m (0.3 s); C1 RMSE 3.8 m; C2 RMSE 10.4 m (see ``tests/terrain/test_fit.py``).
+14.1 m (0.3 s); C1 RMSE 3.7 m; C2 RMSE 10.4 m (see ``tests/terrain/test_fit.py``).
 """
 
 from __future__ import annotations
