@@ -1,0 +1,235 @@
+"""The riders' draw: per-vertex lit skinned characters, then a specular-map second pass.
+
+Skinning happens on the CPU (:meth:`piste.world.scene.Scene.update`: the SSX Tricky blended
+matrices, one palette per LOD, the rider's world matrix folded into each palette matrix, all riders
+of a LOD in one sparse product), so this pass streams world-space positions and normals.  Why the
+CPU and not palette uniforms in the vertex shader: the palettes are 51-110 matrices per rider
+(llvmpipe runs vertex shaders on the same two cores anyway), the skinned low-LOD vertices are
+needed on the CPU for the projected shadows, and the CPU path is the one the tests compare
+against :func:`piste.character.skin`.
+
+Lighting (``character.vert.glsl``): the talk's 1 ambient + 3 directional lights per vertex,
+``ambient + C * max(D * n, 0)``, with each rider's ``D`` and ``C`` chosen at its position from the
+world's lights (:func:`piste.lighting.vertex.choose_lights_many`).
+
+Specular (``character_specular.frag.glsl``): a second pass over the same triangles (GL_LEQUAL, no
+depth writes) adding Blinn-Phong highlights of the sun scaled by a specular map with additive
+blending ``(ONE, ONE)``.  :func:`specular_map` makes the map for the default rider: goggles
+(lens and strap), board (top sheet and rails) and jacket (a duller sheen).
+
+API
+---
+CharacterPass(ctx, lods, texture, spec_map=None, max_riders=6)
+    ``.upload(skinned)``, ``.draw(vp, eye, lights, sun=None, fog=None, specular=True)``
+specular_map(texture) -> (H, W, 4) uint8      r = strength, g = shininess scale
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from piste.errors import RenderError
+from piste.render.context import load_shader
+
+__all__ = ["CharacterPass", "specular_map", "SHININESS"]
+
+#: Blinn-Phong exponent (scaled by 0.25 + the map's green channel)
+SHININESS = 48.0
+
+
+def specular_map(texture) -> np.ndarray:
+    """The default rider's specular map, ``(H, W, 4) uint8`` matching its texture atlas.
+
+    Red = specular strength: goggle lenses 1.0 and strap 0.5, the board's top sheet 0.8 and
+    rails 0.9, the jacket and sleeves 0.3 (waterproof shell), everything else 0.  Green =
+    shininess scale (lenses and board sharp, jacket broad).
+    """
+    from piste.character import rider as _rider
+
+    tex = np.asarray(texture)
+    h, w = tex.shape[:2]
+    out = np.zeros((h, w, 4), np.uint8)
+    out[..., 3] = 255
+    v, u = np.mgrid[0:h, 0:w]
+    uu, vv = (u + 0.5) / w, (v + 0.5) / h
+    tiles = getattr(_rider, "_TILES", {})
+
+    def tile(name):
+        if name not in tiles:
+            return np.zeros((h, w), bool), uu, vv
+        u0, v0, u1, v1 = tiles[name]
+        m = (uu >= u0) & (uu < u1) & (vv >= v0) & (vv < v1)
+        return m, (uu - u0) / (u1 - u0), (vv - v0) / (v1 - v0)
+
+    rgb = tex[..., :3].astype(np.int16)
+    for name in ("jacket", "sleeve"):
+        m, _, _ = tile(name)
+        out[m, 0], out[m, 1] = 77, 40
+    m, lu, lv = tile("board")
+    out[m, 0], out[m, 1] = 204, 200
+    out[m & (np.abs(lv - 0.5) > 0.3), 0] = 230
+    m, lu, lv = tile("head")
+    lens = m & (np.abs(rgb - np.array([255, 150, 30])).max(-1) <= 2)  # the goggle lens colour
+    strap = m & (np.abs(lv - 0.74) < 0.03) & ~lens
+    out[strap, 0], out[strap, 1] = 128, 120
+    out[lens, 0], out[lens, 1] = 255, 255
+    return out
+
+
+class _LodBuffers:
+    """GPU buffers of one LOD for up to ``n`` riders: static UVs and indices, streamed positions
+    and normals."""
+
+    def __init__(self, ctx, mesh, n: int, progs: dict):
+        self.v = int(mesh.n_vertices)
+        self.t = int(mesh.n_triangles)
+        self.n = int(n)
+        off = (np.arange(n, dtype=np.uint32) * self.v)[:, None, None]
+        idx = (np.asarray(mesh.indices, np.uint32)[None] + off).reshape(-1)
+        uv = np.tile(np.asarray(mesh.uv, np.float32), (n, 1))
+        self.index = ctx.buffer(idx.tobytes())
+        self.uv = ctx.buffer(uv.tobytes())
+        self.pos = ctx.buffer(reserve=n * self.v * 12, dynamic=True)
+        self.nrm = ctx.buffer(reserve=n * self.v * 12, dynamic=True)
+        content = [(self.pos, "3f", "in_pos"), (self.nrm, "3f", "in_nrm"), (self.uv, "2f", "in_uv")]
+        self.vaos = {k: ctx.vertex_array(p, content, self.index, index_element_size=4, skip_errors=True)
+                     for k, p in progs.items()}
+        self.count = 0
+
+    def write(self, pos, nrm) -> None:
+        k = len(pos)
+        if k > self.n:
+            raise RenderError(f"character pass: {k} riders at one LOD, room for {self.n}")
+        self.count = k
+        if k:
+            self.pos.write(np.ascontiguousarray(pos, dtype=np.float32).tobytes())
+            self.nrm.write(np.ascontiguousarray(nrm, dtype=np.float32).tobytes())
+
+    def release(self):
+        for vao in self.vaos.values():
+            vao.release()
+        for b in (self.index, self.uv, self.pos, self.nrm):
+            b.release()
+
+
+class CharacterPass:
+    """Draws CPU-skinned riders, lit per vertex, plus the specular-map pass.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context
+    lods : list of :class:`piste.character.LOD` (their meshes; skinned positions arrive per frame)
+    texture : (H, W, 4) uint8 the riders' texture atlas
+    spec_map : (H, W, 4) uint8 (default :func:`specular_map` of ``texture``)
+    max_riders : riders per LOD at most
+    """
+
+    def __init__(self, ctx, lods, texture, spec_map=None, max_riders: int = 6):
+        import moderngl
+
+        self.ctx = ctx
+        vs = load_shader("character.vert.glsl")
+        self.prog = ctx.program(vertex_shader=vs, fragment_shader=load_shader("character.frag.glsl"))
+        self.prog_spec = ctx.program(vertex_shader=vs, fragment_shader=load_shader("character_specular.frag.glsl"))
+        self.prog["u_tex"].value = 0
+        self.prog_spec["u_spec"].value = 1
+        tex = np.asarray(texture)
+        if tex.dtype != np.uint8 or tex.ndim != 3 or tex.shape[2] != 4:
+            raise RenderError(f"character texture: expected (H, W, 4) uint8, got {tex.shape} {tex.dtype}")
+        spec = specular_map(tex) if spec_map is None else np.asarray(spec_map, np.uint8)
+        self.texture = self._tex(tex)
+        self.spec = self._tex(spec)
+        for t in (self.texture, self.spec):
+            t.build_mipmaps()
+            t.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        progs = {"base": self.prog, "spec": self.prog_spec}
+        self.lods = [_LodBuffers(ctx, lod.mesh, max_riders, progs) for lod in lods]
+        self.riders = [np.zeros(0, np.int64) for _ in lods]
+
+    def _tex(self, img):
+        h, w = img.shape[:2]
+        return self.ctx.texture((w, h), 4, np.ascontiguousarray(img).tobytes(), alignment=1)
+
+    @property
+    def triangles(self) -> int:
+        """Triangles drawn by the last upload (one pass)."""
+        return int(sum(b.t * b.count for b in self.lods))
+
+    def upload(self, skinned) -> None:
+        """Stream this frame's skinned riders: ``skinned[l] = (rider indices (k,), positions (k, v, 3),
+        normals (k, v, 3))`` per LOD ``l`` (world space; see :class:`piste.world.scene.SceneFrame`)."""
+        if len(skinned) != len(self.lods):
+            raise RenderError(f"character pass: {len(skinned)} LOD groups for {len(self.lods)} LODs")
+        for l, (idx, pos, nrm) in enumerate(skinned):
+            self.lods[l].write(pos, nrm)
+            self.riders[l] = np.asarray(idx)
+
+    def draw(self, vp, eye, lights, sun=None, fog=None, specular: bool = True, light_only: bool = False) -> None:
+        """Draw the uploaded riders into the bound framebuffer (depth test on).
+
+        Parameters
+        ----------
+        vp : (4, 4) view-projection;  eye : (3,) camera position
+        lights : VertexLights batch indexed by rider (``SceneFrame.rider_lights``)
+        sun : DirectionalLight for the specular pass (None: no specular pass)
+        fog : None or (r, g, b, density per metre)
+        light_only : draw the per-vertex light without the texture (tests)
+        """
+        import moderngl
+
+        ctx = self.ctx
+        vp_bytes = np.asarray(vp, dtype=np.float32).T.tobytes()
+        fog = (0.0, 0.0, 0.0, 0.0) if fog is None else tuple(float(x) for x in fog)
+        eye = tuple(float(x) for x in eye)
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
+        ctx.depth_func = "<"
+        p = self.prog
+        p["u_mvp"].write(vp_bytes)
+        p["u_eye"].value = eye
+        p["u_fog"].value = fog
+        p["u_mode"].value = 1 if light_only else 0
+        self.texture.use(0)
+        self._draw_all("base", p, lights)
+        if not specular or sun is None or light_only:
+            return
+        q = self.prog_spec
+        q["u_mvp"].write(vp_bytes)
+        q["u_eye"].value = eye
+        q["u_fog"].value = fog
+        q["u_sun_dir"].value = tuple(float(-x) for x in sun.direction)
+        q["u_sun_color"].value = tuple(float(sun.intensity * c) for c in sun.color)
+        q["u_shininess"].value = SHININESS
+        self.spec.use(1)
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_equation = moderngl.FUNC_ADD
+        ctx.blend_func = (moderngl.ONE, moderngl.ONE, moderngl.ZERO, moderngl.ONE)
+        ctx.depth_func = "<="
+        ctx.depth_mask = False
+        try:
+            self._draw_all("spec", q, lights)
+        finally:
+            ctx.disable(moderngl.BLEND)
+            ctx.blend_func = moderngl.DEFAULT_BLENDING
+            ctx.depth_mask = True
+            ctx.depth_func = "<"
+
+    def _draw_all(self, which, prog, lights) -> None:
+        import moderngl
+
+        for buf, idx in zip(self.lods, self.riders):
+            vao = buf.vaos[which]
+            n = 3 * buf.t
+            for j, r in enumerate(idx):
+                u = lights[int(r)].uniforms()
+                if "u_light_dir" in prog:
+                    prog["u_light_dir"].write(u["u_light_dir"])
+                    prog["u_light_color"].write(u["u_light_color"])
+                    prog["u_ambient"].value = u["u_ambient"]
+                vao.render(moderngl.TRIANGLES, vertices=n, first=j * n)
+
+    def release(self) -> None:
+        for b in self.lods:
+            b.release()
+        for obj in (self.texture, self.spec, self.prog, self.prog_spec):
+            obj.release()

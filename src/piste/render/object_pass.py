@@ -1,0 +1,222 @@
+"""The objects' draw: compressed vertex formats decoded in the vertex shader, object matrices with
+(non-uniform) scale, per-vertex lighting.
+
+Per object kind one static vertex array: positions 3 x uint16, UVs 2 x uint16, octahedral normals
+2 x int8 (or int16), uint16 indices (:class:`piste.world.objects.CompressedMesh`); the shader
+(``object.vert.glsl``) decodes them with the kind's offset / extent uniforms.  Instances are drawn
+with one instanced draw per kind; each visible instance is one row of 16 RGBA32F texels in an
+instance-data texture (object matrix, inverse-transpose normal matrix, its 1 + 3 light matrices),
+rebuilt per frame from rows computed once (:func:`instance_rows`).
+
+Lighting modes (``mode``): ``dynamic`` (the talk's SSX objects: 1 ambient + 3 directional chosen
+per object), ``baked`` (pre-calculated RGBs per instance vertex, half-bright RGB8, from
+:func:`piste.world.objects.bake_vertex_colors`), ``points`` (every world light evaluated per
+vertex: dynamic point and spot lights with attenuation and cone).
+
+API
+---
+ObjectPass(ctx, objects, lights, mode="dynamic")   ``.draw(vp, eye, visible, fog=None, mode=None)``
+instance_rows(objects) -> (n, 16, 4) float32
+light_uniforms(lights) -> dict of the ``points`` mode's uniform arrays
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from piste.errors import ConfigError, RenderError
+from piste.render.context import load_shader
+
+__all__ = ["ObjectPass", "instance_rows", "light_uniforms", "MAX_POINT_LIGHTS"]
+
+MAX_POINT_LIGHTS = 12
+_MODES = {"dynamic": 0, "baked": 1, "points": 2}
+
+
+def instance_rows(objects) -> np.ndarray:
+    """Per-instance shader data ``(n, 16, 4) float32``: texels 0-3 the object matrix's columns,
+    4-6 the normal matrix's columns, 7-9 the light-direction matrix's rows, 10-12 the
+    light-colour matrix's columns, 13 the ambient colour with the instance's index within its
+    kind in ``.w`` (its row in the baked-colour texture)."""
+    n = len(objects)
+    rows = np.zeros((n, 16, 4), np.float32)
+    rows[:, 0:4, :] = np.swapaxes(objects.matrix, 1, 2)  # columns
+    rows[:, 4:7, :3] = np.swapaxes(objects.normal_matrix, 1, 2)
+    vl = objects.lights
+    if vl is not None:
+        rows[:, 7:10, :3] = vl.directions  # rows
+        rows[:, 10:13, :3] = np.swapaxes(vl.colors, 1, 2)  # columns
+        rows[:, 13, :3] = vl.ambient
+    local = np.zeros(n)
+    for k in range(len(objects.kinds)):
+        idx = np.nonzero(objects.kind == k)[0]
+        local[idx] = np.arange(len(idx))
+    rows[:, 13, 3] = local
+    return rows
+
+
+def light_uniforms(lights) -> dict:
+    """The ``points`` mode's uniforms from a :class:`piste.lighting.Lights`: every direct light
+    (at most :data:`MAX_POINT_LIGHTS`) as position/type, direction/range, colour/falloff and cone."""
+    from piste.lighting.lights import DirectionalLight, SpotLight
+
+    direct = lights.direct
+    if len(direct) > MAX_POINT_LIGHTS:
+        raise ConfigError(f"object lighting 'points': at most {MAX_POINT_LIGHTS} direct lights, the world has {len(direct)}")
+    pos = np.zeros((MAX_POINT_LIGHTS, 4), np.float32)
+    dirs = np.zeros((MAX_POINT_LIGHTS, 4), np.float32)
+    col = np.zeros((MAX_POINT_LIGHTS, 4), np.float32)
+    cone = np.zeros((MAX_POINT_LIGHTS, 4), np.float32)
+    for i, light in enumerate(direct):
+        col[i, :3] = light.intensity * np.asarray(light.color)
+        if isinstance(light, DirectionalLight):
+            pos[i] = (*(-np.asarray(light.direction)), 0.0)
+            continue
+        pos[i] = (*light.position, 2.0 if isinstance(light, SpotLight) else 1.0)
+        dirs[i, 3] = light.range if np.isfinite(light.range) else 0.0
+        col[i, 3] = light.falloff
+        if isinstance(light, SpotLight):
+            dirs[i, :3] = light.direction
+            cone[i, :2] = (np.cos(np.radians(light.outer_angle)), np.cos(np.radians(light.inner_angle)))
+    return {"u_n_lights": len(direct), "u_lpos": pos, "u_ldir": dirs, "u_lcol": col, "u_lcone": cone,
+            "u_world_ambient": tuple(float(x) for x in lights.ambient_color())}
+
+
+class ObjectPass:
+    """Draws an :class:`piste.world.objects.ObjectSet`.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context
+    objects : ObjectSet (its ``lights`` are the dynamic mode's light sets)
+    lights : the world's Lights (baked and points modes)
+    mode : "dynamic" | "baked" | "points" (default for :meth:`draw`)
+    """
+
+    def __init__(self, ctx, objects, lights=None, mode: str = "dynamic"):
+        import moderngl
+
+        if mode not in _MODES:
+            raise ConfigError(f"object lighting must be one of {', '.join(_MODES)}, got {mode!r}")
+        self.ctx = ctx
+        self.objects = objects
+        self.lights = lights
+        self.mode = mode
+        self.prog = ctx.program(vertex_shader=load_shader("object.vert.glsl"),
+                                fragment_shader=load_shader("object.frag.glsl"))
+        self.prog["u_tex"].value = 0
+        self.prog["u_inst"].value = 1
+        self.prog["u_baked"].value = 2
+        tex = objects.texture
+        h, w = tex.shape[:2]
+        self.texture = ctx.texture((w, h), 4, np.ascontiguousarray(tex).tobytes(), alignment=1)
+        self.texture.build_mipmaps()
+        self.texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self.rows = instance_rows(objects)
+        n = max(len(objects), 1)
+        self.inst = ctx.texture((16, n), 4, dtype="f4")
+        self.inst.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.kinds = []
+        for k, name in enumerate(objects.kinds):
+            m = objects.meshes[name]
+            buf = [ctx.buffer(np.ascontiguousarray(m.positions).tobytes()),
+                   ctx.buffer(np.ascontiguousarray(m.uv).tobytes()),
+                   ctx.buffer(np.ascontiguousarray(m.normals).tobytes()),
+                   ctx.buffer(np.ascontiguousarray(m.indices).tobytes())]
+            nfmt = "2i1" if m.normal_bits == 8 else "2i2"
+            vao = ctx.vertex_array(self.prog, [(buf[0], "3u2", "in_pos"), (buf[1], "2u2", "in_uv"), (buf[2], nfmt, "in_nrm")],
+                                   buf[3], index_element_size=m.indices.itemsize, skip_errors=True)
+            self.kinds.append({"mesh": m, "buffers": buf, "vao": vao, "baked": None})
+        self._points = None
+        self.drawn = 0
+        self.triangles = 0
+
+    def _baked_textures(self):
+        from piste.world.objects import bake_vertex_colors
+
+        if self.lights is None:
+            raise RenderError("object lighting 'baked' needs the world's lights")
+        baked = bake_vertex_colors(self.objects, self.lights)
+        for k, name in enumerate(self.objects.kinds):
+            c = baked[name]  # (k, v, 3)
+            kk, v = max(c.shape[0], 1), c.shape[1]
+            img = np.zeros((kk, v, 4), np.uint8)
+            img[: c.shape[0], :, :3] = c
+            img[..., 3] = 255
+            t = self.ctx.texture((v, kk), 4, np.ascontiguousarray(img).tobytes(), alignment=1)
+            import moderngl
+
+            t.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self.kinds[k]["baked"] = t
+
+    def draw(self, vp, eye, visible=None, fog=None, mode: str | None = None, light_only: bool = False) -> None:
+        """Draw the ``visible (k,)`` instances (default: all) into the bound framebuffer.
+
+        ``mode`` overrides the lighting mode; ``light_only`` draws the light without the texture."""
+        import moderngl
+
+        mode = self.mode if mode is None else mode
+        if mode not in _MODES:
+            raise ConfigError(f"object lighting must be one of {', '.join(_MODES)}, got {mode!r}")
+        objs = self.objects
+        vis = np.arange(len(objs)) if visible is None else np.asarray(visible, dtype=np.int64)
+        self.drawn = 0
+        self.triangles = 0
+        if len(vis) == 0:
+            return
+        order = vis[np.argsort(objs.kind[vis], kind="stable")]
+        self.inst.write(np.ascontiguousarray(self.rows[order]).tobytes(), viewport=(0, 0, 16, len(order)))
+        kind_of = objs.kind[order]
+        p = self.prog
+        p["u_vp"].write(np.asarray(vp, dtype=np.float32).T.tobytes())
+        p["u_eye"].value = tuple(float(x) for x in eye)
+        p["u_fog"].value = (0.0, 0.0, 0.0, 0.0) if fog is None else tuple(float(x) for x in fog)
+        p["u_mode"].value = _MODES[mode]
+        p["u_mode_frag"].value = 1 if light_only else 0
+        if mode == "points":
+            if self._points is None:
+                if self.lights is None:
+                    raise RenderError("object lighting 'points' needs the world's lights")
+                self._points = light_uniforms(self.lights)
+            for name, val in self._points.items():
+                if name in p:
+                    if isinstance(val, np.ndarray):
+                        p[name].write(val.astype(np.float32).tobytes())
+                    else:
+                        p[name].value = val
+        if mode == "baked" and self.kinds[0]["baked"] is None:
+            self._baked_textures()
+        self.texture.use(0)
+        self.inst.use(1)
+        ctx = self.ctx
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
+        ctx.depth_func = "<"
+        start = 0
+        for k, info in enumerate(self.kinds):
+            count = int(np.count_nonzero(kind_of == k))
+            if count == 0:
+                continue
+            m = info["mesh"]
+            p["u_base_row"].value = start
+            p["u_pos_offset"].value = tuple(float(x) for x in m.pos_offset)
+            p["u_pos_extent"].value = tuple(float(x) for x in m.pos_extent)
+            p["u_uv_offset"].value = tuple(float(x) for x in m.uv_offset)
+            p["u_uv_extent"].value = tuple(float(x) for x in m.uv_extent)
+            p["u_nmax"].value = float((1 << (m.normal_bits - 1)) - 1)
+            if mode == "baked":
+                info["baked"].use(2)
+            info["vao"].render(moderngl.TRIANGLES, vertices=m.indices.size, instances=count)
+            start += count
+            self.drawn += count
+            self.triangles += count * m.n_triangles
+
+    def release(self) -> None:
+        for info in self.kinds:
+            info["vao"].release()
+            for b in info["buffers"]:
+                b.release()
+            if info["baked"] is not None:
+                info["baked"].release()
+        for obj in (self.texture, self.inst, self.prog):
+            obj.release()

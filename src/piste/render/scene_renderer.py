@@ -1,0 +1,189 @@
+"""The completed real-time scene, one frame: terrain + projected rider shadows + objects + riders +
+specular.
+
+Order of a frame (:meth:`SceneRenderer.render`):
+
+CPU  1. scene update (:meth:`piste.world.scene.Scene.update`): animation, rider LOD, blended-matrix
+        skinning, light choice, object culling;
+     2. terrain: per-edge LOD, frustum culling, tessellation (:meth:`TerrainRenderer.prepare`);
+     3. shadows: one orthographic sun frustum per rider, the terrain patches each touches;
+GPU  4. shadow casters: each rider's low-LOD model into its tile of the shadow texture;
+     5. terrain (+ sky) (:meth:`TerrainRenderer.draw`, not read back);
+     6. the shadow receivers: the extra pass over the shadowed patches only;
+     7. objects (compressed formats, instanced per kind);
+     8. riders (per-vertex 1 + 3 lights), then their specular-map pass;
+     9. glFinish and read back.
+
+API
+---
+SceneRenderer(scene, size=(640, 448), ctx=None, lightmap="placeholder", object_lighting="dynamic",
+              shadows=True, specular=True)
+SceneRenderer.render(t) -> SceneImage      image, the terrain Frame, the SceneFrame, stats, timings
+summarize_scene(images) -> dict            means of the timings and counts
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from piste.render.context import check_gl_error
+
+__all__ = ["SceneRenderer", "SceneImage", "summarize_scene"]
+
+
+@dataclass
+class SceneImage:
+    """One rendered frame of the scene.
+
+    image : (H, W, 4) uint8 or None;  terrain : piste.render.Frame (terrain counts, timings)
+    scene : piste.world.scene.SceneFrame;  shadow_patches : list of patches per rider
+    stats : counts (rider triangles, objects drawn, shadow patches, ...);  timings : ms per stage
+    """
+
+    image: np.ndarray | None
+    terrain: object
+    scene: object
+    shadow_patches: list
+    stats: dict = field(default_factory=dict)
+    timings: dict = field(default_factory=dict)
+
+
+class SceneRenderer:
+    """Renders a :class:`piste.world.scene.Scene` off-screen (see the module docstring).
+
+    Parameters
+    ----------
+    scene : Scene
+    size : (W, H) pixels
+    ctx : moderngl context to share (default: a new headless one)
+    lightmap : the terrain's light map (see :class:`piste.render.TerrainRenderer`)
+    object_lighting : "dynamic" | "baked" | "points"
+    shadows, specular : draw the projected shadows / the specular pass
+    shadow_tile : pixels per rider shadow tile
+    """
+
+    def __init__(self, scene, size=(640, 448), ctx=None, lightmap="placeholder", object_lighting: str = "dynamic",
+                 shadows: bool = True, specular: bool = True, shadow_tile: int = 128, **terrain_kw):
+        from piste.render.character_pass import CharacterPass
+        from piste.render.frame import TerrainRenderer
+        from piste.render.object_pass import ObjectPass
+        from piste.render.shadow_pass import ShadowPass
+        from piste.world.course import TRACK_HALF_WIDTH
+
+        self.scene = scene
+        terrain_kw.setdefault("track", scene.line)
+        terrain_kw.setdefault("track_half_width", TRACK_HALF_WIDTH)
+        self.terrain = TerrainRenderer(scene.net, size=size, ctx=ctx, lightmap=lightmap, **terrain_kw)
+        self.ctx = self.terrain.ctx
+        n = len(scene.riders)
+        self.characters = CharacterPass(self.ctx, scene.lods, scene.model.meshes[0].texture, max_riders=n)
+        self.objects = ObjectPass(self.ctx, scene.objects, scene.lights, mode=object_lighting) if scene.objects is not None else None
+        self.shadows = ShadowPass(self.ctx, n_max=n, tile=shadow_tile) if shadows else None
+        self.specular = bool(specular)
+        self.patch_lo, self.patch_hi = scene.net.patch_bounds
+        # caster bounding sphere: the low LOD's bind-pose extent (riders lift and spin: a margin)
+        b = scene.lods[-1].mesh.bounds()
+        self.caster_radius = 0.5 * float(np.linalg.norm(b[1] - b[0])) + 0.25
+
+    @property
+    def size(self):
+        return self.terrain.size
+
+    def render(self, t: float, read: bool = True, fog: float | None = None, camera=None, lod: bool = True,
+               lightmap_mode: str = "modulate", light_only: bool = False) -> SceneImage:
+        """Render the scene at ``t`` seconds.  ``camera`` overrides the chase camera; ``light_only``
+        draws riders and objects with their per-vertex light only (tests)."""
+        from piste.render.frame import DEFAULT_FOG_DENSITY
+        from piste.render.shadow_pass import shadow_matrices, shadow_patches
+        from piste.render.sky_pass import HORIZON
+
+        fog = DEFAULT_FOG_DENSITY if fog is None else fog
+        w, h = self.size
+        tm = {}
+        t0 = time.perf_counter()
+        sf = self.scene.update(t, aspect=w / h, camera=camera)
+        cam = sf.camera
+        t1 = time.perf_counter()
+        tt: dict = {}
+        mesh = self.terrain.prepare(cam, lod=lod, timings=tt)
+        t2 = time.perf_counter()
+        patches = []
+        sun = self.scene.sun
+        if self.shadows is not None and sun is not None:
+            st = sf.riders
+            centers = st.anchor + st.normal * 0.9
+            light_vp = shadow_matrices(centers, self.caster_radius, sun.direction)
+            patches = shadow_patches(self.patch_lo, self.patch_hi, light_vp, candidates=mesh.patch_ids)
+        t3 = time.perf_counter()
+        # ---- GPU work (uploads count as CPU time: they are memcpy on the CPU side)
+        self.characters.upload(sf.skinned)
+        if self.shadows is not None and sun is not None:
+            self.shadows.render_casters(sf.shadow[0], self.scene.lods[-1].mesh.indices, light_vp)
+        t4 = time.perf_counter()
+        frame = self.terrain.draw(cam, mesh, lightmap_mode=lightmap_mode, fog=fog, read=False, timings=tt)
+        t5 = time.perf_counter()
+        vp = frame_vp = cam.with_aspect(w, h).view_projection()
+        fog_rgba = (*HORIZON, float(fog)) if fog else None
+        if self.shadows is not None and sun is not None:
+            self.shadows.draw_receivers(mesh, patches, frame_vp)
+        if self.objects is not None:
+            self.objects.draw(vp, cam.eye, sf.objects_visible, fog=fog_rgba, light_only=light_only)
+        self.characters.draw(vp, cam.eye, sf.rider_lights, sun=sun if self.specular else None, fog=fog_rgba,
+                             light_only=light_only)
+        self.ctx.finish()
+        t6 = time.perf_counter()
+        image = self.terrain.target.read() if read else None
+        t7 = time.perf_counter()
+        check_gl_error(self.ctx, "drawing the scene")
+        tm.update(sf.timings)
+        tm.update(terrain_lod=tt.get("lod", 0.0), terrain_cull=tt.get("cull", 0.0), tessellate=tt.get("tessellate", 0.0),
+                  shadow_cull=(t3 - t2) * 1e3, upload=frame.timings["upload"] + (t4 - t3) * 1e3,
+                  terrain_draw=frame.timings["draw"], scene_draw=(t6 - t5) * 1e3, readback=(t7 - t6) * 1e3)
+        # the talk's CPU side: animation, skinning, LOD, tessellation, culling
+        tm["cpu"] = (sf.timings["cpu"] + tm["terrain_lod"] + tm["terrain_cull"] + tm["tessellate"] + tm["shadow_cull"])
+        tm["gpu"] = tm["upload"] + tm["terrain_draw"] + tm["scene_draw"] + tm["readback"]
+        tm["total"] = (t7 - t0) * 1e3
+        counts = [len(p) for p in patches]
+        union = int(len(np.unique(np.concatenate(patches)))) if patches else 0
+        stats = {
+            "riders": len(sf.riders),
+            "rider_lod": sf.rider_lod.tolist(),
+            "rider_triangles": self.characters.triangles,
+            "objects_drawn": self.objects.drawn if self.objects is not None else 0,
+            "object_triangles": self.objects.triangles if self.objects is not None else 0,
+            "shadow_patches": int(sum(counts)),
+            "shadow_patches_union": union,
+            "shadow_patches_per_rider": counts,
+            "shadow_triangles": self.shadows.triangles if self.shadows is not None else 0,
+            "terrain_patches": frame.patches,
+            "terrain_triangles": frame.triangles,
+        }
+        frame.image = image
+        return SceneImage(image, frame, sf, patches, stats, tm)
+
+    def release(self) -> None:
+        for p in (self.characters, self.objects, self.shadows):
+            if p is not None:
+                p.release()
+        self.terrain.release()
+
+
+def summarize_scene(images) -> dict:
+    """Means over frames: every timing (``<stage>_ms``), ``fps`` from the mean total, and the mean
+    counts (rider triangles, objects, shadow patches)."""
+    if not images:
+        from piste.errors import ConfigError
+
+        raise ConfigError("summarize_scene: no frames")
+    out = {f"{k}_ms": float(np.mean([im.timings[k] for im in images])) for k in images[0].timings}
+    out["cpu_median_ms"] = float(np.median([im.timings["cpu"] for im in images]))
+    out["fps"] = 1e3 / out["total_ms"] if out["total_ms"] > 0 else float("inf")
+    for k in ("rider_triangles", "objects_drawn", "object_triangles", "shadow_patches", "shadow_patches_union",
+              "shadow_triangles", "terrain_patches", "terrain_triangles"):
+        out[k] = float(np.mean([im.stats[k] for im in images]))
+    out["shadow_patches_max"] = int(max(im.stats["shadow_patches"] for im in images))
+    out["frames"] = len(images)
+    return out

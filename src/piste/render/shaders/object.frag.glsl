@@ -1,0 +1,17 @@
+#version 330 core
+// Objects: texture x per-vertex light (u_mode_frag 1: the light alone, for tests), fog.
+uniform sampler2D u_tex;
+uniform vec3 u_eye;
+uniform vec4 u_fog;
+uniform int u_mode_frag;
+in vec3 v_color;
+in vec2 v_uv;
+in vec3 v_world;
+out vec4 f_color;
+void main() {
+    vec3 c = u_mode_frag == 1 ? v_color : texture(u_tex, v_uv).rgb * v_color;
+    if (u_fog.a > 0.0) {
+        c = mix(c, u_fog.rgb, 1.0 - exp(-u_fog.a * distance(v_world, u_eye)));
+    }
+    f_color = vec4(c, 1.0);
+}

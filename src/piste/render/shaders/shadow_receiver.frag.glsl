@@ -1,0 +1,18 @@
+#version 330 core
+// Multiplies the terrain by the shadow (blend DST_COLOR, ZERO): 1 where the sun's view of the
+// rider is empty, u_shade where it is covered; nothing outside the tile or in front of the
+// caster (closer to the sun than the shadow frustum's near plane).
+uniform sampler2D u_shadow;
+uniform vec4 u_tile;    // x0, y0, width, height of this rider's tile in the shadow texture (0..1)
+uniform vec3 u_shade;   // colour multiplier in full shadow
+in vec3 v_light;
+in vec3 v_world;
+out vec4 f_color;
+void main() {
+    vec2 t = v_light.xy * 0.5 + 0.5;
+    if (any(lessThan(t, vec2(0.0))) || any(greaterThan(t, vec2(1.0))) || v_light.z < -1.0 || v_light.z > 1.0) {
+        discard;
+    }
+    float s = texture(u_shadow, u_tile.xy + t * u_tile.zw).r;
+    f_color = vec4(mix(vec3(1.0), u_shade, s), 1.0);
+}

@@ -1,0 +1,261 @@
+"""Projected rider shadows, as the talk does them: *low resolution model rendered into a texture from
+the light's perspective; shadow texture projected onto terrain; extra pass for shadowed terrain
+patches.*
+
+Per rider ``i`` (all numpy until the draw):
+
+1. :func:`shadow_matrices`: an orthographic view of the rider from the sun: a square of
+   ``2 r`` around its bounding sphere, looking along the sun's direction, depth from ``r`` in front
+   of the rider (towards the sun) to ``reach`` metres behind it;
+2. the rider's **low-LOD** skinned model is drawn in white into its tile of one shadow texture
+   (:meth:`ShadowPass.render_casters`, tiles side by side);
+3. :func:`shadow_patches`: the terrain patches whose control-point boxes meet that frustum
+   (the frustum's six planes against the patch bounds, :func:`piste.render.frame.cull_boxes`),
+   restricted to the patches tessellated this frame;
+4. :meth:`ShadowPass.draw_receivers`: the extra pass: only those patches' triangles (gathered from
+   this frame's :class:`piste.terrain.TerrainMesh`) drawn again with the terrain's depth
+   (``invariant`` positions, GL_LEQUAL, a tiny bias), the texture projected by the sun's matrix,
+   multiplying the frame buffer (blend ``DST_COLOR, ZERO``) by ``shade`` where the texture is
+   covered.  Points outside the tile or in front of the rider (nearer the sun) are left alone.
+
+The stats report the patches per rider and per frame (:attr:`ShadowPass.patch_counts`).
+
+API
+---
+shadow_matrices(centers, radius, sun_direction, reach=40.0) -> (n, 4, 4) light view-projections
+shadow_patches(patch_lo, patch_hi, light_vp, candidates=None) -> list of (k_i,) patch ids
+shadow_triangles(mesh, patch_lists) -> positions, indices, per-rider (first, count)
+ShadowPass(ctx, n_max=6, tile=128)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from piste.errors import RenderError
+from piste.render.context import load_shader
+
+__all__ = ["shadow_matrices", "shadow_patches", "shadow_triangles", "ShadowPass", "SHADE"]
+
+#: colour multiplier in full shadow (what the sun adds over the sky's blue ambient is taken away)
+SHADE = (0.55, 0.6, 0.75)
+
+
+def shadow_matrices(centers, radius, sun_direction, reach: float = 40.0) -> np.ndarray:
+    """Orthographic light view-projection matrices ``(n, 4, 4) float64`` of ``n`` shadow casters.
+
+    Parameters
+    ----------
+    centers : (n, 3) bounding-sphere centres;  radius : (n,) or scalar radii (metres)
+    sun_direction : (3,) the way the sun's light travels
+    reach : how far behind the caster (along the light) the shadow can land, metres
+    """
+    from piste.world.camera import look_at, orthographic
+
+    c = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
+    r = np.broadcast_to(np.asarray(radius, dtype=np.float64), (len(c),))
+    d = np.asarray(sun_direction, dtype=np.float64)
+    d = d / np.linalg.norm(d)
+    up = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.95 else np.array([0.0, 1.0, 0.0])
+    back = 2.0 * float(r.max()) + 1.0
+    out = np.empty((len(c), 4, 4))
+    for i in range(len(c)):  # six riders: tiny 4x4 products
+        view = look_at(c[i] - d * back, c[i], up)
+        proj = orthographic(-r[i], r[i], -r[i], r[i], back - r[i], back + reach)
+        out[i] = proj @ view
+    return out
+
+
+def shadow_patches(patch_lo, patch_hi, light_vp, candidates=None) -> list:
+    """Terrain patches each shadow frustum touches.
+
+    Parameters
+    ----------
+    patch_lo, patch_hi : (p, 3) per-patch control-point bounds (``net.patch_bounds``)
+    light_vp : (n, 4, 4) from :func:`shadow_matrices`
+    candidates : (c,) patch ids to consider (the ones tessellated this frame), default all
+
+    Returns
+    -------
+    list of n ``(k_i,) int64`` patch ids
+    """
+    from piste.render.frame import cull_boxes
+    from piste.world.camera import frustum_planes
+
+    lo, hi = np.asarray(patch_lo), np.asarray(patch_hi)
+    ids = np.arange(len(lo)) if candidates is None else np.asarray(candidates, dtype=np.int64)
+    centre = ((lo[ids] + hi[ids]) / 2.0).T
+    half = ((hi[ids] - lo[ids]) / 2.0).T
+    out = []
+    for vp in np.asarray(light_vp):
+        out.append(ids[cull_boxes(centre, half, frustum_planes(vp))])
+    return out
+
+
+def _ragged(starts, counts):
+    counts = np.asarray(counts, dtype=np.int64)
+    total = int(counts.sum())
+    if total == 0:
+        return np.zeros(0, np.int64)
+    off = np.repeat(np.cumsum(counts) - counts, counts)
+    return np.repeat(np.asarray(starts, dtype=np.int64), counts) + np.arange(total) - off
+
+
+def shadow_triangles(mesh, patch_lists):
+    """The triangles of the given patches in this frame's terrain mesh, for the extra pass.
+
+    Parameters
+    ----------
+    mesh : piste.terrain.TerrainMesh (``patch_ids``, ``vertex_start``, ``tri_start``)
+    patch_lists : list of (k_i,) patch ids per rider
+
+    Returns
+    -------
+    positions (m, 3) float32, indices (t, 3) uint32 into them, ranges (n, 2) int64 ``(first
+    triangle, triangle count)`` per rider.  A patch shadowed by two riders is emitted twice (one
+    draw per rider, each with its own shadow tile).
+    """
+    pid = np.asarray(mesh.patch_ids)
+    lookup = np.full(int(pid.max()) + 1 if len(pid) else 1, -1, np.int64)
+    lookup[pid] = np.arange(len(pid))
+    slots, owner = [], []
+    for i, pl in enumerate(patch_lists):
+        pl = np.asarray(pl, dtype=np.int64)
+        pl = pl[pl < len(lookup)]
+        k = lookup[pl]
+        k = k[k >= 0]
+        slots.append(k)
+        owner.append(np.full(len(k), i))
+    k = np.concatenate(slots) if slots else np.zeros(0, np.int64)
+    vs, ts = np.asarray(mesh.vertex_start), np.asarray(mesh.tri_start)
+    vcount = vs[k + 1] - vs[k]
+    tcount = ts[k + 1] - ts[k]
+    vsel = _ragged(vs[k], vcount)
+    tsel = _ragged(ts[k], tcount)
+    new_start = np.cumsum(vcount) - vcount  # where each slot's vertices land
+    shift = np.repeat(new_start - vs[k], tcount)
+    idx = (np.asarray(mesh.indices)[tsel].astype(np.int64) + shift[:, None]).astype(np.uint32)
+    pos = np.asarray(mesh.positions)[vsel].astype(np.float32)
+    per = np.array([int(tcount[np.concatenate(owner) == i].sum()) if len(k) else 0 for i in range(len(patch_lists))],
+                   dtype=np.int64)
+    first = np.cumsum(per) - per
+    return pos, idx, np.stack([first, per], 1) if len(per) else np.zeros((0, 2), np.int64)
+
+
+class ShadowPass:
+    """The shadow texture (``n_max`` tiles of ``tile`` x ``tile`` side by side) and both draws."""
+
+    def __init__(self, ctx, n_max: int = 6, tile: int = 128):
+        import moderngl
+
+        self.ctx = ctx
+        self.n_max = int(n_max)
+        self.tile = int(tile)
+        w, h = self.tile * self.n_max, self.tile
+        self.texture = ctx.texture((w, h), 4)
+        self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.texture.repeat_x = self.texture.repeat_y = False
+        self.fbo = ctx.framebuffer(color_attachments=[self.texture])
+        self.caster = ctx.program(vertex_shader=load_shader("shadow_caster.vert.glsl"),
+                                  fragment_shader=load_shader("shadow_caster.frag.glsl"))
+        self.receiver = ctx.program(vertex_shader=load_shader("shadow_receiver.vert.glsl"),
+                                    fragment_shader=load_shader("shadow_receiver.frag.glsl"))
+        self.receiver["u_shadow"].value = 3
+        self._cast = {"pos": None, "idx": None, "vao": None, "nv": 0, "n": 0, "nt": 0}
+        self._recv = {"pos": None, "idx": None, "vao": None}
+        self.light_vp = np.zeros((0, 4, 4))
+        self.patch_counts = []
+        self.triangles = 0
+
+    # ------------------------------------------------------------------ casters
+    def render_casters(self, positions, indices, light_vp) -> None:
+        """Draw ``n`` riders' low-LOD meshes (``positions (n, v, 3)`` world space, shared
+        ``indices (t, 3)``) into their tiles with ``light_vp (n, 4, 4)``."""
+        import moderngl
+
+        pos = np.ascontiguousarray(positions, dtype=np.float32)
+        n, v = pos.shape[:2]
+        if n > self.n_max:
+            raise RenderError(f"shadow pass: {n} casters, room for {self.n_max}")
+        ctx = self.ctx
+        c = self._cast
+        if c["vao"] is None or c["nv"] != v or c["n"] != n:
+            for key in ("vao", "pos", "idx"):
+                if c[key] is not None:
+                    c[key].release()
+            idx = (np.asarray(indices, np.uint32)[None] + (np.arange(n, dtype=np.uint32) * v)[:, None, None]).reshape(-1)
+            c["pos"] = ctx.buffer(reserve=pos.nbytes, dynamic=True)
+            c["idx"] = ctx.buffer(idx.tobytes())
+            c["vao"] = ctx.vertex_array(self.caster, [(c["pos"], "3f", "in_pos")], c["idx"], index_element_size=4)
+            c["nv"], c["n"], c["nt"] = v, n, int(np.asarray(indices).shape[0])
+        c["pos"].write(pos.tobytes())
+        self.light_vp = np.asarray(light_vp, dtype=np.float64)
+        self.fbo.use()
+        self.fbo.clear(0.0, 0.0, 0.0, 0.0)
+        ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE | moderngl.BLEND)
+        nt = 3 * c["nt"]
+        for i in range(n):
+            ctx.viewport = (i * self.tile, 0, self.tile, self.tile)
+            self.caster["u_light_vp"].write(self.light_vp[i].astype(np.float32).T.tobytes())
+            c["vao"].render(moderngl.TRIANGLES, vertices=nt, first=i * nt)
+        ctx.enable(moderngl.DEPTH_TEST)
+
+    def read_tiles(self) -> np.ndarray:
+        """The shadow texture ``(tile, n_max * tile) uint8`` coverage, top row first (debugging, tests)."""
+        data = np.frombuffer(self.texture.read(), np.uint8).reshape(self.tile, self.tile * self.n_max, 4)
+        return data[::-1, :, 0].copy()
+
+    # ------------------------------------------------------------------ receivers
+    def draw_receivers(self, mesh, patch_lists, vp, shade=SHADE, depth_bias: float = 2e-5) -> None:
+        """The extra terrain pass (see the module docstring) into the bound framebuffer."""
+        import moderngl
+
+        self.patch_counts = [len(p) for p in patch_lists]
+        pos, idx, ranges = shadow_triangles(mesh, patch_lists)
+        self.triangles = int(len(idx))
+        if len(idx) == 0:
+            return
+        ctx = self.ctx
+        r = self._recv
+        if r["pos"] is None or r["pos"].size < pos.nbytes or r["idx"].size < idx.nbytes:
+            for key in ("vao", "pos", "idx"):
+                if r[key] is not None:
+                    r[key].release()
+            r["pos"] = ctx.buffer(reserve=max(pos.nbytes * 2, 4096), dynamic=True)
+            r["idx"] = ctx.buffer(reserve=max(idx.nbytes * 2, 4096), dynamic=True)
+            r["vao"] = ctx.vertex_array(self.receiver, [(r["pos"], "3f", "in_pos")], r["idx"], index_element_size=4)
+        r["pos"].orphan()
+        r["pos"].write(pos.tobytes())
+        r["idx"].orphan()
+        r["idx"].write(idx.tobytes())
+        p = self.receiver
+        p["u_mvp"].write(np.asarray(vp, dtype=np.float32).T.tobytes())
+        p["u_depth_bias"].value = float(depth_bias)
+        p["u_shade"].value = tuple(float(x) for x in shade)
+        self.texture.use(3)
+        ctx.enable(moderngl.DEPTH_TEST | moderngl.BLEND)
+        ctx.depth_func = "<="
+        ctx.depth_mask = False
+        ctx.blend_equation = moderngl.FUNC_ADD
+        ctx.blend_func = (moderngl.DST_COLOR, moderngl.ZERO, moderngl.ZERO, moderngl.ONE)
+        w = 1.0 / self.n_max
+        try:
+            for i, (first, count) in enumerate(ranges):
+                if count == 0:
+                    continue
+                p["u_light_vp"].write(self.light_vp[i].astype(np.float32).T.tobytes())
+                p["u_tile"].value = (i * w, 0.0, w, 1.0)
+                r["vao"].render(moderngl.TRIANGLES, vertices=int(3 * count), first=int(3 * first))
+        finally:
+            ctx.disable(moderngl.BLEND)
+            ctx.blend_func = moderngl.DEFAULT_BLENDING
+            ctx.depth_mask = True
+            ctx.depth_func = "<"
+
+    def release(self) -> None:
+        for d in (self._cast, self._recv):
+            for key in ("vao", "pos", "idx"):
+                if d.get(key) is not None:
+                    d[key].release()
+        for obj in (self.fbo, self.texture, self.caster, self.receiver):
+            obj.release()
