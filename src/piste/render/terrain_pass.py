@@ -25,7 +25,7 @@ __all__ = ["TerrainPass", "LIGHTMAP_MODES", "DEBUG_VIEWS"]
 
 LIGHTMAP_MODES = ("modulate", "ps2")
 DEBUG_VIEWS = (None, "base", "lightmap", "lod", "wire")
-_MODE_ID = {"modulate": 0, "base": 1, "lightmap": 2, "lod": 3, "flat": 4}
+_MODE_ID = {"modulate": 0, "base": 1, "lightmap": 2, "lod": 3, "flat": 4, "lod_wire": 5}
 
 
 class _Stream:
@@ -255,8 +255,8 @@ class TerrainPass:
         if ps2:
             self._draw_ps2(mvp_bytes, eye, fog)
         if debug in ("lod", "wire"):
-            p["u_mode"].value = _MODE_ID["flat"]
-            p["u_color"].value = (0.08, 0.08, 0.12) if debug == "lod" else (0.35, 0.38, 0.45)
+            p["u_mode"].value = _MODE_ID["lod_wire"] if debug == "lod" else _MODE_ID["flat"]
+            p["u_color"].value = (0.35, 0.38, 0.45)
             p["u_depth_bias"].value = 2e-4
             ctx.depth_func = "<="
             ctx.wireframe = True

@@ -1,7 +1,7 @@
 #version 330 core
 // The terrain's first pass.  u_mode: 0 modulate (Cd x CL, what modern GPUs do), 1 base texture
 // only (Cd, the first pass of the PS2 scheme), 2 light map only (CL), 3 LOD colours, 4 flat colour
-// (wireframe lines).  Fog (u_fog.a = density per metre) mixes towards the horizon colour.
+// (wireframe lines), 5 LOD colours darkened (the LOD view's wireframe).  Fog (u_fog.a = density per metre) mixes towards the horizon colour.
 #include "base_color.glsl"
 uniform sampler2D u_light;
 uniform int u_mode;
@@ -22,14 +22,16 @@ void main() {
         c = base_color(v_uv, v_world);
     } else if (u_mode == 2) {
         c = texture(u_light, v_uvl).rgb;
-    } else if (u_mode == 3) {
+    } else if (u_mode == 3 || u_mode == 5) {
         int k = int(v_kind + 0.5);
         vec3 lod = k == 4 ? u_lod_colors[1] : k == 6 ? u_lod_colors[2] : k == 8 ? u_lod_colors[3] : u_lod_colors[0];
-        c = lod * (0.35 + 0.65 * texture(u_light, v_uvl).rgb);
+        // mode 5: the wireframe over the LOD view, a darker shade of the patch's colour (so that
+        // dense far-away lines still show the colour)
+        c = u_mode == 5 ? lod * 0.35 : lod * (0.35 + 0.65 * texture(u_light, v_uvl).rgb);
     } else {
         c = u_color;
     }
-    if (u_fog.a > 0.0 && u_mode != 4) {
+    if (u_fog.a > 0.0 && u_mode < 4) {
         float f = 1.0 - exp(-u_fog.a * distance(v_world, u_eye));
         c = mix(c, u_fog.rgb, f);
     }
