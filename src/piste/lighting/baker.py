@@ -305,6 +305,10 @@ def write_lightmap(lm: LightMap, out_dir) -> dict:
     write_bytes_atomic(paths["npz"], npz)
     # the manifest goes last: its presence means the other two are complete
     write_bytes_atomic(paths["manifest"], (json.dumps(manifest, indent=2, sort_keys=True) + "\n").encode())
+    umask = os.umask(0)
+    os.umask(umask)
+    for p in paths.values():  # temporary files are created 0600; give the results the usual mode
+        os.chmod(p, 0o666 & ~umask)
     return paths
 
 
