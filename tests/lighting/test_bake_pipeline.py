@@ -13,7 +13,7 @@ from lighting_nets import hill_net, make_lights
 
 from piste.cli import main
 from piste.errors import FormatError
-from piste.lighting import bake_lightmap, dumps_lights, load_lightmap, load_or_bake_default_lightmap, write_lightmap
+from piste.lighting import Lights, PointLight, bake_lightmap, dumps_lights, load_lightmap, load_or_bake_default_lightmap, write_lightmap
 from piste.lighting import baker as baker_mod
 
 FILES = ("lightmap.png", "lightmap.npz", "manifest.json")
@@ -29,12 +29,15 @@ class Stop(Exception):
 
 
 def test_same_input_same_bytes(tmp_path, hill, lights):
+    lights = lights + Lights((PointLight((5.0, 5.0, 20.0), (0.2, 0.2, 0.2), 0.3),))  # range inf
     for k in range(2):
         write_lightmap(bake_lightmap(hill, lights, res=8, chunk_size=2), tmp_path / f"run{k}")
     assert _bytes(tmp_path / "run0") == _bytes(tmp_path / "run1")
     manifest = json.loads((tmp_path / "run0" / "manifest.json").read_text())
     assert manifest["patches"] == 9 and manifest["res"] == 8 and manifest["samples"] == 9 * 64
     assert set(manifest["files"]) == {"lightmap.png", "lightmap.npz"}
+    text = (tmp_path / "run0" / "manifest.json").read_text()
+    assert "Infinity" not in text and '"inf"' in text  # the sun-like point light of range inf
 
 
 def test_resume_after_interruption_gives_identical_bytes(tmp_path, lights):

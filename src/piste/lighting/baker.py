@@ -233,13 +233,24 @@ def bake_lightmap(
         "chunk_size": chunk_size,
         "chunks": n_chunks,
         "samples": int(n * res * res),
-        "lights": lights.to_dict(),
+        "lights": _json_safe(lights.to_dict()),
     }
     manifest["stats"] = {k_: int(v_) for k_, v_ in sorted(stats.items())}
     lm = LightMap(atlas=atlas, rects=layout.rects(), res=res, gutter=gutter, manifest=manifest)
     lm.resumed_chunks = resumed  # type: ignore[attr-defined]
     lm.stats = dict(stats)  # type: ignore[attr-defined]
     return lm
+
+
+def _json_safe(x):
+    """``inf`` (a light's unlimited range) as the string "inf", so the manifest is strict JSON."""
+    if isinstance(x, dict):
+        return {k: _json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_json_safe(v) for v in x]
+    if isinstance(x, float) and not np.isfinite(x):
+        return "inf" if x > 0 else "-inf"
+    return x
 
 
 def _save_npy_atomic(path: Path, arr: np.ndarray) -> None:
