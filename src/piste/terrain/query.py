@@ -387,7 +387,15 @@ class PatchBVH:
             self.level_lo.insert(0, llo)
             self.level_hi.insert(0, lhi)
         self.root_lo, self.root_hi = self.level_lo[0][0], self.level_hi[0][0]
-        self.level_box = [np.ascontiguousarray(np.concatenate([a, b], axis=1)) for a, b in zip(self.level_lo, self.level_hi)]
+        # traversal runs in float32 (half the memory traffic): boxes are widened by a margin far above
+        # float32 rounding of coordinates and ray parameters in the (centred) frame, so the float32
+        # test stays conservative; exact work (slabs, Newton) is float64
+        extent = float(np.nanmax(self.level_hi[0] - self.level_lo[0])) if self.n_leaves else 1.0
+        margin = 1e-5 * max(extent, 1e-300) + 1e-5 * float(np.nanmax(np.abs(np.concatenate([self.level_lo[0], self.level_hi[0]]))))
+        self.level_box = [
+            np.ascontiguousarray(np.concatenate([a - margin, b + margin], axis=1), dtype=np.float32)
+            for a, b in zip(self.level_lo, self.level_hi)
+        ]
         # per level, groups of four siblings laid out (n/4, 6, 4) for the two-level traversal step
         self.level_box4 = [
             np.ascontiguousarray(b.reshape(-1, 4, 6).transpose(0, 2, 1)) if len(b) >= 4 else None for b in self.level_box
@@ -442,7 +450,7 @@ class PatchBVH:
         tested together); empty (NaN) boxes never pass.
         """
         k = len(o)
-        rays = np.concatenate([o, inv, tmin[:, None], tmax[:, None]], axis=1)  # (k, 8): one gather per step
+        rays = np.concatenate([o, inv, tmin[:, None], tmax[:, None]], axis=1).astype(np.float32)  # (k, 8)
         start = self.depth % 2
         width = 1 << start
         r = np.repeat(np.arange(k), width)
@@ -458,7 +466,7 @@ class PatchBVH:
             tn, tf = tn[pi, ci], tf[pi, ci]
             r = r[pi]
             node = 4 * node[pi] + ci
-        return r, self.slot_leaf[node], tn, tf
+        return r, self.slot_leaf[node], tn.astype(np.float64), tf.astype(np.float64)
 
 
 def _slabs(box: np.ndarray, ray: np.ndarray):
@@ -623,7 +631,7 @@ def _trace_batch(bvh: PatchBVH, o, d, t_min, t_max, any_hit, best_t, best_leaf, 
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         of = (o - bvh.frame_origin) @ bvh.frame.T
         df = d @ bvh.frame.T
-        inv = np.clip(1.0 / np.where(df == 0.0, 1e-300, df), -1e300, 1e300)
+        inv = np.clip(1.0 / np.where(df == 0.0, 1e-30, df), -1e30, 1e30)
         r, leaf, tn, tf = bvh.candidates(of, inv, np.full(k, t_min), t_max)
         # fat-plane slab of each sub-patch
         nrm = bvh.leaf_normal[leaf]
