@@ -7,24 +7,36 @@
     overlap in xy the highest surface wins.
 
 ``ray_intersect(net, origins, directions, ...)``
-    Nearest (or any) intersection of many rays with the net.  :class:`PatchBVH` splits every patch
-    into ``split x split`` exact Bézier sub-patches (de Casteljau restriction), bounds each by an
-    axis-aligned box and a "fat plane" slab along its corner normal, and builds an implicit complete
-    binary tree over them in Morton order.  Traversal is breadth first over (ray, node) pairs, all
-    rays of a batch at once.  Each surviving (ray, sub-patch) pair solves ``Q(u, v) = o + t d`` for
-    ``(u, v, t)`` with Newton, started where the ray crosses the sub-patch's mid plane.  A root
-    found from a sub-patch may lie outside it (the restriction is the same polynomial), and is kept
-    when it lies in the parent patch.  Candidates are processed nearest-entry first in rounds of
-    doubling size, so a ray stops as soon as no remaining candidate can beat its hit (or, with
-    ``any_hit``, at its first hit).
+    Nearest (or any) intersection of many rays with the net.  :class:`PatchBVH` cuts every patch
+    into ``k x k`` exact Bézier sub-patches (de Casteljau restriction; ``k`` = 1, 2 or 4 per patch,
+    chosen so each is nearly flat), bounds each by a box in the principal frame of the net (aligned
+    with a course's slope) and by a "fat plane" slab along its corner normal, and orders them by
+    recursive median splits into an implicit complete binary tree.  Traversal is breadth first over
+    (ray, node) pairs, four grandchildren per step, all rays of a batch at once, in float32 with
+    conservative margins.  Each surviving (ray, sub-patch) pair solves ``Q(u, v) = o + t d`` for
+    ``(u, v, t)`` with Newton, in float64, and keeps roots inside the sub-patch only (neighbours find
+    their own).  Where the ray crosses the sub-patch's normal cone steeply the sub-patch can be hit
+    once at most and one start (the ray's crossing of the mid plane) suffices; grazing pairs run
+    Newton from the entry, middle and exit of the ray's slab interval and keep the nearest root.
+    Sub-patches that are graphs ``z = f(x, y)`` (fitted height fields, the course) are skipped
+    without Newton when the ray rises faster than the surface can (most shadow rays leaving their
+    own sub-patch).  Candidates are processed nearest-entry first in rounds of doubling size, so a
+    ray stops as soon as no remaining candidate can beat its hit (with ``any_hit``: its first hit).
 
 Accuracy: Newton runs until the residual is below ``1e-10`` of the patch size, far inside the 1e-5
-of the patch size we promise (tests check against analytic surfaces and dense sampling).
+of the patch size we promise (tests check against analytic surfaces, dense sampling and the teapot).
+Rays tangent to the surface at the root (``|d . n| < 1e-9 |d| |n|``) are not hits; a ray lying *in*
+a flat patch has no isolated intersection and is reported as a miss.  Very grazing rays
+(``|d . n|`` below ~0.01) that cross one sub-patch twice may rarely report the farther root (2 of
+19,000 shadow rays at a 15 degree sun on the default course; hit/miss agreed for all).
 
 Rays that start on the surface (shadow rays from a light-map texel) hit it at ``t ~ 0``: pass
 ``t_min`` (e.g. ``1e-4`` times the patch size, in units of ``|d|``) or move the origin off the
-surface along its normal; both are usual.  A ray lying *in* a flat patch (parallel, on the surface)
-has no isolated intersection and is reported as a miss; a ray parallel to and off the surface misses.
+surface along its normal; both are usual.
+
+Speed (default course, 2,560 patches, 164k shadow rays from 8x8 texels a patch, ``any_hit``,
+2 shared cores): ~200k rays/s at a 35 degree sun, ~80k rays/s at 15 degrees (long grazing rays),
+~300k rays/s at 60 degrees; ``height_at`` ~300-400k points/s.
 
 The acceleration structures are built lazily and cached on the net (``net._piste_query``); they are
 rebuilt when ``net.control_points`` is replaced by another array.  After modifying control points in
@@ -303,13 +315,14 @@ class PatchBVH:
     Parameters
     ----------
     net : PatchNet
-    split : each patch is cut into ``split x split`` sub-patches (tighter bounds, better Newton
-        starts; 2 is a good default for terrain)
+    split : ``"auto"`` (default: 1, 2 or 4 per patch side, so each sub-patch's fat-plane slab is
+        thinner than 5 % of its size) or an integer: each patch cut into ``split x split`` sub-patches
 
     Attributes
     ----------
-    leaf_cp : (L, 4, 4, 3) float64 sub-patch control points, in Morton order
-    leaf_patch : (L,) int64 parent patch;  leaf_uv0 : (L, 2) parent parameters of the sub-patch's (0, 0)
+    leaf_cp : (L, 4, 4, 3) float64 sub-patch control points, in tree order
+    leaf_patch : (L,) int64 parent patch;  leaf_uv0 : (L, 2) parent parameters of the sub-patch's (0, 0);
+    leaf_du : (L,) its parameter width (1 / k)
     leaf_normal : (L, 3) and leaf_slab : (L, 2): the sub-patch lies in ``slab[0] <= n . x <= slab[1]``
     level_lo, level_hi : list of (2^d, 3) node boxes per level d (NaN for empty nodes)
     """
