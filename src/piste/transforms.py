@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from piste.errors import ConfigError
+
 __all__ = [
     "quat_identity",
     "quat_normalize",
@@ -35,6 +37,11 @@ __all__ = [
     "transform_points",
     "transform_vectors",
     "translation_matrix",
+    "look_at",
+    "perspective",
+    "orthographic",
+    "frustum_planes",
+    "cull_boxes",
 ]
 
 
@@ -242,3 +249,82 @@ def transform_vectors(m, v) -> np.ndarray:
     if m.ndim == 2:
         return v @ m[:3, :3].T
     return np.einsum("...ij,...j->...i", m[..., :3, :3], v)
+
+
+# ------------------------------------------------------------------ cameras and frusta
+def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """View matrix ``(4, 4) float64`` of a camera at ``eye`` looking at ``target``."""
+    eye = np.asarray(eye, dtype=np.float64)
+    f = np.asarray(target, dtype=np.float64) - eye
+    fn = np.linalg.norm(f)
+    if not fn > 0:
+        raise ConfigError(f"camera: eye {eye.tolist()} and target are the same point")
+    f = f / fn
+    up = np.asarray(up, dtype=np.float64)
+    s = np.cross(f, up)
+    if np.linalg.norm(s) < 1e-9:  # looking straight along up: pick any side vector
+        s = np.cross(f, np.array([0.0, 1.0, 0.0]) if abs(f[1]) < 0.9 else np.array([1.0, 0.0, 0.0]))
+    s = s / np.linalg.norm(s)
+    u = np.cross(s, f)
+    m = np.eye(4)
+    m[0, :3], m[1, :3], m[2, :3] = s, u, -f
+    m[:3, 3] = -m[:3, :3] @ eye
+    return m
+
+
+def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
+    """OpenGL perspective projection ``(4, 4) float64`` (vertical field of view in degrees)."""
+    if not (0 < near < far):
+        raise ConfigError(f"camera: need 0 < near < far, got near={near}, far={far}")
+    if not (0 < fov_y_deg < 180):
+        raise ConfigError(f"camera: fov_y must be in (0, 180) degrees, got {fov_y_deg}")
+    f = 1.0 / np.tan(np.radians(fov_y_deg) / 2.0)
+    m = np.zeros((4, 4))
+    m[0, 0] = f / aspect
+    m[1, 1] = f
+    m[2, 2] = (far + near) / (near - far)
+    m[2, 3] = 2.0 * far * near / (near - far)
+    m[3, 2] = -1.0
+    return m
+
+
+def orthographic(left, right, bottom, top, near, far) -> np.ndarray:
+    """OpenGL orthographic projection ``(4, 4) float64``."""
+    m = np.eye(4)
+    m[0, 0] = 2.0 / (right - left)
+    m[1, 1] = 2.0 / (top - bottom)
+    m[2, 2] = -2.0 / (far - near)
+    m[0, 3] = -(right + left) / (right - left)
+    m[1, 3] = -(top + bottom) / (top - bottom)
+    m[2, 3] = -(far + near) / (far - near)
+    return m
+
+
+def frustum_planes(view_projection) -> np.ndarray:
+    """The six planes (left, right, bottom, top, near, far) of a view frustum.
+
+    Returns ``(6, 4) float64`` rows ``(a, b, c, d)`` with unit normals pointing into the frustum:
+    a point ``p`` is inside when ``a*x + b*y + c*z + d >= 0`` for all six.
+    """
+    m = np.asarray(view_projection, dtype=np.float64)
+    r0, r1, r2, r3 = m
+    planes = np.stack([r3 + r0, r3 - r0, r3 + r1, r3 - r1, r3 + r2, r3 - r2])
+    return planes / np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
+
+
+def cull_boxes(centre: np.ndarray, half: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """Which boxes meet a frustum (conservative: a box is dropped only when it lies wholly outside
+    one plane).
+
+    Parameters
+    ----------
+    centre, half : (3, n) float64 box centres and half extents (coordinate-major for two GEMVs)
+    planes : (6, 4) float64 inward planes (:func:`frustum_planes`)
+
+    Returns
+    -------
+    (n,) bool
+    """
+    dist = planes[:, :3] @ centre + planes[:, 3:4]  # (6, n) signed distance of the centres
+    reach = np.abs(planes[:, :3]) @ half  # (6, n) the boxes' extent along each normal
+    return (dist + reach >= 0.0).all(axis=0)

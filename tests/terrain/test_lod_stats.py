@@ -3,7 +3,7 @@ import pytest
 
 from piste.errors import ConfigError
 from piste.terrain import edge_levels, format_stats, stats, tessellate, visible_patches
-from piste.terrain.lod import cull_boxes, look_at, perspective
+from piste.transforms import cull_boxes, frustum_planes, look_at, perspective
 
 from nets import grid_net
 
@@ -31,9 +31,9 @@ def test_frustum_culling():
     centres = net.control_points.reshape(len(net), 16, 3).mean(1)
     ahead = np.argmin(np.linalg.norm(centres[:, :2] - [50, 30], axis=1))
     assert ahead in vis
-    vp = perspective(60, 1.0, 0.1, 100) @ look_at([0, 0, 0], [0, 1, 0])
-    boxes_lo = np.array([[-1, 5, -1], [-1, -10, -1]], float)
-    assert cull_boxes(boxes_lo, boxes_lo + 2, vp).tolist() == [True, False]
+    planes = frustum_planes(perspective(60, 1.0, 0.1, 100) @ look_at([0, 0, 0], [0, 1, 0]))
+    centre = np.array([[0, 6, 0], [0, -9, 0]], float).T
+    assert cull_boxes(centre, np.ones((3, 2)), planes).tolist() == [True, False]
 
 
 def test_stats_table():

@@ -20,6 +20,8 @@ from piste.render.context import Offscreen, check_gl_error, create_context
 from piste.render.sky_pass import HORIZON, SkyPass
 from piste.render.terrain_pass import TerrainPass
 
+from piste.transforms import cull_boxes  # noqa: E402  (re-exported)
+
 __all__ = ["TerrainRenderer", "Frame", "summarize", "cull_boxes", "DEFAULT_FOG_DENSITY"]
 
 #: fog density per metre (about 45 % haze at 1 km)
@@ -186,24 +188,6 @@ class TerrainRenderer:
         self.terrain.release()
         self.sky.release()
         self.target.release()
-
-
-def cull_boxes(centre: np.ndarray, half: np.ndarray, planes: np.ndarray) -> np.ndarray:
-    """Which boxes meet a frustum (conservative: a box is dropped only when it lies wholly outside
-    one plane).
-
-    Parameters
-    ----------
-    centre, half : (3, n) float64 box centres and half extents (coordinate-major for two GEMVs)
-    planes : (6, 4) float64 inward planes (:func:`piste.world.camera.frustum_planes`)
-
-    Returns
-    -------
-    (n,) bool
-    """
-    dist = planes[:, :3] @ centre + planes[:, 3:4]  # (6, n) signed distance of the centres
-    reach = np.abs(planes[:, :3]) @ half  # (6, n) the boxes' extent along each normal
-    return (dist + reach >= 0.0).all(axis=0)
 
 
 def summarize(frames: list[Frame]) -> dict:

@@ -14,7 +14,7 @@ ray_intersect       exact ray/net intersection (RayHits), PatchBVH reusable acro
 """
 
 from piste.terrain.bezier import BEZIER_M, blend_tables, evaluate, eval_power_form
-from piste.terrain.lod import cull_boxes, edge_levels, look_at, perspective, visible_patches
+from piste.terrain.lod import edge_levels, visible_patches
 from piste.terrain.net import PatchNet
 from piste.terrain.stats import format_stats, stats
 from piste.terrain.tessellate import TerrainMesh, decode_strips, get_shape, tessellate
@@ -23,8 +23,8 @@ from piste.terrain.query import PatchBVH, RayHits, height_at, ray_intersect
 from piste.world.course import default_course
 
 __all__ = [
-    "PatchNet", "TerrainMesh", "tessellate", "edge_levels", "visible_patches", "cull_boxes", "look_at",
-    "perspective", "stats", "format_stats", "get_shape", "decode_strips",
+    "PatchNet", "TerrainMesh", "tessellate", "edge_levels", "visible_patches", "stats", "format_stats",
+    "get_shape", "decode_strips",
     "BEZIER_M", "blend_tables", "evaluate", "eval_power_form",
     "fit_heightfield", "fit_error", "height_at", "ray_intersect", "RayHits", "PatchBVH", "default_course",
 ]
