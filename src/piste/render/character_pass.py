@@ -34,7 +34,7 @@ from piste.render.context import load_shader
 __all__ = ["CharacterPass", "specular_map", "SHININESS"]
 
 #: Blinn-Phong exponent (scaled by 0.25 + the map's green channel)
-SHININESS = 48.0
+SHININESS = 32.0
 
 
 def specular_map(texture) -> np.ndarray:

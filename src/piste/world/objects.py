@@ -202,7 +202,7 @@ def _tree():
 
 
 def _sign():
-    post = _box((0.0, 0.0, 1.1), (0.12, 0.12, 2.2), "post")
+    post = _box((0.0, 0.1, 1.1), (0.12, 0.12, 2.2), "post")  # behind the panel (its -y face is the sign)
     panel = _box((0.0, 0.0, 2.0), (1.3, 0.08, 0.9), "metal", uv_face="sign")  # the -y face shows the sign
     return _concat("sign", [post, panel])
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from piste.errors import ConfigError
 
-__all__ = ["Scene", "SceneFrame", "LOD_DISTANCES", "sun_light"]
+__all__ = ["Scene", "SceneFrame", "LOD_DISTANCES", "sun_light", "orient_outward"]
 
 #: camera distances (metres) where riders switch from high to medium and from medium to low
 LOD_DISTANCES = (14.0, 35.0)
@@ -47,6 +47,46 @@ def sun_light(lights):
     if not d:
         return None
     return max(d, key=lambda x: abs(x.intensity) * float(np.abs(np.asarray(x.color)).sum()))
+
+
+def orient_outward(mesh):
+    """A copy of a SkinnedMesh whose closed parts all face outward.
+
+    Each connected part's signed volume (divergence theorem, ``sum v0 . (v1 x v2) / 6``) tells
+    whether its triangles wind inward; inward parts get their winding reversed and their normals
+    (and morph normal deltas) negated.  The default rider's lofted limbs and torso come out of
+    :func:`piste.character.default_rider` wound inward (normals pointing into the body), which
+    lights them from behind; this puts them right without touching the character package.
+
+    Returns ``(mesh, flipped_parts)``.
+    """
+    from dataclasses import replace
+
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    tri = np.asarray(mesh.indices, dtype=np.int64)
+    v = mesh.n_vertices
+    e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    adj = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(v, v))
+    n_parts, label = connected_components(adj, directed=False)
+    p = mesh.positions.astype(np.float64)
+    part = label[tri[:, 0]]
+    centre = np.zeros((n_parts, 3))
+    np.add.at(centre, label, p)
+    centre /= np.maximum(np.bincount(label, minlength=n_parts), 1)[:, None]
+    a, b, c = (p[tri[:, k]] - centre[part] for k in range(3))
+    vol = np.bincount(part, weights=np.einsum("ij,ij->i", a, np.cross(b, c)), minlength=n_parts) / 6.0
+    inward = vol < 0
+    if not inward.any():
+        return mesh, 0
+    flip_t = inward[part]
+    new_tri = tri.copy()
+    new_tri[flip_t] = tri[flip_t][:, ::-1]
+    sign = np.where(inward[label], -1.0, 1.0).astype(np.float32)[:, None]
+    out = replace(mesh, indices=new_tri.astype(np.uint32), normals=mesh.normals * sign,
+                  morph_normals=mesh.morph_normals * sign[None])
+    return out, int(inward.sum())
 
 
 @dataclass
@@ -101,7 +141,8 @@ class Scene:
         self.lights = lights
         self.sun = sun_light(lights)
         self.model = model if model is not None else default_rider(0)
-        self.lods = make_lods(self.model.meshes[0])
+        mesh, self.flipped_parts = orient_outward(self.model.meshes[0])
+        self.lods = make_lods(mesh)
         # the LOD's own palette (quantized weights) drives the blended-matrix skinning
         self.skinners = [BlendedMesh(lod.palette, lod.mesh.positions, lod.mesh.normals) for lod in self.lods]
         self.riders = RiderSet(net, self.line, model=self.model, **riders_kw)
