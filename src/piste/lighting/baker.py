@@ -350,6 +350,10 @@ def load_lightmap(out_dir) -> LightMap:
             )
     except FileNotFoundError:
         raise FormatError(npath, "no such file") from None
+    except FormatError:
+        raise
+    except (OSError, ValueError, TypeError, zipfile.BadZipFile) as exc:  # truncated, old layout, not an npz
+        raise FormatError(npath, f"unreadable light map ({type(exc).__name__}: {exc})") from None
 
 
 def lightmap_cache_dir() -> Path:
