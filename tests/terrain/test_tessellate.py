@@ -180,3 +180,19 @@ def test_vertex_cache_follows_uv_changes():
     after = tessellate(net, 4, cache=True)
     assert not np.array_equal(before, after.uv_lightmap)
     assert np.array_equal(after.uv_lightmap, tessellate(net, 4, cache=False).uv_lightmap)
+
+
+@pytest.mark.parametrize("cache", [True, False])
+def test_fitted_dem_is_crack_free(cache):
+    """Real data: a net fitted to matplotlib's Jacksboro fault DEM, random per-edge levels."""
+    from matplotlib.cbook import get_sample_data
+
+    from piste.terrain import fit_heightfield
+
+    dem = get_sample_data("jacksboro_fault_dem.npz")
+    z = np.asarray(dem["elevation"], dtype=np.float64)[:81, :97]
+    net = fit_heightfield(z, 10.0)
+    assert len(net) == 20 * 24
+    levels = np.random.default_rng(7).choice([4, 6, 8], net.n_edges)
+    mesh = tessellate(net, levels, cache=cache)
+    check_crack_free(net, levels, mesh)
