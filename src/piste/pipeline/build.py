@@ -1,0 +1,429 @@
+"""``piste build``: a scene description -> one ``.piste`` bundle, every step pre-processed and cached.
+
+Steps (each keyed by a content hash of what it reads; a key found in the cache is reused):
+
+============== ============================================================ =====================
+step           reads                                                        makes
+============== ============================================================ =====================
+terrain        the terrain source file bytes (or the course seed), settings control points, UVs
+lightmap       terrain key, lights, res / gutter / shadows                  the baked atlas
+characters     the rider model (file bytes or built-in name), LOD ratios    LOD meshes, palettes,
+                                                                            batches, strips, clips
+objects        terrain key, object models and placements, lights           compressed meshes,
+                                                                            instances, vertex RGBs
+visibility     terrain key, object bounds, visibility settings             per-cell bitsets
+============== ============================================================ =====================
+
+Lights and cameras (inline and from glTF) and rider placements are cheap and computed each time.
+The bundle holds no timestamps or absolute paths: rebuilding unchanged inputs gives the same bytes.
+
+API
+---
+build_scene(scene, out=None, cache_dir=None, progress=False, jobs=1) -> BuildResult
+default_cache_dir(scene_path) -> Path        ``<scene folder>/.piste-cache``
+BUILD_VERSION
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from piste.errors import ConfigError
+
+__all__ = ["build_scene", "BuildResult", "default_cache_dir", "BUILD_VERSION", "scene_lights", "scene_cameras"]
+
+#: bumped whenever a step's output for the same input changes
+BUILD_VERSION = "piste.build/1"
+
+
+@dataclass
+class BuildResult:
+    """What a build did: ``path`` of the bundle, ``steps`` ``{name: {"cached": bool, "seconds": float}}``,
+    ``report`` (counts, visibility statistics), ``seconds`` in all, ``bytes`` of the bundle."""
+
+    path: Path
+    steps: dict = field(default_factory=dict)
+    report: dict = field(default_factory=dict)
+    seconds: float = 0.0
+    bytes: int = 0
+
+    @property
+    def cached(self) -> list:
+        return [k for k, v in self.steps.items() if v.get("cached")]
+
+    @property
+    def rebuilt(self) -> list:
+        return [k for k, v in self.steps.items() if not v.get("cached")]
+
+
+def default_cache_dir(scene_path) -> Path:
+    return Path(scene_path).resolve().parent / ".piste-cache"
+
+
+def _json_lights(lights) -> dict:
+    """``Lights.to_dict()`` with infinite ranges as the string "inf" (strict JSON)."""
+    out = {}
+    for kind, items in lights.to_dict().items():
+        out[kind] = [{k: ("inf" if isinstance(v, float) and math.isinf(v) else v) for k, v in it.items()} for it in items]
+    return out
+
+
+def scene_lights(scene, gltf_cache: dict | None = None):
+    """The scene's :class:`piste.lighting.Lights`: inline ``[[lights]]`` plus every ``[[gltf]]``
+    file's lights; the default course's lights when the scene gives none."""
+    from piste.lighting.lights import Lights, default_lights
+    from piste.pipeline.gltf_import import import_gltf
+
+    items = list(scene.lights)
+    for g in scene.gltf:
+        if g.lights:
+            imported = gltf_cache.get(str(g.file)) if gltf_cache is not None else None
+            if imported is None:
+                imported = import_gltf(g)
+                if gltf_cache is not None:
+                    gltf_cache[str(g.file)] = imported
+            items.extend(imported[0])
+    if not items:
+        return default_lights()
+    return Lights(tuple(items), name=scene.name)
+
+
+def scene_cameras(scene, net, centerline, gltf_cache: dict | None = None) -> list:
+    """The scene's cameras as manifest dicts (``name``, eye, target, ..., optional ``track``)."""
+    from piste.formats.bundle import camera_to_dict
+    from piste.pipeline.gltf_import import import_gltf
+    from piste.world.camera import Camera, track_camera
+
+    out = []
+    for c in scene.cameras:
+        if c.track is not None:
+            cam = track_camera(centerline, c.track[0], height=c.height, fov_y=c.fov, near=c.near, far=c.far)
+            d = camera_to_dict(cam)
+            d.update(track=[float(x) for x in c.track], height=float(c.height))
+        else:
+            d = camera_to_dict(Camera(np.array(c.eye), np.array(c.target), up=np.array(c.up), fov_y=c.fov,
+                                      near=c.near, far=c.far))
+        d["name"] = c.name
+        d["source"] = "scene"
+        out.append(d)
+    for g in scene.gltf:
+        if not g.cameras:
+            continue
+        imported = gltf_cache.get(str(g.file)) if gltf_cache is not None else None
+        if imported is None:
+            imported = import_gltf(g)
+            if gltf_cache is not None:
+                gltf_cache[str(g.file)] = imported
+        for name, cam in imported[1].items():
+            d = camera_to_dict(cam)
+            d["name"] = name
+            d["source"] = Path(g.file).name
+            out.append(d)
+    if not out:
+        if centerline is not None:
+            cam = track_camera(centerline, 0.12, height=9.0)
+            d = camera_to_dict(cam)
+            d.update(name="track", track=[0.12, 0.45], height=9.0, source="default")
+        else:
+            lo, hi = net.bounds
+            c = (lo + hi) / 2.0
+            ext = float(np.linalg.norm(hi - lo))
+            eye = c + np.array([-0.35, -0.6, 0.55]) * ext
+            d = camera_to_dict(Camera(eye, c, near=max(ext * 1e-3, 1e-3), far=ext * 4.0))
+            d.update(name="overview", source="default")
+        out.append(d)
+    names = [d["name"] for d in out]
+    dup = {n for n in names if names.count(n) > 1}
+    if dup:
+        raise ConfigError(f"{scene.path}: camera names must be unique, {', '.join(sorted(dup))} given twice "
+                          "(inline and in a glTF file?)")
+    return out
+
+
+def _file_key(path) -> str:
+    from piste.pipeline.cache import content_key
+
+    return content_key(Path(path))
+
+
+def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: int = 1, use_cache: bool = True) -> BuildResult:
+    """Build the bundle of ``scene`` (a :class:`~piste.world.scene_file.SceneFile` or a path).
+
+    Parameters
+    ----------
+    out : bundle path (default: the scene's path with suffix ``.piste``)
+    cache_dir : step cache folder (default: ``.piste-cache`` beside the scene)
+    progress : tqdm bars (steps, bake, visibility)
+    jobs : light-map bake worker processes (1 = in this process)
+    use_cache : False recomputes every step (and stores nothing)
+    """
+    from piste.formats.bundle import write_bundle
+    from piste.pipeline.cache import Cache, content_key
+    from piste.world.scene_file import SceneFile, load_scene
+
+    t_all = time.perf_counter()
+    if not isinstance(scene, SceneFile):
+        scene = load_scene(scene)
+    out = Path(out) if out is not None else Path(scene.path).with_suffix(".piste")
+    cache = Cache((Path(cache_dir) if cache_dir is not None else default_cache_dir(scene.path)) if use_cache else None)
+    result = BuildResult(out)
+    arrays: dict = {}
+    manifest: dict = {"name": scene.name, "scene": Path(scene.path).name, "build": BUILD_VERSION}
+    gltf_cache: dict = {}
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=6, desc="build", unit="step", leave=False)
+
+    def step(name: str, key: str, make):
+        t0 = time.perf_counter()
+        if bar is not None:
+            bar.set_postfix_str(name)
+        got = cache.get(name, key)
+        cached = got is not None
+        if not cached:
+            got = make()
+            cache.put(name, key, *got)
+        result.steps[name] = {"cached": cached, "seconds": time.perf_counter() - t0, "key": key[:16]}
+        if bar is not None:
+            bar.update(1)
+        return got
+
+    # -------------------------------------------------------------- terrain
+    ts = scene.terrain
+    src = _file_key(ts.path) if ts.path is not None else f"seed {ts.seed}"
+    terrain_key = content_key(BUILD_VERSION, "terrain", ts.kind, src, ts.seed, ts.spacing, ts.height_scale,
+                              ts.height_offset, ts.key, ts.samples_per_patch, ts.smooth)
+
+    def make_terrain():
+        from piste.pipeline.sources import load_terrain
+
+        net = load_terrain(ts)
+        a = {"control_points": net.control_points, "uv": net.uv}
+        if ts.kind == "default":
+            from piste.world.course import track_centerline
+
+            a["centerline"] = track_centerline(ts.seed)
+        return a, {"name": net.name, "tol": float(net.tol)}
+
+    ta, tm = step("terrain", terrain_key, make_terrain)
+    from piste.terrain.net import PatchNet
+
+    net = PatchNet(ta["control_points"], uv=ta["uv"], tol=tm["tol"], name=tm["name"])
+    centerline = ta.get("centerline")
+    arrays["terrain/control_points"] = net.control_points
+    arrays["terrain/uv"] = net.uv
+    if centerline is not None:
+        arrays["terrain/centerline"] = centerline
+    lo, hi = net.bounds
+    manifest["terrain"] = {"name": tm["name"], "tol": tm["tol"], "kind": ts.kind, "patches": len(net),
+                           "bounds": [[float(x) for x in lo], [float(x) for x in hi]], "key": terrain_key}
+
+    # -------------------------------------------------------------- lights and cameras
+    lights = scene_lights(scene, gltf_cache)
+    manifest["lights"] = _json_lights(lights)
+    manifest["cameras"] = scene_cameras(scene, net, centerline, gltf_cache)
+
+    # -------------------------------------------------------------- light map
+    from piste.lighting.baker import BAKE_VERSION, bake_lightmap
+
+    lm_spec = scene.lightmap
+    lm_key = content_key(BUILD_VERSION, "lightmap", BAKE_VERSION, terrain_key, manifest["lights"], lm_spec.res,
+                         lm_spec.gutter, lm_spec.shadows)
+
+    def make_lightmap():
+        partial = cache.root / "bake-partial" if cache.root is not None else None
+        lm = bake_lightmap(net, lights, res=lm_spec.res, gutter=lm_spec.gutter, shadows=lm_spec.shadows, jobs=jobs,
+                           partial_dir=partial, progress=progress)
+        if partial is not None:
+            import shutil
+
+            shutil.rmtree(partial / lm.manifest["key"], ignore_errors=True)
+        st = {k: int(v) for k, v in (getattr(lm, "stats", None) or {}).items()}
+        return {"atlas": lm.atlas.astype(np.float32), "rects": lm.rects.astype(np.float32)}, {"stats": st}
+
+    la, lmeta = step("lightmap", lm_key, make_lightmap)
+    arrays["lightmap/atlas"] = la["atlas"]
+    arrays["lightmap/rects"] = la["rects"]
+    net.lightmap_rect = la["rects"].copy()
+    manifest["lightmap"] = {"res": lm_spec.res, "gutter": lm_spec.gutter, "shadows": lm_spec.shadows,
+                            "atlas_size": [int(la["atlas"].shape[1]), int(la["atlas"].shape[0])],
+                            "encoding": "float32 linear light, 1.0 = full", "stats": lmeta.get("stats", {})}
+
+    # -------------------------------------------------------------- characters
+    manifest["characters"] = {}
+    manifest["riders"] = []
+    if scene.riders:
+        models = sorted({r.model for r in scene.riders})
+        if len(models) > 1:
+            raise ConfigError(f"{scene.path}: all riders must share one model (the renderer draws one rider model "
+                              f"per scene), got {', '.join(models)}")
+        model = models[0]
+        msrc = model if model.startswith("builtin:") else _file_key(model)
+        ratios = tuple(scene.lod.ratios)
+        ch_key = content_key(BUILD_VERSION, "characters", msrc, ratios)
+
+        def make_characters():
+            from piste.pipeline.characters import character_arrays
+            from piste.pipeline.sources import load_rider_model
+
+            return character_arrays(load_rider_model(model), ratios=ratios)
+
+        ca, cmeta = step("characters", ch_key, make_characters)
+        cid = "rider"
+        for k, v in ca.items():
+            arrays[f"characters/{cid}/{k}"] = v
+        cmeta = dict(cmeta)
+        cmeta["model"] = model if model.startswith("builtin:") else Path(model).name
+        manifest["characters"][cid] = cmeta
+        from piste.pipeline.sources import rider_matrices
+
+        arrays["riders/matrix"] = rider_matrices(net, scene.riders)
+        for r in scene.riders:
+            clip = r.clip or next(iter(sorted(cmeta["clips"])), None)
+            if clip is not None and clip not in cmeta["clips"]:
+                raise ConfigError(f"{scene.path}, line {r.line}: rider {r.name!r}: no clip {clip!r} in its model; "
+                                  f"clips: {', '.join(sorted(cmeta['clips']))}")
+            manifest["riders"].append({"name": r.name, "character": cid, "clip": clip, "phase": r.phase,
+                                       "heading": r.heading, "scale": r.scale})
+    else:
+        result.steps["characters"] = {"cached": True, "seconds": 0.0, "key": "none"}
+        if bar is not None:
+            bar.update(1)
+    manifest["lod"] = {"near": scene.lod.near, "far": scene.lod.far, "character": list(scene.lod.character),
+                       "ratios": list(scene.lod.ratios)}
+
+    # -------------------------------------------------------------- objects
+    spheres = np.zeros((0, 4))
+    manifest["objects"] = {"kinds": [], "meshes": {}, "instances": []}
+    if scene.objects:
+        srcs = sorted({o.model for o in scene.objects})
+        src_keys = [m if m.startswith("builtin:") else _file_key(m) for m in srcs]
+        placements = [(o.name, o.model, list(o.position), o.heading, o.scale) for o in scene.objects]
+        obj_key = content_key(BUILD_VERSION, "objects", terrain_key, srcs, src_keys, placements, manifest["lights"])
+
+        def make_objects():
+            return _objects_arrays(net, scene.objects, srcs, lights)
+
+        oa, ometa = step("objects", obj_key, make_objects)
+        for k, v in oa.items():
+            arrays[f"objects/{k}"] = v
+        manifest["objects"] = ometa
+        spheres = np.column_stack([oa["center"], oa["radius"]])
+    else:
+        result.steps["objects"] = {"cached": True, "seconds": 0.0, "key": "none"}
+        if bar is not None:
+            bar.update(1)
+
+    # -------------------------------------------------------------- visibility
+    vs = scene.visibility
+    if vs.enabled:
+        from piste.pipeline.visibility import Visibility, compute_visibility
+
+        vis_key = content_key(BUILD_VERSION, "visibility", terrain_key, spheres, vs.cell, list(vs.eye_heights), vs.method)
+
+        def make_visibility():
+            v = compute_visibility(net, vs.cell, vs.eye_heights, objects=spheres, method=vs.method, progress=progress)
+            return v.to_arrays()
+
+        va, vmeta = step("visibility", vis_key, make_visibility)
+        arrays["visibility/patch_bits"] = va["patch_bits"]
+        arrays["visibility/object_bits"] = va["object_bits"]
+        manifest["visibility"] = vmeta
+        vis = Visibility.from_arrays(va, vmeta)
+        manifest["report"] = {"visibility": _visibility_report(net, vis, manifest["cameras"], centerline)}
+    else:
+        result.steps["visibility"] = {"cached": True, "seconds": 0.0, "key": "none"}
+        manifest["visibility"] = None
+        manifest["report"] = {}
+        if bar is not None:
+            bar.update(1)
+    manifest["render"] = {"size": list(scene.render.size), "lightmap_mode": scene.render.lightmap_mode}
+    manifest["inputs"] = {k: v["key"] for k, v in sorted(result.steps.items())}
+
+    # -------------------------------------------------------------- write
+    t0 = time.perf_counter()
+    write_bundle(out, manifest, arrays)
+    result.steps["write"] = {"cached": False, "seconds": time.perf_counter() - t0}
+    if bar is not None:
+        bar.update(1)
+        bar.close()
+    result.bytes = out.stat().st_size
+    result.report = dict(manifest.get("report", {}))
+    result.report["patches"] = len(net)
+    result.report["riders"] = len(scene.riders)
+    result.report["objects"] = len(scene.objects)
+    result.report["lights"] = len(lights)
+    result.report["cameras"] = [c["name"] for c in manifest["cameras"]]
+    result.seconds = time.perf_counter() - t_all
+    return result
+
+
+def _objects_arrays(net, objects, sources, lights):
+    """Compressed meshes per model, instance arrays and baked vertex colours of the placed objects."""
+    from piste.pipeline.sources import load_object_mesh, object_matrices
+    from piste.world.objects import ObjectSet, bake_vertex_colors, compress_mesh, normal_matrix, object_texture
+
+    kinds = []
+    meshes = {}
+    for s in sources:
+        mesh = load_object_mesh(s)
+        kind = s.split(":", 1)[1] if s.startswith("builtin:") else "gltf_" + "".join(
+            ch if ch.isalnum() else "_" for ch in Path(s).stem)
+        kinds.append(kind)
+        meshes[kind] = compress_mesh(mesh)
+    kind_of = dict(zip(sources, kinds))
+    matrix = object_matrices(net, objects)
+    kind = np.array([kinds.index(kind_of[o.model]) for o in objects], dtype=np.int64)
+    # bounding spheres: each mesh's box centre, radius over its vertices, under the object matrix
+    center = np.zeros((len(objects), 3))
+    radius = np.zeros(len(objects))
+    for i, (o, m) in enumerate(zip(objects, matrix)):
+        cm = meshes[kinds[kind[i]]]
+        p, _, _ = cm.decode()
+        c = (p.min(0) + p.max(0)) / 2.0
+        center[i] = m[:3, :3] @ c + m[:3, 3]
+        radius[i] = float(np.linalg.norm(p - c, axis=1).max()) * abs(o.scale)
+    objs = ObjectSet(meshes, tuple(kinds), kind, matrix, normal_matrix(matrix), center, radius, None, object_texture(),
+                     {k: int(np.count_nonzero(kind == i)) for i, k in enumerate(kinds)})
+    colors = bake_vertex_colors(objs, lights)
+    a = {"kind": kind, "matrix": matrix, "center": center, "radius": radius, "texture": objs.texture}
+    meta = {"kinds": list(kinds), "meshes": {}, "instances": [o.name for o in objects],
+            "vertex_colors": "half-bright RGB8 per instance vertex (128 = 1.0), full lighting equation, no shadows"}
+    for k in kinds:
+        cm = meshes[k]
+        p = f"meshes/{k}/"
+        a.update({p + "positions": cm.positions, p + "pos_offset": cm.pos_offset, p + "pos_extent": cm.pos_extent,
+                  p + "uv": cm.uv, p + "uv_offset": cm.uv_offset, p + "uv_extent": cm.uv_extent,
+                  p + "normals": cm.normals, p + "indices": cm.indices})
+        a[f"colors/{k}"] = colors[k]
+        meta["meshes"][k] = {"normal_bits": int(cm.normal_bits), "radius": float(cm.radius), "vertices": cm.n_vertices,
+                             "triangles": cm.n_triangles, "bytes": int(cm.nbytes),
+                             "bytes_float": int(cm.uncompressed_nbytes(cm.n_vertices, cm.n_triangles))}
+    return a, meta
+
+
+def _visibility_report(net, vis, cameras, centerline) -> dict:
+    """% of patches drawn, frustum alone vs frustum + visibility: along the track (default course)
+    and from the scene's cameras."""
+    from piste.formats.bundle import camera_from_dict
+    from piste.pipeline.visibility import culling_report
+
+    out = {}
+    if centerline is not None:
+        from piste.world.camera import track_camera
+
+        cams = [track_camera(centerline, float(t), height=9.0) for t in np.linspace(0.02, 0.98, 49)]
+        out["track"] = culling_report(net, vis, cams)
+    cams = [camera_from_dict(c) for c in cameras]
+    out["cameras"] = culling_report(net, vis, cams)
+    mat = vis.patch_matrix()
+    out["mean_visible_pct"] = float(100.0 * mat.mean())
+    return out

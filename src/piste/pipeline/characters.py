@@ -1,0 +1,158 @@
+"""The character build step: a rider model -> LODs, palettes, batches, strips and clip tables as arrays.
+
+For each LOD (:func:`piste.character.make_lods`): the simplified mesh, its blended-matrix palette
+(the talk's ~250 / ~150 / ~75 matrices), the draw batches under the PS2 budget
+(:func:`piste.character.batch_mesh`) and one triangle strip per batch
+(:func:`piste.character.stripify`, restart-joined).  Clips are resampled at ``rate`` Hz into
+per-bone translation / rotation / scale tables (what :class:`piste.world.riders.ClipTable` plays),
+so loading never samples the original curves.  Morph targets are not carried (riders in a bundle
+show the neutral face).
+
+Array names below ``<prefix>`` (``characters/<model id>/``): ``skeleton/{parents, rest_translation,
+rest_rotation, rest_scale, inverse_bind}``, ``texture``, ``clips/<name>/{translation, rotation, scale}``
+``(F, b, 3|4) float32``, and per LOD ``lod<i>/{positions, normals, uv, indices, joints, weights,
+palette_bones, palette_weights, palette_units, palette_index, batch_vertices, batch_matrices,
+batch_triangles, batch_offsets (nb + 1, 3) [vertices, matrices, triangles], strips, strip_offsets}``.
+
+API
+---
+character_arrays(model, ratios, steps, max_bones, rate) -> (arrays, meta)
+model_from_arrays(arrays, prefix, meta) -> piste.character.Model
+lods_from_arrays(arrays, prefix, meta, model) -> list[piste.character.LOD]
+merged_mesh(model) -> SkinnedMesh          all skinned primitives of a model as one mesh
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from piste.errors import ConfigError
+
+__all__ = ["character_arrays", "model_from_arrays", "lods_from_arrays", "merged_mesh", "CLIP_RATE"]
+
+CLIP_RATE = 30.0
+DEFAULT_STEPS = (0.1, 0.2, 0.25)
+
+
+def merged_mesh(model):
+    """One :class:`SkinnedMesh` of every skinned primitive of ``model`` (texture: the first one's)."""
+    from piste.character.model import SkinnedMesh
+
+    meshes = [m for m in model.meshes if m.skinned] or list(model.meshes)
+    if not meshes:
+        raise ConfigError(f"rider model {model.name!r} has no meshes")
+    if len(meshes) == 1:
+        return meshes[0]
+    off = np.cumsum([0] + [m.n_vertices for m in meshes])[:-1]
+    tex = next((m.texture for m in meshes if m.texture is not None), None)
+    return SkinnedMesh(
+        name=model.name, positions=np.concatenate([m.positions for m in meshes]),
+        indices=np.concatenate([m.indices + o for m, o in zip(meshes, off)]),
+        normals=np.concatenate([m.normals for m in meshes]), uv=np.concatenate([m.uv for m in meshes]),
+        joints=np.concatenate([m.joints for m in meshes]), weights=np.concatenate([m.weights for m in meshes]),
+        texture=tex, skinned=True, group=model.name)
+
+
+def _steps(ratios, steps):
+    steps = tuple(steps) if steps is not None else DEFAULT_STEPS
+    return tuple(steps[min(i, len(steps) - 1)] for i in range(len(ratios)))
+
+
+def character_arrays(model, ratios=(1.0, 0.5, 0.25), steps=None, max_bones: int = 3, rate: float = CLIP_RATE):
+    """Everything the runtime needs of a rider model, pre-processed: ``(arrays, meta)``."""
+    from piste.character import batch_mesh, make_lods, stripify
+
+    if model.skeleton is None:
+        raise ConfigError(f"rider model {model.name!r} has no skeleton: riders need a skinned glTF")
+    sk = model.skeleton
+    mesh = merged_mesh(model)
+    steps = _steps(ratios, steps)
+    lods = make_lods(mesh, ratios=ratios, steps=steps, max_bones=max_bones)
+    a: dict = {
+        "skeleton/parents": sk.parents.astype(np.int32),
+        "skeleton/rest_translation": sk.rest_translation,
+        "skeleton/rest_rotation": sk.rest_rotation,
+        "skeleton/rest_scale": sk.rest_scale,
+        "skeleton/inverse_bind": sk.inverse_bind,
+    }
+    tex = mesh.texture if mesh.texture is not None else np.full((4, 4, 4), 255, np.uint8)
+    a["texture"] = np.ascontiguousarray(tex, dtype=np.uint8)
+    meta: dict = {"name": model.name, "bones": list(sk.names), "clips": {}, "lods": [], "rate": float(rate),
+                  "max_bones": int(max_bones)}
+    for cname, clip in sorted(model.clips.items()):
+        f = int(np.ceil(clip.duration * rate)) + 1
+        times = np.minimum(np.arange(f) / rate, clip.duration)
+        poses = [clip.sample(float(t), skeleton=sk) for t in times]
+        a[f"clips/{cname}/translation"] = np.stack([p.translation for p in poses]).astype(np.float32)
+        a[f"clips/{cname}/rotation"] = np.stack([p.rotation for p in poses]).astype(np.float32)
+        a[f"clips/{cname}/scale"] = np.stack([p.scale for p in poses]).astype(np.float32)
+        meta["clips"][cname] = {"duration": float(clip.duration), "frames": f}
+    for i, lod in enumerate(lods):
+        m, pal = lod.mesh, lod.palette
+        p = f"lod{i}/"
+        a.update({p + "positions": m.positions, p + "normals": m.normals, p + "uv": m.uv,
+                  p + "indices": m.indices.astype(np.uint32), p + "joints": m.joints, p + "weights": m.weights,
+                  p + "palette_bones": pal.bones.astype(np.int32), p + "palette_weights": pal.weights.astype(np.float32),
+                  p + "palette_units": pal.units.astype(np.int32), p + "palette_index": pal.index.astype(np.int32)})
+        batches = batch_mesh(m, palette=pal)
+        verts = [b.vertices for b in batches]
+        mats = [b.matrices for b in batches]
+        tris = [b.triangles for b in batches]
+        strips = [stripify(b.triangles) for b in batches]
+        counts = np.array([[len(v), len(mm), len(t)] for v, mm, t in zip(verts, mats, tris)], np.int64).reshape(-1, 3)
+        a[p + "batch_offsets"] = np.concatenate([np.zeros((1, 3), np.int64), np.cumsum(counts, axis=0)])
+        a[p + "batch_vertices"] = np.concatenate(verts).astype(np.int32) if verts else np.zeros(0, np.int32)
+        a[p + "batch_matrices"] = np.concatenate(mats).astype(np.int32) if mats else np.zeros(0, np.int32)
+        a[p + "batch_triangles"] = (np.concatenate(tris).astype(np.int32) if tris else np.zeros((0, 3), np.int32))
+        a[p + "strip_offsets"] = np.concatenate([[0], np.cumsum([len(s) for s in strips])]).astype(np.int64)
+        a[p + "strips"] = np.concatenate(strips).astype(np.int32) if strips else np.zeros(0, np.int32)
+        strip_len = int(sum(len(s) for s in strips))
+        meta["lods"].append({"name": lod.name, "ratio": float(lod.ratio), "step": float(lod.step),
+                             "error": float(lod.error), "triangles": int(m.n_triangles), "vertices": int(m.n_vertices),
+                             "palette": int(pal.size), "batches": len(batches), "strip_indices": strip_len})
+    return a, meta
+
+
+def model_from_arrays(arrays: dict, prefix: str, meta: dict):
+    """The rider :class:`Model` (skeleton, LOD-0 mesh with texture, clips as LINEAR tracks)."""
+    from piste.character.model import Clip, Model, Skeleton, SkinnedMesh, Track
+
+    g = lambda k: arrays[prefix + k]  # noqa: E731
+    sk = Skeleton(meta["bones"], g("skeleton/parents"), g("skeleton/rest_translation"), g("skeleton/rest_rotation"),
+                  g("skeleton/rest_scale"), g("skeleton/inverse_bind"))
+    p = "lod0/"
+    mesh = SkinnedMesh(name=meta["name"], positions=g(p + "positions"), indices=g(p + "indices"),
+                       normals=g(p + "normals"), uv=g(p + "uv"), joints=g(p + "joints"), weights=g(p + "weights"),
+                       texture=g("texture"), skinned=True, group=meta["name"])
+    rate = float(meta.get("rate", CLIP_RATE))
+    clips = {}
+    for cname, info in meta.get("clips", {}).items():
+        tr, ro, sc = (g(f"clips/{cname}/{k}").astype(np.float64) for k in ("translation", "rotation", "scale"))
+        f = tr.shape[0]
+        times = np.minimum(np.arange(f) / rate, info["duration"])
+        if f > 1 and times[-1] <= times[-2]:  # the last key clamped onto the one before
+            times[-1] = times[-2] + 1e-6
+        tracks = {}
+        for b, name in enumerate(meta["bones"]):
+            tracks[name] = {"translation": Track(times, tr[:, b]), "rotation": Track(times, ro[:, b]),
+                            "scale": Track(times, sc[:, b])}
+        clips[cname] = Clip(cname, float(info["duration"]), tracks, skeleton=sk)
+    return Model(name=meta["name"], skeleton=sk, meshes=[mesh], clips=clips)
+
+
+def lods_from_arrays(arrays: dict, prefix: str, meta: dict, model=None) -> list:
+    """The LODs as built (meshes and palettes), :class:`piste.character.LOD` items."""
+    from piste.character.lod import LOD
+    from piste.character.model import SkinnedMesh
+    from piste.character.palette import Palette
+
+    out = []
+    for i, info in enumerate(meta["lods"]):
+        g = lambda k: arrays[f"{prefix}lod{i}/{k}"]  # noqa: E731
+        mesh = SkinnedMesh(name=f"{meta['name']}/{info['name']}", positions=g("positions"), indices=g("indices"),
+                           normals=g("normals"), uv=g("uv"), joints=g("joints"), weights=g("weights"),
+                           texture=arrays[prefix + "texture"], skinned=True, group=meta["name"])
+        pal = Palette(g("palette_bones"), g("palette_weights"), g("palette_units"), g("palette_index"),
+                      float(info["step"]), int(meta.get("max_bones", 3)))
+        out.append(LOD(info["name"], mesh, pal, float(info["ratio"]), float(info["step"]), float(info["error"])))
+    return out

@@ -1,0 +1,646 @@
+"""The scene description: a TOML file a person writes and reads, parsed and validated.
+
+A scene names its terrain, the riders and objects on it, the lights and cameras (inline, or
+imported from a glTF file an artist lit and framed in Blender), and the pre-processing settings
+(light-map resolution, LOD thresholds, visibility cells).  ``piste build`` turns it into a
+``.piste`` bundle; ``piste render`` and ``piste view`` show it.  Every path is relative to the
+scene file.  Every table and key is optional except where noted::
+
+    name = "my run"
+
+    [terrain]
+    source = "default"            # "default" (the seeded course), a .bpt, a saved net (.npz),
+                                  # a height field: a PNG (8- or 16-bit grey) or an .npz array
+    seed = 0                      # default course seed
+    spacing = 3.125               # height field: metres between samples (or [dx, dy]); an .npz
+                                  # may carry 'dx'/'dy' or 'spacing' instead
+    height_scale = 1.0            # height field: metres per unit (per grey level of a PNG)
+    height_offset = 0.0           # metres added to every height
+    key = "elevation"             # .npz height field: the array to read (default: the first 2-D one)
+    samples_per_patch = 4         # height field: sample intervals per patch side
+    smooth = false                # height field: C2 fit instead of C0
+
+    [lightmap]
+    res = 8                       # texels per patch side
+    shadows = true                # terrain self-shadowing in the bake
+    gutter = 1
+
+    [lod]
+    near = 60.0                   # terrain: edges nearer than this get 8 vertices,
+    far = 180.0                   #   nearer than far 6, the rest 4
+    character = [14.0, 35.0]      # riders: high -> medium -> low LOD distances
+    ratios = [1.0, 0.5, 0.25]     # riders: triangle ratio of each LOD
+
+    [visibility]
+    enabled = true
+    cell = 50.0                   # metres: the course's xy grid of visibility cells
+    eye_heights = [1.7, 9.0]      # metres above the snow of the sampled eye points
+    method = "auto"               # "horizon" (height fields), "rays" (any net) or "auto"
+
+    [render]
+    size = [640, 448]
+    lightmap_mode = "modulate"    # or "ps2"
+
+    [[gltf]]                      # lights and cameras placed in Blender (KHR_lights_punctual)
+    file = "lights.gltf"
+    lights = true
+    cameras = true
+    offset = [0.0, 0.0, 0.0]      # piste position (metres, Z up) of the glTF origin
+    scale = 1.0                   # metres per glTF unit
+    up = "y"                      # the file's up axis: "y" (glTF, Blender's export) or "z"
+    white = 683.0                 # lux that map to piste intensity 1.0 (see piste.pipeline.gltf_import)
+
+    [[riders]]
+    name = "rider 1"
+    model = "builtin:rider"       # or a .gltf/.glb file
+    position = [200.0, 150.0]     # x, y on the snow (z from the surface), or [x, y, z]
+    heading = 0.0                 # degrees about +z, 0 = travelling +y (down the course)
+    clip = "ride"
+    phase = 0.0                   # seconds into the clip at t = 0
+    scale = 1.0
+
+    [[objects]]
+    model = "builtin:tree"        # builtin:tree | builtin:sign | builtin:rock | builtin:rail | a glTF
+    position = [220.0, 160.0]
+    heading = 0.0
+    scale = 1.0
+
+    [[lights]]                    # piste.lighting fields; type is the kind
+    type = "directional"          # ambient | directional | point | spot
+    direction = [0.3, 0.8, -0.5]
+    color = [1.0, 0.9, 0.8]
+    intensity = 1.0
+
+    [[cameras]]
+    name = "start"
+    eye = [200.0, 50.0, 300.0]
+    target = [200.0, 150.0, 260.0]
+    fov = 60.0                    # vertical, degrees
+    near = 0.5
+    far = 4000.0
+    # or a camera flying down the default course's track (from fraction a to b over --frames):
+    # track = [0.1, 0.4]
+    # height = 9.0
+
+Errors: an unknown key, a wrong type or a missing file raise :class:`~piste.errors.ConfigError`
+naming the file, the line and the key (``scene.toml, line 12, key 'riders[1].clip': ...``);
+tomllib gives no line numbers, so :func:`key_lines` scans the text for them.
+
+API
+---
+load_scene(path) -> SceneFile      read and validate a scene file
+loads_scene(text, path) -> SceneFile
+key_lines(text) -> dict            ('riders', 0, 'clip') -> line number
+SceneFile, TerrainSpec, ActorSpec, GltfSpec, CameraSpec, LightmapSpec, LodSpec, VisibilitySpec, RenderSpec
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from piste.errors import ConfigError, ValidationError
+
+__all__ = [
+    "SceneFile",
+    "TerrainSpec",
+    "ActorSpec",
+    "GltfSpec",
+    "CameraSpec",
+    "LightmapSpec",
+    "LodSpec",
+    "VisibilitySpec",
+    "RenderSpec",
+    "load_scene",
+    "loads_scene",
+    "key_lines",
+    "SceneError",
+    "BUILTIN_MODELS",
+]
+
+BUILTIN_MODELS = ("builtin:rider", "builtin:tree", "builtin:sign", "builtin:rock", "builtin:rail")
+HEIGHTFIELD_IMAGES = (".png", ".tif", ".tiff", ".pgm")
+
+
+class SceneError(ConfigError):
+    """A mistake in a scene file: ``path``, ``line`` (1-based or None) and ``key`` (dotted)."""
+
+    def __init__(self, path, message: str, line: int | None = None, key: str | None = None):
+        self.path = str(path) if path is not None else None
+        self.line = line
+        self.key = key
+        where = self.path or "<scene>"
+        if line is not None:
+            where += f", line {line}"
+        if key is not None:
+            where += f", key {key!r}"
+        super().__init__(f"{where}: {message}")
+
+
+# ----------------------------------------------------------------------------- line numbers
+_ARRAY_HEADER = re.compile(r"^\s*\[\[\s*([^\]]+?)\s*\]\]\s*(#.*)?$")
+_TABLE_HEADER = re.compile(r"^\s*\[\s*([^\[\]]+?)\s*\]\s*(#.*)?$")
+_KEY = re.compile(r"""^\s*((?:[A-Za-z0-9_\-]+|"[^"]*"|'[^']*')(?:\s*\.\s*(?:[A-Za-z0-9_\-]+|"[^"]*"|'[^']*'))*)\s*=""")
+
+
+def _split_key(text: str) -> tuple:
+    parts = re.findall(r"""[A-Za-z0-9_\-]+|"[^"]*"|'[^']*'""", text)
+    return tuple(p[1:-1] if p[:1] in "\"'" else p for p in parts)
+
+
+def key_lines(text: str) -> dict:
+    """Line number (1-based) of every table header and key of a TOML document.
+
+    Keys are paths: ``("terrain",)`` for a ``[terrain]`` header, ``("terrain", "seed")`` for a key
+    in it, ``("riders", 1)`` for the second ``[[riders]]`` header and ``("riders", 1, "clip")`` for
+    a key in it.  Multi-line strings and arrays are skipped over.  A best-effort scan (tomllib
+    gives no positions): a key it cannot place is simply absent.
+    """
+    out: dict = {}
+    counts: dict = {}
+    prefix: tuple = ()
+    in_string = None
+    depth = 0
+    for no, line in enumerate(text.splitlines(), start=1):
+        if in_string:
+            if in_string in line:
+                in_string = None
+            continue
+        if depth > 0:  # inside a multi-line array / inline table
+            depth += _bracket_depth(line)
+            continue
+        m = _ARRAY_HEADER.match(line)
+        if m:
+            name = _split_key(m.group(1))
+            i = counts.get(name, -1) + 1
+            counts[name] = i
+            # drop counters of sub-arrays of an earlier element
+            for k in [k for k in counts if len(k) > len(name) and k[: len(name)] == name]:
+                del counts[k]
+            prefix = _indexed(name, counts)
+            out.setdefault(prefix, no)
+            continue
+        m = _TABLE_HEADER.match(line)
+        if m and not line.lstrip().startswith("[["):
+            prefix = _indexed(_split_key(m.group(1)), counts)
+            out.setdefault(prefix, no)
+            continue
+        m = _KEY.match(line)
+        if m:
+            out.setdefault(prefix + _split_key(m.group(1)), no)
+            rest = line[m.end():]
+            for q in ('"""', "'''"):
+                if rest.count(q) == 1:
+                    in_string = q
+            if not in_string:
+                depth = max(0, _bracket_depth(rest))
+    return out
+
+
+def _indexed(name: tuple, counts: dict) -> tuple:
+    """``("riders", "x")`` -> ``("riders", 3, "x")`` when riders is an array of tables (its last element)."""
+    out: tuple = ()
+    for part in name:
+        out = out + (part,)
+        if out in counts:
+            out = out + (counts[out],)
+    return out
+
+
+def _bracket_depth(text: str) -> int:
+    text = re.sub(r'"(?:\\.|[^"\\])*"|\'[^\']*\'', "", text)
+    text = text.split("#", 1)[0]
+    return text.count("[") + text.count("{") - text.count("]") - text.count("}")
+
+
+# ----------------------------------------------------------------------------- specs
+@dataclass
+class TerrainSpec:
+    """Where the terrain comes from.  ``kind``: ``default`` | ``bpt`` | ``net`` (saved PatchNet .npz)
+    | ``heightfield`` (an image or an .npz array).  ``path`` is absolute (None for the default course)."""
+
+    kind: str = "default"
+    path: Path | None = None
+    seed: int = 0
+    spacing: tuple | None = None
+    height_scale: float = 1.0
+    height_offset: float = 0.0
+    key: str | None = None
+    samples_per_patch: int = 4
+    smooth: bool = False
+
+
+@dataclass
+class ActorSpec:
+    """A rider or an object: ``model`` is ``builtin:<kind>`` or an absolute glTF path."""
+
+    name: str
+    model: str
+    position: tuple
+    heading: float = 0.0
+    clip: str | None = None
+    phase: float = 0.0
+    scale: float = 1.0
+    line: int | None = None
+
+    @property
+    def builtin(self) -> str | None:
+        return self.model.split(":", 1)[1] if self.model.startswith("builtin:") else None
+
+
+@dataclass
+class GltfSpec:
+    """Lights and cameras to import from a glTF file (see :mod:`piste.pipeline.gltf_import`)."""
+
+    file: Path
+    lights: bool = True
+    cameras: bool = True
+    offset: tuple = (0.0, 0.0, 0.0)
+    scale: float = 1.0
+    up: str = "y"
+    white: float = 683.0
+
+
+@dataclass
+class CameraSpec:
+    """An inline camera: fixed (``eye``, ``target``) or flying down the track (``track = (a, b)``)."""
+
+    name: str
+    eye: tuple | None = None
+    target: tuple | None = None
+    up: tuple = (0.0, 0.0, 1.0)
+    fov: float = 60.0
+    near: float = 0.5
+    far: float = 4000.0
+    track: tuple | None = None
+    height: float = 9.0
+
+
+@dataclass
+class LightmapSpec:
+    res: int = 8
+    shadows: bool = True
+    gutter: int = 1
+
+
+@dataclass
+class LodSpec:
+    near: float = 60.0
+    far: float = 180.0
+    character: tuple = (14.0, 35.0)
+    ratios: tuple = (1.0, 0.5, 0.25)
+
+
+@dataclass
+class VisibilitySpec:
+    enabled: bool = True
+    cell: float = 50.0
+    eye_heights: tuple = (1.7, 9.0)
+    method: str = "auto"
+
+
+@dataclass
+class RenderSpec:
+    size: tuple = (640, 448)
+    lightmap_mode: str = "modulate"
+
+
+@dataclass
+class SceneFile:
+    """A parsed, validated scene (see the module docstring).  ``lights`` holds piste light
+    objects (:mod:`piste.lighting.lights`) given inline; glTF lights are imported at build time."""
+
+    path: Path
+    name: str
+    terrain: TerrainSpec = field(default_factory=TerrainSpec)
+    riders: list = field(default_factory=list)
+    objects: list = field(default_factory=list)
+    lights: tuple = ()
+    gltf: list = field(default_factory=list)
+    cameras: list = field(default_factory=list)
+    lightmap: LightmapSpec = field(default_factory=LightmapSpec)
+    lod: LodSpec = field(default_factory=LodSpec)
+    visibility: VisibilitySpec = field(default_factory=VisibilitySpec)
+    render: RenderSpec = field(default_factory=RenderSpec)
+    text: str = ""
+
+    def source_files(self) -> list:
+        """Every file the scene reads (the TOML, terrain, glTF files and their buffers and images),
+        absolute, sorted: what a watcher polls and what the build cache hashes."""
+        files = {Path(self.path).resolve()}
+        if self.terrain.path is not None:
+            files.add(Path(self.terrain.path))
+        gltfs = [g.file for g in self.gltf] + [Path(a.model) for a in self.riders + self.objects if a.builtin is None]
+        for g in gltfs:
+            files.add(Path(g))
+            files.update(_gltf_dependencies(Path(g)))
+        return sorted(files)
+
+
+def _gltf_dependencies(path: Path) -> list:
+    """Buffers and images a ``.gltf`` references by relative URI (``.glb`` files embed theirs)."""
+    if path.suffix.lower() != ".gltf" or not path.exists():
+        return []
+    import json
+    import urllib.parse
+
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return []
+    out = []
+    for item in list(doc.get("buffers") or []) + list(doc.get("images") or []):
+        uri = item.get("uri") if isinstance(item, dict) else None
+        if isinstance(uri, str) and not uri.startswith("data:"):
+            out.append((path.parent / urllib.parse.unquote(uri)).resolve())
+    return out
+
+
+# ----------------------------------------------------------------------------- the parser
+class _Checker:
+    """Typed access to one table of the document, with errors naming file, line and key."""
+
+    def __init__(self, path, lines: dict, table: dict, where: tuple, label: str):
+        self.path, self.lines, self.table, self.where, self.label = path, lines, table, where, label
+
+    def line(self, key=None) -> int | None:
+        if key is not None and self.where + (key,) in self.lines:
+            return self.lines[self.where + (key,)]
+        return self.lines.get(self.where)
+
+    def name(self, key) -> str:
+        return f"{self.label}.{key}" if self.label else key
+
+    def error(self, key, message) -> SceneError:
+        return SceneError(self.path, message, line=self.line(key), key=self.name(key) if key else self.label or None)
+
+    def allow(self, keys) -> None:
+        for k in self.table:
+            if k not in keys:
+                raise self.error(k, f"unknown key {k!r}: expected one of {', '.join(sorted(keys))}")
+
+    def get(self, key, kind, default=None, required: bool = False):
+        if key not in self.table:
+            if required:
+                raise SceneError(self.path, f"missing key {key!r}", line=self.line(), key=self.name(key))
+            return default
+        v = self.table[key]
+        return _convert(self, key, v, kind)
+
+
+def _type_name(v) -> str:
+    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string", list: "an array",
+            dict: "a table"}.get(type(v), type(v).__name__)
+
+
+def _convert(c: _Checker, key, v, kind):
+    if kind == "str":
+        if not isinstance(v, str):
+            raise c.error(key, f"expected a string, got {_type_name(v)} ({v!r})")
+        return v
+    if kind == "bool":
+        if not isinstance(v, bool):
+            raise c.error(key, f"expected true or false, got {_type_name(v)} ({v!r})")
+        return v
+    if kind == "int":
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise c.error(key, f"expected an integer, got {_type_name(v)} ({v!r})")
+        return v
+    if kind in ("float", "pos"):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise c.error(key, f"expected a finite number, got {_type_name(v)} ({v!r})")
+        if kind == "pos" and not v > 0:
+            raise c.error(key, f"expected a number > 0, got {v!r}")
+        return float(v)
+    if kind.startswith("vec") or kind == "floats":
+        n = {"vec2": (2,), "vec3": (3,), "vec23": (2, 3), "floats": None}[kind]
+        ok = isinstance(v, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)
+        if not ok or (n is not None and len(v) not in n) or (n is None and not v):
+            want = "an array of numbers" if n is None else f"an array of {' or '.join(map(str, n))} numbers"
+            raise c.error(key, f"expected {want}, got {_type_name(v)} ({v!r})")
+        return tuple(float(x) for x in v)
+    raise AssertionError(kind)
+
+
+def _table(c_parent: _Checker, key: str) -> _Checker:
+    v = c_parent.table.get(key, {})
+    if not isinstance(v, dict):
+        raise c_parent.error(key, f"expected a table [{key}], got {_type_name(v)}")
+    return _Checker(c_parent.path, c_parent.lines, v, (key,), key)
+
+
+def _array(c_parent: _Checker, key: str) -> list:
+    v = c_parent.table.get(key, [])
+    if not isinstance(v, list) or not all(isinstance(x, dict) for x in v):
+        raise c_parent.error(key, f"expected an array of tables [[{key}]]")
+    return [_Checker(c_parent.path, c_parent.lines, x, (key, i), f"{key}[{i}]") for i, x in enumerate(v)]
+
+
+def _file(c: _Checker, key: str, base: Path, suffixes=None) -> Path:
+    rel = c.get(key, "str", required=True)
+    p = (base / rel).resolve()
+    if not p.exists():
+        raise c.error(key, f"no such file: {rel!r} (looked for {p})")
+    if suffixes and p.suffix.lower() not in suffixes:
+        raise c.error(key, f"expected a {' / '.join(suffixes)} file, got {rel!r}")
+    return p
+
+
+def loads_scene(text: str, path="scene.toml") -> SceneFile:
+    """Parse and validate scene TOML ``text``; relative paths resolve against ``path``'s folder."""
+    import tomllib
+
+    path = Path(path)
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        msg = str(exc)
+        m = re.search(r"line (\d+)", msg)
+        raise SceneError(path, f"not valid TOML: {msg}", line=int(m.group(1)) if m else None) from None
+    lines = key_lines(text)
+    base = path.resolve().parent
+    top = _Checker(path, lines, doc, (), "")
+    top.allow({"name", "terrain", "lightmap", "lod", "visibility", "render", "gltf", "riders", "objects", "lights",
+               "cameras"})
+    scene = SceneFile(path=path, name=top.get("name", "str", path.stem), text=text)
+
+    # terrain
+    t = _table(top, "terrain")
+    t.allow({"source", "seed", "spacing", "height_scale", "height_offset", "key", "samples_per_patch", "smooth"})
+    source = t.get("source", "str", "default")
+    ts = TerrainSpec(seed=t.get("seed", "int", 0), height_scale=t.get("height_scale", "float", 1.0),
+                     height_offset=t.get("height_offset", "float", 0.0), key=t.get("key", "str"),
+                     samples_per_patch=t.get("samples_per_patch", "int", 4), smooth=t.get("smooth", "bool", False))
+    if "spacing" in t.table:
+        sp = t.table["spacing"]
+        ts.spacing = (t.get("spacing", "pos"),) * 2 if not isinstance(sp, list) else t.get("spacing", "vec2")
+        if min(ts.spacing) <= 0:
+            raise t.error("spacing", f"expected spacing > 0, got {sp!r}")
+    if ts.samples_per_patch < 3:
+        raise t.error("samples_per_patch", f"expected at least 3, got {ts.samples_per_patch}")
+    if source != "default":
+        ts.path = _file(t, "source", base)
+        suf = ts.path.suffix.lower()
+        if suf == ".bpt":
+            ts.kind = "bpt"
+        elif suf in HEIGHTFIELD_IMAGES:
+            ts.kind = "heightfield"
+        elif suf == ".npz":
+            ts.kind = "net" if _npz_is_net(ts.path) else "heightfield"
+        else:
+            raise t.error("source", f"expected \"default\", a .bpt, an .npz or a height-field image "
+                                    f"({', '.join(HEIGHTFIELD_IMAGES)}), got {source!r}")
+        if ts.kind == "heightfield" and ts.spacing is None and suf != ".npz":
+            raise SceneError(path, "a height-field image needs 'spacing' (metres between samples)",
+                             line=t.line(), key="terrain.spacing")
+    scene.terrain = ts
+
+    # settings
+    lm = _table(top, "lightmap")
+    lm.allow({"res", "shadows", "gutter"})
+    scene.lightmap = LightmapSpec(lm.get("res", "int", 8), lm.get("shadows", "bool", True), lm.get("gutter", "int", 1))
+    if not 2 <= scene.lightmap.res <= 64:
+        raise lm.error("res", f"expected 2 <= res <= 64 texels, got {scene.lightmap.res}")
+    if not 0 <= scene.lightmap.gutter <= 4:
+        raise lm.error("gutter", f"expected 0 <= gutter <= 4, got {scene.lightmap.gutter}")
+    lo = _table(top, "lod")
+    lo.allow({"near", "far", "character", "ratios"})
+    scene.lod = LodSpec(lo.get("near", "float", 60.0), lo.get("far", "float", 180.0),
+                        lo.get("character", "vec2", (14.0, 35.0)), lo.get("ratios", "floats", (1.0, 0.5, 0.25)))
+    if not 0 <= scene.lod.near <= scene.lod.far:
+        raise lo.error("far", f"expected 0 <= near <= far, got near={scene.lod.near}, far={scene.lod.far}")
+    if not all(0 < r <= 1 for r in scene.lod.ratios):
+        raise lo.error("ratios", f"expected ratios in (0, 1], got {list(scene.lod.ratios)}")
+    vi = _table(top, "visibility")
+    vi.allow({"enabled", "cell", "eye_heights", "method"})
+    scene.visibility = VisibilitySpec(vi.get("enabled", "bool", True), vi.get("cell", "pos", 50.0),
+                                      vi.get("eye_heights", "floats", (1.7, 9.0)), vi.get("method", "str", "auto"))
+    if scene.visibility.method not in ("auto", "horizon", "rays"):
+        raise vi.error("method", f"expected \"auto\", \"horizon\" or \"rays\", got {scene.visibility.method!r}")
+    re_ = _table(top, "render")
+    re_.allow({"size", "lightmap_mode"})
+    size = re_.get("size", "vec2", (640, 448))
+    if not all(float(s).is_integer() and 16 <= s <= 8192 for s in size):
+        raise re_.error("size", f"expected [width, height], whole pixels in 16..8192, got {list(size)}")
+    scene.render = RenderSpec((int(size[0]), int(size[1])), re_.get("lightmap_mode", "str", "modulate"))
+    if scene.render.lightmap_mode not in ("modulate", "ps2"):
+        raise re_.error("lightmap_mode", f"expected \"modulate\" or \"ps2\", got {scene.render.lightmap_mode!r}")
+
+    # glTF imports
+    for g in _array(top, "gltf"):
+        g.allow({"file", "lights", "cameras", "offset", "scale", "up", "white"})
+        spec = GltfSpec(_file(g, "file", base, (".gltf", ".glb")), g.get("lights", "bool", True),
+                        g.get("cameras", "bool", True), g.get("offset", "vec3", (0.0, 0.0, 0.0)),
+                        g.get("scale", "pos", 1.0), g.get("up", "str", "y"), g.get("white", "pos", 683.0))
+        if spec.up not in ("y", "z"):
+            raise g.error("up", f"expected \"y\" or \"z\", got {spec.up!r}")
+        scene.gltf.append(spec)
+
+    # riders and objects
+    names = set()
+    for kind in ("riders", "objects"):
+        for i, a in enumerate(_array(top, kind)):
+            keys = {"name", "model", "position", "heading", "scale"} | ({"clip", "phase"} if kind == "riders" else set())
+            a.allow(keys)
+            default_model = "builtin:rider" if kind == "riders" else None
+            model = a.get("model", "str", default_model, required=default_model is None)
+            if model.startswith("builtin:"):
+                allowed = ("builtin:rider",) if kind == "riders" else tuple(m for m in BUILTIN_MODELS if m != "builtin:rider")
+                if model not in allowed:
+                    raise a.error("model", f"unknown built-in model {model!r}: expected one of {', '.join(allowed)} "
+                                           "or a .gltf/.glb file")
+            else:
+                model = str(_file(a, "model", base, (".gltf", ".glb")))
+            name = a.get("name", "str", f"{kind[:-1]}{i}")
+            if name in names:
+                raise a.error("name", f"duplicate name {name!r}")
+            names.add(name)
+            spec = ActorSpec(name, model, a.get("position", "vec23", required=True), a.get("heading", "float", 0.0),
+                             a.get("clip", "str"), a.get("phase", "float", 0.0), a.get("scale", "pos", 1.0), a.line())
+            (scene.riders if kind == "riders" else scene.objects).append(spec)
+
+    # lights
+    scene.lights = tuple(_light(c) for c in _array(top, "lights"))
+
+    # cameras
+    cam_names = set()
+    for i, c in enumerate(_array(top, "cameras")):
+        c.allow({"name", "eye", "target", "up", "fov", "near", "far", "track", "height"})
+        cs = CameraSpec(c.get("name", "str", f"camera{i}"), c.get("eye", "vec3"), c.get("target", "vec3"),
+                        c.get("up", "vec3", (0.0, 0.0, 1.0)), c.get("fov", "float", 60.0), c.get("near", "pos", 0.5),
+                        c.get("far", "pos", 4000.0), c.get("track", "vec2"), c.get("height", "float", 9.0))
+        if cs.name in cam_names:
+            raise c.error("name", f"duplicate camera name {cs.name!r}")
+        cam_names.add(cs.name)
+        if cs.track is None and (cs.eye is None or cs.target is None):
+            raise c.error("eye" if cs.eye is None else "target", "a camera needs eye and target, or track = [from, to]")
+        if cs.track is not None and not all(0.0 <= x <= 1.0 for x in cs.track):
+            raise c.error("track", f"expected fractions of the track in [0, 1], got {list(cs.track)}")
+        if cs.track is not None and scene.terrain.kind != "default":
+            raise c.error("track", "track cameras need the default course (terrain.source = \"default\")")
+        if not 0 < cs.fov < 180:
+            raise c.error("fov", f"expected 0 < fov < 180 degrees, got {cs.fov}")
+        if not cs.near < cs.far:
+            raise c.error("far", f"expected near < far, got near={cs.near}, far={cs.far}")
+        if cs.eye is not None and cs.target is not None and cs.eye == cs.target:
+            raise c.error("target", "eye and target are the same point")
+        scene.cameras.append(cs)
+    return scene
+
+
+def _light(c: _Checker):
+    from dataclasses import fields
+
+    from piste.lighting.lights import AmbientLight, DirectionalLight, PointLight, SpotLight
+
+    kinds = {"ambient": AmbientLight, "directional": DirectionalLight, "point": PointLight, "spot": SpotLight}
+    kind = c.get("type", "str", required=True)
+    if kind not in kinds:
+        raise c.error("type", f"unknown light type {kind!r}: expected one of {', '.join(kinds)}")
+    cls = kinds[kind]
+    allowed = {f.name for f in fields(cls)}
+    c.allow(allowed | {"type"})
+    kw = {}
+    for f in fields(cls):
+        if f.name not in c.table:
+            continue
+        kind_of = {"color": "vec3", "direction": "vec3", "position": "vec3", "shadows": "bool", "name": "str"}.get(f.name)
+        if f.name == "range" and c.table[f.name] == math.inf:
+            kw[f.name] = math.inf
+            continue
+        kw[f.name] = c.get(f.name, kind_of or "float")
+    for need in ("direction", "position"):
+        if need in allowed and need not in kw:
+            raise SceneError(c.path, f"a {kind} light needs {need!r}", line=c.line(), key=c.name(need))
+    try:
+        return cls(**kw)
+    except ValidationError as exc:
+        msg = str(exc)
+        bad = next((k for k in kw if re.search(rf"\b{k}\b", msg)), None)
+        raise c.error(bad, msg) from None
+
+
+def _npz_is_net(path: Path) -> bool:
+    import numpy as np
+
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return "control_points" in data.files
+    except Exception:
+        return False
+
+
+def load_scene(path) -> SceneFile:
+    """Read and validate the scene file at ``path`` (see the module docstring)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SceneError(path, "no such file") from None
+    except IsADirectoryError:
+        raise SceneError(path, "is a folder, expected a scene .toml file") from None
+    except UnicodeDecodeError as exc:
+        raise SceneError(path, f"not UTF-8 text ({exc.reason})") from None
+    return loads_scene(text, path)
