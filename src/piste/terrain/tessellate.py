@@ -291,10 +291,10 @@ class _NetCache:
 
         Rebuilt when the net's corner UVs or light-map rects change (nets are otherwise immutable).
         """
-        snap = (net.uv.tobytes(), net.lightmap_rect.tobytes())
-        if snap != self.grid_snapshot:
+        snap = self.grid_snapshot
+        if snap is None or not (np.array_equal(snap[0], net.uv) and np.array_equal(snap[1], net.lightmap_rect)):
             self.grid_levels, self.grid_flat, self.grid_offset = {}, None, {}
-            self.grid_snapshot = snap
+            self.grid_snapshot = (net.uv.copy(), net.lightmap_rect.copy())
         want = sorted(set(int(n) for n in levels) | set(self.grid_levels))
         if self.grid_flat is None or any(n not in self.grid_levels for n in want):
             for n in want:
