@@ -18,6 +18,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "stats": ("piste.commands.stats", "print the talk's terrain statistics table for a net and camera"),
     "bake": ("piste.commands.bake", "bake per-patch light maps with terrain shadows into an atlas"),
     "view": ("piste.commands.view", "fly over the default course in a window (LOD follows the camera)"),
+    "build": ("piste.commands.build", "pre-process a scene (.toml) into one .piste bundle (cached, byte-identical)"),
+    "render": ("piste.commands.render", "render a scene (.toml or .piste) from one of its cameras (PNG, MP4)"),
 }
 
 

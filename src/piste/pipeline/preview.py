@@ -1,0 +1,294 @@
+"""Rendering a built scene: the glue between a :class:`~piste.formats.bundle.Bundle` and the renderer.
+
+The renderer's entry point for a full scene is :class:`piste.render.scene_renderer.SceneRenderer`,
+which draws a :class:`piste.world.scene.Scene` (course, riders following the track, objects).  A
+bundle's scene differs in two ways, handled here without touching the renderer:
+
+* riders stand where the scene file placed them and play their clips (:class:`PlacedRiders`, the
+  :class:`~piste.world.riders.RiderSet` interface);
+* the pre-computed visibility cuts the terrain patches and objects before frustum culling
+  (:class:`BundleScene` filters objects; the terrain renderer's ``visible`` is wrapped).
+
+A scene without riders is drawn by :class:`piste.render.TerrainRenderer` plus the object pass.
+
+API
+---
+ScenePreview(bundle, size=None, ctx=None, visibility=True)   ``.render(camera, t) -> (H, W, 3) uint8``,
+                                                              ``.stats`` of the last frame, ``.reload(bundle)``
+camera_at(bundle, name, i, n) -> Camera                       a scene camera at frame i of n (track cameras fly)
+render_image(bundle, camera=None, size=None, t=0.0) -> image
+render_frames(bundle, camera, frames, size, fps, video=None, first_png=None) -> list of stats
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from piste.errors import ConfigError
+
+__all__ = ["PlacedRiders", "BundleScene", "ScenePreview", "camera_at", "render_image", "render_frames"]
+
+
+class PlacedRiders:
+    """Riders at fixed places playing their clips (the :class:`piste.world.riders.RiderSet` interface).
+
+    Parameters
+    ----------
+    model : the rider Model (clips);  matrices : (n, 4, 4) rider -> world
+    clips : n clip names;  phases : (n,) seconds into each clip at t = 0
+    """
+
+    def __init__(self, model, matrices, clips, phases, rate: float = 30.0):
+        from piste.world.riders import ClipTable
+
+        self.model = model
+        self.table = ClipTable(model, rate)
+        self.matrix = np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)
+        self.clips = tuple(clips)
+        self.clip_ids = np.array([self.table.clip_index(c) for c in self.clips], dtype=np.int64)
+        self.phase = np.asarray(phases, dtype=np.float64).reshape(-1)
+
+    def __len__(self) -> int:
+        return len(self.clips)
+
+    def state(self, t: float):
+        from piste.world.riders import RiderState
+
+        m = self.matrix
+        anchor = m[:, :3, 3].copy()
+        normal = m[:, :3, 1] / np.linalg.norm(m[:, :3, 1], axis=1, keepdims=True)
+        fwd = m[:, :3, 0] / np.linalg.norm(m[:, :3, 0], axis=1, keepdims=True)
+        skin = self.table.skin_matrices(self.clip_ids, self.phase + float(t), m)
+        return RiderState(float(t), anchor, normal, fwd, m, skin, self.clips, np.zeros(len(self)))
+
+
+def _scene_class():
+    from piste.world.scene import Scene
+
+    class BundleScene(Scene):
+        """A :class:`piste.world.scene.Scene` made from a bundle (riders placed, visibility applied)."""
+
+        def __init__(self, bundle):  # noqa: D401 - Scene's own __init__ builds the default pack
+            from piste.character import BlendedMesh
+            from piste.world.scene import LOD_DISTANCES, sun_light
+
+            man = bundle.manifest
+            self.bundle = bundle
+            self.net = bundle.net
+            self.line = bundle.centerline
+            self.lights = bundle.lights
+            self.sun = sun_light(self.lights)
+            self.model = bundle.rider_model()
+            self.lods = bundle.rider_lods()
+            self.skinners = [BlendedMesh(lod.palette, lod.mesh.positions, lod.mesh.normals) for lod in self.lods]
+            riders = man.get("riders", [])
+            rate = float(next(iter(man["characters"].values())).get("rate", 30.0))
+            self.riders = PlacedRiders(self.model, bundle.arrays["riders/matrix"], [r["clip"] for r in riders],
+                                       [r["phase"] for r in riders], rate=rate)
+            self.follow = 0
+            self.objects = bundle.objects()
+            self.lod_distances = tuple(man.get("lod", {}).get("character", LOD_DISTANCES))
+            self.camera_kw = {}
+            self.visibility = bundle.visibility
+
+        def update(self, t, aspect=640.0 / 448.0, fov_y=60.0, camera=None):
+            sf = super().update(t, aspect=aspect, fov_y=fov_y, camera=camera)
+            if self.visibility is not None and len(sf.objects_visible):
+                keep = self.visibility.objects_at(sf.camera.eye)
+                if keep is not None:
+                    sf.objects_visible = sf.objects_visible[keep[sf.objects_visible]]
+            return sf
+
+    return BundleScene
+
+
+def BundleScene(bundle):  # noqa: N802 - a factory so that importing this module stays light
+    """A :class:`piste.world.scene.Scene` subclass instance for ``bundle`` (see the module docstring)."""
+    return _scene_class()(bundle)
+
+
+def camera_at(bundle, name: str | None = None, i: int = 0, n: int = 1):
+    """The scene camera ``name`` (default: the first) at frame ``i`` of ``n``: a track camera flies
+    from its first to its second fraction of the track; other cameras stay put."""
+    cams = bundle.manifest.get("cameras", [])
+    if not cams:
+        raise ConfigError(f"{bundle.path}: the scene has no cameras")
+    if name is None:
+        d = cams[0]
+    else:
+        d = next((c for c in cams if c["name"] == name), None)
+        if d is None:
+            raise ConfigError(f"{bundle.path}: no camera {name!r}; the scene has {', '.join(c['name'] for c in cams)}")
+    if d.get("track") and bundle.centerline is not None:
+        from piste.world.camera import track_camera
+
+        a, b = d["track"]
+        f = a if n <= 1 else a + (b - a) * i / (n - 1)
+        return track_camera(bundle.centerline, f, height=d.get("height", 9.0), fov_y=d["fov_y"], near=d["near"],
+                            far=d["far"])
+    from piste.formats.bundle import camera_from_dict
+
+    return camera_from_dict(d)
+
+
+class ScenePreview:
+    """Renders a bundle's scene off-screen with the renderer's passes (see the module docstring).
+
+    Parameters
+    ----------
+    bundle : Bundle;  size : (W, H) (default: the scene's render size)
+    ctx : a moderngl context to share (default: a new headless one)
+    visibility : apply the bundle's visibility sets (False: frustum culling alone)
+    """
+
+    def __init__(self, bundle, size=None, ctx=None, visibility: bool = True):
+        from piste.render.context import create_context
+
+        self.ctx = ctx if ctx is not None else create_context()
+        self._own_ctx = ctx is None
+        self.use_visibility = bool(visibility)
+        self.size = tuple(size) if size is not None else tuple(bundle.manifest.get("render", {}).get("size", (640, 448)))
+        self.stats: dict = {}
+        self._setup(bundle)
+
+    def _setup(self, bundle) -> None:
+        self.bundle = bundle
+        man = bundle.manifest
+        lod = man.get("lod", {})
+        kw = {"lod_near": lod.get("near"), "lod_far": lod.get("far")}
+        if bundle.centerline is not None:
+            from piste.world.course import TRACK_HALF_WIDTH
+
+            kw.update(track=bundle.centerline, track_half_width=TRACK_HALF_WIDTH)
+        atlas = bundle.lightmap.atlas
+        self.lightmap_mode = man.get("render", {}).get("lightmap_mode", "modulate")
+        if man.get("riders"):
+            from piste.render.scene_renderer import SceneRenderer
+
+            self.scene = BundleScene(bundle)
+            self.renderer = SceneRenderer(self.scene, size=self.size, ctx=self.ctx, lightmap=atlas,
+                                          object_lighting="baked", **kw)
+            self.terrain = self.renderer.terrain
+            self.objects = None
+        else:
+            from piste.render.frame import TerrainRenderer
+
+            self.scene = None
+            self.renderer = None
+            self.terrain = TerrainRenderer(bundle.net, size=self.size, ctx=self.ctx, lightmap=atlas, **kw)
+            objs = bundle.objects()
+            self.objects = None
+            if objs is not None:
+                from piste.render.object_pass import ObjectPass
+
+                self.objects = ObjectPass(self.ctx, objs, bundle.lights, mode="baked")
+        # the pre-computed visibility in front of frustum culling
+        frustum = self.terrain.visible
+        vis = bundle.visibility if self.use_visibility else None
+
+        def visible(camera, _frustum=frustum, _vis=vis):
+            ids = _frustum(camera)
+            self.stats["frustum_patches"] = int(len(ids))
+            if _vis is not None:
+                s = _vis.patches_at(camera.eye)
+                if s is not None:
+                    ids = ids[s[ids]]
+            self.stats["drawn_patches"] = int(len(ids))
+            return ids
+
+        self.terrain.visible = visible
+
+    def reload(self, bundle) -> None:
+        """Swap in a rebuilt bundle (the GL context is kept)."""
+        self._release_passes()
+        self._setup(bundle)
+
+    def render(self, camera=None, t: float = 0.0) -> np.ndarray:
+        """One frame ``(H, W, 3) uint8`` for ``camera`` (default: the scene's first) at ``t`` seconds."""
+        cam = camera if camera is not None else camera_at(self.bundle)
+        w, h = self.size
+        cam = replace(cam, aspect=w / h)
+        if self.renderer is not None:
+            img = self.renderer.render(t, camera=cam, lightmap_mode=self.lightmap_mode)
+            self.stats.update(img.stats)
+            return img.image[..., :3]
+        from piste.render.frame import DEFAULT_FOG_DENSITY
+        from piste.render.sky_pass import HORIZON
+
+        mesh = self.terrain.prepare(cam)
+        frame = self.terrain.draw(cam, mesh, lightmap_mode=self.lightmap_mode, read=self.objects is None)
+        if self.objects is not None:
+            vis_objs = self.objects.objects.visible(cam.frustum_planes(), max_distance=cam.far, eye=cam.eye)
+            if self.use_visibility and self.bundle.visibility is not None and len(vis_objs):
+                keep = self.bundle.visibility.objects_at(cam.eye)
+                if keep is not None:
+                    vis_objs = vis_objs[keep[vis_objs]]
+            self.objects.draw(cam.view_projection(), cam.eye, vis_objs, fog=(*HORIZON, DEFAULT_FOG_DENSITY))
+            self.ctx.finish()
+            self.stats["objects_drawn"] = int(len(vis_objs))
+            image = self.terrain.target.read()
+        else:
+            image = frame.image
+        self.stats.update(terrain_patches=frame.patches, terrain_triangles=frame.triangles)
+        return image[..., :3]
+
+    def _release_passes(self) -> None:
+        if self.renderer is not None:
+            self.renderer.release()
+        else:
+            self.terrain.release()
+            if self.objects is not None:
+                self.objects.release()
+        self.renderer = self.objects = None
+
+    def release(self) -> None:
+        self._release_passes()
+        if self._own_ctx:
+            self.ctx.release()
+
+
+def render_image(bundle, camera: str | None = None, size=None, t: float = 0.0, ctx=None) -> np.ndarray:
+    """One image ``(H, W, 3) uint8`` of ``bundle`` from scene camera ``camera``."""
+    p = ScenePreview(bundle, size=size, ctx=ctx)
+    try:
+        return p.render(camera_at(bundle, camera), t)
+    finally:
+        p.release()
+
+
+def render_frames(bundle, camera: str | None = None, frames: int = 1, size=None, fps: int = 30, video=None,
+                  first_png=None, ctx=None, progress: bool = False) -> list:
+    """Render ``frames`` frames (time ``i / fps``; track cameras fly), writing the first to
+    ``first_png`` and all to the MP4 ``video`` when given.  Returns each frame's stats."""
+    from piste.render.context import save_png
+
+    p = ScenePreview(bundle, size=size, ctx=ctx)
+    writer = None
+    out = []
+    try:
+        if video is not None:
+            from piste.render.video import VideoWriter
+
+            writer = VideoWriter(video, fps=fps)
+        it = range(frames)
+        if progress:
+            from tqdm import tqdm
+
+            it = tqdm(it, desc="rendering", unit="frame", leave=False)
+        for i in it:
+            img = p.render(camera_at(bundle, camera, i, frames), i / float(fps))
+            if i == 0 and first_png is not None:
+                save_png(first_png, img)
+            if writer is not None:
+                writer.append(img)
+            out.append(dict(p.stats))
+        if writer is not None:
+            writer.close()
+            writer = None
+    finally:
+        if writer is not None:
+            writer.abort()
+        p.release()
+    return out
