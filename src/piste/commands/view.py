@@ -54,3 +54,23 @@ def run(args) -> int:
                    debug=args.debug, frames=args.frames, screenshot=args.out if args.frames else None)
     print(f"{n} frames" + (f"; wrote {args.out}" if args.frames else ""))
     return 0
+
+
+# --- the live scene preview (issue 7, piste.pipeline.live): `piste view SCENE [--headless --out DIR]`
+# rebuilds a scene (.toml) when its files change and reloads it; without SCENE, the course fly-over above.
+_add_course_arguments, _run_course = add_arguments, run
+
+
+def add_arguments(parser) -> None:  # noqa: F811
+    _add_course_arguments(parser)
+    from piste.pipeline.live import add_scene_arguments
+
+    add_scene_arguments(parser)
+
+
+def run(args) -> int:  # noqa: F811
+    if getattr(args, "scene", None):
+        from piste.pipeline.live import run_view
+
+        return run_view(args)
+    return _run_course(args)

@@ -53,7 +53,9 @@ class PlacedRiders:
     def __len__(self) -> int:
         return len(self.clips)
 
-    def state(self, t: float):
+    def state(self, t: float, camera_rider=None, **_ignored):
+        """All riders at ``t`` seconds (:class:`piste.world.riders.RiderState`); the chase-camera
+        keywords of :meth:`RiderSet.state` are accepted and ignored (scene cameras are used)."""
         from piste.world.riders import RiderState
 
         m = self.matrix
