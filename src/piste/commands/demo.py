@@ -47,6 +47,15 @@ def add_arguments(parser) -> None:
     parser.add_argument("--fov", type=float, default=60.0, help="vertical field of view in degrees (default: 60)")
     parser.add_argument("--height", type=float, default=12.0, help="camera height above the track in metres (default: 12)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--scene", choices=("full", "terrain"), default="full",
+                        help="full: the completed scene (six riders chased by the camera, objects, projected shadows, "
+                             "specular; real-time frames at --fps from --start; see piste.commands.demo_scene); "
+                             "terrain: the terrain fly-over only (default: full; debug views imply terrain)")
+    parser.add_argument("--objects", choices=("dynamic", "baked", "points"), default="dynamic",
+                        help="object lighting (full scene): 1 ambient + 3 directional per object (SSX), "
+                             "pre-calculated RGBs, or dynamic point and spot lights")
+    parser.add_argument("--no-shadows", action="store_true", help="full scene without projected rider shadows")
+    parser.add_argument("--no-specular", action="store_true", help="full scene without the riders' specular pass")
 
 
 def lightmap_for(net, lighting: str):
@@ -91,6 +100,10 @@ def run(args) -> int:
     net = default_course(args.seed)
     line = track_centerline(args.seed)
     net, atlas, lighting = lightmap_for(net, args.lighting)
+    if args.scene == "full" and args.debug is None:
+        from piste.commands.demo_scene import run_scene
+
+        return run_scene(args, net, line, atlas, lighting, t0)
     renderer = TerrainRenderer(net, size=(w, h), lightmap=atlas, track=line, track_half_width=TRACK_HALF_WIDTH)
     lod_on = args.lod == "on"
     # warm-up (not timed): shader compilation, tessellation caches

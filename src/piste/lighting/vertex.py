@@ -36,6 +36,7 @@ light_strengths(lights, positions) -> (m, L) float64 and (m, L, 3) directions, c
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -104,6 +105,14 @@ class VertexLights:
         }
 
 
+@lru_cache(maxsize=512)
+def _single(light):
+    """A one-light :class:`Lights` (cached: lights are immutable and hashable)."""
+    from piste.lighting.lights import Lights
+
+    return Lights((light,))
+
+
 def light_strengths(lights, positions):
     """Every direct light of ``lights`` seen from ``m`` positions as a directional light.
 
@@ -118,7 +127,7 @@ def light_strengths(lights, positions):
     directions : (m, L, 3) float64, unit vectors from each position towards each light
     colors : (m, L, 3) float64, ``intensity * colour * attenuation * cone`` (signed)
     """
-    from piste.lighting.lights import Lights, light_terms, light_vectors
+    from piste.lighting.lights import light_terms, light_vectors
 
     positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     m = len(positions)
@@ -131,7 +140,7 @@ def light_strengths(lights, positions):
         L, _ = light_vectors(light, positions)
         L = np.ascontiguousarray(L)
         # the baker's own attenuation x cone: its Lambert factor is 1 for a normal facing the light
-        factor = light_terms(Lights((light,)), positions, L)[:, 0]
+        factor = light_terms(_single(light), positions, L)[:, 0]
         ic = light.intensity * np.asarray(light.color, dtype=np.float64)
         dirs[:, j] = L
         cols[:, j] = factor[:, None] * ic[None, :]

@@ -31,7 +31,10 @@ import numpy as np
 from piste.errors import RenderError
 from piste.render.context import load_shader
 
-__all__ = ["CharacterPass", "specular_map", "SHININESS"]
+__all__ = ["CharacterPass", "specular_map", "rider_textures", "SHININESS", "JACKETS"]
+
+#: jacket colours of the pack (rider i wears JACKETS[i % 6]); pants get a darker partner
+JACKETS = ((214, 52, 38), (30, 120, 200), (250, 180, 30), (40, 160, 90), (150, 60, 170), (240, 240, 245))
 
 #: Blinn-Phong exponent (scaled by 0.25 + the map's green channel)
 SHININESS = 32.0
@@ -73,6 +76,39 @@ def specular_map(texture) -> np.ndarray:
     strap = m & (np.abs(lv - 0.74) < 0.03) & ~lens
     out[strap, 0], out[strap, 1] = 128, 120
     out[lens, 0], out[lens, 1] = 255, 255
+    return out
+
+
+def rider_textures(texture, n: int) -> list:
+    """``n`` variants of a rider texture atlas ``(H, W, 4) uint8``, one jacket colour each
+    (:data:`JACKETS`): the jacket and sleeve tiles' dominant colour (and its darker zip shade) is
+    replaced, keeping the stripes.  Variant 0 keeps the original colours."""
+    from piste.character import rider as _rider
+
+    tex = np.asarray(texture)
+    tiles = getattr(_rider, "_TILES", {})
+    h, w = tex.shape[:2]
+    v, u = np.mgrid[0:h, 0:w]
+    uu, vv = (u + 0.5) / w, (v + 0.5) / h
+    mask = np.zeros((h, w), bool)
+    for name in ("jacket", "sleeve"):
+        if name in tiles:
+            u0, v0, u1, v1 = tiles[name]
+            mask |= (uu >= u0) & (uu < u1) & (vv >= v0) & (vv < v1)
+    out = [tex.copy()]
+    if not mask.any():
+        return out * n
+    rgb = tex[..., :3].astype(np.int32)
+    cols, counts = np.unique(rgb[mask].reshape(-1, 3), axis=0, return_counts=True)
+    base = cols[counts.argmax()]
+    body = mask & (np.abs(rgb - base).max(-1) <= 2)
+    zip_ = mask & (np.abs(rgb - (base * 0.6).astype(np.int32)).max(-1) <= 2)
+    for i in range(1, n):
+        c = np.array(JACKETS[i % len(JACKETS)])
+        t = tex.copy()
+        t[body, :3] = c
+        t[zip_, :3] = (c * 0.6).astype(np.uint8)
+        out.append(t)
     return out
 
 
@@ -137,9 +173,10 @@ class CharacterPass:
         if tex.dtype != np.uint8 or tex.ndim != 3 or tex.shape[2] != 4:
             raise RenderError(f"character texture: expected (H, W, 4) uint8, got {tex.shape} {tex.dtype}")
         spec = specular_map(tex) if spec_map is None else np.asarray(spec_map, np.uint8)
-        self.texture = self._tex(tex)
+        self.textures = [self._tex(t) for t in rider_textures(tex, max_riders)]
+        self.texture = self.textures[0]
         self.spec = self._tex(spec)
-        for t in (self.texture, self.spec):
+        for t in self.textures + [self.spec]:
             t.build_mipmaps()
             t.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         progs = {"base": self.prog, "spec": self.prog_spec}
@@ -189,7 +226,6 @@ class CharacterPass:
         p["u_eye"].value = eye
         p["u_fog"].value = fog
         p["u_mode"].value = 1 if light_only else 0
-        self.texture.use(0)
         self._draw_all("base", p, lights)
         if not specular or sun is None or light_only:
             return
@@ -221,6 +257,8 @@ class CharacterPass:
             vao = buf.vaos[which]
             n = 3 * buf.t
             for j, r in enumerate(idx):
+                if which == "base":
+                    self.textures[int(r) % len(self.textures)].use(0)
                 u = lights[int(r)].uniforms()
                 if "u_light_dir" in prog:
                     prog["u_light_dir"].write(u["u_light_dir"])
@@ -231,5 +269,5 @@ class CharacterPass:
     def release(self) -> None:
         for b in self.lods:
             b.release()
-        for obj in (self.texture, self.spec, self.prog, self.prog_spec):
+        for obj in self.textures + [self.spec, self.prog, self.prog_spec]:
             obj.release()

@@ -58,12 +58,14 @@ def shadow_matrices(centers, radius, sun_direction, reach: float = 40.0) -> np.n
     d = d / np.linalg.norm(d)
     up = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.95 else np.array([0.0, 1.0, 0.0])
     back = 2.0 * float(r.max()) + 1.0
-    out = np.empty((len(c), 4, 4))
-    for i in range(len(c)):  # six riders: tiny 4x4 products
-        view = look_at(c[i] - d * back, c[i], up)
-        proj = orthographic(-r[i], r[i], -r[i], r[i], back - r[i], back + reach)
-        out[i] = proj @ view
-    return out
+    # every caster shares the view rotation (one light direction): only the translation differs
+    view = np.broadcast_to(look_at(-d * back, np.zeros(3), up), (len(c), 4, 4)).copy()
+    view[:, :3, 3] -= c @ view[0, :3, :3].T
+    proj = np.zeros((len(c), 4, 4))
+    for i, ri in enumerate(np.unique(r)):  # usually one radius for all
+        sel = r == ri
+        proj[sel] = orthographic(-ri, ri, -ri, ri, back - ri, back + reach)
+    return proj @ view
 
 
 def shadow_patches(patch_lo, patch_hi, light_vp, candidates=None) -> list:
@@ -77,19 +79,23 @@ def shadow_patches(patch_lo, patch_hi, light_vp, candidates=None) -> list:
 
     Returns
     -------
-    list of n ``(k_i,) int64`` patch ids
+    list of n ``(k_i,) int64`` patch ids.  All ``6 n`` frustum planes are tested against all
+    candidate boxes in one ``(6 n, 3) @ (3, c)`` product (a box is dropped only when it lies wholly
+    outside one plane, as :func:`piste.render.frame.cull_boxes` does).
     """
-    from piste.render.frame import cull_boxes
-    from piste.world.camera import frustum_planes
-
     lo, hi = np.asarray(patch_lo), np.asarray(patch_hi)
     ids = np.arange(len(lo)) if candidates is None else np.asarray(candidates, dtype=np.int64)
-    centre = ((lo[ids] + hi[ids]) / 2.0).T
-    half = ((hi[ids] - lo[ids]) / 2.0).T
-    out = []
-    for vp in np.asarray(light_vp):
-        out.append(ids[cull_boxes(centre, half, frustum_planes(vp))])
-    return out
+    vps = np.asarray(light_vp, dtype=np.float64).reshape(-1, 4, 4)
+    if len(vps) == 0:
+        return []
+    centre = ((lo[ids] + hi[ids]) * 0.5).T
+    half = ((hi[ids] - lo[ids]) * 0.5).T
+    r0, r1, r2, r3 = (vps[:, k] for k in range(4))  # rows of every matrix, (n, 4) each
+    planes = np.stack([r3 + r0, r3 - r0, r3 + r1, r3 - r1, r3 + r2, r3 - r2], 1).reshape(-1, 4)
+    planes = planes / np.linalg.norm(planes[:, :3], axis=1, keepdims=True)  # as frustum_planes()
+    ok = (planes[:, :3] @ centre + planes[:, 3:4] + np.abs(planes[:, :3]) @ half >= 0.0)
+    ok = ok.reshape(len(vps), 6, -1).all(axis=1)
+    return [ids[row] for row in ok]
 
 
 def _ragged(starts, counts):
@@ -101,13 +107,16 @@ def _ragged(starts, counts):
     return np.repeat(np.asarray(starts, dtype=np.int64), counts) + np.arange(total) - off
 
 
-def shadow_triangles(mesh, patch_lists):
+def shadow_triangles(mesh, patch_lists, light_vp=None):
     """The triangles of the given patches in this frame's terrain mesh, for the extra pass.
 
     Parameters
     ----------
     mesh : piste.terrain.TerrainMesh (``patch_ids``, ``vertex_start``, ``tri_start``)
     patch_lists : list of (k_i,) patch ids per rider
+    light_vp : (n, 4, 4) or None: also drop the triangles of those patches that lie wholly outside
+        their rider's shadow box (orthographic, so a box test of the 3 vertices is exact enough);
+        this cuts the extra pass's fill to the shadows' neighbourhood
 
     Returns
     -------
@@ -136,10 +145,17 @@ def shadow_triangles(mesh, patch_lists):
     shift = np.repeat(new_start - vs[k], tcount)
     idx = (np.asarray(mesh.indices)[tsel].astype(np.int64) + shift[:, None]).astype(np.uint32)
     pos = np.asarray(mesh.positions)[vsel].astype(np.float32)
-    per = np.array([int(tcount[np.concatenate(owner) == i].sum()) if len(k) else 0 for i in range(len(patch_lists))],
-                   dtype=np.int64)
+    tri_owner = np.repeat(np.concatenate(owner), tcount) if len(k) else np.zeros(0, np.int64)
+    if light_vp is not None and len(idx):
+        # keep only the triangles whose light-space bounds meet the shadow tile's box
+        vps = np.asarray(light_vp, dtype=np.float64)
+        q = np.einsum("tij,tvj->tvi", vps[tri_owner][:, :3, :3], pos[idx].astype(np.float64))
+        q += vps[tri_owner][:, None, :3, 3]
+        keep = ((q.min(1) <= 1.0) & (q.max(1) >= -1.0)).all(1)
+        idx, tri_owner = idx[keep], tri_owner[keep]
+    per = np.bincount(tri_owner, minlength=len(patch_lists)).astype(np.int64)
     first = np.cumsum(per) - per
-    return pos, idx, np.stack([first, per], 1) if len(per) else np.zeros((0, 2), np.int64)
+    return pos, idx, np.stack([first, per], 1)
 
 
 class ShadowPass:
@@ -211,7 +227,7 @@ class ShadowPass:
         import moderngl
 
         self.patch_counts = [len(p) for p in patch_lists]
-        pos, idx, ranges = shadow_triangles(mesh, patch_lists)
+        pos, idx, ranges = shadow_triangles(mesh, patch_lists, self.light_vp)
         self.triangles = int(len(idx))
         if len(idx) == 0:
             return

@@ -134,7 +134,7 @@ class ClipTable:
         return world @ sk.inverse_bind
 
 
-def surface_frame(net, xy, heading):
+def surface_frame(net, xy, heading, probe_xy=None):
     """Anchors, normals and frames on the exact surface of ``net``.
 
     Parameters
@@ -143,15 +143,24 @@ def surface_frame(net, xy, heading):
     xy : (n, 2) float positions
     heading : (n, 2) or (n, 3) float travel directions (projected onto the tangent plane)
 
+    probe_xy : (k, 2) extra points whose surface heights are wanted too (one query for all)
+
     Returns
     -------
-    anchor (n, 3), normal (n, 3) unit (z > 0), forward (n, 3) unit tangent, all float64;
-    raises ValidationError for points off the terrain.
+    anchor (n, 3), normal (n, 3) unit (z > 0), forward (n, 3) unit tangent, all float64 (and the
+    probes' heights ``(k,)``, NaN off the terrain, when ``probe_xy`` is given);
+    raises ValidationError for rider points off the terrain.
     """
     from piste.terrain.query import eval_points, height_at
 
     xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    z, hit, patch, uv = height_at(net, xy)
+    n_pts = len(xy)
+    if probe_xy is not None:
+        probe_xy = np.asarray(probe_xy, dtype=np.float64).reshape(-1, 2)
+        z_all, hit_all, patch_all, uv_all = height_at(net, np.concatenate([xy, probe_xy]))
+        z, hit, patch, uv = z_all[:n_pts], hit_all[:n_pts], patch_all[:n_pts], uv_all[:n_pts]
+    else:
+        z, hit, patch, uv = height_at(net, xy)
     if not np.all(hit):
         raise ValidationError(f"riders: {int((~hit).sum())} rider position(s) lie off the terrain: {xy[~hit][:3].tolist()}")
     q, du, dv = eval_points(net.control_points[patch], uv[:, 0], uv[:, 1])
@@ -161,7 +170,10 @@ def surface_frame(net, xy, heading):
     if h.shape[-1] == 2:
         h = np.concatenate([h, np.zeros(h.shape[:-1] + (1,))], -1)
     f = _unit(h - (h * n).sum(-1, keepdims=True) * n)
-    return np.stack([xy[:, 0], xy[:, 1], z], 1), n, f
+    anchor = np.stack([xy[:, 0], xy[:, 1], z], 1)
+    if probe_xy is not None:
+        return anchor, n, f, z_all[n_pts:]
+    return anchor, n, f
 
 
 @dataclass
@@ -170,7 +182,9 @@ class RiderState:
 
     t : seconds;  anchor (n, 3) on the surface;  normal (n, 3);  forward (n, 3);
     matrix (n, 4, 4) rider -> world;  skin (n, b, 4, 4) bind space -> world;
-    clip (n,) clip names;  along (n,) metres along the track
+    clip (n,) clip names;  along (n,) metres along the track;
+    heading (n, 2) unit horizontal travel direction;
+    probe_z (k,) surface heights at the extra ``probe_xy`` points asked of :meth:`RiderSet.state`
     """
 
     t: float
@@ -181,6 +195,8 @@ class RiderState:
     skin: np.ndarray
     clip: tuple
     along: np.ndarray
+    heading: np.ndarray | None = None
+    probe_z: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.anchor)
@@ -236,8 +252,11 @@ class RiderSet:
         d = _unit(d)
         return p, d, np.stack([d[:, 1], -d[:, 0]], 1)  # side: to the right of the travel direction
 
-    def state(self, t: float) -> RiderState:
-        """Every rider at ``t`` seconds (see :class:`RiderState`)."""
+    def state(self, t: float, camera_rider: int | None = None, camera_behind: float = 7.0) -> RiderState:
+        """Every rider at ``t`` seconds (see :class:`RiderState`).
+
+        ``camera_rider``: also query the surface height ``camera_behind`` metres behind that rider
+        (where :func:`follow_camera` puts its eye) in the same height query (``state.probe_z``)."""
         t = float(t)
         s = self.start + self.ahead + self.speed * t
         s = np.clip(s, 0.0, self.length - 1.0)
@@ -247,8 +266,14 @@ class RiderSet:
         lat = self.across + self.carve_amp * np.sin(w * t + ph)
         dlat = self.carve_amp * w * np.cos(w * t + ph) / max(self.speed, 1e-6)  # metres across per metre along
         xy = p + side * lat[:, None]
-        heading = d + side * dlat[:, None]
-        anchor, normal, fwd = surface_frame(self.net, xy, heading)
+        heading = _unit(d + side * dlat[:, None])
+        probe = None
+        if camera_rider is not None:
+            probe = xy[int(camera_rider)][None] - camera_behind * heading[int(camera_rider)][None]
+            anchor, normal, fwd, probe_z = surface_frame(self.net, xy, heading, probe_xy=probe)
+        else:
+            anchor, normal, fwd = surface_frame(self.net, xy, heading)
+            probe_z = None
         z_axis = np.cross(fwd, normal)
         n = len(self)
         m = np.zeros((n, 4, 4))
@@ -256,7 +281,7 @@ class RiderSet:
         m[:, 3, 3] = 1.0
         times = self.phase * self.table.duration[self.clip_ids] + t
         skin = self.table.skin_matrices(self.clip_ids, times, m)
-        return RiderState(t, anchor, normal, fwd, m, skin, self.clips, s)
+        return RiderState(t, anchor, normal, fwd, m, skin, self.clips, s, heading, probe_z)
 
     @classmethod
     def default(cls, net, centerline, model=None, **kw) -> "RiderSet":
@@ -265,20 +290,28 @@ class RiderSet:
 
 def follow_camera(state: RiderState, i: int = 0, behind: float = 7.0, height: float = 3.0, look_ahead: float = 10.0,
                   net=None, clearance: float = 1.5, **camera_kw):
-    """A chase camera behind rider ``i``: ``behind`` metres back along its travel direction,
-    ``height`` above it, looking at a point ``look_ahead`` metres ahead, 1 m above the snow;
-    kept ``clearance`` metres above the terrain of ``net`` when given."""
+    """A chase camera behind rider ``i``: ``behind`` metres back along its horizontal travel
+    direction, ``height`` above it, looking at a point ``look_ahead`` metres ahead, 1 m above the
+    snow; kept ``clearance`` metres above the terrain (the height probed by
+    ``RiderSet.state(t, camera_rider=i, camera_behind=behind)``, else queried from ``net``)."""
     from piste.world.camera import Camera
 
-    f = state.forward[i].copy()
-    f[2] = 0.0
-    f = _unit(f)
+    if state.heading is not None:
+        f = np.append(state.heading[i], 0.0)
+    else:
+        f = state.forward[i].copy()
+        f[2] = 0.0
+        f = _unit(f)
     eye = state.anchor[i] - behind * f + np.array([0.0, 0.0, height])
-    if net is not None:
+    ground = None
+    if state.probe_z is not None and len(state.probe_z) and np.isfinite(state.probe_z[0]):
+        ground = float(state.probe_z[0])
+    elif net is not None:
         from piste.terrain.query import height_at
 
         z, hit, _, _ = height_at(net, eye[None, :2])
-        if hit[0]:
-            eye[2] = max(eye[2], z[0] + clearance)
+        ground = float(z[0]) if hit[0] else None
+    if ground is not None:
+        eye[2] = max(eye[2], ground + clearance)
     target = state.anchor[i] + look_ahead * state.forward[i] + np.array([0.0, 0.0, 1.0])
     return Camera(eye=eye, target=target, **camera_kw)

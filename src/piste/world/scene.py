@@ -35,6 +35,8 @@ from piste.errors import ConfigError
 
 __all__ = ["Scene", "SceneFrame", "LOD_DISTANCES", "sun_light", "orient_outward"]
 
+#: the chase camera's distance behind the followed rider (metres)
+CAMERA_BEHIND = 6.0
 #: camera distances (metres) where riders switch from high to medium and from medium to low
 LOD_DISTANCES = (14.0, 35.0)
 
@@ -190,7 +192,7 @@ class Scene:
     def camera(self, state, aspect: float = 640.0 / 448.0, fov_y: float = 60.0):
         from piste.world.riders import follow_camera
 
-        kw = {"behind": 7.0, "height": 3.0, "look_ahead": 10.0}
+        kw = {"behind": CAMERA_BEHIND, "height": 2.6, "look_ahead": 9.0}
         kw.update(self.camera_kw)
         return follow_camera(state, self.follow, net=self.net, aspect=aspect, fov_y=fov_y, far=4000.0, **kw)
 
@@ -201,7 +203,8 @@ class Scene:
 
         tm = {}
         t0 = time.perf_counter()
-        st = self.riders.state(t)
+        st = self.riders.state(t, camera_rider=self.follow if camera is None else None,
+                               camera_behind=self.camera_kw.get("behind", CAMERA_BEHIND))
         cam = camera if camera is not None else self.camera(st, aspect, fov_y)
         t1 = time.perf_counter()
         d = np.linalg.norm(st.anchor - cam.eye, axis=1)

@@ -1,0 +1,143 @@
+"""``piste demo --scene full`` (the default): the completed real-time scene.
+
+Six riders playing their clips down the default course, the camera chasing the first; trees,
+signs, rocks and rails; projected rider shadows; per-vertex lit riders and objects with the
+specular pass.  Frames are real time: frame ``i`` is ``t = i / fps`` seconds after rider 0 was at
+``--start`` (a fraction of the track).  Prints the terrain table (the talk's statistics), the
+characters (bones, palette sizes per LOD, batches), the objects (instances, compressed bytes,
+lighting memory vs error), shadow patches per frame and the frame-time breakdown.
+
+Not a CLI command of its own: :mod:`piste.commands.demo` calls :func:`run_scene`.
+"""
+
+from __future__ import annotations
+
+
+def _objects_table(scene, lights) -> list[str]:
+    from piste.world.objects import lighting_report
+
+    objs = scene.objects
+    st = objs.stats()
+    lines = ["Objects (compressed: 16-bit positions + UVs, octahedral 8-bit normals, uint16 indices):",
+             f"  {'kind':<6} {'instances':>9} {'triangles':>9} {'vertices':>8} {'bytes/vertex':>12} {'mesh bytes':>10} "
+             f"{'as float':>9}"]
+    for k, s in st.items():
+        lines.append(f"  {k:<6} {s['instances']:>9} {s['triangles']:>9} {s['vertices']:>8} {s['vertex_bytes']:>12} "
+                     f"{s['bytes']:>10} {s['bytes_float']:>9}")
+    rep = lighting_report(objs, lights)
+    lines.append("  lighting options vs the full lighting equation per vertex (all lights):")
+    names = {"dynamic": "1 ambient + 3 directional (SSX)", "baked": "pre-calculated RGB8 per vertex",
+             "points": "dynamic point + spot lights"}
+    for k, r in rep.items():
+        lines.append(f"    {names[k]:<34} {r['bytes']:>8} bytes   mean error {r['mean_error']:.4f}   "
+                     f"max error {r['max_error']:.3f}")
+    return lines
+
+
+def run_scene(args, net, line, atlas, lighting: str, t0: float) -> int:
+    import sys
+    import time
+
+    import numpy as np
+
+    from piste.errors import ConfigError
+    from piste.lighting.lights import default_lights
+    from piste.render import save_png, summarize
+    from piste.render.scene_renderer import SceneRenderer, summarize_scene
+    from piste.render.video import VideoWriter
+    from piste.terrain import format_stats
+    from piste.world.course import TRACK_HALF_WIDTH
+    from piste.world.objects import place_objects
+    from piste.world.scene import Scene
+
+    w, h = args.size
+    lights = default_lights()
+    objs = place_objects(net, line, lights, seed=args.seed, track_half_width=TRACK_HALF_WIDTH)
+    length = float(np.linalg.norm(np.diff(line[:, :2], axis=0), axis=1).sum())
+    start = float(args.start) * length
+    if start > length - 120.0:
+        raise ConfigError(f"--start {args.start}: the riders need 120 m of track ahead; use at most "
+                          f"{(length - 120.0) / length:.2f}")
+    scene = Scene(net, line, lights, objects=objs, start=start)
+    renderer = SceneRenderer(scene, size=(w, h), lightmap=atlas, specular=not args.no_specular,
+                             shadows=not args.no_shadows, object_lighting=args.objects)
+    lod_on = args.lod == "on"
+    renderer.render(0.0, read=False, lod=lod_on, lightmap_mode=args.lightmap)  # warm-up: shaders, caches
+    setup_s = time.perf_counter() - t0
+    images = []
+    video = VideoWriter(args.video, fps=args.fps) if args.video else None
+    try:
+        from tqdm import tqdm
+
+        bar = tqdm(range(args.frames), desc="rendering", unit="frame", disable=args.no_progress or args.frames < 2,
+                   file=sys.stderr)
+        for i in bar:
+            im = renderer.render(i / args.fps, lod=lod_on, lightmap_mode=args.lightmap)
+            if i == 0:
+                out = save_png(args.out, im.image[..., :3])
+            if video is not None:
+                video.append(im.image[..., :3])
+            im.image = None
+            im.terrain.image = None
+            images.append(im)
+        if video is not None:
+            video.close()
+    except BaseException:
+        if video is not None:
+            video.abort()
+        raise
+    finally:
+        renderer.release()
+    s = summarize([im.terrain for im in images])
+    sc = summarize_scene(images)
+    lod = "on" if lod_on else "off (all 8x8)"
+    print(format_stats(s, title=(f"Terrain statistics: {net.name}, {len(images)} frame(s) at {w}x{h}, LOD {lod}, "
+                                 f"light map {args.lightmap}, lighting {lighting}")))
+    print()
+    print(f"Characters: {len(scene.riders)} riders, clips {', '.join(scene.riders.clips)}; blended-matrix palettes "
+          f"skinned on the CPU (see piste.render.character_pass)")
+    print(f"  {'LOD':<7} {'triangles':>9} {'vertices':>8} {'bones':>5} {'weight step':>11} {'palette matrices':>16} "
+          f"{'batches':>7}")
+    for c in scene.character_stats():
+        print(f"  {c['lod']:<7} {c['triangles']:>9} {c['vertices']:>8} {c['bones']:>5} {c['step']:>11.2f} "
+              f"{c['palette']:>16} {c['batches']:>7}")
+    lods = np.array([im.scene.rider_lod for im in images])
+    print(f"  riders per LOD (mean over frames): high {np.mean(lods == 0) * 6:.1f}, medium {np.mean(lods == 1) * 6:.1f}, "
+          f"low {np.mean(lods == 2) * 6:.1f};  rider triangles per frame {sc['rider_triangles']:.0f} "
+          f"(+ specular pass)")
+    print()
+    for line_ in _objects_table(scene, lights):
+        print(line_)
+    print(f"  drawn per frame (frustum-culled, lighting '{args.objects}'): {sc['objects_drawn']:.0f} objects, "
+          f"{sc['object_triangles']:.0f} triangles")
+    print()
+    print(f"Projected shadows: {len(scene.riders)} low-LOD riders ({scene.lods[-1].n_triangles} triangles each) into "
+          f"{renderer.shadows.tile if renderer.shadows else 0}x{renderer.shadows.tile if renderer.shadows else 0} tiles;"
+          f" extra pass on the patches each shadow frustum touches:")
+    print(f"  shadow patches per frame: {sc['shadow_patches']:.1f} (max {sc['shadow_patches_max']}; "
+          f"{sc['shadow_patches_union']:.1f} distinct), {sc['shadow_triangles']:.0f} triangles, "
+          f"vs {sc['terrain_patches']:.0f} terrain patches drawn")
+    print()
+    print(f"frame times (mean over {len(images)} frame(s), llvmpipe/EGL; CPU side median {sc['cpu_median_ms']:.2f} ms):")
+    rows = [
+        ("animation (clips, rider matrices, camera)", "animation_ms"),
+        ("character LOD + skinning (palettes)", "lod_skinning_ms"),
+        ("light choice (1 + 3 per rider)", "lights_ms"),
+        ("object culling", "objects_ms"),
+        ("terrain LOD", "terrain_lod_ms"),
+        ("terrain culling", "terrain_cull_ms"),
+        ("tessellation", "tessellate_ms"),
+        ("shadow frusta + patch culling", "shadow_cull_ms"),
+    ]
+    for label, key in rows:
+        print(f"  {label:<42} {sc[key]:7.2f} ms")
+    print(f"  {'LOD + cull + tessellation (terrain)':<42} {sc['terrain_lod_ms'] + sc['terrain_cull_ms'] + sc['tessellate_ms']:7.2f} ms")
+    print(f"  {'CPU side':<42} {sc['cpu_ms']:7.2f} ms")
+    print(f"  {'upload':<42} {sc['upload_ms']:7.2f} ms")
+    print(f"  {'draw terrain (GL + finish)':<42} {sc['terrain_draw_ms']:7.2f} ms")
+    print(f"  {'draw shadows, objects, riders, specular':<42} {sc['scene_draw_ms']:7.2f} ms")
+    print(f"  {'read back':<42} {sc['readback_ms']:7.2f} ms")
+    print(f"  {'frame':<42} {sc['total_ms']:7.2f} ms = {sc['fps']:.1f} fps")
+    print(f"  (set-up, not in the frame times: course, light map, riders, objects, GL context, shaders: {setup_s:.2f} s)")
+    print(f"wrote {out}" + (f" and {args.video} ({len(images)} frames at {args.fps} fps)" if args.video else ""))
+    return 0
