@@ -47,7 +47,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=40)
     ap.add_argument("--size", type=int, nargs=2, default=(640, 448))
+    ap.add_argument("--scene", action="store_true",
+                    help="benchmark the completed scene (riders, objects, shadows, specular) instead of the terrain alone")
     args = ap.parse_args()
+    if args.scene:
+        return bench_scene(args)
 
     from piste.render import TerrainRenderer
     from piste.terrain import tessellate
@@ -103,6 +107,76 @@ def main() -> None:
     print(f"ps2 two-pass light map: median draw {ps2['median']['draw'] / base['median']['draw']:.2f}x the one-pass modulate draw")
     print(f"without culling the whole net ({len(net)} patches, {m.n_triangles} tris) tessellates in "
           f"{np.median(t_nocull):.2f} ms vs {base['median']['tessellate']:.2f} ms for the visible patches")
+
+
+def bench_scene(args) -> None:
+    """The completed scene at ``args.size``: six riders chased by the camera, objects, projected
+    shadows, specular; real-time frames (t = i / 30 s).  Configurations interleaved per frame;
+    prints the median of every stage, the CPU side (animation, skinning, LOD, tessellation,
+    culling) against the 4 ms target and the frame against 60 fps."""
+    from piste.render.scene_renderer import SceneRenderer, summarize_scene
+    from piste.world.scene import Scene
+
+    t0 = time.perf_counter()
+    scene = Scene.default(0)
+    r = SceneRenderer(scene, size=tuple(args.size))
+    print(f"scene set-up (course, rider + LODs, objects, GL, shaders): {time.perf_counter() - t0:.2f} s")
+    print(f"GL: {r.ctx.info['GL_RENDERER']}, {args.size[0]}x{args.size[1]}, {args.frames} frames (t = i / 30 s)")
+    configs = {
+        "full scene": dict(),
+        "no shadows": dict(shadows=False),
+        "no specular": dict(specular=False),
+        "objects baked RGB": dict(objects="baked"),
+        "objects point+spot": dict(objects="points"),
+    }
+
+    def one(t, shadows=True, specular=True, objects="dynamic"):
+        sh, sp = r.shadows, r.specular
+        try:
+            if not shadows:
+                r.shadows = None
+            r.specular = specular
+            r.objects.mode = objects
+            return r.render(t, read=True)
+        finally:
+            r.shadows, r.specular = sh, sp
+
+    for kw in configs.values():
+        one(0.0, **kw)  # warm-up: shaders, baked colours, caches
+    ims = {name: [] for name in configs}
+    for i in range(args.frames):
+        for name, kw in configs.items():
+            im = one(i / 30.0, **kw)
+            im.image = None
+            ims[name].append(im)
+    r.release()
+    cols = ("animation", "lod_skinning", "lights", "objects", "terrain_lod", "terrain_cull", "tessellate",
+            "shadow_cull", "cpu", "upload", "terrain_draw", "scene_draw", "readback", "total")
+    short = ("anim", "skin", "lights", "objcull", "t.lod", "t.cull", "tess", "shadcull", "CPU", "upload",
+             "terrain", "scene", "read", "frame")
+    head = f"{'configuration':22s} " + " ".join(f"{c:>8s}" for c in short) + f" {'fps':>6s}"
+    print()
+    print("median ms per frame (CPU = animation + skinning + LOD + tessellation + culling + light choice)")
+    print(head)
+    print("-" * len(head))
+    med = {}
+    for name, lst in ims.items():
+        m = {k: float(np.median([im.timings[k] for im in lst])) for k in cols}
+        med[name] = m
+        print(f"{name:22s} " + " ".join(f"{m[c]:8.2f}" for c in cols) + f" {1e3 / m['total']:6.1f}")
+    full = summarize_scene(ims["full scene"])
+    m = med["full scene"]
+    print()
+    print(f"full scene: {full['rider_triangles']:.0f} rider + {full['object_triangles']:.0f} object + "
+          f"{full['terrain_triangles']:.0f} terrain triangles, {full['objects_drawn']:.0f} objects, "
+          f"shadow patches per frame {full['shadow_patches']:.1f} (max {full['shadow_patches_max']}), "
+          f"{full['shadow_triangles']:.0f} shadow-pass triangles")
+    print(f"target 60 fps = 16.7 ms/frame: {m['total']:.1f} ms ({1e3 / m['total']:.1f} fps, "
+          f"{'met' if m['total'] <= 16.7 else 'missed'}); CPU side {m['cpu']:.2f} ms (target < 4 ms: "
+          f"{'met' if m['cpu'] < 4.0 else 'missed'}); best CPU side "
+          f"{min(im.timings['cpu'] for im in ims['full scene']):.2f} ms")
+    print(f"the scene's own draws (shadows, objects, riders, specular) add {m['scene_draw']:.1f} ms; without shadows "
+          f"{med['no shadows']['scene_draw']:.1f} ms, without specular {med['no specular']['scene_draw']:.1f} ms")
 
 
 if __name__ == "__main__":

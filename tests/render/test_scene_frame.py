@@ -57,3 +57,16 @@ def test_scene_frame_renders(gl, scene):
     # the followed rider stands in the middle of the picture: not sky, not plain snow
     mid = im.image[40:100, 60:100, :3].astype(int)
     assert (mid.max(-1) - mid.min(-1) > 60).any()  # saturated jacket / board colours
+
+
+def test_demo_full_scene_prints_the_scene_tables(gl_context, tmp_path, capsys):
+    from piste.cli import main
+
+    png = tmp_path / "scene.png"
+    assert main(["demo", "--size", "96", "64", "--frames", "2", "--out", str(png), "--no-progress",
+                 "--lighting", "placeholder", "--objects", "points"]) == 0
+    out = capsys.readouterr().out
+    assert png.exists()
+    for text in ("4x4 patches", "Characters: 6 riders", "palette matrices", "batches", "Objects (compressed",
+                 "pre-calculated RGB8", "shadow patches per frame", "CPU side", "animation", "tessellation", "fps"):
+        assert text in out, text
