@@ -16,6 +16,7 @@ bake_lightmap               the baker (shadows, chunks, process pool, resumable)
 write_lightmap, load_lightmap   the on-disk form (PNG half-bright, .npz float, manifest.json)
 load_or_bake_default_lightmap   cached bake of the default course for the renderer
 ps2_source, ps2_blend, modulate, ps2_error_report   the PS2 light-map blend trick
+VertexLights, choose_lights, vertex_light   per-vertex 1 ambient + 3 directional (characters, objects)
 """
 
 from piste.lighting.baker import (
@@ -51,6 +52,7 @@ from piste.lighting.lights import (
     shade,
 )
 from piste.lighting.ps2 import modulate, ps2_blend, ps2_error_report, ps2_source
+from piste.lighting.vertex import VertexLights, choose_lights, choose_lights_many, vertex_light
 
 __all__ = [
     "AmbientLight",
@@ -83,4 +85,8 @@ __all__ = [
     "ps2_blend",
     "modulate",
     "ps2_error_report",
+    "VertexLights",
+    "choose_lights",
+    "choose_lights_many",
+    "vertex_light",
 ]

@@ -6,6 +6,8 @@ create_context        a headless moderngl context (RenderError naming the packag
 Offscreen             RGBA8 + depth framebuffer with ``read() -> (H, W, 4) uint8``
 save_png              atomic PNG writer
 TerrainRenderer       camera -> LOD -> cull -> tessellate -> upload -> draw -> read back
+SceneRenderer         the completed scene: terrain + rider shadows + objects + riders + specular
+                      (passes in character_pass, object_pass, shadow_pass; ``summarize_scene``)
 Frame, summarize      one frame's image, counts and timings; the talk's statistics over frames
 TerrainPass           the terrain draw: base texture x light map, ``modulate`` or ``ps2`` passes
 SkyPass               gradient sky
@@ -21,6 +23,7 @@ Interactive window: :func:`piste.render.window.run_window` (pyglet, imported laz
 
 from piste.render.context import Offscreen, create_context, save_png
 from piste.render.frame import Frame, TerrainRenderer, cull_boxes, summarize
+from piste.render.scene_renderer import SceneImage, SceneRenderer, summarize_scene
 from piste.render.sky_pass import SkyPass
 from piste.render.terrain_pass import DEBUG_VIEWS, LIGHTMAP_MODES, TerrainPass
 from piste.render.textures import LOD_COLORS, lightmap_atlas_size, placeholder_lightmap, snow_texture, track_field
@@ -31,6 +34,9 @@ __all__ = [
     "Offscreen",
     "save_png",
     "TerrainRenderer",
+    "SceneRenderer",
+    "SceneImage",
+    "summarize_scene",
     "Frame",
     "summarize",
     "cull_boxes",

@@ -1,2 +1,5 @@
 from piste.world.course import default_course, track_centerline  # noqa: E402
 from piste.world.camera import Camera, FlyCamera, frustum_planes, look_at, orthographic, perspective, track_camera  # noqa: E402
+from piste.world.objects import ObjectSet, compress_mesh, make_mesh, place_objects  # noqa: E402
+from piste.world.riders import RiderSet, follow_camera  # noqa: E402
+from piste.world.scene import Scene, SceneFrame  # noqa: E402
