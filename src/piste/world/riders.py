@@ -183,7 +183,8 @@ class RiderState:
     t : seconds;  anchor (n, 3) on the surface;  normal (n, 3);  forward (n, 3);
     matrix (n, 4, 4) rider -> world;  skin (n, b, 4, 4) bind space -> world;
     clip (n,) clip names;  along (n,) metres along the track;
-    heading (n, 2) unit horizontal travel direction;
+    heading (n, 2) unit horizontal travel direction (with the carving);
+    track_dir (n, 2) unit horizontal direction of the track there (what the chase camera follows);
     probe_z (k,) surface heights at the extra ``probe_xy`` points asked of :meth:`RiderSet.state`
     """
 
@@ -197,6 +198,7 @@ class RiderState:
     along: np.ndarray
     heading: np.ndarray | None = None
     probe_z: np.ndarray | None = None
+    track_dir: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.anchor)
@@ -269,7 +271,7 @@ class RiderSet:
         heading = _unit(d + side * dlat[:, None])
         probe = None
         if camera_rider is not None:
-            probe = xy[int(camera_rider)][None] - camera_behind * heading[int(camera_rider)][None]
+            probe = xy[int(camera_rider)][None] - camera_behind * d[int(camera_rider)][None]
             anchor, normal, fwd, probe_z = surface_frame(self.net, xy, heading, probe_xy=probe)
         else:
             anchor, normal, fwd = surface_frame(self.net, xy, heading)
@@ -281,7 +283,7 @@ class RiderSet:
         m[:, 3, 3] = 1.0
         times = self.phase * self.table.duration[self.clip_ids] + t
         skin = self.table.skin_matrices(self.clip_ids, times, m)
-        return RiderState(t, anchor, normal, fwd, m, skin, self.clips, s, heading, probe_z)
+        return RiderState(t, anchor, normal, fwd, m, skin, self.clips, s, heading, probe_z, d)
 
     @classmethod
     def default(cls, net, centerline, model=None, **kw) -> "RiderSet":
@@ -290,14 +292,14 @@ class RiderSet:
 
 def follow_camera(state: RiderState, i: int = 0, behind: float = 7.0, height: float = 3.0, look_ahead: float = 10.0,
                   net=None, clearance: float = 1.5, **camera_kw):
-    """A chase camera behind rider ``i``: ``behind`` metres back along its horizontal travel
-    direction, ``height`` above it, looking at a point ``look_ahead`` metres ahead, 1 m above the
-    snow; kept ``clearance`` metres above the terrain (the height probed by
+    """A chase camera behind rider ``i``: ``behind`` metres back along the track's direction (not
+    the rider's carving heading: the camera stays calm through the turns), ``height`` above it,
+    looking at a point ``look_ahead`` metres ahead along the track, 1 m above the snow; kept ``clearance`` metres above the terrain (the height probed by
     ``RiderSet.state(t, camera_rider=i, camera_behind=behind)``, else queried from ``net``)."""
     from piste.world.camera import Camera
 
-    if state.heading is not None:
-        f = np.append(state.heading[i], 0.0)
+    if state.track_dir is not None:
+        f = np.append(state.track_dir[i], 0.0)
     else:
         f = state.forward[i].copy()
         f[2] = 0.0
@@ -313,5 +315,7 @@ def follow_camera(state: RiderState, i: int = 0, behind: float = 7.0, height: fl
         ground = float(z[0]) if hit[0] else None
     if ground is not None:
         eye[2] = max(eye[2], ground + clearance)
-    target = state.anchor[i] + look_ahead * state.forward[i] + np.array([0.0, 0.0, 1.0])
+    ahead = f * look_ahead
+    ahead[2] = look_ahead * float(state.forward[i, 2])  # follow the slope down
+    target = state.anchor[i] + ahead + np.array([0.0, 0.0, 1.0])
     return Camera(eye=eye, target=target, **camera_kw)
