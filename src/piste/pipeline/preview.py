@@ -28,7 +28,7 @@ import numpy as np
 
 from piste.errors import ConfigError
 
-__all__ = ["PlacedRiders", "BundleScene", "ScenePreview", "camera_at", "render_image", "render_frames"]
+__all__ = ["PlacedRiders", "BundleScene", "clip_table", "ScenePreview", "camera_at", "render_image", "render_frames"]
 
 
 class PlacedRiders:
@@ -40,11 +40,11 @@ class PlacedRiders:
     clips : n clip names;  phases : (n,) seconds into each clip at t = 0
     """
 
-    def __init__(self, model, matrices, clips, phases, rate: float = 30.0):
+    def __init__(self, model, matrices, clips, phases, rate: float = 30.0, table=None):
         from piste.world.riders import ClipTable
 
         self.model = model
-        self.table = ClipTable(model, rate)
+        self.table = table if table is not None else ClipTable(model, rate)
         self.matrix = np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)
         self.clips = tuple(clips)
         self.clip_ids = np.array([self.table.clip_index(c) for c in self.clips], dtype=np.int64)
@@ -64,6 +64,33 @@ class PlacedRiders:
         fwd = m[:, :3, 0] / np.linalg.norm(m[:, :3, 0], axis=1, keepdims=True)
         skin = self.table.skin_matrices(self.clip_ids, self.phase + float(t), m)
         return RiderState(float(t), anchor, normal, fwd, m, skin, self.clips, np.zeros(len(self)))
+
+
+def clip_table(bundle, character: str = "rider"):
+    """A :class:`piste.world.riders.ClipTable` filled straight from the bundle's pre-sampled clip
+    tables (no curve sampling at load: the build did it)."""
+    from piste.world.riders import ClipTable
+
+    meta = bundle.manifest["characters"][character]
+    prefix = f"characters/{character}/clips/"
+    model = bundle.rider_model()
+    table = ClipTable.__new__(ClipTable)
+    table.skeleton = model.skeleton
+    table.rate = float(meta.get("rate", 30.0))
+    table.names = sorted(meta["clips"])
+    table.duration = np.array([meta["clips"][n]["duration"] for n in table.names], dtype=np.float64)
+    table.frames = np.array([meta["clips"][n]["frames"] for n in table.names], dtype=np.int64)
+    b = model.skeleton.n_bones
+    fmax = int(table.frames.max())
+    table._t = np.zeros((len(table.names), fmax, b, 3))
+    table._r = np.zeros((len(table.names), fmax, b, 4))
+    table._s = np.ones((len(table.names), fmax, b, 3))
+    for c, name in enumerate(table.names):
+        f = table.frames[c]
+        table._t[c, :f] = bundle.arrays[prefix + name + "/translation"]
+        table._r[c, :f] = bundle.arrays[prefix + name + "/rotation"]
+        table._s[c, :f] = bundle.arrays[prefix + name + "/scale"]
+    return table
 
 
 def _scene_class():
@@ -88,7 +115,7 @@ def _scene_class():
             riders = man.get("riders", [])
             rate = float(next(iter(man["characters"].values())).get("rate", 30.0))
             self.riders = PlacedRiders(self.model, bundle.arrays["riders/matrix"], [r["clip"] for r in riders],
-                                       [r["phase"] for r in riders], rate=rate)
+                                       [r["phase"] for r in riders], rate=rate, table=clip_table(bundle))
             self.follow = 0
             self.objects = bundle.objects()
             self.lod_distances = tuple(man.get("lod", {}).get("character", LOD_DISTANCES))
