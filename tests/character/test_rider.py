@@ -99,3 +99,12 @@ def test_face_morphs_only_move_the_head(rider):
     assert np.isin(mesh.joints[moved, 0], [head, jaw, rider.skeleton.bone_index("neck")]).all()
     for k in range(mesh.n_morphs):
         assert np.abs(mesh.morph_positions[k]).max() > 0.004  # visible: millimetres to centimetres
+
+
+def test_rider_parts_face_outward():
+    """Every closed part (torso, limbs, board) is wound outward, so its normals point out of the body."""
+    from piste.character import default_rider
+    from piste.world.scene import orient_outward
+
+    _, flipped = orient_outward(default_rider(0).meshes[0])
+    assert flipped == 0

@@ -692,6 +692,14 @@ def _clips(sk, J):
     return clips
 
 
+def _outward(pos: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """Triangles ``(t, 3)`` of one part wound so its signed volume (divergence theorem about the
+    part's centre) is positive: the part faces outward, and normals computed from it point out."""
+    p = pos - pos.mean(axis=0)
+    a, b, c = p[tri[:, 0]], p[tri[:, 1]], p[tri[:, 2]]
+    return tri[:, ::-1].copy() if np.einsum("ij,ij->", a, np.cross(b, c)) < 0 else tri
+
+
 def default_rider(seed: int = 0) -> Model:
     """Build piste's procedural snowboarder (deterministic for a given ``seed``).
 
@@ -714,7 +722,7 @@ def default_rider(seed: int = 0) -> Model:
             head_range = (off, off + len(p.pos))
         pos.append(p.pos)
         uv.append(p.uv)
-        tri.append(p.tri + off)
+        tri.append(_outward(p.pos, p.tri) + off)
         w.append(p.w)
         off += len(p.pos)
     pos = np.concatenate(pos)

@@ -56,9 +56,8 @@ def orient_outward(mesh):
 
     Each connected part's signed volume (divergence theorem, ``sum v0 . (v1 x v2) / 6``) tells
     whether its triangles wind inward; inward parts get their winding reversed and their normals
-    (and morph normal deltas) negated.  The default rider's lofted limbs and torso come out of
-    :func:`piste.character.default_rider` wound inward (normals pointing into the body), which
-    lights them from behind; this puts them right without touching the character package.
+    (and morph normal deltas) negated.  :func:`piste.character.default_rider` is wound outward
+    at the source; this guards meshes from elsewhere (glTF files exported inside-out).
 
     Returns ``(mesh, flipped_parts)``.
     """
