@@ -1,0 +1,59 @@
+"""The pipeline: from Blender (glTF) and a scene description to a ``.piste`` bundle to a fast preview.
+
+The talk's "Pipelines": an off-the-shelf package for content creation, artists in control of lights,
+cameras and animation, a fast in-game preview, and "pre-process everything you can".
+
+Public API
+----------
+build_scene(scene, out=None, cache_dir=None, progress=False, jobs=1) -> BuildResult   (build.py)
+    validation, terrain, baked light map, character LODs/palettes/batches/strips, compressed objects
+    with baked vertex colours, per-cell visibility; content-hash cache, byte-identical bundles
+Cache, content_key                      the step cache (cache.py)
+import_gltf, convert_lights, convert_cameras, axis_matrix, write_scene_gltf
+                                        glTF lights (KHR_lights_punctual) and cameras (gltf_import.py)
+Visibility, compute_visibility, culling_report
+                                        per-cell patch/object bitsets (visibility.py)
+character_arrays                        the character step (characters.py)
+load_terrain, load_rider_model, load_object_mesh   reading a scene's sources (sources.py)
+ScenePreview, render_image, render_frames, camera_at   rendering a bundle (preview.py)
+LiveScene, run_headless                 watch, rebuild, reload: ``piste view SCENE`` (live.py)
+
+The scene file itself is :mod:`piste.world.scene_file` (``load_scene``); the bundle format is
+:mod:`piste.formats.bundle` (``load_bundle``).  Rendering imports OpenGL lazily: building needs none.
+"""
+
+from piste.pipeline.build import BUILD_VERSION, BuildResult, build_scene, default_cache_dir
+from piste.pipeline.cache import Cache, content_key
+from piste.pipeline.characters import character_arrays
+from piste.pipeline.gltf_import import axis_matrix, convert_cameras, convert_lights, import_gltf, write_scene_gltf
+from piste.pipeline.live import LiveScene, run_headless
+from piste.pipeline.preview import ScenePreview, camera_at, render_frames, render_image
+from piste.pipeline.sources import load_object_mesh, load_rider_model, load_terrain
+from piste.pipeline.visibility import Visibility, compute_visibility, culling_report
+
+__all__ = [
+    "build_scene",
+    "BuildResult",
+    "BUILD_VERSION",
+    "default_cache_dir",
+    "Cache",
+    "content_key",
+    "character_arrays",
+    "import_gltf",
+    "convert_lights",
+    "convert_cameras",
+    "axis_matrix",
+    "write_scene_gltf",
+    "Visibility",
+    "compute_visibility",
+    "culling_report",
+    "load_terrain",
+    "load_rider_model",
+    "load_object_mesh",
+    "ScenePreview",
+    "render_image",
+    "render_frames",
+    "camera_at",
+    "LiveScene",
+    "run_headless",
+]

@@ -3,3 +3,4 @@ from piste.world.camera import Camera, FlyCamera, frustum_planes, look_at, ortho
 from piste.world.objects import ObjectSet, compress_mesh, make_mesh, place_objects  # noqa: E402
 from piste.world.riders import RiderSet, follow_camera  # noqa: E402
 from piste.world.scene import Scene, SceneFrame  # noqa: E402
+from piste.world.scene_file import SceneFile, load_scene, loads_scene  # noqa: E402
