@@ -11,8 +11,12 @@ characters     the rider model (file bytes or built-in name), LOD ratios    LOD 
                                                                             batches, strips, clips
 objects        terrain key, object models and placements, lights           compressed meshes,
                                                                             instances, vertex RGBs
-visibility     terrain key, object bounds, visibility settings             per-cell bitsets
+visibility     terrain key, visibility settings                             per-cell patch bits
+object_vis...  terrain key, object bounds, visibility settings             per-cell object bits
 ============== ============================================================ =====================
+
+(``object_visibility`` is its own step so that moving an object re-tests only the objects: with
+up to :data:`OBJECT_RAYS_MAX` objects by exact rays, ~0.2 s on the default course.)
 
 Lights and cameras (inline and from glTF) and rider placements are cheap and computed each time.
 The bundle holds no timestamps or absolute paths: rebuilding unchanged inputs gives the same bytes.
@@ -39,6 +43,8 @@ __all__ = ["build_scene", "BuildResult", "default_cache_dir", "BUILD_VERSION", "
 
 #: bumped whenever a step's output for the same input changes
 BUILD_VERSION = "piste.build/1"
+#: up to this many objects, their visibility bits come from exact rays (cheap, and exact)
+OBJECT_RAYS_MAX = 64
 
 
 @dataclass
@@ -180,7 +186,7 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=6, desc="build", unit="step", leave=False)
+        bar = tqdm(total=7, desc="build", unit="step", leave=False)
 
     def step(name: str, key: str, make):
         t0 = time.perf_counter()
@@ -327,17 +333,33 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
     if vs.enabled:
         from piste.pipeline.visibility import Visibility, compute_visibility
 
-        vis_key = content_key(BUILD_VERSION, "visibility", terrain_key, spheres, vs.cell, list(vs.eye_heights), vs.method)
+        vis_key = content_key(BUILD_VERSION, "visibility", terrain_key, vs.cell, list(vs.eye_heights), vs.method)
 
         def make_visibility():
-            v = compute_visibility(net, vs.cell, vs.eye_heights, objects=spheres, method=vs.method, progress=progress)
+            v = compute_visibility(net, vs.cell, vs.eye_heights, method=vs.method, progress=progress)
             return v.to_arrays()
 
         va, vmeta = step("visibility", vis_key, make_visibility)
+        # the objects' bits on their own: moving an object does not redo the patches
+        obj_method = "rays" if 0 < len(spheres) <= OBJECT_RAYS_MAX else vmeta["method"]
+        ov_key = content_key(BUILD_VERSION, "object_visibility", terrain_key, spheres, vs.cell, list(vs.eye_heights),
+                             obj_method)
+
+        def make_object_visibility():
+            v = compute_visibility(net, vs.cell, vs.eye_heights, objects=spheres, method=obj_method, patches=False)
+            return {"object_bits": v.object_bits}, {"method": obj_method}
+
+        if len(spheres):
+            oa_, _ = step("object_visibility", ov_key, make_object_visibility)
+            obits = oa_["object_bits"]
+        else:
+            obits = np.zeros((va["patch_bits"].shape[0], 0), np.uint8)
+            result.steps["object_visibility"] = {"cached": True, "seconds": 0.0, "key": "none"}
         arrays["visibility/patch_bits"] = va["patch_bits"]
-        arrays["visibility/object_bits"] = va["object_bits"]
+        arrays["visibility/object_bits"] = obits
+        vmeta = dict(vmeta, n_objects=int(len(spheres)))
         manifest["visibility"] = vmeta
-        vis = Visibility.from_arrays(va, vmeta)
+        vis = Visibility.from_arrays({"patch_bits": va["patch_bits"], "object_bits": obits}, vmeta)
         manifest["report"] = {"visibility": _visibility_report(net, vis, manifest["cameras"], centerline)}
     else:
         result.steps["visibility"] = {"cached": True, "seconds": 0.0, "key": "none"}

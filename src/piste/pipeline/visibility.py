@@ -250,7 +250,7 @@ def _rays_visible(net, eyes: np.ndarray, targets: np.ndarray, margin: float) -> 
 # ----------------------------------------------------------------------------- the step
 def compute_visibility(net, cell: float = 50.0, eye_heights=(1.7, 9.0), objects=None, method: str = "auto",
                        azimuths: int = 720, step: float | None = None, margin: float = 0.25,
-                       progress: bool = False) -> Visibility:
+                       progress: bool = False, patches: bool = True) -> Visibility:
     """Visibility bitsets of ``net``'s patches (and objects) for a grid of ``cell``-metre cells.
 
     Parameters
@@ -264,6 +264,8 @@ def compute_visibility(net, cell: float = 50.0, eye_heights=(1.7, 9.0), objects=
     azimuths, step : horizon rays per eye and metres per march step (default: a quarter patch)
     margin : metres of conservative slack (occluders lowered, targets raised)
     progress : tqdm bar over eye batches
+    patches : test the patches (False: only the objects; every patch bit is set), so that moving an
+        object recomputes only the objects' bits (with ``method="rays"`` that is cheap for a few objects)
     """
     if not cell > 0:
         raise ConfigError(f"visibility: cell must be > 0 metres, got {cell}")
@@ -279,13 +281,10 @@ def compute_visibility(net, cell: float = 50.0, eye_heights=(1.7, 9.0), objects=
     m = len(spheres)
     origin, shape = _grid_for(net, cell)
     rows, cols = shape
-    ptargets = patch_targets(net)  # (n, 9, 3)
+    ptargets = patch_targets(net) if patches else np.zeros((n, 0, 3))  # (n, 9, 3)
     k = ptargets.shape[1]
     otargets = np.concatenate([spheres[:, :3], spheres[:, :3] + np.stack([np.zeros(m), np.zeros(m), spheres[:, 3]], 1)])
     targets = np.concatenate([ptargets.reshape(-1, 3), otargets])
-    if method == "rays":
-        # rays from every eye to every patch sample: thin the targets to the centre and corners' inner points
-        pass
     xy, zg, hit, nodes = _eye_points(net, origin, shape, cell, heights)
     eyes = np.concatenate([np.column_stack([xy, zg + h]) for h in heights])  # (g * H, 3)
     valid = np.tile(hit, len(heights))
@@ -306,13 +305,15 @@ def compute_visibility(net, cell: float = 50.0, eye_heights=(1.7, 9.0), objects=
         for ch in it:
             vis_eye[ch] = _horizon_visible(grid, eyes[ch], targets, int(azimuths), st, rmax, margin, batch=len(ch))
     else:
-        it = idx
+        per = max(1, 100_000 // max(len(targets), 1))  # eyes a batch: ~100k rays traced together
+        chunks = [idx[i:i + per] for i in range(0, len(idx), per)]
+        it = chunks
         if progress:
             from tqdm import tqdm
 
-            it = tqdm(idx, desc="visibility (rays)", unit="eye", leave=False)
-        for i in it:
-            vis_eye[i] = _rays_visible(net, eyes[i:i + 1], targets, margin)[0]
+            it = tqdm(chunks, desc="visibility (rays)", unit="eyes", leave=False)
+        for ch in it:
+            vis_eye[ch] = _rays_visible(net, eyes[ch], targets, margin)
     # per ground point: union over heights; per cell: union over its five ground points
     g = len(xy)
     per_point = vis_eye.reshape(len(heights), g, -1).any(axis=0)  # (g, targets)
@@ -324,7 +325,7 @@ def compute_visibility(net, cell: float = 50.0, eye_heights=(1.7, 9.0), objects=
         cell_vis |= per_point[nodes[:, j]]
         cell_ok |= point_valid[nodes[:, j]]
     cell_vis[~cell_ok] = True  # no eye on the terrain: keep everything
-    pv = cell_vis[:, : n * k].reshape(cells, n, k).any(axis=2)
+    pv = cell_vis[:, : n * k].reshape(cells, n, k).any(axis=2) if k else np.ones((cells, n), dtype=bool)
     ov = cell_vis[:, n * k:].reshape(cells, 2, m).any(axis=1) if m else np.zeros((cells, 0), bool)
     pbits = np.packbits(pv, axis=1, bitorder="little")
     obits = np.packbits(ov, axis=1, bitorder="little") if m else np.zeros((cells, 0), np.uint8)
