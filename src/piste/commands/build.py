@@ -39,7 +39,7 @@ def format_result(r) -> str:
         if s.get("key") == "none":
             continue
         state = "cached" if s.get("cached") else "built"
-        lines.append(f"  {name:<11} {state:<7} {s['seconds'] * 1e3:9.1f} ms")
+        lines.append(f"  {name:<17} {state:<7} {s['seconds'] * 1e3:9.1f} ms")
     rep = r.report
     lines.append(f"  {rep.get('patches', 0)} patches, {rep.get('riders', 0)} riders, {rep.get('objects', 0)} objects, "
                  f"{rep.get('lights', 0)} lights, cameras: {', '.join(rep.get('cameras', []))}")
