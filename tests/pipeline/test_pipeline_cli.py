@@ -41,3 +41,27 @@ def test_view_scene_headless(small_scene, gl, tmp_path):
     out = tmp_path / "frames"
     assert main(["view", str(scene), "--headless", "--out", str(out), "--size", "48", "32", "--frames", "1"]) == 0
     assert (out / "frame_0000.png").exists()
+
+
+def test_view_scene_in_a_window_under_xvfb(small_scene, gl_context, tmp_path):
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    import numpy as np
+    import pytest
+    from PIL import Image
+
+    if shutil.which("xvfb-run") is None:
+        pytest.skip("xvfb-run not installed (apt-get install xvfb)")
+    pytest.importorskip("pyglet")
+    scene = small_scene(riders=False)
+    out = tmp_path / "shot.png"
+    cmd = ["xvfb-run", "-a", "-s", "-screen 0 640x480x24", sys.executable, "-m", "piste.cli", "view", str(scene),
+           "--size", "96", "64", "--frames", "3", "--out", str(out)]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=dict(os.environ))
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    assert "3 frames" in r.stdout
+    img = np.asarray(Image.open(out))
+    assert img.shape == (64, 96, 3) and img.std() > 2
