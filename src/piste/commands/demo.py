@@ -7,6 +7,7 @@ the flight.  Prints the talk's statistics table over the frames shown and the fr
 from __future__ import annotations
 
 import argparse
+import contextlib
 
 
 def _size(text: str) -> int:
@@ -112,26 +113,21 @@ def run(args) -> int:
     setup_s = time.perf_counter() - t0
     ts = np.linspace(args.start, args.end, args.frames) if args.frames > 1 else np.array([args.start])
     frames = []
-    video = VideoWriter(args.video, fps=args.fps) if args.video else None
     try:
         from tqdm import tqdm
 
-        bar = tqdm(ts, desc="rendering", unit="frame", disable=args.no_progress or args.frames < 2, file=sys.stderr)
-        for i, t in enumerate(bar):
-            cam = track_camera(line, float(t), height=args.height, fov_y=args.fov)
-            frame = renderer.render(cam, lod=lod_on, lightmap_mode=args.lightmap, debug=args.debug)
-            if i == 0:
-                out = save_png(args.out, frame.image[..., :3])
-            if video is not None:
-                video.append(frame.image[..., :3])
-            frame.image = None  # keep memory flat over long flights
-            frames.append(frame)
-        if video is not None:
-            video.close()
-    except BaseException:
-        if video is not None:
-            video.abort()
-        raise
+        with VideoWriter(args.video, fps=args.fps) if args.video else contextlib.nullcontext() as video:
+            bar = tqdm(ts, desc="rendering", unit="frame", disable=args.no_progress or args.frames < 2,
+                       file=sys.stderr)
+            for i, t in enumerate(bar):
+                cam = track_camera(line, float(t), height=args.height, fov_y=args.fov)
+                frame = renderer.render(cam, lod=lod_on, lightmap_mode=args.lightmap, debug=args.debug)
+                if i == 0:
+                    out = save_png(args.out, frame.image[..., :3])
+                if video is not None:
+                    video.append(frame.image[..., :3])
+                frame.image = None  # keep memory flat over long flights
+                frames.append(frame)
     finally:
         renderer.release()
     s = summarize(frames)

@@ -12,6 +12,8 @@ Not a CLI command of its own: :mod:`piste.commands.demo` calls :func:`run_scene`
 
 from __future__ import annotations
 
+import contextlib
+
 
 def _objects_table(scene, lights) -> list[str]:
     from piste.world.objects import lighting_report
@@ -65,27 +67,21 @@ def run_scene(args, net, line, atlas, lighting: str, t0: float) -> int:
     renderer.render(0.0, read=False, lod=lod_on, lightmap_mode=args.lightmap)  # warm-up: shaders, caches
     setup_s = time.perf_counter() - t0
     images = []
-    video = VideoWriter(args.video, fps=args.fps) if args.video else None
     try:
         from tqdm import tqdm
 
-        bar = tqdm(range(args.frames), desc="rendering", unit="frame", disable=args.no_progress or args.frames < 2,
-                   file=sys.stderr)
-        for i in bar:
-            im = renderer.render(i / args.fps, lod=lod_on, lightmap_mode=args.lightmap)
-            if i == 0:
-                out = save_png(args.out, im.image[..., :3])
-            if video is not None:
-                video.append(im.image[..., :3])
-            im.image = None
-            im.terrain.image = None
-            images.append(im)
-        if video is not None:
-            video.close()
-    except BaseException:
-        if video is not None:
-            video.abort()
-        raise
+        with VideoWriter(args.video, fps=args.fps) if args.video else contextlib.nullcontext() as video:
+            bar = tqdm(range(args.frames), desc="rendering", unit="frame",
+                       disable=args.no_progress or args.frames < 2, file=sys.stderr)
+            for i in bar:
+                im = renderer.render(i / args.fps, lod=lod_on, lightmap_mode=args.lightmap)
+                if i == 0:
+                    out = save_png(args.out, im.image[..., :3])
+                if video is not None:
+                    video.append(im.image[..., :3])
+                im.image = None
+                im.terrain.image = None
+                images.append(im)
     finally:
         renderer.release()
     s = summarize([im.terrain for im in images])
