@@ -1,15 +1,17 @@
 # piste: two commands.  `make demo` sets up and runs the main job; `make test` sets up and runs the tests.
+# Both install exactly the versions CI tested (constraints.txt); `make test-latest` tries the newest.
 PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 APT_PKGS := libegl1 libgl1 libgl1-mesa-dri
+EXTRAS ?= gl,video,gltf,dask,dev
 
-.PHONY: demo test setup system venv bench clean
+.PHONY: demo test test-latest setup system test-tools venv bench docs clean lock
 
 demo: setup
 	$(BIN)/piste demo
 
-test: setup
+test: setup test-tools
 	$(BIN)/python -m pytest -q
 
 bench: setup
@@ -30,11 +32,26 @@ system:
 	  echo "installing python3 (3.11+) with venv"; \
 	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq python3 python3-venv python3-pip; }
 
-$(VENV)/.installed: pyproject.toml
+# Real clients the tests drive (glTF validator, Blender, Chromium, Xvfb).
+test-tools:
+	bash tools/setup-test-tools.sh
+
+$(VENV)/.installed: pyproject.toml constraints.txt
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -e '.[dev]'
+	$(BIN)/pip install -q -c constraints.txt -e '.[$(EXTRAS)]'
 	touch $@
 
+# The newest releases of every dependency, in a venv of their own (not the tested set).
+test-latest: system test-tools
+	$(PY) -m venv .venv-latest
+	.venv-latest/bin/pip install -q --upgrade pip
+	.venv-latest/bin/pip install -q --upgrade -e '.[$(EXTRAS)]'
+	.venv-latest/bin/python -m pytest -q
+
+# Re-record constraints.txt from the current venv (after a deliberate upgrade).
+lock:
+	$(BIN)/pip freeze --exclude-editable | grep -v '^-e ' > constraints.txt
+
 clean:
-	rm -rf $(VENV) out
+	rm -rf $(VENV) .venv-latest out
