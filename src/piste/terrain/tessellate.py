@@ -512,6 +512,8 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False, cache:
     pids = np.arange(len(net), dtype=np.int64) if patches is None else np.asarray(patches, dtype=np.int64).ravel()
     if len(pids) and (pids.min() < 0 or pids.max() >= len(net)):
         raise ValidationError(f"{net.name}: patch ids must be in 0..{len(net) - 1}")
+    if len(pids) == 0:  # nothing in view (camera in the sky, below the ground, outside the world)
+        return empty_mesh(strips)
     side_lv = lv[net.side_edge[pids]].astype(np.int64)  # (p, 4)
     m = side_lv.max(axis=1) if len(pids) else np.zeros(0, np.int64)
     glue = (side_lv != m[:, None]).any(axis=1)
@@ -556,6 +558,18 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False, cache:
         vertex_start=vertex_start,
         tri_start=tri_start,
         strips=strip_buf,
+    )
+
+
+def empty_mesh(strips: bool = False) -> TerrainMesh:
+    """A TerrainMesh with no patches (what :func:`tessellate` gives for an empty patch list)."""
+    f2, f3 = np.zeros((0, 2), np.float32), np.zeros((0, 3), np.float32)
+    return TerrainMesh(
+        positions=f3, normals=f3.copy(), uv=f2, uv_lightmap=f2.copy(), uv_projected=f2.copy(),
+        param=f2.copy(), indices=np.zeros((0, 3), np.uint32), patch_ids=np.zeros(0, np.int64),
+        patch_kind=np.zeros(0, np.int8), patch_levels=np.zeros((0, 4), np.int16),
+        vertex_patch=np.zeros(0, np.int32), vertex_start=np.zeros(1, np.int64),
+        tri_start=np.zeros(1, np.int64), strips=np.zeros(0, np.uint32) if strips else None,
     )
 
 
