@@ -10,7 +10,7 @@ import argparse
 import importlib
 import sys
 
-from piste.errors import PisteError
+from piste.errors import MissingExtraError, PisteError
 
 #: subcommand -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -39,6 +39,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(importlib.import_module(args._module).run(args) or 0)
+    except MissingExtraError as exc:
+        print(f"piste {args.command} needs the '{exc.extra}' extra ({exc.module} is not installed): "
+              f"pip install 'piste[{exc.extra}]'", file=sys.stderr)
+        return 2
     except PisteError as exc:
         print(f"piste {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -36,3 +36,16 @@ class ConfigError(PisteError):
 
 class RenderError(PisteError):
     """OpenGL could not be set up or a draw failed."""
+
+
+class MissingExtraError(PisteError):
+    """An optional dependency is not installed: names the extra that brings it.
+
+    The CLI prints ``piste demo needs the 'gl' extra: pip install 'piste[gl]'``.
+    """
+
+    def __init__(self, extra: str, feature: str, module: str):
+        self.extra = extra
+        self.feature = feature
+        self.module = module
+        super().__init__(f"{feature} needs the '{extra}' extra ({module} is not installed): pip install 'piste[{extra}]'")

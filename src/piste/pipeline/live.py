@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 from piste.errors import PisteError
+from piste.extras import require
 
 __all__ = ["LiveScene", "run_headless", "run_window", "add_scene_arguments", "run_view"]
 
@@ -151,12 +152,7 @@ def run_headless(live: LiveScene, out_dir, frames: int | None = None, seconds: f
 
 def run_window(live: LiveScene, frames: int | None = None, screenshot=None) -> int:
     """Show the scene in a window (pyglet), reloading on change; Esc quits.  Returns frames drawn."""
-    try:
-        import pyglet
-    except ImportError:
-        from piste.errors import RenderError
-
-        raise RenderError("a window needs pyglet: `pip install pyglet` (or use --headless)") from None
+    pyglet = require("pyglet", "a window (`piste view`; or use --headless)")
     import numpy as np
 
     from piste.render.context import save_png

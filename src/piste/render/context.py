@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from piste.errors import RenderError
+from piste.extras import require as require_extra
 
 __all__ = ["create_context", "Offscreen", "save_png", "load_shader", "check_gl_error", "APT_PACKAGES"]
 
@@ -40,10 +41,7 @@ def create_context(backend: str = "egl", require: tuple[int, int] = (3, 3)):
     ------
     RenderError naming the packages to install when no context can be created.
     """
-    try:
-        import moderngl
-    except ImportError as exc:  # pragma: no cover - moderngl is a hard dependency
-        raise RenderError(f"moderngl is not installed ({exc}); run `pip install moderngl`") from None
+    moderngl = require_extra("moderngl", "OpenGL rendering")
     kwargs = {"require": require[0] * 100 + require[1] * 10}
     if backend:
         kwargs["backend"] = backend

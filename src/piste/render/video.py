@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from piste.errors import RenderError
+from piste.extras import require
 
 __all__ = ["VideoWriter"]
 
@@ -22,7 +23,7 @@ class VideoWriter:
     """
 
     def __init__(self, path, fps: int = 30, quality: float = 7.0):
-        import imageio.v2 as imageio
+        imageio = require("imageio.v2", "MP4 output")
 
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)

@@ -14,6 +14,7 @@ import time
 import numpy as np
 
 from piste.errors import RenderError
+from piste.extras import require
 
 __all__ = ["has_display", "run_window"]
 
@@ -33,12 +34,8 @@ def run_window(net, camera, size=(640, 448), track=None, track_half_width: float
     ``frames``: quit after that many frames (for tests and recordings); ``screenshot``: PNG path
     written when quitting (and by the P key).  Returns the number of frames drawn.
     """
-    try:
-        import pyglet
-
-        pyglet.options["debug_gl"] = False  # errors are checked by piste, once per frame
-    except ImportError:
-        raise RenderError("`piste view` needs pyglet: `pip install pyglet` (or use `piste demo` for images)") from None
+    pyglet = require("pyglet", "a window (`piste view`)")
+    pyglet.options["debug_gl"] = False  # errors are checked by piste, once per frame
     import moderngl
 
     from piste.render.context import Offscreen, save_png
