@@ -30,8 +30,10 @@ from pathlib import Path
 import numpy as np
 
 from piste.errors import FormatError, ValidationError
+from piste.formats.atomic import atomic_path, write_bytes_atomic
 from piste.lighting.lightmap import LightMap, assemble_atlas, atlas_layout, encode_half_bright, inputs_key, sample_points
-from piste.lighting.lights import Lights, light_terms, shade
+from piste.lighting.lights import Lights, default_lights, light_terms, shade
+from piste.lighting.shadows import shadow_visibility
 
 __all__ = [
     "BAKE_VERSION",
@@ -71,8 +73,6 @@ def _bake_chunk(chunk: int) -> tuple[int, np.ndarray, dict]:
     stats: dict = {}
     shadow = None
     if s["shadows"] and any(light.shadows for light in lights.direct):
-        from piste.lighting.shadows import shadow_visibility
-
         terms = light_terms(lights, pos, nrm)
         shadow = shadow_visibility(s["net"], lights, pos, nrm, terms, stats=stats)
     colors = shade(lights, pos, nrm, shadow)
@@ -168,8 +168,6 @@ def bake_lightmap(
         for k_, v_ in st.items():
             stats[k_] = stats.get(k_, 0) + v_
         if part is not None:
-            from piste.formats.atomic import write_bytes_atomic
-
             write_bytes_atomic(part / f"chunk_{c:05d}.json", json.dumps(st, sort_keys=True).encode())
             _save_npy_atomic(part / f"chunk_{c:05d}.npy", arr)
         n_done += 1
@@ -254,8 +252,6 @@ def _json_safe(x):
 
 
 def _save_npy_atomic(path: Path, arr: np.ndarray) -> None:
-    from piste.formats.atomic import atomic_path
-
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
             np.lib.format.write_array(fh, np.ascontiguousarray(arr), allow_pickle=False)
@@ -292,8 +288,6 @@ def write_lightmap(lm: LightMap, out_dir) -> dict:
     Returns ``{"png": path, "npz": path, "manifest": path}``.
     """
     import hashlib
-
-    from piste.formats.atomic import write_bytes_atomic
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -363,10 +357,10 @@ def lightmap_cache_dir() -> Path:
 
 
 def load_or_bake_default_lightmap(
-    net=None, lights: Lights | None = None, res: int = 8, shadows: bool = True, cache_dir=None, jobs: int = 0,
+    net, lights: Lights | None = None, res: int = 8, shadows: bool = True, cache_dir=None, jobs: int = 0,
     progress: bool = False,
 ) -> LightMap:
-    """The light map of ``net`` (default: the default course) under ``lights`` (default:
+    """The light map of ``net`` (e.g. :func:`piste.world.course.default_course`) under ``lights`` (default:
     :func:`~piste.lighting.lights.default_lights`), from the disk cache or baked and cached.
 
     The cache entry is ``cache_dir/<inputs hash>/`` (default :func:`lightmap_cache_dir`), so any
@@ -374,13 +368,7 @@ def load_or_bake_default_lightmap(
     ``lm.apply(net)`` (``lightmap_rect``) and upload ``lm.atlas`` (float) or ``lm.to_uint8()``
     (half-bright) as the light-map texture.
     """
-    if net is None:
-        from piste.world.course import default_course
-
-        net = default_course()
     if lights is None:
-        from piste.lighting.lights import default_lights
-
         lights = default_lights()
     cache = Path(cache_dir) if cache_dir is not None else lightmap_cache_dir()
     key = inputs_key(net, lights, res, 1, shadows, 64, BAKE_VERSION)

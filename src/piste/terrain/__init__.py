@@ -7,10 +7,12 @@ tessellate          net + per-edge levels -> TerrainMesh (uniform and glue patch
 TerrainMesh         positions, normals, uv, uv_lightmap, uv_projected, indices (+ strips)
 edge_levels         per-edge distance LOD (4, 6 or 8 vertices per edge)
 stats               the talk's statistics table for a net and camera
-default_course      the seeded default snowboard course (from piste.world.course)
 fit_heightfield     least-squares C0 (or C1/C2) net from a height field
 height_at           exact surface height at many (x, y)
 ray_intersect       exact ray/net intersection (RayHits), PatchBVH reusable across calls
+
+The default course is :func:`piste.world.course.default_course` (the world layer builds on the
+terrain, never the other way round).
 """
 
 from piste.terrain.bezier import BEZIER_M, blend_tables, evaluate, eval_power_form
@@ -20,11 +22,10 @@ from piste.terrain.stats import format_stats, stats
 from piste.terrain.tessellate import TerrainMesh, decode_strips, get_shape, tessellate
 from piste.terrain.fit import fit_error, fit_heightfield
 from piste.terrain.query import PatchBVH, RayHits, height_at, ray_intersect
-from piste.world.course import default_course
 
 __all__ = [
     "PatchNet", "TerrainMesh", "tessellate", "edge_levels", "visible_patches", "stats", "format_stats",
     "get_shape", "decode_strips",
     "BEZIER_M", "blend_tables", "evaluate", "eval_power_form",
-    "fit_heightfield", "fit_error", "height_at", "ray_intersect", "RayHits", "PatchBVH", "default_course",
+    "fit_heightfield", "fit_error", "height_at", "ray_intersect", "RayHits", "PatchBVH",
 ]

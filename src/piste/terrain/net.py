@@ -19,12 +19,18 @@ edges are exactly equal in both patches (the basis of bit-identical, crack-free 
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from piste.errors import FormatError, ValidationError
+from piste.formats.atomic import atomic_path
+from piste.formats.bpt import read_bpt
+from piste.terrain.bezier import evaluate
+from piste.terrain.heightfield import fit_control_points
+from piste.terrain.lod import edge_levels
 
 #: control-point indices (i, j) of each side, in the side's own direction: (4 sides, 4 points, 2)
 SIDE_INDEX = np.array(
@@ -275,22 +281,16 @@ class PatchNet:
     # ------------------------------------------------------------------ evaluation, LOD
     def evaluate(self, u, v, normals: bool = True):
         """Positions (and normals) of every patch at parameters ``(u[s], v[s])``: ``(n, s, 3)`` float64."""
-        from piste.terrain.bezier import evaluate
-
         return evaluate(self.control_points, u, v, normals=normals)
 
     def edge_levels(self, eye, **kwargs) -> np.ndarray:
         """Vertices per edge (4, 6 or 8) for a camera at ``eye``: ``(e,)`` int8.  See :func:`piste.terrain.lod.edge_levels`."""
-        from piste.terrain.lod import edge_levels
-
         return edge_levels(self, eye, **kwargs)
 
     # ------------------------------------------------------------------ I/O
     @classmethod
     def from_bpt(cls, path, **kwargs) -> "PatchNet":
         """Read Newell's patch text format (see :mod:`piste.formats.bpt`)."""
-        from piste.formats.bpt import read_bpt
-
         return cls(read_bpt(path), name=Path(path).name, **kwargs)
 
     @classmethod
@@ -318,15 +318,18 @@ class PatchNet:
 
     @classmethod
     def from_heightfield(cls, z, spacing, **kwargs) -> "PatchNet":
-        """Fit a C0 net to a height field by least squares (see :func:`piste.terrain.fit.fit_heightfield`)."""
-        from piste.terrain.fit import fit_heightfield
-
-        return fit_heightfield(z, spacing, **kwargs)
+        """Fit a C0 net to a height field by least squares (see :func:`piste.terrain.fit.fit_heightfield`;
+        the solve is :func:`piste.terrain.heightfield.fit_control_points`)."""
+        name = kwargs.pop("name", "heightfield")
+        grid = fit_control_points(z, spacing, **kwargs)
+        net = cls(grid.control_points, uv=grid.uv, tol=grid.tol, name=name)
+        net.grid_shape = grid.grid_shape  # patches per column and per row: patch py * Px + px
+        if kwargs.get("progress"):
+            print(f"fit_heightfield: PatchNet of {len(net)} patches", file=sys.stderr)
+        return net
 
     def save(self, path) -> None:
         """Write the net losslessly to ``path`` (``.npz``), atomically."""
-        from piste.formats.atomic import atomic_path
-
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez_compressed(

@@ -26,6 +26,10 @@ from functools import lru_cache
 
 import numpy as np
 
+from piste.errors import ValidationError
+from piste.terrain.fit import fit_heightfield
+from piste.terrain.query import height_at
+
 __all__ = ["default_course", "track_centerline", "course_heightfield", "COURSE_WIDTH", "COURSE_LENGTH"]
 
 COURSE_WIDTH = 400.0
@@ -138,8 +142,6 @@ def course_heightfield(seed: int = 0) -> tuple[np.ndarray, float, tuple[float, f
 
 @lru_cache(maxsize=8)
 def _course(seed: int):
-    from piste.terrain.fit import fit_heightfield
-
     z, spacing, origin = course_heightfield(seed)
     net = fit_heightfield(z, spacing, samples_per_patch=SAMPLES_PER_PATCH, origin=origin, name=f"default course (seed {seed})")
     return net
@@ -163,11 +165,7 @@ def track_centerline(seed: int = 0, n: int = 200) -> np.ndarray:
     -------
     (n, 3) float64: ``x = track_x(y)``, ``y`` from 10 m to 990 m, ``z`` from :func:`piste.terrain.query.height_at`.
     """
-    from piste.terrain.query import height_at
-
     if int(n) < 2:
-        from piste.errors import ValidationError
-
         raise ValidationError(f"track_centerline: n must be at least 2, got {n!r}")
     p = _params(int(seed))
     y = np.linspace(10.0, COURSE_LENGTH - 10.0, int(n))
