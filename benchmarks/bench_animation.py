@@ -12,7 +12,8 @@ import os
 import time
 from pathlib import Path
 
-from piste.character import compression_report, load_gltf, morph_report, morphs_to_null_bones
+from piste.character import compression_report, morph_report, morphs_to_null_bones
+from piste.formats import load_gltf
 from piste.character.compress import default_tolerances
 
 DATA = Path(os.environ.get("PISTE_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")) / "gltf"

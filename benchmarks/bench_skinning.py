@@ -23,7 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from piste.character import default_rider, load_gltf, palette
+from piste.character import default_rider, palette
+from piste.formats import load_gltf
 from piste.character.batches import batch_mesh, frame_bytes
 from piste.character.model import SkinnedMesh
 from piste.character.skinning import BlendedMesh, PostTransformMesh, skin_exact

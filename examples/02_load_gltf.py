@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from piste.character import compress_clip, load_gltf
+from piste.character import compress_clip
+from piste.formats import load_gltf
 
 
 def find_default() -> Path | None:

@@ -15,7 +15,7 @@ GLTF_FILES = sorted(p for p in GLTF_DIR.glob("*/*") if p.suffix in (".gltf", ".g
 
 @functools.lru_cache(maxsize=None)
 def _load_gltf_cached(path: str):
-    from piste.character import load_gltf
+    from piste.formats import load_gltf
 
     return load_gltf(path)
 

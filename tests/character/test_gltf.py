@@ -14,7 +14,8 @@ import pygltflib
 import pytest
 
 import piste.formats
-from piste.character import Model, load_gltf
+from piste.character import Model
+from piste.formats import load_gltf
 from piste.errors import FormatError, PisteError
 
 DATA = Path(os.environ.get("PISTE_DATA", Path(__file__).resolve().parents[3] / "shared" / "data"))

@@ -1,8 +1,7 @@
-"""Characters: glTF import, skeletons, clips, compression, skinning schemes, palettes, morphs.
+"""Characters: skeletons, clips, compression, skinning schemes, palettes, morphs.
 
 Public API
 ----------
-load_gltf(path) -> Model                      glTF 2.0 (.gltf + .bin / data URIs, .glb) import
 Model, Skeleton, Pose, Track, Clip, SkinnedMesh, Light, Camera   data classes (model.py)
 Skeleton.world_matrices(pose), Clip.sample(t, skeleton=None, loop=False, retarget=None)
 compress_clip(clip, skeleton, max_error, virtual_distance) -> CompressedClip   (compress.py)
@@ -15,12 +14,14 @@ make_batches, batch_mesh, check_batches, frame_bytes, Budget, BUDGETS           
 stripify, unstripify, strip_stats                                               (strips.py)
 make_lods, simplify_mesh, LOD                                                   (lod.py)
 default_rider(seed=0) -> Model                                                  (rider.py)
+
+glTF import is :func:`piste.formats.load_gltf` (the format layer builds these data classes; the
+character layer does not import the formats).
 """
 
 from piste.character.model import Camera, Clip, Light, Model, Pose, Skeleton, SkinnedMesh, Track
 from piste.character.compress import CompressedClip, clip_error, compress_clip, compression_report
 from piste.character.morph import NullBoneRig, blend_morphs, morph_report, morphs_to_null_bones, vertex_normals
-from piste.formats.gltf import load_gltf
 from piste.character.skinning import BlendedMesh, PostTransformMesh, skin, skinning_report
 from piste.character.palette import Palette, palette, quantize_weights
 from piste.character.batches import BUDGETS, Batch, Budget, batch_mesh, check_batches, frame_bytes, make_batches
@@ -43,7 +44,6 @@ __all__ = [
     "clip_error",
     "compress_clip",
     "compression_report",
-    "load_gltf",
     "morph_report",
     "morphs_to_null_bones",
     "vertex_normals",

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from piste.character.pose import Pose
+from piste.errors import ConfigError
 from piste.transforms import quat_conjugate, quat_multiply, quat_normalize, quat_slerp
 
 __all__ = ["sample_track", "sample_track_many", "clip_time", "sample_pose", "RETARGET_MODES"]
@@ -94,11 +96,7 @@ def sample_pose(clip, t: float, target, source=None, retarget: str = "none"):
     ``source`` is the skeleton the clip was made for (or None); ``retarget`` one of
     ``RETARGET_MODES`` (see :mod:`piste.character.model`).
     """
-    from piste.character.model import Pose
-
     if retarget not in RETARGET_MODES:
-        from piste.errors import ConfigError
-
         raise ConfigError(f"retarget must be one of {RETARGET_MODES}, got {retarget!r}")
     pose = target.rest_pose()
     g = _gather(clip, t, target)

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from piste.character.palette import palette as make_palette
+from piste.character.strips import RESTART
 from piste.errors import ConfigError, ValidationError
 
 __all__ = ["Budget", "BUDGETS", "Batch", "make_batches", "batch_mesh", "check_batches", "frame_bytes"]
@@ -237,8 +239,6 @@ def batch_mesh(mesh, budget="ps2", step: float = 0.25, max_bones: int = 3, palet
     """Batches of a skinned mesh for the blended-matrix scheme: each vertex references its
     palette entry (``palette`` or ``palette(mesh, step, max_bones)``)."""
     if palette is None:
-        from piste.character.palette import palette as make_palette
-
         palette = make_palette(mesh, step, max_bones)
     return make_batches(mesh.indices, palette.index, budget, **kw)
 
@@ -282,8 +282,6 @@ def frame_bytes(batches, matrix_bytes: int = 48, vertex_bytes: int = 32, strips=
     nb = len(batches)
     mats = sum(b.n_matrices for b in batches)
     if strips is not None:
-        from piste.character.strips import RESTART
-
         verts = sum(int(np.sum(np.asarray(s) != RESTART)) for s in strips)
     else:
         verts = sum(b.n_vertices for b in batches)

@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from piste.character.animation import sample_track_many
+from piste.character.model import Clip, Track
 from piste.character.skeleton import world_from_local
 from piste.errors import ValidationError
 from piste.transforms import compose_trs, quat_angle, quat_normalize, quat_slerp
@@ -172,8 +173,6 @@ class CompressedClip:
 
     def decompress(self):
         """The lossy clip as a :class:`piste.character.Clip` (same name, duration, skeleton)."""
-        from piste.character.model import Clip, Track
-
         grid = self.grid.astype(np.float64)
         tracks: dict = {}
         wtracks: dict = {}

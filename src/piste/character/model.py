@@ -36,6 +36,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from piste.character import animation as _anim
+from piste.character.morph import vertex_normals
+from piste.character.pose import Pose
 from piste.character.skeleton import depth_levels, topological_order, world_from_local
 from piste.errors import ValidationError
 from piste.transforms import compose_trs, invert_affine, quat_normalize
@@ -43,27 +45,6 @@ from piste.transforms import compose_trs, invert_affine, quat_normalize
 __all__ = ["Skeleton", "Pose", "Track", "Clip", "SkinnedMesh", "Light", "Camera", "Model", "INTERPOLATIONS"]
 
 INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
-
-
-@dataclass
-class Pose:
-    """Local transforms of every bone: ``translation (b,3)``, ``rotation (b,4)`` xyzw, ``scale (b,3)``, float64."""
-
-    translation: np.ndarray
-    rotation: np.ndarray
-    scale: np.ndarray
-
-    def __post_init__(self):
-        self.translation = np.asarray(self.translation, dtype=np.float64).reshape(-1, 3)
-        self.rotation = np.asarray(self.rotation, dtype=np.float64).reshape(-1, 4)
-        self.scale = np.asarray(self.scale, dtype=np.float64).reshape(-1, 3)
-
-    @property
-    def n_bones(self) -> int:
-        return self.translation.shape[0]
-
-    def copy(self) -> "Pose":
-        return Pose(self.translation.copy(), self.rotation.copy(), self.scale.copy())
 
 
 @dataclass
@@ -355,7 +336,6 @@ class SkinnedMesh:
         v = self.positions.shape[0]
         self.indices = np.ascontiguousarray(self.indices, dtype=np.uint32).reshape(-1, 3)
         if self.normals is None:
-            from piste.character.morph import vertex_normals
             self.normals = vertex_normals(self.positions, self.indices)
         self.normals = np.ascontiguousarray(self.normals, dtype=np.float32).reshape(v, 3)
         self.uv = np.zeros((v, 2), np.float32) if self.uv is None else np.ascontiguousarray(self.uv, np.float32).reshape(v, 2)

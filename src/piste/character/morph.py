@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from piste.errors import ValidationError
+
 __all__ = ["vertex_normals", "blend_morphs", "NullBoneRig", "morphs_to_null_bones", "morph_report"]
 
 
@@ -47,8 +49,6 @@ def blend_morphs(mesh, weights):
     w = np.asarray(weights, dtype=np.float32).reshape(-1)
     k = mesh.morph_positions.shape[0]
     if w.shape[0] != k:
-        from piste.errors import ValidationError
-
         raise ValidationError(f"mesh {mesh.name!r} has {k} morph targets, got {w.shape[0]} weights")
     v = mesh.positions.shape[0]
     if k == 0:
@@ -148,8 +148,6 @@ def morphs_to_null_bones(mesh, n_bones: int, max_influences: int = 2, iterations
     D = np.asarray(mesh.morph_positions, dtype=np.float64)  # (k, v, 3)
     k, v, _ = D.shape
     if k == 0:
-        from piste.errors import ValidationError
-
         raise ValidationError(f"mesh {mesh.name!r} has no morph targets")
     X_all = D.transpose(1, 0, 2).reshape(v, 3 * k)
     amax = np.abs(X_all).max(axis=1)

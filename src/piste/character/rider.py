@@ -27,7 +27,7 @@ import numpy as np
 
 from piste.character.model import Clip, Model, Pose, Skeleton, SkinnedMesh, Track
 from piste.character.morph import vertex_normals
-from piste.transforms import quat_multiply, quat_conjugate, quat_normalize, quat_rotate
+from piste.transforms import matrix_to_quat, quat_multiply, quat_conjugate, quat_normalize, quat_rotate
 
 __all__ = ["default_rider", "RIDER_BONES", "RIDER_CLIPS", "RIDER_MORPHS"]
 
@@ -548,8 +548,6 @@ def _solve_two_bone(root, target, l1, l2, hint):
 
 def _world_rot(sk, pose):
     """World rotation quaternions ``(b, 4)`` and positions ``(b, 3)`` of ``pose``."""
-    from piste.transforms import matrix_to_quat
-
     w = sk.world_matrices(pose)
     return quat_normalize(matrix_to_quat(w[:, :3, :3])), w[:, :3, 3]
 

@@ -47,6 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from piste.character.palette import Palette, _top_weights, palette as _palette
+from piste.character.palette import palette as make_palette
 from piste.errors import ConfigError, ValidationError
 
 __all__ = ["skin", "skin_exact", "PostTransformMesh", "BlendedMesh", "SCHEMES", "normalize_rows", "skinning_report"]
@@ -346,8 +347,6 @@ def skinning_report(model, steps=(0.1, 0.2, 0.25), max_bones: int = 3, times=Non
     Returns a list of dicts with keys ``step``, ``palette``, ``pos_max``, ``pos_mean``,
     ``normal_max_deg``, ``post_pos_max``, ``post_normal_max_deg``.
     """
-    from piste.character.palette import palette as make_palette
-
     sk = model.skeleton
     meshes = [m for m in model.meshes if m.skinned]
     if sk is None or not meshes:
