@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from piste.errors import FormatError
+from piste.formats import limits, safe_io
 
 __all__ = ["load_gltf"]
 
@@ -59,9 +60,10 @@ def _decode_data_uri(uri: str) -> bytes:
 class _Reader:
     """Validated access to one glTF document's buffers, accessors and images."""
 
-    def __init__(self, path: Path, g):
+    def __init__(self, path: Path, g, allow_paths=()):
         self.path = path
         self.g = g
+        self.allow_paths = tuple(allow_paths)  # folders besides the model's own that URIs may name
         self._buffers: dict[int, bytes] = {}
         self._accessors: dict[int, np.ndarray] = {}
 
@@ -90,22 +92,26 @@ class _Reader:
                     data = None
             if data is None:
                 raise self.err(field, "has no uri and the file has no GLB binary chunk")
+        elif not isinstance(b.uri, str):
+            raise self.err(field + ".uri", f"expected a string, got {b.uri!r}")
         elif b.uri.startswith("data:"):
-            try:
-                data = _decode_data_uri(b.uri)
-            except Exception as e:
-                raise self.err(field + ".uri", f"bad data URI: {e}") from None
-        else:
-            f = self.path.parent / urllib.parse.unquote(b.uri)
-            try:
-                data = f.read_bytes()
-            except OSError as e:
-                raise self.err(field + ".uri", f"cannot read buffer file {str(f)!r}: {e.strerror or e}") from None
+            data = safe_io.decode_data_uri(b.uri, self._byte_cap(b.byteLength, field), self.path, field + ".uri")
+        else:  # confined to the model's folder (or allow_paths), regular files only, byteLength bytes
+            f = safe_io.resolve_reference(self.path, b.uri, self.allow_paths, field + ".uri")
+            data = safe_io.read_regular(f, safe_io.MAX_BUFFER_BYTES, self.path, field + ".uri",
+                                        length=self._byte_cap(b.byteLength, field), what="buffer file",
+                                        length_field=field + ".byteLength")
         data = bytes(data)
         if b.byteLength is None or len(data) < b.byteLength:
             raise self.err(field + ".byteLength", f"declares {b.byteLength} bytes but only {len(data)} are present")
         self._buffers[i] = data
         return data
+
+    def _byte_cap(self, n, field: str) -> int:
+        """A buffer's declared ``byteLength``, checked to be an integer within the cap before reading."""
+        if isinstance(n, bool) or not isinstance(n, int) or not 0 <= n <= safe_io.MAX_BUFFER_BYTES:
+            raise self.err(field + ".byteLength", f"expected a byte count in 0..{safe_io.MAX_BUFFER_BYTES}, got {n!r}")
+        return n
 
     def buffer_view(self, i: int, field: str):
         bv = self.item("bufferViews", i, field)
@@ -215,17 +221,13 @@ class _Reader:
         img = self.item("images", i, field)
         ifield = f"images[{i}]"
         if img.uri is not None:
+            if not isinstance(img.uri, str):
+                raise self.err(ifield + ".uri", f"expected a string, got {img.uri!r}")
             if img.uri.startswith("data:"):
-                try:
-                    data = _decode_data_uri(img.uri)
-                except Exception as e:
-                    raise self.err(ifield + ".uri", f"bad data URI: {e}") from None
-            else:
-                f = self.path.parent / urllib.parse.unquote(img.uri)
-                try:
-                    data = f.read_bytes()
-                except OSError as e:
-                    raise self.err(ifield + ".uri", f"cannot read image file {str(f)!r}: {e.strerror or e}") from None
+                data = safe_io.decode_data_uri(img.uri, safe_io.MAX_IMAGE_BYTES, self.path, ifield + ".uri")
+            else:  # confined to the model's folder (or allow_paths), regular files only, size-capped
+                f = safe_io.resolve_reference(self.path, img.uri, self.allow_paths, ifield + ".uri")
+                data = safe_io.read_regular(f, safe_io.MAX_IMAGE_BYTES, self.path, ifield + ".uri", what="image file")
         elif img.bufferView is not None:
             bv, buf, off, ln = self.buffer_view(img.bufferView, ifield + ".bufferView")
             data = buf[off:off + ln]
@@ -233,6 +235,9 @@ class _Reader:
             raise self.err(ifield, "has neither uri nor bufferView")
         try:
             with Image.open(io.BytesIO(data)) as im:
+                if im.width * im.height > safe_io.MAX_IMAGE_PIXELS:  # header only: checked before decoding
+                    raise ValueError(f"{im.width} x {im.height} pixels, more than the limit of "
+                                     f"{safe_io.MAX_IMAGE_PIXELS}")
                 return np.asarray(im.convert("RGBA"), dtype=np.uint8).copy()
         except Exception as e:
             raise self.err(ifield, f"cannot decode image: {e}") from None
@@ -352,9 +357,12 @@ def _skin_attributes(r: _Reader, attrs, nv: int, n_joints: int, field: str):
     return j, w
 
 
-def load_gltf(path) -> "Model":  # noqa: F821 - forward reference
+def load_gltf(path, allow_paths=()) -> "Model":  # noqa: F821 - forward reference
     """Load a glTF 2.0 file (``.gltf`` with external/embedded buffers, or ``.glb``) as a Model.
 
+    Buffer and image URIs are read only inside the model's folder, or inside one of the folders
+    ``allow_paths`` names (see :mod:`piste.formats.safe_io`); sizes and counts are capped
+    (:mod:`piste.formats.limits`) before anything is allocated.
     Raises FormatError naming the file and the glTF field on malformed input.
     See the module docstring for what is imported and how.
     """
@@ -367,13 +375,14 @@ def load_gltf(path) -> "Model":  # noqa: F821 - forward reference
     path = Path(path)
     if not path.is_file():
         raise FormatError(path, "no such file")
+    limits.precheck_gltf(path)  # file size, GLB chunks, JSON nesting and array counts, before pygltflib
     try:
         g = pygltflib.GLTF2().load(str(path))
     except Exception as e:
         raise FormatError(path, f"not a readable glTF 2.0 file ({type(e).__name__}: {e})") from None
     if g is None:
         raise FormatError(path, "not a readable glTF 2.0 file")
-    r = _Reader(path, g)
+    r = _Reader(path, g, allow_paths)
     nodes = g.nodes or []
     nn = len(nodes)
 
