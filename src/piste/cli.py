@@ -20,6 +20,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "view": ("piste.commands.view", "fly over the default course in a window (LOD follows the camera)"),
     "build": ("piste.commands.build", "pre-process a scene (.toml) into one .piste bundle (cached, byte-identical)"),
     "render": ("piste.commands.render", "render a scene (.toml or .piste) from one of its cameras (PNG, MP4)"),
+    "export": ("piste.commands.export", "export a scene (.toml or .piste) to glTF (.glb/.gltf): terrain, riders, objects, lights"),
 }
 
 
