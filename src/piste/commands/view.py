@@ -1,13 +1,26 @@
-"""``piste view``: fly over the default course in a window; the LOD follows the camera live.
+"""``piste view``: the fast in-game preview of the completed scene in a window.
+
+Without SCENE: the default course with its six riders, objects, projected shadows, specular, the
+light map and the sky (``--terrain-only`` for the terrain alone); the camera flies free from
+``--start`` along the track, or chases a rider (``--follow N``; F toggles).  With SCENE (a
+``.toml`` or ``.piste``): the scene's bundle, rebuilt and reloaded when its files change (see
+:mod:`piste.pipeline.live`).  Keys: see :data:`piste.render.window.HELP`.
+
+Scripted runs: ``--frames N`` / ``--exit-after S`` quit by themselves, ``--state FILE`` writes the
+camera, frames and riders drawn as JSON on exit, ``--benchmark N`` renders N frames along a fixed
+path (the track for ``--terrain-only``, chasing rider 0 otherwise) and prints fps.
 
 Without a display it says so and renders one frame off-screen instead (``--out``).
 """
 
 from __future__ import annotations
 
+import sys
+
 
 def add_arguments(parser) -> None:
     from piste.commands.demo import _positive, _size
+    from piste.pipeline.live import add_scene_arguments
 
     parser.add_argument("--size", nargs=2, type=_size, default=(960, 672), metavar=("W", "H"),
                         help="window size (default: 960 672)")
@@ -17,19 +30,61 @@ def add_arguments(parser) -> None:
     parser.add_argument("--lighting", choices=("baked", "placeholder", "none"), default="baked",
                         help="light-map atlas (see `piste demo --help`)")
     parser.add_argument("--debug", choices=("lod",), help="start in the LOD view (L toggles)")
+    parser.add_argument("--terrain-only", action="store_true", help="the terrain alone (no riders, objects, shadows)")
+    parser.add_argument("--follow", type=int, metavar="N", help="start chasing rider N (F toggles, N next rider)")
+    parser.add_argument("--no-overlay", action="store_true", help="start without the statistics overlay (H toggles)")
     parser.add_argument("--frames", type=_positive, help="quit after N frames (for scripted runs)")
+    parser.add_argument("--exit-after", type=float, metavar="S", help="quit after S seconds (for scripted runs)")
+    parser.add_argument("--state", metavar="FILE", help="write the camera, frames and riders drawn as JSON on exit")
+    parser.add_argument("--benchmark", type=_positive, metavar="N",
+                        help="render N frames along a fixed path without input and print fps (needs a display)")
     parser.add_argument("--out", default="out/view.png",
                         help="screenshot on quit with --frames, or the headless fallback's image (default: out/view.png)")
+    add_scene_arguments(parser)
+
+
+def _course_view_factory(args, net, line, atlas):
+    """``ctx -> view`` for the default course (terrain only or the whole scene)."""
+    from piste.render.window import SceneView, TerrainView
+    from piste.world.course import TRACK_HALF_WIDTH
+
+    def make(ctx):
+        if args.terrain_only:
+            from piste.render.frame import TerrainRenderer
+
+            return TerrainView(TerrainRenderer(net, size=tuple(args.size), ctx=ctx, lightmap=atlas, track=line,
+                                               track_half_width=TRACK_HALF_WIDTH))
+        return SceneView(_scene_renderer(args, net, line, atlas, ctx))
+
+    return make
+
+
+def _scene_renderer(args, net, line, atlas, ctx=None):
+    import numpy as np
+
+    from piste.lighting.lights import default_lights
+    from piste.render.scene_renderer import SceneRenderer
+    from piste.world.course import TRACK_HALF_WIDTH
+    from piste.world.objects import place_objects
+    from piste.world.scene import Scene
+
+    lights = default_lights()
+    objs = place_objects(net, line, lights, seed=args.seed, track_half_width=TRACK_HALF_WIDTH)
+    length = float(np.linalg.norm(np.diff(line[:, :2], axis=0), axis=1).sum())
+    start = min(max(float(args.start), 0.0) * length, max(length - 120.0, 0.0))
+    scene = Scene(net, line, lights, objects=objs, start=start)
+    return SceneRenderer(scene, size=tuple(args.size), ctx=ctx, lightmap=atlas)
 
 
 def run(args) -> int:
-    import sys
+    if getattr(args, "scene", None):
+        from piste.pipeline.live import run_view
 
-    from piste.render.window import has_display, run_window
-    from piste.world.camera import track_camera
-    from piste.world.course import TRACK_HALF_WIDTH, default_course, track_centerline
-
+        return run_view(args)
     from piste.commands.demo import lightmap_for
+    from piste.render.window import HELP, ViewOptions, has_display, print_benchmark, run_window
+    from piste.world.camera import track_camera
+    from piste.world.course import default_course, track_centerline
 
     net = default_course(args.seed)
     line = track_centerline(args.seed)
@@ -38,39 +93,40 @@ def run(args) -> int:
     cam = track_camera(line, args.start, aspect=w / h)
     if not has_display():
         from piste.render import TerrainRenderer, save_png
+        from piste.world.course import TRACK_HALF_WIDTH
 
         print("piste view: no display (DISPLAY / WAYLAND_DISPLAY unset), so no window; rendering one frame "
               f"off-screen to {args.out} instead (run under a desktop or `xvfb-run piste view`)", file=sys.stderr)
-        r = TerrainRenderer(net, size=(w, h), lightmap=atlas, track=line, track_half_width=TRACK_HALF_WIDTH)
-        try:
-            frame = r.render(cam, lightmap_mode=args.lightmap, debug=args.debug)
-        finally:
-            r.release()
-        print(f"wrote {save_png(args.out, frame.image[..., :3])}")
+        if args.terrain_only:
+            r = TerrainRenderer(net, size=(w, h), lightmap=atlas, track=line, track_half_width=TRACK_HALF_WIDTH)
+            try:
+                image = r.render(cam, lightmap_mode=args.lightmap, debug=args.debug).image
+            finally:
+                r.release()
+        else:
+            r = _scene_renderer(args, net, line, atlas)
+            try:
+                image = r.render(0.0, camera=None if args.follow is not None else cam, lightmap_mode=args.lightmap,
+                                 debug=args.debug).image
+            finally:
+                r.release()
+        print(f"wrote {save_png(args.out, image[..., :3])}")
         return 0
-    print("piste view: W/S/A/D fly, Q/E down/up, Shift fast, arrows or mouse drag look, "
-          "L LOD view, M light-map mode, O LOD on/off, P screenshot, Esc quit", file=sys.stderr)
-    n = run_window(net, cam, size=(w, h), lightmap=atlas, track=line, track_half_width=TRACK_HALF_WIDTH, lightmap_mode=args.lightmap,
-                   debug=args.debug, frames=args.frames, screenshot=args.out if args.frames else None)
-    print(f"{n} frames" + (f"; wrote {args.out}" if args.frames else ""))
+    opts = ViewOptions(lightmap_mode=args.lightmap, debug=args.debug, follow=args.follow,
+                       overlay=not args.no_overlay)
+    make = _course_view_factory(args, net, line, atlas)
+    if args.benchmark:
+        cams = None
+        if args.terrain_only:
+            import numpy as np
+
+            path = [track_camera(line, f, aspect=w / h) for f in np.linspace(0.1, 0.9, args.benchmark + 5)]
+            cams = lambda i: path[i]  # noqa: E731
+        st = run_window(make, cam, size=(w, h), opts=opts, benchmark=args.benchmark, benchmark_camera=cams)
+        print_benchmark(st, "terrain only" if args.terrain_only else "full scene, chasing rider 0", (w, h))
+        return 0
+    print(f"piste view: {HELP}", file=sys.stderr)
+    st = run_window(make, cam, size=(w, h), opts=opts, frames=args.frames, exit_after=args.exit_after,
+                    screenshot=args.out if (args.frames or args.exit_after) else None, state=args.state)
+    print(f"{st['frames']} frames" + (f"; wrote {args.out}" if (args.frames or args.exit_after) else ""))
     return 0
-
-
-# --- the live scene preview (issue 7, piste.pipeline.live): `piste view SCENE [--headless --out DIR]`
-# rebuilds a scene (.toml) when its files change and reloads it; without SCENE, the course fly-over above.
-_add_course_arguments, _run_course = add_arguments, run
-
-
-def add_arguments(parser) -> None:  # noqa: F811
-    _add_course_arguments(parser)
-    from piste.pipeline.live import add_scene_arguments
-
-    add_scene_arguments(parser)
-
-
-def run(args) -> int:  # noqa: F811
-    if getattr(args, "scene", None):
-        from piste.pipeline.live import run_view
-
-        return run_view(args)
-    return _run_course(args)

@@ -17,6 +17,8 @@ API
 LiveScene(path, bundle=None, cache_dir=None, size=None, camera=None, ctx=None)
     ``.poll() -> bool`` (rebuilt and reloaded?), ``.render(t) -> image``, ``.last_error``, ``.last_build``
 run_headless(live, out_dir, frames=None, seconds=None, interval=0.1, log=print) -> list of PNG paths
+LiveView(live)                 the fly-through window's view of a LiveScene (piste.render.window)
+run_window(live_factory, camera, size, **window_kw) -> state dict
 add_scene_arguments(parser), run_view(args)    the ``piste view SCENE`` hook (see commands/view.py)
 """
 
@@ -29,7 +31,7 @@ from pathlib import Path
 from piste.errors import PisteError
 from piste.extras import require
 
-__all__ = ["LiveScene", "run_headless", "run_window", "add_scene_arguments", "run_view"]
+__all__ = ["LiveScene", "LiveView", "run_headless", "run_window", "add_scene_arguments", "run_view"]
 
 
 def _stamp(paths) -> dict:
@@ -150,48 +152,94 @@ def run_headless(live: LiveScene, out_dir, frames: int | None = None, seconds: f
     return written
 
 
-def run_window(live: LiveScene, frames: int | None = None, screenshot=None) -> int:
-    """Show the scene in a window (pyglet), reloading on change; Esc quits.  Returns frames drawn."""
-    pyglet = require("pyglet", "a window (`piste view`; or use --headless)")
-    import numpy as np
+class LiveView:
+    """The window's view of a :class:`LiveScene` (:mod:`piste.render.window`): the bundle's scene
+    drawn straight into the window, reloaded in place; V switches the bundle's visibility sets."""
 
-    from piste.render.context import save_png
+    def __init__(self, live: LiveScene):
+        self.live = live
+        self.ctx = None
+        self._hook()
 
-    w, h = live.preview.size
-    window = pyglet.window.Window(w, h, caption=f"piste view {live.path.name}", vsync=False)
-    state = {"frames": 0, "t0": time.perf_counter(), "img": None}
+    def _hook(self) -> None:
+        p = self.live.preview
+        self._with_vis = p.terrain.__dict__.get("visible", p.terrain.visible)
+        self._frustum = type(p.terrain).visible.__get__(p.terrain)
 
-    def check(dt):
+    @property
+    def terrain(self):
+        return self.live.preview.terrain
+
+    @property
+    def riders(self) -> int:
+        p = self.live.preview
+        return len(p.scene.riders) if p.renderer is not None else 0
+
+    @property
+    def has_visibility(self) -> bool:
+        return self.live.bundle.visibility is not None
+
+    def attach(self, ctx) -> None:
+        from piste.render.window import _wrap_screen
+
+        self.ctx = ctx
+        _wrap_screen(self.live.preview.terrain, ctx)
+
+    def poll(self):
+        """Rebuild/reload on change; a message for the log or None."""
+        live = self.live
         if live.poll():
-            print(f"reloaded ({', '.join(live.last_build.rebuilt) if live.last_build else 'bundle'})", file=sys.stderr)
-        elif live.last_error is not None:
-            print(f"error (keeping the last good scene): {live.last_error}", file=sys.stderr)
+            self._hook()
+            self.attach(self.ctx)
+            return f"reloaded ({', '.join(live.last_build.rebuilt) if live.last_build else 'bundle'})"
+        if live.last_error is not None:
+            msg = f"error (keeping the last good scene): {live.last_error}"
             live.last_error = None
+            return msg
+        return None
 
-    @window.event
-    def on_draw():
-        img = live.render(time.perf_counter() - state["t0"])
-        state["img"] = img
-        data = np.ascontiguousarray(img[::-1]).tobytes()
-        pyglet.image.ImageData(w, h, "RGB", data).blit(0, 0)
-        state["frames"] += 1
-        if frames is not None and state["frames"] >= frames:
-            pyglet.app.exit()
+    def draw(self, camera, t, opts):
+        from piste.render.window import SceneView, ViewFrame, riders_in_view
 
-    @window.event
-    def on_key_press(symbol, modifiers):
-        if symbol == pyglet.window.key.ESCAPE:
-            pyglet.app.exit()
+        p = self.live.preview
+        p.terrain.visible = self._with_vis if opts.visibility else self._frustum
+        if p.renderer is not None:
+            p.scene.visibility = self.live.bundle.visibility if opts.visibility else None
+            return SceneView(p.renderer).draw(camera, t, opts)
+        from piste.render.frame import DEFAULT_FOG_DENSITY
+        from piste.render.sky_pass import HORIZON
 
-    pyglet.clock.schedule_interval(check, 0.25)
-    try:
-        pyglet.app.run(interval=1 / 30)
-    finally:
-        pyglet.clock.unschedule(check)
-        window.close()
-    if screenshot and state["img"] is not None:
-        save_png(screenshot, state["img"])
-    return state["frames"]
+        mesh = p.terrain.prepare(camera, lod=opts.lod)
+        frame = p.terrain.draw(camera, mesh, lightmap_mode=opts.lightmap_mode, debug=opts.debug, read=False)
+        extra = {}
+        if p.objects is not None:
+            vis = p.objects.objects.visible(camera.frustum_planes(), max_distance=camera.far, eye=camera.eye)
+            if opts.visibility and self.live.bundle.visibility is not None and len(vis):
+                keep = self.live.bundle.visibility.objects_at(camera.eye)
+                if keep is not None:
+                    vis = vis[keep[vis]]
+            p.objects.draw(camera.view_projection(), camera.eye, vis, fog=(*HORIZON, DEFAULT_FOG_DENSITY))
+            extra["objects"] = int(len(vis))
+        return ViewFrame(camera, frame, extra)
+
+    def release(self) -> None:
+        self.live.release()
+
+
+def run_window(live_factory, camera=None, size=(640, 448), caption="piste view", **kw) -> dict:
+    """Show a live scene in the fly-through window (:func:`piste.render.window.run_window`),
+    reloading on change.  ``live_factory(ctx) -> LiveScene`` (the scene's GL objects live in the
+    window's context).  Returns the window's state dict."""
+    from piste.render import window
+
+    holder = {}
+
+    def make(ctx):
+        holder["view"] = LiveView(live_factory(ctx))
+        return holder["view"]
+
+    return window.run_window(make, camera, size=size, caption=caption,
+                             poll=lambda: holder["view"].poll() if "view" in holder else None, **kw)
 
 
 # ----------------------------------------------------------------------------- the CLI hook
@@ -210,9 +258,9 @@ def run_view(args) -> int:
     from piste.render.window import has_display
 
     size = tuple(args.size) if getattr(args, "size", None) else None
-    live = LiveScene(args.scene, size=size, camera=args.camera)
-    try:
-        if args.headless or not has_display():
+    if args.headless or not has_display():
+        live = LiveScene(args.scene, size=size, camera=args.camera)
+        try:
             out = Path(args.out)
             if out.suffix.lower() == ".png":  # view's own default is a PNG path: use a folder beside it
                 out = out.with_suffix("")
@@ -221,8 +269,30 @@ def run_view(args) -> int:
             files = run_headless(live, out, frames=args.frames, seconds=args.watch_seconds)
             print(f"{len(files)} frame(s) in {out}")
             return 0
-        n = run_window(live, frames=args.frames, screenshot=args.out if args.frames else None)
-        print(f"{n} frames")
+        finally:
+            live.release()
+    from piste.render.window import HELP, ViewOptions, print_benchmark
+
+    path = Path(args.scene)
+
+    def factory(ctx):
+        return LiveScene(path, size=size, camera=args.camera, ctx=ctx)
+
+    def start_camera(view):
+        from piste.pipeline.preview import camera_at
+
+        return camera_at(view.live.bundle, args.camera)
+
+    size = size or (640, 448)
+    opts = ViewOptions(lightmap_mode=args.lightmap, debug=args.debug, follow=args.follow,
+                       overlay=not args.no_overlay)
+    seconds = args.exit_after if args.exit_after is not None else args.watch_seconds
+    if args.benchmark:
+        st = run_window(factory, start_camera, size=size, opts=opts, benchmark=args.benchmark)
+        print_benchmark(st, f"{path.name}, " + ("chasing rider 0" if st.get("follow_used") else "scene camera"), size)
         return 0
-    finally:
-        live.release()
+    print(f"piste view: {HELP}", file=sys.stderr)
+    st = run_window(factory, start_camera, size=size, caption=f"piste view {path.name}", opts=opts, frames=args.frames,
+                    exit_after=seconds, screenshot=args.out if (args.frames or seconds) else None, state=args.state)
+    print(f"{st['frames']} frames")
+    return 0

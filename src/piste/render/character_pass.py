@@ -201,7 +201,8 @@ class CharacterPass:
             self.lods[l].write(pos, nrm)
             self.riders[l] = np.asarray(idx)
 
-    def draw(self, vp, eye, lights, sun=None, fog=None, specular: bool = True, light_only: bool = False) -> None:
+    def draw(self, vp, eye, lights, sun=None, fog=None, specular: bool = True, light_only: bool = False,
+             base: bool = True) -> None:
         """Draw the uploaded riders into the bound framebuffer (depth test on).
 
         Parameters
@@ -211,6 +212,7 @@ class CharacterPass:
         sun : DirectionalLight for the specular pass (None: no specular pass)
         fog : None or (r, g, b, density per metre)
         light_only : draw the per-vertex light without the texture (tests)
+        base : draw the lit base pass (False: only the specular pass, over a base drawn before)
         """
         import moderngl
 
@@ -226,7 +228,8 @@ class CharacterPass:
         p["u_eye"].value = eye
         p["u_fog"].value = fog
         p["u_mode"].value = 1 if light_only else 0
-        self._draw_all("base", p, lights)
+        if base:
+            self._draw_all("base", p, lights)
         if not specular or sun is None or light_only:
             return
         q = self.prog_spec

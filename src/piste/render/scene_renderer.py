@@ -93,9 +93,12 @@ class SceneRenderer:
         return self.terrain.size
 
     def render(self, t: float, read: bool = True, fog: float | None = None, camera=None, lod: bool = True,
-               lightmap_mode: str = "modulate", light_only: bool = False) -> SceneImage:
+               lightmap_mode: str = "modulate", light_only: bool = False, debug: str | None = None,
+               count_rider_pixels: bool = False) -> SceneImage:
         """Render the scene at ``t`` seconds.  ``camera`` overrides the chase camera; ``light_only``
-        draws riders and objects with their per-vertex light only (tests)."""
+        draws riders and objects with their per-vertex light only (tests); ``debug`` is the terrain's
+        debug view (e.g. "lod"); ``count_rider_pixels`` counts the riders' pixels that pass the depth
+        test (an occlusion query: ``stats["rider_pixels"]``)."""
         from piste.render.frame import DEFAULT_FOG_DENSITY
         from piste.render.shadow_pass import shadow_matrices, shadow_patches
         from piste.render.sky_pass import HORIZON
@@ -123,7 +126,8 @@ class SceneRenderer:
         if self.shadows is not None and sun is not None:
             self.shadows.render_casters(sf.shadow[0], self.scene.lods[-1].mesh.indices, light_vp)
         t4 = time.perf_counter()
-        frame = self.terrain.draw(cam, mesh, lightmap_mode=lightmap_mode, fog=fog, read=False, timings=tt)
+        frame = self.terrain.draw(cam, mesh, lightmap_mode=lightmap_mode, fog=fog, read=False, timings=tt,
+                                  debug=debug)
         t5 = time.perf_counter()
         vp = frame_vp = cam.with_aspect(w, h).view_projection()
         fog_rgba = (*HORIZON, float(fog)) if fog else None
@@ -131,8 +135,14 @@ class SceneRenderer:
             self.shadows.draw_receivers(mesh, patches, frame_vp)
         if self.objects is not None:
             self.objects.draw(vp, cam.eye, sf.objects_visible, fog=fog_rgba, light_only=light_only)
-        self.characters.draw(vp, cam.eye, sf.rider_lights, sun=sun if self.specular else None, fog=fog_rgba,
-                             light_only=light_only)
+        query = self.ctx.query(samples=True) if count_rider_pixels else None
+        if query is not None:
+            with query:
+                self.characters.draw(vp, cam.eye, sf.rider_lights, sun=None, fog=fog_rgba, light_only=light_only)
+        if query is None or (self.specular and not light_only):
+            # with the query the base pass is drawn inside it; the specular pass adds on top
+            self.characters.draw(vp, cam.eye, sf.rider_lights, sun=sun if self.specular else None, fog=fog_rgba,
+                                 light_only=light_only, base=query is None)
         self.ctx.finish()
         t6 = time.perf_counter()
         image = self.terrain.target.read() if read else None
@@ -161,6 +171,8 @@ class SceneRenderer:
             "terrain_patches": frame.patches,
             "terrain_triangles": frame.triangles,
         }
+        if query is not None:
+            stats["rider_pixels"] = int(query.samples)
         frame.image = image
         return SceneImage(image, frame, sf, patches, stats, tm)
 

@@ -1,22 +1,46 @@
-"""``piste view``: an interactive window (pyglet + moderngl) flying over the terrain.
+"""``piste view``: the fast in-game preview, an interactive window (pyglet + moderngl).
 
-The frame is rendered exactly as off-screen (LOD, cull and tessellation follow the camera every
-frame), straight into the window's framebuffer.  Keys: W/S/A/D fly, Q/E down/up, Shift fast, arrows or mouse
-drag look, L LOD view, M light-map mode (modulate / ps2), O LOD on/off, P screenshot, Esc quit.
+Every frame is rendered exactly as off-screen (terrain LOD, culling and tessellation follow the
+camera; riders animate, skin and light; objects, projected shadows, specular, light maps, sky),
+straight into the window's framebuffer, then the overlay (the talk's statistics table and a live
+plot of the LOD mix and frame times) is blended over the top-left corner.
+
+Keys (:data:`HELP`): W/S/A/D fly, Q/E down/up, Shift (held) 4x faster, arrows or mouse drag look,
+F follow a rider / fly free, N next rider, L LOD colour view, M light map modulate / ps2, O LOD on/off,
+V visibility sets on/off, H overlay, Space pause time, P screenshot, Esc quit.
+
+Key handling: the window keeps its own set of held keys, fed by its own ``on_key_press`` /
+``on_key_release`` handlers (pushed as one handler frame, so nothing replaces anything; unhandled
+keys fall through to pyglet's defaults) and cleared when the window loses focus.
+
+What is drawn comes from a *view* object (:class:`TerrainView` for the terrain alone,
+:class:`SceneView` for a :class:`~piste.render.scene_renderer.SceneRenderer`; ``piste view SCENE``
+adds a live-reloading one in :mod:`piste.pipeline.live`) made by a factory given the window's GL
+context.  A view has ``riders`` (how many can be followed), ``has_visibility``,
+``attach(ctx)`` (draw into the window), ``draw(camera, t, opts) -> ViewFrame``, ``release()``.
+
+``run_window(..., state=PATH)`` writes a JSON record on exit (camera at start and end, frames,
+riders and rider pixels drawn, fps) -- what the tests under Xvfb check; ``benchmark=N`` renders N
+frames along a fixed path without input and returns the frame times.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 import time
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from piste.errors import RenderError
-from piste.extras import require
 
-__all__ = ["has_display", "run_window"]
+__all__ = ["has_display", "run_window", "ViewOptions", "ViewFrame", "TerrainView", "SceneView", "HELP",
+           "riders_in_view", "print_benchmark"]
+
+HELP = ("W/S/A/D fly, Q/E down/up, Shift fast, arrows or mouse drag look, F follow a rider, N next rider, "
+        "L LOD view, M modulate/ps2, O LOD on/off, V visibility on/off, H overlay, Space pause, P screenshot, Esc quit")
 
 
 def has_display() -> bool:
@@ -26,106 +50,350 @@ def has_display() -> bool:
     return True
 
 
-def run_window(net, camera, size=(640, 448), track=None, track_half_width: float = 16.0, lightmap="placeholder",
-               lightmap_mode: str = "modulate", debug: str | None = None, lod: bool = True,
-               frames: int | None = None, screenshot=None) -> int:
-    """Open a window and fly ``camera`` (a :class:`piste.world.camera.Camera`) over ``net``.
+@dataclass
+class ViewOptions:
+    """The toggles of the preview."""
 
-    ``frames``: quit after that many frames (for tests and recordings); ``screenshot``: PNG path
-    written when quitting (and by the P key).  Returns the number of frames drawn.
+    lightmap_mode: str = "modulate"
+    debug: str | None = None
+    lod: bool = True
+    visibility: bool = True
+    follow: int | None = None
+    overlay: bool = True
+    paused: bool = False
+
+
+@dataclass
+class ViewFrame:
+    """What a view drew: the camera used, the terrain :class:`~piste.render.Frame`, extra counts."""
+
+    camera: object
+    terrain: object
+    extra: dict = field(default_factory=dict)
+
+
+def riders_in_view(camera, anchors, radius: float = 1.2) -> int:
+    """How many rider anchors ``(n, 3)`` (spheres of ``radius`` around their middles) meet the view frustum."""
+    a = np.asarray(anchors, dtype=np.float64).reshape(-1, 3)
+    if not len(a):
+        return 0
+    planes = np.asarray(camera.frustum_planes(), dtype=np.float64)  # (6, 4): n . x + d >= 0 inside
+    centre = a + np.array([0.0, 0.0, 0.9])
+    d = centre @ planes[:, :3].T + planes[:, 3]
+    return int(np.count_nonzero((d >= -radius).all(axis=1)))
+
+
+def _wrap_screen(renderer_terrain, ctx) -> None:
+    from piste.render.context import Offscreen
+
+    renderer_terrain.target.release()
+    renderer_terrain.target = Offscreen.wrap(ctx, ctx.screen)
+
+
+class TerrainView:
+    """The terrain alone (a :class:`piste.render.TerrainRenderer`)."""
+
+    riders = 0
+    has_visibility = False
+
+    def __init__(self, renderer):
+        self.renderer = renderer
+        self.terrain = renderer
+
+    def attach(self, ctx) -> None:
+        _wrap_screen(self.renderer, ctx)
+
+    def draw(self, camera, t: float, opts: ViewOptions) -> ViewFrame:
+        frame = self.renderer.render(camera, lod=opts.lod, lightmap_mode=opts.lightmap_mode, debug=opts.debug,
+                                     read=False)
+        return ViewFrame(camera, frame, {})
+
+    def release(self) -> None:
+        self.renderer.release()
+
+
+class SceneView:
+    """The completed scene (a :class:`piste.render.scene_renderer.SceneRenderer`): riders animate,
+    objects, shadows, specular.  ``opts.follow`` chases that rider with the scene's chase camera."""
+
+    has_visibility = False
+
+    def __init__(self, renderer):
+        self.renderer = renderer
+        self.terrain = renderer.terrain
+
+    @property
+    def riders(self) -> int:
+        return len(self.renderer.scene.riders)
+
+    def attach(self, ctx) -> None:
+        _wrap_screen(self.renderer.terrain, ctx)
+
+    def draw(self, camera, t: float, opts: ViewOptions) -> ViewFrame:
+        scene = self.renderer.scene
+        if opts.follow is not None:
+            scene.follow = int(opts.follow) % max(len(scene.riders), 1)
+        img = self.renderer.render(t, read=False, camera=None if opts.follow is not None else camera, lod=opts.lod,
+                                   lightmap_mode=opts.lightmap_mode, debug=opts.debug, count_rider_pixels=True)
+        cam = img.scene.camera
+        s = img.stats
+        extra = {"riders": s["riders"], "riders_in_view": riders_in_view(cam, img.scene.riders.anchor),
+                 "rider_pixels": s.get("rider_pixels", 0), "rider_triangles": s["rider_triangles"],
+                 "objects": s["objects_drawn"], "shadow_patches": s["shadow_patches"]}
+        return ViewFrame(cam, img.terrain, extra)
+
+    def release(self) -> None:
+        self.renderer.release()
+
+
+def print_benchmark(st: dict, what: str, size) -> float:
+    """Print the fps of a ``run_window(benchmark=N)`` state; returns the median fps."""
+    ms = np.asarray(st["frame_ms"], dtype=np.float64)
+    med = float(np.median(ms))
+    print(f"piste view --benchmark {len(ms)} ({what}, {size[0]}x{size[1]}, window, swap included): "
+          f"median {med:.1f} ms = {1e3 / med:.1f} fps (frames {ms.min():.1f}..{ms.max():.1f} ms; "
+          f"mean {1e3 / ms.mean():.1f} fps)")
+    return 1e3 / med
+
+
+def _cam_record(cam) -> dict:
+    return {"eye": [float(x) for x in cam.eye], "forward": [float(x) for x in cam.forward]}
+
+
+def run_window(make_view, camera, size=(640, 448), caption: str = "piste view", opts: ViewOptions | None = None,
+               frames: int | None = None, screenshot=None, state=None, exit_after: float | None = None,
+               benchmark: int | None = None, benchmark_camera=None, poll=None, log=None) -> dict:
+    """Open a window, make the view (``make_view(ctx)``) and fly ``camera`` (a
+    :class:`piste.world.camera.Camera`) through it.
+
+    Parameters
+    ----------
+    make_view : ``ctx -> view`` (see the module docstring)
+    camera : the start camera, or ``view -> camera``
+    opts : the starting toggles (:class:`ViewOptions`)
+    frames : quit after that many frames;  exit_after : quit after that many seconds
+    screenshot : PNG written on quit (P writes ``out/view_<time>.png``)
+    state : JSON written on quit: ``start``/``end`` camera (eye, forward), ``frames``, ``fps``,
+        ``max_riders_in_view``, ``max_rider_pixels``, ``follow``, toggles
+    benchmark : render this many frames (after 5 warm-up frames) with ``benchmark_camera(i)``
+        (or one camera; None: chase rider 0 when the view has riders, else ``camera``) at t = i / 30 s,
+        no input; the result has ``frame_ms`` (every frame's wall time, swap included)
+    poll : called every 0.25 s (live reload); returns a message to print or None
+
+    Returns the state dict.
     """
-    pyglet = require("pyglet", "a window (`piste view`)")
-    pyglet.options["debug_gl"] = False  # errors are checked by piste, once per frame
+    try:
+        import pyglet
+
+        pyglet.options["debug_gl"] = False  # errors are checked by piste, once per frame
+    except ImportError:
+        raise RenderError("`piste view` needs pyglet: pip install 'piste[gl]' (or use `piste demo` for images)") from None
     import moderngl
 
-    from piste.render.context import Offscreen, save_png
-    from piste.render.frame import TerrainRenderer
+    from piste.render.context import save_png
+    from piste.render.overlay import OverlayPass, StatsHistory, overlay_image
     from piste.world.camera import FlyCamera
 
+    log = log or (lambda msg: print(msg, file=sys.stderr))
+    opts = opts or ViewOptions()
     w, h = int(size[0]), int(size[1])
     try:
         config = pyglet.gl.Config(major_version=3, minor_version=3, forward_compatible=True, depth_size=24,
                                   double_buffer=True)
-        window = pyglet.window.Window(w, h, caption="piste view", config=config, resizable=False, vsync=False)
+        window = pyglet.window.Window(w, h, caption=caption, config=config, resizable=False, vsync=False)
     except Exception as exc:
         raise RenderError(f"cannot open a {w}x{h} OpenGL 3.3 window: {exc}") from None
-    ctx = moderngl.create_context()
-    renderer = TerrainRenderer(net, size=(w, h), ctx=ctx, lightmap=lightmap, track=track,
-                               track_half_width=track_half_width)
-    # draw straight into the window's framebuffer
-    renderer.target.release()
-    renderer.target = Offscreen.wrap(ctx, ctx.screen)
-    fly = FlyCamera.from_camera(camera)
-    keys = pyglet.window.key.KeyStateHandler()
-    window.push_handlers(keys)
-    state = {"mode": lightmap_mode, "debug": debug, "lod": lod, "frames": 0, "last": time.perf_counter(),
-             "fps": 0.0, "error": None}
     key = pyglet.window.key
-
-    def shot(path=None):
-        img = renderer.target.read()
-        return save_png(path or f"out/view_{int(time.time())}.png", img[..., :3])
-
-    @window.event
-    def on_key_press(symbol, modifiers):
-        if symbol == key.ESCAPE:
-            pyglet.app.exit()
-        elif symbol == key.L:
-            state["debug"] = None if state["debug"] == "lod" else "lod"
-        elif symbol == key.M:
-            state["mode"] = "ps2" if state["mode"] == "modulate" else "modulate"
-        elif symbol == key.O:
-            state["lod"] = not state["lod"]
-        elif symbol == key.P:
-            print(f"wrote {shot()}")
-        return pyglet.event.EVENT_HANDLED
-
-    @window.event
-    def on_mouse_drag(x, y, dx, dy, buttons, modifiers):
-        fly.look(dx * 0.004, dy * 0.004)
-
-    def update(dt):
-        fast = 4.0 if keys[key.LSHIFT] or keys[key.RSHIFT] else 1.0
-        fwd = (keys[key.W] - keys[key.S]) * fast
-        right = (keys[key.D] - keys[key.A]) * fast
-        up = (keys[key.E] - keys[key.Q]) * fast
-        fly.move(fwd, right, up, dt)
-        fly.look((keys[key.RIGHT] - keys[key.LEFT]) * 1.5 * dt, (keys[key.UP] - keys[key.DOWN]) * 1.0 * dt)
-
-    @window.event
-    def on_draw():
-        # pyglet's own GL calls (event loop, buffer flips) can leave an error behind under some
-        # drivers (seen: GL_INVALID_OPERATION with Xvfb + llvmpipe); clear it so that the
-        # renderer's own check after drawing reports only errors of the frame itself
-        state["pending"] = ctx.error
-        try:
-            frame = renderer.render(fly.camera(w / h), lod=state["lod"], lightmap_mode=state["mode"],
-                                    debug=state["debug"], read=False)
-        except Exception as exc:  # surface errors after the loop, not inside pyglet's handler
-            state["error"] = exc
-            pyglet.app.exit()
-            return
-        state["frames"] += 1
-        now = time.perf_counter()
-        state["fps"] = 0.9 * state["fps"] + 0.1 / max(now - state["last"], 1e-6)
-        state["last"] = now
-        k = frame.kind_counts
-        window.set_caption(
-            f"piste view  {state['fps']:.0f} fps  {frame.triangles} tris  4x4 {k[4]} 6x6 {k[6]} 8x8 {k[8]} glue {k[0]}  "
-            f"[{state['mode']}{', LOD view' if state['debug'] == 'lod' else ''}{'' if state['lod'] else ', LOD off'}]"
-        )
-        if frames is not None and state["frames"] >= frames:
-            if screenshot:
-                shot(screenshot)
-            pyglet.app.exit()
-
-    pyglet.clock.schedule_interval(update, 1 / 120)
+    ctx = moderngl.create_context()
+    view = None
+    overlay = None
     try:
-        pyglet.app.run(interval=0)
+        view = make_view(ctx)
+        view.attach(ctx)
+        if callable(camera):
+            camera = camera(view)
+        overlay = OverlayPass(ctx)
+        fly = FlyCamera.from_camera(camera)
+        held: set = set()
+        st = {"quit": False, "frames": 0, "t": 0.0, "error": None, "max_riders_in_view": 0, "max_rider_pixels": 0,
+              "start": _cam_record(camera), "cam": camera, "overlay_at": 0.0, "moved_keys": []}
+        history = StatsHistory(120)
+
+        def fly_record():
+            return {"position": [float(x) for x in fly.position], "yaw": fly.yaw, "pitch": fly.pitch,
+                    "forward": [float(x) for x in fly.forward]}
+
+        st["fly_start"] = fly_record()  # where free flight began (updated when leaving the chase camera)
+
+        def shot(path=None):
+            img = view.terrain.target.read()
+            return save_png(path or f"out/view_{int(time.time())}.png", img[..., :3])
+
+        def leave_follow():
+            if opts.follow is not None:
+                cam = st["cam"]
+                fly.position = np.asarray(cam.eye, dtype=np.float64).copy()
+                f = cam.forward
+                fly.yaw = float(np.arctan2(f[0], f[1]))
+                fly.pitch = float(np.arcsin(np.clip(f[2], -1.0, 1.0)))
+                opts.follow = None
+                st["fly_start"] = fly_record()
+
+        def on_key_press(symbol, modifiers):
+            held.add(symbol)
+            if symbol == key.ESCAPE:
+                st["quit"] = True
+            elif symbol == key.L:
+                opts.debug = None if opts.debug == "lod" else "lod"
+            elif symbol == key.M:
+                opts.lightmap_mode = "ps2" if opts.lightmap_mode == "modulate" else "modulate"
+            elif symbol == key.O:
+                opts.lod = not opts.lod
+            elif symbol == key.V:
+                opts.visibility = not opts.visibility
+            elif symbol == key.H:
+                opts.overlay = not opts.overlay
+            elif symbol == key.SPACE:
+                opts.paused = not opts.paused
+            elif symbol == key.F and view.riders:
+                if opts.follow is None:
+                    opts.follow = 0
+                else:
+                    leave_follow()
+            elif symbol == key.N and view.riders:
+                opts.follow = 0 if opts.follow is None else (opts.follow + 1) % view.riders
+            elif symbol == key.P:
+                log(f"wrote {shot()}")
+            else:
+                return None
+            return pyglet.event.EVENT_HANDLED
+
+        def on_key_release(symbol, modifiers):
+            held.discard(symbol)
+
+        def on_deactivate():
+            held.clear()
+
+        def on_mouse_drag(x, y, dx, dy, buttons, modifiers):
+            leave_follow()
+            fly.look(dx * 0.004, dy * 0.004)
+
+        def on_close():
+            st["quit"] = True
+            return pyglet.event.EVENT_HANDLED
+
+        window.push_handlers(on_key_press=on_key_press, on_key_release=on_key_release, on_deactivate=on_deactivate,
+                             on_mouse_drag=on_mouse_drag, on_close=on_close)
+
+        def fly_update(dt):
+            def k(*syms):
+                return 1.0 if any(s in held for s in syms) else 0.0
+
+            fast = 4.0 if k(key.LSHIFT, key.RSHIFT) else 1.0
+            fwd, right, up = k(key.W) - k(key.S), k(key.D) - k(key.A), k(key.E) - k(key.Q)
+            yaw, pitch = k(key.RIGHT) - k(key.LEFT), k(key.UP) - k(key.DOWN)
+            if fwd or right or up or yaw or pitch:
+                leave_follow()
+                fly.move(fwd * fast, right * fast, up * fast, dt)
+                fly.look(yaw * 1.5 * dt, pitch * 1.0 * dt)
+
+        def draw_frame(cam_override=None):
+            cam = cam_override if cam_override is not None else fly.camera(w / h)
+            ctx.error  # noqa: B018  pyglet's own calls may leave an error behind (Xvfb + llvmpipe): clear it
+            vf = view.draw(cam, st["t"], opts)
+            st["cam"] = vf.camera
+            if opts.overlay:
+                overlay.draw((w, h))
+            err = ctx.error
+            if err != "GL_NO_ERROR":
+                raise RenderError(f"OpenGL error {err} after drawing a frame of the view")
+            return vf
+
+        def header():
+            tog = [opts.lightmap_mode, "LOD view" if opts.debug == "lod" else "", "" if opts.lod else "LOD off",
+                   ("vis on" if opts.visibility else "vis off") if view.has_visibility else "",
+                   f"rider {opts.follow}" if opts.follow is not None else "fly", "paused" if opts.paused else ""]
+            return f"{history.fps():5.1f} fps  " + " ".join(x for x in tog if x)
+
+        if benchmark:
+            if benchmark_camera is None:
+                if view.riders:
+                    opts.follow = 0
+                else:
+                    benchmark_camera = camera
+            cams = benchmark_camera if callable(benchmark_camera) else (lambda i: benchmark_camera)
+            times = []
+            for i in range(int(benchmark) + 5):
+                window.dispatch_events()
+                t0 = time.perf_counter()
+                st["t"] = i / 30.0
+                vf = draw_frame(cams(i) if benchmark_camera is not None else None)
+                window.flip()
+                dt_ms = (time.perf_counter() - t0) * 1e3
+                history.add(vf.terrain, dt_ms, vf.extra)
+                if opts.overlay and i % 8 == 0:
+                    overlay.update(overlay_image(history, header()))
+                if i >= 5:
+                    times.append(dt_ms)
+                st["frames"] += 1
+            st["frame_ms"] = times
+            st["follow_used"] = opts.follow is not None
+            st["end"] = _cam_record(st["cam"])
+            return st
+
+        t_start = last = time.perf_counter()
+        last_poll = t_start
+        while not st["quit"]:
+            window.dispatch_events()
+            if st["quit"] or window.has_exit:
+                break
+            now = time.perf_counter()
+            dt = min(now - last, 0.25)
+            last = now
+            if not opts.paused:
+                st["t"] += dt
+            fly_update(dt)
+            if poll is not None and now - last_poll > 0.25:
+                last_poll = now
+                msg = poll()
+                if msg:
+                    log(msg)
+            vf = draw_frame()
+            st["frames"] += 1
+            ex = vf.extra
+            st["max_riders_in_view"] = max(st["max_riders_in_view"], int(ex.get("riders_in_view", 0)))
+            st["max_rider_pixels"] = max(st["max_rider_pixels"], int(ex.get("rider_pixels", 0)))
+            if screenshot and frames is not None and st["frames"] >= frames:
+                shot(screenshot)  # before the flip: the back buffer holds this frame
+            window.flip()
+            history.add(vf.terrain, (time.perf_counter() - now) * 1e3, ex)
+            if opts.overlay and now - st["overlay_at"] > 0.25:
+                st["overlay_at"] = now
+                overlay.update(overlay_image(history, header()))
+            window.set_caption(f"{caption}  {header()}")
+            if frames is not None and st["frames"] >= frames:
+                break
+            if exit_after is not None and now - t_start > exit_after:
+                break
+        if screenshot and (frames is None or st["frames"] < frames):
+            draw_frame()
+            shot(screenshot)
+        st["fps"] = history.fps()
+        st["end"] = _cam_record(st["cam"])
+        st["end_fly"] = fly_record()
+        st["follow"] = opts.follow
+        st["toggles"] = {"lightmap_mode": opts.lightmap_mode, "debug": opts.debug, "lod": opts.lod,
+                         "visibility": opts.visibility, "overlay": opts.overlay}
+        if state is not None:
+            from piste.formats.atomic import atomic_path
+
+            rec = {k: v for k, v in st.items() if k not in ("cam", "quit", "error", "overlay_at", "moved_keys")}
+            with atomic_path(state) as tmp:
+                tmp.write_text(json.dumps(rec, indent=1))
+        return st
     finally:
-        pyglet.clock.unschedule(update)
-        renderer.release()
+        if overlay is not None:
+            overlay.release()
+        if view is not None:
+            view.release()
         window.close()
-    if state["error"] is not None:
-        raise state["error"]
-    return state["frames"]
