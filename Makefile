@@ -4,7 +4,7 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 APT_PKGS := libegl1 libgl1 libgl1-mesa-dri
-EXTRAS ?= gl,video,gltf,dask,dev
+EXTRAS ?= gl,video,gltf,dask,docs,dev
 
 .PHONY: demo test test-latest setup system test-tools venv bench docs clean lock
 
@@ -52,6 +52,10 @@ test-latest: system test-tools
 # Re-record constraints.txt from the current venv (after a deliberate upgrade).
 lock:
 	$(BIN)/pip freeze --exclude-editable | grep -v '^-e ' > constraints.txt
+
+# The documentation site (Sphinx + sphinx-gallery): docs/_build/html/index.html.
+docs: setup
+	$(BIN)/python -m sphinx -q -b html docs docs/_build/html
 
 clean:
 	rm -rf $(VENV) .venv-latest out

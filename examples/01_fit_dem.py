@@ -55,4 +55,5 @@ def main(argv: list[str]) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv))
+    if rc := main(sys.argv):  # exit only on failure: the docs gallery runs this file in-process
+        sys.exit(rc)

@@ -85,4 +85,5 @@ def main(argv) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv))
+    if rc := main(sys.argv):  # exit only on failure: the docs gallery runs this file in-process
+        sys.exit(rc)

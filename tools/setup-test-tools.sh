@@ -8,7 +8,7 @@ SUDO=""; [ "$(id -u)" = 0 ] || SUDO=sudo
 # --- Debian packages -------------------------------------------------------------------------
 # xvfb/xauth: `piste view` under a virtual X server; xdotool: real X key/mouse events for it; nodejs/npm: the Khronos glTF validator;
 # blender: headless re-import of piste's glTF export; chromium: the documentation site.
-APT_PKGS="xvfb xauth xdotool chromium fonts-dejavu-core"
+APT_PKGS="xvfb xauth xdotool chromium chromium-driver fonts-dejavu-core"
 missing=""
 for p in $APT_PKGS; do dpkg -s "$p" >/dev/null 2>&1 || missing="$missing $p"; done
 command -v node >/dev/null 2>&1 || missing="$missing nodejs npm"
