@@ -1,0 +1,370 @@
+"""SSX Tricky ``.ssh`` texture banks (``SHPS``) and the light-map bank ``<NAME>_L.ssh``.
+
+Facts from ``/work/shared/SSX-FORMATS.md``: a 16-byte header (magic ``SHPS``, u32 file size, u32
+image count, 4-char creator ``G278``), then per image a 4-char name and a u32 absolute offset;
+images are separated by the text ``Buy ERTS``.  An image is a chain of chunks, each with a 16-byte
+header: u8 type, u24 size including the header (0 = the last chunk), i16 width, i16 height, i16 x,
+i16 y, u32 flags (``0x2000`` = swizzled).  Types: 1 4-bit indexed, 2 8-bit indexed, 5 32-bit
+RGBA, 33 palette (RGBA), 112 long name, 130 RefPack-compressed 8-bit.  Alpha is half range
+(``0x80`` = opaque, up to 255 over-bright in light maps).
+
+Handled: types 1, 2, 5 with palettes (33) and long names (112).  Not handled yet, each a clear
+:class:`~piste.errors.FormatError`: swizzled images (flag ``0x2000``), RefPack images (130),
+any other chunk type.  Assumptions beyond the fact sheet (checked only against piste's own
+writer): 4-bit pixels hold the left pixel in the low nibble; palettes are stored in index order
+(no PS2 CSM1 block reordering); a long-name chunk's NUL-terminated text follows its 4-byte
+type/size word.
+
+Light maps: pages are 128 x 128 RGBA (type 5) cut without gutters into 16 x 16 tiles of 8 x 8
+texels; a patch's tile is applied with ``u`` and ``v`` transposed (tile row = ``u``, column =
+``v``) and edge-aligned (parameter 0 on the outer texel edge, texel ``i`` centred on ``(i + 0.5) /
+8``).  :func:`extract_tiles` and :func:`place_tiles` convert between pages and tiles in piste's
+orientation ``[patch, j (v), i (u)]``.
+
+API
+---
+SshImage, SshBank, read_ssh(path), parse_ssh(data, path), write_ssh(bank, path)
+lightmap_pages(bank) -> (P, 128, 128, 4) uint8;  lightmap_bank(pages) -> SshBank
+extract_tiles(pages, rect, page) -> (n, 8, 8, 4);  place_tiles(tiles, rect, page, n_pages) -> pages
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from piste.errors import FormatError, ValidationError
+from piste.formats.atomic import write_bytes_atomic
+
+__all__ = [
+    "SshImage", "SshBank", "read_ssh", "parse_ssh", "write_ssh", "lightmap_pages", "lightmap_bank",
+    "extract_tiles", "place_tiles", "tile_origins", "PAGE_SIZE", "TILE", "SWIZZLED",
+]
+
+MAGIC = b"SHPS"
+CREATOR = b"G278"
+SEPARATOR = b"Buy ERTS"
+SWIZZLED = 0x2000
+PAGE_SIZE = 128
+TILE = 8
+INDEXED = {1: 4, 2: 8}
+RGBA32 = 5
+PALETTE = 33
+LONG_NAME = 112
+REFPACK = 130
+#: largest image side accepted (hostile sizes are refused before allocating)
+MAX_SIDE = 4096
+_CHUNK = struct.Struct("<I4hI")
+
+
+@dataclass
+class SshImage:
+    """One image of a bank.
+
+    Attributes
+    ----------
+    name : 4-character directory name
+    kind : 1 (4-bit indexed), 2 (8-bit indexed) or 5 (32-bit RGBA)
+    pixels : (h, w) uint8 palette indices (kinds 1, 2) or (h, w, 4) uint8 RGBA as stored (kind 5)
+    palette : (k, 4) uint8 RGBA as stored (alpha half range), indexed kinds only
+    x, y, flags : the image chunk's header fields
+    long_name : text of a long-name chunk, if any
+    """
+
+    name: str
+    kind: int
+    pixels: np.ndarray
+    palette: np.ndarray | None = None
+    x: int = 0
+    y: int = 0
+    flags: int = 0
+    long_name: str | None = None
+
+    @property
+    def width(self) -> int:
+        return int(self.pixels.shape[1])
+
+    @property
+    def height(self) -> int:
+        return int(self.pixels.shape[0])
+
+    def stored_rgba(self) -> np.ndarray:
+        """``(h, w, 4) uint8`` as stored: palette looked up, alpha still half range."""
+        if self.kind == RGBA32:
+            return self.pixels
+        return self.palette[self.pixels]
+
+    def rgba(self) -> np.ndarray:
+        """``(h, w, 4) uint8`` for display: alpha expanded to full range (``min(2 a, 255)``)."""
+        out = self.stored_rgba().copy()
+        out[..., 3] = np.minimum(out[..., 3].astype(np.uint16) * 2, 255).astype(np.uint8)
+        return out
+
+    def _data(self) -> bytes:
+        if self.kind == RGBA32:
+            return np.ascontiguousarray(self.pixels, dtype=np.uint8).tobytes()
+        if self.kind == 2:
+            return np.ascontiguousarray(self.pixels, dtype=np.uint8).tobytes()
+        flat = np.asarray(self.pixels, dtype=np.uint8).ravel()
+        if len(flat) % 2:
+            flat = np.concatenate([flat, [0]]).astype(np.uint8)
+        return ((flat[0::2] & 15) | ((flat[1::2] & 15) << 4)).astype(np.uint8).tobytes()
+
+    def validate(self) -> None:
+        p = np.asarray(self.pixels)
+        if p.dtype != np.uint8:
+            raise ValidationError(f"ssh image {self.name!r}: pixels must be uint8, got {p.dtype}")
+        if self.kind == RGBA32:
+            if p.ndim != 3 or p.shape[2] != 4:
+                raise ValidationError(f"ssh image {self.name!r}: a type-5 image needs (h, w, 4) pixels, got {p.shape}")
+        elif self.kind in INDEXED:
+            k = 1 << INDEXED[self.kind]
+            pal = None if self.palette is None else np.asarray(self.palette)
+            if p.ndim != 2:
+                raise ValidationError(f"ssh image {self.name!r}: an indexed image needs (h, w) pixels, got {p.shape}")
+            if pal is None or pal.dtype != np.uint8 or pal.ndim != 2 or pal.shape[1] != 4 or not 0 < len(pal) <= k:
+                raise ValidationError(f"ssh image {self.name!r}: needs a (<= {k}, 4) uint8 palette")
+            if p.size and int(p.max()) >= len(pal):
+                raise ValidationError(f"ssh image {self.name!r}: index {int(p.max())} past its {len(pal)}-colour palette")
+        else:
+            raise ValidationError(f"ssh image {self.name!r}: kind must be 1, 2 or 5, got {self.kind}")
+        if len(self.name.encode("latin-1", "replace")) > 4:
+            raise ValidationError(f"ssh image {self.name!r}: names are at most 4 characters")
+
+
+@dataclass
+class SshBank:
+    """A texture bank: ``images`` in directory order, ``creator`` (4 bytes, ``G278``)."""
+
+    images: list
+    creator: bytes = CREATOR
+
+    def __len__(self) -> int:
+        return len(self.images)
+
+    def __getitem__(self, i) -> SshImage:
+        return self.images[i]
+
+    def to_bytes(self) -> bytes:
+        """Encode the bank (canonical layout: each image 16-byte aligned after ``Buy ERTS``)."""
+        for im in self.images:
+            im.validate()
+        n = len(self.images)
+        head_len = 16 + 8 * n
+        body = bytearray()
+        offsets = []
+        pos = head_len
+        for im in self.images:
+            pad = bytearray(SEPARATOR)
+            while (pos + len(pad)) % 16:
+                pad += b"\0"
+            body += pad
+            pos += len(pad)
+            offsets.append(pos)
+            blob = _encode_image(im)
+            body += blob
+            pos += len(blob)
+        out = bytearray(MAGIC + struct.pack("<II", head_len + len(body), n) + self.creator)
+        for im, off in zip(self.images, offsets):
+            out += im.name.encode("latin-1", "replace").ljust(4, b"\0")[:4] + struct.pack("<I", off)
+        return bytes(out + body)
+
+
+def _chunk(kind: int, data: bytes, w: int, h: int, x: int = 0, y: int = 0, flags: int = 0, last: bool = False) -> bytes:
+    body = data + b"\0" * (-(16 + len(data)) % 16)
+    size = 0 if last else 16 + len(body)
+    return _CHUNK.pack(kind | (size << 8), w, h, x, y, flags) + body
+
+
+def _encode_image(im: SshImage) -> bytes:
+    chunks = [(im.kind, im._data(), im.width, im.height, im.x, im.y, im.flags)]
+    if im.kind in INDEXED:
+        pal = np.ascontiguousarray(im.palette, dtype=np.uint8)
+        chunks.append((PALETTE, pal.tobytes(), len(pal), 1, 0, 0, 0))
+    out = b""
+    for i, c in enumerate(chunks):
+        last = i == len(chunks) - 1 and im.long_name is None
+        out += _chunk(*c, last=last)
+    if im.long_name is not None:
+        text = im.long_name.encode("latin-1", "replace") + b"\0"
+        text += b"\0" * (-(4 + len(text)) % 16)
+        out += struct.pack("<I", LONG_NAME) + text  # size 0: the last chunk
+    return out
+
+
+def parse_ssh(data: bytes, path=None) -> SshBank:
+    """Parse an ``.ssh`` bank's bytes (see :func:`read_ssh`)."""
+    data = bytes(data)
+    size = len(data)
+    if size < 16:
+        raise FormatError(path, f"truncated: {size} bytes, an .ssh header is 16", field="header")
+    if data[:4] != MAGIC:
+        raise FormatError(path, f"expected magic 'SHPS' (PS2 texture bank), got {data[:4]!r}", field="magic")
+    n = struct.unpack_from("<I", data, 8)[0]
+    creator = data[12:16]
+    if 16 + 8 * n > size:
+        raise FormatError(path, f"{n} images need a {16 + 8 * n}-byte directory, the file has {size} bytes",
+                          field="image count")
+    directory = [(data[16 + 8 * i:20 + 8 * i].rstrip(b"\0").decode("latin-1"),
+                  struct.unpack_from("<I", data, 20 + 8 * i)[0]) for i in range(n)]
+    images = []
+    for i, (name, off) in enumerate(directory):
+        where = f"image {i} ({name!r})"
+        if off + 16 > size:
+            raise FormatError(path, f"{where}: offset {off} lies past the end ({size} bytes)", field="offset")
+        images.append(_parse_image(data, off, name, where, path))
+    return SshBank(images, creator)
+
+
+def _parse_image(data: bytes, off: int, name: str, where: str, path) -> SshImage:
+    size = len(data)
+    pos = off
+    image = None
+    palette = None
+    long_name = None
+    for _ in range(64):
+        if pos + 4 > size:
+            raise FormatError(path, f"{where}: chunk at {pos} lies past the end", field="chunk")
+        word = struct.unpack_from("<I", data, pos)[0]
+        kind, csize = word & 0xFF, word >> 8
+        if kind == LONG_NAME:
+            end = pos + csize if csize else size
+            long_name = data[pos + 4:end].lstrip(b"\0").split(b"\0", 1)[0].decode("latin-1")
+        else:
+            if pos + 16 > size:
+                raise FormatError(path, f"{where}: chunk header at {pos} is truncated", field="chunk")
+            _, w, h, x, y, flags = _CHUNK.unpack_from(data, pos)
+            body = pos + 16
+            if kind in INDEXED or kind == RGBA32:
+                if flags & SWIZZLED:
+                    raise FormatError(path, f"{where}: swizzled images (flag 0x2000) are not supported yet",
+                                      field="flags")
+                if not (0 < w <= MAX_SIDE and 0 < h <= MAX_SIDE):
+                    raise FormatError(path, f"{where}: image size {w}x{h} outside 1..{MAX_SIDE}", field="size")
+                nbytes = {1: (w * h + 1) // 2, 2: w * h, 5: w * h * 4}[kind]
+                if body + nbytes > size:
+                    raise FormatError(path, f"{where}: {w}x{h} type-{kind} pixels need {nbytes} bytes from {body}, "
+                                            f"the file has {size}", field="pixels")
+                raw = np.frombuffer(data, np.uint8, count=nbytes, offset=body)
+                if kind == RGBA32:
+                    pix = raw.reshape(h, w, 4).copy()
+                elif kind == 2:
+                    pix = raw.reshape(h, w).copy()
+                else:
+                    pix = np.stack([raw & 15, raw >> 4], axis=1).ravel()[: w * h].reshape(h, w).copy()
+                image = (kind, pix, x, y, flags)
+            elif kind == PALETTE:
+                k = w * h
+                if not 0 < k <= 256 or body + 4 * k > size:
+                    raise FormatError(path, f"{where}: palette of {w}x{h} colours is out of range or truncated",
+                                      field="palette")
+                palette = np.frombuffer(data, np.uint8, count=4 * k, offset=body).reshape(k, 4).copy()
+            elif kind == REFPACK:
+                raise FormatError(path, f"{where}: RefPack-compressed images (type 130) are not supported yet",
+                                  field="chunk type")
+            else:
+                raise FormatError(path, f"{where}: unknown chunk type {kind} at offset {pos} (known: 1, 2, 5, 33, "
+                                        "112, 130)", field="chunk type")
+        if csize == 0:
+            break
+        pos += csize
+    if image is None:
+        raise FormatError(path, f"{where}: no image chunk (type 1, 2 or 5)", field="chunk type")
+    kind, pix, x, y, flags = image
+    if kind in INDEXED:
+        if palette is None:
+            raise FormatError(path, f"{where}: an indexed image without a palette chunk (33)", field="palette")
+        if pix.size and int(pix.max()) >= len(palette):
+            raise FormatError(path, f"{where}: pixel index {int(pix.max())} past the {len(palette)}-colour palette",
+                              field="pixels")
+    return SshImage(name, kind, pix, palette, x, y, flags, long_name)
+
+
+def read_ssh(path) -> SshBank:
+    """Read a ``.ssh`` texture bank; bad input raises :class:`~piste.errors.FormatError` naming the
+    file, the image and the field."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise FormatError(path, "no such file") from None
+    except OSError as exc:
+        raise FormatError(path, f"cannot read ({exc.strerror})") from None
+    return parse_ssh(data, path)
+
+
+def write_ssh(bank: SshBank, path) -> None:
+    """Write ``bank`` to ``path`` atomically."""
+    write_bytes_atomic(path, bank.to_bytes())
+
+
+# ----------------------------------------------------------------------------- light maps
+def lightmap_pages(bank: SshBank, path=None) -> np.ndarray:
+    """The pages of a light-map bank as stored: ``(P, 128, 128, 4) uint8`` (RGB = Cs, A = As)."""
+    pages = []
+    for i, im in enumerate(bank.images):
+        if im.kind != RGBA32 or im.pixels.shape[:2] != (PAGE_SIZE, PAGE_SIZE):
+            raise FormatError(path, f"image {i} ({im.name!r}): a light-map page must be a 128x128 type-5 image, "
+                                    f"got {im.width}x{im.height} type {im.kind}", field="image")
+        pages.append(im.pixels)
+    if not pages:
+        return np.zeros((0, PAGE_SIZE, PAGE_SIZE, 4), np.uint8)
+    return np.stack(pages)
+
+
+def lightmap_bank(pages) -> SshBank:
+    """A light-map bank from ``(P, 128, 128, 4) uint8`` pages (names ``0000``, ``0001``, ...)."""
+    pages = np.asarray(pages)
+    if pages.dtype != np.uint8 or pages.ndim != 4 or pages.shape[1:] != (PAGE_SIZE, PAGE_SIZE, 4):
+        raise ValidationError(f"light-map pages must be (P, 128, 128, 4) uint8, got {pages.shape} {pages.dtype}")
+    return SshBank([SshImage(f"{i:04d}", RGBA32, pages[i].copy()) for i in range(len(pages))])
+
+
+def tile_origins(rect, page, n_pages: int | None = None, path=None) -> np.ndarray:
+    """Texel origins ``(n, 2)`` int (x, y) of each patch's tile in its page from the stored rects
+    ``(n, 4)`` (x, y, w, h in 0..1); checks tiles are 8x8 inside the page and pages exist."""
+    rect = np.asarray(rect, dtype=np.float64)
+    page = np.asarray(page)
+    x0 = np.rint(rect[:, 0] * PAGE_SIZE).astype(np.int64)
+    y0 = np.rint(rect[:, 1] * PAGE_SIZE).astype(np.int64)
+    bad = (x0 < 0) | (y0 < 0) | (x0 + TILE > PAGE_SIZE) | (y0 + TILE > PAGE_SIZE) | (page < 0)
+    if n_pages is not None:
+        bad |= page >= n_pages
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise FormatError(path, f"patch {k}: light-map tile {rect[k].tolist()} on page {int(page[k])} lies outside "
+                                f"the {n_pages if n_pages is not None else '?'} 128x128 page(s)", field="lightmap_rect")
+    return np.stack([x0, y0], axis=1)
+
+
+def extract_tiles(pages, rect, page, path=None) -> np.ndarray:
+    """Each patch's 8x8 light-map tile in piste's orientation: ``(n, 8, 8, C)`` with
+    ``[k, j, i]`` the texel at ``u = (i + 0.5) / 8``, ``v = (j + 0.5) / 8`` (the page holds it
+    transposed: page row = ``u``, column = ``v``)."""
+    pages = np.asarray(pages)
+    o = tile_origins(rect, page, len(pages), path)
+    r = np.arange(TILE)
+    page = np.asarray(page, dtype=np.int64)
+    # page[y0 + i, x0 + j] -> tile[j, i]
+    rows = o[:, 1, None, None] + r[None, None, :]  # (n, j, i) -> y0 + i
+    cols = o[:, 0, None, None] + r[None, :, None]  # (n, j, i) -> x0 + j
+    return pages[page[:, None, None], rows, cols]
+
+
+def place_tiles(tiles, rect, page, n_pages: int, fill=None) -> np.ndarray:
+    """Inverse of :func:`extract_tiles`: pages ``(n_pages, 128, 128, C)`` holding every tile."""
+    tiles = np.asarray(tiles)
+    c = tiles.shape[-1]
+    out = np.zeros((n_pages, PAGE_SIZE, PAGE_SIZE, c), tiles.dtype)
+    if fill is not None:
+        out[...] = fill
+    o = tile_origins(rect, page, n_pages)
+    r = np.arange(TILE)
+    page = np.asarray(page, dtype=np.int64)
+    rows = o[:, 1, None, None] + r[None, None, :]
+    cols = o[:, 0, None, None] + r[None, :, None]
+    out[page[:, None, None], rows, cols] = tiles
+    return out
