@@ -1,0 +1,376 @@
+"""Resident terrain: every patch tessellated once per LOD level, kept (on the GPU); each frame only
+decides levels and lists indices.
+
+The talk's per-edge LOD with uniform and glue patches, without re-assembling vertices every frame:
+
+* **Vertex blocks** (built once): patch ``p`` owns the block of ``B = sum(n^2)`` vertices starting
+  at ``p B`` holding its uniform grids at every LOD level ``n`` (4, 6, 8: ``B = 116``), in the
+  :func:`piste.terrain.get_shape` layout.  Corners and edge vertices are the canonical ones of the
+  vertex cache (bit-identical in both patches of an edge), so any mix of levels is crack-free.
+* **Shape templates** (built once): for every combination of side levels (``3^4 = 81``), the
+  triangles of that uniform or glue shape as block-local vertex indices: a glue patch's side ``s``
+  at level ``n`` takes its vertices from the level-``n`` grid, its inner mesh from the level-``m``
+  grid, all inside the patch's own block.
+* **Per frame**: hierarchical frustum culling (:class:`piste.terrain.cull.PatchTree`), the level
+  of each visible side (its edge midpoint's distance; the same arithmetic on the same inputs in
+  both patches), and the index list ``template + p B`` (:func:`piste.terrain._kernels.frame_indices`).
+  No vertex is written on the CPU.
+
+Geomorphing
+-----------
+Each vertex also stores its **morph target**: where the next coarser level's tessellation has the
+same parameter point (edge vertices: linear along the coarser edge polyline, computed once per
+edge in the edge's canonical direction and copied into both patches; inner vertices: the coarser
+uniform grid's triangle at that (u, v); corners and the coarsest level: themselves), and a
+**morph slot** (edge id for edge vertices, ``n_edges + p`` for inner vertices).  Each frame gives
+every visible slot a factor ``f`` in [0, 1] (:meth:`ResidentTerrain.frame`): 1 deep inside a
+level's distance band, falling to 0 at the band's far end, where the edge switches to the coarser
+level; the drawn position is ``target + f (position - target)``.  An edge vertex gets its edge's
+factor in both patches, so shared edges stay bit-identical at every factor; an inner grid at level
+``m`` takes the largest factor of the patch's level-``m`` sides.  ``morph=False`` draws the
+positions themselves (the talk's exact behaviour, pictures identical to the CPU path's).
+
+API
+---
+ResidentTerrain(net, levels=(4, 6, 8))    the blocks and templates (``vertices (N B, 11) float32``)
+ResidentTerrain.frame(eye, planes, ...)  -> ResidentMesh (indices, patch list, morph factors)
+ResidentMesh.morphed_positions(rows)     CPU twin of the vertex shader's morph (tests, shadows)
+ResidentMesh.to_mesh()                   the same frame as a classic TerrainMesh (debug views, export)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from piste.errors import ConfigError, ValidationError
+from piste.terrain import _kernels
+from piste.terrain._kernels import frame_indices
+from piste.terrain.cull import patch_tree
+from piste.terrain.lod import DEFAULT_FAR, DEFAULT_NEAR, LEVELS
+from piste.terrain.net import SIDE_CORNERS, PatchNet
+from piste.terrain.tessellate import MAX_LEVEL, VERTEX_FLOATS, _cache, _glue_sources, get_shape, tessellate
+
+__all__ = ["ResidentTerrain", "ResidentMesh", "RESIDENT_FLOATS", "MORPH_BAND", "resident_terrain"]
+
+#: floats per resident vertex: position 3, morph target 3, uv 2, light-map uv 2, morph slot 1
+RESIDENT_FLOATS = 11
+#: fraction of each level's distance band over which its vertices morph towards the coarser level
+MORPH_BAND = 0.3
+
+
+def _full_index(n: int) -> np.ndarray:
+    """Local vertex index of grid point ``(i, j)`` of a uniform ``n x n`` shape: ``full[j, i]``, ``(n, n)``."""
+    sh = get_shape((n,) * 4)
+    full = np.empty((n, n), dtype=np.int64)
+    mi = n - 2
+    full[1:-1, 1:-1] = sh.inner_off + np.arange(mi * mi).reshape(mi, mi)
+    seq = []
+    for s in range(4):
+        a, b = SIDE_CORNERS[s]
+        seq.append(np.concatenate([[a], 4 + sh.side_off[s] + np.arange(n - 2), [b]]))
+    full[0, :], full[:, -1] = seq[0], seq[1]
+    full[-1, :], full[:, 0] = seq[2], seq[3]
+    return full
+
+
+def _side_seq(n: int, s: int) -> np.ndarray:
+    """Local indices along side ``s`` of a uniform level-``n`` shape, corners included, ``(n,)``."""
+    a, b = SIDE_CORNERS[s]
+    return np.concatenate([[a], 4 + s * (n - 2) + np.arange(n - 2), [b]]).astype(np.int64)
+
+
+@dataclass
+class ResidentMesh:
+    """One frame of resident terrain.
+
+    Attributes
+    ----------
+    resident : ResidentTerrain
+    indices : (t, 3) uint32, into the resident vertex blocks
+    patch_ids : (p,) int64, the patches drawn (ascending)
+    patch_levels : (p, 4) int16, vertices per side
+    patch_kind : (p,) int8, the level of uniform patches, 0 for glue patches
+    tri_start : (p + 1,) int64, triangles of the k-th drawn patch
+    vertex_first : (p,) int64, first vertex of each drawn patch's block; vertex_count : (p,) block size
+    factors : (n_edges + n_patches,) float32, the morph factor of every slot (valid at the drawn ones)
+    morph : bool, whether the factors apply (False: positions drawn as they are)
+    n_vertices : distinct vertices drawn (the shapes' vertex counts summed)
+    """
+
+    resident: "ResidentTerrain"
+    indices: np.ndarray
+    patch_ids: np.ndarray
+    patch_levels: np.ndarray
+    patch_kind: np.ndarray
+    tri_start: np.ndarray
+    vertex_first: np.ndarray
+    vertex_count: np.ndarray
+    factors: np.ndarray
+    morph: bool
+    n_vertices: int
+
+    @property
+    def n_triangles(self) -> int:
+        return len(self.indices)
+
+    def edge_levels(self) -> np.ndarray:
+        """Per-edge levels ``(e,)`` int16 of this frame (edges of undrawn patches: the coarse level)."""
+        r = self.resident
+        lv = np.full(r.net.n_edges, r.levels[0], dtype=np.int16)
+        lv[r.net.side_edge[self.patch_ids]] = self.patch_levels
+        return lv
+
+    def morphed_positions(self, rows: np.ndarray) -> np.ndarray:
+        """World positions ``(k, 3) float32`` of resident vertex ``rows``, morphed as the vertex shader
+        does (``target + f (position - target)`` in float32)."""
+        v = self.resident.vertices[np.asarray(rows, dtype=np.int64)]
+        pos = v[:, 0:3]
+        if not self.morph:
+            return pos.copy()
+        tgt = v[:, 3:6]
+        f = self.factors[v[:, 10].astype(np.int64)][:, None]
+        return (tgt + f * (pos - tgt)).astype(np.float32)
+
+    def to_mesh(self):
+        """This frame's patches and levels as a classic :class:`piste.terrain.TerrainMesh` (unmorphed;
+        for debug views and export)."""
+        return tessellate(self.resident.net, self.edge_levels(), patches=self.patch_ids)
+
+    def compact(self):
+        """``(positions (m, 3) float32 morphed, indices (t, 3) uint32)`` over only the vertices used."""
+        rows, inv = np.unique(self.indices.ravel(), return_inverse=True)
+        return self.morphed_positions(rows), inv.reshape(-1, 3).astype(np.uint32)
+
+
+class ResidentTerrain:
+    """Per-patch vertex blocks at every LOD level with morph targets, and the shape templates.
+
+    Parameters
+    ----------
+    net : PatchNet
+    levels : (coarse, medium, fine) vertices per edge (strictly increasing, 2..64)
+
+    Attributes
+    ----------
+    vertices : (N B, 11) float32: position, morph target, uv, light-map uv, morph slot
+    block : B, vertices per patch;  level_offset : {n: offset of level n's grid in a block}
+    """
+
+    def __init__(self, net: PatchNet, levels=LEVELS):
+        levels = tuple(int(x) for x in levels)
+        if len(levels) != 3 or list(levels) != sorted(set(levels)) or levels[0] < 2 or levels[-1] > MAX_LEVEL:
+            raise ConfigError(f"resident terrain levels must be 3 increasing values in 2..{MAX_LEVEL}, got {levels}")
+        self.net = net
+        self.levels = levels
+        self.level_offset = {}
+        o = 0
+        for n in levels:
+            self.level_offset[n] = o
+            o += n * n
+        self.block = o
+        self._snapshot = None
+        self._build_vertices()
+        self._build_templates()
+        self.edge_mid = np.ascontiguousarray(net.edge_midpoints())
+        self.side_edge = np.ascontiguousarray(net.side_edge, dtype=np.int64)
+        self.degenerate = np.ascontiguousarray(net.edge_degenerate, dtype=np.bool_)
+        self.factors = np.ones(net.n_edges + len(net), dtype=np.float32)
+
+    # ------------------------------------------------------------------ build (once)
+    def _build_vertices(self) -> None:
+        net = self.net
+        N, B = len(net), self.block
+        cache = _cache(net)
+        flat, offset = cache.grids(net, self.levels)
+        grids = {n: flat[offset[n]:offset[n] + N * n * n * VERTEX_FLOATS].reshape(N, n * n, VERTEX_FLOATS)
+                 for n in self.levels}
+        out = np.empty((N, B, RESIDENT_FLOATS), dtype=np.float32)
+        pids = np.arange(N)
+        for li, n in enumerate(self.levels):
+            g = grids[n]
+            blk = out[:, self.level_offset[n]:self.level_offset[n] + n * n]
+            blk[..., 0:3] = g[..., 0:3]
+            blk[..., 6:10] = g[..., 8:12]
+            # morph slots: corners 0 (target = position), sides their edge, inner n_edges + p
+            slot = np.zeros((N, n * n), dtype=np.int64)
+            for s in range(4):
+                slot[:, 4 + s * (n - 2):4 + (s + 1) * (n - 2)] = net.side_edge[:, s:s + 1]
+            slot[:, 4 + 4 * (n - 2):] = net.n_edges + pids[:, None]
+            blk[..., 10] = slot
+            if li == 0:
+                blk[..., 3:6] = g[..., 0:3]
+                continue
+            c = self.levels[li - 1]
+            blk[..., 3:6] = self._targets(grids[c], c, g, n)
+        self.vertices = out.reshape(N * B, RESIDENT_FLOATS)
+        self._snapshot = (net.uv.copy(), net.lightmap_rect.copy())
+
+    def _targets(self, gc: np.ndarray, c: int, g: np.ndarray, n: int) -> np.ndarray:
+        """Morph targets ``(N, n^2, 3) float32`` of the level-``n`` grids towards the level-``c`` ones."""
+        net = self.net
+        N = len(net)
+        tgt = np.empty((N, n * n, 3), dtype=np.float32)
+        pc = gc[..., 0:3]
+        tgt[:, :4] = g[:, :4, 0:3]  # corners stay
+        # edges: the coarse edge polyline in each edge's canonical direction, once per edge
+        canon = np.empty((net.n_edges, c, 3), dtype=np.float32)
+        for s in range(4):
+            seq = pc[:, _side_seq(c, s)]  # (N, c, 3) in side direction
+            flip = net.side_flip[:, s]
+            seq = np.where(flip[:, None, None], seq[:, ::-1], seq)
+            canon[net.side_edge[:, s]] = seq
+        t = np.arange(1, n - 1, dtype=np.float64) / (n - 1) * (c - 1)
+        j = np.minimum(np.floor(t).astype(np.int64), c - 2)
+        a = (t - j)[None, :, None]
+        edge_t = (canon[:, j].astype(np.float64) * (1.0 - a) + canon[:, j + 1].astype(np.float64) * a).astype(np.float32)
+        for s in range(4):
+            e = edge_t[net.side_edge[:, s]]  # (N, n-2, 3) canonical direction
+            flip = net.side_flip[:, s]
+            tgt[:, 4 + s * (n - 2):4 + (s + 1) * (n - 2)] = np.where(flip[:, None, None], e[:, ::-1], e)
+        # inner: the coarse uniform grid's triangle (cells split along (i, j)-(i+1, j+1))
+        full_c = _full_index(c)
+        P = pc[:, full_c.ravel()].reshape(N, c, c, 3).astype(np.float64)  # [p, j, i]
+        ti = np.arange(1, n - 1, dtype=np.float64) / (n - 1) * (c - 1)
+        vv, uu = np.meshgrid(ti, ti, indexing="ij")  # inner point (i, j) at [j-1, i-1]
+        x, y = uu.ravel(), vv.ravel()
+        ci = np.minimum(np.floor(x).astype(np.int64), c - 2)
+        cj = np.minimum(np.floor(y).astype(np.int64), c - 2)
+        fx, fy = (x - ci), (y - cj)
+        pa, pb = P[:, cj, ci], P[:, cj, ci + 1]
+        pcc, pd = P[:, cj + 1, ci + 1], P[:, cj + 1, ci]
+        lower = (fx >= fy)[None, :, None]
+        fx, fy = fx[None, :, None], fy[None, :, None]
+        inner = np.where(lower, pa * (1 - fx) + pb * (fx - fy) + pcc * fy, pa * (1 - fy) + pcc * fx + pd * (fy - fx))
+        tgt[:, 4 + 4 * (n - 2):] = inner.astype(np.float32)
+        return tgt
+
+    def _build_templates(self) -> None:
+        L = self.levels
+        k = len(L)
+        tm, start, count, kind, nverts = [], [], [], [], []
+        o = 0
+        for key in range(k ** 4):
+            li = [(key // k ** (3 - s)) % k for s in range(4)]
+            lv = tuple(L[i] for i in li)
+            sh = get_shape(lv)
+            lvl, slot = _glue_sources(lv)
+            local = np.array([self.level_offset[int(n)] for n in lvl], dtype=np.int64) + slot
+            t = local[sh.tris].astype(np.uint32).ravel()
+            tm.append(t)
+            start.append(o)
+            count.append(len(t))
+            o += len(t)
+            kind.append(lv[0] if sh.uniform else 0)
+            nverts.append(sh.n_verts)
+        self.tmpl = np.concatenate(tm).astype(np.uint32)
+        self.tmpl_start = np.array(start, dtype=np.int64)
+        self.tmpl_count = np.array(count, dtype=np.int64)
+        self.shape_kind = np.array(kind, dtype=np.int8)
+        self.shape_verts = np.array(nverts, dtype=np.int64)
+        self.level_array = np.array(L, dtype=np.int16)
+
+    def stale(self) -> bool:
+        """True when the net's corner UVs or light-map rects changed since the blocks were built."""
+        s = self._snapshot
+        return not (np.array_equal(s[0], self.net.uv) and np.array_equal(s[1], self.net.lightmap_rect))
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.vertices.nbytes)
+
+    # ------------------------------------------------------------------ per frame
+    def frame(self, eye, planes=None, near: float = DEFAULT_NEAR, far: float = DEFAULT_FAR, lod: bool = True,
+              morph: bool = True, patches=None, side_levels=None, morph_band: float = MORPH_BAND,
+              use_numba: bool | None = None) -> ResidentMesh:
+        """Levels, culling and the index list for a camera at ``eye``.
+
+        Parameters
+        ----------
+        eye : (3,) camera position
+        planes : (6, 4) inward frustum planes (None: every patch)
+        near, far : LOD thresholds (as :func:`piste.terrain.edge_levels`: ``d < near`` fine,
+            ``d < far`` medium, else coarse)
+        lod : False draws every patch at the fine level
+        morph : geomorph between levels (False: the talk's exact positions)
+        patches : (p,) explicit patch ids (overrides ``planes``)
+        side_levels : (p, 4) explicit level indices 0..2 per side of ``patches`` (tests);
+            with ``morph``, the factors must then be set by the caller in :attr:`factors`
+        use_numba : None (compiled when numba is installed), False (numpy; the same result)
+        """
+        net = self.net
+        eye = np.asarray(eye, dtype=np.float64).reshape(3)
+        if not np.all(np.isfinite(eye)):
+            raise ConfigError(f"eye must be finite, got {eye.tolist()}")
+        if not (0 <= near <= far):
+            raise ConfigError(f"LOD thresholds must satisfy 0 <= near <= far, got near={near}, far={far}")
+        if patches is not None:
+            pids = np.asarray(patches, dtype=np.int64).ravel()
+            if len(pids) and (pids.min() < 0 or pids.max() >= len(net)):
+                raise ValidationError(f"{net.name}: patch ids must be in 0..{len(net) - 1}")
+        elif planes is None:
+            pids = np.arange(len(net), dtype=np.int64)
+        else:
+            pids = patch_tree(net).cull(planes)
+        fac = self.factors
+        if side_levels is None and _kernels.HAVE_NUMBA and use_numba is not False:
+            key = _kernels.side_lod(pids, self.side_edge, self.edge_mid, self.degenerate, eye, near, far, morph_band,
+                                    lod, morph or not lod, fac)
+            return self._mesh(pids, key, morph, use_numba)
+        se = net.side_edge[pids]  # (p, 4)
+        if side_levels is not None:
+            li = np.asarray(side_levels, dtype=np.int64).reshape(len(pids), 4)
+            if li.size and (li.min() < 0 or li.max() > 2):
+                raise ValidationError("side_levels must be level indices 0..2")
+        elif not lod:
+            li = np.full((len(pids), 4), 2, dtype=np.int64)
+            fac[se] = 1.0
+            fac[net.n_edges + pids] = 1.0
+        else:
+            d = self.edge_mid[se] - eye  # (p, 4, 3)
+            d2 = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2]
+            dist = np.sqrt(d2)
+            li = np.where(dist < near, 2, np.where(dist < far, 1, 0))
+            li[net.edge_degenerate[se]] = 0
+            if morph:
+                w = float(morph_band)
+                f_fine = (near - dist) / max(w * near, 1e-12)
+                f_mid = (far - dist) / max(w * (far - near), 1e-12)
+                f = np.clip(np.where(li == 2, f_fine, np.where(li == 1, f_mid, 1.0)), 0.0, 1.0).astype(np.float32)
+                fac[se] = f
+                mx = li.max(axis=1) if len(li) else np.zeros(0, np.int64)
+                fin = np.where(li == mx[:, None], f, np.float32(0.0)).max(axis=1) if len(li) else np.zeros(0, np.float32)
+                fac[net.n_edges + pids] = fin
+        key = ((li[:, 0] * 3 + li[:, 1]) * 3 + li[:, 2]) * 3 + li[:, 3]
+        return self._mesh(pids, key, morph, use_numba)
+
+    def _mesh(self, pids: np.ndarray, key: np.ndarray, morph: bool, use_numba=None) -> ResidentMesh:
+        li = np.stack([(key // 3 ** (3 - s)) % 3 for s in range(4)], axis=1) if len(key) else np.zeros((0, 4), np.int64)
+        base = pids * self.block
+        flat, start = frame_indices(key, base, self.tmpl, self.tmpl_start, self.tmpl_count, use_numba=use_numba)
+        return ResidentMesh(
+            resident=self,
+            indices=flat.reshape(-1, 3),
+            patch_ids=pids,
+            patch_levels=self.level_array[li],
+            patch_kind=self.shape_kind[key],
+            tri_start=start // 3,
+            vertex_first=base,
+            vertex_count=np.full(len(pids), self.block, dtype=np.int64),
+            factors=self.factors,
+            morph=bool(morph),
+            n_vertices=int(self.shape_verts[key].sum()),
+        )
+
+
+def resident_terrain(net: PatchNet, levels=LEVELS) -> ResidentTerrain:
+    """The :class:`ResidentTerrain` of ``net`` at ``levels``, built once and kept on the net (rebuilt
+    when its UVs or light-map rects change)."""
+    key = tuple(int(x) for x in levels)
+    store = net.__dict__.setdefault("_resident", {})
+    r = store.get(key)
+    if r is None or r.stale():
+        r = ResidentTerrain(net, key)
+        store[key] = r
+    return r
