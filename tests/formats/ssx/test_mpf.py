@@ -1,0 +1,180 @@
+"""SSX Tricky .mpf: layout, byte-identical round trips, in-place patching, unknown bytes kept."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from piste.errors import FormatError, ValidationError
+from piste.formats.ssx.mpf import (
+    BONE_DTYPE, DIR_DTYPE, PALETTE_ENTRY_DTYPE, Group, Link, Mesh, MorphKey, MpfFile, SubModel, mpf_bytes,
+    pack_chunks, parse_mpf, read_mpf, strip_triangles, write_mpf,
+)
+
+
+def small_mpf(seed=0, n=130, shadow=True) -> MpfFile:
+    """A hand-built file: 3 bones, 3 palettes, a render group, a morph group, a shadow group."""
+    rng = np.random.default_rng(seed)
+    pos = rng.normal(size=(n, 3)).astype("<f4") * 50
+    uv = np.zeros((n, 4), "<i2")
+    uv[:, :2] = rng.integers(0, 4096, (n, 2))
+    slot = rng.integers(0, 3, n)
+    uv[:, 2], uv[:, 3] = 14 + 4 * slot, 114 + 3 * slot
+    nrm = rng.integers(-32767, 32767, (n, 3)).astype("<i2")
+    strips = [np.arange(0, 70), np.arange(70, 75), np.arange(75, n)]
+    chunks = pack_chunks(strips, uv, nrm, pos)
+    pal = [np.array([(100, 0, 0)], PALETTE_ENTRY_DTYPE), np.array([(50, 0, 0), (50, 1, 0)], PALETTE_ENTRY_DTYPE),
+           np.array([(25, 0, 0), (50, 1, 0), (25, 2, 0)], PALETTE_ENTRY_DTYPE)]
+    bones = np.zeros(3, BONE_DTYPE)
+    bones["name"] = [b"hips", b"spine", b"head"]
+    bones["parent_file"] = [-1, 0, 0]
+    bones["parent_bone"] = [-1, 0, 1]
+    bones["translation"] = [[0, 0, 100], [0, 0, 20], [0, 0, 40]]
+    keys = [MorphKey(deltas=rng.integers(-100, 100, (chunks[0].n_vertices, 3)).astype("i1")) for _ in range(2)]
+    groups = [Group(1, 0, [Link([Mesh(chunks[1:])], np.array([0, 1, 2], "<u4"))]),
+              Group(256, 0, [Link([Mesh(chunks[:1], morphs=keys)], np.array([0, 1, 2], "<u4"))])]
+    if shadow:
+        sh = pack_chunks([np.arange(20)], None, None, pos, shadow_slots=np.full(n, 14, "<u4"))
+        groups.append(Group(17, 0, [Link([Mesh(sh)], np.array([1], "<u4"))]))
+    body = SubModel(name="Body3000", bones=bones, palettes=pal, morph_keys=2, groups=groups)
+    uv1 = uv.copy()
+    uv1[:, 2], uv1[:, 3] = 14 + 4 * (slot % 2), 114 + 3 * (slot % 2)
+    other = SubModel(name="Body750", bones=bones.copy(), palettes=pal[:2], groups=[
+        Group(1, 0, [Link([Mesh(pack_chunks([np.arange(10)], uv1, nrm, pos))], np.array([0, 1], "<u4"))])])
+    return MpfFile([body, other])
+
+
+def test_layout_facts():
+    b = mpf_bytes(small_mpf())
+    assert int(np.frombuffer(b, "<u4", 1, 0)[0]) == 8
+    count, dir_off = np.frombuffer(b, "<i2", 2, 4)
+    assert (count, dir_off) == (2, 12)
+    assert int(np.frombuffer(b, "<u4", 1, 8)[0]) == 12 + 80 * 2 + 4
+    e = np.frombuffer(b, DIR_DTYPE, 2, 12)
+    assert bytes(e[0]["name"]).rstrip(b"\0") == b"Body3000"
+    assert list(e[0]["counts"]) == [3, 3, 3, 3, 0, 0, 2]  # palettes, wrefs, groups, bones, materials, ik, morphs
+    assert int(e[0]["sections"][4]) == 0  # materials first
+    base = 176 + int(e[0]["offset"])
+    # palette header: count, offset, constant 36; first entry 100 % on bone 0 of file 0
+    ph = np.frombuffer(b, "<u4", 3, base + int(e[0]["sections"][6]))
+    assert ph[0] == 1 and ph[2] == 36
+    assert tuple(np.frombuffer(b, PALETTE_ENTRY_DTYPE, 1, base + int(ph[1]))[0]) == (100, 0, 0)
+    # first chunk: 24-bit qword count, byte 31 = 0x6C, strip-table header (strips, 14, 114, vertices)
+    f = parse_mpf(b)
+    c = f.models[0].groups[0].links[0].meshes[0].chunks[0]
+    o = base + c.offset
+    assert b[o + 31] == 0x6C
+    strips, w14, w114, nv = np.frombuffer(b, "<u4", 4, o + 48)
+    assert (w14, w114) == (14, 114) and nv == c.n_vertices <= 55
+    qwc = int.from_bytes(b[o:o + 3], "little")
+    assert qwc == (64 + 16 * strips) // 16 - 1
+
+
+def test_round_trip_byte_identical_and_rebuild(tmp_path):
+    f = small_mpf()
+    b = mpf_bytes(f)
+    p = tmp_path / "rider.mpf"
+    assert write_mpf(f, p) == []
+    g = read_mpf(p)
+    assert g.unknown == []
+    out = tmp_path / "again.mpf"
+    assert write_mpf(g, out) == []
+    assert out.read_bytes() == b
+    for s in g.models:  # forget the source: the canonical layout reproduces the same bytes
+        s.source = None
+    g.source = None
+    assert mpf_bytes(g) == b
+
+
+def test_values_survive():
+    f = small_mpf()
+    g = parse_mpf(mpf_bytes(f))
+    for a, b in zip(f.models, g.models):
+        assert a.bone_names == b.bone_names
+        assert np.array_equal(a.bones, b.bones)
+        assert [p.tolist() for p in a.palettes] == [p.tolist() for p in b.palettes]
+        for la, lb in zip(a.links, b.links):
+            assert np.array_equal(la.refs, lb.refs)
+            for ma, mb in zip(la.meshes, lb.meshes):
+                assert [k.deltas.tolist() for k in ma.morphs] == [k.deltas.tolist() for k in mb.morphs]
+                for ca, cb in zip(ma.chunks, mb.chunks):
+                    assert np.array_equal(ca.positions, cb.positions)
+                    assert np.array_equal(ca.strip_lengths, cb.strip_lengths)
+                    if ca.uv is None:
+                        assert cb.uv is None and np.array_equal(ca.shadow_slots, cb.shadow_slots)
+                    else:
+                        assert np.array_equal(ca.uv, cb.uv) and np.array_equal(ca.normals, cb.normals)
+    assert g.models[0].groups[2].type == 17 and g.models[0].groups[2].links[0].meshes[0].chunks[0].shadow
+
+
+def test_edit_values_patches_in_place_and_keeps_unknown_bytes():
+    b = bytearray(mpf_bytes(small_mpf()))
+    b += b"MODDER-NOTE-1234"  # bytes after the last blob: not understood, must be kept
+    f = parse_mpf(bytes(b))
+    assert any(w == "file" and n == 16 for w, o, n, _ in f.unknown)
+    assert mpf_bytes(f) == bytes(b)
+    c = f.models[0].groups[0].links[0].meshes[0].chunks[1]
+    c.positions[3] = (1.5, -2.0, 3.25)
+    f.models[0].bones["translation"][1] = (0, 1, 22)
+    f.models[0].palettes[1]["weight"] = (75, 25)
+    f.models[0].groups[1].links[0].meshes[0].morphs[1].deltas[0] = (1, 2, 3)
+    out = mpf_bytes(f)
+    assert len(out) == len(b) and out.endswith(b"MODDER-NOTE-1234")
+    g = parse_mpf(out)
+    assert np.array_equal(g.models[0].groups[0].links[0].meshes[0].chunks[1].positions[3], [1.5, -2.0, 3.25])
+    assert np.allclose(g.models[0].bones["translation"][1], (0, 1, 22))
+    assert g.models[0].palettes[1]["weight"].tolist() == [75, 25]
+    assert g.models[0].groups[1].links[0].meshes[0].morphs[1].deltas[0].tolist() == [1, 2, 3]
+
+
+def test_shape_change_is_laid_out_anew_with_a_note(tmp_path):
+    f = parse_mpf(mpf_bytes(small_mpf()))
+    f.models[1].bones = f.models[1].bones[:2]
+    notes = write_mpf(f, tmp_path / "x.mpf")
+    assert notes and "laid out anew" in notes[0]
+    g = read_mpf(tmp_path / "x.mpf")
+    assert len(g.models[1].bones) == 2 and g.models[0].n_vertices == f.models[0].n_vertices
+
+
+def test_gap_inside_a_blob_is_reported_and_kept():
+    f = small_mpf()
+    b = bytearray(mpf_bytes(f))
+    g = parse_mpf(bytes(b))
+    sub = g.models[0]
+    # the 16-aligned padding after the palettes is a gap of zero bytes; put a marker there
+    e = np.frombuffer(bytes(b), DIR_DTYPE, 2, 12)
+    base = 176 + int(e[0]["offset"])
+    mesh_data = int(e[0]["sections"][3])
+    last_pal = sub._offsets["palettes"][-1] + 4 * len(sub.palettes[-1])
+    if mesh_data - last_pal >= 2:
+        b[base + last_pal:base + last_pal + 2] = b"\xab\xcd"
+        h = parse_mpf(bytes(b))
+        assert any(w == "Body3000 blob" for w, *_ in h.unknown)
+        assert mpf_bytes(h) == bytes(b)
+
+
+def test_strip_triangles_keep_winding():
+    t = strip_triangles([4, 3])
+    assert t.tolist() == [[0, 1, 2], [2, 1, 3], [4, 5, 6]]
+    assert strip_triangles([2, 1]).shape == (0, 3)
+
+
+def test_pack_chunks_limit_and_winding():
+    n = 200
+    pos = np.random.default_rng(1).normal(size=(n, 3)).astype("<f4")
+    uv = np.zeros((n, 4), "<i2")
+    uv[:, 2], uv[:, 3] = 14, 114
+    nrm = np.zeros((n, 3), "<i2")
+    chunks = pack_chunks([np.arange(n)], uv, nrm, pos)
+    assert all(c.n_vertices <= 55 for c in chunks)
+    got = {tuple(np.round(pos_t, 5).ravel()) for c in chunks for pos_t in c.positions[c.triangles()]}
+    s = np.arange(n)
+    want = {tuple(np.round(pos[t], 5).ravel()) for t in strip_triangles([n])}
+    assert got == want and len(want) == n - 2
+    with pytest.raises(ValidationError):
+        pack_chunks([s], uv, nrm, pos, max_vertices=3)
+
+
+def test_not_a_model_file():
+    with pytest.raises(FormatError, match="music"):
+        parse_mpf(b"xDFP" + bytes(20), "song.mpf")
