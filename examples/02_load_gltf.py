@@ -18,7 +18,10 @@ from piste.formats import load_gltf
 
 
 def find_default() -> Path | None:
-    data = Path(os.environ.get("PISTE_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
+    if "PISTE_DATA" in os.environ:  # the docs gallery sets it (it runs examples without __file__)
+        data = Path(os.environ["PISTE_DATA"])
+    else:
+        data = Path(__file__).resolve().parents[2] / "shared" / "data"
     for rel in ("gltf/RobotExpressive/RobotExpressive.glb", "gltf/CesiumMan/CesiumMan.glb"):
         if (data / rel).is_file():
             return data / rel
