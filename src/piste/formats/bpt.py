@@ -15,6 +15,11 @@ from pathlib import Path
 import numpy as np
 
 from piste.errors import FormatError
+from piste.formats import limits, safe_io
+
+#: largest .bpt read (a patch takes ~400 bytes of text: ~2.6 million patches)
+MAX_BPT_BYTES = 1 << 30
+_MIN_PATCH_BYTES = 4 + 16 * 6  # "3 3\n" and 16 lines of "0 0 0\n"
 
 
 def read_bpt(path) -> np.ndarray:
@@ -29,10 +34,11 @@ def read_bpt(path) -> np.ndarray:
     FormatError naming the file and line of the first problem.
     """
     path = Path(path)
+    if not path.exists():
+        raise FormatError(path, "no such file")
+    data = safe_io.read_regular(path, MAX_BPT_BYTES)  # regular files only, size-capped, before reading
     try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise FormatError(path, "no such file") from None
+        text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise FormatError(path, f"not a text file ({exc.reason})") from None
     lines = [(no, line.split()) for no, line in enumerate(text.splitlines(), 1) if line.strip()]
@@ -58,6 +64,11 @@ def read_bpt(path) -> np.ndarray:
     no, (count,) = numbers(1, "the patch count", int)
     if count <= 0:
         raise FormatError(path, f"expected a positive patch count, got {count}", line=no)
+    # each patch is at least 17 lines ("3 3" and 16 "x y z"): 100 bytes; check before allocating
+    if count > limits.MAX_PATCHES or count > len(data) // _MIN_PATCH_BYTES + 1:  # +1: a truncated file says where
+        raise FormatError(path, f"patch count {count} is more than the file's {len(data)} bytes can hold "
+                                f"(at least {_MIN_PATCH_BYTES} bytes a patch, at most {limits.MAX_PATCHES} patches)",
+                          line=no)
     cp = np.empty((count, 16, 3), dtype=np.float64)
     for p in range(count):
         no, deg = numbers(2, f"the degrees of patch {p} ('3 3')", int)
