@@ -206,7 +206,8 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
     ts = scene.terrain
     src = _file_key(ts.path) if ts.path is not None else f"seed {ts.seed}"
     terrain_key = content_key(BUILD_VERSION, "terrain", ts.kind, src, ts.seed, ts.spacing, ts.height_scale,
-                              ts.height_offset, ts.key, ts.samples_per_patch, ts.smooth)
+                              ts.height_offset, ts.key, ts.samples_per_patch, ts.smooth,
+                              *((ts.nodata, ts.vertical_units) if ts.kind == "geotiff" else ()))
 
     def make_terrain():
         from piste.pipeline.sources import load_terrain

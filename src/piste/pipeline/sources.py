@@ -2,7 +2,10 @@
 
 Height-field images: row ``r``, column ``c`` of the image is the height at ``x = c * dx``,
 ``y = r * dy`` (the image's top row at ``y = 0``); 16-bit PNGs keep their 65,536 levels.
-Heights are ``value * height_scale + height_offset`` metres.
+Heights are ``value * height_scale + height_offset`` metres.  A GeoTIFF (kind ``geotiff``) brings
+its own spacing, nodata and vertical units (:func:`piste.formats.geotiff.read_geotiff`); its
+sample ``[0, 0]`` (the south-west corner) is placed at x = y = 0 (float32 rendering keeps
+centimetres only near the origin), ``spacing`` in the scene overrides the file's.
 
 API
 ---
@@ -29,7 +32,12 @@ __all__ = ["load_terrain", "load_heightfield", "load_rider_model", "load_object_
 def load_heightfield(spec) -> tuple[np.ndarray, tuple]:
     """``(z (H, W) float64 metres, (dx, dy))`` of a height-field terrain spec."""
     path = Path(spec.path)
-    if path.suffix.lower() == ".npz":
+    if spec.kind == "geotiff":
+        from piste.formats.geotiff import read_geotiff
+
+        dem = read_geotiff(path, fill=spec.nodata, vertical_units=spec.vertical_units)
+        z, spacing = dem.z, spec.spacing or dem.spacing
+    elif path.suffix.lower() == ".npz":
         try:
             data = np.load(path, allow_pickle=False)
         except Exception as exc:
@@ -82,7 +90,7 @@ def load_terrain(spec):
         return PatchNet.from_bpt(spec.path)
     if spec.kind == "net":
         return PatchNet.load(spec.path)
-    if spec.kind == "heightfield":
+    if spec.kind in ("heightfield", "geotiff"):
         from piste.terrain.fit import fit_heightfield
 
         z, spacing = load_heightfield(spec)

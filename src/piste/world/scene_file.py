@@ -19,6 +19,11 @@ scene file.  Every table and key is optional except where noted::
     key = "elevation"             # .npz height field: the array to read (default: the first 2-D one)
     samples_per_patch = 4         # height field: sample intervals per patch side
     smooth = false                # height field: C2 fit instead of C0
+    nodata = "nearest"            # GeoTIFF (.tif with georeferencing; spacing from its tags):
+                                  # missing samples "nearest" | "error" | a height in metres
+    vertical_units = "metre"      # GeoTIFF: override the file's vertical unit (metre, foot, us_survey_foot)
+    tiles = "world.tiles"         # large worlds: build a tiled net folder (piste.terrain.tiles)
+    tile_patches = 64             #   patches per tile side
 
     [lightmap]
     res = 8                       # texels per patch side
@@ -230,6 +235,10 @@ class TerrainSpec:
     key: str | None = None
     samples_per_patch: int = 4
     smooth: bool = False
+    nodata: object = "nearest"
+    vertical_units: str | None = None
+    tiles: Path | None = None
+    tile_patches: int = 64
 
 
 @dataclass
@@ -468,7 +477,8 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
 
     # terrain
     t = _table(top, "terrain")
-    t.allow({"source", "seed", "spacing", "height_scale", "height_offset", "key", "samples_per_patch", "smooth"})
+    t.allow({"source", "seed", "spacing", "height_scale", "height_offset", "key", "samples_per_patch", "smooth",
+             "nodata", "vertical_units", "tiles", "tile_patches"})
     source = t.get("source", "str", "default")
     ts = TerrainSpec(seed=t.get("seed", "int", 0), height_scale=t.get("height_scale", "float", 1.0),
                      height_offset=t.get("height_offset", "float", 0.0), key=t.get("key", "str"),
@@ -480,11 +490,14 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
             raise t.error("spacing", f"expected spacing > 0, got {sp!r}")
     if ts.samples_per_patch < 3:
         raise t.error("samples_per_patch", f"expected at least 3, got {ts.samples_per_patch}")
+    _large_world_keys(t, ts, base)
     if source != "default":
         ts.path = _file(t, "source", base)
         suf = ts.path.suffix.lower()
         if suf == ".bpt":
             ts.kind = "bpt"
+        elif suf in (".tif", ".tiff") and _tiff_is_geotiff(ts.path):
+            ts.kind = "geotiff"
         elif suf in HEIGHTFIELD_IMAGES:
             ts.kind = "heightfield"
         elif suf == ".npz":
@@ -620,6 +633,37 @@ def _light(c: _Checker):
         msg = str(exc)
         bad = next((k for k in kw if re.search(rf"\b{k}\b", msg)), None)
         raise c.error(bad, msg) from None
+
+
+def _large_world_keys(t: _Checker, ts: TerrainSpec, base: Path) -> None:
+    """terrain.nodata / vertical_units (GeoTIFF) and tiles / tile_patches (tiled nets)."""
+    if "nodata" in t.table:
+        v = t.table["nodata"]
+        ts.nodata = t.get("nodata", "float") if not isinstance(v, str) else t.get("nodata", "str")
+        if isinstance(ts.nodata, str) and ts.nodata not in ("nearest", "error"):
+            raise t.error("nodata", f"expected \"nearest\", \"error\" or a number, got {v!r}")
+    ts.vertical_units = t.get("vertical_units", "str")
+    if ts.vertical_units is not None and ts.vertical_units not in ("metre", "meter", "foot", "us_survey_foot"):
+        raise t.error("vertical_units", f"expected metre, foot or us_survey_foot, got {ts.vertical_units!r}")
+    if "tiles" in t.table:
+        ts.tiles = (base / t.get("tiles", "str")).resolve()
+    ts.tile_patches = t.get("tile_patches", "int", 64)
+    if not 2 <= ts.tile_patches <= 1024:
+        raise t.error("tile_patches", f"expected 2 .. 1024 patches a tile side, got {ts.tile_patches}")
+
+
+def _tiff_is_geotiff(path: Path) -> bool:
+    """A TIFF with georeferencing tags (ModelPixelScale or ModelTransformation)."""
+    try:
+        import tifffile
+    except ImportError:
+        return False
+    try:
+        with tifffile.TiffFile(path) as tf:
+            tags = tf.pages[0].tags
+            return 33550 in tags or 34264 in tags
+    except Exception:
+        return False
 
 
 def _npz_is_net(path: Path) -> bool:

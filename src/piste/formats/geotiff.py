@@ -1,0 +1,287 @@
+"""GeoTIFF digital elevation models: heights with their georeferencing.
+
+A GeoTIFF DEM is a one-band TIFF image of heights plus tags that place it on the ground:
+
+* ``ModelPixelScaleTag`` (33550): ``(sx, sy, sz)``, the pixel size in the model's units;
+* ``ModelTiepointTag`` (33922): ``(i, j, k, X, Y, Z)``, raster point ``(i, j)`` lies at ``(X, Y)``;
+* ``GeoKeyDirectoryTag`` (34735): the model type (projected / geographic), the raster type
+  (``PixelIsArea``: the tie point is a pixel's corner; ``PixelIsPoint``: its centre), the linear
+  units of a projected system and the vertical units (metre, foot, US survey foot);
+* ``GDAL_NODATA`` (42113): the value that marks missing samples (an ASCII number).
+
+:func:`read_geotiff` returns a :class:`DemRaster` in piste's height-field layout (see
+:mod:`piste.terrain.fit`): row ``r`` at ``y = origin[1] + r * dy`` with ``dy > 0`` (the file's
+north-up rows are flipped so +y is north and x, y, z stay right-handed), heights in metres, pixel
+centres as sample points.  A geographic raster (degrees) is converted to metres at its centre
+latitude (``111,320 m * cos(lat)`` a degree of longitude, ``110,574 m`` a degree of latitude), good
+to a fraction of a percent over a few kilometres.  Missing samples (nodata or non-finite) are filled
+from the nearest valid sample (``fill="nearest"``), with a constant (``fill=<number>``), or refused
+(``fill="error"``); ``mask`` says which samples were missing.
+
+:func:`write_geotiff` writes such a file (float32 heights, PixelIsArea, metres), atomically.
+
+Needs ``tifffile`` (the ``dask`` extra: ``pip install 'piste[dask]'``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from piste.errors import ConfigError, FormatError
+from piste.formats.atomic import atomic_path
+
+__all__ = ["DemRaster", "read_geotiff", "write_geotiff", "MAX_SAMPLES", "UNIT_METRES"]
+
+#: refuse rasters of more samples than this (a hostile header could claim anything)
+MAX_SAMPLES = 1_500_000_000
+#: EPSG linear unit codes -> metres
+UNIT_METRES = {9001: 1.0, 9002: 0.3048, 9003: 1200.0 / 3937.0, 9036: 1000.0}
+_UNIT_NAMES = {"metre": 9001, "meter": 9001, "m": 9001, "foot": 9002, "ft": 9002, "us_survey_foot": 9003,
+               "us-ft": 9003}
+_TAG_SCALE, _TAG_TIEPOINT, _TAG_TRANSFORM, _TAG_GEOKEYS, _TAG_DOUBLES, _TAG_NODATA = 33550, 33922, 34264, 34735, 34736, 42113
+_KEY_MODEL, _KEY_RASTER, _KEY_LINEAR_UNITS, _KEY_VERTICAL_UNITS = 1024, 1025, 3076, 4099
+_PIXEL_IS_AREA, _PIXEL_IS_POINT = 1, 2
+_MODEL_PROJECTED, _MODEL_GEOGRAPHIC = 1, 2
+
+
+def _tifffile():
+    try:
+        import tifffile
+    except ImportError:
+        raise ConfigError("reading a GeoTIFF needs the 'dask' extra (tifffile): pip install 'piste[dask]'") from None
+    return tifffile
+
+
+@dataclass
+class DemRaster:
+    """A height field with its place on the ground.
+
+    Attributes
+    ----------
+    z : (H, W) float64 metres, row ``r`` at ``y = origin[1] + r * spacing[1]`` (north up the rows)
+    spacing : (dx, dy) metres between samples, both > 0
+    origin : (x, y) metres of sample ``z[0, 0]`` in the file's projected system (for a geographic
+        raster: metres east/north of longitude 0 at the centre latitude, an approximation)
+    mask : (H, W) bool, True where the file had no data (filled in ``z``)
+    vertical_units : the file's vertical unit name ("metre", "foot", "us_survey_foot")
+    geographic : the file is in degrees (converted to metres)
+    path : the file
+    """
+
+    z: np.ndarray
+    spacing: tuple
+    origin: tuple
+    mask: np.ndarray
+    vertical_units: str = "metre"
+    geographic: bool = False
+    path: Path | None = None
+
+    @property
+    def nodata_fraction(self) -> float:
+        return float(self.mask.mean()) if self.mask.size else 0.0
+
+
+def _geokeys(path: Path, page) -> dict:
+    """GeoKey id -> value (ints, doubles, or tuples of doubles) from the GeoKeyDirectory."""
+    tags = page.tags
+    if _TAG_GEOKEYS not in tags:
+        return {}
+    raw = np.asarray(tags[_TAG_GEOKEYS].value, dtype=np.int64).ravel()
+    doubles = np.asarray(tags[_TAG_DOUBLES].value, dtype=np.float64).ravel() if _TAG_DOUBLES in tags else np.zeros(0)
+    if len(raw) < 4 or len(raw) < 4 + 4 * int(raw[3]):
+        raise FormatError(path, f"GeoKeyDirectory of {len(raw)} values is shorter than its header says",
+                          field="GeoKeyDirectoryTag")
+    keys: dict = {}
+    for k in range(int(raw[3])):
+        key, loc, count, off = (int(x) for x in raw[4 + 4 * k: 8 + 4 * k])
+        if loc == 0:
+            keys[key] = off
+        elif loc == _TAG_DOUBLES and off + count <= len(doubles):
+            keys[key] = tuple(float(x) for x in doubles[off:off + count])
+    return keys
+
+
+def _nodata(path: Path, page):
+    if _TAG_NODATA not in page.tags:
+        return None
+    text = page.tags[_TAG_NODATA].value
+    text = text.decode("ascii", "replace") if isinstance(text, bytes) else str(text)
+    text = text.strip().strip("\x00").strip()
+    try:
+        return float(text)
+    except ValueError:
+        raise FormatError(path, f"GDAL_NODATA must be a number, got {text!r}", field="GDAL_NODATA") from None
+
+
+def _georeference(path: Path, page, shape) -> tuple[tuple, tuple, bool, float]:
+    """((sx, sy), (x0, y0) of pixel (0, 0)'s centre, geographic, z scale) in the file's units."""
+    tags = page.tags
+    keys = _geokeys(path, page)
+    area = keys.get(_KEY_RASTER, _PIXEL_IS_AREA) != _PIXEL_IS_POINT
+    if _TAG_SCALE in tags and _TAG_TIEPOINT in tags:
+        scale = np.asarray(tags[_TAG_SCALE].value, dtype=np.float64).ravel()
+        tie = np.asarray(tags[_TAG_TIEPOINT].value, dtype=np.float64).ravel()
+        if len(scale) < 2 or len(tie) < 6:
+            raise FormatError(path, f"expected 3 pixel scales and 6 tie-point values, got {len(scale)} and {len(tie)}",
+                              field="ModelPixelScaleTag")
+        sx, sy = float(scale[0]), float(scale[1])
+        sz = float(scale[2]) if len(scale) > 2 and scale[2] != 0 else 1.0
+        i, j, x, y = (float(v) for v in (tie[0], tie[1], tie[3], tie[4]))
+        x0, y0 = x - i * sx, y + j * sy  # raster corner/centre (0, 0)
+    elif _TAG_TRANSFORM in tags:
+        m = np.asarray(tags[_TAG_TRANSFORM].value, dtype=np.float64).ravel()
+        if len(m) != 16:
+            raise FormatError(path, f"ModelTransformationTag must hold 16 values, got {len(m)}",
+                              field="ModelTransformationTag")
+        if m[1] != 0 or m[4] != 0:
+            raise FormatError(path, "a rotated or sheared raster (ModelTransformationTag with off-diagonal terms) "
+                                    "is not supported: resample it north-up first", field="ModelTransformationTag")
+        sx, sy, sz, x0, y0 = float(m[0]), float(-m[5]), 1.0, float(m[3]), float(m[7])
+    else:
+        raise FormatError(path, "no georeferencing: expected ModelPixelScaleTag and ModelTiepointTag "
+                                "(or ModelTransformationTag)", field="ModelPixelScaleTag")
+    if not (np.isfinite([sx, sy, x0, y0]).all() and sx > 0 and sy != 0):
+        raise FormatError(path, f"expected a positive finite pixel size, got ({sx}, {sy})", field="ModelPixelScaleTag")
+    if area:  # the tie point is the pixel's corner: samples sit at pixel centres
+        x0, y0 = x0 + 0.5 * sx, y0 - 0.5 * sy
+    geographic = keys.get(_KEY_MODEL) == _MODEL_GEOGRAPHIC
+    return (sx, sy), (x0, y0), geographic, sz
+
+
+def read_geotiff(path, fill="nearest", vertical_units: str | None = None) -> DemRaster:
+    """Read a one-band GeoTIFF DEM (see the module docstring).
+
+    Parameters
+    ----------
+    fill : ``"nearest"`` (default), a number (metres), or ``"error"`` (refuse missing samples)
+    vertical_units : override the file's vertical unit ("metre", "foot", "us_survey_foot")
+
+    Raises
+    ------
+    FormatError : not a TIFF, several bands, no georeferencing, a hostile size, missing samples
+        with ``fill="error"``, an unknown vertical unit code.
+    """
+    tifffile = _tifffile()
+    path = Path(path)
+    if not path.is_file():
+        raise FormatError(path, "no such file")
+    try:
+        tf = tifffile.TiffFile(path)
+    except Exception as exc:
+        raise FormatError(path, f"not a readable TIFF ({exc})") from None
+    with tf:
+        if not tf.pages:
+            raise FormatError(path, "not a readable TIFF (no image in the file)")
+        page = tf.pages[0]
+        shape = tuple(int(s) for s in page.shape)
+        if len(shape) == 3 and 1 in (shape[0], shape[-1]):
+            shape = tuple(s for s in shape if s != 1) if shape.count(1) < 2 else shape[:2]
+        if len(shape) != 2:
+            raise FormatError(path, f"expected one band of heights, got an image of shape {tuple(page.shape)}",
+                              field="SamplesPerPixel")
+        if shape[0] * shape[1] > MAX_SAMPLES or min(shape) < 2:
+            raise FormatError(path, f"raster of {shape[0]} x {shape[1]} samples: expected 2 .. "
+                                    f"{MAX_SAMPLES:,} samples", field="ImageLength")
+        (sx, sy), (x0, y0), geographic, sz = _georeference(path, page, shape)
+        keys = _geokeys(path, page)
+        nodata = _nodata(path, page)
+        try:
+            z = np.asarray(page.asarray(), dtype=np.float64).reshape(shape)
+        except Exception as exc:
+            raise FormatError(path, f"could not decode the raster ({exc})") from None
+    # vertical units
+    if vertical_units is not None:
+        if vertical_units not in _UNIT_NAMES:
+            raise ConfigError(f"vertical_units must be one of {', '.join(sorted(_UNIT_NAMES))}, got {vertical_units!r}")
+        vcode = _UNIT_NAMES[vertical_units]
+    else:
+        vcode = keys.get(_KEY_VERTICAL_UNITS, 9001)
+        if vcode == 32767:  # user-defined: no information, take metres
+            vcode = 9001
+        if vcode not in UNIT_METRES:
+            raise FormatError(path, f"vertical unit code {vcode} is not a known linear unit (metre 9001, foot 9002, "
+                                    "US survey foot 9003): give vertical_units", field="VerticalUnitsGeoKey")
+    vname = {9001: "metre", 9002: "foot", 9003: "us_survey_foot", 9036: "kilometre"}[vcode]
+    mask = ~np.isfinite(z)
+    if nodata is not None:
+        mask |= z == nodata
+    if mask.all():
+        raise FormatError(path, "every sample is nodata", field="GDAL_NODATA")
+    z = z * UNIT_METRES[vcode]
+    # horizontal units
+    if geographic:
+        lat = np.radians(y0 - 0.5 * (shape[0] - 1) * sy)
+        mx, my = 111_320.0 * np.cos(lat), 110_574.0
+        sx, sy, x0, y0 = sx * mx, sy * my, x0 * mx, y0 * my
+    else:
+        lu = keys.get(_KEY_LINEAR_UNITS, 9001)
+        f = UNIT_METRES.get(lu, 1.0)
+        sx, sy, x0, y0 = sx * f, sy * f, x0 * f, y0 * f
+    # north-up rows (row 0 at the top, y decreasing) -> row r at y0' + r * dy
+    if sy > 0:
+        z, mask = z[::-1], mask[::-1]
+        y0 = y0 - (shape[0] - 1) * sy
+    z = np.ascontiguousarray(z)
+    mask = np.ascontiguousarray(mask)
+    if mask.any():
+        z = _fill(path, z, mask, fill)
+    return DemRaster(z, (float(sx), float(abs(sy))), (float(x0), float(y0)), mask, vname, geographic, path)
+
+
+def _fill(path: Path, z: np.ndarray, mask: np.ndarray, fill) -> np.ndarray:
+    if isinstance(fill, str) and fill == "error":
+        r, c = (int(v) for v in np.argwhere(mask)[0])
+        raise FormatError(path, f"{int(mask.sum())} sample(s) have no data, first at row {r}, column {c} "
+                                "(rows counted from the south edge): fill them or set fill", field="GDAL_NODATA")
+    if isinstance(fill, str):
+        if fill != "nearest":
+            raise ConfigError(f"nodata fill must be 'nearest', 'error' or a number, got {fill!r}")
+        from scipy.ndimage import distance_transform_edt
+
+        idx = distance_transform_edt(mask, return_distances=False, return_indices=True)
+        return z[idx[0], idx[1]]
+    z = z.copy()
+    z[mask] = float(fill)
+    return z
+
+
+def write_geotiff(path, z, spacing, origin=(0.0, 0.0), nodata: float | None = None,
+                  vertical_units: str = "metre", epsg: int | None = None) -> Path:
+    """Write a north-up float32 GeoTIFF DEM (PixelIsArea), atomically.
+
+    Parameters
+    ----------
+    z : (H, W) heights in piste layout (row ``r`` at ``y = origin[1] + r * dy``); written north-up
+    spacing : float or (dx, dy) metres
+    origin : (x, y) of sample ``z[0, 0]``'s centre (projected metres)
+    nodata : GDAL_NODATA value (samples equal to it are missing)
+    vertical_units : "metre", "foot" or "us_survey_foot" (heights are written as given, in that unit)
+    epsg : ProjectedCSTypeGeoKey (optional; e.g. 32633)
+    """
+    tifffile = _tifffile()
+    z = np.asarray(z, dtype=np.float32)
+    dx, dy = (float(spacing), float(spacing)) if np.ndim(spacing) == 0 else (float(spacing[0]), float(spacing[1]))
+    h, w = z.shape
+    # corner of the north-west pixel
+    x_nw = float(origin[0]) - 0.5 * dx
+    y_nw = float(origin[1]) + (h - 1) * dy + 0.5 * dy
+    keys = [(_KEY_MODEL, 0, 1, _MODEL_PROJECTED), (_KEY_RASTER, 0, 1, _PIXEL_IS_AREA),
+            (_KEY_LINEAR_UNITS, 0, 1, 9001), (_KEY_VERTICAL_UNITS, 0, 1, _UNIT_NAMES[vertical_units])]
+    if epsg is not None:
+        keys.insert(2, (3072, 0, 1, int(epsg)))
+    keys.sort()
+    geo = [1, 1, 0, len(keys)] + [v for k in keys for v in k]
+    extratags = [
+        (_TAG_SCALE, "d", 3, (dx, dy, 0.0), False),
+        (_TAG_TIEPOINT, "d", 6, (0.0, 0.0, 0.0, x_nw, y_nw, 0.0), False),
+        (_TAG_GEOKEYS, "H", len(geo), tuple(geo), False),
+    ]
+    if nodata is not None:
+        extratags.append((_TAG_NODATA, "s", 0, f"{nodata:g}", False))
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        tifffile.imwrite(tmp, np.ascontiguousarray(z[::-1]), extratags=extratags, photometric="minisblack")
+    return path
