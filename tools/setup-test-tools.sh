@@ -19,3 +19,20 @@ if [ -n "$missing" ]; then
 fi
 
 # --- npm tools (into .tools/, never global) --------------------------------------------------
+
+# --- glTF export tests (issue 13): Blender (headless re-import) and the Khronos glTF validator ---
+# blender: Debian 12's 3.4 (~30 s, 174 packages, 23 MB download); its glTF importer needs numpy in
+# the system Python (python3-numpy).  gltf-validator: npm package into .tools/, run by
+# tools/gltf_validate.mjs.
+GLTF_APT=""
+command -v blender >/dev/null 2>&1 || GLTF_APT="$GLTF_APT blender"
+dpkg -s python3-numpy >/dev/null 2>&1 || python3 -c "import numpy" >/dev/null 2>&1 || GLTF_APT="$GLTF_APT python3-numpy"
+if [ -n "$GLTF_APT" ]; then
+  echo "installing glTF test tools:$GLTF_APT"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get -o DPkg::Lock::Timeout=600 install -y -qq --no-install-recommends $GLTF_APT
+fi
+if [ ! -f .tools/node_modules/gltf-validator/package.json ]; then
+  mkdir -p .tools
+  npm install --prefix .tools --no-audit --no-fund --loglevel=error gltf-validator@2.0.0-dev.3.10
+fi
