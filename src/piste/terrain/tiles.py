@@ -1,0 +1,388 @@
+"""Tiled patch nets: a net too large for memory, fitted and stored one tile at a time.
+
+Layout
+------
+A height field ``z (H, W)`` with ``s`` sample intervals a patch side holds ``Px = (W - 1) // s`` by
+``Py = (H - 1) // s`` patches (``edge="crop"``, as :func:`piste.terrain.fit.fit_heightfield`).  A
+:class:`TileGrid` cuts them into tiles of ``T x T`` patches (the last row/column of tiles may be
+smaller); tile ``(ty, tx)`` holds patches ``[tx T, min((tx+1) T, Px))`` in x and the same in y,
+ordered ``row * width + col`` inside the tile (patch ``(0, 0)`` at the tile's south-west corner).
+
+Fit with fixed shared boundaries (exact C0 across tiles)
+-------------------------------------------------------
+A global least-squares fit couples every control point of the world.  The tiled fit decouples it
+in three stages, each a deterministic function of the samples it reads:
+
+1. **Corners**: the control point at every tile corner is the height sample there.
+2. **Tile edges**: each tile side is a 1-D C0 piecewise-cubic Bézier curve (``3m + 1`` control
+   values for ``m`` patches) fitted by least squares to the samples along that side, with its two
+   corner values fixed.  Both tiles that share a side compute it from the same samples with the same
+   code, so they get the *same bits* (tested), and no tile waits for another.
+3. **Interior**: the tile's ``(3 Ty + 1) x (3 Tx + 1)`` control grid with its boundary ring fixed
+   from stage 2; the interior unknowns solve the separable least-squares problem
+   ``min || Ay_I Z_I Ax_Iᵀ - (z - Ay Z_fixed Axᵀ) ||`` (normal equations along y then x).
+
+x and y control points are the regular grid at thirds of a patch, computed from *global* indices,
+so shared boundary control points are bit-identical in all three coordinates and the welded net of
+any group of tiles is watertight.  The error is a little above the global fit (the edges see only
+their own row of samples); measured on a 361 x 361 synthetic range: see ``tests/terrain/test_tiles.py``.
+
+Storage
+-------
+A :class:`TileStore` is a folder: ``index.json`` (the grid, written atomically) and one ``.npz`` a
+tile and product (``fit/t_0003_0012.npz``, ...), each written atomically and byte-deterministic
+(fixed zip timestamps), carrying the key of its inputs so that a resumed build can check
+(:meth:`TileStore.verify`) and skip it.  Nothing here ever holds more than a tile's neighbourhood.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import zipfile
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from piste.errors import FormatError, ValidationError
+from piste.formats.atomic import write_bytes_atomic
+from piste.terrain.bezier import bernstein
+from piste.terrain.net import PatchNet
+
+__all__ = ["TileGrid", "TileStore", "fit_tile", "fit_edge", "tile_net", "neighbourhood_net", "npz_bytes",
+           "TILES_FORMAT", "TILE_FIT_VERSION"]
+
+TILES_FORMAT = "piste.TiledNet/1"
+#: bumped whenever :func:`fit_tile`'s output for the same input changes
+TILE_FIT_VERSION = "piste.tile-fit/1"
+_ZIP_DATE = (1980, 1, 1, 0, 0, 0)
+
+
+# ----------------------------------------------------------------------------- the grid
+@dataclass(frozen=True)
+class TileGrid:
+    """How a height field of ``samples = (H, W)`` is cut into tiles of ``tile_patches`` patches.
+
+    Attributes
+    ----------
+    samples : (H, W) samples of the height field
+    samples_per_patch : sample intervals a patch side (>= 3)
+    tile_patches : patches a tile side
+    spacing : (dx, dy) metres
+    origin : (x, y) of sample ``[0, 0]``
+    """
+
+    samples: tuple
+    samples_per_patch: int
+    tile_patches: int
+    spacing: tuple
+    origin: tuple = (0.0, 0.0)
+
+    def __post_init__(self):
+        s, t = int(self.samples_per_patch), int(self.tile_patches)
+        if s < 3:
+            raise ValidationError(f"TileGrid: samples_per_patch must be >= 3, got {s}")
+        if t < 1:
+            raise ValidationError(f"TileGrid: tile_patches must be >= 1, got {t}")
+        if self.patches[0] < 1 or self.patches[1] < 1 or self.patches[0] * self.patches[1] < 2:
+            raise ValidationError(f"TileGrid: {self.samples[0]} x {self.samples[1]} samples hold fewer than 2 patches "
+                                  f"of {s} sample intervals")
+        if min(self.spacing) <= 0:
+            raise ValidationError(f"TileGrid: spacing must be positive, got {self.spacing}")
+
+    @property
+    def patches(self) -> tuple[int, int]:
+        """``(Py, Px)`` patches of the whole world."""
+        s = self.samples_per_patch
+        return (self.samples[0] - 1) // s, (self.samples[1] - 1) // s
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(tiles_y, tiles_x)``."""
+        t = self.tile_patches
+        py, px = self.patches
+        return -(-py // t), -(-px // t)
+
+    @property
+    def n_patches(self) -> int:
+        return self.patches[0] * self.patches[1]
+
+    def tiles(self) -> list[tuple[int, int]]:
+        """Every ``(ty, tx)``, row by row."""
+        return [(ty, tx) for ty in range(self.shape[0]) for tx in range(self.shape[1])]
+
+    def patch_range(self, ty: int, tx: int) -> tuple[int, int, int, int]:
+        """``(py0, py1, px0, px1)``: the tile's patches (half-open) in world patch indices."""
+        if not (0 <= ty < self.shape[0] and 0 <= tx < self.shape[1]):
+            raise ValidationError(f"TileGrid: no tile ({ty}, {tx}) in a grid of {self.shape[0]} x {self.shape[1]}")
+        t = self.tile_patches
+        py, px = self.patches
+        return ty * t, min((ty + 1) * t, py), tx * t, min((tx + 1) * t, px)
+
+    def sample_window(self, ty: int, tx: int) -> tuple[slice, slice]:
+        """Rows and columns of the samples tile ``(ty, tx)`` covers (rims included)."""
+        s = self.samples_per_patch
+        y0, y1, x0, x1 = self.patch_range(ty, tx)
+        return slice(y0 * s, y1 * s + 1), slice(x0 * s, x1 * s + 1)
+
+    def tile_bounds_xy(self, ty: int, tx: int) -> tuple[float, float, float, float]:
+        """``(x0, y0, x1, y1)`` metres of the tile."""
+        s = self.samples_per_patch
+        y0, y1, x0, x1 = self.patch_range(ty, tx)
+        (dx, dy), (ox, oy) = self.spacing, self.origin
+        return ox + x0 * s * dx, oy + y0 * s * dy, ox + x1 * s * dx, oy + y1 * s * dy
+
+    def tile_of(self, x: float, y: float) -> tuple[int, int]:
+        """The tile under world ``(x, y)`` (clamped to the grid)."""
+        s, t = self.samples_per_patch, self.tile_patches
+        (dx, dy), (ox, oy) = self.spacing, self.origin
+        tx = int(np.floor((x - ox) / (s * dx * t)))
+        ty = int(np.floor((y - oy) / (s * dy * t)))
+        return min(max(ty, 0), self.shape[0] - 1), min(max(tx, 0), self.shape[1] - 1)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "TileGrid":
+        return cls(tuple(int(v) for v in d["samples"]), int(d["samples_per_patch"]), int(d["tile_patches"]),
+                   tuple(float(v) for v in d["spacing"]), tuple(float(v) for v in d["origin"]))
+
+
+# ----------------------------------------------------------------------------- the fit
+def _basis(m: int, s: int) -> np.ndarray:
+    """Dense ``(m s + 1, 3 m + 1)`` sample matrix of a C0 piecewise cubic of ``m`` segments."""
+    k = np.arange(m * s + 1)
+    seg = np.minimum(k // s, m - 1)
+    w = bernstein(k / s - seg)  # (k, 4)
+    a = np.zeros((len(k), 3 * m + 1))
+    a[k[:, None], 3 * seg[:, None] + np.arange(4)] = w
+    return a
+
+
+def fit_edge(samples, s: int) -> np.ndarray:
+    """Control values of a tile side: ``samples (m s + 1,)`` -> ``(3 m + 1,)`` float64.
+
+    The end values are the end samples (shared with the neighbouring sides); the rest is the
+    least-squares fit of the samples with those ends fixed.  A pure function of its arguments.
+    """
+    z = np.asarray(samples, dtype=np.float64)
+    m = (len(z) - 1) // s
+    out = np.empty(3 * m + 1)
+    out[0], out[-1] = z[0], z[-1]
+    a = _basis(m, s)
+    rhs = z - a[:, 0] * z[0] - a[:, -1] * z[-1]
+    ai = a[:, 1:-1]
+    out[1:-1] = np.linalg.solve(ai.T @ ai, ai.T @ rhs)
+    return out
+
+
+def fit_tile_heights(window, s: int) -> np.ndarray:
+    """The z control grid ``(3 Ty + 1, 3 Tx + 1)`` of a tile from its samples ``window
+    (Ty s + 1, Tx s + 1)`` (rims included): corners, edges (:func:`fit_edge`), then the interior
+    with the boundary fixed."""
+    w = np.asarray(window, dtype=np.float64)
+    ty, tx = (w.shape[0] - 1) // s, (w.shape[1] - 1) // s
+    zc = np.zeros((3 * ty + 1, 3 * tx + 1))
+    zc[0, :] = fit_edge(w[0, :], s)
+    zc[-1, :] = fit_edge(w[-1, :], s)
+    zc[:, 0] = fit_edge(w[:, 0], s)
+    zc[:, -1] = fit_edge(w[:, -1], s)
+    ay, ax = _basis(ty, s), _basis(tx, s)
+    resid = w - ay @ zc @ ax.T  # what the fixed boundary leaves to the interior
+    ayi, axi = ay[:, 1:-1], ax[:, 1:-1]
+    if ayi.shape[1] and axi.shape[1]:
+        rhs = ayi.T @ resid @ axi  # (Ny, Nx)
+        tmp = np.linalg.solve(ayi.T @ ayi, rhs)  # Gy⁻¹ rhs
+        zc[1:-1, 1:-1] = np.linalg.solve(axi.T @ axi, tmp.T).T  # ... Gx⁻¹
+    return zc
+
+
+def _axis_coords(first: int, count: int, step: float, origin: float) -> np.ndarray:
+    """Coordinates of global control indices ``first .. first + count - 1`` (thirds of a patch)."""
+    g = np.arange(first, first + count)
+    return origin + (g // 3) * step + (g % 3) * (step / 3.0)
+
+
+def tile_control_points(grid: TileGrid, ty: int, tx: int, zc: np.ndarray) -> np.ndarray:
+    """``(n, 4, 4, 3)`` float64 control points of a tile from its z control grid."""
+    s = grid.samples_per_patch
+    py0, py1, px0, px1 = grid.patch_range(ty, tx)
+    ny, nx = py1 - py0, px1 - px0
+    (dx, dy), (ox, oy) = grid.spacing, grid.origin
+    xs = _axis_coords(3 * px0, 3 * nx + 1, s * dx, ox)
+    ys = _axis_coords(3 * py0, 3 * ny + 1, s * dy, oy)
+    ii = 3 * np.arange(nx)[None, :, None, None] + np.arange(4)[None, None, :, None]
+    jj = 3 * np.arange(ny)[:, None, None, None] + np.arange(4)[None, None, None, :]
+    shape = (ny, nx, 4, 4)
+    cp = np.empty(shape + (3,))
+    cp[..., 0] = np.broadcast_to(xs[ii], shape)
+    cp[..., 1] = np.broadcast_to(ys[jj], shape)
+    cp[..., 2] = zc[jj, ii]
+    return cp.reshape(ny * nx, 4, 4, 3)
+
+
+def tile_uv(grid: TileGrid, cp: np.ndarray) -> np.ndarray:
+    """Base-texture UV at the corners (one repeat a patch, from the world origin): ``(n, 4, 2)`` float32."""
+    s = grid.samples_per_patch
+    (dx, dy), (ox, oy) = grid.spacing, grid.origin
+    corners = cp[:, [0, 3, 3, 0], [0, 0, 3, 3], :2]
+    return np.stack([(corners[..., 0] - ox) / (s * dx), (corners[..., 1] - oy) / (s * dy)], -1).astype(np.float32)
+
+
+def fit_tile(grid: TileGrid, ty: int, tx: int, window) -> dict:
+    """Fit tile ``(ty, tx)`` from its sample window (:meth:`TileGrid.sample_window`).
+
+    Returns ``{"control_points": (n, 4, 4, 3) float64, "uv": (n, 4, 2) float32}``.
+    """
+    w = np.asarray(window, dtype=np.float64)
+    rows, cols = grid.sample_window(ty, tx)
+    want = (rows.stop - rows.start, cols.stop - cols.start)
+    if w.shape != want:
+        raise ValidationError(f"tile ({ty}, {tx}): sample window of shape {w.shape}, expected {want}")
+    bad = ~np.isfinite(w)
+    if bad.any():
+        r, c = (int(v) for v in np.argwhere(bad)[0])
+        raise ValidationError(f"tile ({ty}, {tx}): non-finite height at row {rows.start + r}, column {cols.start + c}")
+    zc = fit_tile_heights(w, grid.samples_per_patch)
+    cp = tile_control_points(grid, ty, tx, zc)
+    return {"control_points": cp, "uv": tile_uv(grid, cp)}
+
+
+# ----------------------------------------------------------------------------- storage
+def npz_bytes(arrays: dict) -> bytes:
+    """A deterministic ``.npz`` (deflated, fixed timestamps, keys in the given order)."""
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
+        for name, arr in arrays.items():
+            item = io.BytesIO()
+            np.lib.format.write_array(item, np.asarray(arr), allow_pickle=False)
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=_ZIP_DATE)
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = 0o644 << 16
+            zf.writestr(info, item.getvalue(), compresslevel=1)
+    return buf.getvalue()
+
+
+class TileStore:
+    """A tiled world on disk: ``root/index.json`` plus ``root/<product>/t_YYYY_XXXX.npz``.
+
+    ``index.json`` holds ``{"format", "grid", "key", ...}``; products are ``fit`` (control points,
+    UVs) and ``lit`` (light map, far field, visibility), each tile file carrying ``key`` (the hash of
+    its inputs) so that :meth:`verify` can tell a finished tile from a stale or torn one.
+    """
+
+    def __init__(self, root):
+        self.root = Path(root)
+
+    # -- index
+    @property
+    def index_path(self) -> Path:
+        return self.root / "index.json"
+
+    def write_index(self, index: dict) -> None:
+        self.root.mkdir(parents=True, exist_ok=True)
+        write_bytes_atomic(self.index_path, (json.dumps(index, indent=1, sort_keys=True) + "\n").encode())
+
+    def read_index(self) -> dict:
+        try:
+            index = json.loads(self.index_path.read_text())
+        except FileNotFoundError:
+            raise FormatError(self.index_path, "no such file: not a tiled world (run piste build first)") from None
+        except (OSError, ValueError) as exc:
+            raise FormatError(self.index_path, f"not a readable JSON index ({exc})") from None
+        if not isinstance(index, dict) or index.get("format") != TILES_FORMAT:
+            raise FormatError(self.index_path, f"expected format {TILES_FORMAT!r}", field="format")
+        return index
+
+    def grid(self) -> TileGrid:
+        index = self.read_index()
+        try:
+            return TileGrid.from_dict(index["grid"])
+        except (KeyError, TypeError, ValueError, ValidationError) as exc:
+            raise FormatError(self.index_path, f"bad tile grid ({exc})", field="grid") from None
+
+    # -- tiles
+    def path(self, product: str, ty: int, tx: int) -> Path:
+        return self.root / product / f"t_{ty:04d}_{tx:04d}.npz"
+
+    def write(self, product: str, ty: int, tx: int, arrays: dict, key: str) -> str:
+        """Write one tile atomically; returns the sha256 of its bytes."""
+        data = npz_bytes({"key": np.array(key), **arrays})
+        p = self.path(product, ty, tx)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        write_bytes_atomic(p, data)
+        return hashlib.sha256(data).hexdigest()
+
+    def read(self, product: str, ty: int, tx: int, key: str | None = None) -> dict:
+        """The arrays of one tile (``FormatError`` naming the tile when missing, torn or stale)."""
+        p = self.path(product, ty, tx)
+        try:
+            with np.load(p, allow_pickle=False) as data:
+                arrays = {k: data[k] for k in data.files}
+        except FileNotFoundError:
+            raise FormatError(p, f"tile ({ty}, {tx}) has no {product!r} output yet") from None
+        except Exception as exc:
+            raise FormatError(p, f"tile ({ty}, {tx}): not a readable tile ({exc})") from None
+        got = str(arrays.pop("key", ""))
+        if key is not None and got != key:
+            raise FormatError(p, f"tile ({ty}, {tx}) was built from other inputs (key {got[:12]}, "
+                                 f"expected {key[:12]})", field="key")
+        return arrays
+
+    def verify(self, product: str, ty: int, tx: int, key: str) -> str | None:
+        """sha256 of a finished tile whose key matches and whose arrays read back (CRC-checked), else None."""
+        p = self.path(product, ty, tx)
+        if not p.is_file():
+            return None
+        try:
+            data = p.read_bytes()
+            with zipfile.ZipFile(io.BytesIO(data)) as zf:
+                if zf.testzip() is not None:
+                    return None
+                with zf.open("key.npy") as fh:
+                    got = str(np.lib.format.read_array(fh, allow_pickle=False))
+        except Exception:
+            return None
+        return hashlib.sha256(data).hexdigest() if got == key else None
+
+
+def tile_net(store: TileStore, ty: int, tx: int, name: str | None = None) -> PatchNet:
+    """The :class:`PatchNet` of one fitted tile."""
+    a = store.read("fit", ty, tx)
+    grid = store.grid()
+    s = grid.samples_per_patch
+    return PatchNet(a["control_points"], uv=a["uv"], tol=1e-6 * s * min(grid.spacing), name=name or f"tile {ty},{tx}")
+
+
+def neighbourhood_net(store: TileStore, grid: TileGrid, ty: int, tx: int, halo: int = 1,
+                      ring: int | None = None) -> tuple[PatchNet, np.ndarray]:
+    """The net of tile ``(ty, tx)`` and its neighbours within ``halo`` tiles (welded: shared tile
+    edges are bit-identical), and the index of each of the centre tile's patches in it, ``(n,)``.
+
+    ``ring``: keep only neighbour patches within ``ring`` patches of the centre tile (None: all).
+    """
+    py0, py1, px0, px1 = grid.patch_range(ty, tx)
+    cps, uvs, centre = [], [], None
+    count = 0
+    for y in range(max(ty - halo, 0), min(ty + halo + 1, grid.shape[0])):
+        for x in range(max(tx - halo, 0), min(tx + halo + 1, grid.shape[1])):
+            a = store.read("fit", y, x)
+            qy0, qy1, qx0, qx1 = grid.patch_range(y, x)
+            gy, gx = np.mgrid[qy0:qy1, qx0:qx1]
+            gy, gx = gy.ravel(), gx.ravel()
+            keep = np.ones(len(gy), bool)
+            if ring is not None:
+                keep = (gy >= py0 - ring) & (gy < py1 + ring) & (gx >= px0 - ring) & (gx < px1 + ring)
+            if (y, x) == (ty, tx):
+                centre = count + np.arange(len(gy))
+            cps.append(a["control_points"][keep])
+            uvs.append(a["uv"][keep])
+            count += int(keep.sum())
+    s = grid.samples_per_patch
+    net = PatchNet(np.concatenate(cps), uv=np.concatenate(uvs), tol=1e-6 * s * min(grid.spacing),
+                   name=f"tile {ty},{tx} + {halo}")
+    return net, centre
