@@ -26,7 +26,7 @@ def main() -> None:
     args = ap.parse_args()
 
     from piste.commands.build import format_result
-    from piste.formats.bundle import load_bundle
+    from piste.pipeline.bundle_objects import load_bundle
     from piste.pipeline.build import build_scene
 
     with tempfile.TemporaryDirectory() as tmp:

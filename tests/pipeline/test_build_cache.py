@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from piste.errors import ConfigError
-from piste.formats.bundle import load_bundle
+from piste.pipeline.bundle_objects import load_bundle
 from piste.pipeline.build import build_scene
 from piste.pipeline.cache import Cache, Hasher, content_key
 

@@ -7,7 +7,7 @@ import pytest
 
 from piste.character import BUDGETS
 from piste.character.strips import canonical_triangles, unstripify
-from piste.formats.bundle import load_bundle
+from piste.pipeline.bundle_objects import load_bundle
 from piste.pipeline.build import build_scene
 
 

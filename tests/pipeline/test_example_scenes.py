@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from piste.formats.bundle import load_bundle
+from piste.pipeline.bundle_objects import load_bundle
 from piste.pipeline.build import build_scene
 from piste.pipeline.preview import ScenePreview, camera_at
 from piste.world.scene_file import load_scene

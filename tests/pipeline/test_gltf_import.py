@@ -79,7 +79,7 @@ def test_photometric_conversion():
 
 def test_wysiwyg_gltf_lights_bake_like_the_same_lights_inline(small_scene):
     """A scene lit in a glTF file bakes the same light map as the scene with those lights typed in."""
-    from piste.formats.bundle import load_bundle
+    from piste.pipeline.bundle_objects import load_bundle
     from piste.pipeline.build import build_scene
 
     inline = small_scene(riders=False)

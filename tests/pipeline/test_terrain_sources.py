@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from piste.formats.bundle import load_bundle
+from piste.pipeline.bundle_objects import load_bundle
 from piste.pipeline.build import build_scene
 
 TEAPOT = Path(__file__).resolve().parents[3] / "shared" / "data" / "patches" / "teapot.bpt"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from piste.formats.bundle import load_bundle
+from piste.pipeline.bundle_objects import load_bundle
 from piste.pipeline.build import build_scene
 from piste.pipeline.preview import ScenePreview
 from piste.world.camera import Camera

@@ -28,7 +28,7 @@ def load_or_build(scene, quiet: bool = True):
     from pathlib import Path
 
     from piste.errors import ConfigError
-    from piste.formats.bundle import load_bundle
+    from piste.pipeline.bundle_objects import load_bundle
 
     p = Path(scene)
     if p.suffix.lower() == ".piste":

@@ -10,19 +10,23 @@ Layout: a zip archive with
 Members are sorted, every timestamp is 1980-01-01 and arrays are written with fixed headers, so the
 same content gives the same bytes.  The file is written atomically (temp file + rename).
 
-:func:`load_bundle` checks the format version and every member (zip CRC, shape, dtype, and the
+:func:`read_bundle` checks the format version and every member (zip CRC, shape, dtype, and the
 manifest's SHA-256) and raises :class:`~piste.errors.FormatError` naming the file and member on a
-wrong version or a corrupt file.  The terrain net, light map, lights, cameras and visibility are
-built on load; objects and characters when first asked for.
+wrong version or a corrupt file.
+
+This module only reads and writes arrays and metadata (:class:`BundleData`); it imports nothing
+from the layers above.  Turning them into the scene's objects (terrain net, light map, lights,
+cameras, visibility, objects, characters) is :func:`piste.pipeline.load_bundle`
+(:mod:`piste.pipeline.bundle_objects`).
 
 API
 ---
 BUNDLE_FORMAT                         "piste.bundle/1"
 write_bundle(path, manifest, arrays)  atomic, deterministic
-load_bundle(path) -> Bundle
+read_bundle(path, verify=True) -> BundleData   ``.path``, ``.manifest``, ``.arrays`` (checked)
 read_manifest(path) -> dict           the manifest only (cheap)
-Bundle                                ``.net``, ``.lightmap``, ``.lights``, ``.cameras``, ``.visibility``,
-                                      ``.objects()``, ``.rider_model()``, ``.arrays``, ``.manifest``
+camera_to_dict(camera) -> dict        a camera's manifest entry (any object with eye/target/up/fov_y/...)
+load_bundle(path)                     deprecated here: use :func:`piste.pipeline.load_bundle`
 """
 
 from __future__ import annotations
@@ -30,20 +34,24 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import warnings
 import zipfile
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from piste.errors import FormatError
+from piste.formats.atomic import atomic_path
 
-__all__ = ["BUNDLE_FORMAT", "write_bundle", "load_bundle", "read_manifest", "Bundle", "lights_from_dict",
-           "camera_to_dict", "camera_from_dict"]
+__all__ = ["BUNDLE_FORMAT", "REQUIRED_MEMBERS", "write_bundle", "read_bundle", "read_manifest", "BundleData",
+           "camera_to_dict", "load_bundle"]
 
 BUNDLE_FORMAT = "piste.bundle/1"
 _EPOCH = (1980, 1, 1, 0, 0, 0)
+#: members every bundle has (the terrain and its light map)
+REQUIRED_MEMBERS = ("terrain/control_points", "terrain/uv", "lightmap/atlas", "lightmap/rects")
 
 
 def _npy_bytes(arr: np.ndarray) -> bytes:
@@ -55,7 +63,6 @@ def _npy_bytes(arr: np.ndarray) -> bytes:
 def write_bundle(path, manifest: dict, arrays: dict, compresslevel: int = 1) -> Path:
     """Write a bundle atomically: ``manifest`` (JSON-able dict; ``format`` and ``members`` are set
     here) and ``arrays`` (``{"a/b": ndarray}``, stored as ``a/b.npy``).  Returns the path."""
-    from piste.formats.atomic import atomic_path
 
     man = dict(manifest)
     man["format"] = BUNDLE_FORMAT
@@ -147,181 +154,55 @@ def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool) -
     return out
 
 
-# ----------------------------------------------------------------------------- helpers
-def lights_from_dict(d: dict):
-    """:class:`piste.lighting.Lights` from ``Lights.to_dict()`` output (infinite ranges may be
-    the string "inf")."""
-    from piste.lighting.lights import AmbientLight, DirectionalLight, Lights, PointLight, SpotLight
-
-    kinds = {"ambient": AmbientLight, "directional": DirectionalLight, "point": PointLight, "spot": SpotLight}
-    out = []
-    for kind, items in d.items():
-        for item in items:
-            kw = dict(item)
-            if isinstance(kw.get("range"), str):
-                kw["range"] = float(kw["range"])
-            out.append(kinds[kind](**kw))
-    return Lights(tuple(out))
-
-
 def camera_to_dict(cam) -> dict:
+    """The manifest entry of a camera (any object with ``eye``, ``target``, ``up``, ``fov_y``,
+    ``near``, ``far``, ``ortho_height``); :func:`piste.pipeline.bundle_objects.camera_from_dict`
+    reads it back."""
     return {"eye": [float(x) for x in cam.eye], "target": [float(x) for x in cam.target], "up": [float(x) for x in cam.up],
             "fov_y": float(cam.fov_y), "near": float(cam.near), "far": float(cam.far),
             "ortho_height": None if cam.ortho_height is None else float(cam.ortho_height)}
 
 
-def camera_from_dict(d: dict):
-    from piste.world.camera import Camera
-
-    return Camera(np.array(d["eye"]), np.array(d["target"]), up=np.array(d["up"]), fov_y=d["fov_y"], near=d["near"],
-                  far=d["far"], ortho_height=d.get("ortho_height"))
-
-
-# ----------------------------------------------------------------------------- the bundle
 @dataclass
-class Bundle:
-    """A loaded bundle.
-
-    Attributes
-    ----------
-    path : Path;  manifest : dict;  arrays : {name: ndarray}
-    net : piste.terrain.PatchNet (light-map rects set);  lightmap : piste.lighting.LightMap
-    lights : piste.lighting.Lights;  cameras : {name: piste.world.camera.Camera} (in scene order)
-    visibility : piste.pipeline.visibility.Visibility or None
-    centerline : (k, 3) track centre line (the default course) or None
-    """
+class BundleData:
+    """A bundle's contents as read: ``path`` (Path), ``manifest`` (dict, version-checked) and
+    ``arrays`` (``{member name: ndarray}``, each checked against the manifest's shape, dtype and
+    SHA-256).  No objects are built here (see :func:`piste.pipeline.load_bundle`)."""
 
     path: Path
     manifest: dict
     arrays: dict
-    net: object
-    lightmap: object
-    lights: object
-    cameras: dict
-    visibility: object = None
-    centerline: np.ndarray | None = None
-    _cache: dict = field(default_factory=dict, repr=False)
-
-    @property
-    def name(self) -> str:
-        return str(self.manifest.get("name", self.path.stem))
-
-    def camera(self, name: str | None = None):
-        """The camera called ``name`` (default: the first)."""
-        from piste.errors import ConfigError
-
-        if not self.cameras:
-            raise ConfigError(f"{self.path}: the scene has no cameras")
-        if name is None:
-            return next(iter(self.cameras.values()))
-        if name not in self.cameras:
-            raise ConfigError(f"{self.path}: no camera {name!r}; the scene has {', '.join(self.cameras)}")
-        return self.cameras[name]
-
-    def objects(self):
-        """The placed objects as a :class:`piste.world.objects.ObjectSet` (None when there are none)."""
-        if "objects" in self._cache:
-            return self._cache["objects"]
-        info = self.manifest.get("objects") or {}
-        kinds = tuple(info.get("kinds", ()))
-        if not kinds:
-            self._cache["objects"] = None
-            return None
-        from piste.world.objects import CompressedMesh, ObjectSet, normal_matrix
-
-        a = self.arrays
-        meshes = {}
-        for k in kinds:
-            p = f"objects/meshes/{k}/"
-            m = info["meshes"][k]
-            meshes[k] = CompressedMesh(k, a[p + "positions"], a[p + "pos_offset"], a[p + "pos_extent"], a[p + "uv"],
-                                       a[p + "uv_offset"], a[p + "uv_extent"], a[p + "normals"], int(m["normal_bits"]),
-                                       a[p + "indices"], float(m["radius"]))
-        kind = a["objects/kind"].astype(np.int64)
-        matrix = a["objects/matrix"].astype(np.float64)
-        vl = None
-        if len(self.lights.direct) or len(self.lights.ambient):
-            from piste.lighting.vertex import choose_lights_many
-
-            vl = choose_lights_many(self.lights, a["objects/center"])
-        tex = a.get("objects/texture")
-        counts = {k: int(np.count_nonzero(kind == i)) for i, k in enumerate(kinds)}
-        objs = ObjectSet(meshes, kinds, kind, matrix, normal_matrix(matrix), a["objects/center"].astype(np.float64),
-                         a["objects/radius"].astype(np.float64), vl, tex, counts)
-        self._cache["objects"] = objs
-        return objs
-
-    def vertex_colors(self) -> dict:
-        """Baked per-instance vertex colours ``{kind: (k, v, 3) uint8}`` half-bright."""
-        info = self.manifest.get("objects") or {}
-        return {k: self.arrays[f"objects/colors/{k}"] for k in info.get("kinds", ())}
-
-    def rider_model(self):
-        """The riders' character :class:`piste.character.Model` (skeleton, LOD-0 mesh, clips) or None."""
-        if "rider_model" in self._cache:
-            return self._cache["rider_model"]
-        info = self.manifest.get("characters") or {}
-        if not info:
-            self._cache["rider_model"] = None
-            return None
-        from piste.pipeline.characters import model_from_arrays
-
-        name = sorted(info)[0]
-        m = model_from_arrays(self.arrays, f"characters/{name}/", info[name])
-        self._cache["rider_model"] = m
-        return m
-
-    def rider_lods(self):
-        """The riders' LODs (:class:`piste.character.LOD` list, palettes as built) or None."""
-        if "rider_lods" in self._cache:
-            return self._cache["rider_lods"]
-        info = self.manifest.get("characters") or {}
-        if not info:
-            return None
-        from piste.pipeline.characters import lods_from_arrays
-
-        name = sorted(info)[0]
-        lods = lods_from_arrays(self.arrays, f"characters/{name}/", info[name], self.rider_model())
-        self._cache["rider_lods"] = lods
-        return lods
 
 
-def load_bundle(path, verify: bool = True) -> Bundle:
-    """Load a ``.piste`` bundle (see the module docstring).
+def read_bundle(path, verify: bool = True) -> BundleData:
+    """Read a ``.piste`` bundle's manifest and arrays (see the module docstring).
 
     ``verify`` checks each member's SHA-256 against the manifest (the zip CRC is always checked).
     Raises :class:`~piste.errors.FormatError` on a missing file, a wrong format version, a missing
-    or corrupt member.
+    or corrupt member, or a missing required member (:data:`REQUIRED_MEMBERS`).
     """
-    from piste.lighting.lightmap import LightMap
-    from piste.terrain.net import PatchNet
-
     path = Path(path)
     with _open(path) as zf:
         man = _manifest(path, zf)
         arrays = _read_arrays(path, zf, man["members"], verify)
-    for need in ("terrain/control_points", "terrain/uv", "lightmap/atlas", "lightmap/rects"):
+    for need in REQUIRED_MEMBERS:
         if need not in arrays:
             raise FormatError(path, "required member is missing", field=f"{need}.npy")
-    t = man.get("terrain", {})
-    try:
-        net = PatchNet(arrays["terrain/control_points"], uv=arrays["terrain/uv"], lightmap_rect=arrays["lightmap/rects"],
-                       tol=t.get("tol"), name=t.get("name", "terrain"))
-    except Exception as exc:
-        raise FormatError(path, f"invalid terrain ({exc})", field="terrain/control_points.npy") from None
-    lm_info = man.get("lightmap", {})
-    lightmap = LightMap(atlas=arrays["lightmap/atlas"].astype(np.float32), rects=arrays["lightmap/rects"],
-                        res=int(lm_info.get("res", 8)), gutter=int(lm_info.get("gutter", 1)), manifest=lm_info)
-    try:
-        lights = lights_from_dict(man.get("lights", {}))
-        cameras = {c["name"]: camera_from_dict(c) for c in man.get("cameras", [])}
-    except (KeyError, TypeError, ValueError) as exc:
-        raise FormatError(path, f"bad lights or cameras in the manifest ({exc})", field="manifest.json") from None
-    vis = None
-    if man.get("visibility"):
-        from piste.pipeline.visibility import Visibility
+    return BundleData(path, man, arrays)
 
-        vis = Visibility.from_arrays({"patch_bits": arrays["visibility/patch_bits"],
-                                      "object_bits": arrays["visibility/object_bits"]}, man["visibility"])
-    line = arrays.get("terrain/centerline")
-    return Bundle(path, man, arrays, net, lightmap, lights, cameras, vis, line)
+
+def load_bundle(path, verify: bool = True) -> BundleData:
+    """Deprecated here: :func:`piste.pipeline.load_bundle` loads a bundle as the scene's objects
+    (``.net``, ``.lightmap``, ``.cameras``, ...).  This returns :func:`read_bundle`'s
+    :class:`BundleData` (manifest and arrays only) and warns."""
+    warnings.warn("piste.formats.bundle.load_bundle now returns the raw BundleData (manifest and arrays); use "
+                  "piste.pipeline.load_bundle for the scene objects, or piste.formats.bundle.read_bundle",
+                  DeprecationWarning, stacklevel=2)
+    return read_bundle(path, verify)
+
+
+def __getattr__(name: str):
+    if name in ("Bundle", "lights_from_dict", "camera_from_dict"):
+        raise AttributeError(f"piste.formats.bundle.{name} moved to piste.pipeline.bundle_objects (the format layer "
+                             f"reads and writes arrays only): from piste.pipeline import {name}")
+    raise AttributeError(f"module 'piste.formats.bundle' has no attribute {name!r}")

@@ -15,13 +15,15 @@ Visibility, compute_visibility, culling_report
                                         per-cell patch/object bitsets (visibility.py)
 character_arrays                        the character step (characters.py)
 load_terrain, load_rider_model, load_object_mesh   reading a scene's sources (sources.py)
+load_bundle, Bundle, lights_from_dict, camera_from_dict   a built bundle as scene objects (bundle_objects.py)
 ScenePreview, render_image, render_frames, camera_at   rendering a bundle (preview.py)
 LiveScene, run_headless                 watch, rebuild, reload: ``piste view SCENE`` (live.py)
 
 The scene file itself is :mod:`piste.world.scene_file` (``load_scene``); the bundle format is
-:mod:`piste.formats.bundle` (``load_bundle``).  Rendering imports OpenGL lazily: building needs none.
+:mod:`piste.formats.bundle` (``read_bundle``: arrays and metadata only).  Rendering imports OpenGL lazily: building needs none.
 """
 
+from piste.pipeline.bundle_objects import Bundle, camera_from_dict, lights_from_dict, load_bundle
 from piste.pipeline.build import BUILD_VERSION, BuildResult, build_scene, default_cache_dir
 from piste.pipeline.cache import Cache, content_key
 from piste.pipeline.characters import character_arrays
@@ -33,6 +35,10 @@ from piste.pipeline.visibility import Visibility, compute_visibility, culling_re
 
 __all__ = [
     "build_scene",
+    "load_bundle",
+    "Bundle",
+    "lights_from_dict",
+    "camera_from_dict",
     "BuildResult",
     "BUILD_VERSION",
     "default_cache_dir",

@@ -57,7 +57,7 @@ class LiveScene:
     """
 
     def __init__(self, path, bundle=None, cache_dir=None, size=None, camera: str | None = None, ctx=None):
-        from piste.formats.bundle import load_bundle
+        from piste.pipeline.bundle_objects import load_bundle
         from piste.pipeline.preview import ScenePreview
 
         self.path = Path(path)
@@ -98,7 +98,7 @@ class LiveScene:
         a failed rebuild keeps the old one and sets :attr:`last_error`."""
         if not self.changed():
             return False
-        from piste.formats.bundle import load_bundle
+        from piste.pipeline.bundle_objects import load_bundle
 
         self._stamps = _stamp(self._files)
         try:

@@ -1,4 +1,4 @@
-"""Rendering a built scene: the glue between a :class:`~piste.formats.bundle.Bundle` and the renderer.
+"""Rendering a built scene: the glue between a :class:`~piste.pipeline.bundle_objects.Bundle` and the renderer.
 
 The renderer's entry point for a full scene is :class:`piste.render.scene_renderer.SceneRenderer`,
 which draws a :class:`piste.world.scene.Scene` (course, riders following the track, objects).  A
@@ -157,7 +157,7 @@ def camera_at(bundle, name: str | None = None, i: int = 0, n: int = 1):
         f = a if n <= 1 else a + (b - a) * i / (n - 1)
         return track_camera(bundle.centerline, f, height=d.get("height", 9.0), fov_y=d["fov_y"], near=d["near"],
                             far=d["far"])
-    from piste.formats.bundle import camera_from_dict
+    from piste.pipeline.bundle_objects import camera_from_dict
 
     return camera_from_dict(d)
 

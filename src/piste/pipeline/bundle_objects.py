@@ -1,0 +1,193 @@
+"""A built bundle as the scene's objects: the runtime's view of a ``.piste`` file.
+
+:mod:`piste.formats.bundle` reads and writes the arrays and the manifest (:class:`BundleData`);
+this module turns them into the objects the renderer draws: the terrain :class:`PatchNet` (with
+its light-map tiles), the :class:`LightMap`, the :class:`Lights`, the cameras, the visibility
+sets, and, when first asked for, the placed objects and the riders' character model and LODs.
+
+API
+---
+load_bundle(path, verify=True) -> Bundle
+Bundle                 ``.net``, ``.lightmap``, ``.lights``, ``.cameras``, ``.visibility``, ``.centerline``,
+                       ``.objects()``, ``.vertex_colors()``, ``.rider_model()``, ``.rider_lods()``,
+                       ``.arrays``, ``.manifest``, ``.camera(name)``
+bundle_from_data(BundleData) -> Bundle
+lights_from_dict(d) -> Lights          ``Lights.to_dict()`` back (infinite ranges may be "inf")
+camera_from_dict(d) -> Camera          :func:`piste.formats.bundle.camera_to_dict` back
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from piste.errors import ConfigError, FormatError
+from piste.formats.bundle import BundleData, camera_to_dict, read_bundle
+from piste.lighting.lightmap import LightMap
+from piste.lighting.lights import AmbientLight, DirectionalLight, Lights, PointLight, SpotLight
+from piste.lighting.vertex import choose_lights_many
+from piste.pipeline.characters import lods_from_arrays, model_from_arrays
+from piste.pipeline.visibility import Visibility
+from piste.terrain.net import PatchNet
+from piste.world.camera import Camera
+from piste.world.objects import CompressedMesh, ObjectSet, normal_matrix
+
+__all__ = ["Bundle", "load_bundle", "bundle_from_data", "lights_from_dict", "camera_from_dict", "camera_to_dict"]
+
+
+def lights_from_dict(d: dict) -> Lights:
+    """:class:`piste.lighting.Lights` from ``Lights.to_dict()`` output (infinite ranges may be
+    the string "inf")."""
+    kinds = {"ambient": AmbientLight, "directional": DirectionalLight, "point": PointLight, "spot": SpotLight}
+    out = []
+    for kind, items in d.items():
+        for item in items:
+            kw = dict(item)
+            if isinstance(kw.get("range"), str):
+                kw["range"] = float(kw["range"])
+            out.append(kinds[kind](**kw))
+    return Lights(tuple(out))
+
+
+def camera_from_dict(d: dict) -> Camera:
+    """The :class:`piste.world.camera.Camera` of a manifest entry (:func:`camera_to_dict`)."""
+    return Camera(np.array(d["eye"]), np.array(d["target"]), up=np.array(d["up"]), fov_y=d["fov_y"], near=d["near"],
+                  far=d["far"], ortho_height=d.get("ortho_height"))
+
+
+@dataclass
+class Bundle:
+    """A loaded bundle.
+
+    Attributes
+    ----------
+    path : Path;  manifest : dict;  arrays : {name: ndarray}
+    net : piste.terrain.PatchNet (light-map rects set);  lightmap : piste.lighting.LightMap
+    lights : piste.lighting.Lights;  cameras : {name: piste.world.camera.Camera} (in scene order)
+    visibility : piste.pipeline.visibility.Visibility or None
+    centerline : (k, 3) track centre line (the default course) or None
+    """
+
+    path: Path
+    manifest: dict
+    arrays: dict
+    net: object
+    lightmap: object
+    lights: object
+    cameras: dict
+    visibility: object = None
+    centerline: np.ndarray | None = None
+    _cache: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def name(self) -> str:
+        return str(self.manifest.get("name", self.path.stem))
+
+    def camera(self, name: str | None = None):
+        """The camera called ``name`` (default: the first)."""
+        if not self.cameras:
+            raise ConfigError(f"{self.path}: the scene has no cameras")
+        if name is None:
+            return next(iter(self.cameras.values()))
+        if name not in self.cameras:
+            raise ConfigError(f"{self.path}: no camera {name!r}; the scene has {', '.join(self.cameras)}")
+        return self.cameras[name]
+
+    def objects(self):
+        """The placed objects as a :class:`piste.world.objects.ObjectSet` (None when there are none)."""
+        if "objects" in self._cache:
+            return self._cache["objects"]
+        info = self.manifest.get("objects") or {}
+        kinds = tuple(info.get("kinds", ()))
+        if not kinds:
+            self._cache["objects"] = None
+            return None
+        a = self.arrays
+        meshes = {}
+        for k in kinds:
+            p = f"objects/meshes/{k}/"
+            m = info["meshes"][k]
+            meshes[k] = CompressedMesh(k, a[p + "positions"], a[p + "pos_offset"], a[p + "pos_extent"], a[p + "uv"],
+                                       a[p + "uv_offset"], a[p + "uv_extent"], a[p + "normals"], int(m["normal_bits"]),
+                                       a[p + "indices"], float(m["radius"]))
+        kind = a["objects/kind"].astype(np.int64)
+        matrix = a["objects/matrix"].astype(np.float64)
+        vl = None
+        if len(self.lights.direct) or len(self.lights.ambient):
+            vl = choose_lights_many(self.lights, a["objects/center"])
+        tex = a.get("objects/texture")
+        counts = {k: int(np.count_nonzero(kind == i)) for i, k in enumerate(kinds)}
+        objs = ObjectSet(meshes, kinds, kind, matrix, normal_matrix(matrix), a["objects/center"].astype(np.float64),
+                         a["objects/radius"].astype(np.float64), vl, tex, counts)
+        self._cache["objects"] = objs
+        return objs
+
+    def vertex_colors(self) -> dict:
+        """Baked per-instance vertex colours ``{kind: (k, v, 3) uint8}`` half-bright."""
+        info = self.manifest.get("objects") or {}
+        return {k: self.arrays[f"objects/colors/{k}"] for k in info.get("kinds", ())}
+
+    def rider_model(self):
+        """The riders' character :class:`piste.character.Model` (skeleton, LOD-0 mesh, clips) or None."""
+        if "rider_model" in self._cache:
+            return self._cache["rider_model"]
+        info = self.manifest.get("characters") or {}
+        if not info:
+            self._cache["rider_model"] = None
+            return None
+        name = sorted(info)[0]
+        m = model_from_arrays(self.arrays, f"characters/{name}/", info[name])
+        self._cache["rider_model"] = m
+        return m
+
+    def rider_lods(self):
+        """The riders' LODs (:class:`piste.character.LOD` list, palettes as built) or None."""
+        if "rider_lods" in self._cache:
+            return self._cache["rider_lods"]
+        info = self.manifest.get("characters") or {}
+        if not info:
+            return None
+        name = sorted(info)[0]
+        lods = lods_from_arrays(self.arrays, f"characters/{name}/", info[name], self.rider_model())
+        self._cache["rider_lods"] = lods
+        return lods
+
+
+def bundle_from_data(data: BundleData) -> Bundle:
+    """Build the terrain net, light map, lights, cameras and visibility of a read bundle (objects
+    and characters are built when first asked for).  Raises :class:`~piste.errors.FormatError`
+    naming the file and member when they are not valid."""
+    path, man, arrays = data.path, data.manifest, data.arrays
+    t = man.get("terrain", {})
+    try:
+        net = PatchNet(arrays["terrain/control_points"], uv=arrays["terrain/uv"], lightmap_rect=arrays["lightmap/rects"],
+                       tol=t.get("tol"), name=t.get("name", "terrain"))
+    except Exception as exc:
+        raise FormatError(path, f"invalid terrain ({exc})", field="terrain/control_points.npy") from None
+    lm_info = man.get("lightmap", {})
+    lightmap = LightMap(atlas=arrays["lightmap/atlas"].astype(np.float32), rects=arrays["lightmap/rects"],
+                        res=int(lm_info.get("res", 8)), gutter=int(lm_info.get("gutter", 1)), manifest=lm_info)
+    try:
+        lights = lights_from_dict(man.get("lights", {}))
+        cameras = {c["name"]: camera_from_dict(c) for c in man.get("cameras", [])}
+    except (KeyError, TypeError, ValueError) as exc:
+        raise FormatError(path, f"bad lights or cameras in the manifest ({exc})", field="manifest.json") from None
+    vis = None
+    if man.get("visibility"):
+        vis = Visibility.from_arrays({"patch_bits": arrays["visibility/patch_bits"],
+                                      "object_bits": arrays["visibility/object_bits"]}, man["visibility"])
+    line = arrays.get("terrain/centerline")
+    return Bundle(path, man, arrays, net, lightmap, lights, cameras, vis, line)
+
+
+def load_bundle(path, verify: bool = True) -> Bundle:
+    """Load a ``.piste`` bundle as the scene's objects (:func:`piste.formats.bundle.read_bundle`, then
+    :func:`bundle_from_data`).
+
+    ``verify`` checks each member's SHA-256 against the manifest (the zip CRC is always checked).
+    Raises :class:`~piste.errors.FormatError` on a missing file, a wrong format version, a missing
+    or corrupt member.
+    """
+    return bundle_from_data(read_bundle(path, verify))
