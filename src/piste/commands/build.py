@@ -16,6 +16,11 @@ def add_arguments(parser) -> None:
     parser.add_argument("--no-cache", action="store_true", help="recompute every step, store nothing")
     parser.add_argument("--jobs", type=int, default=1, help="light-map bake worker processes (default 1; 0 = every core)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.add_argument("--dask", metavar="local", help="large worlds: build the tiles as Dask tasks on a LocalCluster "
+                        "on 127.0.0.1 (implies a tiled build: terrain.tiles, default SCENE.tiles)")
+    parser.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="large worlds: build the tiles on the Dask "
+                        "scheduler at this address (the tiles folder must be on storage every worker sees)")
+    parser.add_argument("--workers", type=int, default=None, help="--dask local: worker processes (default: cores)")
 
 
 def run(args) -> int:
@@ -26,7 +31,17 @@ def run(args) -> int:
 
     if args.jobs < 0:
         raise ConfigError(f"--jobs must be >= 0, got {args.jobs}")
-    r = build_scene(args.scene, out=args.out, cache_dir=args.cache, progress=not args.quiet and sys.stderr.isatty(),
+    from piste.world.scene_file import load_scene
+
+    scene = load_scene(args.scene)
+    if scene.terrain.tiles is not None or args.dask or args.scheduler:
+        from piste.pipeline.dask_build import build_scene_tiles
+
+        r = build_scene_tiles(scene, out=args.out, dask=args.dask, scheduler=args.scheduler, workers=args.workers,
+                              progress=not args.quiet and sys.stderr.isatty())
+        print(r.summary())
+        return 0
+    r = build_scene(scene, out=args.out, cache_dir=args.cache, progress=not args.quiet and sys.stderr.isatty(),
                     jobs=args.jobs, use_cache=not args.no_cache)
     print(format_result(r))
     return 0

@@ -1,0 +1,428 @@
+"""Building a large world tile by tile: fit, bake (light maps, far field) and visibility per tile.
+
+A tiled build never holds the whole net: each task reads the height samples of one tile (and, to
+bake, the fitted tiles around it), writes its result atomically to a :class:`~piste.terrain.tiles.TileStore`,
+and returns a few numbers.  Two passes:
+
+1. ``fit``  (every tile, independent): :func:`piste.terrain.tiles.fit_tile` -> ``fit/t_Y_X.npz``
+   (control points, UVs).  Shared tile edges are bit-identical by construction.
+2. ``lit``  (every tile, after the fits of its 3 x 3 neighbourhood): light-map texels of the tile's
+   patches (``(n, res, res, 3)`` uint8, half-bright), with normals averaged across tile seams and
+   shadow rays against the neighbourhood (a halo of one tile: mountains further away than one tile
+   cast no shadow here), the **far field** (the tile's patch-corner grid with colours: a coarse
+   stand-in the runtime draws for distant tiles), and per-cell **visibility** bitsets of the tile's
+   patches from eyes over the tile (:func:`piste.pipeline.visibility.compute_visibility`, horizon
+   method).
+
+Every task is a pure function of its inputs: the single-machine build (:func:`build_tiles`) and the
+Dask build (:mod:`piste.pipeline.dask_build`) run the same tasks and write the same bytes.  A task
+whose output file exists and verifies (its stored key equals the key of its inputs, its zip CRCs
+check) is skipped, so a killed build resumes where it stopped.  ``index.json`` is written last.
+
+Height sources
+--------------
+:class:`ArraySource` (an array in memory), :class:`FileSource` (a scene's height field: GeoTIFF,
+PNG or .npz, read once per process) and :class:`SyntheticSource` (a seeded fractal range computed
+from global sample indices with + - * only, so any window of it has the same bits; no file at all).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from piste.errors import PisteError, ValidationError
+from piste.pipeline.cache import content_key
+from piste.terrain.tiles import TILE_FIT_VERSION, TILES_FORMAT, TileGrid, TileStore, fit_tile, neighbourhood_net
+
+__all__ = ["TiledSpec", "TiledResult", "ArraySource", "FileSource", "SyntheticSource", "TileError", "fit_task",
+           "lit_task",
+           "spec_from_scene", "synthetic_spec",
+           "build_tiles", "write_index", "TILE_BAKE_VERSION"]
+
+#: bumped whenever :func:`lit_task`'s output for the same input changes
+TILE_BAKE_VERSION = "piste.tile-bake/1"
+
+
+class TileError(PisteError):
+    """A tile task failed: names the tile and the step."""
+
+    def __init__(self, step: str, ty: int, tx: int, cause: BaseException):
+        self.step, self.tile = step, (ty, tx)
+        super().__init__(f"tile ({ty}, {tx}) failed in step {step!r}: {type(cause).__name__}: {cause}")
+
+
+# ----------------------------------------------------------------------------- height sources
+@dataclass(frozen=True)
+class ArraySource:
+    """Heights from an array in memory (or a ``np.memmap``), ``(H, W)`` metres."""
+
+    z: np.ndarray = field(repr=False)
+    spacing: tuple = (1.0, 1.0)
+    key: str = ""
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return tuple(self.z.shape)
+
+    def window(self, rows: slice, cols: slice) -> np.ndarray:
+        return np.asarray(self.z[rows, cols], dtype=np.float64)
+
+    def source_key(self) -> str:
+        return self.key or content_key("array", np.ascontiguousarray(self.z))
+
+
+_FILE_CACHE: dict = {}
+
+
+@dataclass(frozen=True)
+class FileSource:
+    """A scene's height field (a :class:`~piste.world.scene_file.TerrainSpec` of kind geotiff,
+    heightfield): read once per process, windows cut from it."""
+
+    spec: object = field(repr=False)
+
+    def _load(self):
+        p = Path(self.spec.path)
+        st = p.stat()
+        k = (str(p), st.st_mtime_ns, st.st_size, self.spec.height_scale, self.spec.height_offset,
+             str(self.spec.nodata), self.spec.vertical_units, self.spec.key, self.spec.spacing)
+        if k not in _FILE_CACHE:
+            from piste.pipeline.sources import load_heightfield
+
+            _FILE_CACHE.clear()  # one DEM at a time per process
+            _FILE_CACHE[k] = load_heightfield(self.spec)
+        return _FILE_CACHE[k]
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return tuple(self._load()[0].shape)
+
+    @property
+    def spacing(self) -> tuple:
+        return tuple(self._load()[1])
+
+    def window(self, rows: slice, cols: slice) -> np.ndarray:
+        return self._load()[0][rows, cols]
+
+    def source_key(self) -> str:
+        import hashlib
+
+        h = hashlib.sha256(Path(self.spec.path).read_bytes()).hexdigest()
+        s = self.spec
+        return content_key("file", h, s.kind, s.height_scale, s.height_offset, str(s.nodata), s.vertical_units, s.key,
+                           s.spacing)
+
+
+def _hash2(ix: np.ndarray, iy: np.ndarray, seed: int) -> np.ndarray:
+    """Lattice values in [0, 1) from integer coordinates (a 64-bit integer hash)."""
+    h = (ix.astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)) ^ (iy.astype(np.uint64) * np.uint64(0xC2B2AE3D27D4EB4F))
+    h ^= np.uint64(seed * 0x165667B19E3779F9 & 0xFFFFFFFFFFFFFFFF)
+    h ^= h >> np.uint64(31)
+    h *= np.uint64(0x94D049BB133111EB)
+    h ^= h >> np.uint64(29)
+    return (h >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0)
+
+
+@dataclass(frozen=True)
+class SyntheticSource:
+    """A seeded fractal mountain range of ``shape = (H, W)`` samples at ``spacing`` metres.
+
+    Ridged value noise (6 octaves) with smoothstep interpolation, computed from global sample
+    indices with integer hashing and ``+ - *`` only: every window has exactly the bits the whole
+    field would have, on any machine.  Heights ~0 .. ``relief`` metres.
+    """
+
+    shape: tuple = (3001, 3001)
+    spacing: tuple = (10.0, 10.0)
+    seed: int = 0
+    relief: float = 1500.0
+    wavelength: float = 2400.0
+
+    def window(self, rows: slice, cols: slice) -> np.ndarray:
+        r = np.arange(rows.start, min(rows.stop, self.shape[0]), dtype=np.int64)
+        c = np.arange(cols.start, min(cols.stop, self.shape[1]), dtype=np.int64)
+        out = np.zeros((len(r), len(c)))
+        amp, total = 1.0, 0.0
+        for octave in range(6):
+            # lattice cell size in samples (an integer: exact cell/fraction arithmetic)
+            cy = max(int(round(self.wavelength / self.spacing[1] / 2**octave)), 2)
+            cx = max(int(round(self.wavelength / self.spacing[0] / 2**octave)), 2)
+            iy, fy = r // cy, (r % cy).astype(np.float64) * (1.0 / cy)
+            ix, fx = c // cx, (c % cx).astype(np.float64) * (1.0 / cx)
+            sy, sx = fy * fy * (3.0 - 2.0 * fy), fx * fx * (3.0 - 2.0 * fx)
+            s = self.seed * 7 + octave
+            v00 = _hash2(ix[None, :], iy[:, None], s)
+            v10 = _hash2(ix[None, :] + 1, iy[:, None], s)
+            v01 = _hash2(ix[None, :], iy[:, None] + 1, s)
+            v11 = _hash2(ix[None, :] + 1, iy[:, None] + 1, s)
+            a = v00 + (v10 - v00) * sx[None, :]
+            b = v01 + (v11 - v01) * sx[None, :]
+            n = a + (b - a) * sy[:, None]
+            ridge = 1.0 - (2.0 * n - 1.0) * (2.0 * n - 1.0) if octave else n
+            out += amp * ridge
+            total += amp
+            amp *= 0.5
+        return out * (self.relief / total)
+
+    def source_key(self) -> str:
+        return content_key("synthetic/1", list(self.shape), list(self.spacing), self.seed, self.relief, self.wavelength)
+
+
+# ----------------------------------------------------------------------------- the spec
+@dataclass
+class TiledSpec:
+    """Everything a tile task needs (picklable: it travels to Dask workers).
+
+    Attributes
+    ----------
+    root : the tile store folder
+    source : ArraySource | FileSource | SyntheticSource
+    grid : TileGrid
+    lights_toml : the lights as :func:`piste.lighting.lights.dumps_lights` text ("": the default lights)
+    res, shadows : light-map texels a patch side, terrain self-shadowing
+    cell, eye_heights : visibility cells (metres) and eye heights; ``cell = 0`` skips visibility
+    """
+
+    root: str
+    source: object = field(repr=False)
+    grid: TileGrid = None
+    lights_toml: str = ""
+    res: int = 4
+    shadows: bool = True
+    cell: float = 0.0
+    eye_heights: tuple = (1.7, 9.0)
+    name: str = "world"
+    _src_key: str = field(default="", repr=False)
+
+    @property
+    def store(self) -> TileStore:
+        return TileStore(self.root)
+
+    def source_key(self) -> str:
+        if not self._src_key:
+            self._src_key = self.source.source_key()
+        return self._src_key
+
+    def fit_key(self, ty: int, tx: int) -> str:
+        return content_key(TILE_FIT_VERSION, self.source_key(), self.grid.to_dict(), ty, tx)
+
+    def lit_key(self, ty: int, tx: int) -> str:
+        g = self.grid
+        near = [self.fit_key(y, x) for y in range(max(ty - 1, 0), min(ty + 2, g.shape[0]))
+                for x in range(max(tx - 1, 0), min(tx + 2, g.shape[1]))]
+        return content_key(TILE_BAKE_VERSION, near, self.lights_toml, self.res, self.shadows, self.cell,
+                           list(self.eye_heights))
+
+    def lights(self):
+        from piste.lighting.lights import loads_lights
+
+        return loads_lights(self.lights_toml, "<lights>") if self.lights_toml else _default_lights()
+
+
+def _default_lights():
+    from piste.lighting.lights import default_lights
+
+    return default_lights()
+
+
+# ----------------------------------------------------------------------------- tasks
+def fit_task(spec: TiledSpec, ty: int, tx: int) -> dict:
+    """Fit one tile (skipped when its output verifies): ``{"tile", "sha256", "skipped", "seconds"}``."""
+    t0 = time.perf_counter()
+    key = spec.fit_key(ty, tx)
+    store = spec.store
+    sha = store.verify("fit", ty, tx, key)
+    if sha is not None:
+        return {"tile": (ty, tx), "sha256": sha, "skipped": True, "seconds": 0.0}
+    try:
+        rows, cols = spec.grid.sample_window(ty, tx)
+        arrays = fit_tile(spec.grid, ty, tx, spec.source.window(rows, cols))
+        sha = store.write("fit", ty, tx, arrays, key)
+    except Exception as exc:
+        raise TileError("fit", ty, tx, exc) from exc
+    return {"tile": (ty, tx), "sha256": sha, "skipped": False, "seconds": time.perf_counter() - t0}
+
+
+def lit_task(spec: TiledSpec, ty: int, tx: int, *_deps) -> dict:
+    """Bake one tile's light map, far field and visibility (needs the fits of its neighbourhood).
+
+    Returns ``{"tile", "sha256", "skipped", "seconds", "samples", "rays", "zmin", "zmax", "patches"}``.
+    ``_deps`` only orders the task after its neighbours' fits (Dask futures).
+    """
+    t0 = time.perf_counter()
+    key = spec.lit_key(ty, tx)
+    store = spec.store
+    sha = store.verify("lit", ty, tx, key)
+    if sha is not None:
+        meta = store.read("lit", ty, tx)["meta"]
+        return {"tile": (ty, tx), "sha256": sha, "skipped": True, "seconds": 0.0, "samples": 0, "rays": 0,
+                "zmin": float(meta[0]), "zmax": float(meta[1]), "patches": int(meta[2])}
+    try:
+        arrays, info = _bake_tile(spec, ty, tx)
+        sha = store.write("lit", ty, tx, arrays, key)
+    except Exception as exc:
+        raise TileError("lit", ty, tx, exc) from exc
+    return {"tile": (ty, tx), "sha256": sha, "skipped": False, "seconds": time.perf_counter() - t0, **info}
+
+
+def _bake_tile(spec: TiledSpec, ty: int, tx: int) -> tuple[dict, dict]:
+    from piste.lighting.lightmap import encode_half_bright, sample_points
+    from piste.lighting.lights import light_terms, shade
+    from piste.lighting.shadows import shadow_visibility
+
+    g, res = spec.grid, spec.res
+    store = spec.store
+    lights = spec.lights()
+    # seam-averaged sample points: the tile plus a ring of one patch of its neighbours
+    ring_net, centre = neighbourhood_net(store, g, ty, tx, halo=1, ring=1)
+    pos, nrm = sample_points(ring_net, res)
+    pos, nrm = pos[centre].reshape(-1, 3), nrm[centre].reshape(-1, 3)
+    n = len(centre)
+    stats: dict = {}
+    shadow = None
+    if spec.shadows and any(light.shadows for light in lights.direct):
+        occluders, _ = neighbourhood_net(store, g, ty, tx, halo=1)
+        terms = light_terms(lights, pos, nrm)
+        shadow = shadow_visibility(occluders, lights, pos, nrm, terms, stats=stats)
+        del occluders
+    colors = shade(lights, pos, nrm, shadow).reshape(n, res, res, 3)
+    texels = encode_half_bright(colors)
+    # far field: the tile's patch-corner grid (exact surface points) and the texel at each corner
+    py0, py1, px0, px1 = g.patch_range(ty, tx)
+    ny, nx = py1 - py0, px1 - px0
+    cp = ring_net.control_points[centre].reshape(ny, nx, 4, 4, 3)
+    far = np.empty((ny + 1, nx + 1, 3))
+    far[:-1, :-1] = cp[:, :, 0, 0]
+    far[:-1, -1] = cp[:, -1, 3, 0]
+    far[-1, :-1] = cp[-1, :, 0, 3]
+    far[-1, -1] = cp[-1, -1, 3, 3]
+    t = texels.reshape(ny, nx, res, res, 3)
+    far_rgb = np.empty((ny + 1, nx + 1, 3), np.uint8)
+    far_rgb[:-1, :-1] = t[:, :, 0, 0]
+    far_rgb[:-1, -1] = t[:, -1, 0, res - 1]
+    far_rgb[-1, :-1] = t[-1, :, res - 1, 0]
+    far_rgb[-1, -1] = t[-1, -1, res - 1, res - 1]
+    lo = cp.reshape(-1, 3).min(0)
+    hi = cp.reshape(-1, 3).max(0)
+    arrays = {"texels": texels, "far_positions": far, "far_colors": far_rgb,
+              "meta": np.array([lo[2], hi[2], n], dtype=np.float64)}
+    if spec.cell > 0:
+        from piste.pipeline.visibility import compute_visibility
+        from piste.terrain.net import PatchNet
+
+        tile = PatchNet(ring_net.control_points[centre], tol=ring_net.tol, name=f"tile {ty},{tx}")
+        vis = compute_visibility(tile, cell=spec.cell, eye_heights=spec.eye_heights, method="horizon", azimuths=180)
+        va, vm = vis.to_arrays()
+        for k, v in va.items():
+            arrays[f"vis_{k}"] = v
+        arrays["vis_meta"] = np.array(_json(vm))
+    info = {"samples": n * res * res, "rays": int(stats.get("rays", 0)), "zmin": float(lo[2]), "zmax": float(hi[2]),
+            "patches": n}
+    return arrays, info
+
+
+def _json(d) -> str:
+    import json
+
+    return json.dumps(d, sort_keys=True, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o))
+
+
+# ----------------------------------------------------------------------------- the driver
+def write_index(spec: TiledSpec, fits: dict, lits: dict, extra: dict | None = None) -> dict:
+    """Write ``index.json`` (atomically) from the tasks' results; returns it."""
+    g = spec.grid
+    tiles = {}
+    for (ty, tx) in g.tiles():
+        f, lt = fits[(ty, tx)], lits[(ty, tx)]
+        x0, y0, x1, y1 = g.tile_bounds_xy(ty, tx)
+        tiles[f"{ty},{tx}"] = {"fit": f["sha256"], "lit": lt["sha256"], "patches": lt["patches"],
+                               "bounds": [[x0, y0, lt["zmin"]], [x1, y1, lt["zmax"]]]}
+    index = {"format": TILES_FORMAT, "name": spec.name, "grid": g.to_dict(), "patches": g.n_patches,
+             "res": spec.res, "shadows": spec.shadows, "cell": spec.cell, "lights": spec.lights_toml,
+             "source": spec.source_key(), "tiles": tiles, **(extra or {})}
+    spec.store.write_index(index)
+    return index
+
+
+@dataclass
+class TiledResult:
+    root: Path
+    index: dict
+    seconds: float
+    fit: dict
+    lit: dict
+
+    @property
+    def built(self) -> int:
+        return sum(not r["skipped"] for r in self.fit.values()) + sum(not r["skipped"] for r in self.lit.values())
+
+    @property
+    def skipped(self) -> int:
+        return sum(r["skipped"] for r in self.fit.values()) + sum(r["skipped"] for r in self.lit.values())
+
+    def summary(self) -> str:
+        g = TileGrid.from_dict(self.index["grid"])
+        samples = sum(r.get("samples", 0) for r in self.lit.values())
+        bake_s = sum(r["seconds"] for r in self.lit.values())
+        rate = f", bake {samples / bake_s:,.0f} samples/s" if bake_s > 0 and samples else ""
+        return (f"built {self.root} ({g.n_patches:,} patches in {g.shape[0]} x {g.shape[1]} tiles) in "
+                f"{self.seconds:.2f} s: {self.built} tile steps computed, {self.skipped} reused{rate}")
+
+
+def build_tiles(spec: TiledSpec, progress: bool = False) -> TiledResult:
+    """Build every tile in this process (fit pass, then lit pass), then the index."""
+    t0 = time.perf_counter()
+    g = spec.grid
+    spec.store.root.mkdir(parents=True, exist_ok=True)
+    fits, lits = {}, {}
+    for step, fn, out in (("fit", fit_task, fits), ("lit", lit_task, lits)):
+        it = g.tiles()
+        if progress:
+            from tqdm import tqdm
+
+            it = tqdm(it, desc=f"tiles: {step}", unit="tile", leave=False)
+        for ty, tx in it:
+            out[(ty, tx)] = fn(spec, ty, tx)
+    index = write_index(spec, fits, lits)
+    return TiledResult(spec.store.root, index, time.perf_counter() - t0, fits, lits)
+
+
+def spec_from_scene(scene, root=None, res: int | None = None) -> TiledSpec:
+    """The :class:`TiledSpec` of a scene whose terrain is a height field (``terrain.tiles``)."""
+    from piste.errors import ConfigError
+    from piste.lighting.lights import dumps_lights
+    from piste.pipeline.build import scene_lights
+
+    ts = scene.terrain
+    if ts.kind not in ("heightfield", "geotiff"):
+        raise ConfigError(f"{scene.path}: a tiled build needs a height-field terrain (GeoTIFF, PNG or .npz), "
+                          f"got terrain kind {ts.kind!r}")
+    src = FileSource(ts)
+    grid = TileGrid(src.shape, ts.samples_per_patch, ts.tile_patches, src.spacing)
+    check_grid(grid)
+    root = Path(root) if root is not None else (ts.tiles or Path(scene.path).with_suffix(".tiles"))
+    return TiledSpec(str(root), src, grid, dumps_lights(scene_lights(scene)), res=res or scene.lightmap.res,
+                     shadows=scene.lightmap.shadows, cell=scene.visibility.cell if scene.visibility.enabled else 0.0,
+                     eye_heights=tuple(scene.visibility.eye_heights), name=scene.name)
+
+
+def synthetic_spec(root, patches_side: int, samples_per_patch: int = 3, tile_patches: int = 64, spacing: float = 10.0,
+                   seed: int = 0, res: int = 4, shadows: bool = True, cell: float = 0.0) -> TiledSpec:
+    """A synthetic world of ``patches_side ** 2`` patches (for benchmarks and examples)."""
+    n = patches_side * samples_per_patch + 1
+    src = SyntheticSource((n, n), (spacing, spacing), seed)
+    grid = TileGrid((n, n), samples_per_patch, tile_patches, (spacing, spacing))
+    check_grid(grid)
+    return TiledSpec(str(root), src, grid, "", res=res, shadows=shadows, cell=cell, name=f"synthetic {seed}")
+
+
+def check_grid(grid: TileGrid) -> None:
+    if grid.n_patches > 50_000_000:
+        raise ValidationError(f"{grid.n_patches:,} patches: more than the 50 M a tiled world supports")
+    if math.prod(grid.shape) > 1_000_000:
+        raise ValidationError(f"{math.prod(grid.shape):,} tiles: raise tile_patches")
