@@ -1,0 +1,177 @@
+"""Rendering an SSX Tricky level with its own textures and light maps.
+
+``modulate``: the terrain renderer's one pass, base texture x linear light ``CL`` (recovered from
+the stored ``Cs``/``As``, see :mod:`piste.formats.ssx.lightmap`).
+
+``ps2``: the game's way with the stored texels.  The terrain renderer draws the base texture
+(``Cd``) first; :class:`SourcePass` then draws the same triangles (depth ``<=``) with the stored
+``(Cs, As)`` light-map texels, blended ``(Cd - Cs) x As`` as the GS does (``As`` 128 = 1.0; above
+1.0 in a second, additive stage, since GL blend factors stop at 1).  8-bit rounding differs from
+the GS's truncating ``>> 7`` by at most a level or two per stage.
+
+API
+---
+SourcePass(ctx)                 .set_source((h, w, 4) uint8), .draw(mesh, mvp, stage)
+render_level(level, camera, size, lightmap_mode, ctx=None, renderer=None) -> (H, W, 3) uint8
+level_renderer(level, size, ctx=None) -> TerrainRenderer with the level's atlases and LOD preset
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from piste.errors import ConfigError, RenderError
+from piste.render.context import check_gl_error, load_shader
+from piste.render.frame import TerrainRenderer
+
+__all__ = ["SourcePass", "render_level", "level_renderer", "SSX_LOD"]
+
+#: the ssx_tricky preset's LOD switch distances in metres (3000 / 15000 game units)
+SSX_LOD = (30.0, 150.0)
+
+
+class SourcePass:
+    """Draws a terrain mesh with an SSX light-map source atlas ``(Cs, As)`` (see the module)."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.prog = ctx.program(vertex_shader=load_shader("ssx_source.vert.glsl"),
+                                fragment_shader=load_shader("ssx_source.frag.glsl"))
+        self.prog["u_source"].value = 0
+        self.source = None
+        self.overbright = False
+        self._bufs = []
+        self._vao = None
+        self._n = 0
+
+    def set_source(self, image) -> None:
+        """Use ``(h, w, 4) uint8`` stored texels (RGB = Cs, A = As) laid out by the net's
+        ``lightmap_rect``; sampled bilinearly, clamped."""
+        import moderngl
+
+        img = np.asarray(image)
+        if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 4:
+            raise RenderError(f"light-map source: expected (h, w, 4) uint8, got {img.shape} {img.dtype}")
+        if self.source is not None:
+            self.source.release()
+        h, w = img.shape[:2]
+        self.source = self.ctx.texture((w, h), 4, np.ascontiguousarray(img).tobytes(), alignment=1)
+        self.source.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.source.repeat_x = self.source.repeat_y = False
+        self.overbright = bool((img[..., 3] > 128).any())
+
+    def upload(self, mesh) -> None:
+        self._release_geometry()
+        pos = self.ctx.buffer(np.ascontiguousarray(mesh.positions, dtype=np.float32).tobytes())
+        uvl = self.ctx.buffer(np.ascontiguousarray(mesh.uv_lightmap, dtype=np.float32).tobytes())
+        idx = self.ctx.buffer(np.ascontiguousarray(mesh.indices, dtype=np.uint32).tobytes())
+        self._bufs = [pos, uvl, idx]
+        self._vao = self.ctx.vertex_array(self.prog, [(pos, "3f", "in_pos"), (uvl, "2f", "in_uvl")], idx,
+                                          index_element_size=4)
+        self._n = int(np.asarray(mesh.indices).size)
+
+    def draw(self, mvp, stage: str = "blend") -> None:
+        """Draw the uploaded mesh into the bound framebuffer.  ``stage``: "blend" (the GS blend,
+        both stages) or "raw" (the texels, no blending)."""
+        import moderngl
+
+        if self.source is None or self._vao is None or self._n == 0:
+            return
+        ctx = self.ctx
+        self.prog["u_mvp"].write(np.asarray(mvp, dtype=np.float32).T.tobytes())
+        self.prog["u_depth_bias"].value = 2e-5
+        self.source.use(0)
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE)
+        ctx.depth_func = "<="
+        ctx.depth_mask = False
+        try:
+            if stage == "raw":
+                ctx.disable(moderngl.BLEND)
+                self.prog["u_stage"].value = 2
+                self._vao.render(moderngl.TRIANGLES, vertices=self._n)
+                return
+            ctx.enable(moderngl.BLEND)
+            ctx.blend_equation = (moderngl.FUNC_REVERSE_SUBTRACT, moderngl.FUNC_ADD)
+            ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.SRC_ALPHA, moderngl.ZERO, moderngl.ONE)
+            self.prog["u_stage"].value = 0
+            self._vao.render(moderngl.TRIANGLES, vertices=self._n)
+            if self.overbright:
+                ctx.blend_equation = moderngl.FUNC_ADD
+                ctx.blend_func = (moderngl.DST_COLOR, moderngl.ONE, moderngl.ZERO, moderngl.ONE)
+                self.prog["u_stage"].value = 1
+                self._vao.render(moderngl.TRIANGLES, vertices=self._n)
+        finally:
+            ctx.blend_equation = moderngl.FUNC_ADD
+            ctx.blend_func = moderngl.DEFAULT_BLENDING
+            ctx.disable(moderngl.BLEND)
+            ctx.depth_mask = True
+            ctx.depth_func = "<"
+
+    def _release_geometry(self) -> None:
+        if self._vao is not None:
+            self._vao.release()
+            self._vao = None
+        for b in self._bufs:
+            b.release()
+        self._bufs = []
+
+    def release(self) -> None:
+        self._release_geometry()
+        if self.source is not None:
+            self.source.release()
+            self.source = None
+        self.prog.release()
+
+
+def level_renderer(level, size=(640, 448), ctx=None, lod_near: float = SSX_LOD[0], lod_far: float = SSX_LOD[1]):
+    """A :class:`TerrainRenderer` for ``level`` (an :class:`piste.pipeline.ssx_level.SsxLevel` or
+    anything with ``net``, ``base_atlas``, ``light``, ``source``) with the ``ssx_tricky`` LOD preset,
+    and a :class:`SourcePass` attached as ``renderer.ssx_source``."""
+    r = TerrainRenderer(level.net, size=size, ctx=ctx, lightmap=level.light, base_texture=level.base_atlas,
+                        lod_near=lod_near, lod_far=lod_far)
+    r.ssx_source = SourcePass(r.ctx)
+    r.ssx_source.set_source(level.source)
+    return r
+
+
+def render_level(level, camera, size=(640, 448), lightmap_mode: str = "modulate", ctx=None, renderer=None,
+                 lod: bool = True, fog: float | None = None, stage: str = "blend") -> np.ndarray:
+    """One frame of ``level`` seen by ``camera``: ``(H, W, 3) uint8``.
+
+    ``lightmap_mode``: "modulate" (base x CL in one pass), "ps2" (base, then the stored Cs/As
+    blended as the GS does), "base" (the base textures alone) or "source" (the stored Cs/As texels
+    without blending: RGB = Cs, and ``stage="raw"`` reads alpha As / 2 from the fourth channel; use
+    :func:`render_level_rgba`)."""
+    return render_level_rgba(level, camera, size, lightmap_mode, ctx, renderer, lod, fog)[..., :3]
+
+
+def render_level_rgba(level, camera, size=(640, 448), lightmap_mode: str = "modulate", ctx=None, renderer=None,
+                      lod: bool = True, fog: float | None = None) -> np.ndarray:
+    """As :func:`render_level` with the alpha channel, ``(H, W, 4) uint8``."""
+    modes = ("modulate", "ps2", "base", "source")
+    if lightmap_mode not in modes:
+        raise ConfigError(f"lightmap mode must be one of {', '.join(modes)}, got {lightmap_mode!r}")
+    own = renderer is None
+    r = renderer if renderer is not None else level_renderer(level, size, ctx)
+    try:
+        cam = replace(camera, aspect=r.size[0] / r.size[1])
+        levels = r.levels(cam, lod)
+        mesh = r.prepare(cam, levels=levels)  # explicit levels: a CPU-tessellated TerrainMesh
+        if lightmap_mode == "modulate":
+            return r.draw(cam, mesh, lightmap_mode="modulate", fog=fog).image
+        r.draw(cam, mesh, debug="base", read=False, clear=(0.0, 0.0, 0.0, 0.0), sky=lightmap_mode != "source")
+        if lightmap_mode in ("ps2", "source"):
+            src = r.ssx_source
+            src.upload(mesh)
+            r.target.use()
+            src.draw(cam.view_projection(), stage="raw" if lightmap_mode == "source" else "blend")
+            r.ctx.finish()
+            check_gl_error(r.ctx, "drawing the SSX light-map pass")
+        return r.target.read().copy()
+    finally:
+        if own:
+            r.ssx_source.release()
+            r.release()
