@@ -19,6 +19,8 @@ from piste.errors import ConfigError
 from piste.render.context import Offscreen, check_gl_error, create_context
 from piste.render.sky_pass import HORIZON, SkyPass
 from piste.render.terrain_pass import TerrainPass
+from piste.terrain.cull import patch_tree
+from piste.terrain.resident import resident_terrain
 
 from piste.transforms import cull_boxes  # noqa: E402  (re-exported)
 
@@ -66,12 +68,17 @@ class TerrainRenderer:
     lod_near, lod_far : per-edge LOD distance thresholds (default: the terrain core's)
     track : (k, 3) centre line of a groomed track to mark on the snow (projected texture), or None
     track_half_width : metres from the centre line to the track's dye lines
+    lod_morph : geomorph between LOD levels (False: the talk's exact positions, which pop)
+    resident : keep every patch's vertices on the GPU and send only index lists (False: tessellate
+        on the CPU every frame, the talk's way; same triangles)
     """
 
     def __init__(self, net, size=(640, 448), ctx=None, lightmap="placeholder", base_texture=None,
                  lod_near: float | None = None, lod_far: float | None = None, track=None,
-                 track_half_width: float = 16.0):
+                 track_half_width: float = 16.0, lod_morph: bool = True, resident: bool = True):
         self.net = net
+        self.lod_morph = bool(lod_morph)
+        self.resident = bool(resident)
         self.ctx = ctx if ctx is not None else create_context()
         self.target = Offscreen(self.ctx, size)
         if isinstance(lightmap, str):
@@ -92,6 +99,16 @@ class TerrainRenderer:
         self._centre = np.ascontiguousarray(((lo + hi) / 2.0).T)  # (3, n): boxes as centre +- half
         self._half = np.ascontiguousarray(((hi - lo) / 2.0).T)
         self.mesh = None
+        self.visibility = None  # see set_visibility
+        self.cull_stats: dict = {}
+
+    def set_visibility(self, visibility=None) -> None:
+        """Pre-computed visibility in front of frustum culling (a bundle's per-cell sets, see
+        :class:`piste.pipeline.visibility.Visibility`): any object whose ``patches_at(eye)`` gives an
+        ``(n,)`` bool mask of the patches seen from the eye's cell, or None (outside: keep all).
+        None removes it.  After each :meth:`visible`, ``cull_stats`` holds ``frustum_patches`` and
+        ``drawn_patches``."""
+        self.visibility = visibility
 
     @property
     def size(self) -> tuple[int, int]:
@@ -107,8 +124,17 @@ class TerrainRenderer:
         return self.net.edge_levels(camera.eye, **self.lod_kwargs) if lod else 8
 
     def visible(self, camera) -> np.ndarray:
-        """Patches whose control-point boxes meet the view frustum, ``(p,)`` int64 (vectorised)."""
-        return np.nonzero(cull_boxes(self._centre, self._half, camera.frustum_planes()))[0]
+        """Patches whose control-point boxes meet the view frustum, ``(p,)`` int64 ascending
+        (hierarchical: :class:`piste.terrain.cull.PatchTree`, the same set as the flat test), then
+        cut by the pre-computed visibility when one is set (:meth:`set_visibility`)."""
+        ids = patch_tree(self.net).cull(camera.frustum_planes())
+        frustum = len(ids)
+        if self.visibility is not None:
+            keep = self.visibility.patches_at(camera.eye)
+            if keep is not None:
+                ids = ids[keep[ids]]
+        self.cull_stats = {"frustum_patches": int(frustum), "drawn_patches": int(len(ids))}
+        return ids
 
     def prepare(self, camera, lod: bool = True, levels=None, timings: dict | None = None):
         """LOD, cull and tessellate for ``camera``; returns the :class:`TerrainMesh`.
@@ -118,6 +144,15 @@ class TerrainRenderer:
         from piste.terrain.tessellate import tessellate
 
         t = timings if timings is not None else {}
+        if levels is None and self.resident:  # GPU-resident blocks: only culling, LOD and indices here
+            t0 = time.perf_counter()
+            res = resident_terrain(self.net)
+            pids = self.visible(camera)
+            t1 = time.perf_counter()
+            mesh = res.frame(camera.eye, patches=pids, lod=lod, morph=self.lod_morph, **self.lod_kwargs)
+            t2 = time.perf_counter()
+            t.update(lod=0.0, cull=(t1 - t0) * 1e3, tessellate=(t2 - t1) * 1e3)
+            return mesh
         t0 = time.perf_counter()
         if levels is None:
             levels = self.levels(camera, lod)

@@ -136,15 +136,22 @@ def shadow_triangles(mesh, patch_lists, light_vp=None):
         slots.append(k)
         owner.append(np.full(len(k), i))
     k = np.concatenate(slots) if slots else np.zeros(0, np.int64)
-    vs, ts = np.asarray(mesh.vertex_start), np.asarray(mesh.tri_start)
-    vcount = vs[k + 1] - vs[k]
+    ts = np.asarray(mesh.tri_start)
+    if hasattr(mesh, "vertex_first"):  # resident terrain: each patch's vertex block (geomorphed below)
+        vfirst, vcount = np.asarray(mesh.vertex_first)[k], np.asarray(mesh.vertex_count)[k]
+    else:
+        vs = np.asarray(mesh.vertex_start)
+        vfirst, vcount = vs[k], vs[k + 1] - vs[k]
     tcount = ts[k + 1] - ts[k]
-    vsel = _ragged(vs[k], vcount)
+    vsel = _ragged(vfirst, vcount)
     tsel = _ragged(ts[k], tcount)
     new_start = np.cumsum(vcount) - vcount  # where each slot's vertices land
-    shift = np.repeat(new_start - vs[k], tcount)
+    shift = np.repeat(new_start - vfirst, tcount)
     idx = (np.asarray(mesh.indices)[tsel].astype(np.int64) + shift[:, None]).astype(np.uint32)
-    pos = np.asarray(mesh.positions)[vsel].astype(np.float32)
+    if hasattr(mesh, "morphed_positions"):
+        pos = mesh.morphed_positions(vsel)
+    else:
+        pos = np.asarray(mesh.positions)[vsel].astype(np.float32)
     tri_owner = np.repeat(np.concatenate(owner), tcount) if len(k) else np.zeros(0, np.int64)
     if light_vp is not None and len(idx):
         # keep only the triangles whose light-space bounds meet the shadow tile's box
@@ -177,42 +184,51 @@ class ShadowPass:
         self.receiver = ctx.program(vertex_shader=load_shader("shadow_receiver.vert.glsl"),
                                     fragment_shader=load_shader("shadow_receiver.frag.glsl"))
         self.receiver["u_shadow"].value = 3
-        self._cast = {"pos": None, "idx": None, "vao": None, "nv": 0, "n": 0, "nt": 0}
+        self._casts: dict = {}  # per caster group (one per rider model): its buffers
         self._recv = {"pos": None, "idx": None, "vao": None}
         self.light_vp = np.zeros((0, 4, 4))
         self.patch_counts = []
         self.triangles = 0
 
     # ------------------------------------------------------------------ casters
-    def render_casters(self, positions, indices, light_vp) -> None:
+    def render_casters(self, positions, indices, light_vp, first: int = 0, group: int = 0) -> None:
         """Draw ``n`` riders' low-LOD meshes (``positions (n, v, 3)`` world space, shared
-        ``indices (t, 3)``) into their tiles with ``light_vp (n, 4, 4)``."""
+        ``indices (t, 3)``) into tiles ``first .. first + n - 1`` with ``light_vp (n, 4, 4)``.
+
+        Several rider models: one call per model (``group`` names its buffers), the first with
+        ``first=0`` clears the texture, later ones add their tiles."""
         import moderngl
 
         pos = np.ascontiguousarray(positions, dtype=np.float32)
         n, v = pos.shape[:2]
-        if n > self.n_max:
-            raise RenderError(f"shadow pass: {n} casters, room for {self.n_max}")
+        if first + n > self.n_max:
+            raise RenderError(f"shadow pass: {first + n} casters, room for {self.n_max}")
         ctx = self.ctx
-        c = self._cast
+        c = self._casts.setdefault(group, {"pos": None, "idx": None, "vao": None, "nv": 0, "n": 0, "nt": 0})
         if c["vao"] is None or c["nv"] != v or c["n"] != n:
             for key in ("vao", "pos", "idx"):
                 if c[key] is not None:
                     c[key].release()
             idx = (np.asarray(indices, np.uint32)[None] + (np.arange(n, dtype=np.uint32) * v)[:, None, None]).reshape(-1)
-            c["pos"] = ctx.buffer(reserve=pos.nbytes, dynamic=True)
-            c["idx"] = ctx.buffer(idx.tobytes())
+            c["pos"] = ctx.buffer(reserve=max(pos.nbytes, 4), dynamic=True)
+            c["idx"] = ctx.buffer(idx.tobytes() if len(idx) else b"\0\0\0\0")
             c["vao"] = ctx.vertex_array(self.caster, [(c["pos"], "3f", "in_pos")], c["idx"], index_element_size=4)
             c["nv"], c["n"], c["nt"] = v, n, int(np.asarray(indices).shape[0])
-        c["pos"].write(pos.tobytes())
-        self.light_vp = np.asarray(light_vp, dtype=np.float64)
+        if pos.nbytes:
+            c["pos"].write(pos.tobytes())
+        lvp = np.asarray(light_vp, dtype=np.float64).reshape(-1, 4, 4)
+        if first == 0:
+            self.light_vp = lvp
+        else:
+            self.light_vp = np.concatenate([self.light_vp[:first], lvp])
         self.fbo.use()
-        self.fbo.clear(0.0, 0.0, 0.0, 0.0)
+        if first == 0:
+            self.fbo.clear(0.0, 0.0, 0.0, 0.0)
         ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE | moderngl.BLEND)
         nt = 3 * c["nt"]
         for i in range(n):
-            ctx.viewport = (i * self.tile, 0, self.tile, self.tile)
-            self.caster["u_light_vp"].write(self.light_vp[i].astype(np.float32).T.tobytes())
+            ctx.viewport = ((first + i) * self.tile, 0, self.tile, self.tile)
+            self.caster["u_light_vp"].write(lvp[i].astype(np.float32).T.tobytes())
             c["vao"].render(moderngl.TRIANGLES, vertices=nt, first=i * nt)
         ctx.enable(moderngl.DEPTH_TEST)
 
@@ -269,7 +285,7 @@ class ShadowPass:
             ctx.depth_func = "<"
 
     def release(self) -> None:
-        for d in (self._cast, self._recv):
+        for d in (*self._casts.values(), self._recv):
             for key in ("vao", "pos", "idx"):
                 if d.get(key) is not None:
                     d[key].release()

@@ -11,6 +11,14 @@ Light-map modes
 Debug views (``debug=``): ``base`` (Cd only), ``lightmap`` (CL only), ``lod`` (patches coloured by
 kind, 4x4 / 6x6 / 8x8 / glue, over the light map, with a wireframe overlay), ``wire`` (the lit
 terrain with a wireframe overlay).
+
+Geometry
+--------
+``upload(mesh)`` takes a CPU-tessellated :class:`piste.terrain.TerrainMesh` (streamed every frame)
+or a :class:`piste.terrain.resident.ResidentMesh`: then the patches' vertex blocks stay on the GPU
+(uploaded once per net) and a frame sends only its index list and the morph factors (a float
+texture), and the vertex shader geomorphs.  The first pass's fragment shader is compiled once per
+mode (no run-time mode branch).
 """
 
 from __future__ import annotations
@@ -20,12 +28,21 @@ import numpy as np
 from piste.errors import ConfigError, RenderError
 from piste.render.context import load_shader
 from piste.render.textures import LOD_COLORS, snow_texture
+from piste.terrain.resident import ResidentMesh
 
 __all__ = ["TerrainPass", "LIGHTMAP_MODES", "DEBUG_VIEWS"]
 
 LIGHTMAP_MODES = ("modulate", "ps2")
 DEBUG_VIEWS = (None, "base", "lightmap", "lod", "wire")
 _MODE_ID = {"modulate": 0, "base": 1, "lightmap": 2, "lod": 3, "flat": 4, "lod_wire": 5}
+_MORPH_UNIT = 4
+_RESIDENT_FORMAT = ("3f 3f 2f 2f 1f", "in_pos", "in_target", "in_uv", "in_uvl", "in_morph")
+
+
+def _with_defines(source: str, **defines) -> str:
+    """``source`` with ``#define NAME value`` lines after its ``#version`` line."""
+    head, _, rest = source.partition("\n")
+    return head + "\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items()) + rest
 
 
 class _Stream:
@@ -68,27 +85,56 @@ class TerrainPass:
 
     def __init__(self, ctx, lightmap=None, base_texture=None):
         self.ctx = ctx
-        vs = load_shader("terrain.vert.glsl")
-        self.prog = ctx.program(vertex_shader=vs, fragment_shader=load_shader("terrain.frag.glsl"))
-        self.prog_ps2 = ctx.program(vertex_shader=vs, fragment_shader=load_shader("ps2_lightmap.frag.glsl"))
-        self.prog_fog = ctx.program(vertex_shader=vs, fragment_shader=load_shader("fog.frag.glsl"))
-        for p in (self.prog, self.prog_ps2):
-            p["u_base"].value = 0
-            p["u_light"].value = 1
+        self._vs = load_shader("terrain.vert.glsl")
+        self._fs = load_shader("terrain.frag.glsl")
+        self._programs: dict = {}  # mode id -> the first pass compiled for that mode
+        self.prog_ps2 = ctx.program(vertex_shader=self._vs, fragment_shader=load_shader("ps2_lightmap.frag.glsl"))
+        self.prog_fog = ctx.program(vertex_shader=self._vs, fragment_shader=load_shader("fog.frag.glsl"))
+        # uniforms every terrain program gets (applied when a program is first used / after a change)
         cols = [LOD_COLORS[k] for k in (0, 4, 6, 8)]
-        self.prog["u_lod_colors"].value = [tuple(c / 255.0 for c in col) for col in cols]
-        for p in (self.prog, self.prog_ps2):
-            p["u_track"].value = 2
-            p["u_track_on"].value = 0
+        self._uniforms = {"u_base": 0, "u_light": 1, "u_track": 2, "u_track_on": 0, "u_morph": _MORPH_UNIT,
+                          "u_morph_on": 0, "u_lod_colors": [tuple(c / 255.0 for c in col) for col in cols]}
+        self._stamp = 0
+        self._applied: dict = {}
         self.base = None
         self.light = None
         self.track = None
         self.set_base_texture(snow_texture() if base_texture is None else base_texture)
         self.set_lightmap(lightmap)
         self._streams = {k: _Stream(ctx) for k in ("pos", "uv", "uvl", "kind", "index")}
-        self._vaos: dict[str, object] = {}
+        self._vaos: dict = {}  # (program key, source) -> vertex array
         self.n_indices = 0
         self.has_kind = False
+        self._source = "stream"  # or "resident"
+        self._resident = None  # the ResidentTerrain whose blocks are on the GPU
+        self._resident_buf = None
+        self._morph_tex = None
+        self._morph = False
+
+    @property
+    def prog(self):
+        """The modulate first-pass program (compiled on first use)."""
+        return self._program(_MODE_ID["modulate"])
+
+    def _program(self, mode: int):
+        p = self._programs.get(mode)
+        if p is None:
+            p = self.ctx.program(vertex_shader=self._vs, fragment_shader=_with_defines(self._fs, TERRAIN_MODE=mode))
+            self._programs[mode] = p
+        return self._apply(p)
+
+    def _apply(self, p):
+        """Write the shared uniforms into ``p`` if they changed since it last got them."""
+        if self._applied.get(id(p)) != self._stamp:
+            for name, value in self._uniforms.items():
+                if name in p:
+                    p[name].value = value
+            self._applied[id(p)] = self._stamp
+        return p
+
+    def _set_uniforms(self, **values) -> None:
+        self._uniforms.update(values)
+        self._stamp += 1
 
     # ------------------------------------------------------------------ textures
     def _texture(self, image, name: str):
@@ -161,8 +207,7 @@ class TerrainPass:
             self.track.release()
             self.track = None
         if field is None:
-            for p in (self.prog, self.prog_ps2):
-                p["u_track_on"].value = 0
+            self._set_uniforms(u_track_on=0)
             return
         f = np.clip(np.asarray(field, dtype=np.float32), -1000.0, 1000.0).astype(np.float16)
         if f.ndim != 2:
@@ -172,18 +217,26 @@ class TerrainPass:
         self.track.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.track.repeat_x = self.track.repeat_y = False
         x0, y0, x1, y1 = (float(v) for v in rect)
-        for p in (self.prog, self.prog_ps2):
-            p["u_track_on"].value = 1
-            p["u_track_rect"].value = (x0, y0, 1.0 / (x1 - x0), 1.0 / (y1 - y0))
-            p["u_track_half"].value = float(half_width)
+        self._set_uniforms(u_track_on=1, u_track_rect=(x0, y0, 1.0 / (x1 - x0), 1.0 / (y1 - y0)),
+                           u_track_half=float(half_width))
 
     # ------------------------------------------------------------------ geometry
     def upload(self, mesh, kinds: bool = False) -> None:
-        """Upload a :class:`piste.terrain.TerrainMesh` (buffers are reused and orphaned).
+        """Upload a frame's terrain: a :class:`piste.terrain.TerrainMesh` (buffers are reused and
+        orphaned) or a :class:`piste.terrain.resident.ResidentMesh` (the net's vertex blocks are
+        uploaded once; each frame writes only its indices and morph factors).
 
-        ``kinds``: also upload each vertex's patch kind (for the LOD debug view).
+        ``kinds``: also upload each vertex's patch kind (for the LOD debug view; a resident frame is
+        then tessellated on the CPU for this view).
         """
+        if isinstance(mesh, ResidentMesh):
+            if not kinds:
+                self._upload_resident(mesh)
+                return
+            mesh = mesh.to_mesh()
         s = self._streams
+        self._source = "stream"
+        self._morph = False
         changed = s["pos"].write(np.asarray(mesh.positions, dtype=np.float32))
         changed |= s["uv"].write(np.asarray(mesh.uv, dtype=np.float32))
         changed |= s["uvl"].write(np.asarray(mesh.uv_lightmap, dtype=np.float32))
@@ -192,21 +245,50 @@ class TerrainPass:
             kind = np.asarray(mesh.patch_kind, dtype=np.float32)[mesh.vertex_patch]
             changed |= s["kind"].write(kind)
         if changed or (kinds and not self.has_kind):
-            self._build_vaos(kinds)
+            self._release_vaos()
+        self.has_kind = kinds
         self.n_indices = int(np.asarray(mesh.indices).size)
 
-    def _build_vaos(self, kinds: bool) -> None:
+    def _upload_resident(self, mesh: ResidentMesh) -> None:
+        r = mesh.resident
+        if self._resident is not r:
+            if self._resident_buf is not None:
+                self._resident_buf.release()
+            if self._morph_tex is not None:
+                self._morph_tex.release()
+            self._resident_buf = self.ctx.buffer(np.ascontiguousarray(r.vertices).tobytes())
+            self._morph_tex = self.ctx.texture((1024, len(r.factors) // 1024), 1, dtype="f4")
+            self._resident = r
+            self._release_vaos()
+        if self._streams["index"].write(np.asarray(mesh.indices, dtype=np.uint32)):
+            self._release_vaos()
+        if mesh.morph:
+            self._morph_tex.write(r.factors)
+        self._source = "resident"
+        self._morph = bool(mesh.morph)
+        self.has_kind = False
+        self.n_indices = int(mesh.indices.size)
+
+    def _release_vaos(self) -> None:
         for vao in self._vaos.values():
             vao.release()
-        s = self._streams
-        content = [(s["pos"].buffer, "3f", "in_pos"), (s["uv"].buffer, "2f", "in_uv"), (s["uvl"].buffer, "2f", "in_uvl")]
-        if kinds:
-            content.append((s["kind"].buffer, "1f", "in_kind"))
-        self._vaos = {
-            name: self.ctx.vertex_array(prog, content, s["index"].buffer, index_element_size=4, skip_errors=True)
-            for name, prog in (("main", self.prog), ("ps2", self.prog_ps2), ("fog", self.prog_fog))
-        }
-        self.has_kind = kinds
+        self._vaos = {}
+
+    def _vao(self, prog):
+        key = (id(prog), self._source)
+        vao = self._vaos.get(key)
+        if vao is None:
+            s = self._streams
+            if self._source == "resident":
+                content = [(self._resident_buf, *_RESIDENT_FORMAT)]
+            else:
+                content = [(s["pos"].buffer, "3f", "in_pos"), (s["uv"].buffer, "2f", "in_uv"),
+                           (s["uvl"].buffer, "2f", "in_uvl")]
+                if self.has_kind:
+                    content.append((s["kind"].buffer, "1f", "in_kind"))
+            vao = self.ctx.vertex_array(prog, content, s["index"].buffer, index_element_size=4, skip_errors=True)
+            self._vaos[key] = vao
+        return vao
 
     # ------------------------------------------------------------------ drawing
     def draw(self, mvp, eye, lightmap_mode: str = "modulate", debug: str | None = None, fog=None) -> None:
@@ -238,40 +320,47 @@ class TerrainPass:
         self.light.use(1)
         if self.track is not None:
             self.track.use(2)
+        if self._morph:
+            self._morph_tex.use(_MORPH_UNIT)
+        if self._uniforms["u_morph_on"] != int(self._morph):
+            self._set_uniforms(u_morph_on=int(self._morph))
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         ctx.depth_func = "<"
-        p = self.prog
-        p["u_mvp"].write(mvp_bytes)
-        p["u_depth_bias"].value = 0.0
-        p["u_eye"].value = eye
         ps2 = lightmap_mode == "ps2" and debug in (None, "wire")
         first = {None: "modulate", "wire": "modulate", "base": "base", "lightmap": "lightmap", "lod": "lod"}[debug]
         if ps2:
             first = "base"
-        p["u_mode"].value = _MODE_ID[first]
-        p["u_fog"].value = (0.0, 0.0, 0.0, 0.0) if ps2 else fog
-        self._vaos["main"].render(moderngl.TRIANGLES, vertices=self.n_indices)
+        p = self._program(_MODE_ID[first])
+        p["u_mvp"].write(mvp_bytes)
+        p["u_depth_bias"].value = 0.0
+        if "u_eye" in p:
+            p["u_eye"].value = eye
+        if "u_fog" in p:
+            p["u_fog"].value = (0.0, 0.0, 0.0, 0.0) if ps2 else fog
+        self._vao(p).render(moderngl.TRIANGLES, vertices=self.n_indices)
         if ps2:
             self._draw_ps2(mvp_bytes, eye, fog)
         if debug in ("lod", "wire"):
-            p["u_mode"].value = _MODE_ID["lod_wire"] if debug == "lod" else _MODE_ID["flat"]
-            p["u_color"].value = (0.35, 0.38, 0.45)
-            p["u_depth_bias"].value = 2e-4
+            w = self._program(_MODE_ID["lod_wire"] if debug == "lod" else _MODE_ID["flat"])
+            w["u_mvp"].write(mvp_bytes)
+            if "u_color" in w:
+                w["u_color"].value = (0.35, 0.38, 0.45)
+            w["u_depth_bias"].value = 2e-4
             ctx.depth_func = "<="
             ctx.wireframe = True
             try:
-                self._vaos["main"].render(moderngl.TRIANGLES, vertices=self.n_indices)
+                self._vao(w).render(moderngl.TRIANGLES, vertices=self.n_indices)
             finally:
                 ctx.wireframe = False
                 ctx.depth_func = "<"
-                p["u_depth_bias"].value = 0.0
+                w["u_depth_bias"].value = 0.0
 
     def _draw_ps2(self, mvp_bytes: bytes, eye, fog) -> None:
         import moderngl
 
         ctx = self.ctx
-        q = self.prog_ps2
+        q = self._apply(self.prog_ps2)
         q["u_mvp"].write(mvp_bytes)
         q["u_depth_bias"].value = 0.0
         ctx.depth_func = "=="
@@ -281,16 +370,16 @@ class TerrainPass:
         ctx.blend_equation = (moderngl.FUNC_REVERSE_SUBTRACT, moderngl.FUNC_ADD)
         ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.SRC_ALPHA, moderngl.ZERO, moderngl.ONE)
         try:
-            self._vaos["ps2"].render(moderngl.TRIANGLES, vertices=self.n_indices)
+            self._vao(q).render(moderngl.TRIANGLES, vertices=self.n_indices)
             if fog[3] > 0.0:
-                f = self.prog_fog
+                f = self._apply(self.prog_fog)
                 f["u_mvp"].write(mvp_bytes)
                 f["u_depth_bias"].value = 0.0
                 f["u_eye"].value = eye
                 f["u_fog"].value = fog
                 ctx.blend_equation = moderngl.FUNC_ADD
                 ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ZERO, moderngl.ONE)
-                self._vaos["fog"].render(moderngl.TRIANGLES, vertices=self.n_indices)
+                self._vao(f).render(moderngl.TRIANGLES, vertices=self.n_indices)
         finally:
             ctx.blend_equation = moderngl.FUNC_ADD
             ctx.blend_func = moderngl.DEFAULT_BLENDING
@@ -299,11 +388,12 @@ class TerrainPass:
             ctx.depth_func = "<"
 
     def release(self) -> None:
-        for vao in self._vaos.values():
-            vao.release()
-        self._vaos = {}
+        self._release_vaos()
         for s in self._streams.values():
             s.release()
-        for obj in (self.base, self.light, self.track, self.prog, self.prog_ps2, self.prog_fog):
+        for obj in (self.base, self.light, self.track, self.prog_ps2, self.prog_fog, self._resident_buf,
+                    self._morph_tex, *self._programs.values()):
             if obj is not None:
                 obj.release()
+        self._programs = {}
+        self._resident = self._resident_buf = self._morph_tex = None

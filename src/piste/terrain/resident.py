@@ -94,7 +94,8 @@ class ResidentMesh:
     patch_kind : (p,) int8, the level of uniform patches, 0 for glue patches
     tri_start : (p + 1,) int64, triangles of the k-th drawn patch
     vertex_first : (p,) int64, first vertex of each drawn patch's block; vertex_count : (p,) block size
-    factors : (n_edges + n_patches,) float32, the morph factor of every slot (valid at the drawn ones)
+    factors : (s,) float32, the morph factor of every slot (``n_edges + n_patches`` used, padded to
+        rows of 1024; valid at the drawn ones; the live array, overwritten by the next frame)
     morph : bool, whether the factors apply (False: positions drawn as they are)
     n_vertices : distinct vertices drawn (the shapes' vertex counts summed)
     """
@@ -176,7 +177,8 @@ class ResidentTerrain:
         self.edge_mid = np.ascontiguousarray(net.edge_midpoints())
         self.side_edge = np.ascontiguousarray(net.side_edge, dtype=np.int64)
         self.degenerate = np.ascontiguousarray(net.edge_degenerate, dtype=np.bool_)
-        self.factors = np.ones(net.n_edges + len(net), dtype=np.float32)
+        slots = net.n_edges + len(net)
+        self.factors = np.ones(-(-slots // 1024) * 1024, dtype=np.float32)  # rows of 1024 (the GPU's texture)
 
     # ------------------------------------------------------------------ build (once)
     def _build_vertices(self) -> None:

@@ -2,9 +2,19 @@
 // Terrain vertices: world position, base-texture UV, light-map atlas UV (and, for the LOD view,
 // the patch kind: 4, 6, 8, or 0 for a glue patch).  Every terrain pass uses this shader, so the
 // passes' depths are identical (``invariant``) and the PS2 second pass can test with GL_EQUAL.
+//
+// Geomorphing (resident terrain, u_morph_on = 1): each vertex also carries its morph target (the
+// same parameter point on the next coarser level) and a morph slot; this frame's factor for the
+// slot comes from u_morph (one float per slot, 1024 a row) and the drawn position is
+// target + f (position - target).  Both copies of a shared edge vertex have the same inputs, so
+// they land on the same bits.
 uniform mat4 u_mvp;
 uniform float u_depth_bias;  // clip-space z offset, a fraction of w (wireframe overlay)
+uniform int u_morph_on;
+uniform sampler2D u_morph;
 in vec3 in_pos;
+in vec3 in_target;
+in float in_morph;
 in vec2 in_uv;
 in vec2 in_uvl;
 in float in_kind;
@@ -14,10 +24,16 @@ out vec3 v_world;
 flat out float v_kind;
 invariant gl_Position;
 void main() {
-    gl_Position = u_mvp * vec4(in_pos, 1.0);
+    vec3 p = in_pos;
+    if (u_morph_on == 1) {
+        int id = int(in_morph);
+        float f = texelFetch(u_morph, ivec2(id & 1023, id >> 10), 0).r;
+        p = in_target + f * (in_pos - in_target);
+    }
+    gl_Position = u_mvp * vec4(p, 1.0);
     gl_Position.z -= u_depth_bias * gl_Position.w;
     v_uv = in_uv;
     v_uvl = in_uvl;
-    v_world = in_pos;
+    v_world = p;
     v_kind = in_kind;
 }
