@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from piste.errors import FormatError
-from piste.formats import limits, safe_io
+from piste.formats import gltf_checks, gltf_ext, limits, safe_io
 
 __all__ = ["load_gltf"]
 
@@ -370,7 +370,7 @@ def load_gltf(path, allow_paths=()) -> "Model":  # noqa: F821 - forward referenc
 
     from piste.character.model import Camera, Clip, Light, Model, Skeleton, SkinnedMesh, Track
     from piste.character.skeleton import topological_order, world_from_local
-    from piste.transforms import compose_trs, invert_affine, transform_points, transform_vectors
+    from piste.transforms import compose_trs, transform_points, transform_vectors
 
     path = Path(path)
     if not path.is_file():
@@ -383,6 +383,7 @@ def load_gltf(path, allow_paths=()) -> "Model":  # noqa: F821 - forward referenc
     if g is None:
         raise FormatError(path, "not a readable glTF 2.0 file")
     r = _Reader(path, g, allow_paths)
+    gltf_ext.check_required(r)  # every extensionsRequired entry is read or refused by name
     nodes = g.nodes or []
     nn = len(nodes)
 
@@ -482,7 +483,7 @@ def load_gltf(path, allow_paths=()) -> "Model":  # noqa: F821 - forward referenc
     skin_bones: list[np.ndarray] = []
     if has_skeleton:
         b_nodes = list(bone_nodes)
-        ibm_all = [invert_affine(node_world[i]) for i in b_nodes]
+        ibm_all = [gltf_checks.rest_inverse(node_world[i]) for i in b_nodes]  # identity if scaled to 0
         is_joint = [False] * len(b_nodes)
         idx_of = {n: k for k, n in enumerate(b_nodes)}
         names = [node_names[i] for i in b_nodes]
@@ -564,28 +565,29 @@ def load_gltf(path, allow_paths=()) -> "Model":  # noqa: F821 - forward referenc
             r.item("skins", skin_i, f"nodes[{ni}].skin")
         extras = mesh.extras if isinstance(mesh.extras, dict) else {}
         tnames = extras.get("targetNames") or []
-        default_w = getattr(node, "weights", None)
-        if default_w is None:
-            default_w = mesh.weights
+        # node.weights, else mesh.weights; both optional (pygltflib gives [] when absent): 0 then
+        default_w = getattr(node, "weights", None) or mesh.weights or None
         for pi, prim in enumerate(prims):
             field = f"meshes[{mi}].primitives[{pi}]"
             attrs = prim.attributes
             if attrs is None or attrs.POSITION is None:
                 raise r.err(field + ".attributes.POSITION", "is missing")
-            pos = r.accessor(attrs.POSITION, field + ".attributes.POSITION", types=("VEC3",), comps=(_FLOAT,))
+            gltf_ext.prepare_primitive(r, prim, field)  # KHR_draco_mesh_compression
+            pos = r.accessor(attrs.POSITION, field + ".attributes.POSITION", types=("VEC3",), comps=gltf_ext.vertex_comps(r, (_FLOAT,)))
             nv = pos.shape[0]
             tri = _triangles(r, prim, nv, field)
             if tri is None:
                 continue
             nrm = None
             if attrs.NORMAL is not None:
-                nrm = r.accessor(attrs.NORMAL, field + ".attributes.NORMAL", types=("VEC3",), comps=(_FLOAT,))
+                nrm = r.accessor(attrs.NORMAL, field + ".attributes.NORMAL", types=("VEC3",), comps=gltf_ext.vertex_comps(r, (_FLOAT,)))
+                nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)  # quantized normals
                 if nrm.shape[0] != nv:
                     raise r.err(field + ".attributes.NORMAL", f"count {nrm.shape[0]} differs from POSITION's {nv}")
             uv = None
             if attrs.TEXCOORD_0 is not None:
                 uv = r.accessor(attrs.TEXCOORD_0, field + ".attributes.TEXCOORD_0", types=("VEC2",),
-                                comps=(_FLOAT, 5121, 5123))
+                                comps=gltf_ext.vertex_comps(r, (_FLOAT, 5121, 5123)))
                 if uv.shape[0] != nv:
                     raise r.err(field + ".attributes.TEXCOORD_0", f"count {uv.shape[0]} differs from POSITION's {nv}")
             # morph targets
@@ -608,10 +610,13 @@ def load_gltf(path, allow_paths=()) -> "Model":  # noqa: F821 - forward referenc
                     mnrm[ti] = d
             dw = np.zeros(k)
             if default_w is not None and k:
-                dw = np.asarray(default_w, dtype=np.float64).reshape(-1)
-                if dw.shape[0] != k or not np.all(np.isfinite(dw)):
+                dw = gltf_checks.float_array(default_w)
+                if dw is None or dw.shape[0] != k or not np.all(np.isfinite(dw)):
                     raise r.err(f"meshes[{mi}].weights", f"expected {k} finite morph weights")
             tex, color = material(prim.material, field + ".material")
+            minfo = gltf_ext.material_info(r, prim.material, field + ".material")  # alpha, sides, UV transform
+            if uv is not None:
+                uv = gltf_ext.apply_uv_transform(uv, minfo.uv_transform)
             # placement
             if skin_i is not None and has_skeleton:
                 j, w = _skin_attributes(r, attrs, nv, len(skins[skin_i].joints), field)
@@ -621,10 +626,12 @@ def load_gltf(path, allow_paths=()) -> "Model":  # noqa: F821 - forward referenc
                 skinned = True
             else:
                 wm = node_world[ni]
+                if has_skeleton and gltf_checks.singular(wm):  # zero scale: node space, inverse bind = I
+                    wm = np.eye(4)
                 pos = transform_points(wm, pos)
                 if k:
                     mpos = transform_vectors(wm, mpos)
-                nm = np.linalg.inv(wm[:3, :3]).T
+                nm = gltf_checks.normal_matrix(wm)  # inverse transpose, finite for zero scale
                 if nrm is not None:
                     nrm = nrm @ nm.T
                     ln = np.linalg.norm(nrm, axis=1, keepdims=True)
@@ -647,7 +654,8 @@ def load_gltf(path, allow_paths=()) -> "Model":  # noqa: F821 - forward referenc
             meshes.append(SkinnedMesh(
                 name=name, positions=pos, indices=tri, normals=nrm, uv=uv, joints=joints, weights=w,
                 morph_positions=mpos, morph_normals=mnrm, morph_names=[str(x) for x in tnames][:k],
-                morph_default_weights=dw, texture=tex, base_color=color, skinned=skinned, group=group))
+                morph_default_weights=dw, texture=tex, base_color=color, skinned=skinned, group=group,
+                material=minfo))
     names_seen = _unique([m.name for m in meshes])
     for m, n in zip(meshes, names_seen):
         m.name = n
@@ -728,7 +736,10 @@ def load_gltf(path, allow_paths=()) -> "Model":  # noqa: F821 - forward referenc
     lights = []
     cameras = []
     ext = g.extensions if isinstance(g.extensions, dict) else {}
-    light_defs = (ext.get("KHR_lights_punctual") or {}).get("lights") or []
+    lpx = ext.get("KHR_lights_punctual")
+    light_defs = (lpx.get("lights") if isinstance(lpx, dict) else None) or []
+    if not isinstance(light_defs, list):
+        raise r.err("extensions.KHR_lights_punctual.lights", f"expected an array, got {type(light_defs).__name__}")
     for i in np.flatnonzero(in_scene):
         n = nodes[i]
         wm = node_world[i]
@@ -738,31 +749,39 @@ def load_gltf(path, allow_paths=()) -> "Model":  # noqa: F821 - forward referenc
         up = wm[:3, 1] / max(np.linalg.norm(wm[:3, 1]), 1e-30)
         nex = n.extensions if isinstance(n.extensions, dict) else {}
         if "KHR_lights_punctual" in nex:
-            li = (nex["KHR_lights_punctual"] or {}).get("light")
+            nlx = nex["KHR_lights_punctual"]
+            li = nlx.get("light") if isinstance(nlx, dict) else None
             if not isinstance(li, int) or not 0 <= li < len(light_defs):
                 raise r.err(f"nodes[{i}].extensions.KHR_lights_punctual.light",
                             f"refers to light {li!r} but the file has {len(light_defs)}")
-            ld = light_defs[li]
-            spot = ld.get("spot") or {}
+            lf = gltf_checks.light_fields(path, f"extensions.KHR_lights_punctual.lights[{li}]", light_defs[li])
             lights.append(Light(
-                name=ld.get("name") or node_names[i], type=ld.get("type", "point"),
-                color=np.asarray(ld.get("color", [1.0, 1.0, 1.0]), dtype=np.float64),
-                intensity=float(ld.get("intensity", 1.0)), range=ld.get("range"),
-                inner_cone=float(spot.get("innerConeAngle", 0.0)),
-                outer_cone=float(spot.get("outerConeAngle", np.pi / 4)), position=pos, direction=fwd))
+                name=lf["name"] or node_names[i], type=lf["type"], color=lf["color"], intensity=lf["intensity"],
+                range=lf["range"], inner_cone=lf["inner_cone"], outer_cone=lf["outer_cone"], position=pos,
+                direction=fwd))
         if n.camera is not None:
             c = r.item("cameras", n.camera, f"nodes[{i}].camera")
+            cf, num = f"cameras[{n.camera}]", gltf_checks.number
             if c.type == "orthographic" and c.orthographic is not None:
-                o = c.orthographic
+                o, of = c.orthographic, cf + ".orthographic"
+                znear = num(path, of + ".znear", o.znear, 0.0, 0.0)
                 cameras.append(Camera(name=c.name or node_names[i], position=pos, forward=fwd, up=up, yfov=0.0,
-                                      znear=float(o.znear or 0.0), zfar=o.zfar, type="orthographic",
-                                      xmag=o.xmag, ymag=o.ymag))
+                                      znear=znear, zfar=num(path, of + ".zfar", o.zfar, lo=znear, lo_open=True),
+                                      type="orthographic", xmag=num(path, of + ".xmag", o.xmag),
+                                      ymag=num(path, of + ".ymag", o.ymag)))
             else:
                 p = c.perspective
                 if p is None:
                     raise r.err(f"cameras[{n.camera}].perspective", "is missing")
-                cameras.append(Camera(name=c.name or node_names[i], position=pos, forward=fwd, up=up,
-                                      yfov=float(p.yfov), aspect=p.aspectRatio, znear=float(p.znear), zfar=p.zfar))
+                pf = cf + ".perspective"
+                znear = num(path, pf + ".znear", p.znear, lo=0.0, lo_open=True)
+                cameras.append(Camera(
+                    name=c.name or node_names[i], position=pos, forward=fwd, up=up,
+                    yfov=num(path, pf + ".yfov", p.yfov, lo=0.0, hi=np.pi, lo_open=True, hi_open=True),
+                    aspect=None if p.aspectRatio is None else num(path, pf + ".aspectRatio", p.aspectRatio, lo=0.0,
+                                                                  lo_open=True),
+                    znear=znear,
+                    zfar=None if p.zfar is None else num(path, pf + ".zfar", p.zfar, lo=znear, lo_open=True)))
 
     return Model(name=path.stem, skeleton=skeleton, meshes=meshes, clips=clips, lights=lights, cameras=cameras,
                  path=str(path))
