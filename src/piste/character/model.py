@@ -313,6 +313,8 @@ class SkinnedMesh:
     base_color : (4,) float32          base-colour factor (linear RGBA)
     skinned : bool                     joints/weights are meaningful (False: no skeleton)
     group : str                        glTF mesh name this primitive came from
+    material : piste.formats.gltf_ext.MaterialInfo or None  the glTF material (alpha mode,
+                                       double-sided, UV transform (already applied to ``uv``), emissive, unlit)
     """
 
     name: str
@@ -330,6 +332,7 @@ class SkinnedMesh:
     base_color: np.ndarray | None = None
     skinned: bool = False
     group: str = ""
+    material: object = None
 
     def __post_init__(self):
         self.positions = np.ascontiguousarray(self.positions, dtype=np.float32).reshape(-1, 3)

@@ -1,0 +1,233 @@
+"""glTF extensions on import: which are read, which are refused, and the decoders.
+
+:func:`piste.formats.gltf.load_gltf` calls :func:`check_required` once per file and
+:func:`prepare_primitive` before it reads a primitive's attributes.
+
+- ``extensionsRequired``: every entry must be in :data:`SUPPORTED` or the file is refused with a
+  :class:`~piste.errors.FormatError` naming the extension (a required extension changes what the
+  data means, so reading on would give garbage).  Extensions that are only *used* are optional by
+  definition (the file carries fallback data) and are ignored when piste does not read them.
+- **KHR_draco_mesh_compression**: the primitive's compressed bufferView is decoded with DracoPy (the
+  optional ``gltf`` extra; without it a one-line error names the extra), the attributes are matched
+  by their Draco unique ids and checked against the accessors' counts and component counts, and
+  the decoded arrays stand in for those accessors (which have no bufferView).  A Draco buffer that
+  does not decode, or decodes to the wrong counts, raises ``FormatError``: never zeros.
+- **KHR_mesh_quantization**: integer ``POSITION`` / ``NORMAL`` / ``TEXCOORD_n`` / morph-target
+  attributes (normalized or not) are accepted (the reader converts them to float; node transforms
+  do the dequantization, as the extension specifies); quantized normals are re-normalised.
+- **KHR_texture_transform**, **KHR_materials_emissive_strength**, **KHR_materials_unlit**: read into
+  :class:`MaterialInfo` (:func:`material_info`), with base-colour factor and texture, alpha mode,
+  alpha cutoff and double-sidedness.
+
+API
+---
+SUPPORTED                                   names of the extensions piste reads
+check_required(reader)                      refuse unsupported extensionsRequired
+vertex_comps(reader, core)                  component types a vertex attribute may have
+prepare_primitive(reader, prim, field)      decode KHR_draco_mesh_compression into the reader's cache
+material_info(reader, index, field) -> MaterialInfo
+texture_transform_matrix(offset, rotation, scale) -> (3, 3)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from piste.errors import FormatError
+
+__all__ = ["SUPPORTED", "check_required", "vertex_comps", "apply_uv_transform", "prepare_primitive", "MaterialInfo", "material_info",
+           "texture_transform_matrix", "QUANTIZED_COMPS"]
+
+SUPPORTED = (
+    "KHR_draco_mesh_compression",
+    "KHR_mesh_quantization",
+    "KHR_texture_transform",
+    "KHR_materials_emissive_strength",
+    "KHR_materials_unlit",
+    "KHR_lights_punctual",
+)
+#: component types allowed for vertex attributes with KHR_mesh_quantization (plus FLOAT)
+QUANTIZED_COMPS = (5126, 5120, 5121, 5122, 5123)
+
+_DTYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
+_NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+_NORM_DIV = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0, 5125: 4294967295.0}
+
+
+def vertex_comps(r, core: tuple) -> tuple:
+    """Component types allowed for a vertex attribute: ``core`` (the glTF 2.0 core set), widened to
+    :data:`QUANTIZED_COMPS` when the file declares KHR_mesh_quantization."""
+    names = set(r.g.extensionsUsed or []) | set(r.g.extensionsRequired or [])
+    return QUANTIZED_COMPS if "KHR_mesh_quantization" in names else core
+
+
+def check_required(r) -> None:
+    """Raise FormatError for an ``extensionsRequired`` entry piste cannot read."""
+    req = r.g.extensionsRequired or []
+    if not isinstance(req, list):
+        raise r.err("extensionsRequired", "expected a list of extension names")
+    for k, name in enumerate(req):
+        if name not in SUPPORTED:
+            raise r.err(f"extensionsRequired[{k}]",
+                        f"the file requires extension {name!r}, which piste cannot read "
+                        f"(supported: {', '.join(SUPPORTED)})")
+
+
+def _dracopy(r):
+    try:
+        import DracoPy
+    except ImportError:
+        raise FormatError(r.path, "KHR_draco_mesh_compression needs the 'gltf' extra: pip install 'piste[gltf]'",
+                          field="extensions.KHR_draco_mesh_compression") from None
+    return DracoPy
+
+
+def prepare_primitive(r, prim, field: str) -> None:
+    """Decode a KHR_draco_mesh_compression primitive into ``r``'s accessor cache (no-op otherwise)."""
+    ext = prim.extensions if isinstance(prim.extensions, dict) else {}
+    d = ext.get("KHR_draco_mesh_compression")
+    if d is None:
+        return
+    efield = field + ".extensions.KHR_draco_mesh_compression"
+    if not isinstance(d, dict) or not isinstance(d.get("attributes"), dict) or "bufferView" not in d:
+        raise r.err(efield, "expected {bufferView, attributes}")
+    draco = _dracopy(r)
+    bv, data, off, ln = r.buffer_view(d["bufferView"], efield + ".bufferView")
+    try:
+        mesh = draco.decode(bytes(data[off:off + ln]))
+    except Exception as e:  # DracoPy raises its own exception types (and ValueError) on corrupt data
+        raise r.err(efield, f"cannot decode the Draco buffer ({type(e).__name__}: {e})") from None
+    faces = getattr(mesh, "faces", None)
+    if faces is None:
+        raise r.err(efield, "the Draco buffer holds a point cloud, not a triangle mesh")
+    attrs = prim.attributes
+    for name, uid in d["attributes"].items():
+        afield = f"{efield}.attributes.{name}"
+        acc_i = getattr(attrs, name, None) if not name.startswith("_") else None
+        if acc_i is None and isinstance(getattr(attrs, "__dict__", None), dict):
+            acc_i = attrs.__dict__.get(name)
+        if acc_i is None:
+            raise r.err(afield, f"names attribute {name} which the primitive does not have")
+        att = mesh.get_attribute_by_unique_id(uid) if isinstance(uid, int) else None
+        if att is None:
+            raise r.err(afield, f"no attribute with Draco unique id {uid!r} in the compressed buffer")
+        _inject(r, acc_i, np.asarray(att["data"]), afield)
+    if prim.indices is not None:
+        _inject(r, prim.indices, np.asarray(faces, dtype=np.int64).reshape(-1, 1), efield + " (indices)")
+
+
+def _inject(r, acc_i: int, data: np.ndarray, field: str) -> None:
+    a = r.item("accessors", acc_i, field)
+    nc = _NCOMP.get(a.type)
+    if nc is None or a.componentType not in _DTYPES:
+        raise r.err(f"accessors[{acc_i}]", f"type {a.type}/{a.componentType} cannot hold Draco data")
+    data = data.reshape(data.shape[0], -1)
+    if data.shape != (a.count, nc):
+        raise r.err(field, f"decodes to {data.shape[0]} x {data.shape[1]} values but accessors[{acc_i}] "
+                           f"declares {a.count} x {nc}")
+    raw = data.astype(_DTYPES[a.componentType])
+    if a.normalized and a.componentType != 5126:
+        f = raw.astype(np.float64) / _NORM_DIV[a.componentType]
+        if a.componentType in (5120, 5122):
+            f = np.maximum(f, -1.0)
+    else:
+        f = raw.astype(np.float64)
+    if not np.all(np.isfinite(f)):
+        raise r.err(field, "decoded values are not finite")
+    r._accessors[(acc_i, False)] = f if a.normalized else raw
+    r._accessors[(acc_i, True)] = f
+
+
+# ---------------------------------------------------------------------------------------------
+def texture_transform_matrix(offset=(0.0, 0.0), rotation: float = 0.0, scale=(1.0, 1.0)) -> np.ndarray:
+    """KHR_texture_transform's ``(3, 3)`` UV matrix ``T(offset) R(rotation) S(scale)`` (the
+    extension's own definition: ``uv' = M @ (u, v, 1)``)."""
+    c, s = np.cos(rotation), np.sin(rotation)
+    t = np.array([[1, 0, offset[0]], [0, 1, offset[1]], [0, 0, 1]], dtype=np.float64)
+    rm = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]], dtype=np.float64)
+    sm = np.array([[scale[0], 0, 0], [0, scale[1], 0], [0, 0, 1]], dtype=np.float64)
+    return t @ rm @ sm
+
+
+@dataclass
+class MaterialInfo:
+    """What piste keeps of a glTF material.
+
+    base_color : (4,) float32 linear RGBA factor;  base_texture : texture index or None
+    texcoord : UV set of the base-colour texture;  uv_transform : (3, 3) KHR_texture_transform matrix
+    alpha_mode : "OPAQUE" | "MASK" | "BLEND";  alpha_cutoff;  double_sided
+    emissive : (3,) linear RGB (factor x KHR_materials_emissive_strength);  unlit (KHR_materials_unlit)
+    """
+
+    name: str = ""
+    base_color: np.ndarray = field(default_factory=lambda: np.ones(4, np.float32))
+    base_texture: int | None = None
+    texcoord: int = 0
+    uv_transform: np.ndarray = field(default_factory=lambda: np.eye(3))
+    alpha_mode: str = "OPAQUE"
+    alpha_cutoff: float = 0.5
+    double_sided: bool = False
+    emissive: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
+    unlit: bool = False
+
+
+def _finite(r, v, n, fld):
+    a = np.asarray(v, dtype=np.float64).reshape(-1)
+    if a.shape != (n,) or not np.all(np.isfinite(a)):
+        raise r.err(fld, f"expected {n} finite numbers")
+    return a
+
+
+def material_info(r, mi, field: str) -> MaterialInfo:
+    """:class:`MaterialInfo` of ``materials[mi]`` (defaults when ``mi`` is None)."""
+    if mi is None:
+        return MaterialInfo()
+    m = r.item("materials", mi, field)
+    mf = f"materials[{mi}]"
+    info = MaterialInfo(name=m.name or f"material{mi}")
+    pbr = m.pbrMetallicRoughness
+    if pbr is not None:
+        if pbr.baseColorFactor is not None:
+            info.base_color = _finite(r, pbr.baseColorFactor, 4, mf + ".pbrMetallicRoughness.baseColorFactor").astype(np.float32)
+        bt = pbr.baseColorTexture
+        if bt is not None and bt.index is not None:
+            info.base_texture = int(bt.index)
+            info.texcoord = int(bt.texCoord or 0)
+            tex_ext = bt.extensions if isinstance(bt.extensions, dict) else {}
+            tt = tex_ext.get("KHR_texture_transform")
+            if isinstance(tt, dict):
+                tf = mf + ".pbrMetallicRoughness.baseColorTexture.extensions.KHR_texture_transform"
+                off = _finite(r, tt.get("offset", (0.0, 0.0)), 2, tf + ".offset")
+                rot = float(_finite(r, [tt.get("rotation", 0.0)], 1, tf + ".rotation")[0])
+                sc = _finite(r, tt.get("scale", (1.0, 1.0)), 2, tf + ".scale")
+                info.uv_transform = texture_transform_matrix(off, rot, sc)
+                if tt.get("texCoord") is not None:
+                    info.texcoord = int(tt["texCoord"])
+    mode = m.alphaMode or "OPAQUE"
+    if mode not in ("OPAQUE", "MASK", "BLEND"):
+        raise r.err(mf + ".alphaMode", f"is {mode!r}, expected OPAQUE, MASK or BLEND")
+    info.alpha_mode = mode
+    if m.alphaCutoff is not None:
+        info.alpha_cutoff = float(_finite(r, [m.alphaCutoff], 1, mf + ".alphaCutoff")[0])
+    info.double_sided = bool(m.doubleSided)
+    ext = m.extensions if isinstance(m.extensions, dict) else {}
+    em = np.zeros(3)
+    if m.emissiveFactor is not None:
+        em = _finite(r, m.emissiveFactor, 3, mf + ".emissiveFactor")
+    es = ext.get("KHR_materials_emissive_strength")
+    if isinstance(es, dict):
+        em = em * float(_finite(r, [es.get("emissiveStrength", 1.0)], 1,
+                                mf + ".extensions.KHR_materials_emissive_strength.emissiveStrength")[0])
+    info.emissive = em.astype(np.float32)
+    info.unlit = "KHR_materials_unlit" in ext
+    return info
+
+
+def apply_uv_transform(uv: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """``(v, 2)`` UVs through a KHR_texture_transform matrix (identity: unchanged)."""
+    if np.array_equal(m, np.eye(3)):
+        return uv
+    uv = np.asarray(uv, dtype=np.float64)
+    return uv @ m[:2, :2].T + m[:2, 2]
