@@ -436,7 +436,7 @@ def _objects_arrays(net, objects, sources, lights):
 def _visibility_report(net, vis, cameras, centerline) -> dict:
     """% of patches drawn, frustum alone vs frustum + visibility: along the track (default course)
     and from the scene's cameras."""
-    from piste.formats.bundle import camera_from_dict
+    from piste.pipeline.bundle_objects import camera_from_dict
     from piste.pipeline.visibility import culling_report
 
     out = {}
