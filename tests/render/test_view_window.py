@@ -9,6 +9,7 @@ import shutil
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -150,3 +151,22 @@ def test_view_benchmark_prints_fps(gl_context, xserver):
                         "--terrain-only", "--benchmark", "3"], env=xserver, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     assert "fps" in r.stdout and "terrain only" in r.stdout
+
+
+def test_view_fallback_draws_extra_rider_models(gl_context, tmp_path, monkeypatch, capsys):
+    """``--rider-model FILE:N`` adds riders of another model to the default course (the headless
+    fallback renders the frame the window would show)."""
+    data = Path(os.environ.get("PISTE_DATA", Path(__file__).resolve().parents[3] / "shared" / "data"))
+    cesium = data / "gltf" / "CesiumMan" / "CesiumMan.glb"
+    if not cesium.exists():
+        pytest.skip(f"test model {cesium} not found")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    a, b = tmp_path / "a.png", tmp_path / "b.png"
+    base = ["view", "--size", "96", "64", "--lighting", "none", "--follow", "0"]
+    assert main(base + ["--out", str(a)]) == 0
+    assert main(base + ["--rider-model", f"{cesium}:2", "--out", str(b)]) == 0
+    ia, ib = (np.asarray(Image.open(x)).astype(int) for x in (a, b))
+    assert (np.abs(ia - ib).max(-1) > 30).sum() > 5
+    assert main(base + ["--rider-model", str(tmp_path / "nope.glb")]) == 2
+    assert "no such file" in capsys.readouterr().err

@@ -31,6 +31,9 @@ def add_arguments(parser) -> None:
                         help="light-map atlas (see `piste demo --help`)")
     parser.add_argument("--debug", choices=("lod",), help="start in the LOD view (L toggles)")
     parser.add_argument("--terrain-only", action="store_true", help="the terrain alone (no riders, objects, shadows)")
+    parser.add_argument("--rider-model", action="append", default=[], metavar="FILE[:N]",
+                        help="add N riders (default 2) of a skinned, animated glTF model to the default course "
+                             "(repeatable: any number of different rider models)")
     parser.add_argument("--follow", type=int, metavar="N", help="start chasing rider N (F toggles, N next rider)")
     parser.add_argument("--no-overlay", action="store_true", help="start without the statistics overlay (H toggles)")
     parser.add_argument("--frames", type=_positive, help="quit after N frames (for scripted runs)")
@@ -73,7 +76,28 @@ def _scene_renderer(args, net, line, atlas, ctx=None):
     length = float(np.linalg.norm(np.diff(line[:, :2], axis=0), axis=1).sum())
     start = min(max(float(args.start), 0.0) * length, max(length - 120.0, 0.0))
     scene = Scene(net, line, lights, objects=objs, start=start)
-    return SceneRenderer(scene, size=tuple(args.size), ctx=ctx, lightmap=atlas)
+    casts = [Scene(net, line, lights, model=m, pack=pack, start=start) for m, pack in rider_casts(args.rider_model)]
+    return SceneRenderer(scene, size=tuple(args.size), ctx=ctx, lightmap=atlas, casts=casts)
+
+
+def rider_casts(specs) -> list:
+    """``FILE[:N]`` specs -> ``[(rider model, pack)]``: N riders (default 2) of each glTF model,
+    placed between the default pack's riders."""
+    from pathlib import Path
+
+    from piste.errors import ConfigError
+    from piste.formats.gltf import load_gltf
+    from piste.world.riders import pack_for, rider_model
+
+    out = []
+    for k, spec in enumerate(specs):
+        path, _, n = str(spec).rpartition(":") if ":" in str(spec) and str(spec).rsplit(":", 1)[1].isdigit() \
+            else (str(spec), "", "2")
+        if not Path(path).is_file():
+            raise ConfigError(f"--rider-model {spec}: no such file {path}")
+        m = rider_model(load_gltf(path))
+        out.append((m, pack_for(m, int(n), ahead=4.0 + 2.0 * k, across=0.0, spacing=9.0)))
+    return out
 
 
 def run(args) -> int:

@@ -35,22 +35,11 @@ DEFAULT_STEPS = (0.1, 0.2, 0.25)
 
 
 def merged_mesh(model):
-    """One :class:`SkinnedMesh` of every skinned primitive of ``model`` (texture: the first one's)."""
-    from piste.character.model import SkinnedMesh
+    """One :class:`SkinnedMesh` of every skinned primitive of ``model`` (texture: the first one's);
+    see :func:`piste.world.riders.merged_mesh`."""
+    from piste.world.riders import merged_mesh as _merged
 
-    meshes = [m for m in model.meshes if m.skinned] or list(model.meshes)
-    if not meshes:
-        raise ConfigError(f"rider model {model.name!r} has no meshes")
-    if len(meshes) == 1:
-        return meshes[0]
-    off = np.cumsum([0] + [m.n_vertices for m in meshes])[:-1]
-    tex = next((m.texture for m in meshes if m.texture is not None), None)
-    return SkinnedMesh(
-        name=model.name, positions=np.concatenate([m.positions for m in meshes]),
-        indices=np.concatenate([m.indices + o for m, o in zip(meshes, off)]),
-        normals=np.concatenate([m.normals for m in meshes]), uv=np.concatenate([m.uv for m in meshes]),
-        joints=np.concatenate([m.joints for m in meshes]), weights=np.concatenate([m.weights for m in meshes]),
-        texture=tex, skinned=True, group=model.name)
+    return _merged(model)
 
 
 def _steps(ratios, steps):

@@ -19,7 +19,7 @@ blending ``(ONE, ONE)``.  :func:`specular_map` makes the map for the default rid
 
 API
 ---
-CharacterPass(ctx, lods, texture, spec_map=None, max_riders=6)
+CharacterPass(ctx, lods, texture, spec_map=None, max_riders=6, rider_atlas=True)
     ``.upload(skinned)``, ``.draw(vp, eye, lights, sun=None, fog=None, specular=True)``
 specular_map(texture) -> (H, W, 4) uint8      r = strength, g = shininess scale
 """
@@ -158,9 +158,11 @@ class CharacterPass:
     texture : (H, W, 4) uint8 the riders' texture atlas
     spec_map : (H, W, 4) uint8 (default :func:`specular_map` of ``texture``)
     max_riders : riders per LOD at most
+    rider_atlas : the texture is the default rider's atlas (jacket colours per rider, its specular
+        map); False for other models (one texture for all, no specular unless ``spec_map``)
     """
 
-    def __init__(self, ctx, lods, texture, spec_map=None, max_riders: int = 6):
+    def __init__(self, ctx, lods, texture, spec_map=None, max_riders: int = 6, rider_atlas: bool = True):
         import moderngl
 
         self.ctx = ctx
@@ -172,8 +174,13 @@ class CharacterPass:
         tex = np.asarray(texture)
         if tex.dtype != np.uint8 or tex.ndim != 3 or tex.shape[2] != 4:
             raise RenderError(f"character texture: expected (H, W, 4) uint8, got {tex.shape} {tex.dtype}")
-        spec = specular_map(tex) if spec_map is None else np.asarray(spec_map, np.uint8)
-        self.textures = [self._tex(t) for t in rider_textures(tex, max_riders)]
+        if spec_map is not None:
+            spec = np.asarray(spec_map, np.uint8)
+        elif rider_atlas:
+            spec = specular_map(tex)
+        else:
+            spec = np.zeros((4, 4, 4), np.uint8)
+        self.textures = [self._tex(t) for t in (rider_textures(tex, max_riders) if rider_atlas else [tex])]
         self.texture = self.textures[0]
         self.spec = self._tex(spec)
         for t in self.textures + [self.spec]:

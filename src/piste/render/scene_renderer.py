@@ -41,6 +41,7 @@ class SceneImage:
     image : (H, W, 4) uint8 or None;  terrain : piste.render.Frame (terrain counts, timings)
     scene : piste.world.scene.SceneFrame;  shadow_patches : list of patches per rider
     stats : counts (rider triangles, objects drawn, shadow patches, ...);  timings : ms per stage
+    casts : the SceneFrames of the renderer's other rider models (``SceneRenderer(casts=...)``)
     """
 
     image: np.ndarray | None
@@ -49,6 +50,7 @@ class SceneImage:
     shadow_patches: list
     stats: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
+    casts: list = field(default_factory=list)
 
 
 class SceneRenderer:
@@ -63,10 +65,15 @@ class SceneRenderer:
     object_lighting : "dynamic" | "baked" | "points"
     shadows, specular : draw the projected shadows / the specular pass
     shadow_tile : pixels per rider shadow tile
+    casts : more riders with other models: Scene-like objects (``model``, ``lods``, ``skinners``,
+        ``riders``, ``update(t, aspect, camera=...)``; e.g. ``Scene(net, line, lights, model=m,
+        pack=pack_for(m, 3))``) animated, skinned, lit, shadowed and drawn with the scene's own
+        riders, each model with its own LODs, palettes and textures.  ``scene`` keeps the camera
+        and the objects.
     """
 
     def __init__(self, scene, size=(640, 448), ctx=None, lightmap="placeholder", object_lighting: str = "dynamic",
-                 shadows: bool = True, specular: bool = True, shadow_tile: int = 128, **terrain_kw):
+                 shadows: bool = True, specular: bool = True, shadow_tile: int = 128, casts=(), **terrain_kw):
         from piste.render.character_pass import CharacterPass
         from piste.render.frame import TerrainRenderer
         from piste.render.object_pass import ObjectPass
@@ -78,15 +85,23 @@ class SceneRenderer:
         terrain_kw.setdefault("track_half_width", TRACK_HALF_WIDTH)
         self.terrain = TerrainRenderer(scene.net, size=size, ctx=ctx, lightmap=lightmap, **terrain_kw)
         self.ctx = self.terrain.ctx
-        n = len(scene.riders)
-        self.characters = CharacterPass(self.ctx, scene.lods, scene.model.meshes[0].texture, max_riders=n)
+        self.casts = [scene] + [c for c in casts if len(c.riders)]
+        n = sum(len(c.riders) for c in self.casts)
+        self.cast_passes = [
+            CharacterPass(self.ctx, c.lods, c.model.meshes[0].texture, max_riders=len(c.riders),
+                          rider_atlas=getattr(c, "rider_atlas", c.model.name == "rider"))
+            for c in self.casts]
+        self.characters = self.cast_passes[0]
         self.objects = ObjectPass(self.ctx, scene.objects, scene.lights, mode=object_lighting) if scene.objects is not None else None
         self.shadows = ShadowPass(self.ctx, n_max=n, tile=shadow_tile) if shadows else None
         self.specular = bool(specular)
         self.patch_lo, self.patch_hi = scene.net.patch_bounds
-        # caster bounding sphere: the low LOD's bind-pose extent (riders lift and spin: a margin)
-        b = scene.lods[-1].mesh.bounds()
-        self.caster_radius = 0.5 * float(np.linalg.norm(b[1] - b[0])) + 0.25
+        # caster bounding sphere per model: the low LOD's bind-pose extent (riders lift and spin: a margin)
+        self.cast_radius = []
+        for c in self.casts:
+            b = c.lods[-1].mesh.bounds()
+            self.cast_radius.append(0.5 * float(np.linalg.norm(b[1] - b[0])) + 0.25)
+        self.caster_radius = self.cast_radius[0]
 
     @property
     def size(self):
@@ -109,6 +124,8 @@ class SceneRenderer:
         t0 = time.perf_counter()
         sf = self.scene.update(t, aspect=w / h, camera=camera)
         cam = sf.camera
+        # the other models' riders, seen by the same camera
+        frames = [sf] + [c.update(t, aspect=w / h, camera=cam) for c in self.casts[1:]]
         t1 = time.perf_counter()
         tt: dict = {}
         mesh = self.terrain.prepare(cam, lod=lod, timings=tt)
@@ -116,15 +133,21 @@ class SceneRenderer:
         patches = []
         sun = self.scene.sun
         if self.shadows is not None and sun is not None:
-            st = sf.riders
-            centers = st.anchor + st.normal * 0.9
-            light_vp = shadow_matrices(centers, self.caster_radius, sun.direction)
+            centers = np.concatenate([f.riders.anchor + f.riders.normal * 0.9 for f in frames])
+            radius = np.concatenate([np.full(len(f.riders), r) for f, r in zip(frames, self.cast_radius)])
+            light_vp = shadow_matrices(centers, radius, sun.direction)
             patches = shadow_patches(self.patch_lo, self.patch_hi, light_vp, candidates=mesh.patch_ids)
         t3 = time.perf_counter()
         # ---- GPU work (uploads count as CPU time: they are memcpy on the CPU side)
-        self.characters.upload(sf.skinned)
+        for cp, f in zip(self.cast_passes, frames):
+            cp.upload(f.skinned)
         if self.shadows is not None and sun is not None:
-            self.shadows.render_casters(sf.shadow[0], self.scene.lods[-1].mesh.indices, light_vp)
+            first = 0
+            for g, (c, f) in enumerate(zip(self.casts, frames)):
+                k = len(f.riders)
+                self.shadows.render_casters(f.shadow[0], c.lods[-1].mesh.indices, light_vp[first:first + k],
+                                            first=first, group=g)
+                first += k
         t4 = time.perf_counter()
         frame = self.terrain.draw(cam, mesh, lightmap_mode=lightmap_mode, fog=fog, read=False, timings=tt,
                                   debug=debug)
@@ -136,19 +159,25 @@ class SceneRenderer:
         if self.objects is not None:
             self.objects.draw(vp, cam.eye, sf.objects_visible, fog=fog_rgba, light_only=light_only)
         query = self.ctx.query(samples=True) if count_rider_pixels else None
-        if query is not None:
-            with query:
-                self.characters.draw(vp, cam.eye, sf.rider_lights, sun=None, fog=fog_rgba, light_only=light_only)
-        if query is None or (self.specular and not light_only):
-            # with the query the base pass is drawn inside it; the specular pass adds on top
-            self.characters.draw(vp, cam.eye, sf.rider_lights, sun=sun if self.specular else None, fog=fog_rgba,
-                                 light_only=light_only, base=query is None)
+        for cp, f in zip(self.cast_passes, frames):
+            if query is not None:
+                with query:
+                    cp.draw(vp, cam.eye, f.rider_lights, sun=None, fog=fog_rgba, light_only=light_only)
+                pixels = int(query.samples)
+                rider_pixels = pixels + (rider_pixels if cp is not self.cast_passes[0] else 0)
+            if query is None or (self.specular and not light_only):
+                # with the query the base pass is drawn inside it; the specular pass adds on top
+                cp.draw(vp, cam.eye, f.rider_lights, sun=sun if self.specular else None, fog=fog_rgba,
+                        light_only=light_only, base=query is None)
         self.ctx.finish()
         t6 = time.perf_counter()
         image = self.terrain.target.read() if read else None
         t7 = time.perf_counter()
         check_gl_error(self.ctx, "drawing the scene")
         tm.update(sf.timings)
+        for f in frames[1:]:
+            for k, v in f.timings.items():
+                tm[k] = tm.get(k, 0.0) + v
         tm.update(terrain_lod=tt.get("lod", 0.0), terrain_cull=tt.get("cull", 0.0), tessellate=tt.get("tessellate", 0.0),
                   shadow_cull=(t3 - t2) * 1e3, upload=frame.timings["upload"] + (t4 - t3) * 1e3,
                   terrain_draw=frame.timings["draw"], scene_draw=(t6 - t5) * 1e3, readback=(t7 - t6) * 1e3)
@@ -159,9 +188,10 @@ class SceneRenderer:
         counts = [len(p) for p in patches]
         union = int(len(np.unique(np.concatenate(patches)))) if patches else 0
         stats = {
-            "riders": len(sf.riders),
-            "rider_lod": sf.rider_lod.tolist(),
-            "rider_triangles": self.characters.triangles,
+            "riders": int(sum(len(f.riders) for f in frames)),
+            "rider_lod": [int(x) for f in frames for x in f.rider_lod],
+            "rider_triangles": int(sum(cp.triangles for cp in self.cast_passes)),
+            "rider_models": len(self.casts),
             "objects_drawn": self.objects.drawn if self.objects is not None else 0,
             "object_triangles": self.objects.triangles if self.objects is not None else 0,
             "shadow_patches": int(sum(counts)),
@@ -172,12 +202,12 @@ class SceneRenderer:
             "terrain_triangles": frame.triangles,
         }
         if query is not None:
-            stats["rider_pixels"] = int(query.samples)
+            stats["rider_pixels"] = rider_pixels
         frame.image = image
-        return SceneImage(image, frame, sf, patches, stats, tm)
+        return SceneImage(image, frame, sf, patches, stats, tm, frames[1:])
 
     def release(self) -> None:
-        for p in (self.characters, self.objects, self.shadows):
+        for p in (*self.cast_passes, self.objects, self.shadows):
             if p is not None:
                 p.release()
         self.terrain.release()

@@ -137,7 +137,9 @@ class SceneView:
                                    lightmap_mode=opts.lightmap_mode, debug=opts.debug, count_rider_pixels=True)
         cam = img.scene.camera
         s = img.stats
-        extra = {"riders": s["riders"], "riders_in_view": riders_in_view(cam, img.scene.riders.anchor),
+        extra = {"riders": s["riders"], "riders_in_view": riders_in_view(
+                     cam, np.concatenate([img.scene.riders.anchor] + [f.riders.anchor for f in img.casts])),
+                 "rider_models": s.get("rider_models", 1),
                  "rider_pixels": s.get("rider_pixels", 0), "rider_triangles": s["rider_triangles"],
                  "objects": s["objects_drawn"], "shadow_patches": s["shadow_patches"]}
         return ViewFrame(cam, img.terrain, extra)

@@ -29,6 +29,13 @@ RiderSet.default(net, centerline, model=None, n=6)   the pack
 RiderSet.state(t) -> RiderState                      anchors, normals, matrices, skin matrices
 ClipTable(model, rate=60)                            pre-sampled clips; ``.local(clip_ids, times)``
 follow_camera(state, i, ...) -> piste.world.camera.Camera
+merged_mesh(model) -> SkinnedMesh                     a model's skinned primitives as one mesh
+rider_model(model) -> Model                          the model with that one mesh (what a Scene draws)
+pack_for(model, n, ahead=0.0, across=0.0) -> pack    a pack playing the model's own clips
+
+Different riders: a :class:`RiderSet` plays one model; a scene with several rider models has one
+set (one :class:`piste.world.scene.Scene` "cast") per model, each with its own LODs, palettes,
+batches and clip tables; :class:`piste.render.scene_renderer.SceneRenderer` draws them together.
 """
 
 from __future__ import annotations
@@ -39,7 +46,8 @@ import numpy as np
 
 from piste.errors import ConfigError, ValidationError
 
-__all__ = ["RiderSet", "RiderState", "ClipTable", "follow_camera", "surface_frame", "DEFAULT_PACK"]
+__all__ = ["RiderSet", "RiderState", "ClipTable", "follow_camera", "surface_frame", "DEFAULT_PACK", "merged_mesh",
+           "rider_model", "pack_for"]
 
 #: the default pack: (clip, phase in [0, 1), metres ahead of rider 0, metres across the track,
 #: carving amplitude in metres, carving period in seconds)
@@ -96,6 +104,39 @@ class ClipTable:
                 flip = (r[k] * r[k - 1]).sum(-1) < 0
                 r[k, flip] *= -1
             self.frames[c] = f
+
+    @classmethod
+    def from_samples(cls, skeleton, rate: float, names, duration, translation, rotation, scale) -> "ClipTable":
+        """A table from clips already sampled at ``rate`` Hz (a bundle's pre-sampled clips): no curve
+        sampling.  For clip ``names[c]``: ``translation[c]`` ``(F_c, b, 3)``, ``rotation[c]``
+        ``(F_c, b, 4)`` xyzw, ``scale[c]`` ``(F_c, b, 3)``; ``duration`` ``(c,)`` seconds."""
+        names = list(names)
+        duration = np.asarray(duration, dtype=np.float64).reshape(-1)
+        if not names or not (len(names) == len(duration) == len(translation) == len(rotation) == len(scale)):
+            raise ValidationError(f"ClipTable.from_samples: {len(names)} clips, {len(duration)} durations, "
+                                  f"{len(translation)}/{len(rotation)}/{len(scale)} tables: expected the same count (>= 1)")
+        b = skeleton.n_bones
+        frames = np.array([len(t) for t in translation], dtype=np.int64)
+        table = cls.__new__(cls)
+        table.skeleton = skeleton
+        table.rate = float(rate)
+        table.names = names
+        table.duration = duration
+        table.frames = frames
+        fmax = int(frames.max())
+        table._t = np.zeros((len(names), fmax, b, 3))
+        table._r = np.zeros((len(names), fmax, b, 4))
+        table._s = np.ones((len(names), fmax, b, 3))
+        for c in range(len(names)):
+            f = frames[c]
+            for what, src, dst, w in (("translation", translation, table._t, 3), ("rotation", rotation, table._r, 4),
+                                      ("scale", scale, table._s, 3)):
+                a = np.asarray(src[c], dtype=np.float64)
+                if a.shape != (f, b, w):
+                    raise ValidationError(f"ClipTable.from_samples: clip {names[c]!r} {what} has shape {a.shape}, "
+                                          f"expected {(int(f), b, w)}")
+                dst[c, :f] = a
+        return table
 
     def clip_index(self, name: str) -> int:
         try:
@@ -319,3 +360,61 @@ def follow_camera(state: RiderState, i: int = 0, behind: float = 7.0, height: fl
     ahead[2] = look_ahead * float(state.forward[i, 2])  # follow the slope down
     target = state.anchor[i] + ahead + np.array([0.0, 0.0, 1.0])
     return Camera(eye=eye, target=target, **camera_kw)
+
+
+def merged_mesh(model):
+    """One :class:`~piste.character.model.SkinnedMesh` of every skinned primitive of ``model``
+    (texture: the first one's).  Morph targets are kept when every primitive has the same number."""
+    from piste.character.model import SkinnedMesh
+
+    meshes = [m for m in model.meshes if m.skinned] or list(model.meshes)
+    if not meshes:
+        raise ConfigError(f"rider model {model.name!r} has no meshes")
+    if len(meshes) == 1:
+        return meshes[0]
+    off = np.cumsum([0] + [m.n_vertices for m in meshes])[:-1]
+    tex = next((m.texture for m in meshes if m.texture is not None), None)
+    kw = {}
+    n_morph = {int(np.asarray(m.morph_positions).shape[0]) for m in meshes}
+    if len(n_morph) == 1 and n_morph != {0}:
+        kw = {"morph_positions": np.concatenate([m.morph_positions for m in meshes], axis=1),
+              "morph_normals": np.concatenate([m.morph_normals for m in meshes], axis=1),
+              "morph_names": list(meshes[0].morph_names),
+              "morph_default_weights": np.asarray(meshes[0].morph_default_weights)}
+    return SkinnedMesh(
+        name=model.name, positions=np.concatenate([m.positions for m in meshes]),
+        indices=np.concatenate([m.indices + o for m, o in zip(meshes, off)]),
+        normals=np.concatenate([m.normals for m in meshes]), uv=np.concatenate([m.uv for m in meshes]),
+        joints=np.concatenate([m.joints for m in meshes]), weights=np.concatenate([m.weights for m in meshes]),
+        texture=tex, skinned=True, group=model.name, **kw)
+
+
+def rider_model(model):
+    """``model`` with all its skinned primitives merged into one mesh and an RGBA texture (white
+    when it has none): what a scene cast draws.  Raises ConfigError without a skin or clips."""
+    from dataclasses import replace
+
+    if model.skeleton is None or not model.clips:
+        raise ConfigError(f"rider model {model.name!r}: a rider needs a skin and at least one animation")
+    mesh = merged_mesh(model)
+    tex = mesh.texture
+    if tex is None:  # the base colour factor (sRGB-ish bytes) as a flat texture
+        c = np.clip(np.asarray(mesh.base_color, np.float64) ** (1 / 2.2) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+        tex = np.tile(c, (4, 4, 1))
+    else:
+        tex = np.asarray(tex)
+        if tex.ndim == 3 and tex.shape[2] == 3:
+            tex = np.concatenate([tex, np.full(tex.shape[:2] + (1,), 255, tex.dtype)], axis=2)
+        tex = np.ascontiguousarray(tex, dtype=np.uint8)
+    return replace(model, meshes=[replace(mesh, texture=tex)])
+
+
+def pack_for(model, n: int, ahead: float = 0.0, across: float = 0.0, spacing: float = 8.0):
+    """A pack of ``n`` riders of ``model`` playing its clips in turn: rows for :class:`RiderSet`
+    starting ``ahead`` metres ahead of the track position, ``spacing`` metres apart, zig-zagging
+    ``across`` +- 3 m."""
+    clips = sorted(model.clips)
+    if not clips:
+        raise ConfigError(f"rider model {model.name!r} has no clips")
+    return tuple((clips[i % len(clips)], (0.37 * i) % 1.0, ahead + spacing * i, across + (3.0 if i % 2 else -3.0),
+                  2.0, 3.0 + 0.3 * i) for i in range(int(n)))
