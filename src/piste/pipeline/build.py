@@ -281,7 +281,7 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
             from piste.pipeline.characters import character_arrays
             from piste.pipeline.sources import load_rider_model
 
-            return character_arrays(load_rider_model(model), ratios=ratios)
+            return character_arrays(load_rider_model(model, allow_paths=scene.allow_paths), ratios=ratios)
 
         ca, cmeta = step("characters", ch_key, make_characters)
         cid = "rider"
@@ -317,7 +317,7 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
         obj_key = content_key(BUILD_VERSION, "objects", terrain_key, srcs, src_keys, placements, manifest["lights"])
 
         def make_objects():
-            return _objects_arrays(net, scene.objects, srcs, lights)
+            return _objects_arrays(net, scene.objects, srcs, lights, scene.allow_paths)
 
         oa, ometa = step("objects", obj_key, make_objects)
         for k, v in oa.items():
@@ -389,7 +389,7 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
     return result
 
 
-def _objects_arrays(net, objects, sources, lights):
+def _objects_arrays(net, objects, sources, lights, allow_paths=()):
     """Compressed meshes per model, instance arrays and baked vertex colours of the placed objects."""
     from piste.pipeline.sources import load_object_mesh, object_matrices
     from piste.world.objects import ObjectSet, bake_vertex_colors, compress_mesh, normal_matrix, object_texture
@@ -397,7 +397,7 @@ def _objects_arrays(net, objects, sources, lights):
     kinds = []
     meshes = {}
     for s in sources:
-        mesh = load_object_mesh(s)
+        mesh = load_object_mesh(s, allow_paths=allow_paths)
         kind = s.split(":", 1)[1] if s.startswith("builtin:") else "gltf_" + "".join(
             ch if ch.isalnum() else "_" for ch in Path(s).stem)
         kinds.append(kind)

@@ -140,7 +140,7 @@ def import_gltf(spec) -> tuple[list, dict]:
     """Lights and cameras of a :class:`piste.world.scene_file.GltfSpec`'s file, in piste's terms."""
     from piste.formats.gltf import load_gltf
 
-    model = load_gltf(spec.file)
+    model = load_gltf(spec.file, allow_paths=getattr(spec, "allow_paths", ()))
     lights = convert_lights(model.lights, spec.up, spec.offset, spec.scale, spec.white) if spec.lights else []
     cameras = convert_cameras(model.cameras, spec.up, spec.offset, spec.scale) if spec.cameras else {}
     return lights, cameras

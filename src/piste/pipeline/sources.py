@@ -99,21 +99,22 @@ def load_terrain(spec):
     raise ConfigError(f"unknown terrain kind {spec.kind!r}")
 
 
-def load_rider_model(model: str):
-    """A rider :class:`piste.character.Model`: ``builtin:rider`` or a skinned glTF file."""
+def load_rider_model(model: str, allow_paths=()):
+    """A rider :class:`piste.character.Model`: ``builtin:rider`` or a skinned glTF file (whose URIs
+    may also read ``allow_paths``, see :func:`piste.formats.gltf.load_gltf`)."""
     if model == "builtin:rider":
         from piste.character.rider import default_rider
 
         return default_rider(0)
     from piste.formats.gltf import load_gltf
 
-    m = load_gltf(model)
+    m = load_gltf(model, allow_paths=allow_paths)
     if m.skeleton is None or not m.clips:
         raise ConfigError(f"{model}: a rider model needs a skin and at least one animation")
     return m
 
 
-def load_object_mesh(model: str):
+def load_object_mesh(model: str, allow_paths=()):
     """An object mesh (object space Z up, base at the origin): a built-in kind or a glTF file's
     meshes merged (glTF Y up turned Z up, see :mod:`piste.pipeline.gltf_import`)."""
     from piste.world.objects import ObjectMesh, make_mesh
@@ -123,7 +124,7 @@ def load_object_mesh(model: str):
     from piste.formats.gltf import load_gltf
     from piste.pipeline.gltf_import import axis_matrix
 
-    m = load_gltf(model)
+    m = load_gltf(model, allow_paths=allow_paths)
     if not m.meshes:
         raise ConfigError(f"{model}: no meshes to use as an object")
     a = axis_matrix("y")

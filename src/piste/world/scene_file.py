@@ -7,6 +7,8 @@ imported from a glTF file an artist lit and framed in Blender), and the pre-proc
 scene file.  Every table and key is optional except where noted::
 
     name = "my run"
+    allow_paths = ["../assets"]   # folders glTF buffer/image URIs may read besides the model's own
+                                  # (default: none; '..', absolute paths and links out are refused)
 
     [terrain]
     source = "default"            # "default" (the seeded course), a .bpt, a saved net (.npz),
@@ -106,7 +108,9 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from piste.errors import ConfigError, ValidationError
+from piste.errors import ConfigError, PisteError, ValidationError
+from piste.formats.limits import precheck_gltf
+from piste.formats.safe_io import check_regular, resolve_reference
 
 __all__ = [
     "SceneFile",
@@ -270,6 +274,7 @@ class GltfSpec:
     scale: float = 1.0
     up: str = "y"
     white: float = 683.0
+    allow_paths: tuple = ()  # folders besides the model's own its URIs may name (scene ``allow_paths``)
 
 
 @dataclass
@@ -334,6 +339,7 @@ class SceneFile:
     visibility: VisibilitySpec = field(default_factory=VisibilitySpec)
     render: RenderSpec = field(default_factory=RenderSpec)
     text: str = ""
+    allow_paths: tuple = ()  # absolute folders glTF files may read besides their own (``allow_paths`` key)
 
     def source_files(self) -> list:
         """Every file the scene reads (the TOML, terrain, glTF files and their buffers and images),
@@ -344,26 +350,32 @@ class SceneFile:
         gltfs = [g.file for g in self.gltf] + [Path(a.model) for a in self.riders + self.objects if a.builtin is None]
         for g in gltfs:
             files.add(Path(g))
-            files.update(_gltf_dependencies(Path(g)))
+            files.update(_gltf_dependencies(Path(g), self.allow_paths))
         return sorted(files)
 
 
-def _gltf_dependencies(path: Path) -> list:
-    """Buffers and images a ``.gltf`` references by relative URI (``.glb`` files embed theirs)."""
-    if path.suffix.lower() != ".gltf" or not path.exists():
-        return []
-    import json
-    import urllib.parse
+def _gltf_dependencies(path: Path, allow_paths=()) -> list:
+    """Buffers and images a ``.gltf`` references by relative URI (``.glb`` files embed theirs).
 
+    Only references the loader would read (regular files inside the model's folder or
+    ``allow_paths``, :mod:`piste.formats.safe_io`) are listed: a hostile URI naming a device, a pipe
+    or a file elsewhere is never hashed or polled; loading the model reports it."""
+    if path.suffix.lower() != ".gltf" or not path.is_file():
+        return []
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        doc = precheck_gltf(path)
+    except PisteError:
         return []
     out = []
     for item in list(doc.get("buffers") or []) + list(doc.get("images") or []):
         uri = item.get("uri") if isinstance(item, dict) else None
         if isinstance(uri, str) and not uri.startswith("data:"):
-            out.append((path.parent / urllib.parse.unquote(uri)).resolve())
+            try:
+                f = resolve_reference(path, uri, allow_paths)
+                check_regular(f, 1 << 62)
+            except PisteError:
+                continue
+            out.append(f)
     return out
 
 
@@ -452,9 +464,26 @@ def _file(c: _Checker, key: str, base: Path, suffixes=None) -> Path:
     p = (base / rel).resolve()
     if not p.exists():
         raise c.error(key, f"no such file: {rel!r} (looked for {p})")
+    if not p.is_file():  # a folder, device or pipe: never opened (a pipe would hang the loader)
+        raise c.error(key, f"{rel!r} is not a regular file (looked for {p})")
     if suffixes and p.suffix.lower() not in suffixes:
         raise c.error(key, f"expected a {' / '.join(suffixes)} file, got {rel!r}")
     return p
+
+
+def _allow_paths(top: _Checker, base: Path) -> tuple:
+    """The top-level ``allow_paths = ["../assets", ...]``: folders (relative to the scene file) that
+    glTF buffer and image URIs may name besides their model's own folder."""
+    v = top.table.get("allow_paths", [])
+    if not isinstance(v, list) or not all(isinstance(x, str) and x for x in v):
+        raise top.error("allow_paths", f"expected an array of folder paths, got {v!r}")
+    out = []
+    for rel in v:
+        p = (base / rel).resolve()
+        if not p.is_dir():
+            raise top.error("allow_paths", f"{rel!r} is not a folder (looked for {p})")
+        out.append(p)
+    return tuple(out)
 
 
 def loads_scene(text: str, path="scene.toml") -> SceneFile:
@@ -472,8 +501,9 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     base = path.resolve().parent
     top = _Checker(path, lines, doc, (), "")
     top.allow({"name", "terrain", "lightmap", "lod", "visibility", "render", "gltf", "riders", "objects", "lights",
-               "cameras"})
+               "cameras", "allow_paths"})
     scene = SceneFile(path=path, name=top.get("name", "str", path.stem), text=text)
+    scene.allow_paths = _allow_paths(top, base)
 
     # terrain
     t = _table(top, "terrain")
@@ -546,7 +576,8 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
         g.allow({"file", "lights", "cameras", "offset", "scale", "up", "white"})
         spec = GltfSpec(_file(g, "file", base, (".gltf", ".glb")), g.get("lights", "bool", True),
                         g.get("cameras", "bool", True), g.get("offset", "vec3", (0.0, 0.0, 0.0)),
-                        g.get("scale", "pos", 1.0), g.get("up", "str", "y"), g.get("white", "pos", 683.0))
+                        g.get("scale", "pos", 1.0), g.get("up", "str", "y"), g.get("white", "pos", 683.0),
+                        scene.allow_paths)
         if spec.up not in ("y", "z"):
             raise g.error("up", f"expected \"y\" or \"z\", got {spec.up!r}")
         scene.gltf.append(spec)
