@@ -1,7 +1,7 @@
 """SSX Tricky (PS2) rider and board models, ``.mpf``: read, edit, write back byte for byte.
 
 Pure bytes <-> arrays (numpy); conversion to piste's character :class:`~piste.character.Model`
-and the encoder from a piste rider live in :mod:`piste.character.ssx_model`.
+and the encoder from a piste rider live in :mod:`piste.formats.ssx.mpf_model`.
 
 Facts (``/work/shared/SSX-FORMATS.md`` and OpenSlope's Apache-2.0 prose spec
 ``Trailmap/specs/240-models-mpf.md``; no code from the GPL tools was read into this module)
@@ -69,7 +69,7 @@ read_mpf(path) -> MpfFile / parse_mpf(data, path) -> MpfFile
 write_mpf(mpf, path) -> list[str]          atomic; returns notes (what was laid out anew)
 mpf_bytes(mpf) -> bytes
 MpfFile, SubModel, Group, Link, Mesh, Chunk, MorphKey
-pack_chunks(strips, uv, normals, positions, max_vertices=55) -> list[Chunk]
+pack_chunks(strips, uv, normals, positions, max_vertices=55) -> list[Chunk]  (the encoder's packer)
 strip_triangles(strip_lengths) -> (t, 3) int64   local vertex indices of a chunk's strips
 """
 
@@ -364,13 +364,15 @@ def strip_triangles(strip_lengths) -> np.ndarray:
     return np.stack([np.where(odd, a + 1, a), np.where(odd, a, a + 1), a + 2], axis=1)
 
 
-def pack_chunks(strips, uv, normals, positions, max_vertices: int = MAX_CHUNK_VERTICES, shadow_slots=None) -> list:
+def pack_chunks(strips, uv, normals, positions, max_vertices: int = MAX_CHUNK_VERTICES, shadow_slots=None,
+                return_index: bool = False):
     """Pack non-indexed strips into chunks of at most ``max_vertices`` vertices.
 
     ``strips`` is a list of vertex-index arrays into the per-vertex arrays ``uv (n, 4) int16``,
     ``normals (n, 3) int16``, ``positions (n, 3) float32`` (``uv``/``normals`` None and
     ``shadow_slots (n,) uint32`` for a shadow mesh). A strip longer than a chunk is cut into pieces
     that overlap by two vertices and start at even offsets, so every triangle keeps its winding.
+    Returns the chunks, and with ``return_index`` also each chunk's source vertex indices.
     """
     if max_vertices < 4:
         raise ValidationError(f"max_vertices must be >= 4, got {max_vertices}")
@@ -381,18 +383,19 @@ def pack_chunks(strips, uv, normals, positions, max_vertices: int = MAX_CHUNK_VE
         if s.size < 3:
             continue
         start = 0
-        while True:
-            piece = s[start:start + max_vertices]
+        while True:  # pieces of step + 2 vertices: consecutive pieces share exactly one edge
+            piece = s[start:start + step + 2] if s.size - start > max_vertices else s[start:]
             pieces.append(piece)
-            if start + max_vertices >= s.size:
+            if start + piece.size >= s.size:
                 break
             start += step
-    chunks, cur = [], []
+    chunks, cur, index = [], [], []
     size = 0
     for p in pieces + [None]:
         if p is None or size + p.size > max_vertices:
             if cur:
                 idx = np.concatenate(cur)
+                index.append(idx)
                 chunks.append(Chunk(
                     strip_lengths=np.array([c.size for c in cur], "<u4"),
                     positions=np.ascontiguousarray(positions[idx], "<f4"),
@@ -405,7 +408,7 @@ def pack_chunks(strips, uv, normals, positions, max_vertices: int = MAX_CHUNK_VE
                 break
         cur.append(p)
         size += p.size
-    return chunks
+    return (chunks, index) if return_index else chunks
 
 
 # ------------------------------------------------------------------------------------ reading

@@ -1,0 +1,165 @@
+"""SSX Tricky .mpf <-> piste riders: the encoder's limits and report, decoding to a Model, the
+file's own palettes as blended-matrix palettes, clips by bone name, glTF export."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from piste.character import BlendedMesh, default_rider, make_lods, palette, skin
+from piste.formats.ssx.mpf_model import (
+    euler_to_matrix, matrix_to_euler, model_to_mpf, mpf_to_model,
+)
+from piste.formats.ssx.mpf import DIR_DTYPE, mpf_bytes, parse_mpf, read_mpf, write_mpf
+
+
+@pytest.fixture(scope="module")
+def rider():
+    return default_rider(0)
+
+
+@pytest.fixture(scope="module")
+def encoded(rider):
+    f, report = model_to_mpf(rider)
+    return f, report, mpf_bytes(f)
+
+
+@pytest.fixture(scope="module")
+def decoded(encoded):
+    return mpf_to_model(parse_mpf(encoded[2]))
+
+
+def test_euler_round_trip():
+    e = np.random.default_rng(0).uniform(-1.4, 1.4, (50, 3))
+    m = euler_to_matrix(e)
+    assert np.allclose(m @ m.transpose(0, 2, 1), np.eye(3), atol=1e-12)
+    assert np.allclose(matrix_to_euler(m), e, atol=1e-9)
+    # x first: Rz Ry Rx
+    x = euler_to_matrix([0.3, 0, 0])
+    assert np.allclose(euler_to_matrix([0.3, 0.2, 0.1]), euler_to_matrix([0, 0, 0.1]) @ euler_to_matrix([0, 0.2, 0]) @ x)
+
+
+def test_encoder_obeys_the_game_limits(encoded):
+    f, report, b = encoded
+    assert f.names == ["Body3000", "Body1500", "Body750"]
+    for sub in f.models:
+        for p in sub.palettes:
+            w = p["weight"].astype(int)
+            assert w.sum() == 100 and np.all(w % 25 == 0) and len(p) <= 3
+        for lk in sub.links:
+            assert 1 <= len(lk.refs) <= 25
+            for m in lk.meshes:
+                for c in m.chunks:
+                    assert c.n_vertices <= 55
+                    assert c.slots.min() >= 0 and c.slots.max() < len(lk.refs)
+                    assert np.all(c.uv[:, 3] == 114 + 3 * c.slots)
+    assert report["max_chunk_vertices"] <= 55 and report["max_link_matrices"] <= 25
+    types = {g.type for g in f.models[0].groups}
+    assert types == {1, 256}  # the face's morph triangles sit in a type-256 group
+    e = np.frombuffer(b, DIR_DTYPE, 3, 12)
+    assert list(e["counts"][:, 6]) == [3, 3, 3]
+
+
+def test_report_measures_quantisation(encoded):
+    _, r, _ = encoded
+    assert r["step"] == 0.25 and r["weights_changed"] > 0
+    assert 0 < r["max_weight_error"] <= 0.25 + 1e-6
+    assert r["max_bind_error_m"] < 1e-6  # float32 centimetres
+    assert 0 < r["max_pose_error_m"] < 0.05  # 25 % steps, mid-"ride"
+    assert r["morph_clipped"] == 0 and r["morph_max_error_m"] <= 0.5 / 12.8 * 0.01 + 1e-9
+    assert [x["triangles"] for x in r["lods"]] == [3084, 1542, 770]
+
+
+def test_golden_file_round_trips_byte_identical(encoded, tmp_path):
+    f, _, b = encoded
+    p = tmp_path / "RIDER.mpf"
+    assert write_mpf(f, p) == []
+    g = read_mpf(p)
+    assert g.unknown == []
+    assert write_mpf(g, tmp_path / "copy.mpf") == []
+    assert (tmp_path / "copy.mpf").read_bytes() == b
+    for s in g.models:
+        s.source = None
+    assert mpf_bytes(g) == b
+
+
+def test_decoded_skeleton_matches(rider, decoded):
+    sk, want = decoded.skeleton, rider.skeleton
+    assert sk.names == want.names and np.array_equal(sk.parents, want.parents)
+    assert np.allclose(sk.rest_translation, want.rest_translation, atol=1e-6)
+    assert np.allclose(sk.inverse_bind, want.inverse_bind, atol=1e-6)
+
+
+def test_decoded_lods_have_the_same_triangles(rider, decoded):
+    lods = make_lods(rider.meshes[0], steps=0.25, max_bones=3)
+    assert [lod.name for lod in decoded.lods] == ["high", "medium", "low"]
+    for a, b in zip(lods, decoded.lods):
+        assert a.n_triangles == b.n_triangles
+        pa, pb = a.mesh.positions[a.mesh.indices], b.mesh.positions[b.mesh.indices]
+        d, j = cKDTree(pa.mean(1)).query(pb.mean(1))
+        assert d.max() < 1e-5
+        na = np.cross(pa[:, 1] - pa[:, 0], pa[:, 2] - pa[:, 0])[j]
+        nb = np.cross(pb[:, 1] - pb[:, 0], pb[:, 2] - pb[:, 0])
+        assert np.all(np.einsum("ij,ij->i", na, nb) > 0)  # winding kept through strips and chunks
+        assert b.mesh.n_vertices <= a.mesh.n_vertices + 8  # welded back (non-indexed strips stored)
+
+
+def test_file_palettes_are_the_blended_palettes(rider, decoded):
+    """The decoded LODs carry the file's palettes; piste's palette() of the same weights agrees
+    vertex by vertex, and skinning with the file's palette equals the 'blended' scheme."""
+    sk = decoded.skeleton
+    pose = rider.clips["grab"].sample(0.4, skeleton=sk)
+    m = sk.skin_matrices(pose)
+    for lod in decoded.lods:
+        mine = palette(lod.mesh, step=0.25, max_bones=3)
+        assert mine.size == lod.palette.size
+        fb, fw = lod.palette.vertex_weights()
+        pb, pw = mine.vertex_weights()
+        v = lod.mesh.n_vertices
+        dense = lambda b, w: np.add.at(z := np.zeros((v, sk.n_bones)), (np.repeat(np.arange(v), b.shape[1]),  # noqa: E731
+                                                                         b.reshape(-1)), w.reshape(-1)) or z
+        assert np.allclose(dense(fb, fw), dense(pb, pw))
+        assert np.all(np.isin(np.round(fw * 100), [0, 25, 50, 75, 100]))
+        got, _ = BlendedMesh(lod.palette, lod.mesh.positions, lod.mesh.normals).apply(m)
+        want, _ = skin(lod.mesh, m, scheme="blended", step=0.25, max_bones=3)
+        assert np.abs(got - want).max() < 1e-5
+
+
+def test_clips_by_bone_name_drive_the_decoded_rider(rider, decoded):
+    for name in ("ride", "spin"):
+        clip = rider.clips[name]
+        a = clip.sample(0.3, skeleton=rider.skeleton)
+        b = clip.sample(0.3, skeleton=decoded.skeleton)
+        wa, wb = rider.skeleton.world_matrices(a), decoded.skeleton.world_matrices(b)
+        assert np.abs(wa - wb).max() < 1e-5
+    # the posed decoded body follows the posed original (exact skinning, weights in 25 % steps)
+    pose = rider.clips["crouch"].sample(0.5, skeleton=decoded.skeleton)
+    p_dec, _ = skin(decoded.meshes[0], decoded.skeleton.skin_matrices(pose))
+    p_src, _ = skin(rider.meshes[0], rider.skeleton.skin_matrices(rider.clips["crouch"].sample(0.5)))
+    d, _ = cKDTree(p_src).query(p_dec)
+    assert d.max() < 0.05
+
+
+def test_morph_targets_decoded(rider, decoded):
+    src = rider.meshes[0]
+    mesh = decoded.meshes[0]
+    assert mesh.n_morphs == 3
+    _, j = cKDTree(src.positions).query(mesh.positions)
+    err = np.abs(mesh.morph_positions - src.morph_positions[:, j]).max()
+    assert err <= 0.5 / 12.8 * 0.01 + 1e-6
+    assert np.abs(mesh.morph_positions).max() > 0.005  # the face really moves
+
+
+def test_decoded_rider_exports_to_gltf(decoded, rider, tmp_path):
+    from piste.formats.gltf import load_gltf
+    from piste.formats.gltf_export import CharacterExport, export_gltf
+
+    decoded.clips = {"ride": rider.clips["ride"]}
+    try:
+        export_gltf(tmp_path / "rider.glb", characters=[CharacterExport(decoded, name="mpf")])
+    finally:
+        decoded.clips = {}
+    back = load_gltf(tmp_path / "rider.glb")
+    assert back.skeleton is not None and back.n_triangles == decoded.meshes[0].n_triangles
+    assert "ride" in back.clips or any("ride" in k for k in back.clips)
