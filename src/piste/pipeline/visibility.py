@@ -42,6 +42,9 @@ from piste.errors import ConfigError
 
 __all__ = ["Visibility", "compute_visibility", "culling_report", "patch_targets", "is_heightfield"]
 
+#: most eye-point x target tests one visibility computation may allocate (bytes of booleans)
+MAX_VISIBILITY_WORK = 2 << 30
+
 
 @dataclass
 class Visibility:
@@ -281,6 +284,12 @@ def compute_visibility(net, cell: float = 50.0, eye_heights=(1.7, 9.0), objects=
     m = len(spheres)
     origin, shape = _grid_for(net, cell)
     rows, cols = shape
+    # bound the work before allocating: (eye points x targets) booleans (a tiny cell asked for TiBs)
+    work = ((rows + 1) * (cols + 1) + rows * cols) * len(heights) * (n * (9 if patches else 0) + 2 * m)
+    if work > MAX_VISIBILITY_WORK:
+        raise ConfigError(f"visibility: a cell of {cell:g} m cuts the course into {rows} x {cols} cells, "
+                          f"{work / 2**30:.1f} GiB of eye-target tests (limit {MAX_VISIBILITY_WORK / 2**30:.0f} GiB): "
+                          "use a larger visibility.cell")
     ptargets = patch_targets(net) if patches else np.zeros((n, 0, 3))  # (n, 9, 3)
     k = ptargets.shape[1]
     otargets = np.concatenate([spheres[:, :3], spheres[:, :3] + np.stack([np.zeros(m), np.zeros(m), spheres[:, 3]], 1)])
