@@ -7,7 +7,10 @@ bundle's scene differs in two ways, handled here without touching the renderer:
 * riders stand where the scene file placed them and play their clips (:class:`PlacedRiders`, the
   :class:`~piste.world.riders.RiderSet` interface);
 * the pre-computed visibility cuts the terrain patches and objects before frustum culling
-  (:class:`BundleScene` filters objects; the terrain renderer's ``visible`` is wrapped).
+  (:class:`BundleScene` filters objects; the terrain renderer's public
+  :meth:`~piste.render.frame.TerrainRenderer.set_visibility` hook cuts the patches);
+* objects are lit by the RGBs the build baked into the bundle
+  (:meth:`~piste.render.object_pass.ObjectPass.set_vertex_colors`), not baked again.
 
 A scene without riders is drawn by :class:`piste.render.TerrainRenderer` plus the object pass.
 
@@ -26,7 +29,19 @@ from dataclasses import replace
 
 import numpy as np
 
+from piste.character import BlendedMesh
 from piste.errors import ConfigError
+from piste.pipeline.bundle_objects import camera_from_dict
+from piste.render.context import create_context, save_png
+from piste.render.frame import DEFAULT_FOG_DENSITY, TerrainRenderer
+from piste.render.object_pass import ObjectPass
+from piste.render.scene_renderer import SceneRenderer
+from piste.render.sky_pass import HORIZON
+from piste.render.video import VideoWriter
+from piste.world.camera import track_camera
+from piste.world.course import TRACK_HALF_WIDTH
+from piste.world.riders import ClipTable, RiderState
+from piste.world.scene import LOD_DISTANCES, Scene, sun_light
 
 __all__ = ["PlacedRiders", "BundleScene", "clip_table", "ScenePreview", "camera_at", "render_image", "render_frames"]
 
@@ -41,8 +56,6 @@ class PlacedRiders:
     """
 
     def __init__(self, model, matrices, clips, phases, rate: float = 30.0, table=None):
-        from piste.world.riders import ClipTable
-
         self.model = model
         self.table = table if table is not None else ClipTable(model, rate)
         self.matrix = np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)
@@ -56,8 +69,6 @@ class PlacedRiders:
     def state(self, t: float, camera_rider=None, **_ignored):
         """All riders at ``t`` seconds (:class:`piste.world.riders.RiderState`); the chase-camera
         keywords of :meth:`RiderSet.state` are accepted and ignored (scene cameras are used)."""
-        from piste.world.riders import RiderState
-
         m = self.matrix
         anchor = m[:, :3, 3].copy()
         normal = m[:, :3, 1] / np.linalg.norm(m[:, :3, 1], axis=1, keepdims=True)
@@ -66,76 +77,49 @@ class PlacedRiders:
         return RiderState(float(t), anchor, normal, fwd, m, skin, self.clips, np.zeros(len(self)))
 
 
-def clip_table(bundle, character: str = "rider"):
+def clip_table(bundle, character: str = "rider") -> ClipTable:
     """A :class:`piste.world.riders.ClipTable` filled straight from the bundle's pre-sampled clip
     tables (no curve sampling at load: the build did it)."""
-    from piste.world.riders import ClipTable
-
     meta = bundle.manifest["characters"][character]
     prefix = f"characters/{character}/clips/"
-    model = bundle.rider_model()
-    table = ClipTable.__new__(ClipTable)
-    table.skeleton = model.skeleton
-    table.rate = float(meta.get("rate", 30.0))
-    table.names = sorted(meta["clips"])
-    table.duration = np.array([meta["clips"][n]["duration"] for n in table.names], dtype=np.float64)
-    table.frames = np.array([meta["clips"][n]["frames"] for n in table.names], dtype=np.int64)
-    b = model.skeleton.n_bones
-    fmax = int(table.frames.max())
-    table._t = np.zeros((len(table.names), fmax, b, 3))
-    table._r = np.zeros((len(table.names), fmax, b, 4))
-    table._s = np.ones((len(table.names), fmax, b, 3))
-    for c, name in enumerate(table.names):
-        f = table.frames[c]
-        table._t[c, :f] = bundle.arrays[prefix + name + "/translation"]
-        table._r[c, :f] = bundle.arrays[prefix + name + "/rotation"]
-        table._s[c, :f] = bundle.arrays[prefix + name + "/scale"]
-    return table
+    names = sorted(meta["clips"])
+    return ClipTable.from_samples(bundle.rider_model().skeleton, float(meta.get("rate", 30.0)), names,
+                                  [meta["clips"][n]["duration"] for n in names],
+                                  [bundle.arrays[prefix + n + "/translation"] for n in names],
+                                  [bundle.arrays[prefix + n + "/rotation"] for n in names],
+                                  [bundle.arrays[prefix + n + "/scale"] for n in names])
 
 
-def _scene_class():
-    from piste.world.scene import Scene
+class BundleScene(Scene):
+    """A :class:`piste.world.scene.Scene` made from a bundle (riders placed, visibility applied)."""
 
-    class BundleScene(Scene):
-        """A :class:`piste.world.scene.Scene` made from a bundle (riders placed, visibility applied)."""
+    def __init__(self, bundle):  # noqa: D401 - Scene's own __init__ builds the default pack
+        man = bundle.manifest
+        self.bundle = bundle
+        self.net = bundle.net
+        self.line = bundle.centerline
+        self.lights = bundle.lights
+        self.sun = sun_light(self.lights)
+        self.model = bundle.rider_model()
+        self.lods = bundle.rider_lods()
+        self.skinners = [BlendedMesh(lod.palette, lod.mesh.positions, lod.mesh.normals) for lod in self.lods]
+        riders = man.get("riders", [])
+        rate = float(next(iter(man["characters"].values())).get("rate", 30.0))
+        self.riders = PlacedRiders(self.model, bundle.arrays["riders/matrix"], [r["clip"] for r in riders],
+                                   [r["phase"] for r in riders], rate=rate, table=clip_table(bundle))
+        self.follow = 0
+        self.objects = bundle.objects()
+        self.lod_distances = tuple(man.get("lod", {}).get("character", LOD_DISTANCES))
+        self.camera_kw = {}
+        self.visibility = bundle.visibility
 
-        def __init__(self, bundle):  # noqa: D401 - Scene's own __init__ builds the default pack
-            from piste.character import BlendedMesh
-            from piste.world.scene import LOD_DISTANCES, sun_light
-
-            man = bundle.manifest
-            self.bundle = bundle
-            self.net = bundle.net
-            self.line = bundle.centerline
-            self.lights = bundle.lights
-            self.sun = sun_light(self.lights)
-            self.model = bundle.rider_model()
-            self.lods = bundle.rider_lods()
-            self.skinners = [BlendedMesh(lod.palette, lod.mesh.positions, lod.mesh.normals) for lod in self.lods]
-            riders = man.get("riders", [])
-            rate = float(next(iter(man["characters"].values())).get("rate", 30.0))
-            self.riders = PlacedRiders(self.model, bundle.arrays["riders/matrix"], [r["clip"] for r in riders],
-                                       [r["phase"] for r in riders], rate=rate, table=clip_table(bundle))
-            self.follow = 0
-            self.objects = bundle.objects()
-            self.lod_distances = tuple(man.get("lod", {}).get("character", LOD_DISTANCES))
-            self.camera_kw = {}
-            self.visibility = bundle.visibility
-
-        def update(self, t, aspect=640.0 / 448.0, fov_y=60.0, camera=None):
-            sf = super().update(t, aspect=aspect, fov_y=fov_y, camera=camera)
-            if self.visibility is not None and len(sf.objects_visible):
-                keep = self.visibility.objects_at(sf.camera.eye)
-                if keep is not None:
-                    sf.objects_visible = sf.objects_visible[keep[sf.objects_visible]]
-            return sf
-
-    return BundleScene
-
-
-def BundleScene(bundle):  # noqa: N802 - a factory so that importing this module stays light
-    """A :class:`piste.world.scene.Scene` subclass instance for ``bundle`` (see the module docstring)."""
-    return _scene_class()(bundle)
+    def update(self, t, aspect=640.0 / 448.0, fov_y=60.0, camera=None):
+        sf = super().update(t, aspect=aspect, fov_y=fov_y, camera=camera)
+        if self.visibility is not None and len(sf.objects_visible):
+            keep = self.visibility.objects_at(sf.camera.eye)
+            if keep is not None:
+                sf.objects_visible = sf.objects_visible[keep[sf.objects_visible]]
+        return sf
 
 
 def camera_at(bundle, name: str | None = None, i: int = 0, n: int = 1):
@@ -151,14 +135,10 @@ def camera_at(bundle, name: str | None = None, i: int = 0, n: int = 1):
         if d is None:
             raise ConfigError(f"{bundle.path}: no camera {name!r}; the scene has {', '.join(c['name'] for c in cams)}")
     if d.get("track") and bundle.centerline is not None:
-        from piste.world.camera import track_camera
-
         a, b = d["track"]
         f = a if n <= 1 else a + (b - a) * i / (n - 1)
         return track_camera(bundle.centerline, f, height=d.get("height", 9.0), fov_y=d["fov_y"], near=d["near"],
                             far=d["far"])
-    from piste.pipeline.bundle_objects import camera_from_dict
-
     return camera_from_dict(d)
 
 
@@ -173,8 +153,6 @@ class ScenePreview:
     """
 
     def __init__(self, bundle, size=None, ctx=None, visibility: bool = True):
-        from piste.render.context import create_context
-
         self.ctx = ctx if ctx is not None else create_context()
         self._own_ctx = ctx is None
         self.use_visibility = bool(visibility)
@@ -188,46 +166,28 @@ class ScenePreview:
         lod = man.get("lod", {})
         kw = {"lod_near": lod.get("near"), "lod_far": lod.get("far")}
         if bundle.centerline is not None:
-            from piste.world.course import TRACK_HALF_WIDTH
-
             kw.update(track=bundle.centerline, track_half_width=TRACK_HALF_WIDTH)
         atlas = bundle.lightmap.atlas
         self.lightmap_mode = man.get("render", {}).get("lightmap_mode", "modulate")
+        colors = bundle.vertex_colors()
         if man.get("riders"):
-            from piste.render.scene_renderer import SceneRenderer
-
             self.scene = BundleScene(bundle)
             self.renderer = SceneRenderer(self.scene, size=self.size, ctx=self.ctx, lightmap=atlas,
                                           object_lighting="baked", **kw)
             self.terrain = self.renderer.terrain
             self.objects = None
+            if self.renderer.objects is not None:
+                self.renderer.objects.set_vertex_colors(colors)
         else:
-            from piste.render.frame import TerrainRenderer
-
             self.scene = None
             self.renderer = None
             self.terrain = TerrainRenderer(bundle.net, size=self.size, ctx=self.ctx, lightmap=atlas, **kw)
             objs = bundle.objects()
             self.objects = None
             if objs is not None:
-                from piste.render.object_pass import ObjectPass
-
-                self.objects = ObjectPass(self.ctx, objs, bundle.lights, mode="baked")
+                self.objects = ObjectPass(self.ctx, objs, bundle.lights, mode="baked", colors=colors)
         # the pre-computed visibility in front of frustum culling
-        frustum = self.terrain.visible
-        vis = bundle.visibility if self.use_visibility else None
-
-        def visible(camera, _frustum=frustum, _vis=vis):
-            ids = _frustum(camera)
-            self.stats["frustum_patches"] = int(len(ids))
-            if _vis is not None:
-                s = _vis.patches_at(camera.eye)
-                if s is not None:
-                    ids = ids[s[ids]]
-            self.stats["drawn_patches"] = int(len(ids))
-            return ids
-
-        self.terrain.visible = visible
+        self.terrain.set_visibility(bundle.visibility if self.use_visibility else None)
 
     def reload(self, bundle) -> None:
         """Swap in a rebuilt bundle (the GL context is kept)."""
@@ -242,10 +202,8 @@ class ScenePreview:
         if self.renderer is not None:
             img = self.renderer.render(t, camera=cam, lightmap_mode=self.lightmap_mode)
             self.stats.update(img.stats)
+            self.stats.update(self.terrain.cull_stats)
             return img.image[..., :3]
-        from piste.render.frame import DEFAULT_FOG_DENSITY
-        from piste.render.sky_pass import HORIZON
-
         mesh = self.terrain.prepare(cam)
         frame = self.terrain.draw(cam, mesh, lightmap_mode=self.lightmap_mode, read=self.objects is None)
         if self.objects is not None:
@@ -260,6 +218,7 @@ class ScenePreview:
             image = self.terrain.target.read()
         else:
             image = frame.image
+        self.stats.update(self.terrain.cull_stats)
         self.stats.update(terrain_patches=frame.patches, terrain_triangles=frame.triangles)
         return image[..., :3]
 
@@ -291,15 +250,11 @@ def render_frames(bundle, camera: str | None = None, frames: int = 1, size=None,
                   first_png=None, ctx=None, progress: bool = False) -> list:
     """Render ``frames`` frames (time ``i / fps``; track cameras fly), writing the first to
     ``first_png`` and all to the MP4 ``video`` when given.  Returns each frame's stats."""
-    from piste.render.context import save_png
-
     p = ScenePreview(bundle, size=size, ctx=ctx)
     writer = None
     out = []
     try:
         if video is not None:
-            from piste.render.video import VideoWriter
-
             writer = VideoWriter(video, fps=fps)
         it = range(frames)
         if progress:

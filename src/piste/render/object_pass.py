@@ -91,9 +91,12 @@ class ObjectPass:
     objects : ObjectSet (its ``lights`` are the dynamic mode's light sets)
     lights : the world's Lights (baked and points modes)
     mode : "dynamic" | "baked" | "points" (default for :meth:`draw`)
+    colors : the baked mode's pre-calculated RGBs ``{kind: (k, v, 3) uint8}`` half-bright (e.g. a
+        bundle's ``vertex_colors()``; default: baked from ``lights`` on first use), see
+        :meth:`set_vertex_colors`
     """
 
-    def __init__(self, ctx, objects, lights=None, mode: str = "dynamic"):
+    def __init__(self, ctx, objects, lights=None, mode: str = "dynamic", colors=None):
         import moderngl
 
         if mode not in _MODES:
@@ -128,15 +131,38 @@ class ObjectPass:
                                    buf[3], index_element_size=m.indices.itemsize, skip_errors=True)
             self.kinds.append({"mesh": m, "buffers": buf, "vao": vao, "baked": None})
         self._points = None
+        self.colors = None
+        if colors is not None:
+            self.set_vertex_colors(colors)
         self.drawn = 0
         self.triangles = 0
+
+    def set_vertex_colors(self, colors) -> None:
+        """Use pre-calculated RGBs for the baked mode: ``{kind: (k, v, 3) uint8}`` half-bright, the
+        instances of each kind in the order of ``objects.instances(kind)`` (what
+        :func:`piste.world.objects.bake_vertex_colors` returns and a bundle stores)."""
+        colors = {k: np.asarray(c) for k, c in colors.items()}
+        for name in self.objects.kinds:
+            c = colors.get(name)
+            want = (len(self.objects.instances(name)), len(self.objects.meshes[name].positions), 3)
+            if c is None or c.shape != want or c.dtype != np.uint8:
+                got = None if c is None else f"{c.shape} {c.dtype}"
+                raise RenderError(f"baked colours of {name!r}: expected {want} uint8, got {got}")
+        self.colors = colors
+        for info in self.kinds:
+            if info["baked"] is not None:
+                info["baked"].release()
+                info["baked"] = None
 
     def _baked_textures(self):
         from piste.world.objects import bake_vertex_colors
 
-        if self.lights is None:
+        if self.colors is not None:
+            baked = self.colors
+        elif self.lights is None:
             raise RenderError("object lighting 'baked' needs the world's lights")
-        baked = bake_vertex_colors(self.objects, self.lights)
+        else:
+            baked = bake_vertex_colors(self.objects, self.lights)
         for k, name in enumerate(self.objects.kinds):
             c = baked[name]  # (k, v, 3)
             kk, v = max(c.shape[0], 1), c.shape[1]
