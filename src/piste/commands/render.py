@@ -11,7 +11,8 @@ from __future__ import annotations
 def add_arguments(parser) -> None:
     from piste.commands.demo import _positive, _size
 
-    parser.add_argument("scene", help="a scene (.toml) or a bundle (.piste)")
+    parser.add_argument("scene", help="a scene (.toml), a bundle (.piste) or a tiled world folder (.tiles: a flight "
+                        "across it at --speed, tiles streamed)")
     parser.add_argument("--camera", help="scene camera to render from (default: the first; see --list)")
     parser.add_argument("--out", default="out/render.png", help="PNG of the first frame (default: out/render.png)")
     parser.add_argument("--size", nargs=2, type=_size, metavar=("W", "H"), help="image size (default: the scene's)")
@@ -20,6 +21,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--fps", type=_positive, default=30, help="frame rate (default: 30)")
     parser.add_argument("--list", action="store_true", help="list the scene's cameras and exit")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.add_argument("--speed", type=float, default=100.0, help="tiled worlds: flight speed in m/s (default 100)")
+    parser.add_argument("--budget", type=float, default=256.0, help="tiled worlds: streaming memory budget in MiB")
 
 
 def load_or_build(scene, quiet: bool = True):
@@ -44,9 +47,18 @@ def load_or_build(scene, quiet: bool = True):
 def run(args) -> int:
     import sys
 
+    if str(args.scene).lower().endswith(".pbd"):  # an SSX Tricky level: piste.commands.ssx
+        from piste.commands.ssx import render_pbd
+
+        print(f"wrote {render_pbd(args.scene, args.out, args.size or (640, 448))}")
+        return 0
     from piste.errors import ConfigError
     from piste.pipeline.preview import render_frames
 
+    if args.scene.rstrip("/").endswith(".tiles"):  # a tiled world: stream it (piste.render.streaming)
+        from piste.render.streaming import render_flight_cli
+
+        return render_flight_cli(args)
     b = load_or_build(args.scene, args.quiet)
     if args.list:
         for c in b.manifest.get("cameras", []):

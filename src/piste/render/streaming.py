@@ -1,0 +1,506 @@
+"""Streaming a tiled world at run time: tiles paged in and out by camera distance under a fixed
+memory budget, loaded by a background thread, with coarse far-field stand-ins so the horizon never
+shows holes.
+
+Two levels a tile
+-----------------
+* **far** (always drawn until its near mesh is resident): the tile's patch-corner grid from the
+  build (``lit/*.npz`` ``far_positions``/``far_colors``: one vertex a patch corner, i.e. a 2 x 2
+  evaluation of every patch with shared corners).  Corners are exact surface points and
+  bit-identical between neighbouring tiles, so far tiles meet without cracks.
+* **near**: every patch evaluated on its ``res x res`` light-map grid, coloured by its baked texels.
+
+Where a near tile meets a far one, the near tile's border follows the patch edge curves and the
+far tile's border their chords.  Both lie in the same vertical plane (patch edges are straight in
+x, y), so every tile gets a **skirt**: a strip hanging ``zmax - zmin + 1`` metres down from its
+border (the curve and its chord both lie inside the tile's height range).  Whichever border is
+higher, the other tile's skirt closes the gap; skirts are hidden under the terrain everywhere else.
+
+Paging
+------
+:class:`TileCache` (no OpenGL; testable alone) keeps every far tile within the view distance
+(loaded up front: 15 bytes a patch) and chooses near tiles by distance from the eye (nearest
+first, within ``near_radius``) while their bytes fit ``budget_bytes``; a loader thread builds the
+near meshes, the renderer uploads finished ones and releases evicted ones.  ``resident_bytes``
+(far + near meshes, the CPU copies; the GPU holds the same arrays) never exceeds the budget.
+
+:class:`StreamingRenderer` draws a frame: far tiles not covered by a resident near tile, near
+tiles, frustum-culled per tile, fogged to the sky colour at the view distance.
+:func:`fly_path` is a straight flight across the world (``piste render WORLD.tiles``).
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from piste.errors import ConfigError, FormatError
+from piste.terrain.bezier import evaluate, grid_params
+from piste.terrain.tiles import TileStore
+
+__all__ = ["TileCache", "StreamingRenderer", "TileMesh", "near_mesh", "far_mesh", "mesh_bytes", "fly_path",
+           "render_flight", "render_flight_cli"]
+
+SKY = (0.80, 0.86, 0.93)
+
+_VERT = """#version 330
+uniform mat4 u_vp;
+uniform vec3 u_eye;
+in vec3 in_pos;
+in vec3 in_rgb;
+out vec3 v_rgb;
+out float v_dist;
+void main() {
+    gl_Position = u_vp * vec4(in_pos, 1.0);
+    v_rgb = in_rgb * (255.0 / 128.0);  // half-bright texels: 128 = full light
+    v_dist = distance(in_pos, u_eye);
+}
+"""
+_FRAG = """#version 330
+uniform vec3 u_fog_color;
+uniform vec2 u_fog;   // start, end (metres)
+in vec3 v_rgb;
+in float v_dist;
+out vec4 f_color;
+void main() {
+    vec3 snow = vec3(0.93, 0.95, 0.98);
+    float f = clamp((v_dist - u_fog.x) / max(u_fog.y - u_fog.x, 1.0), 0.0, 1.0);
+    f_color = vec4(mix(snow * v_rgb, u_fog_color, f), 1.0);
+}
+"""
+
+
+@dataclass
+class TileMesh:
+    """A tile's triangles: positions ``(k, 3)`` float32, colours ``(k, 3)`` uint8 (half-bright),
+    indices ``(t, 3)`` uint32."""
+
+    positions: np.ndarray
+    colors: np.ndarray
+    indices: np.ndarray
+
+    @property
+    def nbytes(self) -> int:
+        return self.positions.nbytes + self.colors.nbytes + self.indices.nbytes
+
+
+def _grid_triangles(rows: int, cols: int, offset: int = 0) -> np.ndarray:
+    """Two triangles a cell of a ``rows x cols`` vertex grid (row-major), ``(2 (r-1)(c-1), 3)``."""
+    r, c = np.mgrid[0:rows - 1, 0:cols - 1]
+    a = (r * cols + c).ravel() + offset
+    return np.concatenate([np.stack([a, a + 1, a + cols + 1], 1), np.stack([a, a + cols + 1, a + cols], 1)])
+
+
+def _skirt(border: np.ndarray, colors: np.ndarray, depth: float, offset: int):
+    """A strip hanging ``depth`` down from a border polyline ``(m, 3)``: vertices, colours, triangles."""
+    low = border.copy()
+    low[:, 2] -= depth
+    m = len(border)
+    i = np.arange(m - 1) + offset
+    tris = np.concatenate([np.stack([i, i + 1, i + m + 1], 1), np.stack([i, i + m + 1, i + m], 1)])
+    return np.concatenate([border, low]), np.concatenate([colors, colors]), tris
+
+
+def _with_skirts(pos: np.ndarray, rgb: np.ndarray, tris: np.ndarray, sides: list, depth: float) -> TileMesh:
+    """``pos (k, 3)``, ``rgb (k, 3)`` plus a skirt under each border polyline (index arrays in ``sides``)."""
+    ps, cs, ts = [pos], [rgb], [tris]
+    n = len(pos)
+    for idx in sides:
+        p, c, t = _skirt(pos[idx], rgb[idx], depth, n)
+        ps.append(p)
+        cs.append(c)
+        ts.append(t)
+        n += len(p)
+    return TileMesh(np.concatenate(ps).astype(np.float32), np.concatenate(cs).astype(np.uint8),
+                    np.concatenate(ts).astype(np.uint32))
+
+
+def far_mesh(lit: dict, depth: float) -> TileMesh:
+    """The far stand-in of a tile: its corner grid ``(ny+1, nx+1)`` plus skirts."""
+    g = np.asarray(lit["far_positions"], dtype=np.float64)
+    rows, cols = g.shape[:2]
+    idx = np.arange(rows * cols).reshape(rows, cols)
+    sides = [idx[0], idx[:, -1], idx[-1], idx[:, 0]]
+    return _with_skirts(g.reshape(-1, 3), np.asarray(lit["far_colors"]).reshape(-1, 3), _grid_triangles(rows, cols),
+                        sides, depth)
+
+
+def near_mesh(fit: dict, lit: dict, grid_shape: tuple, depth: float) -> TileMesh:
+    """The near mesh of a tile: every patch on its ``res x res`` light-map grid, coloured by its
+    texels, welded into one ``(ny (res-1) + 1, nx (res-1) + 1)`` vertex grid (patches share their
+    edge vertices: no cracks inside a tile by construction), plus skirts.
+
+    ``grid_shape``: ``(ny, nx)`` patches of the tile (patch ``row * nx + col``).
+    """
+    texels = np.asarray(lit["texels"])  # (n, res, res, 3), [patch, j (v), i (u)]
+    n, res = texels.shape[:2]
+    u, v = grid_params(res)
+    pos = evaluate(np.asarray(fit["control_points"]), u, v, normals=False)  # (n, res*res, 3)
+    ny, nx = grid_shape
+    r = res - 1
+    rows, cols = ny * r + 1, nx * r + 1
+    gp = np.empty((rows, cols, 3))
+    gc = np.empty((rows, cols, 3), np.uint8)
+    pos = pos.reshape(ny, nx, res, res, 3)
+    tex = texels.reshape(ny, nx, res, res, 3)
+    for j in range(res):  # scatter: a shared vertex takes the value of the last patch written
+        for i in range(res):
+            gp[j:j + ny * r:r, i:i + nx * r:r] = pos[:, :, j, i]
+            gc[j:j + ny * r:r, i:i + nx * r:r] = tex[:, :, j, i]
+    idx = np.arange(rows * cols).reshape(rows, cols)
+    sides = [idx[0], idx[:, -1], idx[-1], idx[:, 0]]
+    return _with_skirts(gp.reshape(-1, 3), gc.reshape(-1, 3), _grid_triangles(rows, cols), sides, depth)
+
+
+def mesh_bytes(rows: int, cols: int) -> int:
+    """Bytes of a grid mesh of ``rows x cols`` vertices with skirts (positions, colours, indices)."""
+    border = 2 * (rows + cols)
+    verts = rows * cols + 2 * border
+    tris = 2 * (rows - 1) * (cols - 1) + 2 * (border - 4)
+    return verts * 15 + tris * 12
+
+
+class TileCache:
+    """Which tiles are resident, at which level, under ``budget_bytes`` (see the module docstring).
+
+    Parameters
+    ----------
+    root : a tiled world folder (``piste build`` with ``terrain.tiles``)
+    budget_bytes : the most bytes of tile meshes held at once
+    near_radius : metres (from the eye to a tile's rectangle) within which tiles get near meshes
+    view_distance : far tiles beyond this are not loaded (default: the whole world)
+    """
+
+    def __init__(self, root, budget_bytes: int = 256 << 20, near_radius: float | None = None,
+                 view_distance: float | None = None):
+        self.store = TileStore(root)
+        self.index = self.store.read_index()
+        self.grid = self.store.grid()
+        g = self.grid
+        self.budget = int(budget_bytes)
+        s = g.samples_per_patch
+        tile_size = g.tile_patches * s * max(g.spacing)
+        self.near_radius = float(near_radius) if near_radius is not None else 1.5 * tile_size
+        self.view_distance = view_distance
+        self.res = int(self.index["res"])
+        self._lock = threading.Lock()
+        self.near: dict = {}
+        self.far: dict = {}
+        self.bounds: dict = {}
+        for key, t in self.index["tiles"].items():
+            ty, tx = (int(v) for v in key.split(","))
+            self.bounds[(ty, tx)] = np.asarray(t["bounds"], dtype=np.float64)
+        # the bytes of a tile's near mesh, estimated exactly from its patch count
+        self._near_estimate = {t: self._near_bytes(int(self.index["tiles"][f"{t[0]},{t[1]}"]["patches"]), t)
+                               for t in self.bounds}
+        self._far_bytes = 0
+        for t in sorted(self.bounds):
+            mesh = far_mesh(self._read("lit", t, ("far_positions", "far_colors")), self._depth(t))
+            self.far[t] = mesh
+            self._far_bytes += mesh.nbytes
+        if self._far_bytes > self.budget:
+            raise ConfigError(f"streaming budget {self.budget / 2**20:.1f} MiB is below the far field's "
+                              f"{self._far_bytes / 2**20:.1f} MiB: raise it")
+        self._queue: queue.PriorityQueue = queue.PriorityQueue()
+        self._pending: set = set()
+        self._wanted: set = set()
+        self.loaded_count = 0
+        self.errors: list = []
+        self._stop = False
+        self._thread = threading.Thread(target=self._run, name="piste-tile-loader", daemon=True)
+        self._thread.start()
+
+    # ---------------------------------------------------------------- sizes
+    def _near_bytes(self, n: int, t) -> int:
+        py0, py1, px0, px1 = self.grid.patch_range(*t)
+        r = self.res - 1
+        return mesh_bytes((py1 - py0) * r + 1, (px1 - px0) * r + 1)
+
+    def _depth(self, t) -> float:
+        b = self.bounds[t]
+        return float(b[1, 2] - b[0, 2]) + 1.0
+
+    @property
+    def resident_bytes(self) -> int:
+        with self._lock:
+            return self._far_bytes + sum(m.nbytes for m in self.near.values())
+
+    # ---------------------------------------------------------------- loading
+    def _read(self, product: str, t, names=None) -> dict:
+        p = self.store.path(product, *t)
+        try:
+            with np.load(p, allow_pickle=False) as data:
+                return {k: data[k] for k in (names or data.files) if k != "key"}
+        except Exception as exc:
+            raise FormatError(p, f"tile {t}: cannot read its {product!r} data ({exc})") from None
+
+    def _run(self) -> None:
+        while not self._stop:
+            try:
+                _, t = self._queue.get(timeout=0.05)
+            except queue.Empty:
+                continue
+            if t is None:
+                break
+            try:
+                with self._lock:
+                    wanted = t in self._wanted
+                if wanted:
+                    py0, py1, px0, px1 = self.grid.patch_range(*t)
+                    mesh = near_mesh(self._read("fit", t, ("control_points",)), self._read("lit", t, ("texels",)),
+                                     (py1 - py0, px1 - px0), self._depth(t))
+                    with self._lock:
+                        if t in self._wanted:  # still wanted and still fits: the budget was reserved
+                            self.near[t] = mesh
+                            self.loaded_count += 1
+            except Exception as exc:  # reported by wait_idle / the renderer
+                self.errors.append(exc)
+            finally:
+                with self._lock:
+                    self._pending.discard(t)
+                self._queue.task_done()
+
+    def distance(self, eye, t) -> float:
+        """Metres from ``eye`` (x, y) to tile ``t``'s rectangle."""
+        b = self.bounds[t]
+        dx = max(b[0, 0] - eye[0], 0.0, eye[0] - b[1, 0])
+        dy = max(b[0, 1] - eye[1], 0.0, eye[1] - b[1, 1])
+        return float(np.hypot(dx, dy))
+
+    def update(self, eye) -> None:
+        """Choose the near set for ``eye``: nearest tiles first within ``near_radius`` while the
+        budget allows; evict the others at once, queue the missing ones for the loader."""
+        eye = np.asarray(eye, dtype=np.float64)
+        order = sorted((self.distance(eye, t), t) for t in self.bounds)
+        room = self.budget - self._far_bytes
+        want = []
+        for d, t in order:
+            if d > self.near_radius:
+                break
+            cost = self._near_estimate[t]
+            if cost > room:
+                break
+            room -= cost
+            want.append((d, t))
+        with self._lock:
+            self._wanted = {t for _, t in want}
+            for t in [t for t in self.near if t not in self._wanted]:
+                del self.near[t]
+            todo = [(d, t) for d, t in want if t not in self.near and t not in self._pending]
+            self._pending.update(t for _, t in todo)
+        for d, t in todo:
+            self._queue.put((d, t))
+
+    def wait_idle(self, timeout: float = 60.0) -> None:
+        """Block until the loader has nothing queued (tests, offline rendering)."""
+        t0 = time.perf_counter()
+        while True:
+            with self._lock:
+                busy = bool(self._pending)
+            if not busy:
+                break
+            if time.perf_counter() - t0 > timeout:
+                raise TimeoutError("tile loader still busy")
+            time.sleep(0.002)
+        if self.errors:
+            raise self.errors[0]
+
+    def draw_list(self) -> list:
+        """``[(tile, "near" | "far", TileMesh)]``: a near mesh where one is resident, else the far one."""
+        with self._lock:
+            near = dict(self.near)
+        return [(t, "near", near[t]) if t in near else (t, "far", self.far[t]) for t in sorted(self.far)]
+
+    def close(self) -> None:
+        self._stop = True
+        self._queue.put((-1.0, None))
+        self._thread.join(timeout=5)
+
+
+def _aabb_visible(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    """An axis-aligned box against inward frustum planes (the positive vertex test)."""
+    p = np.where(planes[:, :3] >= 0.0, hi, lo)
+    return bool(((p * planes[:, :3]).sum(1) + planes[:, 3] >= 0.0).all())
+
+
+class StreamingRenderer:
+    """Renders a tiled world through a :class:`TileCache` (headless EGL by default).
+
+    Parameters
+    ----------
+    root : the tiled world folder
+    size : (width, height)
+    budget_bytes, near_radius : see :class:`TileCache`
+    background : clear colour (RGB 0..1); the sky colour by default
+    """
+
+    def __init__(self, root, size=(640, 448), budget_bytes: int = 256 << 20, near_radius: float | None = None,
+                 ctx=None, background=SKY):
+        from piste.render.context import Offscreen, create_context
+
+        self.cache = TileCache(root, budget_bytes=budget_bytes, near_radius=near_radius)
+        self.ctx = ctx or create_context()
+        self.size = (int(size[0]), int(size[1]))
+        self.fbo = Offscreen(self.ctx, self.size)
+        self.prog = self.ctx.program(vertex_shader=_VERT, fragment_shader=_FRAG)
+        self.background = tuple(float(c) for c in background)
+        self._gpu: dict = {}  # (tile, level) -> (vbo_pos, vbo_rgb, ibo, vao, mesh id)
+        self.stats: dict = {}
+
+    def _vao(self, key, mesh: TileMesh):
+        got = self._gpu.get(key)
+        if got is not None and got[4] == id(mesh):
+            return got[3]
+        if got is not None:
+            self._release(key)
+        pos = self.ctx.buffer(np.ascontiguousarray(mesh.positions))
+        rgb = self.ctx.buffer(np.ascontiguousarray(mesh.colors))
+        ibo = self.ctx.buffer(np.ascontiguousarray(mesh.indices))
+        vao = self.ctx.vertex_array(self.prog, [(pos, "3f", "in_pos"), (rgb, "3f1", "in_rgb")], index_buffer=ibo,
+                                    index_element_size=4)
+        self._gpu[key] = (pos, rgb, ibo, vao, id(mesh))
+        return vao
+
+    def _release(self, key) -> None:
+        for obj in self._gpu.pop(key)[:4][::-1]:
+            obj.release()
+
+    def render(self, camera, wait: bool = False) -> np.ndarray:
+        """One frame from ``camera`` (:class:`piste.world.camera.Camera`): ``(H, W, 3)`` uint8.
+
+        ``wait``: block until every wanted near tile is loaded first (offline rendering, tests);
+        otherwise tiles still loading show their far stand-ins.
+        """
+        import moderngl
+
+        t0 = time.perf_counter()
+        cam = camera.with_aspect(*self.size)
+        self.cache.update(cam.eye)
+        if wait:
+            self.cache.wait_idle()
+        elif self.cache.errors:
+            raise self.cache.errors[0]
+        vp = cam.view_projection()
+        planes = cam.frustum_planes()
+        self.fbo.use()
+        self.fbo.clear((*self.background, 1.0))
+        self.ctx.enable(moderngl.DEPTH_TEST)
+        self.ctx.disable(moderngl.CULL_FACE)
+        self.prog["u_vp"].write(vp.astype(np.float32).T.tobytes())
+        self.prog["u_eye"].value = tuple(float(x) for x in cam.eye)
+        self.prog["u_fog_color"].value = self.background
+        self.prog["u_fog"].value = (0.6 * cam.far, cam.far)
+        drawn = {"near": 0, "far": 0, "culled": 0}
+        live = set()
+        for t, level, mesh in self.cache.draw_list():
+            b = self.cache.bounds[t]
+            lo, hi = b[0].copy(), b[1].copy()
+            lo[2] -= self.cache._depth(t)  # skirts
+            if not _aabb_visible(planes, lo, hi):
+                drawn["culled"] += 1
+                continue
+            key = (t, level)
+            live.add(key)
+            self._vao(key, mesh).render(moderngl.TRIANGLES)
+            drawn[level] += 1
+        for key in [k for k in self._gpu if k[1] == "near" and k not in live and k[0] not in self.cache.near]:
+            self._release(key)  # evicted near tiles leave the GPU too
+        image = self.fbo.read()[..., :3].copy()
+        self.stats = {**drawn, "resident_bytes": self.cache.resident_bytes, "ms": (time.perf_counter() - t0) * 1e3}
+        return image
+
+    def close(self) -> None:
+        for key in list(self._gpu):
+            self._release(key)
+        self.prog.release()
+        self.fbo.release()
+        self.cache.close()
+
+
+def fly_path(index: dict, frames: int, fps: float = 30.0, speed: float = 100.0, height: float = 120.0,
+             fov: float = 60.0, far: float | None = None):
+    """Cameras of a straight flight across the world's diagonal at ``speed`` m/s, ``height`` m
+    above the tiles' top, looking ahead and down."""
+    from piste.terrain.tiles import TileGrid
+    from piste.world.camera import Camera
+
+    g = TileGrid.from_dict(index["grid"])
+    b = np.array([t["bounds"] for t in index["tiles"].values()])
+    lo, hi = b[:, 0].min(0), b[:, 1].max(0)
+    start = np.array([lo[0], lo[1], 0.0]) + 0.1 * (hi - lo)
+    d = np.array([hi[0] - lo[0], hi[1] - lo[1], 0.0])
+    d /= np.linalg.norm(d)
+    z = hi[2] + height
+    tile = g.tile_patches * g.samples_per_patch * max(g.spacing)
+    far = far or max(4.0 * tile, 3000.0)
+    for k in range(frames):
+        eye = start + d * speed * k / fps
+        eye[2] = z
+        yield Camera(eye, eye + d * 400.0 - np.array([0.0, 0.0, 150.0]), fov_y=fov, near=1.0, far=far)
+
+
+def render_flight(root, out=None, size=(640, 448), frames: int = 1, fps: float = 30.0, speed: float = 100.0,
+                  budget_mb: float = 256.0, video=None, wait: bool = True, progress: bool = False) -> dict:
+    """``piste render WORLD.tiles``: fly across a tiled world; PNG of the first frame, optional MP4.
+
+    Returns ``{"frames", "ms" (per frame), "resident_mb" (max), "near", "far"}``.
+    """
+    from piste.render.context import save_png
+
+    import contextlib
+
+    root = Path(root)
+    r = StreamingRenderer(root, size=size, budget_bytes=int(budget_mb * 2**20))
+    times, resident = [], []
+    try:
+        with contextlib.ExitStack() as stack:
+            writer = None
+            if video is not None:
+                from piste.render.video import VideoWriter
+
+                writer = stack.enter_context(VideoWriter(video, fps=int(fps)))
+            cams = fly_path(r.cache.index, frames, fps, speed)
+            if progress:
+                from tqdm import tqdm
+
+                cams = tqdm(cams, total=frames, desc="frames", unit="frame", leave=False)
+            for k, cam in enumerate(cams):
+                img = r.render(cam, wait=wait)
+                times.append(r.stats["ms"])
+                resident.append(r.stats["resident_bytes"])
+                if k == 0 and out is not None:
+                    save_png(out, img)
+                if writer is not None:
+                    writer.append(img)
+        stats = dict(r.stats)
+    finally:
+        r.close()
+    return {"frames": frames, "ms": times, "resident_mb": max(resident) / 2**20, "near": stats.get("near", 0),
+            "far": stats.get("far", 0)}
+
+
+def render_flight_cli(args) -> int:
+    """``piste render WORLD.tiles [--frames N --fps F --speed V --budget MiB --video X.mp4]``."""
+    import sys
+
+    if not Path(args.scene).is_dir():
+        raise ConfigError(f"{args.scene}: no such tiled world (build one: piste build SCENE with terrain.tiles)")
+    if args.speed <= 0 or args.budget <= 0:
+        raise ConfigError(f"--speed and --budget must be > 0, got {args.speed} and {args.budget}")
+    size = tuple(args.size) if args.size else (640, 448)
+    if args.video and (size[0] % 2 or size[1] % 2):
+        raise ConfigError(f"--size {size[0]} {size[1]}: H.264 video needs an even width and height")
+    r = render_flight(args.scene, out=args.out, size=size, frames=args.frames, fps=args.fps, speed=args.speed,
+                      budget_mb=args.budget, video=args.video,
+                      progress=not args.quiet and sys.stderr.isatty() and args.frames > 1)
+    ms = np.array(r["ms"])
+    print(f"wrote {args.out}" + (f" and {args.video}" if args.video else "") +
+          f": {r['frames']} frame(s) flying at {args.speed:g} m/s, median {np.median(ms):.1f} ms "
+          f"(max {ms.max():.1f}), resident {r['resident_mb']:.1f} MiB of {args.budget:g}, "
+          f"last frame {r['near']} near + {r['far']} far tiles")
+    return 0
