@@ -23,7 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
-from piste.errors import ConfigError, FormatError
+from piste.errors import ConfigError, FormatError, PisteError
+from piste.formats.limits import MAX_HEIGHTFIELD_SAMPLES
+from piste.formats.safe_io import check_regular
+
+#: largest height-field file (PNG, .npz) read
+MAX_HEIGHTFIELD_FILE_BYTES = 1 << 30
 
 __all__ = ["load_terrain", "load_heightfield", "load_rider_model", "load_object_mesh", "rider_matrices",
            "object_matrices", "heading_vector"]
@@ -38,44 +43,100 @@ def load_heightfield(spec) -> tuple[np.ndarray, tuple]:
         dem = read_geotiff(path, fill=spec.nodata, vertical_units=spec.vertical_units)
         z, spacing = dem.z, spec.spacing or dem.spacing
     elif path.suffix.lower() == ".npz":
-        try:
-            data = np.load(path, allow_pickle=False)
-        except Exception as exc:
-            raise FormatError(path, f"not a readable .npz ({exc})") from None
-        with data:
-            names = list(data.files)
-            key = spec.key or next((k for k in names if data[k].ndim == 2), None)
-            if key is None or key not in names:
-                raise FormatError(path, f"no 2-D height array{' ' + repr(spec.key) if spec.key else ''}; "
-                                        f"arrays: {', '.join(names)}", field=spec.key or "")
-            z = np.asarray(data[key], dtype=np.float64)
-            spacing = spec.spacing
-            if spacing is None:
-                if "dx" in names:
-                    dx = float(data["dx"])
-                    spacing = (dx, float(data["dy"]) if "dy" in names else dx)
-                elif "spacing" in names:
-                    s = np.asarray(data["spacing"], dtype=np.float64).ravel()
-                    spacing = (float(s[0]), float(s[-1]))
-                else:
-                    raise FormatError(path, "no spacing: give terrain.spacing in the scene or store 'dx'/'spacing'",
-                                      field="spacing")
+        z, spacing = _npz_heightfield(path, spec)
     else:
         from PIL import Image
 
+        check_regular(path, MAX_HEIGHTFIELD_FILE_BYTES, what="height field")
         try:
             with Image.open(path) as im:
+                w, h = im.size  # from the header: checked before a pixel is decoded
+                if w * h > MAX_HEIGHTFIELD_SAMPLES:
+                    raise FormatError(path, f"height field of {w} x {h} samples is more than the limit of "
+                                            f"{MAX_HEIGHTFIELD_SAMPLES} (4096 x 4096)")
                 z = np.asarray(im)
+        except PisteError:
+            raise
         except Exception as exc:
             raise FormatError(path, f"not a readable image ({exc})") from None
         if z.ndim == 3:
             z = z[..., 0]
         z = z.astype(np.float64)
         spacing = spec.spacing
+    if not np.all(np.isfinite(z)):
+        raise FormatError(path, f"height field has {int(np.count_nonzero(~np.isfinite(z)))} non-finite samples")
     if z.ndim != 2 or min(z.shape) < spec.samples_per_patch + 1:
         raise FormatError(path, f"height field of shape {z.shape} is too small for {spec.samples_per_patch} "
                                 "samples a patch")
     return z * spec.height_scale + spec.height_offset, tuple(float(s) for s in spacing)
+
+
+def _member_shape(path, data, name: str) -> tuple:
+    """Shape of ``.npz`` member ``name`` from its ``.npy`` header alone (nothing decompressed)."""
+    try:
+        with data.zip.open(name + ".npy") as fh:
+            version = np.lib.format.read_magic(fh)
+            read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            shape, _, dtype = read(fh)
+    except Exception as exc:
+        raise FormatError(path, f"array {name!r} has an unreadable header ({type(exc).__name__}: {exc})",
+                          field=name) from None
+    if dtype.kind not in "biuf":
+        raise FormatError(path, f"array {name!r} holds {dtype}, expected numbers", field=name)
+    return tuple(shape)
+
+
+def _npz_array(path, data, name: str, max_size: int) -> np.ndarray:
+    shape = _member_shape(path, data, name)
+    if int(np.prod(shape, dtype=np.float64)) > max_size:
+        raise FormatError(path, f"array {name!r} of shape {shape} is more than the limit of {max_size} values",
+                          field=name)
+    try:
+        return np.asarray(data[name], dtype=np.float64)
+    except Exception as exc:
+        raise FormatError(path, f"array {name!r} is unreadable ({type(exc).__name__}: {exc})", field=name) from None
+
+
+def _spacing_value(path, name: str, a: np.ndarray, index: int) -> float:
+    flat = a.ravel()
+    if flat.size == 0 or not np.isfinite(flat[index]) or not flat[index] > 0:
+        raise FormatError(path, f"expected a spacing > 0 metres, got {a.tolist()!r}", field=name)
+    return float(flat[index])
+
+
+def _npz_heightfield(path, spec) -> tuple:
+    """``(z, spacing)`` from an ``.npz``: every member's shape and type checked from its header
+    before it is read, the height array capped at MAX_HEIGHTFIELD_SAMPLES."""
+    check_regular(path, MAX_HEIGHTFIELD_FILE_BYTES, what="height field")
+    try:
+        data = np.load(path, allow_pickle=False)
+    except Exception as exc:
+        raise FormatError(path, f"not a readable .npz ({type(exc).__name__}: {exc})") from None
+    if not hasattr(data, "files"):
+        raise FormatError(path, "not an .npz archive (a single .npy array)")
+    with data:
+        names = list(data.files)
+        if spec.key is not None:
+            key = spec.key
+        else:
+            key = next((k for k in names if len(_member_shape(path, data, k)) == 2), None)
+        if key is None or key not in names:
+            raise FormatError(path, f"no 2-D height array{' ' + repr(spec.key) if spec.key else ''}; "
+                                    f"arrays: {', '.join(names)}", field=spec.key or "")
+        z = _npz_array(path, data, key, MAX_HEIGHTFIELD_SAMPLES)
+        spacing = spec.spacing
+        if spacing is None:
+            if "dx" in names:
+                dx = _spacing_value(path, "dx", _npz_array(path, data, "dx", 16), 0)
+                dy = _spacing_value(path, "dy", _npz_array(path, data, "dy", 16), 0) if "dy" in names else dx
+                spacing = (dx, dy)
+            elif "spacing" in names:
+                sp = _npz_array(path, data, "spacing", 16)
+                spacing = (_spacing_value(path, "spacing", sp, 0), _spacing_value(path, "spacing", sp, -1))
+            else:
+                raise FormatError(path, "no spacing: give terrain.spacing in the scene or store 'dx'/'spacing'",
+                                  field="spacing")
+    return z, spacing
 
 
 def load_terrain(spec):
@@ -106,6 +167,10 @@ def load_rider_model(model: str, allow_paths=()):
         from piste.character.rider import default_rider
 
         return default_rider(0)
+    if model.lower().endswith(".mpf"):  # scene key model = "ssx:RIDER.mpf"
+        from piste.pipeline.ssx_rider import load_mpf_rider
+
+        return load_mpf_rider(model)
     from piste.formats.gltf import load_gltf
 
     m = load_gltf(model, allow_paths=allow_paths)
