@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from piste.errors import MissingExtraError, PisteError
@@ -32,12 +33,19 @@ def build_parser() -> argparse.ArgumentParser:
         p = sub.add_parser(name, help=help_, description=help_)
         p.set_defaults(_module=module)
         importlib.import_module(module).add_arguments(p)
+        if name in ("demo", "render", "view"):
+            p.add_argument("--lod-morph", choices=("on", "off"), default=None,
+                           help="geomorph terrain vertices between LOD levels (default: on, or the scene file's "
+                                "[lod] morph); off: the talk's exact behaviour")
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    morph_env = os.environ.get("PISTE_LOD_MORPH")
+    if getattr(args, "lod_morph", None):  # read by piste.terrain.resident.morph_setting
+        os.environ["PISTE_LOD_MORPH"] = args.lod_morph
     try:
         return int(importlib.import_module(args._module).run(args) or 0)
     except MissingExtraError as exc:
@@ -50,6 +58,11 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    finally:
+        if morph_env is None:
+            os.environ.pop("PISTE_LOD_MORPH", None)
+        else:
+            os.environ["PISTE_LOD_MORPH"] = morph_env
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -305,7 +305,7 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
         if bar is not None:
             bar.update(1)
     manifest["lod"] = {"near": scene.lod.near, "far": scene.lod.far, "character": list(scene.lod.character),
-                       "ratios": list(scene.lod.ratios)}
+                       "ratios": list(scene.lod.ratios), "morph": bool(scene.lod.morph)}
 
     # -------------------------------------------------------------- objects
     spheres = np.zeros((0, 4))

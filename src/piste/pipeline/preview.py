@@ -164,7 +164,7 @@ class ScenePreview:
         self.bundle = bundle
         man = bundle.manifest
         lod = man.get("lod", {})
-        kw = {"lod_near": lod.get("near"), "lod_far": lod.get("far")}
+        kw = {"lod_near": lod.get("near"), "lod_far": lod.get("far"), "lod_morph": lod.get("morph")}
         if bundle.centerline is not None:
             kw.update(track=bundle.centerline, track_half_width=TRACK_HALF_WIDTH)
         atlas = bundle.lightmap.atlas

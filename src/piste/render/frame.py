@@ -20,7 +20,7 @@ from piste.render.context import Offscreen, check_gl_error, create_context
 from piste.render.sky_pass import HORIZON, SkyPass
 from piste.render.terrain_pass import TerrainPass
 from piste.terrain.cull import patch_tree
-from piste.terrain.resident import resident_terrain
+from piste.terrain.resident import morph_setting, resident_terrain
 
 from piste.transforms import cull_boxes  # noqa: E402  (re-exported)
 
@@ -68,16 +68,17 @@ class TerrainRenderer:
     lod_near, lod_far : per-edge LOD distance thresholds (default: the terrain core's)
     track : (k, 3) centre line of a groomed track to mark on the snow (projected texture), or None
     track_half_width : metres from the centre line to the track's dye lines
-    lod_morph : geomorph between LOD levels (False: the talk's exact positions, which pop)
+    lod_morph : geomorph between LOD levels (False: the talk's exact positions, which pop); None:
+        on unless the CLI's ``--lod-morph off`` says otherwise (:func:`piste.terrain.resident.morph_setting`)
     resident : keep every patch's vertices on the GPU and send only index lists (False: tessellate
         on the CPU every frame, the talk's way; same triangles)
     """
 
     def __init__(self, net, size=(640, 448), ctx=None, lightmap="placeholder", base_texture=None,
                  lod_near: float | None = None, lod_far: float | None = None, track=None,
-                 track_half_width: float = 16.0, lod_morph: bool = True, resident: bool = True):
+                 track_half_width: float = 16.0, lod_morph: bool | None = None, resident: bool = True):
         self.net = net
-        self.lod_morph = bool(lod_morph)
+        self.lod_morph = morph_setting(lod_morph)
         self.resident = bool(resident)
         self.ctx = ctx if ctx is not None else create_context()
         self.target = Offscreen(self.ctx, size)

@@ -40,6 +40,7 @@ ResidentMesh.to_mesh()                   the same frame as a classic TerrainMesh
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,7 +53,7 @@ from piste.terrain.lod import DEFAULT_FAR, DEFAULT_NEAR, LEVELS
 from piste.terrain.net import SIDE_CORNERS, PatchNet
 from piste.terrain.tessellate import MAX_LEVEL, VERTEX_FLOATS, _cache, _glue_sources, get_shape, tessellate
 
-__all__ = ["ResidentTerrain", "ResidentMesh", "RESIDENT_FLOATS", "MORPH_BAND", "resident_terrain"]
+__all__ = ["ResidentTerrain", "ResidentMesh", "RESIDENT_FLOATS", "MORPH_BAND", "resident_terrain", "morph_setting"]
 
 #: floats per resident vertex: position 3, morph target 3, uv 2, light-map uv 2, morph slot 1
 RESIDENT_FLOATS = 11
@@ -364,6 +365,18 @@ class ResidentTerrain:
             morph=bool(morph),
             n_vertices=int(self.shape_verts[key].sum()),
         )
+
+
+def morph_setting(explicit: bool | None = None) -> bool:
+    """Whether to geomorph: ``PISTE_LOD_MORPH=on|off`` in the environment if set (the CLI's
+    ``--lod-morph`` sets it for the command's run, so it wins over a scene file's ``[lod] morph``),
+    else ``explicit`` (the scene file's key or a caller's choice), else on."""
+    env = os.environ.get("PISTE_LOD_MORPH", "").strip().lower()
+    if env in ("on", "off"):
+        return env == "on"
+    if env:
+        raise ConfigError(f"PISTE_LOD_MORPH must be 'on' or 'off', got {env!r}")
+    return True if explicit is None else bool(explicit)
 
 
 def resident_terrain(net: PatchNet, levels=LEVELS) -> ResidentTerrain:

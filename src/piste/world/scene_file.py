@@ -37,6 +37,8 @@ scene file.  Every table and key is optional except where noted::
     far = 180.0                   #   nearer than far 6, the rest 4
     character = [14.0, 35.0]      # riders: high -> medium -> low LOD distances
     ratios = [1.0, 0.5, 0.25]     # riders: triangle ratio of each LOD
+    morph = true                  # terrain: geomorph between 4/6/8 (false: the talk's popping;
+                                  #   `--lod-morph on|off` on demo/render/view overrides)
 
     [visibility]
     enabled = true
@@ -305,6 +307,7 @@ class LodSpec:
     far: float = 180.0
     character: tuple = (14.0, 35.0)
     ratios: tuple = (1.0, 0.5, 0.25)
+    morph: bool = True  # geomorph terrain vertices between levels (False: the talk's exact popping)
 
 
 @dataclass
@@ -549,9 +552,10 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     if not 0 <= scene.lightmap.gutter <= 4:
         raise lm.error("gutter", f"expected 0 <= gutter <= 4, got {scene.lightmap.gutter}")
     lo = _table(top, "lod")
-    lo.allow({"near", "far", "character", "ratios"})
+    lo.allow({"near", "far", "character", "ratios", "morph"})
     scene.lod = LodSpec(lo.get("near", "float", 60.0), lo.get("far", "float", 180.0),
-                        lo.get("character", "vec2", (14.0, 35.0)), lo.get("ratios", "floats", (1.0, 0.5, 0.25)))
+                        lo.get("character", "vec2", (14.0, 35.0)), lo.get("ratios", "floats", (1.0, 0.5, 0.25)),
+                        lo.get("morph", "bool", True))
     if not 0 <= scene.lod.near <= scene.lod.far:
         raise lo.error("far", f"expected 0 <= near <= far, got near={scene.lod.near}, far={scene.lod.far}")
     if not all(0 < r <= 1 for r in scene.lod.ratios):
