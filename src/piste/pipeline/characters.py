@@ -56,7 +56,9 @@ def character_arrays(model, ratios=(1.0, 0.5, 0.25), steps=None, max_bones: int 
     sk = model.skeleton
     mesh = merged_mesh(model)
     steps = _steps(ratios, steps)
-    lods = make_lods(mesh, ratios=ratios, steps=steps, max_bones=max_bones)
+    lods = getattr(model, "lods", None)  # a model that ships its own LODs (an .mpf's Body3000/1500/750)
+    if not lods or len(lods) != len(ratios):
+        lods = make_lods(mesh, ratios=ratios, steps=steps, max_bones=max_bones)
     a: dict = {
         "skeleton/parents": sk.parents.astype(np.int32),
         "skeleton/rest_translation": sk.rest_translation,

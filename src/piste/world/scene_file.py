@@ -61,7 +61,7 @@ scene file.  Every table and key is optional except where noted::
 
     [[riders]]
     name = "rider 1"
-    model = "builtin:rider"       # or a .gltf/.glb file
+    model = "builtin:rider"       # or a .gltf/.glb file, or "ssx:RIDER.mpf" (SSX Tricky)
     position = [200.0, 150.0]     # x, y on the snow (z from the surface), or [x, y, z]
     heading = 0.0                 # degrees about +z, 0 = travelling +y (down the course)
     clip = "ride"
@@ -599,6 +599,11 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
                 if model not in allowed:
                     raise a.error("model", f"unknown built-in model {model!r}: expected one of {', '.join(allowed)} "
                                            "or a .gltf/.glb file")
+            elif model.startswith("ssx:") and kind == "riders":  # an SSX Tricky .mpf (piste.pipeline.ssx_rider)
+                mp = (base / model[4:]).resolve()
+                if mp.suffix.lower() != ".mpf" or not mp.is_file():
+                    raise a.error("model", f"{model!r}: expected ssx:<an existing .mpf file> (looked for {mp})")
+                model = str(mp)
             else:
                 model = str(_file(a, "model", base, (".gltf", ".glb")))
             name = a.get("name", "str", f"{kind[:-1]}{i}")
