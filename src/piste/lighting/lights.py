@@ -87,10 +87,21 @@ __all__ = [
 ]
 
 
-def _vec3(value, what: str) -> tuple[float, float, float]:
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.shape != (3,) or not np.isfinite(arr).all():
+#: largest magnitude of a light's intensity or colour component, and of a position coordinate:
+#: far beyond any real light (the sun is ~1e5 lux), far below what overflows a float32 light map
+MAX_LIGHT_VALUE = 1e6
+MAX_COORDINATE = 1e9
+
+
+def _vec3(value, what: str, limit: float = MAX_COORDINATE) -> tuple[float, float, float]:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        arr = None
+    if arr is None or arr.shape != (3,) or not np.isfinite(arr).all():
         raise ValidationError(f"{what}: expected 3 finite numbers, got {value!r}")
+    if np.abs(arr).max() > limit:
+        raise ValidationError(f"{what}: expected numbers within +-{limit:g}, got {value!r}")
     return (float(arr[0]), float(arr[1]), float(arr[2]))
 
 
@@ -104,13 +115,17 @@ def _unit(value, what: str) -> tuple[float, float, float]:
     return (float(v[0]), float(v[1]), float(v[2]))
 
 
-def _finite(value, what: str) -> float:
+def _finite(value, what: str, limit: float = math.inf) -> float:
+    if isinstance(value, (str, bytes)):  # float("1e3") would pass: a light file gives numbers
+        raise ValidationError(f"{what}: expected a number, got {value!r}")
     try:
         x = float(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ValidationError(f"{what}: expected a number, got {value!r}") from None
     if not math.isfinite(x):
         raise ValidationError(f"{what}: expected a finite number, got {value!r}")
+    if abs(x) > limit:
+        raise ValidationError(f"{what}: expected a number within +-{limit:g}, got {value!r}")
     return x
 
 
@@ -137,8 +152,9 @@ class AmbientLight:
     name: str = ""
 
     def __post_init__(self):
-        object.__setattr__(self, "color", _vec3(self.color, f"ambient light {self.name!r} color"))
-        object.__setattr__(self, "intensity", _finite(self.intensity, f"ambient light {self.name!r} intensity"))
+        object.__setattr__(self, "color", _vec3(self.color, f"ambient light {self.name!r} color", MAX_LIGHT_VALUE))
+        object.__setattr__(self, "intensity", _finite(self.intensity, f"ambient light {self.name!r} intensity",
+                                                      MAX_LIGHT_VALUE))
 
 
 @dataclass(frozen=True)
@@ -155,8 +171,8 @@ class DirectionalLight:
     def __post_init__(self):
         w = f"directional light {self.name!r}"
         object.__setattr__(self, "direction", _unit(self.direction, f"{w} direction"))
-        object.__setattr__(self, "color", _vec3(self.color, f"{w} color"))
-        object.__setattr__(self, "intensity", _finite(self.intensity, f"{w} intensity"))
+        object.__setattr__(self, "color", _vec3(self.color, f"{w} color", MAX_LIGHT_VALUE))
+        object.__setattr__(self, "intensity", _finite(self.intensity, f"{w} intensity", MAX_LIGHT_VALUE))
         object.__setattr__(self, "shadows", bool(self.shadows))
 
 
@@ -176,8 +192,8 @@ class PointLight:
     def __post_init__(self):
         w = f"point light {self.name!r}"
         object.__setattr__(self, "position", _vec3(self.position, f"{w} position"))
-        object.__setattr__(self, "color", _vec3(self.color, f"{w} color"))
-        object.__setattr__(self, "intensity", _finite(self.intensity, f"{w} intensity"))
+        object.__setattr__(self, "color", _vec3(self.color, f"{w} color", MAX_LIGHT_VALUE))
+        object.__setattr__(self, "intensity", _finite(self.intensity, f"{w} intensity", MAX_LIGHT_VALUE))
         object.__setattr__(self, "range", _range(self.range, f"{w} range"))
         object.__setattr__(self, "falloff", _falloff(self.falloff, f"{w} falloff"))
         object.__setattr__(self, "shadows", bool(self.shadows))
@@ -205,8 +221,8 @@ class SpotLight:
         w = f"spot light {self.name!r}"
         object.__setattr__(self, "position", _vec3(self.position, f"{w} position"))
         object.__setattr__(self, "direction", _unit(self.direction, f"{w} direction"))
-        object.__setattr__(self, "color", _vec3(self.color, f"{w} color"))
-        object.__setattr__(self, "intensity", _finite(self.intensity, f"{w} intensity"))
+        object.__setattr__(self, "color", _vec3(self.color, f"{w} color", MAX_LIGHT_VALUE))
+        object.__setattr__(self, "intensity", _finite(self.intensity, f"{w} intensity", MAX_LIGHT_VALUE))
         object.__setattr__(self, "range", _range(self.range, f"{w} range"))
         object.__setattr__(self, "falloff", _falloff(self.falloff, f"{w} falloff"))
         inner = _finite(self.inner_angle, f"{w} inner_angle")
@@ -377,10 +393,14 @@ def loads_lights(text: str, path="<string>") -> Lights:
 def load_lights(path) -> Lights:
     """Read a TOML lights file (see the module docstring for the format)."""
     path = Path(path)
+    if path.exists() and not path.is_file():  # a folder, device or pipe (which would hang the read)
+        raise FormatError(path, "not a regular file")
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise FormatError(path, "no such file") from None
+    except OSError as exc:
+        raise FormatError(path, f"cannot read: {exc.strerror or exc}") from None
     except UnicodeDecodeError as exc:
         raise FormatError(path, f"not UTF-8 text ({exc})") from None
     return loads_lights(text, path)
