@@ -1,0 +1,178 @@
+"""Large-world benchmark: tiled builds of synthetic worlds, locally and on a 2-worker Dask LocalCluster.
+
+    python benchmarks/bench_large.py [--quick] [--sizes 10000 100000] [--million] [--workers 2]
+                                     [--res 4] [--no-shadows] [--frames 60] [--repeats 1]
+
+For every size (patches; a square world at 3 samples a patch side, 10 m spacing, tiles of 64 x 64
+patches) it builds the world from scratch in a child process -- fit, bake (light maps with shadow
+rays against the 3 x 3 tile neighbourhood), far field -- once in this machine's process and once
+as Dask tasks on a LocalCluster of ``--workers`` worker processes on 127.0.0.1, interleaved, and
+prints build time (median and range over ``--repeats``), peak RSS (the build process; for Dask the
+client and the largest worker), the Dask/local time ratio, bake samples/s per worker, the scaling
+exponent of build time in patches (a least-squares slope of log time over log patches; 1.0 =
+linear) and streaming frame times flying across the largest world at 100 m/s (headless EGL,
+``--frames`` frames, every near tile loaded before its frame: the worst case).  The tiles of the
+Dask build are compared byte for byte with the local ones.
+
+``--million`` adds the 1,000,000-patch world (3,001 x 3,001 samples): minutes on 2 cores.
+``--quick``: 10,000 patches only, 2 x 2-texel light maps, 10 frames.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def _child(argv) -> None:
+    """``--_child MODE ROOT SIDE RES SHADOWS WORKERS``: one build in a fresh process; prints JSON."""
+    mode, root, side, res, shadows, workers = argv
+    from piste.pipeline.tiled_build import build_tiles, synthetic_spec
+
+    spec = synthetic_spec(root, int(side), tile_patches=64, res=int(res), shadows=shadows == "1", spacing=10.0)
+    t0 = time.perf_counter()
+    out = {"mode": mode}
+    if mode == "local":
+        r = build_tiles(spec)
+    else:
+        from piste.pipeline.dask_build import build_tiles_dask, close_client, dask_client
+
+        client = dask_client("local", workers=int(workers))
+        try:
+            t0 = time.perf_counter()  # cluster start-up excluded (reported separately)
+            r = build_tiles_dask(spec, client)
+            rss = client.run(lambda: resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+            out["worker_rss_mb"] = max(rss.values()) / 1024
+        finally:
+            close_client(client)
+    out["seconds"] = time.perf_counter() - t0
+    out["rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    out["patches"] = spec.grid.n_patches
+    out["tiles"] = len(spec.grid.tiles())
+    out["samples"] = sum(v.get("samples", 0) for v in r.lit.values())
+    out["bake_task_seconds"] = sum(v["seconds"] for v in r.lit.values())
+    out["fit_task_seconds"] = sum(v["seconds"] for v in r.fit.values())
+    print(json.dumps(out))
+
+
+def _run_child(mode, root, side, res, shadows, workers) -> dict:
+    shutil.rmtree(root, ignore_errors=True)
+    cmd = [sys.executable, __file__, "--_child", mode, str(root), str(side), str(res), "1" if shadows else "0",
+           str(workers)]
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    p = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    if p.returncode != 0:
+        raise SystemExit(f"{mode} build failed:\n{p.stderr[-3000:]}")
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def _files(root: Path) -> dict:
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def _med(xs) -> str:
+    xs = sorted(xs)
+    m = xs[len(xs) // 2]
+    return f"{m:8.2f} s [{xs[0]:.2f}..{xs[-1]:.2f}]"
+
+
+def main() -> None:
+    if len(sys.argv) > 1 and sys.argv[1] == "--_child":
+        _child(sys.argv[2:])
+        return
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    ap.add_argument("--quick", action="store_true", help="10k patches, 2x2 texels, 10 frames")
+    ap.add_argument("--sizes", type=int, nargs="+", default=[10_000, 100_000], help="world sizes in patches")
+    ap.add_argument("--million", action="store_true", help="also the 1,000,000-patch world")
+    ap.add_argument("--workers", type=int, default=2, help="Dask LocalCluster worker processes (default 2)")
+    ap.add_argument("--res", type=int, default=4, help="light-map texels a patch side (default 4)")
+    ap.add_argument("--no-shadows", action="store_true", help="bake without shadow rays")
+    ap.add_argument("--no-dask", action="store_true", help="local builds only")
+    ap.add_argument("--frames", type=int, default=60, help="streaming frames (default 60; 0 = none)")
+    ap.add_argument("--repeats", type=int, default=1, help="builds of each kind and size (default 1)")
+    ap.add_argument("--keep", metavar="DIR", help="build into DIR and keep the worlds")
+    args = ap.parse_args()
+    sizes = [10_000] if args.quick else list(args.sizes)
+    if args.million and 1_000_000 not in sizes:
+        sizes.append(1_000_000)
+    res = 2 if args.quick else args.res
+    frames = 10 if args.quick else args.frames
+    shadows = not args.no_shadows
+    tmp = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="bench_large_"))
+    print(f"bench_large: sizes {sizes}, light maps {res}x{res}, shadows {shadows}, Dask workers "
+          f"{0 if args.no_dask else args.workers}, {os.cpu_count()} cores (timings on a shared machine are noisy)")
+    rows = []
+    try:
+        for n in sizes:
+            side = int(round(math.sqrt(n)))
+            runs = {"local": [], "dask": []}
+            for _ in range(args.repeats):  # interleaved: local, dask, local, dask, ...
+                runs["local"].append(_run_child("local", tmp / f"local_{side}", side, res, shadows, args.workers))
+                if not args.no_dask:
+                    runs["dask"].append(_run_child("dask", tmp / f"dask_{side}", side, res, shadows, args.workers))
+            same = None
+            if not args.no_dask:
+                same = _files(tmp / f"local_{side}") == _files(tmp / f"dask_{side}")
+            loc = runs["local"]
+            r0 = loc[0]
+            line = {"patches": r0["patches"], "tiles": r0["tiles"], "local_s": [r["seconds"] for r in loc],
+                    "local_rss_mb": max(r["rss_mb"] for r in loc),
+                    "bake_sps": r0["samples"] / max(r0["bake_task_seconds"], 1e-9)}
+            print(f"\n{r0['patches']:>9,} patches ({r0['tiles']} tiles):")
+            print(f"  local   build {_med(line['local_s'])}  peak RSS {line['local_rss_mb']:7.0f} MB  "
+                  f"bake {line['bake_sps']:,.0f} samples/s (1 process)")
+            if runs["dask"]:
+                dk = runs["dask"]
+                line["dask_s"] = [r["seconds"] for r in dk]
+                wsps = dk[0]["samples"] / max(dk[0]["bake_task_seconds"], 1e-9)
+                ratio = sorted(line["dask_s"])[len(dk) // 2] / sorted(line["local_s"])[len(loc) // 2]
+                print(f"  dask    build {_med(line['dask_s'])}  peak RSS client {max(r['rss_mb'] for r in dk):5.0f} MB"
+                      f", worker {max(r['worker_rss_mb'] for r in dk):5.0f} MB  bake {wsps:,.0f} samples/s per worker")
+                print(f"  dask / local time ratio {ratio:.2f} ({args.workers} workers); tiles byte-identical: {same}")
+            rows.append(line)
+        if len(rows) > 1:
+            import numpy as np
+
+            x = np.log([r["patches"] for r in rows])
+            y = np.log([sorted(r["local_s"])[len(r["local_s"]) // 2] for r in rows])
+            slope = float(np.polyfit(x, y, 1)[0])
+            print(f"\nscaling exponent (local build time ~ patches^k): k = {slope:.2f}")
+        if frames > 0:
+            _streaming(tmp, rows, frames)
+    finally:
+        if not args.keep:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _streaming(tmp: Path, rows, frames: int) -> None:
+    import numpy as np
+
+    from piste.render.streaming import render_flight
+
+    print(f"\nstreaming: {frames} frames flying at 100 m/s, 640x448, headless EGL, near tiles loaded before each frame")
+    base = None
+    for r in rows:
+        side = int(round(math.sqrt(r["patches"])))
+        root = tmp / f"local_{side}"
+        render_flight(root, frames=2)  # warm-up (shader compile)
+        st = render_flight(root, frames=frames, speed=100.0, budget_mb=256.0)
+        ms = np.array(st["ms"][1:])
+        med = float(np.median(ms))
+        base = base or med
+        print(f"  {r['patches']:>9,} patches: frame median {med:6.1f} ms [{ms.min():.1f}..{ms.max():.1f}], "
+              f"resident {st['resident_mb']:.1f} MiB, {st['near']} near + {st['far']} far tiles; "
+              f"x{med / base:.2f} the smallest world's frame")
+
+
+if __name__ == "__main__":
+    main()
