@@ -18,6 +18,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--no-shadows", action="store_true", help="skip shadow rays (unshadowed lighting)")
     parser.add_argument("--chunk-size", type=int, default=64, help="patches per chunk (unit of resuming)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--format", choices=("piste", "ssx-tricky"), default="piste",
+                        help="piste: an atlas in --out; ssx-tricky: NET is a .pbd, writes NAME_L.ssh beside it the "
+                             "game's way and updates the patches' light-map tiles (see `piste ssx --help`)")
+    parser.add_argument("--scene", metavar="TOML", help="ssx-tricky: take the lights from this scene file")
 
 
 def _load_net(path):
@@ -47,6 +51,13 @@ def run(args) -> int:
     from piste.errors import ConfigError
     from piste.lighting import bake_lightmap, default_lights, load_lights, write_lightmap
 
+    if args.format == "ssx-tricky" or str(args.net or "").lower().endswith(".pbd"):
+        from piste.commands.ssx import bake_pbd
+
+        if args.net is None:
+            raise ConfigError("--format ssx-tricky needs a level: piste bake LEVEL.pbd --format ssx-tricky")
+        out = args.out if str(args.out).lower().endswith(".pbd") else None
+        return bake_pbd(args.net, out, args.lights, args.scene, not args.no_shadows, args.jobs, args.quiet)
     if args.jobs < 0:
         raise ConfigError(f"--jobs must be >= 0, got {args.jobs}")
     if args.chunk_size < 1:

@@ -101,6 +101,11 @@ def rider_casts(specs) -> list:
 
 
 def run(args) -> int:
+    if str(getattr(args, "scene", None) or "").lower().endswith(".pbd"):  # an SSX Tricky level
+        from piste.commands.ssx import view_pbd
+
+        args.level = args.scene
+        return view_pbd(args)
     if getattr(args, "scene", None):
         from piste.pipeline.live import run_view
 

@@ -161,7 +161,7 @@ def load_level(path, cell: int = 64, tol: float | None = None) -> SsxLevel:
     textures = read_ssh(ssh) if ssh is not None else None
     lightmaps = read_ssh(lssh) if lssh is not None else None
     n_tex = len(textures) if textures is not None else 0
-    reduced = np.stack([reduce_texture(im.rgba()) for im in textures.images] + [_WHITE[..., :3]])
+    reduced = np.stack([reduce_texture(im.rgba()) for im in (textures.images if textures else [])] + [_WHITE[..., :3]])
     base, origins, size = texture_atlas(textures, cell)
     pages = lightmap_pages(lightmaps, lssh) if lightmaps is not None else None
     light, source, rects = level_light(pbd, pages, reduced, lssh)
@@ -235,7 +235,8 @@ def bake_level(level: SsxLevel, lights: Lights, shadows: bool = True, jobs: int 
 
 def write_baked(level: SsxLevel, baked: BakedPages, out_pbd=None) -> tuple[Path, Path]:
     """Write the baked pages as ``NAME_L.ssh`` beside ``out_pbd`` (default: the level's own .pbd,
-    rewritten) and the .pbd with every patch's light-map rect and page updated; both atomic."""
+    rewritten) and the .pbd with every patch's light-map rect and page updated (a new name also
+    gets a copy of the textures as ``NAME.ssh``); each atomic."""
     out = Path(out_pbd) if out_pbd is not None else level.path
     if out.suffix.lower() != ".pbd":
         raise ConfigError(f"{out}: the output level must be a .pbd")
@@ -243,5 +244,7 @@ def write_baked(level: SsxLevel, baked: BakedPages, out_pbd=None) -> tuple[Path,
     level.pbd.lightmap_page = baked.lightmap_page.astype(np.int16)
     lpath = out.with_name(f"{out.stem}_L.ssh")
     write_ssh(lightmap_bank(baked.pages), lpath)
+    if level.textures is not None and out.resolve() != level.path.resolve():
+        write_ssh(level.textures, out.with_name(f"{out.stem}.ssh"))  # the new level's own textures
     write_pbd(level.pbd, out)
     return out, lpath

@@ -14,6 +14,7 @@ API
 SourcePass(ctx)                 .set_source((h, w, 4) uint8), .draw(mesh, mvp, stage)
 render_level(level, camera, size, lightmap_mode, ctx=None, renderer=None) -> (H, W, 3) uint8
 level_renderer(level, size, ctx=None) -> TerrainRenderer with the level's atlases and LOD preset
+LevelView(renderer)             the window's view of a level (M toggles modulate / ps2)
 """
 
 from __future__ import annotations
@@ -25,8 +26,9 @@ import numpy as np
 from piste.errors import ConfigError, RenderError
 from piste.render.context import check_gl_error, load_shader
 from piste.render.frame import TerrainRenderer
+from piste.render.window import TerrainView, ViewFrame
 
-__all__ = ["SourcePass", "render_level", "level_renderer", "SSX_LOD"]
+__all__ = ["SourcePass", "render_level", "render_level_rgba", "level_renderer", "LevelView", "SSX_LOD"]
 
 #: the ssx_tricky preset's LOD switch distances in metres (3000 / 15000 game units)
 SSX_LOD = (30.0, 150.0)
@@ -175,3 +177,23 @@ def render_level_rgba(level, camera, size=(640, 448), lightmap_mode: str = "modu
         if own:
             r.ssx_source.release()
             r.release()
+
+
+class LevelView(TerrainView):
+    """``piste view LEVEL.pbd``: the level in the window; ``ps2`` mode draws the stored Cs/As pass."""
+
+    def draw(self, camera, t: float, opts) -> ViewFrame:
+        if opts.lightmap_mode != "ps2" or opts.debug is not None:
+            return super().draw(camera, t, opts)
+        r = self.renderer
+        cam = replace(camera, aspect=r.size[0] / r.size[1])
+        mesh = r.prepare(cam, levels=r.levels(cam, opts.lod))
+        frame = r.draw(cam, mesh, debug="base", read=False)
+        r.ssx_source.upload(mesh)
+        r.target.use()
+        r.ssx_source.draw(cam.view_projection())
+        return ViewFrame(camera, frame, {})
+
+    def release(self) -> None:
+        self.renderer.ssx_source.release()
+        super().release()
