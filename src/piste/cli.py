@@ -22,6 +22,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "build": ("piste.commands.build", "pre-process a scene (.toml) into one .piste bundle (cached, byte-identical)"),
     "render": ("piste.commands.render", "render a scene (.toml or .piste) from one of its cameras (PNG, MP4)"),
     "export": ("piste.commands.export", "export a scene (.toml or .piste) to glTF (.glb/.gltf): terrain, riders, objects, lights"),
+    "ssx": ("piste.commands.ssx", "SSX Tricky levels (.pbd): info, render, view, bake light maps, convert, make"),
 }
 
 
