@@ -429,6 +429,8 @@ class _Reader:
         dtype = np.dtype(dtype)
         if count < 0 or count > self.size:
             raise self.err(field_name, f"count {count} is impossible in a {self.size}-byte blob")
+        if count == 0:  # an empty section's offset is never followed
+            return np.zeros(0, dtype)
         self.need(off, dtype.itemsize * count, field_name)
         if claim and count:
             self.claimed.append((off, dtype.itemsize * count))
@@ -628,6 +630,9 @@ def parse_mpf(data: bytes, path="<bytes>") -> MpfFile:
     if dir_off < 12 or dir_off + 80 * count + 4 > len(data):
         raise FormatError(path, f"a directory of {count} entries at offset {dir_off} runs past the end of the "
                                 f"{len(data)}-byte file", field="header.directory_offset")
+    if start < dir_off + 80 * count + 4:
+        raise FormatError(path, f"data start {start} lies inside the directory of {count} entries at offset {dir_off} "
+                                f"(expected >= {dir_off + 80 * count + 4})", field="header.data_start")
     if start > len(data):
         raise FormatError(path, f"data start {start} is past the end of the {len(data)}-byte file",
                           field="header.data_start")
