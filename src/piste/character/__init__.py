@@ -14,6 +14,7 @@ make_batches, batch_mesh, check_batches, frame_bytes, Budget, BUDGETS           
 stripify, unstripify, strip_stats                                               (strips.py)
 make_lods, simplify_mesh, LOD                                                   (lod.py)
 default_rider(seed=0) -> Model                                                  (rider.py)
+retarget_clip(clip, skeleton, bone_map="builtin"|{src: dst}), builtin_bone_map, bone_roles (retarget.py)
 
 glTF import is :func:`piste.formats.load_gltf` (the format layer builds these data classes; the
 character layer does not import the formats).
@@ -28,6 +29,7 @@ from piste.character.batches import BUDGETS, Batch, Budget, batch_mesh, check_ba
 from piste.character.strips import strip_stats, stripify, unstripify
 from piste.character.lod import LOD, make_lods, simplify_mesh
 from piste.character.rider import default_rider
+from piste.character.retarget import RetargetWarning, bone_roles, builtin_bone_map, retarget_clip
 
 __all__ = [
     "Camera",

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from piste.character import animation as _anim
+from piste.character import retarget as _retarget
 from piste.character.morph import vertex_normals
 from piste.character.pose import Pose
 from piste.character.skeleton import depth_levels, topological_order, world_from_local
@@ -264,6 +265,8 @@ class Clip:
             raise ValidationError(f"clip {self.name!r} has no skeleton: pass one to sample()")
         if retarget is None:
             retarget = "none" if sk is self.skeleton else "scaled"
+        if sk is not self.skeleton:
+            _retarget.check_coverage(self, sk)  # warns naming the unmatched bones (< half driven)
         t = _anim.clip_time(t, self.duration, loop)
         return _anim.sample_pose(self, t, sk, self.skeleton, retarget)
 

@@ -60,6 +60,9 @@ from pathlib import Path
 import numpy as np
 
 from piste.errors import ConfigError, ValidationError
+from piste.formats.atomic import atomic_path, write_bytes_atomic
+from piste.terrain.tessellate import tessellate
+from piste.transforms import compose_trs, decompose_trs, matrix_to_quat
 
 __all__ = ["TerrainExport", "CharacterExport", "ObjectsExport", "ExportReport", "export_gltf", "terrain_mesh",
            "lightmap_to_png_array", "Y_UP_ROOT_ROTATION"]
@@ -143,8 +146,6 @@ class ExportReport:
 def terrain_mesh(net, level=4):
     """The terrain tessellated for export: every edge at ``level`` (4, 6 or 8, or any level 2..64),
     or per-edge levels ``(edges,)``.  Returns a :class:`piste.terrain.tessellate.TerrainMesh`."""
-    from piste.terrain.tessellate import tessellate
-
     if np.ndim(level) == 0:
         lv = int(level)
         if not 2 <= lv <= 64:
@@ -181,8 +182,6 @@ def _png(image) -> bytes:
 
 def _quat_looking(forward, up) -> list:
     """Node rotation xyzw whose -Z is ``forward`` and +Y is (nearly) ``up``."""
-    from piste.transforms import matrix_to_quat
-
     f = np.asarray(forward, dtype=np.float64)
     f = f / max(np.linalg.norm(f), 1e-300)
     u = np.asarray(up, dtype=np.float64)
@@ -199,8 +198,6 @@ def _quat_looking(forward, up) -> list:
 
 def _trs(matrix, tol: float = 1e-6):
     """``(t, r, s, ok)`` of an affine matrix; ``ok`` False when it has shear (not a TRS)."""
-    from piste.transforms import compose_trs, decompose_trs
-
     m = np.asarray(matrix, dtype=np.float64)
     t, r, s = decompose_trs(m)
     r = r / np.linalg.norm(r, axis=-1, keepdims=True)
@@ -560,8 +557,6 @@ def export_gltf(path, terrain: TerrainExport | None = None, characters=(), objec
     "nodes"; ``up`` "y" (the root node turns piste's Z up into glTF's Y up) or "z" (no turn).
     ``extras`` are stored on the glTF scene.  See the module docstring for the conventions.
     """
-    from piste.formats.atomic import atomic_path, write_bytes_atomic
-
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".glb", ".gltf"):

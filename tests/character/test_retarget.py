@@ -1,0 +1,122 @@
+"""Retargeting clips between rigs with different bone names: explicit and built-in bone maps, and
+the warning when a clip drives fewer than half of a skeleton's bones."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from piste.character import default_rider
+from piste.character.retarget import (
+    MIXAMO,
+    RetargetWarning,
+    bone_roles,
+    builtin_bone_map,
+    check_coverage,
+    coverage,
+    retarget_clip,
+)
+from piste.errors import ConfigError
+from piste.formats.gltf import load_gltf
+
+DATA = Path("/work/shared/data/gltf")
+if not DATA.is_dir():
+    DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "gltf"
+
+
+def _renamed(model, names):
+    """A copy of a model whose skeleton's bones and clip tracks are renamed ``old -> names[old]``."""
+    from dataclasses import replace
+
+    sk = model.skeleton
+    new = [names.get(n, n) for n in sk.names]
+    sk2 = type(sk)(new, sk.parents, sk.rest_translation, sk.rest_rotation, sk.rest_scale, sk.inverse_bind,
+                   sk.node_index, sk.is_joint)
+    clips = {k: replace(c, tracks={names.get(b, b): t for b, t in c.tracks.items()}, skeleton=sk2)
+             for k, c in model.clips.items()}
+    return replace(model, skeleton=sk2, clips=clips)
+
+
+@pytest.fixture(scope="module")
+def fox_and_cesium():
+    return load_gltf(DATA / "Fox" / "Fox.glb"), load_gltf(DATA / "CesiumMan" / "CesiumMan.glb")
+
+
+def test_fox_run_on_cesiumman_warns_naming_bones(fox_and_cesium):
+    fox, cm = fox_and_cesium
+    with pytest.warns(RetargetWarning, match=r"drives 0 of the skeleton's \d+ bones; unmatched: node\d+"):
+        pose = fox.clips["Run"].sample(0.3, cm.skeleton)
+    assert np.allclose(pose.rotation, cm.skeleton.rest_rotation)  # what the warning is about
+
+
+def test_builtin_map_fox_to_cesiumman(fox_and_cesium):
+    fox, cm = fox_and_cesium
+    m = builtin_bone_map(fox.skeleton, cm.skeleton)
+    assert len(m) >= 19 and len(set(m.values())) == len(m)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RetargetWarning)
+        clip = retarget_clip(fox.clips["Run"], cm.skeleton)
+        driven, unmatched = coverage(clip, cm.skeleton)
+        assert len(driven) >= 0.85 * (len(driven) + len(unmatched))  # the fox's toes are not animated
+        pose = clip.sample(0.3, cm.skeleton, loop=True)
+    moved = np.abs(pose.rotation - cm.skeleton.rest_rotation).max(axis=1) > 1e-3
+    assert moved.sum() >= 10
+    # left stays left: the fox's left thigh drives the bone CesiumMan's geometry calls left
+    assert bone_roles(cm.skeleton)[m["b_LeftLeg01_015"]] == "thigh_l"
+
+
+def test_structure_alone_labels_the_rider_like_its_names():
+    """The CesiumMan path (bones named node<i>): hierarchy + rest geometry give the same roles as
+    the default rider's own names."""
+    rider = default_rider(0)
+    by_name = bone_roles(rider.skeleton)
+    anon = _renamed(rider, {n: f"node{i}" for i, n in enumerate(rider.skeleton.names)})
+    by_structure = bone_roles(anon.skeleton)
+    idx = {f"node{i}": n for i, n in enumerate(rider.skeleton.names)}
+    got = {idx[k]: v for k, v in by_structure.items()}
+    core = ("pelvis", "neck", "head", "thigh_l", "shin_l", "foot_l", "toe_l", "thigh_r", "shin_r", "foot_r", "toe_r",
+            "upperarm_l", "lowerarm_l", "hand_l", "upperarm_r", "lowerarm_r", "hand_r", "spine1", "spine3")
+    for bone, role in by_name.items():
+        if role in core:
+            assert got.get(bone) == role, (bone, role, got.get(bone))
+
+
+def test_mixamo_names_play_the_riders_clip_exactly():
+    rider = default_rider(0)
+    inv = {v: "mixamorig:" + k for k, v in MIXAMO.items()}
+    mix = _renamed(rider, inv)
+    m = builtin_bone_map(mix.skeleton, rider.skeleton)
+    assert all(m[inv[r]] == r for r in inv if r in rider.skeleton.names)
+    clip = retarget_clip(mix.clips["ride"], rider.skeleton)
+    for t in (0.0, 0.4, 0.9):
+        a = rider.clips["ride"].sample(t, rider.skeleton)
+        b = clip.sample(t, rider.skeleton, retarget="none")
+        assert np.allclose(a.rotation, b.rotation) and np.allclose(a.translation, b.translation)
+
+
+def test_explicit_map_and_errors(fox_and_cesium):
+    fox, cm = fox_and_cesium
+    m = {"b_Hip_01": "node2", "b_Spine01_02": "node11"}
+    with pytest.warns(RetargetWarning, match="drives 2 of"):
+        clip = retarget_clip(fox.clips["Run"], cm.skeleton, bone_map=m)
+    assert set(clip.tracks) == {"node2", "node11"}
+    assert clip.skeleton.get("node2") is not None and clip.skeleton.get("b_Hip_01") is None
+    with pytest.raises(ConfigError, match="no bone 'hips' in the clip's skeleton"):
+        retarget_clip(fox.clips["Run"], cm.skeleton, bone_map={"hips": "node2"})
+    with pytest.raises(ConfigError, match="no bone 'nodeX' in the target"):
+        retarget_clip(fox.clips["Run"], cm.skeleton, bone_map={"b_Hip_01": "nodeX"})
+    with pytest.raises(ConfigError, match="both map to 'node2'"):
+        retarget_clip(fox.clips["Run"], cm.skeleton, bone_map={"b_Hip_01": "node2", "b_Spine01_02": "node2"})
+    with pytest.raises(ConfigError, match="'builtin' or a table"):
+        retarget_clip(fox.clips["Run"], cm.skeleton, bone_map="guess")
+
+
+def test_own_skeleton_never_warns():
+    rider = default_rider(0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RetargetWarning)
+        rider.clips["spin"].sample(0.2)
+        assert check_coverage(rider.clips["spin"], rider.skeleton)
