@@ -164,3 +164,18 @@ def test_numba_and_numpy_frames_bit_identical():
             assert np.array_equal(a.indices, b.indices) and np.array_equal(a.patch_ids, b.patch_ids)
             assert np.array_equal(fa, b.factors)
             assert np.array_equal(a.patch_levels, b.patch_levels)
+
+
+@pytest.mark.skipif(not _kernels.HAVE_NUMBA, reason="numba not installed: only the numpy path exists")
+@pytest.mark.parametrize("seed", range(3))
+def test_compiled_cpu_tessellation_bit_identical_to_numpy(seed):
+    net = grid_net(4, 5, seed=seed)
+    rng = np.random.default_rng(seed)
+    levels = rng.choice([4, 6, 8], net.n_edges)
+    pids = np.sort(rng.choice(len(net), 13, replace=False))
+    for patches in (None, pids):
+        a = tessellate(net, levels, patches=patches)
+        b = tessellate(net, levels, patches=patches, use_numba=False)
+        for k in ("positions", "normals", "uv", "uv_lightmap", "uv_projected", "param", "indices", "patch_ids",
+                  "patch_kind", "patch_levels", "vertex_patch", "vertex_start", "tri_start"):
+            assert np.array_equal(getattr(a, k), getattr(b, k)), k

@@ -102,23 +102,39 @@ def frame_indices(key: np.ndarray, base: np.ndarray, tmpl: np.ndarray, tstart: n
 def _gather_cached_py(pids, shape_of, vertex_start, tri_start, src_start, src_level, src_slot, tri_src_start,
                       tris, level_row, grid, vert, indices):
     nf = grid.shape[1]
+    g1 = grid.reshape(-1)
+    v1 = vert.reshape(-1)
+    i1 = indices.reshape(-1)
+    t1 = tris.reshape(-1)
     for i in range(pids.shape[0]):
         p = pids[i]
         g = shape_of[i]
         v0 = vertex_start[i]
         nv = vertex_start[i + 1] - v0
         s0 = src_start[g]
+        n0 = src_level[s0]
+        uniform = True
         for k in range(nv):
-            n = src_level[s0 + k]
-            row = level_row[n] + p * n * n + src_slot[s0 + k]
-            for f in range(nf):
-                vert[v0 + k, f] = grid[row, f]
-        t0 = tri_start[i]
-        nt = tri_start[i + 1] - t0
-        ts = tri_src_start[g]
+            if src_level[s0 + k] != n0 or src_slot[s0 + k] != k:
+                uniform = False
+                break
+        if uniform:  # one contiguous block of the level's grid
+            a = (level_row[n0] + p * n0 * n0) * nf
+            b = v0 * nf
+            for q in range(nv * nf):
+                v1[b + q] = g1[a + q]
+        else:
+            for k in range(nv):
+                n = src_level[s0 + k]
+                a = (level_row[n] + p * n * n + src_slot[s0 + k]) * nf
+                b = (v0 + k) * nf
+                for f in range(nf):
+                    v1[b + f] = g1[a + f]
+        t0 = tri_start[i] * 3
+        nt = (tri_start[i + 1] - tri_start[i]) * 3
+        ts = tri_src_start[g] * 3
         for k in range(nt):
-            for c in range(3):
-                indices[t0 + k, c] = tris[ts + k, c] + v0
+            i1[t0 + k] = t1[ts + k] + v0
 
 
 _gather_cached_nb = _jit(_gather_cached_py)

@@ -30,6 +30,7 @@ from functools import lru_cache
 import numpy as np
 
 from piste.errors import ValidationError
+from piste.terrain import _kernels
 from piste.terrain.bezier import (
     _limit_normals,
     blend_tables,
@@ -486,7 +487,8 @@ def _bilinear_weights(prm: np.ndarray) -> np.ndarray:
     return np.stack([(1 - u) * (1 - v), u * (1 - v), u * v, (1 - u) * v], axis=1).astype(np.float32)
 
 
-def tessellate(net: PatchNet, levels, patches=None, strips: bool = False, cache: bool | None = None) -> TerrainMesh:
+def tessellate(net: PatchNet, levels, patches=None, strips: bool = False, cache: bool | None = None,
+               use_numba: bool | None = None) -> TerrainMesh:
     """Tessellate ``net`` with per-edge ``levels``.
 
     Parameters
@@ -500,6 +502,8 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False, cache:
         default course at levels 4, 6 and 8).  ``False`` evaluates everything this frame with the
         blend tables.  Default: on when the cache stays under 512 MB.  Both give bit-identical
         corners and edges (so both are crack-free); inner points agree to float32 rounding.
+    use_numba : the cached path's gather as one compiled pass (default when numba is installed);
+        False: the numpy path.  Both give bit-identical meshes.
 
     Returns
     -------
@@ -520,9 +524,12 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False, cache:
     key = ((((glue * 65 + m) * 65 + side_lv[:, 0]) * 65 + side_lv[:, 1]) * 65 + side_lv[:, 2]) * 65 + side_lv[:, 3]
     order = np.argsort(key, kind="stable")
     pids, side_lv, m, key, glue = pids[order], side_lv[order], m[order], key[order], glue[order]
-    ukeys, first_of, shape_of = np.unique(key, return_index=True, return_inverse=True)
-    shape_of = shape_of.ravel()
-    shapes = [get_shape(tuple(side_lv[i])) for i in first_of]
+    new = np.empty(len(key), dtype=bool)  # keys are sorted: a shape starts where the key changes
+    new[:1] = True
+    np.not_equal(key[1:], key[:-1], out=new[1:])
+    first_of = np.flatnonzero(new)
+    shape_of = np.cumsum(new) - 1
+    shapes = [get_shape(tuple(side_lv[i].tolist())) for i in first_of]
     s_nv = np.array([sh.n_verts for sh in shapes], dtype=np.int64)
     s_nt = np.array([len(sh.tris) for sh in shapes], dtype=np.int64)
     nv_p, nt_p = s_nv[shape_of], s_nt[shape_of]
@@ -533,14 +540,19 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False, cache:
     if cache is None:
         cache = len(net) * 116 * VERTEX_FLOATS * 4 < 512 * 2**20
     indices = np.empty((T, 3), dtype=np.uint32)
-    if cache:
-        vert = _gather_cached(net, pids, side_lv, m, glue, shapes, shape_of, first_of, vertex_start, n_uniform)
+    if cache and _kernels.HAVE_NUMBA and use_numba is not False:
+        vert = _gather_compiled(net, pids, side_lv, shapes, shape_of, vertex_start, tri_start, indices)
         pos, nrm, param = vert[:, 0:3], vert[:, 3:6], vert[:, 6:8]
         uv, uv_lm, uv_proj = vert[:, 8:10], vert[:, 10:12], vert[:, 12:14]
     else:
-        pos, nrm, param, uv, uv_lm, uv_proj = _evaluate_frame(
-            net, lv, pids, side_lv, m, glue, shapes, shape_of, first_of, vertex_start, n_uniform)
-    _write_indices(indices, shapes, shape_of, first_of, vertex_start, tri_start, n_uniform)
+        if cache:
+            vert = _gather_cached(net, pids, side_lv, m, glue, shapes, shape_of, first_of, vertex_start, n_uniform)
+            pos, nrm, param = vert[:, 0:3], vert[:, 3:6], vert[:, 6:8]
+            uv, uv_lm, uv_proj = vert[:, 8:10], vert[:, 10:12], vert[:, 12:14]
+        else:
+            pos, nrm, param, uv, uv_lm, uv_proj = _evaluate_frame(
+                net, lv, pids, side_lv, m, glue, shapes, shape_of, first_of, vertex_start, n_uniform)
+        _write_indices(indices, shapes, shape_of, first_of, vertex_start, tri_start, n_uniform)
     vpatch = np.repeat(np.arange(len(pids), dtype=np.int32), nv_p)
     strip_buf = _strips(shapes, shape_of, vertex_start) if strips else None
     return TerrainMesh(
@@ -606,6 +618,41 @@ def _write_indices(indices, shapes, shape_of, first_of, vertex_start, tri_start,
         nt = s_nt[so]
         tsrc = _ragged_arange(s_tstart[so], nt)
         indices[tri_start[n_uniform]:] = all_tris[tsrc] + np.repeat(vertex_start[n_uniform:-1], nt)[:, None]
+
+
+def _gather_compiled(net, pids, side_lv, shapes, shape_of, vertex_start, tri_start, indices) -> np.ndarray:
+    """The cached path in one compiled pass (:func:`piste.terrain._kernels.gather_cached`): vertices
+    ``(V, VERTEX_FLOATS)`` float32 returned, ``indices`` filled."""
+    if not len(pids):
+        return np.empty((0, VERTEX_FLOATS), dtype=np.float32)
+    cache = _cache(net)
+    tables = _shape_tables(tuple(sh.levels for sh in shapes))
+    flat, offset = cache.grids(net, tables[-1])
+    level_row = np.zeros(MAX_LEVEL + 1, np.int64)
+    for n, o in offset.items():
+        level_row[n] = o // VERTEX_FLOATS
+    vert = np.empty((int(vertex_start[-1]), VERTEX_FLOATS), dtype=np.float32)
+    _kernels.gather_cached(pids, shape_of, vertex_start, tri_start, *tables[:-1], level_row,
+                           flat.reshape(-1, VERTEX_FLOATS), vert, indices)
+    return vert
+
+
+@lru_cache(maxsize=4096)
+def _shape_tables(levels: tuple):
+    """Flattened per-shape tables of the compiled gather for a tuple of shapes (cached: a moving
+    camera sees the same few combinations): src_start, src_level, src_slot, tri_src_start, tris and
+    the sorted levels used."""
+    shapes = [get_shape(lv) for lv in levels]
+    src = [_glue_sources(lv) for lv in levels]
+    nv = np.array([len(x[0]) for x in src], dtype=np.int64)
+    src_start = np.concatenate([[0], np.cumsum(nv)[:-1]]).astype(np.int64)
+    src_level = np.concatenate([x[0] for x in src]).astype(np.int64) if src else np.zeros(0, np.int64)
+    src_slot = np.concatenate([x[1] for x in src]).astype(np.int64) if src else np.zeros(0, np.int64)
+    nt = np.array([len(sh.tris) for sh in shapes], dtype=np.int64)
+    tri_src_start = np.concatenate([[0], np.cumsum(nt)[:-1]]).astype(np.int64)
+    tris = np.concatenate([sh.tris for sh in shapes]).astype(np.uint32) if shapes else np.zeros((0, 3), np.uint32)
+    used = sorted({n for lv in levels for n in lv})
+    return src_start, src_level, src_slot, tri_src_start, tris, used
 
 
 @lru_cache(maxsize=None)
