@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from piste.errors import ConfigError
+from piste.pipeline.ssx_level import bundle_arrays, level_key
 
 __all__ = ["build_scene", "BuildResult", "default_cache_dir", "BUILD_VERSION", "scene_lights", "scene_cameras"]
 
@@ -205,6 +206,8 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
     # -------------------------------------------------------------- terrain
     ts = scene.terrain
     src = _file_key(ts.path) if ts.path is not None else f"seed {ts.seed}"
+    if ts.kind == "ssx_pbd":  # the .pbd and the texture / light-map banks beside it
+        src = level_key(ts.path)
     terrain_key = content_key(BUILD_VERSION, "terrain", ts.kind, src, ts.seed, ts.spacing, ts.height_scale,
                               ts.height_offset, ts.key, ts.samples_per_patch, ts.smooth,
                               *((ts.nodata, ts.vertical_units) if ts.kind == "geotiff" else ()))
@@ -246,6 +249,8 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
                          lm_spec.gutter, lm_spec.shadows)
 
     def make_lightmap():
+        if ts.kind == "ssx_pbd":  # an SSX level brings its own light maps and textures (pipeline.ssx_level)
+            return bundle_arrays(ts.path), {"stats": {}}
         partial = cache.root / "bake-partial" if cache.root is not None else None
         lm = bake_lightmap(net, lights, res=lm_spec.res, gutter=lm_spec.gutter, shadows=lm_spec.shadows, jobs=jobs,
                            partial_dir=partial, progress=progress)
@@ -259,6 +264,8 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
     la, lmeta = step("lightmap", lm_key, make_lightmap)
     arrays["lightmap/atlas"] = la["atlas"]
     arrays["lightmap/rects"] = la["rects"]
+    if "base_texture" in la:
+        arrays["terrain/base_texture"] = la["base_texture"]
     net.lightmap_rect = la["rects"].copy()
     manifest["lightmap"] = {"res": lm_spec.res, "gutter": lm_spec.gutter, "shadows": lm_spec.shadows,
                             "atlas_size": [int(la["atlas"].shape[1]), int(la["atlas"].shape[0])],

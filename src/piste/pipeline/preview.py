@@ -167,6 +167,8 @@ class ScenePreview:
         kw = {"lod_near": lod.get("near"), "lod_far": lod.get("far"), "lod_morph": lod.get("morph")}
         if bundle.centerline is not None:
             kw.update(track=bundle.centerline, track_half_width=TRACK_HALF_WIDTH)
+        if "terrain/base_texture" in bundle.arrays:  # an SSX level's own textures (pipeline.ssx_level)
+            kw["base_texture"] = bundle.arrays["terrain/base_texture"]
         atlas = bundle.lightmap.atlas
         self.lightmap_mode = man.get("render", {}).get("lightmap_mode", "modulate")
         colors = bundle.vertex_colors()

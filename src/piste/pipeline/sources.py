@@ -26,6 +26,7 @@ import numpy as np
 from piste.errors import ConfigError, FormatError, PisteError
 from piste.formats.limits import MAX_HEIGHTFIELD_SAMPLES
 from piste.formats.safe_io import check_regular
+from piste.pipeline.ssx_level import load_level
 
 #: largest height-field file (PNG, .npz) read
 MAX_HEIGHTFIELD_FILE_BYTES = 1 << 30
@@ -147,6 +148,8 @@ def load_terrain(spec):
         from piste.world.course import default_course
 
         return default_course(spec.seed)
+    if spec.kind == "ssx_pbd":  # UVs into the level's texture atlas (piste.pipeline.ssx_level)
+        return load_level(spec.path).net
     if spec.kind == "bpt":
         return PatchNet.from_bpt(spec.path)
     if spec.kind == "net":

@@ -12,7 +12,10 @@ scene file.  Every table and key is optional except where noted::
 
     [terrain]
     source = "default"            # "default" (the seeded course), a .bpt, a saved net (.npz),
-                                  # a height field: a PNG (8- or 16-bit grey) or an .npz array
+                                  # a height field: a PNG (8- or 16-bit grey) or an .npz array,
+                                  # or an SSX Tricky level (.pbd)
+    ssx_pbd = "LEVEL.pbd"         # (instead of source) an SSX Tricky level: its own textures
+                                  # (LEVEL.ssh) and light maps (LEVEL_L.ssh) from beside it
     seed = 0                      # default course seed
     spacing = 3.125               # height field: metres between samples (or [dx, dy]); an .npz
                                   # may carry 'dx'/'dy' or 'spacing' instead
@@ -511,7 +514,7 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     # terrain
     t = _table(top, "terrain")
     t.allow({"source", "seed", "spacing", "height_scale", "height_offset", "key", "samples_per_patch", "smooth",
-             "nodata", "vertical_units", "tiles", "tile_patches"})
+             "nodata", "vertical_units", "tiles", "tile_patches", "ssx_pbd"})
     source = t.get("source", "str", "default")
     ts = TerrainSpec(seed=t.get("seed", "int", 0), height_scale=t.get("height_scale", "float", 1.0),
                      height_offset=t.get("height_offset", "float", 0.0), key=t.get("key", "str"),
@@ -524,11 +527,17 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     if ts.samples_per_patch < 3:
         raise t.error("samples_per_patch", f"expected at least 3, got {ts.samples_per_patch}")
     _large_world_keys(t, ts, base)
-    if source != "default":
+    if "ssx_pbd" in t.table:  # an SSX Tricky level, its .ssh / _L.ssh beside it (piste.pipeline.ssx_level)
+        if source != "default":
+            raise t.error("ssx_pbd", "give the terrain as source or as ssx_pbd, not both")
+        ts.path, ts.kind = _file(t, "ssx_pbd", base, (".pbd",)), "ssx_pbd"
+    elif source != "default":
         ts.path = _file(t, "source", base)
         suf = ts.path.suffix.lower()
         if suf == ".bpt":
             ts.kind = "bpt"
+        elif suf == ".pbd":
+            ts.kind = "ssx_pbd"
         elif suf in (".tif", ".tiff") and _tiff_is_geotiff(ts.path):
             ts.kind = "geotiff"
         elif suf in HEIGHTFIELD_IMAGES:

@@ -1,0 +1,102 @@
+"""``piste mpf``: SSX Tricky rider models (.mpf).
+
+  piste mpf info RIDER.mpf                      sub-models, bones, palettes, chunks, unknown bytes
+  piste mpf encode OUT.mpf [--model M.glb]      a piste rider (default: the built-in one) as an .mpf,
+                                                with the quantisation report (--report R.json)
+  piste mpf export RIDER.mpf OUT.glb            the decoded rider (+ shared clips) as glTF
+  piste mpf copy RIDER.mpf OUT.mpf              read and write back (byte-identical when unedited)
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from piste.errors import ConfigError
+
+
+def add_arguments(p) -> None:
+    sub = p.add_subparsers(dest="mpf_command", metavar="ACTION")
+    sub.required = True
+    a = sub.add_parser("info", help="list the sub-models, bones, palettes, chunks and unknown bytes")
+    a.add_argument("file", help="an .mpf model file")
+    a.add_argument("--json", action="store_true", help="print JSON")
+    e = sub.add_parser("encode", help="write a piste rider as an SSX Tricky .mpf")
+    e.add_argument("out", help="output .mpf")
+    e.add_argument("--model", default="builtin:rider", help="builtin:rider (default) or a skinned .gltf/.glb")
+    e.add_argument("--ratios", type=float, nargs="+", default=[1.0, 0.5, 0.25],
+                   help="triangle ratio of each LOD (Body3000, Body1500, Body750; default 1 0.5 0.25)")
+    e.add_argument("--report", help="also write the quantisation report as JSON here")
+    x = sub.add_parser("export", help="export the decoded rider with the shared clips to glTF")
+    x.add_argument("file", help="an .mpf (a _body.mpf reads its _head.mpf partner too)")
+    x.add_argument("out", help="output .glb or .gltf")
+    c = sub.add_parser("copy", help="read and write back (byte-identical when nothing changed)")
+    c.add_argument("file")
+    c.add_argument("out")
+
+
+def _info(f) -> dict:
+    out = {"file": f.path, "format_id": f.format_id, "sub_models": [], "unknown": [list(u) for u in f.unknown]}
+    for s in f.models:
+        chunks = [c for lk in s.links for m in lk.meshes for c in m.chunks]
+        out["sub_models"].append({
+            "name": s.name, "file_id": s.file_id, "bones": len(s.bones), "materials": len(s.materials),
+            "ik_points": len(s.ik), "groups": [g.type for g in s.groups], "links": len(s.links),
+            "palettes": len(s.palettes), "morph_keys": s.morph_keys, "chunks": len(chunks),
+            "vertices": int(sum(c.n_vertices for c in chunks)), "triangles": s.n_triangles,
+            "max_chunk_vertices": int(max((c.n_vertices for c in chunks), default=0)),
+            "max_link_matrices": int(max((len(lk.refs) for lk in s.links), default=0))})
+    return out
+
+
+def run(args) -> int:
+    from piste.formats.ssx.mpf import read_mpf, write_mpf
+
+    if args.mpf_command == "info":
+        info = _info(read_mpf(args.file))
+        if args.json:
+            print(json.dumps(info, indent=1))
+            return 0
+        print(f"{args.file}: format id {info['format_id']}, {len(info['sub_models'])} sub-models")
+        for s in info["sub_models"]:
+            print(f"  {s['name']:<16} file {s['file_id']:>3}  bones {s['bones']:>3}  palettes {s['palettes']:>4}  "
+                  f"groups {s['groups']}  links {s['links']:>3}  chunks {s['chunks']:>4}  vertices {s['vertices']:>5}  "
+                  f"triangles {s['triangles']:>5}  morph keys {s['morph_keys']}")
+        for w, o, n, note in info["unknown"]:
+            print(f"  unknown: {w} @ {o} ({n} bytes): {note}")
+        return 0
+    if args.mpf_command == "encode":
+        from piste.formats.ssx.mpf_model import model_to_mpf
+        from piste.pipeline.sources import load_rider_model
+
+        if len(args.ratios) > 3:
+            raise ConfigError("at most three LODs (Body3000, Body1500, Body750)")
+        model = load_rider_model(args.model)
+        f, report = model_to_mpf(model, ratios=tuple(args.ratios))
+        write_mpf(f, args.out)
+        if args.report:
+            from piste.formats.atomic import write_bytes_atomic
+
+            write_bytes_atomic(args.report, json.dumps(report, indent=1).encode())
+        print(f"wrote {args.out}: " + ", ".join(f"{x['name']} {x['triangles']} triangles / {x['palette']} palettes / "
+                                                f"{x['chunks']} chunks" for x in report["lods"]))
+        print(f"weights in {int(report['step'] * 100)} % steps: {report['weights_changed']} vertices changed, max "
+              f"weight error {report['max_weight_error']:.3f}; max position error {report['max_bind_error_m'] * 1000:.4f} mm "
+              f"(bind), {report['max_pose_error_m'] * 1000:.1f} mm ({report['pose']})")
+        return 0
+    if args.mpf_command == "export":
+        from piste.formats.gltf_export import CharacterExport, export_gltf
+        from piste.pipeline.ssx_rider import load_mpf_rider
+
+        model = load_mpf_rider(args.file)
+        r = export_gltf(args.out, characters=[CharacterExport(model, name=model.name)])
+        print(f"wrote {r.path} ({r.bytes} bytes)")
+        return 0
+    if args.mpf_command == "copy":
+        notes = write_mpf(read_mpf(args.file), args.out)
+        same = Path(args.file).read_bytes() == Path(args.out).read_bytes()
+        print(f"wrote {args.out} ({'byte-identical' if same else 'changed'})")
+        for n in notes:
+            print(f"  note: {n}")
+        return 0
+    raise ConfigError(f"unknown action {args.mpf_command!r}")
