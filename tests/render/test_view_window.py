@@ -122,7 +122,8 @@ def test_view_flies_and_draws_riders_under_a_real_x_server(gl_context, xserver, 
         _x(xserver, "mousemove_relative", "--", "40", "0")
         time.sleep(0.4)
         _x(xserver, "mouseup", "1")
-        time.sleep(0.3)
+        _x(xserver, "key", "m")  # ps2 light-map mode: the half-float frame resolved into the window
+        time.sleep(0.8)
         _x(xserver, "key", "Escape")
         out, err = proc.communicate(timeout=60)
     finally:
@@ -132,6 +133,7 @@ def test_view_flies_and_draws_riders_under_a_real_x_server(gl_context, xserver, 
     assert proc.returncode == 0, out[-2000:] + err[-2000:]
     st = json.loads(state.read_text())
     assert st["follow"] is None  # F left the chase camera
+    assert st["toggles"]["lightmap_mode"] == "ps2"
     assert st["max_riders_in_view"] >= 1 and st["max_rider_pixels"] > 50
     # W moved the fly camera along its forward direction
     start = np.array(st["fly_start"]["position"])

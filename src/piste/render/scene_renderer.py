@@ -150,7 +150,7 @@ class SceneRenderer:
                 first += k
         t4 = time.perf_counter()
         frame = self.terrain.draw(cam, mesh, lightmap_mode=lightmap_mode, fog=fog, read=False, timings=tt,
-                                  debug=debug)
+                                  debug=debug)  # a ps2 frame resolves here: the 8-bit frame buffer the rest blends on
         t5 = time.perf_counter()
         vp = frame_vp = cam.with_aspect(w, h).view_projection()
         fog_rgba = (*HORIZON, float(fog)) if fog else None

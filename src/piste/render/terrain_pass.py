@@ -169,8 +169,9 @@ class TerrainPass:
         half_bright : uint8 texels are ``round(128 c)``
 
         Uploaded as a half-float texture, sampled bilinearly, clamped, without mip-maps (tiles have
-        gutters; mip-maps would bleed between patches).  In ``ps2`` mode light above 1.0 saturates
-        (As is clamped to 1 on an 8-bit target).
+        gutters; mip-maps would bleed between patches).  In ``ps2`` mode light above 1.0 survives
+        the blend because :class:`~piste.render.frame.TerrainRenderer` draws ps2 frames into a
+        half-float target (As up to 2.0; on an 8-bit target it would clamp at 1).
         """
         import moderngl
 

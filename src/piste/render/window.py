@@ -202,7 +202,10 @@ def run_window(make_view, camera, size=(640, 448), caption: str = "piste view", 
     try:
         config = pyglet.gl.Config(major_version=3, minor_version=3, forward_compatible=True, depth_size=24,
                                   double_buffer=True)
-        window = pyglet.window.Window(w, h, caption=caption, config=config, resizable=False, vsync=False)
+        # hidden until the view is built and its first frame drawn: input sent to a visible window
+        # before then would queue up and arrive all at once
+        window = pyglet.window.Window(w, h, caption=caption, config=config, resizable=False, vsync=False,
+                                      visible=False)
     except Exception as exc:
         raise RenderError(f"cannot open a {w}x{h} OpenGL 3.3 window: {exc}") from None
     key = pyglet.window.key
@@ -325,6 +328,7 @@ def run_window(make_view, camera, size=(640, 448), caption: str = "piste view", 
                     benchmark_camera = camera
             cams = benchmark_camera if callable(benchmark_camera) else (lambda i: benchmark_camera)
             times = []
+            window.set_visible(True)
             for i in range(int(benchmark) + 5):
                 window.dispatch_events()
                 t0 = time.perf_counter()
@@ -343,6 +347,9 @@ def run_window(make_view, camera, size=(640, 448), caption: str = "piste view", 
             st["end"] = _cam_record(st["cam"])
             return st
 
+        draw_frame()
+        window.flip()
+        window.set_visible(True)
         t_start = last = time.perf_counter()
         last_poll = t_start
         while not st["quit"]:
