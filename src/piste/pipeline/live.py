@@ -163,8 +163,7 @@ class LiveView:
 
     def _hook(self) -> None:
         p = self.live.preview
-        self._with_vis = p.terrain.__dict__.get("visible", p.terrain.visible)
-        self._frustum = type(p.terrain).visible.__get__(p.terrain)
+        self._vis = getattr(p.terrain, "visibility", None)  # the bundle's sets (TerrainRenderer.set_visibility)
 
     @property
     def terrain(self):
@@ -202,7 +201,7 @@ class LiveView:
         from piste.render.window import SceneView, ViewFrame, riders_in_view
 
         p = self.live.preview
-        p.terrain.visible = self._with_vis if opts.visibility else self._frustum
+        p.terrain.set_visibility(self._vis if opts.visibility else None)
         if p.renderer is not None:
             p.scene.visibility = self.live.bundle.visibility if opts.visibility else None
             return SceneView(p.renderer).draw(camera, t, opts)
