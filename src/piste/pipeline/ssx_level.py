@@ -24,6 +24,8 @@ load_level(path, cell=64) -> SsxLevel
 level_files(path) -> (ssh or None, light-map ssh or None)
 bake_level(level, lights, shadows=True, jobs=1) -> BakedPages
 write_baked(level, baked, out_pbd=None) -> (pbd path, _L.ssh path)
+level_key(path) -> str                        content hash of the .pbd and its banks (build cache key)
+bundle_arrays(path) -> {atlas, rects, base_texture}   what ``piste build`` stores for an SSX terrain
 SSX_TRICKY_LOD = {"near": 30.0, "far": 150.0}     the ssx_tricky preset's switch distances (m)
 """
 
@@ -37,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from piste.errors import ConfigError
+from piste.pipeline.cache import content_key
 from piste.formats.ssx.lightmap import base_tiles, light_from_source, reduce_texture, tile_params
 from piste.formats.ssx.pbd import NET_TO_UV, Pbd, default_lightmap_tiles, read_pbd, write_pbd
 from piste.formats.ssx.ssh import (
@@ -49,7 +52,7 @@ from piste.lighting.shadows import shadow_visibility
 from piste.terrain.bezier import evaluate
 
 __all__ = ["SsxLevel", "load_level", "level_files", "bake_level", "BakedPages", "write_baked", "SSX_TRICKY_LOD",
-           "texture_atlas"]
+           "texture_atlas", "level_key", "bundle_arrays"]
 
 #: the ``ssx_tricky`` preset: the game's LOD switch distances (3000 / 15000 units) in metres
 SSX_TRICKY_LOD = {"near": 30.0, "far": 150.0}
@@ -248,3 +251,22 @@ def write_baked(level: SsxLevel, baked: BakedPages, out_pbd=None) -> tuple[Path,
         write_ssh(level.textures, out.with_name(f"{out.stem}.ssh"))  # the new level's own textures
     write_pbd(level.pbd, out)
     return out, lpath
+
+
+# ----------------------------------------------------------------------------- scene builds
+def level_key(path) -> str:
+    """Content hash of ``path`` and the ``.ssh`` / ``_L.ssh`` beside it (a build-cache key part)."""
+    path = Path(path)
+    parts = []
+    for p in (path, *level_files(path)):
+        parts += ["-"] if p is None else [p.name, p.read_bytes()]
+    return content_key("ssx-level/1", *parts)
+
+
+def bundle_arrays(path) -> dict:
+    """What a scene build stores for an SSX terrain (``[terrain] ssx_pbd = ...``): the level's own
+    light map as the bundle's linear ``atlas (h, w, 3) float32`` with its ``rects (n, 4)``, and the
+    level textures as ``base_texture (H, W, 4) uint8`` (the net's UVs point into it)."""
+    level = load_level(path)
+    return {"atlas": level.light.astype(np.float32), "rects": level.net.lightmap_rect.astype(np.float32),
+            "base_texture": level.base_atlas}

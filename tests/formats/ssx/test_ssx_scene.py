@@ -1,0 +1,53 @@
+"""A scene file with `terrain = { ssx_pbd = "LEVEL.pbd" }`: built, rendered with the level's own
+textures and light maps."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from piste.errors import PisteError
+from piste.formats.ssx import make_level
+from piste.pipeline.build import build_scene
+from piste.world.scene_file import load_scene
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    d = tmp_path_factory.mktemp("ssxscene")
+    make_level(rows=2, cols=3, seed=2).write(d, "LV")
+    return d
+
+
+def test_scene_builds_and_renders_the_level(folder, gl):
+    from piste.pipeline import load_bundle
+    from piste.pipeline.preview import ScenePreview
+
+    scene = folder / "scene.toml"
+    scene.write_text('name = "lv"\nterrain = { ssx_pbd = "LV.pbd" }\n\n[render]\nsize = [96, 64]\n')
+    s = load_scene(scene)
+    assert s.terrain.kind == "ssx_pbd" and s.terrain.path.name == "LV.pbd"
+    r = build_scene(scene, use_cache=False)
+    b = load_bundle(r.path)
+    assert b.arrays["terrain/base_texture"].shape[2] == 4
+    assert len(b.net) == 6 and b.lightmap.atlas.max() > 1.0  # the level's own (over-bright) light
+    p = ScenePreview(b, ctx=gl)
+    try:
+        img = p.render().astype(int)
+    finally:
+        p.release() if hasattr(p, "release") else None
+    # the rock texture (patches 1 and 4) is dark brown: textured, not plain snow
+    brown = (img[..., 0] < 150) & (img[..., 2] < img[..., 0])
+    assert brown.mean() > 0.02
+
+
+def test_source_suffix_and_conflicts(folder):
+    scene = folder / "s2.toml"
+    scene.write_text('[terrain]\nsource = "LV.pbd"\n')
+    assert load_scene(scene).terrain.kind == "ssx_pbd"
+    scene.write_text('[terrain]\nsource = "LV.pbd"\nssx_pbd = "LV.pbd"\n')
+    with pytest.raises(PisteError, match="ssx_pbd"):
+        load_scene(scene)
+    scene.write_text('[terrain]\nssx_pbd = "LV.ssh"\n')
+    with pytest.raises(PisteError, match=".pbd"):
+        load_scene(scene)
