@@ -31,3 +31,16 @@ def test_mpf_cli_bad_file(tmp_path, capsys):
     assert main(["mpf", "info", str(tmp_path / "bad.mpf")]) == 2
     err = capsys.readouterr().err
     assert "bad.mpf" in err and "format id 13" in err and len(err.strip().splitlines()) == 1
+
+
+def test_bench_mpf_runs(capsys):
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[3] / "benchmarks" / "bench_mpf.py"
+    spec = importlib.util.spec_from_file_location("bench_mpf", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert mod.main(["--quick", "--rounds", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "3084 / 1542 / 770 triangles in 3 LODs" in out and "read + convert median" in out
