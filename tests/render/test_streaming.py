@@ -125,3 +125,34 @@ def test_far_stand_ins_while_loading_and_cli(world, gl, tmp_path, capsys):
     assert out.stat().st_size > 100 and "4 frame(s) flying at 100 m/s" in text
     assert main(["render", str(tmp_path / "none.tiles")]) == 2
     assert "no such tiled world" in capsys.readouterr().err
+
+
+def test_piste_view_tiles_headless_and_in_a_window(world, gl_context, tmp_path, monkeypatch, capsys):
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    from PIL import Image
+
+    from piste.cli import main
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    out = tmp_path / "v.png"
+    assert main(["view", str(world), "--out", str(out), "--size", "64", "48"]) == 0
+    assert "no display" in capsys.readouterr().err
+    assert np.asarray(Image.open(out)).std() > 5
+    if shutil.which("xvfb-run") is None:
+        if os.environ.get("PISTE_REQUIRE_TOOLS") == "1":
+            pytest.fail("xvfb-run is missing (apt-get install xvfb)")
+        pytest.skip("xvfb-run not installed (apt-get install xvfb)")
+    pytest.importorskip("pyglet")
+    shot = tmp_path / "w.png"
+    cmd = ["xvfb-run", "-a", "-s", "-screen 0 640x480x24", sys.executable, "-m", "piste.cli", "view", str(world),
+           "--size", "96", "64", "--frames", "4", "--out", str(shot)]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=dict(os.environ))
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    assert "4 frames" in r.stdout
+    img = np.asarray(Image.open(shot))
+    assert img.shape == (64, 96, 3) and img.std() > 5

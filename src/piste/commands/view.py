@@ -106,6 +106,10 @@ def run(args) -> int:
 
         args.level = args.scene
         return view_pbd(args)
+    if str(getattr(args, "scene", None) or "").rstrip("/").endswith(".tiles"):  # a tiled world: streamed
+        from piste.render.streaming import view_tiles
+
+        return view_tiles(args)
     if getattr(args, "scene", None):
         from piste.pipeline.live import run_view
 

@@ -44,7 +44,7 @@ from piste.terrain.bezier import evaluate, grid_params
 from piste.terrain.tiles import TileStore
 
 __all__ = ["TileCache", "StreamingRenderer", "TileMesh", "near_mesh", "far_mesh", "mesh_bytes", "fly_path",
-           "render_flight", "render_flight_cli"]
+           "render_flight", "render_flight_cli", "StreamingView", "view_tiles"]
 
 SKY = (0.80, 0.86, 0.93)
 
@@ -192,9 +192,11 @@ class TileCache:
         self.near: dict = {}
         self.far: dict = {}
         self.bounds: dict = {}
+        self.patches: dict = {}
         for key, t in self.index["tiles"].items():
             ty, tx = (int(v) for v in key.split(","))
             self.bounds[(ty, tx)] = np.asarray(t["bounds"], dtype=np.float64)
+            self.patches[(ty, tx)] = int(t["patches"])
         # the bytes of a tile's near mesh, estimated exactly from its patch count
         self._near_estimate = {t: self._near_bytes(int(self.index["tiles"][f"{t[0]},{t[1]}"]["patches"]), t)
                                for t in self.bounds}
@@ -370,11 +372,12 @@ class StreamingRenderer:
         for obj in self._gpu.pop(key)[:4][::-1]:
             obj.release()
 
-    def render(self, camera, wait: bool = False) -> np.ndarray:
+    def render(self, camera, wait: bool = False, read: bool = True) -> np.ndarray | None:
         """One frame from ``camera`` (:class:`piste.world.camera.Camera`): ``(H, W, 3)`` uint8.
 
         ``wait``: block until every wanted near tile is loaded first (offline rendering, tests);
-        otherwise tiles still loading show their far stand-ins.
+        otherwise tiles still loading show their far stand-ins.  ``read=False`` leaves the image in
+        the target (a window's screen) and returns None.
         """
         import moderngl
 
@@ -395,7 +398,7 @@ class StreamingRenderer:
         self.prog["u_eye"].value = tuple(float(x) for x in cam.eye)
         self.prog["u_fog_color"].value = self.background
         self.prog["u_fog"].value = (0.6 * cam.far, cam.far)
-        drawn = {"near": 0, "far": 0, "culled": 0}
+        drawn = {"near": 0, "far": 0, "culled": 0, "near_patches": 0, "far_patches": 0, "triangles": 0}
         live = set()
         for t, level, mesh in self.cache.draw_list():
             b = self.cache.bounds[t]
@@ -408,9 +411,11 @@ class StreamingRenderer:
             live.add(key)
             self._vao(key, mesh).render(moderngl.TRIANGLES)
             drawn[level] += 1
+            drawn[f"{level}_patches"] += self.cache.patches[t]
+            drawn["triangles"] += len(mesh.indices)
         for key in [k for k in self._gpu if k[1] == "near" and k not in live and k[0] not in self.cache.near]:
             self._release(key)  # evicted near tiles leave the GPU too
-        image = self.fbo.read()[..., :3].copy()
+        image = self.fbo.read()[..., :3].copy() if read else None
         self.stats = {**drawn, "resident_bytes": self.cache.resident_bytes, "ms": (time.perf_counter() - t0) * 1e3}
         return image
 
@@ -503,4 +508,91 @@ def render_flight_cli(args) -> int:
           f": {r['frames']} frame(s) flying at {args.speed:g} m/s, median {np.median(ms):.1f} ms "
           f"(max {ms.max():.1f}), resident {r['resident_mb']:.1f} MiB of {args.budget:g}, "
           f"last frame {r['near']} near + {r['far']} far tiles")
+    return 0
+
+
+# ----------------------------------------------------------------------------- piste view WORLD.tiles
+@dataclass
+class _StreamFrame:
+    """What the window's statistics overlay reads of a frame (near patches counted as 8x8, far as 4x4)."""
+
+    patches: int
+    patches_total: int
+    triangles: int
+    kind_counts: dict
+    timings: dict
+
+
+class StreamingView:
+    """A :mod:`piste.render.window` view of a tiled world (fly with the usual keys)."""
+
+    riders = 0
+    has_visibility = False
+
+    def __init__(self, renderer: StreamingRenderer):
+        self.renderer = renderer
+        self.terrain = self  # the window reads ``view.terrain.target`` for screenshots
+
+    @property
+    def target(self):
+        return self.renderer.fbo
+
+    def attach(self, ctx) -> None:
+        from piste.render.context import Offscreen
+
+        self.renderer.fbo.release()
+        self.renderer.fbo = Offscreen.wrap(ctx, ctx.screen)
+
+    def draw(self, camera, t: float, opts):
+        from piste.render.window import ViewFrame
+
+        self.renderer.render(camera, read=False)
+        st = self.renderer.stats
+        total = sum(self.renderer.cache.patches.values())
+        kinds = {4: st["far_patches"], 6: 0, 8: st["near_patches"], 0: 0, -1: 0}
+        frame = _StreamFrame(st["near_patches"] + st["far_patches"], total, st["triangles"], kinds, {})
+        return ViewFrame(camera, frame, {"resident_mb": st["resident_bytes"] / 2**20})
+
+    def release(self) -> None:
+        self.renderer.close()
+
+
+def view_tiles(args) -> int:
+    """``piste view WORLD.tiles``: fly through a tiled world in a window (tiles streamed); without a
+    display, one frame off-screen to ``--out``."""
+    import sys
+
+    from piste.render.window import ViewOptions, has_display, print_benchmark, run_window
+
+    root = Path(args.scene)
+    if not root.is_dir():
+        raise ConfigError(f"{root}: no such tiled world (build one: piste build SCENE with terrain.tiles)")
+    budget = int(float(getattr(args, "budget", None) or 256.0) * 2**20)
+    w, h = (int(x) for x in args.size)
+    index = TileStore(root).read_index()
+    path = list(fly_path(index, max(int(args.benchmark or 1), 1)))
+    if not has_display():
+        from piste.render.context import save_png
+
+        print("piste view: no display, so no window; rendering one frame of the tiled world off-screen to "
+              f"{args.out} instead (run under a desktop or `xvfb-run piste view`)", file=sys.stderr)
+        r = StreamingRenderer(root, size=(w, h), budget_bytes=budget)
+        try:
+            save_png(args.out, r.render(path[0], wait=True))
+        finally:
+            r.close()
+        return 0
+
+    def make(ctx):
+        return StreamingView(StreamingRenderer(root, size=(w, h), budget_bytes=budget, ctx=ctx))
+
+    if args.benchmark:
+        st = run_window(make, path[0], size=(w, h), opts=ViewOptions(), benchmark=args.benchmark,
+                        benchmark_camera=lambda i: path[min(max(i - 5, 0), len(path) - 1)])
+        print_benchmark(st, "tiled world, flying at 100 m/s", (w, h))
+        return 0
+    st = run_window(make, path[0], size=(w, h), caption=f"piste view {root.name}", opts=ViewOptions(),
+                    frames=args.frames, exit_after=args.exit_after, screenshot=args.out if args.frames else None,
+                    state=args.state)
+    print(f"piste view: {st.get('frames', 0)} frames")
     return 0
