@@ -172,8 +172,8 @@ class ResidentTerrain:
             self.level_offset[n] = o
             o += n * n
         self.block = o
-        self._snapshot = None
-        self._build_vertices()
+        self._snapshot = (net.uv.copy(), net.lightmap_rect.copy())
+        self._vertices = None  # built on first use (a frame's LOD and index list do not need them)
         self._build_templates()
         self.edge_mid = np.ascontiguousarray(net.edge_midpoints())
         self.side_edge = np.ascontiguousarray(net.side_edge, dtype=np.int64)
@@ -182,6 +182,13 @@ class ResidentTerrain:
         self.factors = np.ones(-(-slots // 1024) * 1024, dtype=np.float32)  # rows of 1024 (the GPU's texture)
 
     # ------------------------------------------------------------------ build (once)
+    @property
+    def vertices(self) -> np.ndarray:
+        """``(N B, 11) float32``: position, morph target, uv, light-map uv, morph slot (built on first use)."""
+        if self._vertices is None:
+            self._build_vertices()
+        return self._vertices
+
     def _build_vertices(self) -> None:
         net = self.net
         N, B = len(net), self.block
@@ -207,8 +214,7 @@ class ResidentTerrain:
                 continue
             c = self.levels[li - 1]
             blk[..., 3:6] = self._targets(grids[c], c, g, n)
-        self.vertices = out.reshape(N * B, RESIDENT_FLOATS)
-        self._snapshot = (net.uv.copy(), net.lightmap_rect.copy())
+        self._vertices = out.reshape(N * B, RESIDENT_FLOATS)
 
     def _targets(self, gc: np.ndarray, c: int, g: np.ndarray, n: int) -> np.ndarray:
         """Morph targets ``(N, n^2, 3) float32`` of the level-``n`` grids towards the level-``c`` ones."""
@@ -281,7 +287,8 @@ class ResidentTerrain:
 
     @property
     def nbytes(self) -> int:
-        return int(self.vertices.nbytes)
+        """Bytes of the vertex blocks (``N B 44``)."""
+        return len(self.net) * self.block * RESIDENT_FLOATS * 4
 
     # ------------------------------------------------------------------ per frame
     def frame(self, eye, planes=None, near: float = DEFAULT_NEAR, far: float = DEFAULT_FAR, lod: bool = True,
