@@ -163,3 +163,64 @@ def test_decoded_rider_exports_to_gltf(decoded, rider, tmp_path):
     back = load_gltf(tmp_path / "rider.glb")
     assert back.skeleton is not None and back.n_triangles == decoded.meshes[0].n_triangles
     assert "ride" in back.clips or any("ride" in k for k in back.clips)
+
+
+def _head_file(body_sub):
+    """A head file (file id 2): one bone 'hat' parented across files onto the body's 'head', and
+    a small strip weighted 50/50 head/hat and 100 % hat."""
+    from piste.formats.ssx.mpf import BONE_DTYPE, PALETTE_ENTRY_DTYPE, Group, Link, Mesh, MpfFile, SubModel, pack_chunks
+
+    head = body_sub.bone_names.index("head")
+    bones = np.zeros(1, BONE_DTYPE)
+    bones[0] = (b"hat", 0, head, 2, 0, (0.0, 0.0, 15.0), (0.0, 0.0, 0.0), (0, 0, 0), (1, -1, -1, 1, -1, 1))
+    pals = [np.array([(50, head, 0), (50, 0, 2)], PALETTE_ENTRY_DTYPE), np.array([(100, 0, 2)], PALETTE_ENTRY_DTYPE)]
+    n = 6
+    pos = np.array([[x, y, 185.0] for x in (-5.0, 5.0) for y in (-5.0, 0.0, 5.0)], "<f4")
+    slot = np.array([0, 0, 0, 1, 1, 1])
+    uv = np.zeros((n, 4), "<i2")
+    uv[:, 2], uv[:, 3] = 14 + 4 * slot, 114 + 3 * slot
+    nrm = np.tile(np.array([0, 0, 32767], "<i2"), (n, 1))
+    chunks = pack_chunks([np.array([0, 3, 1, 4, 2, 5])], uv, nrm, pos)
+    sub = SubModel(name="Head3000", file_id=2, bones=bones, palettes=pals,
+                   groups=[Group(1, 0, [Link([Mesh(chunks)], np.array([0, 1], "<u4"))])])
+    return MpfFile([sub])
+
+
+def test_head_file_parents_across_files(encoded, tmp_path):
+    from piste.formats.ssx.mpf import write_mpf
+    from piste.pipeline.ssx_rider import load_mpf_rider
+
+    body = parse_mpf(encoded[2])
+    head = parse_mpf(mpf_bytes(_head_file(body.models[0])))
+    m = mpf_to_model(body, head)
+    sk = m.skeleton
+    hat, hd = sk.bone_index("hat"), sk.bone_index("head")
+    assert sk.parents[hat] == hd and sk.n_bones == 26
+    w = sk.bind_pose_world()
+    assert np.allclose(w[hat][:3, 3] - w[hd][:3, 3], [0.0, 0.15, 0.0], atol=1e-6)  # SSX +Z 15 cm = piste +Y
+    hm = next(x for x in m.meshes if x.name == "Head3000")
+    rows = {tuple(sorted((int(j), round(float(x), 2)) for j, x in zip(jj, ww) if x > 0))
+            for jj, ww in zip(hm.joints, hm.weights)}
+    assert rows == {((hd, 0.5), (hat, 0.5)), ((hat, 1.0),)}
+    assert np.allclose(sorted(hm.positions[:, 1]), [1.85] * 6, atol=1e-6)  # SSX z 185 cm = piste y 1.85 m
+    with pytest.raises(Exception, match="file id 0"):
+        mpf_to_model(head)  # the head alone names body bones
+    write_mpf(body, tmp_path / "mac_body.mpf")
+    write_mpf(head, tmp_path / "mac_head.mpf")
+    r = load_mpf_rider(tmp_path / "mac_body.mpf")
+    assert "hat" in r.skeleton.names and set(r.clips) == {"ride", "crouch", "grab", "spin"}
+
+
+def test_encode_a_gltf_rider(gltf_model):
+    src = gltf_model("CesiumMan")
+    f, r = model_to_mpf(src, ratios=(1.0, 0.5), names=("Body3000", "Body1500"))
+    assert r["max_chunk_vertices"] <= 55 and r["max_link_matrices"] <= 25
+    assert r["max_bind_error_m"] < 1e-5 and r["bone_scale_dropped"] < 1e-4
+    assert 0 < r["max_pose_error_m"] < 0.1 * src.size()
+    m = mpf_to_model(parse_mpf(mpf_bytes(f)))
+    assert m.skeleton.names == src.skeleton.names and m.lods[0].n_triangles == src.n_triangles
+    fox = gltf_model("Fox")
+    f, r = model_to_mpf(fox, ratios=(1.0,), names=("Body3000",))
+    assert r["renamed_bones"] and all(len(v) <= 16 for v in r["renamed_bones"].values())
+    names = mpf_to_model(parse_mpf(mpf_bytes(f))).skeleton.names
+    assert len(set(names)) == fox.skeleton.n_bones and all(len(n) <= 16 for n in names)

@@ -399,12 +399,18 @@ def _bone_records(sk: Skeleton, file_id: int, report: dict) -> np.ndarray:
     t = (local[:, :3, 3] @ a.T) / CM
     e = matrix_to_euler(a @ rot @ a.T)
     b = np.zeros(sk.n_bones, BONE_DTYPE)
-    names = []
+    names, renamed = [], {}
     for i, n in enumerate(sk.names):
         enc = n.encode("ascii", "replace")
-        if len(enc) > 16:
-            raise ConfigError(f"bone name {n!r} is longer than the 16 characters an .mpf bone name holds")
+        if len(enc) > 16:  # an .mpf bone name holds 16 characters: shorten, keep names unique
+            enc = enc[:16]
+            k = 0
+            while enc in names or any(enc == x.encode("ascii", "replace") for x in sk.names[i + 1:]):
+                k += 1
+                enc = enc[:16 - len(str(k)) - 1] + b"~" + str(k).encode()
+            renamed[n] = enc.decode("ascii")
         names.append(enc)
+    report["renamed_bones"] = renamed
     b["name"] = names
     b["parent_file"] = np.where(has, file_id, -1)
     b["parent_bone"] = np.where(has, par, -1)
@@ -508,7 +514,8 @@ def model_to_mpf(model, ratios=(1.0, 0.5, 0.25), names=("Body3000", "Body1500", 
     ``max_bind_error_m`` (position round trip), ``max_pose_error_m`` (file palettes vs exact
     skinning with the original weights at ``pose_time`` of ``clip``, default: mid first clip),
     ``morph_max_error_m``, ``morph_clipped``, ``uv_clipped``, ``max_link_matrices``,
-    ``max_chunk_vertices``, ``bone_scale_dropped``.
+    ``max_chunk_vertices``, ``bone_scale_dropped`` (largest bind-matrix scale departure from 1,
+    which the file cannot hold), ``renamed_bones`` (names longer than 16 characters, shortened).
     """
     sk = model.skeleton
     if sk is None:
