@@ -30,6 +30,7 @@ BUILD_VERSION
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -275,32 +276,44 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
     manifest["characters"] = {}
     manifest["riders"] = []
     if scene.riders:
-        models = sorted({r.model for r in scene.riders})
-        if len(models) > 1:
-            raise ConfigError(f"{scene.path}: all riders must share one model (the renderer draws one rider model "
-                              f"per scene), got {', '.join(models)}")
-        model = models[0]
-        msrc = model if model.startswith("builtin:") else _file_key(model)
+        # one character per rider model (any number: each its own LODs, palettes, batches, clips);
+        # the first keeps the id "rider", the others "rider2", "rider3", ... in the order of the file
+        models = list(dict.fromkeys(r.model for r in scene.riders))
         ratios = tuple(scene.lod.ratios)
-        ch_key = content_key(BUILD_VERSION, "characters", msrc, ratios)
+        cid_of = {}
+        steps_done = []
+        for k, model in enumerate(models):
+            msrc = model if model.startswith("builtin:") else _file_key(model)
+            own = [r for r in scene.riders if r.model == model]
+            clip_srcs = sorted({(r.clips_from, json.dumps(r.bone_map, sort_keys=True)) for r in own if r.clips_from})
+            ch_key = content_key(BUILD_VERSION, "characters", msrc, ratios, [(_file_key(f), b) for f, b in clip_srcs])
 
-        def make_characters():
-            from piste.pipeline.characters import character_arrays
-            from piste.pipeline.sources import load_rider_model
+            def make_characters(model=model, clip_srcs=clip_srcs):
+                from piste.pipeline.characters import character_arrays
+                from piste.pipeline.sources import add_rider_clips, load_rider_model
 
-            return character_arrays(load_rider_model(model, allow_paths=scene.allow_paths), ratios=ratios)
+                m = load_rider_model(model, allow_paths=scene.allow_paths)
+                m = add_rider_clips(m, [(f, json.loads(b)) for f, b in clip_srcs], allow_paths=scene.allow_paths)
+                return character_arrays(m, ratios=ratios)
 
-        ca, cmeta = step("characters", ch_key, make_characters)
-        cid = "rider"
-        for k, v in ca.items():
-            arrays[f"characters/{cid}/{k}"] = v
-        cmeta = dict(cmeta)
-        cmeta["model"] = model if model.startswith("builtin:") else Path(model).name
-        manifest["characters"][cid] = cmeta
+            ca, cmeta = step("characters", ch_key, make_characters)
+            steps_done.append(result.steps["characters"])
+            cid = "rider" if k == 0 else f"rider{k + 1}"
+            cid_of[model] = cid
+            for name, v in ca.items():
+                arrays[f"characters/{cid}/{name}"] = v
+            cmeta = dict(cmeta)
+            cmeta["model"] = model if model.startswith("builtin:") else Path(model).name
+            manifest["characters"][cid] = cmeta
+        result.steps["characters"] = {"cached": all(d["cached"] for d in steps_done),
+                                      "seconds": sum(d["seconds"] for d in steps_done),
+                                      "key": steps_done[0]["key"], "models": len(models)}
         from piste.pipeline.sources import rider_matrices
 
         arrays["riders/matrix"] = rider_matrices(net, scene.riders)
         for r in scene.riders:
+            cid = cid_of[r.model]
+            cmeta = manifest["characters"][cid]
             clip = r.clip or next(iter(sorted(cmeta["clips"])), None)
             if clip is not None and clip not in cmeta["clips"]:
                 raise ConfigError(f"{scene.path}, line {r.line}: rider {r.name!r}: no clip {clip!r} in its model; "

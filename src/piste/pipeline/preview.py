@@ -32,6 +32,7 @@ import numpy as np
 from piste.character import BlendedMesh
 from piste.errors import ConfigError
 from piste.pipeline.bundle_objects import camera_from_dict
+from piste.pipeline.characters import lods_from_arrays, model_from_arrays
 from piste.render.context import create_context, save_png
 from piste.render.frame import DEFAULT_FOG_DENSITY, TerrainRenderer
 from piste.render.object_pass import ObjectPass
@@ -83,31 +84,61 @@ def clip_table(bundle, character: str = "rider") -> ClipTable:
     meta = bundle.manifest["characters"][character]
     prefix = f"characters/{character}/clips/"
     names = sorted(meta["clips"])
-    return ClipTable.from_samples(bundle.rider_model().skeleton, float(meta.get("rate", 30.0)), names,
+    skeleton = (bundle.rider_model() if character == _first_character(bundle) else
+                model_from_arrays(bundle.arrays, f"characters/{character}/", meta)).skeleton
+    return ClipTable.from_samples(skeleton, float(meta.get("rate", 30.0)), names,
                                   [meta["clips"][n]["duration"] for n in names],
                                   [bundle.arrays[prefix + n + "/translation"] for n in names],
                                   [bundle.arrays[prefix + n + "/rotation"] for n in names],
                                   [bundle.arrays[prefix + n + "/scale"] for n in names])
 
 
-class BundleScene(Scene):
-    """A :class:`piste.world.scene.Scene` made from a bundle (riders placed, visibility applied)."""
+def _first_character(bundle) -> str:
+    chars = bundle.manifest.get("characters") or {}
+    return "rider" if "rider" in chars else next(iter(chars), "rider")
 
-    def __init__(self, bundle):  # noqa: D401 - Scene's own __init__ builds the default pack
+
+class BundleScene(Scene):
+    """A :class:`piste.world.scene.Scene` made from a bundle (riders placed, visibility applied).
+
+    A bundle with several rider models (characters ``rider``, ``rider2``, ...): this scene holds
+    the first one's riders and the objects; :attr:`casts` holds one BundleScene per other model
+    (``character=``), which :class:`~piste.render.scene_renderer.SceneRenderer` draws with it.
+    """
+
+    def __init__(self, bundle, character: str | None = None):  # noqa: D401 - Scene's own __init__ builds the default pack
         man = bundle.manifest
+        first = _first_character(bundle)
+        cid = character or first
         self.bundle = bundle
+        self.character = cid
         self.net = bundle.net
         self.line = bundle.centerline
         self.lights = bundle.lights
         self.sun = sun_light(self.lights)
-        self.model = bundle.rider_model()
-        self.lods = bundle.rider_lods()
+        if cid == first:
+            self.model = bundle.rider_model()
+            self.lods = bundle.rider_lods()
+        else:
+            meta = man["characters"][cid]
+            self.model = model_from_arrays(bundle.arrays, f"characters/{cid}/", meta)
+            self.lods = lods_from_arrays(bundle.arrays, f"characters/{cid}/", meta, self.model)
         self.skinners = [BlendedMesh(lod.palette, lod.mesh.positions, lod.mesh.normals) for lod in self.lods]
-        riders = man.get("riders", [])
-        rate = float(next(iter(man["characters"].values())).get("rate", 30.0))
-        self.riders = PlacedRiders(self.model, bundle.arrays["riders/matrix"], [r["clip"] for r in riders],
-                                   [r["phase"] for r in riders], rate=rate, table=clip_table(bundle))
+        all_riders = man.get("riders", [])
+        mine = [i for i, r in enumerate(all_riders) if r.get("character", first) == cid]
+        riders = [all_riders[i] for i in mine]
+        rate = float(man["characters"][cid].get("rate", 30.0))
+        self.riders = PlacedRiders(self.model, np.asarray(bundle.arrays["riders/matrix"])[mine], [r["clip"] for r in riders],
+                                   [r["phase"] for r in riders], rate=rate, table=clip_table(bundle, cid))
         self.follow = 0
+        self.casts = [BundleScene(bundle, c) for c in (man.get("characters") or {}) if c != cid] \
+            if character is None else []
+        if character is not None and cid != first:  # a cast: riders only
+            self.objects = None
+            self.lod_distances = tuple(man.get("lod", {}).get("character", LOD_DISTANCES))
+            self.camera_kw = {}
+            self.visibility = None
+            return
         self.objects = bundle.objects()
         self.lod_distances = tuple(man.get("lod", {}).get("character", LOD_DISTANCES))
         self.camera_kw = {}

@@ -69,7 +69,8 @@ class SceneRenderer:
         ``riders``, ``update(t, aspect, camera=...)``; e.g. ``Scene(net, line, lights, model=m,
         pack=pack_for(m, 3))``) animated, skinned, lit, shadowed and drawn with the scene's own
         riders, each model with its own LODs, palettes and textures.  ``scene`` keeps the camera
-        and the objects.
+        and the objects.  Default: ``scene.casts`` when the scene has them (a bundle with several
+        rider models, :class:`piste.pipeline.preview.BundleScene`).
     """
 
     def __init__(self, scene, size=(640, 448), ctx=None, lightmap="placeholder", object_lighting: str = "dynamic",
@@ -85,6 +86,7 @@ class SceneRenderer:
         terrain_kw.setdefault("track_half_width", TRACK_HALF_WIDTH)
         self.terrain = TerrainRenderer(scene.net, size=size, ctx=ctx, lightmap=lightmap, **terrain_kw)
         self.ctx = self.terrain.ctx
+        casts = list(casts) or list(getattr(scene, "casts", None) or ())  # a bundle scene lists its own
         self.casts = [scene] + [c for c in casts if len(c.riders)]
         n = sum(len(c.riders) for c in self.casts)
         self.cast_passes = [
