@@ -120,3 +120,79 @@ def test_own_skeleton_never_warns():
         warnings.simplefilter("error", RetargetWarning)
         rider.clips["spin"].sample(0.2)
         assert check_coverage(rider.clips["spin"], rider.skeleton)
+
+
+def test_baked_relative_equals_sampled_relative(fox_and_cesium):
+    """mode="relative" bakes the rule into the keys: sampling the baked clip with no retargeting
+    gives the pose Clip.sample computes with retarget="relative" from the renamed clip."""
+    fox, cm = fox_and_cesium
+    renamed = retarget_clip(fox.clips["Run"], cm.skeleton, warn=False)
+    baked = retarget_clip(fox.clips["Run"], cm.skeleton, warn=False, mode="relative")
+    assert baked.skeleton is cm.skeleton
+    for t in (0.1, 0.37, 0.6):
+        a = renamed.sample(t, cm.skeleton, retarget="relative")
+        b = baked.sample(t, cm.skeleton)
+        dots = np.abs((a.rotation * b.rotation).sum(1))
+        assert np.allclose(dots, 1.0, atol=1e-9) and np.allclose(a.translation, b.translation, atol=1e-9)
+
+
+def _scene(folder, rider_extra):
+    import shutil
+
+    shutil.copy(DATA / "Fox" / "Fox.glb", folder / "Fox.glb")
+    n, spacing = 17, 4.0
+    y, x = np.mgrid[0:n, 0:n] * spacing
+    np.savez(folder / "hill.npz", z=30.0 - 0.3 * y, dx=np.float64(spacing))
+    p = folder / "s.toml"
+    p.write_text(f"""name = "fox run"
+[terrain]
+source = "hill.npz"
+[lightmap]
+res = 8
+[visibility]
+enabled = false
+[[riders]]
+name = "runner"
+position = [30.0, 30.0]
+{rider_extra}
+[[cameras]]
+name = "main"
+eye = [30.0, 10.0, 30.0]
+target = [30.0, 30.0, 20.0]
+""")
+    return p
+
+
+def test_scene_file_clips_from_with_bone_map(tmp_path):
+    """A scene's rider plays the Fox's Run on the default rider through the built-in map (and an
+    explicit table); bad bone_map values name the key."""
+    from piste.pipeline.build import build_scene
+    from piste.pipeline.bundle_objects import load_bundle
+    from piste.world.scene_file import SceneError, load_scene
+
+    p = _scene(tmp_path, 'clip = "Run"\nclips_from = "Fox.glb"\nbone_map = "builtin"')
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RetargetWarning)
+        b = load_bundle(build_scene(load_scene(p), out=tmp_path / "s.piste").path)
+    m = b.rider_model()
+    assert "Run" in m.clips and {"ride", "spin"} <= set(m.clips)
+    pose = m.clips["Run"].sample(0.3, m.skeleton, loop=True)
+    moved = np.abs(np.abs((pose.rotation * m.skeleton.rest_rotation).sum(1)) - 1) > 1e-4
+    assert moved.sum() >= 8
+    # an explicit table: only those bones move
+    d2 = tmp_path / "explicit"
+    d2.mkdir()
+    p2 = _scene(d2, 'clip = "Run"\nclips_from = "Fox.glb"\nbone_map = { b_Spine01_02 = "spine1", b_Neck_04 = "neck" }')
+    with pytest.warns(RetargetWarning, match="drives 2 of"):
+        b2 = load_bundle(build_scene(load_scene(p2), out=d2 / "s.piste").path)
+    m2 = b2.rider_model()
+    pose = m2.clips["Run"].sample(0.3, m2.skeleton, loop=True)
+    moved = np.abs(np.abs((pose.rotation * m2.skeleton.rest_rotation).sum(1)) - 1) > 1e-6
+    assert {m2.skeleton.names[i] for i in np.flatnonzero(moved)} <= {"spine1", "neck"} and moved.any()
+    for extra, match in (('clips_from = "Fox.glb"\nbone_map = 3', "riders\\[0\\].bone_map"),
+                         ('bone_map = "builtin"', "needs clips_from"),
+                         ('clips_from = "nope.glb"', "no such file")):
+        d3 = tmp_path / f"bad{len(extra)}"
+        d3.mkdir()
+        with pytest.raises(SceneError, match=match):
+            load_scene(_scene(d3, extra))

@@ -27,7 +27,8 @@ API
 bone_roles(skeleton) -> {bone name: role}
 builtin_bone_map(source, target) -> {source bone: target bone}
 resolve_bone_map(bone_map, source, target) -> dict    ("builtin", a dict, or None = same names)
-retarget_clip(clip, target, bone_map="builtin", source=None, warn=True) -> Clip
+retarget_clip(clip, target, bone_map="builtin", source=None, warn=True, mode=None) -> Clip
+add_clips(model, source_model, bone_map="builtin", clips=None, mode="relative") -> Model
 coverage(clip, target) -> (driven, unmatched)         target joint names
 check_coverage(clip, target, min_fraction=0.5)        warn when fewer than half are driven
 """
@@ -41,8 +42,9 @@ from dataclasses import replace
 import numpy as np
 
 from piste.errors import ConfigError
+from piste.transforms import quat_conjugate, quat_multiply
 
-__all__ = ["RetargetWarning", "ROLES", "bone_roles", "builtin_bone_map", "resolve_bone_map", "retarget_clip",
+__all__ = ["RetargetWarning", "ROLES", "bone_roles", "builtin_bone_map", "resolve_bone_map", "retarget_clip", "add_clips",
            "coverage", "check_coverage"]
 
 _LIMBS = ("clavicle", "upperarm", "lowerarm", "hand", "thigh", "shin", "foot", "toe")
@@ -293,15 +295,21 @@ def resolve_bone_map(bone_map, source, target) -> dict[str, str]:
     return dict(bone_map)
 
 
-def retarget_clip(clip, target, bone_map="builtin", source=None, warn: bool = True, name: str | None = None):
+def retarget_clip(clip, target, bone_map="builtin", source=None, warn: bool = True, name: str | None = None,
+                  mode: str | None = None):
     """A copy of ``clip`` whose tracks are named for ``target``'s bones.
 
     ``source``: the clip's skeleton (default ``clip.skeleton``); ``bone_map``: see
-    :func:`resolve_bone_map`.  The returned clip's ``skeleton`` is the source skeleton with its
-    bones renamed the same way (so the ``scaled``/``relative`` retarget rules compare the right
-    rest bones); play it with ``clip.sample(t, target)``.  Warns (:class:`RetargetWarning`) when it
-    drives fewer than half of the target's joints.
+    :func:`resolve_bone_map`.  With ``mode=None`` the returned clip's ``skeleton`` is the source
+    skeleton with its bones renamed the same way (so the ``scaled``/``relative`` rules of
+    :meth:`Clip.sample` compare the right rest bones); play it with ``clip.sample(t, target)``.
+    With ``mode="relative"`` or ``"scaled"`` that rule is baked into the keys (exactly: both are
+    affine in the key values, so LINEAR, STEP and CUBICSPLINE tangents transform alike) and the
+    clip belongs to ``target`` (``clip.skeleton is target``).  Warns (:class:`RetargetWarning`)
+    when it drives fewer than half of the target's joints.
     """
+    if mode not in (None, "relative", "scaled"):
+        raise ConfigError(f"retarget mode must be 'relative', 'scaled' or None, got {mode!r}")
     src = source if source is not None else clip.skeleton
     if src is None:
         raise ConfigError(f"clip {clip.name!r} has no skeleton: pass source=")
@@ -321,8 +329,47 @@ def retarget_clip(clip, target, bone_map="builtin", source=None, warn: bool = Tr
     renamed = type(src)(names, src.parents, src.rest_translation, src.rest_rotation, src.rest_scale, src.inverse_bind,
                         src.node_index, src.is_joint)
     out = replace(clip, name=name or clip.name, tracks=tracks, skeleton=renamed)
+    if mode is not None:
+        out = replace(out, tracks=_bake(out.tracks, renamed, target, mode), skeleton=target)
     if warn:
         check_coverage(out, target)
+    return out
+
+
+def _bake(tracks, src, dst, mode: str) -> dict:
+    """Tracks with the ``scaled`` / ``relative`` retarget rule applied to every key (and tangent)."""
+    out = {}
+    for bone, bt in tracks.items():
+        i, j = src.get(bone), dst.get(bone)
+        nb = {}
+        for path, tr in bt.items():
+            if path == "rotation":
+                if mode == "relative":
+                    q = quat_multiply(dst.rest_rotation[j], quat_conjugate(src.rest_rotation[i]))
+                    f = lambda v, q=q: quat_multiply(np.broadcast_to(q, v.shape), v)  # noqa: E731
+                else:
+                    f = lambda v: v  # noqa: E731
+                lin = f
+            elif path == "translation":
+                ls = float(np.linalg.norm(src.rest_translation[i]))
+                ratio = float(np.linalg.norm(dst.rest_translation[j])) / ls if ls > 1e-12 else 1.0
+                if mode == "relative":
+                    f = lambda v, a=dst.rest_translation[j], b=src.rest_translation[i], k=ratio: a + k * (v - b)  # noqa: E731
+                else:
+                    f = lambda v, k=ratio: k * v  # noqa: E731
+                lin = lambda v, k=ratio: k * v  # noqa: E731
+            else:  # scale
+                if mode == "relative":
+                    safe = np.where(np.abs(src.rest_scale[i]) > 1e-12, src.rest_scale[i], 1.0)
+                    f = lambda v, a=dst.rest_scale[j], b=safe: a * v / b  # noqa: E731
+                    lin = f
+                else:
+                    f = lin = lambda v: v  # noqa: E731
+            kw = {}
+            if tr.interpolation == "CUBICSPLINE":
+                kw = {"in_tangents": lin(tr.in_tangents), "out_tangents": lin(tr.out_tangents)}
+            nb[path] = type(tr)(tr.times.copy(), f(tr.values), tr.interpolation, **kw)
+        out[bone] = nb
     return out
 
 
@@ -345,3 +392,21 @@ def check_coverage(clip, target, min_fraction: float = 0.5) -> bool:
                   f"(give a bone map: piste.character.retarget.retarget_clip(clip, skeleton, bone_map='builtin' "
                   f"or {{source: target}}), or a scene file's bone_map)", RetargetWarning, stacklevel=3)
     return False
+
+
+def add_clips(model, source_model, bone_map="builtin", clips=None, mode: str = "relative", warn: bool = True):
+    """A copy of ``model`` with ``source_model``'s clips (all, or the names in ``clips``) retargeted
+    onto it (baked with ``mode``) and added; a name the model already has gets the source model's
+    name in front (``"Fox:Run"``)."""
+    if model.skeleton is None or source_model.skeleton is None:
+        raise ConfigError("add_clips: both models need a skeleton")
+    names = list(source_model.clips) if clips is None else list(clips)
+    missing = [n for n in names if n not in source_model.clips]
+    if missing:
+        raise ConfigError(f"{source_model.name}: no clip {missing[0]!r} (clips: {', '.join(source_model.clips)})")
+    new = dict(model.clips)
+    for n in names:
+        key = n if n not in new else f"{source_model.name}:{n}"
+        new[key] = retarget_clip(source_model.clips[n], model.skeleton, bone_map, source_model.skeleton, warn=warn,
+                                 name=key, mode=mode)
+    return replace(model, clips=new)

@@ -140,6 +140,7 @@ def terrain_levels(bundle, level):
 def bundle_parts(bundle, level=4, with_base_texture: bool = True) -> dict:
     """Keyword arguments of :func:`piste.formats.gltf_export.export_gltf` for a loaded bundle."""
     from piste.formats.gltf_export import CharacterExport, ObjectsExport, TerrainExport
+    from piste.pipeline.characters import model_from_arrays
 
     base = None
     if with_base_texture:
@@ -147,12 +148,17 @@ def bundle_parts(bundle, level=4, with_base_texture: bool = True) -> dict:
 
         base = snow_texture()
     parts = {"terrain": TerrainExport(bundle.net, bundle.lightmap.atlas, terrain_levels(bundle, level), base)}
-    model = bundle.rider_model()
+    info = bundle.manifest.get("characters") or {}
+    models: dict = {}
     chars = []
-    if model is not None:
+    if info:
         mats = bundle.arrays["riders/matrix"]
         for i, r in enumerate(bundle.manifest.get("riders", [])):
             name = r.get("name") or f"rider{i}"
+            cid = r.get("character") or sorted(info)[0]
+            if cid not in models:  # each rider model of the scene (riders of one model share it)
+                models[cid] = model_from_arrays(bundle.arrays, f"characters/{cid}/", info[cid])
+            model = models[cid]
             chars.append(CharacterExport(model, mats[i], name=name, clips=[r["clip"]] if r.get("clip") else [],
                                          prefix=f"{name}:", extras={"piste_rider": {"clip": r.get("clip"),
                                                                                     "phase": float(r.get("phase", 0.0))}}))

@@ -11,6 +11,7 @@ API
 ---
 load_terrain(spec) -> PatchNet               a TerrainSpec's net
 load_rider_model(model) -> Model             "builtin:rider" or a glTF file
+add_rider_clips(model, [(file, bone_map)])   clips from other glTF files, retargeted (riders' clips_from)
 load_object_mesh(model) -> ObjectMesh        "builtin:<kind>" or a glTF file (meshes merged, Z up)
 rider_matrices(net, riders) -> (n, 4, 4)     rider space (Y up, board along +X) -> world
 object_matrices(net, objects, meshes) -> (m, 4, 4)   object space (Z up) -> world
@@ -23,7 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
+from piste.character.retarget import add_clips
 from piste.errors import ConfigError, FormatError, PisteError
+from piste.formats.gltf import load_gltf
 from piste.formats.limits import MAX_HEIGHTFIELD_SAMPLES
 from piste.formats.safe_io import check_regular
 from piste.pipeline.ssx_level import load_level
@@ -180,6 +183,17 @@ def load_rider_model(model: str, allow_paths=()):
     if m.skeleton is None or not m.clips:
         raise ConfigError(f"{model}: a rider model needs a skin and at least one animation")
     return m
+
+
+def add_rider_clips(model, sources, allow_paths=()):
+    """``model`` with the clips of each ``(file, bone_map)`` in ``sources`` retargeted onto it
+    (:func:`piste.character.retarget.add_clips`, relative rule baked; a scene's ``clips_from``)."""
+    for file, bone_map in sources:
+        src = load_gltf(file, allow_paths=allow_paths)
+        if src.skeleton is None or not src.clips:
+            raise ConfigError(f"{file}: clips_from needs a file with a skin and at least one animation")
+        model = add_clips(model, src, bone_map if bone_map is not None else "builtin")
+    return model
 
 
 def load_object_mesh(model: str, allow_paths=()):

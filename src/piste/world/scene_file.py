@@ -69,6 +69,8 @@ scene file.  Every table and key is optional except where noted::
     heading = 0.0                 # degrees about +z, 0 = travelling +y (down the course)
     clip = "ride"
     phase = 0.0                   # seconds into the clip at t = 0
+    clips_from = "Fox.glb"        # optional: play this file's clips, retargeted onto the model
+    bone_map = "builtin"          #   by the built-in map, or { "b_Hip_01" = "pelvis", ... }
     scale = 1.0
 
     [[objects]]
@@ -262,6 +264,8 @@ class ActorSpec:
     phase: float = 0.0
     scale: float = 1.0
     line: int | None = None
+    clips_from: str | None = None     # riders: a glTF file whose clips are retargeted onto the model
+    bone_map: object = None           # riders: "builtin" or {clip bone: model bone} (piste.character.retarget)
 
     @property
     def builtin(self) -> str | None:
@@ -599,7 +603,8 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     names = set()
     for kind in ("riders", "objects"):
         for i, a in enumerate(_array(top, kind)):
-            keys = {"name", "model", "position", "heading", "scale"} | ({"clip", "phase"} if kind == "riders" else set())
+            keys = {"name", "model", "position", "heading", "scale"} | (
+                {"clip", "phase", "clips_from", "bone_map"} if kind == "riders" else set())
             a.allow(keys)
             default_model = "builtin:rider" if kind == "riders" else None
             model = a.get("model", "str", default_model, required=default_model is None)
@@ -621,6 +626,15 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
             names.add(name)
             spec = ActorSpec(name, model, a.get("position", "vec23", required=True), a.get("heading", "float", 0.0),
                              a.get("clip", "str"), a.get("phase", "float", 0.0), a.get("scale", "pos", 1.0), a.line())
+            if "clips_from" in a.table:
+                spec.clips_from = str(_file(a, "clips_from", base, (".gltf", ".glb")))
+                bm = a.table.get("bone_map", "builtin")
+                if not (bm == "builtin" or (isinstance(bm, dict) and all(
+                        isinstance(k, str) and isinstance(v, str) for k, v in bm.items()))):
+                    raise a.error("bone_map", f"expected \"builtin\" or a table of clip bone = \"model bone\", got {bm!r}")
+                spec.bone_map = bm
+            elif "bone_map" in a.table:
+                raise a.error("bone_map", "needs clips_from = \"<a .gltf/.glb with the clips>\"")
             (scene.riders if kind == "riders" else scene.objects).append(spec)
 
     # lights
