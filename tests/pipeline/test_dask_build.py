@@ -107,3 +107,43 @@ def test_cli_build_tiled_scene_with_dask_local(tmp_path, capsys):
         from piste.pipeline.dask_build import dask_client
 
         dask_client(scheduler="localhost:1")
+
+
+class _KillOnce(SyntheticSource):
+    """A synthetic source whose first read of one window kills the worker process running it."""
+
+    def window(self, rows, cols):
+        import os
+
+        marker = Path(os.environ["PISTE_TEST_KILL_MARKER"])
+        if rows.start == 12 and cols.start == 12 and not marker.exists():
+            marker.write_text("killed")
+            os._exit(1)  # the worker dies mid-task, as if killed
+        return super().window(rows, cols)
+
+
+@pytest.mark.slow
+def test_killed_worker_resumes_byte_identical(tmp_path, monkeypatch):
+    import dataclasses
+    import sys
+
+    distributed = pytest.importorskip("distributed")
+    import cloudpickle
+
+    from piste.pipeline.dask_build import build_tiles_dask
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    monkeypatch.setenv("PISTE_TEST_KILL_MARKER", str(tmp_path / "killed"))
+    local = synthetic_spec(tmp_path / "local", 12, tile_patches=4, res=2, spacing=20.0)
+    build_tiles(local)
+    spec = synthetic_spec(tmp_path / "dask", 12, tile_patches=4, res=2, spacing=20.0)
+    spec.source = _KillOnce(**{f.name: getattr(spec.source, f.name) for f in dataclasses.fields(SyntheticSource)})
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, protocol="tcp://",
+                                  host="127.0.0.1", dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        r = build_tiles_dask(spec, client)
+    assert (tmp_path / "killed").exists()  # a worker really died (tile (1, 1)'s fit)
+    # tasks whose results died with the worker are re-run by Dask; those whose tiles were already
+    # written find them on disk and skip the work
+    assert r.built + r.skipped == 18 and r.built >= 9
+    assert _files(tmp_path / "dask") == _files(tmp_path / "local")
