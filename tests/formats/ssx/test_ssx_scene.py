@@ -35,7 +35,7 @@ def test_scene_builds_and_renders_the_level(folder, gl):
     try:
         img = p.render().astype(int)
     finally:
-        p.release() if hasattr(p, "release") else None
+        p.release()
     # the rock texture (patches 1 and 4) is dark brown: textured, not plain snow
     brown = (img[..., 0] < 150) & (img[..., 2] < img[..., 0])
     assert brown.mean() > 0.02

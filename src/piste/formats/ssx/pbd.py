@@ -107,8 +107,8 @@ def power_to_bezier(stored) -> np.ndarray:
     -------
     (n, 4, 4, 3) float64 ``P = M⁻¹ C M⁻ᵀ``.
     """
-    c = np.asarray(stored, dtype=np.float64)[:, ::-1].reshape(-1, 4, 4, 3)
-    return np.einsum("ai,nijc,bj->nabc", M_INV, c, M_INV, optimize=True)
+    c = np.asarray(stored, dtype=np.float64)[:, ::-1].reshape(-1, 4, 4, 3).transpose(0, 3, 1, 2)  # (n, 3, 4, 4)
+    return np.ascontiguousarray((M_INV @ c @ M_INV.T).transpose(0, 2, 3, 1))
 
 
 def bezier_to_power(cp) -> np.ndarray:
@@ -122,8 +122,8 @@ def bezier_to_power(cp) -> np.ndarray:
     -------
     (n, 16, 3) float64, ``C[3][3]`` first (round to float32 to store).
     """
-    p = np.asarray(cp, dtype=np.float64)
-    c = np.einsum("ai,nijc,bj->nabc", M, p, M, optimize=True)
+    p = np.asarray(cp, dtype=np.float64).transpose(0, 3, 1, 2)  # (n, 3, 4, 4)
+    c = (M @ p @ M.T).transpose(0, 2, 3, 1)
     return c.reshape(-1, 16, 3)[:, ::-1]
 
 
