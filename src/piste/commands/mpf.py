@@ -36,7 +36,10 @@ def add_arguments(p) -> None:
 
 
 def _info(f) -> dict:
-    out = {"file": f.path, "format_id": f.format_id, "sub_models": [], "unknown": [list(u) for u in f.unknown]}
+    from piste.formats.ssx.mpf import game_limits
+
+    out = {"file": f.path, "format_id": f.format_id, "sub_models": [], "unknown": [list(u) for u in f.unknown],
+           "game_limits": [list(x) for x in game_limits(f)]}
     for s in f.models:
         chunks = [c for lk in s.links for m in lk.meshes for c in m.chunks]
         out["sub_models"].append({
@@ -64,6 +67,10 @@ def run(args) -> int:
                   f"triangles {s['triangles']:>5}  morph keys {s['morph_keys']}")
         for w, o, n, note in info["unknown"]:
             print(f"  unknown: {w} @ {o} ({n} bytes): {note}")
+        for w, problem in info["game_limits"]:
+            print(f"  over the game's limits: {w}: {problem}")
+        if not info["game_limits"]:
+            print("  within the game's limits (<= 55 vertices a chunk, <= 25 palettes a link, 25 % weight steps)")
         return 0
     if args.mpf_command == "encode":
         from piste.formats.ssx.mpf_model import model_to_mpf

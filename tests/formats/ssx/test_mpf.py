@@ -178,3 +178,22 @@ def test_pack_chunks_limit_and_winding():
 def test_not_a_model_file():
     with pytest.raises(FormatError, match="music"):
         parse_mpf(b"xDFP" + bytes(20), "song.mpf")
+
+
+def test_game_limits():
+    from piste.formats.ssx.mpf import game_limits
+
+    f = small_mpf()
+    assert game_limits(f) == []
+    f.models[0].palettes[1]["weight"] = (40, 60)
+    f.models[0].links[0].refs = np.arange(30, dtype="<u4") % 3
+    f.models[1].name = "Body3000"[:7] + "0"  # "Body3000" again, shortened: still unique at 15
+    c = f.models[0].links[0].meshes[0].chunks[0]
+    c.strip_lengths = np.array([60], "<u4")
+    c.positions = np.zeros((60, 3), "<f4")
+    problems = [p for _, p in game_limits(f)]
+    assert any("40, 60" in p for p in problems) and any("30 palettes" in p for p in problems)
+    assert any("60 vertices" in p for p in problems)
+    g = small_mpf()
+    g.models[0].name, g.models[1].name = "ZZZZZZZZZZZZZZZA", "ZZZZZZZZZZZZZZZB"
+    assert any("15 characters" in p for _, p in game_limits(g))

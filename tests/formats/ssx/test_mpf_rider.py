@@ -55,6 +55,9 @@ def test_encoder_obeys_the_game_limits(encoded):
                     assert c.slots.min() >= 0 and c.slots.max() < len(lk.refs)
                     assert np.all(c.uv[:, 3] == 114 + 3 * c.slots)
     assert report["max_chunk_vertices"] <= 55 and report["max_link_matrices"] <= 25
+    from piste.formats.ssx.mpf import game_limits
+
+    assert game_limits(f) == []
     types = {g.type for g in f.models[0].groups}
     assert types == {1, 256}  # the face's morph triangles sit in a type-256 group
     e = np.frombuffer(b, DIR_DTYPE, 3, 12)

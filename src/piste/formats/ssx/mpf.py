@@ -71,6 +71,7 @@ mpf_bytes(mpf) -> bytes
 MpfFile, SubModel, Group, Link, Mesh, Chunk, MorphKey
 pack_chunks(strips, uv, normals, positions, max_vertices=55) -> list[Chunk]  (the encoder's packer)
 strip_triangles(strip_lengths) -> (t, 3) int64   local vertex indices of a chunk's strips
+game_limits(mpf) -> list[(sub-model, problem)]     what the game would not take (55 / 25 / 25 % steps)
 """
 
 from __future__ import annotations
@@ -85,7 +86,7 @@ from piste.formats.atomic import write_bytes_atomic
 
 __all__ = [
     "MpfFile", "SubModel", "Group", "Link", "Mesh", "Chunk", "MorphKey", "read_mpf", "parse_mpf", "write_mpf",
-    "mpf_bytes", "pack_chunks", "strip_triangles", "FORMAT_TRICKY_PS2", "MAX_CHUNK_VERTICES", "MAX_GROUP_MATRICES",
+    "mpf_bytes", "pack_chunks", "strip_triangles", "game_limits", "FORMAT_TRICKY_PS2", "MAX_CHUNK_VERTICES", "MAX_GROUP_MATRICES",
     "UV_SCALE", "NORMAL_SCALE", "MORPH_SCALE", "BONE_DTYPE", "MATERIAL_DTYPE", "IK_DTYPE", "DIR_DTYPE",
     "PALETTE_ENTRY_DTYPE", "GROUP_RENDER", "GROUP_SHADOW", "GROUP_MORPH", "SLOT_TRANSFORM_BASE", "SLOT_NORMAL_BASE",
 ]
@@ -676,6 +677,41 @@ def read_mpf(path) -> MpfFile:
     if size > MAX_FILE_BYTES:
         raise FormatError(path, f"{size} bytes is more than the {MAX_FILE_BYTES}-byte limit for a model file")
     return parse_mpf(p.read_bytes(), path)
+
+
+def game_limits(mpf: MpfFile) -> list:
+    """What would stop the game from taking the file: a list of ``(sub-model, problem)`` (empty
+    when none). Checked: chunks of more than 55 vertices, links referencing more than 25 palettes
+    (the vector unit holds 25 blended matrices), weight palettes not in 25 % steps or with more
+    than 3 entries (retail never has them; the loader itself accepts any integer percent), names
+    the engine's 15-character compare cannot tell apart, bone indices past a file's bone list."""
+    out = []
+    counts = {}
+    for s in mpf.models:
+        counts.setdefault(s.file_id, len(s.bones))
+    seen = {}
+    for s in mpf.models:
+        key = s.name[:15]
+        if key in seen and seen[key] != s.name:
+            out.append((s.name, f"the engine compares 15 characters: {s.name!r} and {seen[key]!r} look the same"))
+        seen[key] = s.name
+        for i, lk in enumerate(s.links):
+            if len(lk.refs) > MAX_GROUP_MATRICES:
+                out.append((s.name, f"link {i} references {len(lk.refs)} palettes (the game holds {MAX_GROUP_MATRICES})"))
+            for m in lk.meshes:
+                for c in m.chunks:
+                    if c.n_vertices > MAX_CHUNK_VERTICES:
+                        out.append((s.name, f"link {i}: a chunk of {c.n_vertices} vertices (the game takes "
+                                            f"{MAX_CHUNK_VERTICES})"))
+        for i, p in enumerate(s.palettes):
+            w = np.asarray(p["weight"], np.int64)
+            if np.any(w % 25) or len(p) > 3:
+                out.append((s.name, f"palette {i} {w.tolist()} is not 1-3 weights in 25 % steps"))
+            for e in p:
+                f, b = int(e["file"]), int(e["bone"])
+                if f in counts and b >= counts[f]:
+                    out.append((s.name, f"palette {i} names bone {b} of file {f}, which has {counts[f]} bones"))
+    return out
 
 
 # ------------------------------------------------------------------------------------ writing
