@@ -63,6 +63,13 @@ def test_failed_tile_is_named(tmp_path):
     spec = TiledSpec(str(tmp_path / "bad"), ArraySource(z, (1.0, 1.0)), TileGrid(z.shape, 3, 3, (1.0, 1.0)), res=2)
     with pytest.raises(TileError, match=r"tile \(1, 0\) failed in step 'fit'.*row 15, column 2"):
         build_tiles(spec)
+    distributed = pytest.importorskip("distributed")
+    from piste.pipeline.dask_build import build_tiles_dask
+
+    with distributed.LocalCluster(n_workers=1, processes=False, protocol="tcp://", host="127.0.0.1",
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        with pytest.raises(TileError, match=r"tile \(1, 0\) failed in step 'fit'.*row 15, column 2"):
+            build_tiles_dask(spec, client)
 
 
 def test_dask_local_cluster_is_byte_identical_and_resumes(tmp_path):

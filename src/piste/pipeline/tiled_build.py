@@ -51,9 +51,14 @@ TILE_BAKE_VERSION = "piste.tile-bake/1"
 class TileError(PisteError):
     """A tile task failed: names the tile and the step."""
 
-    def __init__(self, step: str, ty: int, tx: int, cause: BaseException):
-        self.step, self.tile = step, (ty, tx)
-        super().__init__(f"tile ({ty}, {tx}) failed in step {step!r}: {type(cause).__name__}: {cause}")
+    def __init__(self, step: str, ty: int, tx: int, cause):
+        self.step, self.tile, self.cause = step, (ty, tx), str(cause)
+        what = cause if isinstance(cause, str) else f"{type(cause).__name__}: {cause}"
+        super().__init__(f"tile ({ty}, {tx}) failed in step {step!r}: {what}")
+
+    def __reduce__(self):  # travels back from Dask workers intact
+        msg = str(self).split(": ", 1)[1] if ": " in str(self) else str(self)
+        return (TileError, (self.step, self.tile[0], self.tile[1], msg))
 
 
 # ----------------------------------------------------------------------------- height sources
