@@ -36,6 +36,8 @@ scene file.  Every table and key is optional except where noted::
     gutter = 1
 
     [lod]
+    preset = "piste"              # near/far defaults: "piste" (60 / 180) or "ssx_tricky" (30 / 150 m,
+                                  # the game's; the default for an ssx_pbd terrain)
     near = 60.0                   # terrain: edges nearer than this get 8 vertices,
     far = 180.0                   #   nearer than far 6, the rest 4
     character = [14.0, 35.0]      # riders: high -> medium -> low LOD distances
@@ -138,6 +140,8 @@ __all__ = [
 
 BUILTIN_MODELS = ("builtin:rider", "builtin:tree", "builtin:sign", "builtin:rock", "builtin:rail")
 HEIGHTFIELD_IMAGES = (".png", ".tif", ".tiff", ".pgm")
+#: [lod] preset -> (near, far) metres: piste's own, and SSX Tricky's 3000 / 15000 game units
+LOD_PRESETS = {"piste": (60.0, 180.0), "ssx_tricky": (30.0, 150.0)}
 
 
 class SceneError(ConfigError):
@@ -565,8 +569,11 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     if not 0 <= scene.lightmap.gutter <= 4:
         raise lm.error("gutter", f"expected 0 <= gutter <= 4, got {scene.lightmap.gutter}")
     lo = _table(top, "lod")
-    lo.allow({"near", "far", "character", "ratios", "morph"})
-    scene.lod = LodSpec(lo.get("near", "float", 60.0), lo.get("far", "float", 180.0),
+    lo.allow({"near", "far", "character", "ratios", "morph", "preset"})
+    preset = lo.get("preset", "str", "ssx_tricky" if ts.kind == "ssx_pbd" else "piste")
+    if preset not in LOD_PRESETS:
+        raise lo.error("preset", f"expected one of {', '.join(map(repr, LOD_PRESETS))}, got {preset!r}")
+    scene.lod = LodSpec(lo.get("near", "float", LOD_PRESETS[preset][0]), lo.get("far", "float", LOD_PRESETS[preset][1]),
                         lo.get("character", "vec2", (14.0, 35.0)), lo.get("ratios", "floats", (1.0, 0.5, 0.25)),
                         lo.get("morph", "bool", True))
     if not 0 <= scene.lod.near <= scene.lod.far:

@@ -51,3 +51,16 @@ def test_source_suffix_and_conflicts(folder):
     scene.write_text('[terrain]\nssx_pbd = "LV.ssh"\n')
     with pytest.raises(PisteError, match=".pbd"):
         load_scene(scene)
+
+
+def test_ssx_tricky_lod_preset(folder):
+    scene = folder / "s3.toml"
+    scene.write_text('terrain = { ssx_pbd = "LV.pbd" }\n')
+    lod = load_scene(scene).lod
+    assert (lod.near, lod.far) == (30.0, 150.0)  # the game's 3000 / 15000 units
+    scene.write_text('[lod]\npreset = "ssx_tricky"\nfar = 120.0\n')
+    lod = load_scene(scene).lod
+    assert (lod.near, lod.far) == (30.0, 120.0)
+    scene.write_text('[lod]\npreset = "n64"\n')
+    with pytest.raises(PisteError, match="preset"):
+        load_scene(scene)
