@@ -11,7 +11,7 @@ import importlib
 import os
 import sys
 
-from piste.errors import MissingExtraError, PisteError
+from piste.errors import MissingExtraError, PisteError, describe_os_error
 
 #: subcommand -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -56,6 +56,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except PisteError as exc:
         print(f"piste {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # unwritable or full output / cache, a vanished input: one line naming the path
+        print(f"piste {args.command}: error: {describe_os_error(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

@@ -6,6 +6,8 @@ message names the file, the field and what was expected.
 
 from __future__ import annotations
 
+import errno
+
 
 class PisteError(Exception):
     """Base class of every error piste raises on purpose."""
@@ -49,3 +51,26 @@ class MissingExtraError(PisteError):
         self.feature = feature
         self.module = module
         super().__init__(f"{feature} needs the '{extra}' extra ({module} is not installed): pip install 'piste[{extra}]'")
+
+
+class OutputError(PisteError):
+    """A file or folder could not be written (unwritable, full disk, ...): names the path.
+
+    Partial files are removed before it is raised (see :mod:`piste.formats.atomic`)."""
+
+    def __init__(self, path, message: str):
+        self.path = str(path) if path is not None else None
+        super().__init__(f"{self.path or '<output>'}: {message}")
+
+
+def describe_os_error(exc: OSError, path=None) -> str:
+    """One line for an OSError: the path it concerns and the system's reason (no traceback)."""
+    where = path if path is not None else exc.filename
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    if exc.errno == errno.ENOSPC:
+        reason = "no space left on the device (disk full)"
+    elif exc.errno == errno.EDQUOT:
+        reason = "disk quota exceeded"
+    if exc.filename2 is not None:
+        return f"{where} -> {exc.filename2}: {reason}"
+    return f"{where}: {reason}" if where is not None else reason

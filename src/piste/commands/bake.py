@@ -46,9 +46,9 @@ def run(args) -> int:
     import shutil
     import sys
     import time
-    from pathlib import Path
 
     from piste.errors import ConfigError
+    from piste.formats.atomic import check_writable_folder
     from piste.lighting import bake_lightmap, default_lights, load_lights, write_lightmap
 
     if args.format == "ssx-tricky" or str(args.net or "").lower().endswith(".pbd"):
@@ -62,9 +62,9 @@ def run(args) -> int:
         raise ConfigError(f"--jobs must be >= 0, got {args.jobs}")
     if args.chunk_size < 1:
         raise ConfigError(f"--chunk-size must be >= 1, got {args.chunk_size}")
+    out = check_writable_folder(args.out)  # before the bake, not after it
     net = _load_net(args.net)
     lights = load_lights(args.lights) if args.lights else default_lights()
-    out = Path(args.out)
     partial = out / ".partial"
     t0 = time.perf_counter()
     lm = bake_lightmap(

@@ -26,7 +26,10 @@ def add_arguments(parser) -> None:
 def run(args) -> int:
     import sys
 
+    from pathlib import Path
+
     from piste.errors import ConfigError
+    from piste.formats.atomic import check_writable_folder
     from piste.pipeline.build import build_scene
 
     if args.jobs < 0:
@@ -34,6 +37,10 @@ def run(args) -> int:
     from piste.world.scene_file import load_scene
 
     scene = load_scene(args.scene)
+    # an unwritable output or cache is reported now, not after minutes of building
+    check_writable_folder(Path(args.out).parent if args.out else Path(args.scene).resolve().parent)
+    if args.cache and not args.no_cache:
+        check_writable_folder(args.cache)
     if scene.terrain.tiles is not None or args.dask or args.scheduler:
         from piste.pipeline.dask_build import build_scene_tiles
 

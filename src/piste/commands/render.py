@@ -52,7 +52,10 @@ def run(args) -> int:
 
         print(f"wrote {render_pbd(args.scene, args.out, args.size or (640, 448))}")
         return 0
+    from pathlib import Path
+
     from piste.errors import ConfigError
+    from piste.formats.atomic import check_writable_folder
     from piste.pipeline.preview import render_frames
 
     if args.scene.rstrip("/").endswith(".tiles"):  # a tiled world: stream it (piste.render.streaming)
@@ -70,6 +73,9 @@ def run(args) -> int:
         w, h = size or tuple(b.manifest.get("render", {}).get("size", (640, 448)))
         if w % 2 or h % 2:
             raise ConfigError(f"--size {w} {h}: H.264 video needs an even width and height")
+    for out in (args.out, args.video):  # unwritable outputs are reported before rendering
+        if out:
+            check_writable_folder(Path(out).parent)
     stats = render_frames(b, args.camera, args.frames, size=size, fps=args.fps, video=args.video, first_png=args.out,
                           progress=not args.quiet and sys.stderr.isatty() and args.frames > 1)
     if stats and "frustum_patches" in stats[0]:

@@ -31,9 +31,11 @@ import numpy as np
 
 from piste.errors import FormatError, ValidationError
 from piste.formats.atomic import atomic_path, write_bytes_atomic
+from piste.formats.safe_io import check_regular, loads_json, read_regular
 from piste.lighting.lightmap import LightMap, assemble_atlas, atlas_layout, encode_half_bright, inputs_key, sample_points
 from piste.lighting.lights import Lights, default_lights, light_terms, shade
 from piste.lighting.shadows import shadow_visibility
+from piste.workers import die_with_parent, kill_pool
 
 __all__ = [
     "BAKE_VERSION",
@@ -47,6 +49,8 @@ __all__ = [
 #: bumped whenever the baker's output for the same input changes
 BAKE_VERSION = "piste.lightmap-bake/1"
 MANIFEST_FORMAT = "piste.lightmap/1"
+#: largest light-map file (png / npz) read when verifying a bake folder
+MAX_LIGHTMAP_BYTES = 4 << 30
 #: with ``jobs=0`` a bake uses a process pool only from this many samples on
 AUTO_PARALLEL_SAMPLES = 300_000
 #: environment for worker processes: one BLAS thread each (the pool provides the parallelism)
@@ -190,7 +194,9 @@ def bake_lightmap(
             saved = {k_: os.environ.get(k_) for k_ in _WORKER_ENV}
             os.environ.update(_WORKER_ENV)  # inherited by the spawned workers
             try:
-                pool = ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn"), initializer=_init_worker, initargs=(state,))
+                # workers are SIGKILLed by the kernel if this process dies (piste.workers)
+                pool = ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn"), initializer=die_with_parent,
+                                           initargs=(os.getpid(), _init_worker, state))
                 pending = {pool.submit(_bake_chunk, c) for c in todo}
             finally:
                 for k_, v_ in saved.items():
@@ -204,9 +210,8 @@ def bake_lightmap(
                         finished, pending = wait(pending, return_when=FIRST_COMPLETED)
                         for fut in sorted(finished, key=lambda f: f.result()[0]):
                             store(*fut.result())
-                except BaseException:
-                    for fut in pending:
-                        fut.cancel()
+                except BaseException:  # an error, Ctrl-C, a full disk: stop the workers now
+                    kill_pool(pool)
                     raise
     finally:
         if bar is not None:
@@ -306,6 +311,12 @@ def write_lightmap(lm: LightMap, out_dir) -> dict:
         "lightmap.npz": hashlib.sha256(npz).hexdigest(),
     }
     paths = {"png": out / "lightmap.png", "npz": out / "lightmap.npz", "manifest": out / "manifest.json"}
+    # the old manifest goes first: a folder interrupted from here on has no manifest (or one whose
+    # SHA-256 sums, checked by load_lightmap, refuse mixed old and new files): whole or not at all
+    try:
+        paths["manifest"].unlink()
+    except FileNotFoundError:
+        pass
     write_bytes_atomic(paths["png"], png)
     write_bytes_atomic(paths["npz"], npz)
     # the manifest goes last: its presence means the other two are complete
@@ -317,18 +328,43 @@ def write_lightmap(lm: LightMap, out_dir) -> dict:
     return paths
 
 
-def load_lightmap(out_dir) -> LightMap:
-    """Read a light map written by :func:`write_lightmap` (float atlas from the .npz)."""
+def _verify_sums(out: Path, mpath: Path, manifest: dict) -> None:
+    """Check ``lightmap.png`` and ``lightmap.npz`` against the manifest's SHA-256 sums."""
+    import hashlib
+
+    files = manifest.get("files")
+    if not isinstance(files, dict) or set(files) != {"lightmap.png", "lightmap.npz"}:
+        raise FormatError(mpath, "expected the SHA-256 sums of lightmap.png and lightmap.npz", field="files")
+    for name, want in sorted(files.items()):
+        f = out / name
+        try:
+            size = check_regular(f, MAX_LIGHTMAP_BYTES, owner=mpath, field=f"files.{name}", what="light-map file")
+            h = hashlib.sha256()
+            with open(f, "rb") as fh:
+                for block in iter(lambda: fh.read(1 << 20), b""):
+                    h.update(block)
+        except OSError as exc:
+            raise FormatError(f, f"cannot read: {exc.strerror or exc}") from None
+        if h.hexdigest() != want:
+            raise FormatError(f, f"does not match the SHA-256 sum in {mpath.name} ({size} bytes): the folder mixes "
+                                 "two bakes (an interrupted bake?); bake again")
+
+
+def load_lightmap(out_dir, verify: bool = True) -> LightMap:
+    """Read a light map written by :func:`write_lightmap` (float atlas from the .npz).
+
+    ``verify``: check both files against the manifest's SHA-256 sums first (a folder whose bake
+    was interrupted between its renames is refused, not read half old, half new)."""
     out = Path(out_dir)
     mpath = out / "manifest.json"
-    try:
-        manifest = json.loads(mpath.read_text())
-    except FileNotFoundError:
-        raise FormatError(mpath, "no such file (not a baked light-map folder?)") from None
-    except json.JSONDecodeError as exc:
-        raise FormatError(mpath, f"not valid JSON: {exc.msg}", line=exc.lineno) from None
-    if manifest.get("format") != MANIFEST_FORMAT:
-        raise FormatError(mpath, f"expected format {MANIFEST_FORMAT!r}, got {manifest.get('format')!r}", field="format")
+    if not mpath.exists():
+        raise FormatError(mpath, "no such file (not a baked light-map folder, or its bake was interrupted)")
+    manifest = loads_json(read_regular(mpath, 1 << 24, what="manifest"), mpath)
+    if not isinstance(manifest, dict) or manifest.get("format") != MANIFEST_FORMAT:
+        got = manifest.get("format") if isinstance(manifest, dict) else type(manifest).__name__
+        raise FormatError(mpath, f"expected format {MANIFEST_FORMAT!r}, got {got!r}", field="format")
+    if verify:
+        _verify_sums(out, mpath, manifest)
     npath = out / "lightmap.npz"
     try:
         with np.load(npath, allow_pickle=False) as data:
