@@ -146,7 +146,9 @@ def bundle_parts(bundle, level=4, with_base_texture: bool = True) -> dict:
     if with_base_texture:
         from piste.render.textures import snow_texture
 
-        base = snow_texture()
+        base = bundle.arrays.get("terrain/base_texture")  # an SSX level's own textures (pipeline.ssx_level)
+        if base is None:
+            base = snow_texture()
     parts = {"terrain": TerrainExport(bundle.net, bundle.lightmap.atlas, terrain_levels(bundle, level), base)}
     info = bundle.manifest.get("characters") or {}
     models: dict = {}

@@ -64,3 +64,26 @@ def test_ssx_tricky_lod_preset(folder):
     scene.write_text('[lod]\npreset = "n64"\n')
     with pytest.raises(PisteError, match="preset"):
         load_scene(scene)
+
+
+def test_gltf_export_carries_the_level_textures(folder, tmp_path):
+    import io
+
+    import pygltflib
+    from PIL import Image
+
+    from piste.cli import main
+    from piste.pipeline.ssx_level import load_level
+
+    scene = folder / "exp.toml"
+    scene.write_text('terrain = { ssx_pbd = "LV.pbd" }\n')
+    out = tmp_path / "lv.glb"
+    assert main(["export", str(scene), str(out), "--quiet"]) == 0
+    g = pygltflib.GLTF2().load(str(out))
+    blob = g.binary_blob()
+    images = []
+    for im in g.images:
+        bv = g.bufferViews[im.bufferView]
+        images.append(np.asarray(Image.open(io.BytesIO(blob[bv.byteOffset:bv.byteOffset + bv.byteLength]))))
+    atlas = load_level(folder / "LV.pbd").base_atlas
+    assert any(i.shape == atlas.shape and (i == atlas).all() for i in images)
