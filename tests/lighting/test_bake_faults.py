@@ -153,3 +153,40 @@ def test_workers_die_with_a_killed_parent(tmp_path):
     for k in left:  # do not leave them behind even if the test fails
         os.kill(k, signal.SIGKILL)
     assert not left, f"{len(left)} of {len(kids)} child processes outlived their killed parent"
+
+
+def test_full_disk_while_storing_chunks_removes_them(tmp_path, hill, lights, monkeypatch):
+    from piste.errors import OutputError
+
+    part = tmp_path / ".partial"
+    real = Path.write_bytes
+    calls = {"n": 0}
+
+    def filling(self, data):
+        calls["n"] += 1
+        if calls["n"] > 3:  # the disk fills up after a few chunks
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(self, data)
+
+    monkeypatch.setattr(Path, "write_bytes", filling)
+    with pytest.raises(OutputError, match="no space left on the device"):
+        bake_lightmap(hill, lights, res=8, chunk_size=1, partial_dir=part)
+    monkeypatch.setattr(Path, "write_bytes", real)
+    assert [p for p in part.rglob("*") if p.is_file()] == []  # no chunks, no temporary files
+
+
+def test_stale_partials_of_other_inputs_are_removed(tmp_path, hill, lights):
+    part = tmp_path / ".partial"
+
+    class Stop(Exception):
+        pass
+
+    def stop(c, done, total):
+        raise Stop
+
+    with pytest.raises(Stop):
+        bake_lightmap(hill, lights, res=8, chunk_size=1, partial_dir=part, on_chunk=stop)
+    (old,) = list(part.iterdir())
+    assert list(old.iterdir())  # an abandoned bake's chunk
+    bake_lightmap(hill, lights, res=16, chunk_size=1, partial_dir=part)  # other inputs
+    assert not old.exists()

@@ -19,6 +19,7 @@ map for the default lights, baked once and cached on disk.
 
 from __future__ import annotations
 
+import errno
 import io
 import json
 import os
@@ -29,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from piste.errors import FormatError, ValidationError
+from piste.errors import FormatError, OutputError, ValidationError
 from piste.formats.atomic import atomic_path, write_bytes_atomic
 from piste.formats.safe_io import check_regular, loads_json, read_regular
 from piste.lighting.lightmap import LightMap, assemble_atlas, atlas_layout, encode_half_bright, inputs_key, sample_points
@@ -51,6 +52,7 @@ BAKE_VERSION = "piste.lightmap-bake/1"
 MANIFEST_FORMAT = "piste.lightmap/1"
 #: largest light-map file (png / npz) read when verifying a bake folder
 MAX_LIGHTMAP_BYTES = 4 << 30
+_DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
 #: with ``jobs=0`` a bake uses a process pool only from this many samples on
 AUTO_PARALLEL_SAMPLES = 300_000
 #: environment for worker processes: one BLAS thread each (the pool provides the parallelism)
@@ -131,6 +133,7 @@ def bake_lightmap(
     part = None
     if partial_dir is not None:
         part = Path(partial_dir) / key
+        _remove_stale_partials(Path(partial_dir), key)
         part.mkdir(parents=True, exist_ok=True)
         for c in range(n_chunks):
             f = part / f"chunk_{c:05d}.npy"
@@ -213,6 +216,12 @@ def bake_lightmap(
                 except BaseException:  # an error, Ctrl-C, a full disk: stop the workers now
                     kill_pool(pool)
                     raise
+    except OutputError as exc:
+        # a full disk: the finished chunks are what filled it; keeping them for a resume would
+        # leave the disk full, so they go (an unwritable folder keeps nothing anyway)
+        if part is not None and getattr(exc.__cause__ or exc.__context__, "errno", None) in _DISK_FULL:
+            shutil.rmtree(part, ignore_errors=True)
+        raise
     finally:
         if bar is not None:
             bar.close()
@@ -243,6 +252,16 @@ def bake_lightmap(
     lm.resumed_chunks = resumed  # type: ignore[attr-defined]
     lm.stats = dict(stats)  # type: ignore[attr-defined]
     return lm
+
+
+def _remove_stale_partials(partial_dir: Path, key: str) -> None:
+    """Remove finished chunks of bakes of *other* inputs (an abandoned bake's chunks would stay
+    forever: only the current inputs' chunks are removed when a bake completes)."""
+    if not partial_dir.is_dir():
+        return
+    for d in partial_dir.iterdir():
+        if d.name != key and d.is_dir() and not d.is_symlink() and len(d.name) == len(key):
+            shutil.rmtree(d, ignore_errors=True)
 
 
 def _json_safe(x):
