@@ -30,7 +30,7 @@ def test_demo_writes_png_and_mp4(gl_context, piste_cache, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("extra", [["--lod", "off", "--lightmap", "ps2"], ["--debug", "lod"]])
-def test_demo_options(gl_context, tmp_path, capsys, extra):
+def test_demo_options(gl_context, piste_cache, tmp_path, capsys, extra):
     png = tmp_path / "d.png"
     assert main(["demo", "--size", "64", "48", "--out", str(png), "--no-progress", "--lighting", "placeholder", *extra]) == 0
     out = capsys.readouterr().out
@@ -38,6 +38,25 @@ def test_demo_options(gl_context, tmp_path, capsys, extra):
     if "off" in extra:
         line = next(ln for ln in out.splitlines() if ln.startswith("8x8 patches"))
         assert "100.0 %" in line
+
+
+def test_demo_is_the_built_default_scene_through_the_render_runtime(gl_context, piste_cache, tmp_path, capsys):
+    """``piste demo`` builds the built-in default scene into the cache (once) and draws it with the
+    runtime of ``piste render``: the terrain fly-over's first frame is ``piste render``'s picture of
+    the built bundle from its flight camera, pixel for pixel."""
+    from piste.pipeline.default_scene import build_default_scene, default_scene_path
+
+    demo_png, render_png = tmp_path / "demo.png", tmp_path / "render.png"
+    assert main(["demo", "--scene", "terrain", "--size", "64", "48", "--out", str(demo_png), "--no-progress"]) == 0
+    bundle = default_scene_path(0).with_suffix(".piste")
+    assert bundle.is_file() and bundle.parent == piste_cache / "scenes"
+    again = build_default_scene(0)  # every step now comes from the build cache
+    assert again.path == bundle and set(again.cached) >= {"terrain", "lightmap"}
+    assert main(["render", str(bundle), "--camera", "flight", "--size", "64", "48", "--out", str(render_png),
+                 "--quiet"]) == 0
+    a, b = np.asarray(Image.open(demo_png)), np.asarray(Image.open(render_png))
+    assert a.shape == b.shape == (48, 64, 3) and a.std() > 5
+    assert np.array_equal(a, b)
 
 
 def test_demo_rejects_bad_arguments(tmp_path, capsys):

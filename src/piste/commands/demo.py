@@ -2,6 +2,11 @@
 
 Writes ``out/demo.png`` (the first frame); with ``--frames N --video out/demo.mp4`` also an MP4 of
 the flight.  Prints the talk's statistics table over the frames shown and the frame times.
+
+The demo is ``piste build`` of the built-in default scene (:mod:`piste.pipeline.default_scene`:
+the course of ``--seed``, its lights and baked light map; built once into the piste cache folder,
+then loaded) followed by the runtime that ``piste render`` uses
+(:class:`piste.pipeline.preview.ScenePreview`): one place where a frame is made.
 """
 
 from __future__ import annotations
@@ -78,38 +83,53 @@ def lightmap_for(net, lighting: str):
     return lm.apply(net), lm.atlas, "baked"
 
 
+def demo_bundle(args):
+    """The built (cached) default scene of ``args.seed`` and what ``--lighting`` draws with it:
+    ``(bundle, lightmap for ScenePreview, lighting as printed)``."""
+    import sys
+
+    from piste.pipeline.bundle_objects import load_bundle
+    from piste.pipeline.default_scene import build_default_scene
+
+    result = build_default_scene(args.seed, progress=not args.no_progress and sys.stderr.isatty())
+    bundle = load_bundle(result.path, verify=False)  # just written or verified by the build's cache
+    lightmap = {"baked": "bundle", "placeholder": "placeholder", "none": None}[args.lighting]
+    return bundle, lightmap, args.lighting
+
+
 def run(args) -> int:
     import sys
     import time
-    from pathlib import Path
 
     import numpy as np
 
     from piste.errors import ConfigError
-    from piste.render import TerrainRenderer, save_png, summarize
+    from piste.extras import require
+    from piste.pipeline.preview import ScenePreview
+    from piste.render import summarize
+    from piste.render.context import save_png
     from piste.render.video import VideoWriter
     from piste.terrain import format_stats
     from piste.world.camera import track_camera
-    from piste.world.course import TRACK_HALF_WIDTH, default_course, track_centerline
 
     w, h = args.size
     if args.video and (w % 2 or h % 2):
         raise ConfigError(f"--size {w} {h}: H.264 video needs an even width and height")
     if not (0.0 <= args.start <= 1.0 and 0.0 <= args.end <= 1.0):
         raise ConfigError(f"--start/--end must be fractions of the track in [0, 1], got {args.start}, {args.end}")
+    require("moderngl", "piste demo")  # before building: say at once that OpenGL is missing
     t0 = time.perf_counter()
-    net = default_course(args.seed)
-    line = track_centerline(args.seed)
-    net, atlas, lighting = lightmap_for(net, args.lighting)
+    bundle, lightmap, lighting = demo_bundle(args)
+    net, line = bundle.net, bundle.centerline
     if args.scene == "full" and args.debug is None:
         from piste.commands.demo_scene import run_scene
 
-        return run_scene(args, net, line, atlas, lighting, t0)
-    renderer = TerrainRenderer(net, size=(w, h), lightmap=atlas, track=line, track_half_width=TRACK_HALF_WIDTH)
+        return run_scene(args, bundle, lightmap, lighting, t0)
+    preview = ScenePreview(bundle, size=(w, h), lightmap=lightmap, lightmap_mode=args.lightmap)
     lod_on = args.lod == "on"
     # warm-up (not timed): shader compilation, tessellation caches
-    renderer.render(track_camera(line, args.start, height=args.height, fov_y=args.fov), lod=lod_on,
-                    lightmap_mode=args.lightmap, debug=args.debug, read=False)
+    preview.render(track_camera(line, args.start, height=args.height, fov_y=args.fov), lod=lod_on, debug=args.debug,
+                   read=False)
     setup_s = time.perf_counter() - t0
     ts = np.linspace(args.start, args.end, args.frames) if args.frames > 1 else np.array([args.start])
     frames = []
@@ -121,15 +141,16 @@ def run(args) -> int:
                        file=sys.stderr)
             for i, t in enumerate(bar):
                 cam = track_camera(line, float(t), height=args.height, fov_y=args.fov)
-                frame = renderer.render(cam, lod=lod_on, lightmap_mode=args.lightmap, debug=args.debug)
+                image = preview.render(cam, lod=lod_on, debug=args.debug)
                 if i == 0:
-                    out = save_png(args.out, frame.image[..., :3])
+                    out = save_png(args.out, image)
                 if video is not None:
-                    video.append(frame.image[..., :3])
+                    video.append(image)
+                frame = preview.frame
                 frame.image = None  # keep memory flat over long flights
                 frames.append(frame)
     finally:
-        renderer.release()
+        preview.release()
     s = summarize(frames)
     lod = "on" if args.lod == "on" else "off (all 8x8)"
     title = (f"Terrain statistics: {net.name}, {len(frames)} frame(s) at {w}x{h}, LOD {lod}, "

@@ -36,16 +36,19 @@ def _objects_table(scene, lights) -> list[str]:
     return lines
 
 
-def run_scene(args, net, line, atlas, lighting: str, t0: float) -> int:
+def run_scene(args, bundle, lightmap, lighting: str, t0: float) -> int:
+    """The full scene on the built default course ``bundle`` (see :func:`piste.commands.demo.run`):
+    six riders and the course's objects placed here, drawn by the same runtime as ``piste render``."""
     import sys
     import time
 
     import numpy as np
 
     from piste.errors import ConfigError
-    from piste.lighting.lights import default_lights
-    from piste.render import save_png, summarize
-    from piste.render.scene_renderer import SceneRenderer, summarize_scene
+    from piste.pipeline.preview import ScenePreview
+    from piste.render import summarize
+    from piste.render.context import save_png
+    from piste.render.scene_renderer import summarize_scene
     from piste.render.video import VideoWriter
     from piste.terrain import format_stats
     from piste.world.course import TRACK_HALF_WIDTH
@@ -53,7 +56,7 @@ def run_scene(args, net, line, atlas, lighting: str, t0: float) -> int:
     from piste.world.scene import Scene
 
     w, h = args.size
-    lights = default_lights()
+    net, line, lights = bundle.net, bundle.centerline, bundle.lights
     objs = place_objects(net, line, lights, seed=args.seed, track_half_width=TRACK_HALF_WIDTH)
     length = float(np.linalg.norm(np.diff(line[:, :2], axis=0), axis=1).sum())
     start = float(args.start) * length
@@ -61,10 +64,11 @@ def run_scene(args, net, line, atlas, lighting: str, t0: float) -> int:
         raise ConfigError(f"--start {args.start}: the riders need 120 m of track ahead; use at most "
                           f"{(length - 120.0) / length:.2f}")
     scene = Scene(net, line, lights, objects=objs, start=start)
-    renderer = SceneRenderer(scene, size=(w, h), lightmap=atlas, specular=not args.no_specular,
-                             shadows=not args.no_shadows, object_lighting=args.objects)
+    preview = ScenePreview(bundle, size=(w, h), scene=scene, lightmap=lightmap, object_lighting=args.objects,
+                           shadows=not args.no_shadows, specular=not args.no_specular, lightmap_mode=args.lightmap)
+    renderer = preview.renderer
     lod_on = args.lod == "on"
-    renderer.render(0.0, read=False, lod=lod_on, lightmap_mode=args.lightmap)  # warm-up: shaders, caches
+    preview.render(None, 0.0, lod=lod_on, read=False)  # warm-up: shaders, caches
     setup_s = time.perf_counter() - t0
     images = []
     try:
@@ -74,16 +78,17 @@ def run_scene(args, net, line, atlas, lighting: str, t0: float) -> int:
             bar = tqdm(range(args.frames), desc="rendering", unit="frame",
                        disable=args.no_progress or args.frames < 2, file=sys.stderr)
             for i in bar:
-                im = renderer.render(i / args.fps, lod=lod_on, lightmap_mode=args.lightmap)
+                image = preview.render(None, i / args.fps, lod=lod_on)
                 if i == 0:
-                    out = save_png(args.out, im.image[..., :3])
+                    out = save_png(args.out, image)
                 if video is not None:
-                    video.append(im.image[..., :3])
+                    video.append(image)
+                im = preview.frame
                 im.image = None
                 im.terrain.image = None
                 images.append(im)
     finally:
-        renderer.release()
+        preview.release()
     s = summarize([im.terrain for im in images])
     sc = summarize_scene(images)
     lod = "on" if lod_on else "off (all 8x8)"

@@ -16,7 +16,8 @@ Visibility, compute_visibility, culling_report
 character_arrays                        the character step (characters.py)
 load_terrain, load_rider_model, load_object_mesh   reading a scene's sources (sources.py)
 load_bundle, Bundle, lights_from_dict, camera_from_dict   a built bundle as scene objects (bundle_objects.py)
-ScenePreview, render_image, render_frames, camera_at   rendering a bundle (preview.py)
+ScenePreview, render_image, render_frames, camera_at   the runtime: rendering a bundle (preview.py)
+build_default_scene                     the built-in default scene `piste demo` builds (default_scene.py)
 LiveScene, run_headless                 watch, rebuild, reload: ``piste view SCENE`` (live.py)
 
 The scene file itself is :mod:`piste.world.scene_file` (``load_scene``); the bundle format is
@@ -26,6 +27,7 @@ The scene file itself is :mod:`piste.world.scene_file` (``load_scene``); the bun
 from piste.pipeline.bundle_objects import Bundle, camera_from_dict, lights_from_dict, load_bundle
 from piste.pipeline.build import BUILD_VERSION, BuildResult, build_scene, default_cache_dir
 from piste.pipeline.cache import Cache, content_key
+from piste.pipeline.default_scene import build_default_scene
 from piste.pipeline.characters import character_arrays
 from piste.pipeline.gltf_import import axis_matrix, convert_cameras, convert_lights, import_gltf, write_scene_gltf
 from piste.pipeline.live import LiveScene, run_headless
@@ -36,6 +38,7 @@ from piste.pipeline.visibility import Visibility, compute_visibility, culling_re
 __all__ = [
     "build_scene",
     "load_bundle",
+    "build_default_scene",
     "Bundle",
     "lights_from_dict",
     "camera_from_dict",

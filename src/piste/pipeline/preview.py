@@ -174,42 +174,68 @@ def camera_at(bundle, name: str | None = None, i: int = 0, n: int = 1):
 
 
 class ScenePreview:
-    """Renders a bundle's scene off-screen with the renderer's passes (see the module docstring).
+    """The runtime: renders a bundle's scene off-screen with the renderer's passes (see the module
+    docstring).  ``piste render``, ``piste view SCENE`` and ``piste demo`` all make their frames
+    here (:meth:`render`).
 
     Parameters
     ----------
     bundle : Bundle;  size : (W, H) (default: the scene's render size)
     ctx : a moderngl context to share (default: a new headless one)
     visibility : apply the bundle's visibility sets (False: frustum culling alone)
+    scene : a :class:`piste.world.scene.Scene` on the bundle's terrain, lights and centre line to
+        draw instead of the bundle's own riders and objects (``piste demo``: six riders running down
+        the track, chased by the camera, and the course's objects placed at run time); default: the
+        bundle's scene
+    lightmap : the light-map atlas: "bundle" (the baked one, default), "placeholder" (lit from the
+        normals, no shadows) or None (unlit)
+    object_lighting : "baked" (default: the RGBs the bundle holds), "dynamic" or "points"
+    shadows, specular : the riders' projected shadows and specular pass
+    lightmap_mode : "modulate" or "ps2" (default: the scene's)
+
+    After :meth:`render`, ``stats`` holds the frame's counts and ``frame`` the renderer's own
+    result (a :class:`piste.render.Frame` for terrain-only scenes, else a
+    :class:`piste.render.SceneImage`) with its timings.
     """
 
-    def __init__(self, bundle, size=None, ctx=None, visibility: bool = True):
+    def __init__(self, bundle, size=None, ctx=None, visibility: bool = True, scene=None, lightmap="bundle",
+                 object_lighting: str = "baked", shadows: bool = True, specular: bool = True,
+                 lightmap_mode: str | None = None):
+        if not (isinstance(lightmap, str) and lightmap in ("bundle", "placeholder")) and lightmap is not None:
+            raise ConfigError(f"lightmap must be 'bundle', 'placeholder' or None, got {lightmap!r}")
         self.ctx = ctx if ctx is not None else create_context()
         self._own_ctx = ctx is None
         self.use_visibility = bool(visibility)
         self.size = tuple(size) if size is not None else tuple(bundle.manifest.get("render", {}).get("size", (640, 448)))
+        self.options = {"scene": scene, "lightmap": lightmap, "object_lighting": object_lighting,
+                        "shadows": bool(shadows), "specular": bool(specular), "lightmap_mode": lightmap_mode}
         self.stats: dict = {}
+        self.frame = None
         self._setup(bundle)
 
     def _setup(self, bundle) -> None:
         self.bundle = bundle
         man = bundle.manifest
+        opt = self.options
         lod = man.get("lod", {})
-        kw = {"lod_near": lod.get("near"), "lod_far": lod.get("far"), "lod_morph": lod.get("morph")}
+        kw = {"lod_near": lod.get("near"), "lod_far": lod.get("far"), "lod_morph": lod.get("morph", True)}
         if bundle.centerline is not None:
             kw.update(track=bundle.centerline, track_half_width=TRACK_HALF_WIDTH)
         if "terrain/base_texture" in bundle.arrays:  # an SSX level's own textures (pipeline.ssx_level)
             kw["base_texture"] = bundle.arrays["terrain/base_texture"]
-        atlas = bundle.lightmap.atlas
-        self.lightmap_mode = man.get("render", {}).get("lightmap_mode", "modulate")
+        atlas = bundle.lightmap.atlas if opt["lightmap"] == "bundle" else opt["lightmap"]
+        self.lightmap_mode = opt["lightmap_mode"] or man.get("render", {}).get("lightmap_mode", "modulate")
+        mode = opt["object_lighting"]
         colors = bundle.vertex_colors()
-        if man.get("riders"):
-            self.scene = BundleScene(bundle)
+        self.follow = opt["scene"] is not None  # a run-time scene: the camera chases its rider
+        if self.follow or man.get("riders"):
+            self.scene = opt["scene"] if self.follow else BundleScene(bundle)
             self.renderer = SceneRenderer(self.scene, size=self.size, ctx=self.ctx, lightmap=atlas,
-                                          object_lighting="baked", **kw)
+                                          object_lighting=mode, shadows=opt["shadows"], specular=opt["specular"],
+                                          **kw)
             self.terrain = self.renderer.terrain
             self.objects = None
-            if self.renderer.objects is not None:
+            if self.renderer.objects is not None and mode == "baked" and self.scene.objects is bundle.objects():
                 self.renderer.objects.set_vertex_colors(colors)
         else:
             self.scene = None
@@ -218,7 +244,8 @@ class ScenePreview:
             objs = bundle.objects()
             self.objects = None
             if objs is not None:
-                self.objects = ObjectPass(self.ctx, objs, bundle.lights, mode="baked", colors=colors)
+                self.objects = ObjectPass(self.ctx, objs, bundle.lights, mode=mode,
+                                          colors=colors if mode == "baked" else None)
         # the pre-computed visibility in front of frustum culling
         self.terrain.set_visibility(bundle.visibility if self.use_visibility else None)
 
@@ -227,18 +254,28 @@ class ScenePreview:
         self._release_passes()
         self._setup(bundle)
 
-    def render(self, camera=None, t: float = 0.0) -> np.ndarray:
-        """One frame ``(H, W, 3) uint8`` for ``camera`` (default: the scene's first) at ``t`` seconds."""
-        cam = camera if camera is not None else camera_at(self.bundle)
+    def render(self, camera=None, t: float = 0.0, lod: bool = True, debug: str | None = None,
+               read: bool = True) -> np.ndarray | None:
+        """One frame ``(H, W, 3) uint8`` for ``camera`` at ``t`` seconds (None with ``read=False``).
+
+        ``camera`` defaults to the chase camera of a run-time ``scene``, else the scene's first
+        camera; ``lod=False`` draws every patch 8x8; ``debug`` is a terrain debug view ("lod",
+        "wire", "base", "lightmap")."""
         w, h = self.size
-        cam = replace(cam, aspect=w / h)
+        if camera is None and not self.follow:
+            camera = camera_at(self.bundle)
+        cam = replace(camera, aspect=w / h) if camera is not None else None
         if self.renderer is not None:
-            img = self.renderer.render(t, camera=cam, lightmap_mode=self.lightmap_mode)
+            img = self.renderer.render(t, camera=cam, lod=lod, lightmap_mode=self.lightmap_mode, debug=debug,
+                                       read=read)
+            self.frame = img
             self.stats.update(img.stats)
             self.stats.update(self.terrain.cull_stats)
-            return img.image[..., :3]
-        mesh = self.terrain.prepare(cam)
-        frame = self.terrain.draw(cam, mesh, lightmap_mode=self.lightmap_mode, read=self.objects is None)
+            return img.image[..., :3] if read else None
+        frame = self.terrain.render(cam, lod=lod, lightmap_mode=self.lightmap_mode, debug=debug,
+                                    read=read and self.objects is None)
+        self.frame = frame
+        image = frame.image
         if self.objects is not None:
             vis_objs = self.objects.objects.visible(cam.frustum_planes(), max_distance=cam.far, eye=cam.eye)
             if self.use_visibility and self.bundle.visibility is not None and len(vis_objs):
@@ -248,12 +285,11 @@ class ScenePreview:
             self.objects.draw(cam.view_projection(), cam.eye, vis_objs, fog=(*HORIZON, DEFAULT_FOG_DENSITY))
             self.ctx.finish()
             self.stats["objects_drawn"] = int(len(vis_objs))
-            image = self.terrain.target.read()
-        else:
-            image = frame.image
+            image = self.terrain.target.read() if read else None
+            frame.image = image
         self.stats.update(self.terrain.cull_stats)
         self.stats.update(terrain_patches=frame.patches, terrain_triangles=frame.triangles)
-        return image[..., :3]
+        return image[..., :3] if read else None
 
     def _release_passes(self) -> None:
         if self.renderer is not None:

@@ -1,0 +1,78 @@
+"""The built-in default scene: what ``piste demo`` builds (cached) before it renders.
+
+The default course of a seed, its default lights (:func:`piste.lighting.default_lights`) and the
+baked light map (8 x 8 texels a patch, terrain shadows), with a camera flying down the track.  It
+is an ordinary scene file, written into the piste cache folder (``$PISTE_CACHE_DIR`` or
+``~/.cache/piste``, then ``scenes/``) and built by :func:`piste.pipeline.build_scene` with the
+step cache beside it, so the first ``piste demo`` bakes the light map and every later one loads
+the bundle.  The riders and the objects of the demo are placed at run time
+(:mod:`piste.commands.demo_scene`); the pre-processed parts come from the bundle.
+
+API
+---
+DEFAULT_SCENE_TOML                      the scene file (``{seed}`` filled in)
+default_scene_path(seed, root=None)     where the scene file lives (written when missing or changed)
+build_default_scene(seed=0, root=None, progress=False) -> BuildResult
+cache_root() -> Path                    ``$PISTE_CACHE_DIR`` or ``~/.cache/piste``
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from piste.formats.atomic import write_bytes_atomic
+from piste.pipeline.build import BuildResult, build_scene
+
+__all__ = ["DEFAULT_SCENE_TOML", "cache_root", "default_scene_path", "build_default_scene"]
+
+#: the built-in default scene (no riders or objects: ``piste demo`` places them at run time)
+DEFAULT_SCENE_TOML = """\
+# The built-in default scene of `piste demo` (written by piste.pipeline.default_scene).
+name = "default course (seed {seed})"
+
+[terrain]
+source = "default"
+seed = {seed}
+
+[lightmap]
+res = 8
+shadows = true
+
+[lod]
+near = 60.0
+far = 180.0
+
+[visibility]
+enabled = false
+
+[[cameras]]
+name = "flight"
+track = [0.12, 0.45]
+height = 12.0
+fov = 60.0
+"""
+
+
+def cache_root() -> Path:
+    """``$PISTE_CACHE_DIR`` or ``~/.cache/piste`` (where baked light maps and built scenes live)."""
+    return Path(os.environ.get("PISTE_CACHE_DIR") or Path.home() / ".cache" / "piste")
+
+
+def default_scene_path(seed: int = 0, root=None) -> Path:
+    """The default scene file of ``seed`` under ``root`` (default: :func:`cache_root` / ``scenes``),
+    written (atomically) when missing or different."""
+    folder = Path(root) if root is not None else cache_root() / "scenes"
+    path = folder / f"default-seed{int(seed)}.toml"
+    text = DEFAULT_SCENE_TOML.format(seed=int(seed)).encode()
+    if not path.is_file() or path.read_bytes() != text:
+        folder.mkdir(parents=True, exist_ok=True)
+        write_bytes_atomic(path, text)
+    return path
+
+
+def build_default_scene(seed: int = 0, root=None, progress: bool = False) -> BuildResult:
+    """Build (or load from the cache) the default scene of ``seed``: the bundle is
+    ``default-seed<seed>.piste`` beside the scene file, the step cache ``.piste-cache`` beside it."""
+    path = default_scene_path(seed, root)
+    return build_scene(path, progress=progress)
