@@ -1,183 +1,348 @@
-"""Frame time of the default course at 640x448 (llvmpipe/EGL on this machine), CPU vs GPU.
+"""Frame time at 640x448 on this machine (llvmpipe/EGL without a GPU), measured against the
+machine's floor, per pass, and as the world grows.
 
-Flies the camera down the track and renders every frame the way ``piste demo`` does: per-edge LOD,
-frustum culling, tessellation of the visible patches, upload (CPU side), then draw + glFinish and
-read-back (GPU side; on llvmpipe "GPU" is the CPU's other cores).  Prints the median of each
-stage per configuration, fps, and the comparison with LOD off (every patch 8x8: the talk's
-"without LOD") and without culling (the whole net tessellated every frame).
+Sections (every configuration interleaved frame by frame in one process; medians with [min-max]):
 
-Targets: 60 fps (16.7 ms a frame), CPU side under 4 ms.
+1. **Floor**: clear + one full-screen textured quad + read-back at the same size: what any frame
+   costs here.  Every frame time below is also printed as a multiple of it (target <= 4x).
+2. **Terrain**: the default course flown down the track: the GPU-resident path with geomorphing
+   (the default), without geomorphing, the CPU tessellation path (vertices streamed every frame),
+   the PS2 two-pass light map, LOD off.
+3. **Completed scene**: six riders chased by the camera, objects, projected shadows, specular: the
+   full scene, without shadows / specular, and a per-pass profile (``glFinish`` around each pass:
+   what llvmpipe spends in each).
+4. **Scaling**: frame time and CPU side against the number of patches (2,560 / 10k / 40k; the
+   camera's far plane at 1 km caps the visible set; ``bench_terrain.py`` takes the CPU side to 160k)
+   and riders (6 / 24 / 96), with the fitted exponent ``t ~ n^k``.
 
-Run: ``.venv/bin/python benchmarks/bench_frame.py [--frames 40] [--size 640 448]``
+Targets (issue 15): 60 fps (16.7 ms) for the completed scene, CPU side <= 4 ms, frame <= 4x floor.
+
+Run: ``.venv/bin/python benchmarks/bench_frame.py [--quick] [--frames N] [--size W H] [--scene]``
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).parent))
+from _timing import fit_exponent, record  # noqa: E402
 
-def run_configs(renderer, cameras, configs: dict) -> dict:
-    """Render every camera in every configuration, interleaved (config A, B, C for camera 1, then
-    camera 2, ...) so that load from other processes hits all configurations alike."""
-    from piste.render import summarize
-
-    for kw in configs.values():
-        renderer.render(cameras[0], read=False, **kw)  # warm-up (shaders, caches)
-    frames = {name: [] for name in configs}
-    for cam in cameras:
-        for name, kw in configs.items():
-            f = renderer.render(cam, **kw)
-            f.image = None
-            frames[name].append(f)
-    out = {}
-    for name, fs in frames.items():
-        s = summarize(fs)
-        out[name] = {
-            "median": {k: float(np.median([f.timings[k] for f in fs])) for k in fs[0].timings},
-            "best": {k: float(np.min([f.timings[k] for f in fs])) for k in fs[0].timings},
-            "tris": s["polys"],
-        }
-    return out
+_FLOOR_VS = """#version 330 core
+out vec2 v_uv;
+void main() {
+    vec2 p = vec2(float(gl_VertexID & 1), float(gl_VertexID >> 1));
+    v_uv = p;
+    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
+}
+"""
+_FLOOR_FS = """#version 330 core
+uniform sampler2D u_tex;
+in vec2 v_uv;
+out vec4 f_color;
+void main() { f_color = texture(u_tex, v_uv); }
+"""
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--frames", type=int, default=40)
-    ap.add_argument("--size", type=int, nargs=2, default=(640, 448))
-    ap.add_argument("--scene", action="store_true",
-                    help="benchmark the completed scene (riders, objects, shadows, specular) instead of the terrain alone")
-    args = ap.parse_args()
-    if args.scene:
-        return bench_scene(args)
+class Floor:
+    """The machine's floor at ``size``: clear, one full-screen textured quad (bilinear, mip-mapped
+    like the terrain's base texture), glFinish, read-back."""
 
+    def __init__(self, ctx, size):
+        import moderngl
+
+        from piste.render.context import Offscreen
+
+        self.ctx = ctx
+        self.target = Offscreen(ctx, size)
+        rng = np.random.default_rng(0)
+        img = rng.integers(0, 256, (256, 256, 4), dtype=np.uint8)
+        self.tex = ctx.texture((256, 256), 4, img.tobytes())
+        self.tex.build_mipmaps()
+        self.tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self.prog = ctx.program(vertex_shader=_FLOOR_VS, fragment_shader=_FLOOR_FS)
+        self.vao = ctx.vertex_array(self.prog, [])
+
+    def run(self) -> float:
+        import moderngl
+
+        t0 = time.perf_counter()
+        self.target.use()
+        self.target.clear((0.0, 0.0, 0.0, 1.0))
+        self.tex.use(0)
+        self.ctx.disable(moderngl.DEPTH_TEST)
+        self.vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
+        self.ctx.enable(moderngl.DEPTH_TEST)
+        self.ctx.finish()
+        self.target.read()
+        return (time.perf_counter() - t0) * 1e3
+
+    def release(self):
+        for o in (self.vao, self.prog, self.tex):
+            o.release()
+        self.target.release()
+
+
+def med(xs) -> float:
+    return float(np.median(xs))
+
+
+def rng_str(xs) -> str:
+    return f"{med(xs):7.2f} [{min(xs):.1f}-{max(xs):.1f}]"
+
+
+# ---------------------------------------------------------------------------------------- terrain
+def terrain_section(args, floor_ms: list) -> dict:
     from piste.render import TerrainRenderer
-    from piste.terrain import tessellate
     from piste.world.camera import track_camera
     from piste.world.course import TRACK_HALF_WIDTH, default_course, track_centerline
 
     net = default_course()
     line = track_centerline()
+    size = tuple(args.size)
     t0 = time.perf_counter()
-    r = TerrainRenderer(net, size=tuple(args.size), track=line, track_half_width=TRACK_HALF_WIDTH)
-    print(f"set-up (context, placeholder light map, track field, shaders): {time.perf_counter() - t0:.2f} s")
-    print(f"GL: {r.ctx.info['GL_RENDERER']}, {args.size[0]}x{args.size[1]}, {args.frames} frames from t=0.1 to 0.9 of the track")
+    kw = dict(size=size, track=line, track_half_width=TRACK_HALF_WIDTH)
+    r = TerrainRenderer(net, **kw)
+    r_plain = TerrainRenderer(net, ctx=r.ctx, lod_morph=False, **kw)
+    r_cpu = TerrainRenderer(net, ctx=r.ctx, resident=False, lod_morph=False, **kw)
+    floor = Floor(r.ctx, size)
+    print(f"GL: {r.ctx.info['GL_RENDERER']}, {size[0]}x{size[1]}; set-up {time.perf_counter() - t0:.2f} s")
     cams = [track_camera(line, t) for t in np.linspace(0.1, 0.9, args.frames)]
-
     configs = {
-        "LOD on, modulate": dict(lod=True, lightmap_mode="modulate"),
-        "LOD on, ps2 (2 passes)": dict(lod=True, lightmap_mode="ps2"),
-        "LOD off (all 8x8), modulate": dict(lod=False, lightmap_mode="modulate"),
+        "resident + geomorph (default)": (r, {}),
+        "resident, morph off": (r_plain, {}),
+        "CPU path (streamed vertices)": (r_cpu, {}),
+        "resident, ps2 (2 passes)": (r, dict(lightmap_mode="ps2")),
+        "resident, LOD off (all 8x8)": (r, dict(lod=False)),
     }
-    results = run_configs(r, cams, configs)
-
-    # no culling: tessellate the whole net at the LOD every frame (CPU side only)
-    t_nocull = []
-    for cam in cams[:10]:
-        lv = net.edge_levels(cam.eye)
-        t1 = time.perf_counter()
-        m = tessellate(net, lv)
-        t_nocull.append((time.perf_counter() - t1) * 1e3)
-    r.release()
-
-    cols = ("lod", "cull", "tessellate", "upload", "cpu", "draw", "readback", "gpu", "total")
-    head = f"{'configuration':30s} {'tris':>7s} " + " ".join(f"{c:>10s}" for c in cols) + f" {'fps':>6s}"
-    for stat, what in (("median", "median"), ("best", "best (least disturbed by other processes)")):
-        print()
-        print(f"{what} ms per frame")
-        print(head)
-        print("-" * len(head))
-        for name, res in results.items():
-            t = res[stat]
-            print(f"{name:30s} {res['tris']:7d} " + " ".join(f"{t[c]:10.2f}" for c in cols) + f" {1e3 / t['total']:6.1f}")
-    base = results["LOD on, modulate"]
-    off = results["LOD off (all 8x8), modulate"]
-    ps2 = results["LOD on, ps2 (2 passes)"]
-    print()
-    for stat in ("median", "best"):
-        b = base[stat]
-        print(f"{stat}: target 60 fps = 16.7 ms/frame: LOD on {b['total']:.1f} ms ({1e3 / b['total']:.1f} fps, "
-              f"{'met' if b['total'] <= 16.7 else 'missed'}); CPU side {b['cpu']:.2f} ms "
-              f"(target < 4 ms: {'met' if b['cpu'] < 4.0 else 'missed'})")
-    print(f"LOD off draws {off['tris'] / base['tris']:.2f}x the triangles; median frame "
-          f"{off['median']['total'] / base['median']['total']:.2f}x as long, CPU side "
-          f"{off['median']['cpu'] / base['median']['cpu']:.2f}x (llvmpipe at this size is bound by pixels, not triangles)")
-    print(f"ps2 two-pass light map: median draw {ps2['median']['draw'] / base['median']['draw']:.2f}x the one-pass modulate draw")
-    print(f"without culling the whole net ({len(net)} patches, {m.n_triangles} tris) tessellates in "
-          f"{np.median(t_nocull):.2f} ms vs {base['median']['tessellate']:.2f} ms for the visible patches")
+    for rr, k in configs.values():  # warm-up: shaders, vertex blocks, caches, numba
+        rr.render(cams[0], **k)
+    floor.run()
+    res = {name: [] for name in configs}
+    for cam in cams:
+        for name, (rr, k) in configs.items():
+            res[name].append(rr.render(cam, **k))
+        floor_ms.append(floor.run())
+    cols = ("cull", "tessellate", "upload", "cpu", "draw", "readback", "total")
+    print(f"\n== terrain, {args.frames} frames down the track (loaded machine: medians [min-max] ms) ==")
+    head = f"{'configuration':31s} {'tris':>7s} " + " ".join(f"{c:>10s}" for c in cols) + f" {'fps':>6s} {'x floor':>8s}"
+    print(head + "\n" + "-" * len(head))
+    fl = med(floor_ms)
+    out = {}
+    for name, frames in res.items():
+        m = {c: med([f.timings[c] for f in frames]) for c in cols}
+        tris = int(med([f.triangles for f in frames]))
+        out[name] = m
+        print(f"{name:31s} {tris:7d} " + " ".join(f"{m[c]:10.2f}" for c in cols) +
+              f" {1e3 / m['total']:6.1f} {m['total'] / fl:8.2f}")
+    print(f"{'floor (clear + quad + read)':31s} {'':7s} " + " " * 66 + f"{fl:10.2f}")
+    a, b, c = out["resident + geomorph (default)"], out["resident, morph off"], out["CPU path (streamed vertices)"]
+    print(f"\nresident vs CPU path: CPU side {c['cpu']:.2f} -> {b['cpu']:.2f} ms ({c['cpu'] / max(b['cpu'], 1e-9):.1f}x), "
+          f"frame {c['total']:.1f} -> {b['total']:.1f} ms; geomorphing costs {a['total'] - b['total']:+.2f} ms a frame "
+          "(a texture fetch per vertex)")
+    for o in (r, r_plain, r_cpu, floor):
+        o.release()
+    record("frame", "terrain frame, default course", "x floor", f"{a['total']:.1f} ms", f"floor {fl:.2f} ms",
+           f"{a['total'] / fl:.1f}x")
+    record("frame", "terrain CPU side (cull + LOD + index list + upload)", "<= 0.5 ms (+upload)", f"{a['cpu']:.2f} ms",
+           f"CPU path {c['cpu']:.2f} ms", f"{c['cpu'] / max(a['cpu'], 1e-9):.1f}x")
+    return out
 
 
-def bench_scene(args) -> None:
-    """The completed scene at ``args.size``: six riders chased by the camera, objects, projected
-    shadows, specular; real-time frames (t = i / 30 s).  Configurations interleaved per frame;
-    prints the median of every stage, the CPU side (animation, skinning, LOD, tessellation,
-    culling) against the 4 ms target and the frame against 60 fps."""
+# ---------------------------------------------------------------------------------------- scene
+def _profile(r):
+    """Wrap each pass of a SceneRenderer with glFinish + timer; returns (accumulator, undo)."""
+    ctx = r.ctx
+    acc: dict = {}
+    wrapped = []
+
+    def wrap(obj, name, label):
+        if obj is None:
+            return
+        fn = getattr(obj, name)
+
+        def w(*a, **k):
+            ctx.finish()
+            t0 = time.perf_counter()
+            out = fn(*a, **k)
+            ctx.finish()
+            acc.setdefault(label, []).append((time.perf_counter() - t0) * 1e3)
+            return out
+
+        setattr(obj, name, w)
+        wrapped.append((obj, name))
+
+    wrap(r.shadows, "render_casters", "shadow casters")
+    wrap(r.terrain.terrain, "draw", "terrain")
+    wrap(r.terrain.sky, "draw", "sky")
+    wrap(r.shadows, "draw_receivers", "shadow receivers")
+    wrap(r.objects, "draw", "objects")
+    for cp in r.cast_passes:
+        wrap(cp, "draw", "riders + specular")
+    wrap(r.terrain.target, "read", "read-back")
+
+    def undo():
+        for obj, name in wrapped:
+            delattr(obj, name)
+
+    return acc, undo
+
+
+def scene_section(args, floor_ms: list) -> dict:
     from piste.render.scene_renderer import SceneRenderer, summarize_scene
     from piste.world.scene import Scene
 
     t0 = time.perf_counter()
     scene = Scene.default(0)
     r = SceneRenderer(scene, size=tuple(args.size))
-    print(f"scene set-up (course, rider + LODs, objects, GL, shaders): {time.perf_counter() - t0:.2f} s")
-    print(f"GL: {r.ctx.info['GL_RENDERER']}, {args.size[0]}x{args.size[1]}, {args.frames} frames (t = i / 30 s)")
-    configs = {
-        "full scene": dict(),
-        "no shadows": dict(shadows=False),
-        "no specular": dict(specular=False),
-        "objects baked RGB": dict(objects="baked"),
-        "objects point+spot": dict(objects="points"),
-    }
+    floor = Floor(r.ctx, tuple(args.size))
+    print(f"\nscene set-up (course, rider + LODs, objects, GL, shaders): {time.perf_counter() - t0:.2f} s")
 
-    def one(t, shadows=True, specular=True, objects="dynamic"):
+    def one(t, shadows=True, specular=True):
         sh, sp = r.shadows, r.specular
         try:
             if not shadows:
                 r.shadows = None
             r.specular = specular
-            r.objects.mode = objects
             return r.render(t, read=True)
         finally:
             r.shadows, r.specular = sh, sp
 
+    configs = {"full scene": dict(), "no shadows": dict(shadows=False), "no specular": dict(specular=False)}
     for kw in configs.values():
-        one(0.0, **kw)  # warm-up: shaders, baked colours, caches
+        one(0.0, **kw)
     ims = {name: [] for name in configs}
     for i in range(args.frames):
         for name, kw in configs.items():
             im = one(i / 30.0, **kw)
             im.image = None
             ims[name].append(im)
-    r.release()
-    cols = ("animation", "lod_skinning", "lights", "objects", "terrain_lod", "terrain_cull", "tessellate",
-            "shadow_cull", "cpu", "upload", "terrain_draw", "scene_draw", "readback", "total")
-    short = ("anim", "skin", "lights", "objcull", "t.lod", "t.cull", "tess", "shadcull", "CPU", "upload",
-             "terrain", "scene", "read", "frame")
-    head = f"{'configuration':22s} " + " ".join(f"{c:>8s}" for c in short) + f" {'fps':>6s}"
-    print()
-    print("median ms per frame (CPU = animation + skinning + LOD + tessellation + culling + light choice)")
-    print(head)
-    print("-" * len(head))
-    med = {}
+        floor_ms.append(floor.run())
+    # per-pass profile (extra glFinish calls: the sum is a little above the plain frame)
+    acc, undo = _profile(r)
+    prof_total = []
+    for i in range(max(args.frames // 2, 3)):
+        t1 = time.perf_counter()
+        one(i / 30.0)
+        prof_total.append((time.perf_counter() - t1) * 1e3)
+    undo()
+    cols = ("animation", "lod_skinning", "lights", "objects", "terrain_cull", "tessellate", "shadow_cull", "cpu",
+            "upload", "terrain_draw", "scene_draw", "readback", "total")
+    short = ("anim", "skin", "lights", "objcull", "t.cull", "t.index", "shadcull", "CPU", "upload", "terrain", "scene",
+             "read", "frame")
+    fl = med(floor_ms)
+    print(f"\n== completed scene, {args.frames} frames (t = i / 30 s), medians ms (loaded machine) ==")
+    head = f"{'configuration':14s} " + " ".join(f"{c:>8s}" for c in short) + f" {'fps':>6s} {'x floor':>8s}"
+    print(head + "\n" + "-" * len(head))
+    out = {}
     for name, lst in ims.items():
-        m = {k: float(np.median([im.timings[k] for im in lst])) for k in cols}
-        med[name] = m
-        print(f"{name:22s} " + " ".join(f"{m[c]:8.2f}" for c in cols) + f" {1e3 / m['total']:6.1f}")
+        m = {k: med([im.timings.get(k, 0.0) for im in lst]) for k in cols}
+        out[name] = m
+        print(f"{name:14s} " + " ".join(f"{m[c]:8.2f}" for c in cols) + f" {1e3 / m['total']:6.1f} {m['total'] / fl:8.2f}")
     full = summarize_scene(ims["full scene"])
-    m = med["full scene"]
-    print()
-    print(f"full scene: {full['rider_triangles']:.0f} rider + {full['object_triangles']:.0f} object + "
-          f"{full['terrain_triangles']:.0f} terrain triangles, {full['objects_drawn']:.0f} objects, "
-          f"shadow patches per frame {full['shadow_patches']:.1f} (max {full['shadow_patches_max']}), "
-          f"{full['shadow_triangles']:.0f} shadow-pass triangles")
-    print(f"target 60 fps = 16.7 ms/frame: {m['total']:.1f} ms ({1e3 / m['total']:.1f} fps, "
-          f"{'met' if m['total'] <= 16.7 else 'missed'}); CPU side {m['cpu']:.2f} ms (target < 4 ms: "
-          f"{'met' if m['cpu'] < 4.0 else 'missed'}); best CPU side "
-          f"{min(im.timings['cpu'] for im in ims['full scene']):.2f} ms")
-    print(f"the scene's own draws (shadows, objects, riders, specular) add {m['scene_draw']:.1f} ms; without shadows "
-          f"{med['no shadows']['scene_draw']:.1f} ms, without specular {med['no specular']['scene_draw']:.1f} ms")
+    m = out["full scene"]
+    print(f"\nper pass (glFinish around each; frame {med(prof_total):.1f} ms with the extra syncs):")
+    for label, ts in sorted(acc.items(), key=lambda kv: -med(kv[1])):
+        print(f"  {label:18s} {rng_str(ts)} ms  ({100 * med(ts) / med(prof_total):4.1f} %)")
+    print(f"\nfull scene: {full['rider_triangles']:.0f} rider + {full['object_triangles']:.0f} object + "
+          f"{full['terrain_triangles']:.0f} terrain triangles, {full['objects_drawn']:.0f} objects")
+    print(f"target 60 fps = 16.7 ms: {m['total']:.1f} ms ({1e3 / m['total']:.1f} fps, "
+          f"{'met' if m['total'] <= 16.7 else 'missed'}); CPU side {m['cpu']:.2f} ms (target <= 4: "
+          f"{'met' if m['cpu'] <= 4.0 else 'missed'}); {m['total'] / fl:.1f}x the floor ({fl:.2f} ms; target <= 4x: "
+          f"{'met' if m['total'] <= 4 * fl else 'missed'})")
+    record("frame", "completed scene fps (640x448, llvmpipe)", ">= 60 fps", f"{1e3 / m['total']:.1f} fps",
+           "", "", m["total"] <= 16.7)
+    record("frame", "completed scene CPU side", "<= 4 ms", f"{m['cpu']:.2f} ms", "", "", m["cpu"] <= 4.0)
+    record("frame", "completed scene vs machine floor", "<= 4x", f"{m['total']:.1f} ms", f"floor {fl:.2f} ms",
+           f"{m['total'] / fl:.1f}x", m["total"] <= 4 * fl)
+    floor.release()
+    r.release()
+    return out
+
+
+# ---------------------------------------------------------------------------------------- scaling
+def scaling_section(args) -> None:
+    from piste.render import TerrainRenderer
+    from piste.render.scene_renderer import SceneRenderer
+    from piste.character import default_rider
+    from piste.world.camera import Camera
+    from piste.world.course import default_course, track_centerline
+    from piste.world.riders import pack_for
+    from piste.world.scene import Scene
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from bench_terrain import FAR, grid_of
+
+    frames = max(args.frames // 2, 4)
+    print(f"\n== scaling: patches (far plane {FAR:.0f} m caps the visible set; unlit), {frames} frames each ==")
+    print(f"{'patches':>8s} {'visible':>8s} {'tris':>8s} {'CPU side':>10s} {'frame':>10s}")
+    rows = []
+    sizes = (2560, 10_000) if args.quick else (2560, 10_000, 40_000)
+    for n in sizes:
+        net = default_course() if n == 2560 else grid_of(n)
+        lo, hi = net.patch_bounds
+        if n == 2560:
+            tr = track_centerline()
+            cams = [Camera(tr[i] + [0.0, 0.0, 4.0], tr[min(i + 40, len(tr) - 1)], far=FAR)
+                    for i in np.linspace(len(tr) // 10, len(tr) // 2, frames).astype(int)]
+        else:
+            xm = float((lo[:, 0].min() + hi[:, 0].max()) / 2)
+            y0, z = float(lo[:, 1].min()), float(hi[:, 2].max())
+            cams = [Camera([xm + dx, y0 - 20.0, z + 30.0], [xm + dx, y0 + 400.0, z - 20.0], far=FAR)
+                    for dx in np.linspace(-50, 50, frames)]
+        r = TerrainRenderer(net, size=tuple(args.size), lightmap=None)
+        r.render(cams[0])
+        fs = [r.render(c) for c in cams]
+        r.release()
+        row = (n, med([f.patches for f in fs]), med([f.triangles for f in fs]), med([f.timings["cpu"] for f in fs]),
+               med([f.timings["total"] for f in fs]))
+        rows.append(row)
+        print(f"{row[0]:8d} {row[1]:8.0f} {row[2]:8.0f} {row[3]:10.2f} {row[4]:10.2f}")
+    ns = [r_[0] for r_ in rows]
+    print(f"fitted exponent: CPU side n^{fit_exponent(ns, [r_[3] for r_ in rows]):.2f}, frame "
+          f"n^{fit_exponent(ns, [r_[4] for r_ in rows]):.2f}")
+
+    print(f"\n== scaling: riders (the completed scene), {frames} frames each ==")
+    print(f"{'riders':>8s} {'CPU side':>10s} {'anim':>8s} {'skin':>8s} {'frame':>10s}")
+    model = default_rider(0)
+    rrows = []
+    for k in ((6, 24) if args.quick else (6, 24, 96)):
+        scene = Scene.default(0, model=model, pack=pack_for(model, k, spacing=max(2.0, 48.0 / k)))
+        r = SceneRenderer(scene, size=tuple(args.size))
+        r.render(0.0)
+        ims = [r.render(i / 30.0) for i in range(frames)]
+        r.release()
+        row = (k, med([im.timings["cpu"] for im in ims]), med([im.timings["animation"] for im in ims]),
+               med([im.timings["lod_skinning"] for im in ims]), med([im.timings["total"] for im in ims]))
+        rrows.append(row)
+        print(f"{row[0]:8d} {row[1]:10.2f} {row[2]:8.2f} {row[3]:8.2f} {row[4]:10.2f}")
+    ks = [r_[0] for r_ in rrows]
+    kc = fit_exponent(ks, [r_[1] for r_ in rrows])
+    print(f"fitted exponent: CPU side n^{kc:.2f} (target <= 1), frame n^{fit_exponent(ks, [r_[4] for r_ in rrows]):.2f}")
+    record("frame", "riders: CPU side scaling exponent", "<= 1 (linear)", f"n^{kc:.2f}", "", "", kc <= 1.05)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="8 frames, smaller scaling tables")
+    ap.add_argument("--frames", type=int, help="frames per configuration (default 30, quick 8)")
+    ap.add_argument("--size", type=int, nargs=2, default=(640, 448))
+    ap.add_argument("--scene", action="store_true", help="only the completed scene (no terrain-only or scaling runs)")
+    ap.add_argument("--no-scaling", action="store_true", help="skip the scaling tables")
+    args = ap.parse_args(argv)
+    args.frames = args.frames or (8 if args.quick else 30)
+    floor_ms: list = []
+    if not args.scene:
+        terrain_section(args, floor_ms)
+    scene_section(args, floor_ms)
+    if not (args.scene or args.no_scaling):
+        scaling_section(args)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from piste.render.context import check_gl_error
+from piste.terrain.cull import patch_tree
 
 __all__ = ["SceneRenderer", "SceneImage", "summarize_scene"]
 
@@ -138,7 +139,8 @@ class SceneRenderer:
             centers = np.concatenate([f.riders.anchor + f.riders.normal * 0.9 for f in frames])
             radius = np.concatenate([np.full(len(f.riders), r) for f, r in zip(frames, self.cast_radius)])
             light_vp = shadow_matrices(centers, radius, sun.direction)
-            patches = shadow_patches(self.patch_lo, self.patch_hi, light_vp, candidates=mesh.patch_ids)
+            patches = shadow_patches(self.patch_lo, self.patch_hi, light_vp, candidates=mesh.patch_ids,
+                                     tree=patch_tree(self.scene.net))
         t3 = time.perf_counter()
         # ---- GPU work (uploads count as CPU time: they are memcpy on the CPU side)
         for cp, f in zip(self.cast_passes, frames):
