@@ -6,6 +6,9 @@
 - ``morphs_to_null_bones(mesh, n_bones, max_influences=2) -> NullBoneRig``: the null-bone
   alternative (translation-only bones with per-vertex weights), fitted by clustering + ALS.
 - ``morph_report(mesh, rig) -> dict``: bytes, flops, measured time per frame and error of both.
+- ``face_weights(names, t, riders) -> (n, k)``: a procedural face (blink, mouth; other targets in turn).
+- ``FaceSkin(mesh, palette_index, mode)``: morph targets or null bones added after blended-matrix
+  skinning (what the renderer draws: faces that move).
 """
 
 from __future__ import annotations
@@ -18,7 +21,8 @@ import numpy as np
 
 from piste.errors import ValidationError
 
-__all__ = ["vertex_normals", "blend_morphs", "NullBoneRig", "morphs_to_null_bones", "morph_report"]
+__all__ = ["vertex_normals", "blend_morphs", "NullBoneRig", "morphs_to_null_bones", "morph_report", "face_weights",
+           "FaceSkin", "FACE_NULL_BONES"]
 
 
 def vertex_normals(positions, indices) -> np.ndarray:
@@ -237,3 +241,102 @@ def morph_report(mesh, rig: NullBoneRig, n_samples: int = 64, seed: int = 0, tim
                 rms_error=float(np.sqrt(np.mean(errs ** 2))) if errs.size else 0.0,
                 relative_error=float(errs.max() / disp) if disp > 0 else 0.0,
                 max_displacement=disp, normal_error_deg=nerr)
+
+
+# ---------------------------------------------------------------------------------------------- faces that move
+#: null bones per LOD of the null-bone face (the talk's alternative to morph targets)
+FACE_NULL_BONES = 8
+
+
+def face_weights(names, t, riders) -> np.ndarray:
+    """A procedural face animation: morph weights ``(n, k) float32`` at ``t`` seconds for the
+    riders ``riders (n,)`` (their indices: each rider keeps its own rhythm).
+
+    Targets named ``blink`` close the eyes for 0.15 s every 2.8-4.0 s; ``smile`` and ``shout`` (the
+    mouth) come and go on slower cycles, never both at once.  Any other target (a glTF model's
+    expressions, e.g. RobotExpressive's Angry / Surprised / Sad) takes its turn in a cycle: each
+    fades in, holds and fades out over 2 s.
+    """
+    names = [str(n).lower() for n in names]
+    r = np.asarray(riders, dtype=np.float64).reshape(-1)
+    t = float(t)
+    out = np.zeros((len(r), len(names)), np.float32)
+    period = 2.8 + 0.4 * (r % 4)
+    ph = np.mod(t + 0.77 * r, period)
+    blink = np.clip(1.0 - np.abs(ph - 0.075) / 0.075, 0.0, 1.0)  # a 0.15 s triangle at the start of each period
+    mouth = 0.5 - 0.5 * np.cos(2.0 * np.pi * (t + 1.3 * r) / 5.0)  # 0..1 over 5 s
+    which = np.mod(np.floor((t + 1.3 * r) / 5.0), 2.0)  # smile, then shout
+    others = [i for i, n in enumerate(names) if n not in ("blink", "smile", "shout")]
+    for i, n in enumerate(names):
+        if n == "blink":
+            out[:, i] = blink
+        elif n == "smile":
+            out[:, i] = mouth * (which == 0)
+        elif n == "shout":
+            out[:, i] = mouth * (which == 1)
+    if others:
+        slot = np.floor((t + 0.9 * r) / 2.0).astype(np.int64) % len(others)
+        x = np.mod(t + 0.9 * r, 2.0) / 2.0
+        env = np.clip(np.minimum(x, 1.0 - x) * 4.0, 0.0, 1.0)  # fade in 0.5 s, hold, fade out 0.5 s
+        for j, i in enumerate(others):
+            out[:, i] = np.where(slot == j, env, 0.0)
+    return out
+
+
+class FaceSkin:
+    """Faces that move on blended-matrix skinned riders: morph targets (or their null-bone fit)
+    added after skinning.
+
+    Skinning is linear in the bind-space position, so ``skin(p + d) = skin(p) + R d`` with ``R``
+    the rotation part of the vertex's palette matrix: only the ``m`` vertices a target moves are
+    touched, ``(n, m, 3, 3) @ (n, m, 3)`` per frame.  ``mode="morph"`` blends the targets
+    (:func:`blend_morphs`, normals too); ``mode="null_bones"`` displaces by the translation-only
+    null bones fitted to them (:func:`morphs_to_null_bones`; normals unchanged, as on the PS2).
+
+    Parameters
+    ----------
+    mesh : the LOD's SkinnedMesh (with ``morph_positions``);  palette_index : (v,) its palette entries
+    mode : "morph" | "null_bones";  n_bones : null bones of the fit
+    """
+
+    def __init__(self, mesh, palette_index, mode: str = "morph", n_bones: int = FACE_NULL_BONES):
+        if mode not in ("morph", "null_bones"):
+            raise ValidationError(f"face mode must be 'morph' or 'null_bones', got {mode!r}")
+        self.mode = mode
+        self.names = list(mesh.morph_names)
+        self.k = int(mesh.morph_positions.shape[0])
+        moved = np.nonzero(np.abs(mesh.morph_positions).sum(axis=(0, 2)) > 0)[0] if self.k else np.zeros(0, np.int64)
+        self.index = np.asarray(palette_index)
+        self.rig = None
+        if mode == "null_bones" and self.k and len(moved):
+            self.rig = morphs_to_null_bones(mesh, min(int(n_bones), len(moved)))
+            self.vertices = self.rig.vertices.astype(np.int64)
+        else:
+            self.vertices = moved.astype(np.int64)
+        self.dpos = np.ascontiguousarray(mesh.morph_positions[:, self.vertices], np.float32)  # (k, m, 3)
+        self.dnrm = np.ascontiguousarray(mesh.morph_normals[:, self.vertices], np.float32)
+
+    def __bool__(self) -> bool:
+        return bool(self.k and len(self.vertices))
+
+    def offsets(self, weights) -> np.ndarray:
+        """Bind-space displacements ``(n, m, 3) float32`` of the moved vertices for ``weights (n, k)``."""
+        w = np.asarray(weights, np.float32).reshape(-1, self.k)
+        if self.rig is not None:
+            t = np.einsum("nk,kjc->njc", w, self.rig.offsets)  # (n, J, 3) bone translations
+            return np.einsum("mi,nmic->nmc", self.rig.weights, t[:, self.rig.joints])
+        return np.einsum("nk,kmc->nmc", w, self.dpos)
+
+    def apply(self, positions, normals, palette, weights) -> None:
+        """Add the face to skinned ``positions``/``normals (n, v, 3)`` in place, given this frame's
+        ``palette (n, p, 3, 4)`` (:meth:`BlendedMesh.palette_matrices`) and ``weights (n, k)``."""
+        if not self or not len(positions):
+            return
+        vs = self.vertices
+        rot = palette[:, self.index[vs], :, :3]  # (n, m, 3, 3)
+        positions[:, vs] += np.einsum("nmij,nmj->nmi", rot, self.offsets(weights))
+        if self.rig is None:
+            w = np.asarray(weights, np.float32).reshape(-1, self.k)
+            dn = np.einsum("nmij,nmj->nmi", rot, np.einsum("nk,kmc->nmc", w, self.dnrm))
+            nn = normals[:, vs] + dn
+            normals[:, vs] = nn / np.maximum(np.linalg.norm(nn, axis=-1, keepdims=True), 1e-12)

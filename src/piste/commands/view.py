@@ -34,6 +34,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--rider-model", action="append", default=[], metavar="FILE[:N]",
                         help="add N riders (default 2) of a skinned, animated glTF model to the default course "
                              "(repeatable: any number of different rider models)")
+    parser.add_argument("--face", choices=("morph", "null_bones", "off"), default="morph",
+                        help="riders' faces: morph targets, their null-bone fit, or the neutral face (default: morph)")
     parser.add_argument("--follow", type=int, metavar="N", help="start chasing rider N (F toggles, N next rider)")
     parser.add_argument("--no-overlay", action="store_true", help="start without the statistics overlay (H toggles)")
     parser.add_argument("--frames", type=_positive, help="quit after N frames (for scripted runs)")
@@ -77,7 +79,9 @@ def _scene_renderer(args, net, line, atlas, ctx=None):
     start = min(max(float(args.start), 0.0) * length, max(length - 120.0, 0.0))
     scene = Scene(net, line, lights, objects=objs, start=start)
     casts = [Scene(net, line, lights, model=m, pack=pack, start=start) for m, pack in rider_casts(args.rider_model)]
-    return SceneRenderer(scene, size=tuple(args.size), ctx=ctx, lightmap=atlas, casts=casts)
+    face = getattr(args, "face", "morph")
+    return SceneRenderer(scene, size=tuple(args.size), ctx=ctx, lightmap=atlas, casts=casts,
+                         face=None if face == "off" else face)
 
 
 def rider_casts(specs) -> list:

@@ -72,10 +72,15 @@ class SceneRenderer:
         riders, each model with its own LODs, palettes and textures.  ``scene`` keeps the camera
         and the objects.  Default: ``scene.casts`` when the scene has them (a bundle with several
         rider models, :class:`piste.pipeline.preview.BundleScene`).
+    face : faces that move: "morph" (morph targets added after skinning), "null_bones" (their
+        null-bone fit) or None (the neutral face).  Weights come from the rider's clip when it
+        animates them (glTF morph animations), else from :func:`piste.character.morph.face_weights`
+        (blink and mouth for the default rider, other models' expressions in turn).
     """
 
     def __init__(self, scene, size=(640, 448), ctx=None, lightmap="placeholder", object_lighting: str = "dynamic",
-                 shadows: bool = True, specular: bool = True, shadow_tile: int = 128, casts=(), **terrain_kw):
+                 shadows: bool = True, specular: bool = True, shadow_tile: int = 128, casts=(),
+                 face: str | None = "morph", **terrain_kw):
         from piste.render.character_pass import CharacterPass
         from piste.render.frame import TerrainRenderer
         from piste.render.object_pass import ObjectPass
@@ -105,6 +110,11 @@ class SceneRenderer:
             b = c.lods[-1].mesh.bounds()
             self.cast_radius.append(0.5 * float(np.linalg.norm(b[1] - b[0])) + 0.25)
         self.caster_radius = self.cast_radius[0]
+        from piste.character.morph import FaceSkin
+
+        self.face = face
+        self.faces = [[FaceSkin(lod.mesh, lod.palette.index, face) for lod in c.lods] if face else []
+                      for c in self.casts]
 
     @property
     def size(self):
@@ -112,11 +122,12 @@ class SceneRenderer:
 
     def render(self, t: float, read: bool = True, fog: float | None = None, camera=None, lod: bool = True,
                lightmap_mode: str = "modulate", light_only: bool = False, debug: str | None = None,
-               count_rider_pixels: bool = False) -> SceneImage:
+               count_rider_pixels: bool = False, face_time: float | None = None) -> SceneImage:
         """Render the scene at ``t`` seconds.  ``camera`` overrides the chase camera; ``light_only``
         draws riders and objects with their per-vertex light only (tests); ``debug`` is the terrain's
         debug view (e.g. "lod"); ``count_rider_pixels`` counts the riders' pixels that pass the depth
-        test (an occlusion query: ``stats["rider_pixels"]``)."""
+        test (an occlusion query: ``stats["rider_pixels"]``); ``face_time`` is the face animation's
+        time (default ``t``)."""
         from piste.render.frame import DEFAULT_FOG_DENSITY
         from piste.render.shadow_pass import shadow_matrices, shadow_patches
         from piste.render.sky_pass import HORIZON
@@ -129,6 +140,9 @@ class SceneRenderer:
         cam = sf.camera
         # the other models' riders, seen by the same camera
         frames = [sf] + [c.update(t, aspect=w / h, camera=cam) for c in self.casts[1:]]
+        for c, f, faces in zip(self.casts, frames, self.faces):
+            if faces:
+                self._add_faces(c, f, faces, t, t if face_time is None else face_time)
         t1 = time.perf_counter()
         tt: dict = {}
         mesh = self.terrain.prepare(cam, lod=lod, timings=tt)
@@ -209,6 +223,38 @@ class SceneRenderer:
             stats["rider_pixels"] = rider_pixels
         frame.image = image
         return SceneImage(image, frame, sf, patches, stats, tm, frames[1:])
+
+    @staticmethod
+    def face_weights(cast, state, t: float, face_t: float, riders) -> np.ndarray:
+        """Morph weights ``(len(riders), k)`` of ``cast``'s riders: their clip's weight track
+        when it has one for the whole mesh (a glTF morph animation), else the procedural face."""
+        from piste.character.morph import face_weights
+
+        mesh = cast.lods[0].mesh
+        k = mesh.morph_positions.shape[0]
+        out = face_weights(mesh.morph_names, face_t, riders)
+        clips = cast.model.clips
+        rs = cast.riders
+        times = rs.clip_times(t) if hasattr(rs, "clip_times") else np.asarray(rs.phase, np.float64) + t
+        for j, r in enumerate(riders):
+            clip = clips.get(state.clip[r])
+            tracks = [tr for tr in (clip.weight_tracks.values() if clip is not None else ())
+                      if np.asarray(tr.values).reshape(len(tr.times), -1).shape[1] == k]
+            if len(tracks) == 1:
+                from piste.character.animation import clip_time, sample_track
+
+                tt = clip_time(float(times[r]) - t + face_t, clip.duration, True)
+                out[j] = np.asarray(sample_track(tracks[0], tt), np.float32).reshape(k)
+        return out
+
+    def _add_faces(self, cast, frame, faces, t, face_t) -> None:
+        st = frame.riders
+        for level, (idx, pos, nrm) in enumerate(frame.skinned):
+            fs = faces[level]
+            if not fs or not len(idx):
+                continue
+            pal = cast.skinners[level].palette_matrices(st.skin[idx])
+            fs.apply(pos, nrm, pal, self.face_weights(cast, st, t, face_t, idx))
 
     def release(self) -> None:
         for p in (*self.cast_passes, self.objects, self.shadows):

@@ -326,6 +326,10 @@ class RiderSet:
         skin = self.table.skin_matrices(self.clip_ids, times, m)
         return RiderState(t, anchor, normal, fwd, m, skin, self.clips, s, heading, probe_z, d)
 
+    def clip_times(self, t: float) -> np.ndarray:
+        """``(n,)`` seconds into each rider's clip at ``t`` (unwrapped; clips loop)."""
+        return self.phase * self.table.duration[self.clip_ids] + float(t)
+
     @classmethod
     def default(cls, net, centerline, model=None, **kw) -> "RiderSet":
         return cls(net, centerline, model=model, **kw)
@@ -364,7 +368,7 @@ def follow_camera(state: RiderState, i: int = 0, behind: float = 7.0, height: fl
 
 def merged_mesh(model):
     """One :class:`~piste.character.model.SkinnedMesh` of every skinned primitive of ``model``
-    (texture: the first one's).  Morph targets are kept when every primitive has the same number."""
+    (texture: the first one's).  Morph targets are merged by name."""
     from piste.character.model import SkinnedMesh
 
     meshes = [m for m in model.meshes if m.skinned] or list(model.meshes)
@@ -374,13 +378,21 @@ def merged_mesh(model):
         return meshes[0]
     off = np.cumsum([0] + [m.n_vertices for m in meshes])[:-1]
     tex = next((m.texture for m in meshes if m.texture is not None), None)
+    # morph targets: the union of the primitives' target names (a primitive without one: zeros)
+    names = list(dict.fromkeys(n for m in meshes for n in m.morph_names))
     kw = {}
-    n_morph = {int(np.asarray(m.morph_positions).shape[0]) for m in meshes}
-    if len(n_morph) == 1 and n_morph != {0}:
-        kw = {"morph_positions": np.concatenate([m.morph_positions for m in meshes], axis=1),
-              "morph_normals": np.concatenate([m.morph_normals for m in meshes], axis=1),
-              "morph_names": list(meshes[0].morph_names),
-              "morph_default_weights": np.asarray(meshes[0].morph_default_weights)}
+    if names:
+        k = len(names)
+        mp = [np.zeros((k, m.n_vertices, 3), np.float32) for m in meshes]
+        mn = [np.zeros((k, m.n_vertices, 3), np.float32) for m in meshes]
+        dw = np.zeros(k, np.float32)
+        for m, a, b in zip(meshes, mp, mn):
+            for j, n in enumerate(m.morph_names):
+                i = names.index(n)
+                a[i], b[i] = m.morph_positions[j], m.morph_normals[j]
+                dw[i] = m.morph_default_weights[j]
+        kw = {"morph_positions": np.concatenate(mp, axis=1), "morph_normals": np.concatenate(mn, axis=1),
+              "morph_names": names, "morph_default_weights": dw}
     return SkinnedMesh(
         name=model.name, positions=np.concatenate([m.positions for m in meshes]),
         indices=np.concatenate([m.indices + o for m, o in zip(meshes, off)]),
