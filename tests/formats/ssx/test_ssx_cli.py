@@ -41,3 +41,42 @@ def test_cli_bad_level(tmp_path, capsys):
     assert main(["ssx", "info", str(bad)]) != 0
     err = capsys.readouterr().err
     assert "BAD.pbd" in err and "platform" in err and "Traceback" not in err
+
+
+def _need(tool: str, package: str):
+    """Skip without ``tool``; fail instead when PISTE_REQUIRE_TOOLS is set (CI)."""
+    import os
+    import shutil
+
+    import pytest
+
+    if shutil.which(tool) is None:
+        msg = f"{tool} not installed (apt-get install {package}; tools/setup-test-tools.sh)"
+        if os.environ.get("PISTE_REQUIRE_TOOLS"):
+            pytest.fail(msg)
+        pytest.skip(msg)
+
+
+def test_view_window_under_xvfb(tmp_path, gl_context):
+    """`piste view LEVEL.pbd` opens a window (Xvfb) and draws the level in ps2 mode."""
+    import os
+    import subprocess
+    import sys
+
+    import pytest
+    from PIL import Image
+
+    _need("xvfb-run", "xvfb")
+    pytest.importorskip("pyglet")
+    assert main(["ssx", "make", str(tmp_path), "--name", "LV"]) == 0
+    shot = tmp_path / "shot.png"
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    r = subprocess.run(["xvfb-run", "-a", sys.executable, "-m", "piste.cli", "view", str(tmp_path / "LV.pbd"),
+                        "--frames", "3", "--lightmap", "ps2", "--size", "160", "112", "--out", str(shot)],
+                       env=env, capture_output=True, text=True, timeout=180)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    assert img.shape == (112, 160, 3)
+    # the rock texture's dark brown shows below the overlay
+    lower = img[70:]
+    assert ((lower[..., 0] < 140) & (lower[..., 2] < lower[..., 0]) & (lower[..., 0] > 30)).mean() > 0.03
