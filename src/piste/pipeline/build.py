@@ -286,7 +286,10 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
             msrc = model if model.startswith("builtin:") else _file_key(model)
             own = [r for r in scene.riders if r.model == model]
             clip_srcs = sorted({(r.clips_from, json.dumps(r.bone_map, sort_keys=True)) for r in own if r.clips_from})
-            ch_key = content_key(BUILD_VERSION, "characters", msrc, ratios, [(_file_key(f), b) for f, b in clip_srcs])
+            from piste.pipeline.characters import CHARACTERS_VERSION
+
+            ch_key = content_key(BUILD_VERSION, "characters", CHARACTERS_VERSION, msrc, ratios,
+                                 [(_file_key(f), b) for f, b in clip_srcs])
 
             def make_characters(model=model, clip_srcs=clip_srcs):
                 from piste.pipeline.characters import character_arrays

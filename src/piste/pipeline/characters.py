@@ -5,8 +5,9 @@ For each LOD (:func:`piste.character.make_lods`): the simplified mesh, its blend
 (:func:`piste.character.batch_mesh`) and one triangle strip per batch
 (:func:`piste.character.stripify`, restart-joined).  Clips are resampled at ``rate`` Hz into
 per-bone translation / rotation / scale tables (what :class:`piste.world.riders.ClipTable` plays),
-so loading never samples the original curves.  Morph targets are not carried (riders in a bundle
-show the neutral face).
+so loading never samples the original curves.  Morph targets travel per LOD
+(``lod<i>/morph_positions``, ``lod<i>/morph_normals`` ``(k, v, 3) float32``, names in the meta's
+``morphs``), so riders in a bundle move their faces too.
 
 Array names below ``<prefix>`` (``characters/<model id>/``): ``skeleton/{parents, rest_translation,
 rest_rotation, rest_scale, inverse_bind}``, ``texture``, ``clips/<name>/{translation, rotation, scale}``
@@ -26,11 +27,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from piste.errors import ConfigError
+from piste.errors import ConfigError, FormatError
 
-__all__ = ["character_arrays", "model_from_arrays", "lods_from_arrays", "merged_mesh", "CLIP_RATE"]
+__all__ = ["character_arrays", "model_from_arrays", "lods_from_arrays", "merged_mesh", "CLIP_RATE",
+           "CHARACTERS_VERSION"]
 
 CLIP_RATE = 30.0
+#: what the character step writes (part of its cache key): 2 = morph targets per LOD
+CHARACTERS_VERSION = 2
 DEFAULT_STEPS = (0.1, 0.2, 0.25)
 
 
@@ -69,7 +73,7 @@ def character_arrays(model, ratios=(1.0, 0.5, 0.25), steps=None, max_bones: int 
     tex = mesh.texture if mesh.texture is not None else np.full((4, 4, 4), 255, np.uint8)
     a["texture"] = np.ascontiguousarray(tex, dtype=np.uint8)
     meta: dict = {"name": model.name, "bones": list(sk.names), "clips": {}, "lods": [], "rate": float(rate),
-                  "max_bones": int(max_bones)}
+                  "max_bones": int(max_bones), "morphs": list(mesh.morph_names)}
     for cname, clip in sorted(model.clips.items()):
         f = int(np.ceil(clip.duration * rate)) + 1
         times = np.minimum(np.arange(f) / rate, clip.duration)
@@ -81,6 +85,9 @@ def character_arrays(model, ratios=(1.0, 0.5, 0.25), steps=None, max_bones: int 
     for i, lod in enumerate(lods):
         m, pal = lod.mesh, lod.palette
         p = f"lod{i}/"
+        if m.morph_positions.shape[0]:
+            a[p + "morph_positions"] = np.ascontiguousarray(m.morph_positions, np.float32)
+            a[p + "morph_normals"] = np.ascontiguousarray(m.morph_normals, np.float32)
         a.update({p + "positions": m.positions, p + "normals": m.normals, p + "uv": m.uv,
                   p + "indices": m.indices.astype(np.uint32), p + "joints": m.joints, p + "weights": m.weights,
                   p + "palette_bones": pal.bones.astype(np.int32), p + "palette_weights": pal.weights.astype(np.float32),
@@ -104,6 +111,21 @@ def character_arrays(model, ratios=(1.0, 0.5, 0.25), steps=None, max_bones: int 
     return a, meta
 
 
+def _morphs(arrays: dict, prefix: str, meta: dict) -> dict:
+    """The morph-target keywords of a LOD's SkinnedMesh (none when the bundle has none)."""
+    if prefix + "morph_positions" not in arrays:
+        return {}
+    names = list(meta.get("morphs") or [])
+    mp, mn = arrays[prefix + "morph_positions"], arrays.get(prefix + "morph_normals")
+    v = arrays[prefix + "positions"].shape[0]
+    if mp.ndim != 3 or mp.shape[1:] != (v, 3) or mn is None or mn.shape != mp.shape:
+        raise FormatError(None, f"expected (k, {v}, 3) morph deltas, got {mp.shape} and "
+                                f"{None if mn is None else mn.shape}", field=prefix + "morph_positions")
+    k = mp.shape[0]
+    return {"morph_positions": arrays[prefix + "morph_positions"], "morph_normals": arrays[prefix + "morph_normals"],
+            "morph_names": names[:k]}
+
+
 def model_from_arrays(arrays: dict, prefix: str, meta: dict):
     """The rider :class:`Model` (skeleton, LOD-0 mesh with texture, clips as LINEAR tracks)."""
     from piste.character.model import Clip, Model, Skeleton, SkinnedMesh, Track
@@ -114,7 +136,7 @@ def model_from_arrays(arrays: dict, prefix: str, meta: dict):
     p = "lod0/"
     mesh = SkinnedMesh(name=meta["name"], positions=g(p + "positions"), indices=g(p + "indices"),
                        normals=g(p + "normals"), uv=g(p + "uv"), joints=g(p + "joints"), weights=g(p + "weights"),
-                       texture=g("texture"), skinned=True, group=meta["name"])
+                       texture=g("texture"), skinned=True, group=meta["name"], **_morphs(arrays, prefix + p, meta))
     rate = float(meta.get("rate", CLIP_RATE))
     clips = {}
     for cname, info in meta.get("clips", {}).items():
@@ -142,7 +164,8 @@ def lods_from_arrays(arrays: dict, prefix: str, meta: dict, model=None) -> list:
         g = lambda k: arrays[f"{prefix}lod{i}/{k}"]  # noqa: E731
         mesh = SkinnedMesh(name=f"{meta['name']}/{info['name']}", positions=g("positions"), indices=g("indices"),
                            normals=g("normals"), uv=g("uv"), joints=g("joints"), weights=g("weights"),
-                           texture=arrays[prefix + "texture"], skinned=True, group=meta["name"])
+                           texture=arrays[prefix + "texture"], skinned=True, group=meta["name"],
+                           **_morphs(arrays, f"{prefix}lod{i}/", meta))
         pal = Palette(g("palette_bones"), g("palette_weights"), g("palette_units"), g("palette_index"),
                       float(info["step"]), int(meta.get("max_bones", 3)))
         out.append(LOD(info["name"], mesh, pal, float(info["ratio"]), float(info["step"]), float(info["error"])))
