@@ -15,7 +15,8 @@ def test_mpf_cli_end_to_end(tmp_path, capsys):
     capsys.readouterr()
     assert main(["mpf", "info", str(out), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
-    assert [s["name"] for s in info["sub_models"]] == ["Body3000", "Body1500"]
+    assert [s["name"] for s in info["sub_models"]] == ["Body3000", "Body1500", "BodyShdw750"]
+    assert info["sub_models"][2]["groups"] == [17]
     assert info["sub_models"][0]["max_link_matrices"] <= 25 and info["unknown"] == [] and info["game_limits"] == []
     assert main(["mpf", "copy", str(out), str(tmp_path / "C.mpf")]) == 0
     assert (tmp_path / "C.mpf").read_bytes() == out.read_bytes()

@@ -42,7 +42,7 @@ def test_euler_round_trip():
 
 def test_encoder_obeys_the_game_limits(encoded):
     f, report, b = encoded
-    assert f.names == ["Body3000", "Body1500", "Body750"]
+    assert f.names == ["Body3000", "Body1500", "Body750", "BodyShdw750"]
     for sub in f.models:
         for p in sub.palettes:
             w = p["weight"].astype(int)
@@ -53,13 +53,16 @@ def test_encoder_obeys_the_game_limits(encoded):
                 for c in m.chunks:
                     assert c.n_vertices <= 55
                     assert c.slots.min() >= 0 and c.slots.max() < len(lk.refs)
-                    assert np.all(c.uv[:, 3] == 114 + 3 * c.slots)
+                    assert c.shadow == (sub.name == "BodyShdw750")
+                    if not c.shadow:
+                        assert np.all(c.uv[:, 3] == 114 + 3 * c.slots)
     assert report["max_chunk_vertices"] <= 55 and report["max_link_matrices"] <= 25
     from piste.formats.ssx.mpf import game_limits
 
     assert game_limits(f) == []
     types = {g.type for g in f.models[0].groups}
     assert types == {1, 256}  # the face's morph triangles sit in a type-256 group
+    assert {g.type for g in f.models[3].groups} == {17} and f.models[3].n_triangles == 770
     e = np.frombuffer(b, DIR_DTYPE, 3, 12)
     assert list(e["counts"][:, 6]) == [3, 3, 3]
 

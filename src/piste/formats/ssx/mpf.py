@@ -539,6 +539,9 @@ def _read_submodel(path, data: bytes, base: int, entry, index: int) -> tuple:
     sub = SubModel(name=name, file_id=int(entry["file_id"]), morph_keys=cnt["morph_keys"], entry=entry.copy(),
                    source=bytes(data[base:base + size]))
     sub.bones = r.arr(sec["bones"], BONE_DTYPE, cnt["bones"], "bones")
+    bad = ~(np.isfinite(sub.bones["translation"]).all(1) & np.isfinite(sub.bones["rotation"]).all(1))
+    if bad.any():
+        raise r.err("bones.translation", f"bone {int(np.argmax(bad))}: bind translation or rotation is NaN or infinite")
     sub.ik = r.arr(sec["ik"], IK_DTYPE, cnt["ik"], "ik_points")
     sub.materials = r.arr(sec["materials"], MATERIAL_DTYPE, cnt["materials"], "materials")
     ph = r.arr(sec["palettes"], PALHDR_DTYPE, cnt["palettes"], "palettes")
@@ -909,10 +912,14 @@ def mpf_bytes(mpf: MpfFile, notes: list | None = None) -> bytes:
     for i, sub in enumerate(mpf.models):
         _check_values(sub)
         e = np.zeros((), DIR_DTYPE) if sub.entry is None else np.array(sub.entry, DIR_DTYPE)
-        name = sub.name.encode("ascii")
-        if len(name) > 16:
-            raise ValidationError(f"sub-model name {sub.name!r} is longer than 16 characters")
-        if sub.entry is None or bytes(e["name"]).split(b"\0", 1)[0] != name:
+        stored = bytes(e["name"]).split(b"\0", 1)[0].decode("ascii", "replace") if sub.entry is not None else None
+        if stored != sub.name:  # renamed (or new): the name must be plain ASCII of <= 16 characters
+            try:
+                name = sub.name.encode("ascii")
+            except UnicodeEncodeError:
+                raise ValidationError(f"sub-model name {sub.name!r} is not plain ASCII") from None
+            if len(name) > 16:
+                raise ValidationError(f"sub-model name {sub.name!r} is longer than 16 characters")
             e["name"] = name
         if not -128 <= sub.file_id <= 127:
             raise ValidationError(f"{sub.name}: file id {sub.file_id} does not fit a signed byte")

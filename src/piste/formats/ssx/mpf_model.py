@@ -441,7 +441,7 @@ def _links(tri_pal: list, cap: int) -> list:
     return out
 
 
-def _encode_lod(name, mesh, pal, file_id, step, morph_keys, report) -> SubModel:
+def _encode_lod(name, mesh, pal, file_id, step, morph_keys, report, shadow: bool = False) -> SubModel:
     a = SSX_TO_PISTE.T
     pos = (mesh.positions.astype(np.float64) @ a.T / CM).astype("<f4")
     nrm = mesh.normals.astype(np.float64) @ a.T
@@ -457,7 +457,7 @@ def _encode_lod(name, mesh, pal, file_id, step, morph_keys, report) -> SubModel:
         palettes.append(np.array(ent, PALETTE_ENTRY_DTYPE))
     tris = mesh.indices.astype(np.int64)
     tri_pal = [tuple(sorted(set(x))) for x in pal.index[tris].tolist()]
-    if morph_keys:
+    if morph_keys and not shadow:
         d = mesh.morph_positions.astype(np.float64) @ a.T / CM * MORPH_SCALE  # (k, v, 3) stored units
         di = np.round(d)
         report["morph_clipped"] += int(np.count_nonzero(np.abs(di) > 127))
@@ -470,7 +470,9 @@ def _encode_lod(name, mesh, pal, file_id, step, morph_keys, report) -> SubModel:
         di = None
         is_morph = np.zeros(len(tris), bool)
     groups = []
-    for gtype, sel in ((GROUP_RENDER, ~is_morph), (GROUP_MORPH, is_morph)):
+    kinds = ((GROUP_SHADOW, np.ones(len(tris), bool)),) if shadow else \
+        ((GROUP_RENDER, ~is_morph), (GROUP_MORPH, is_morph))
+    for gtype, sel in kinds:
         ids = np.nonzero(sel)[0]
         if ids.size == 0:
             continue
@@ -483,7 +485,11 @@ def _encode_lod(name, mesh, pal, file_id, step, morph_keys, report) -> SubModel:
             uv_l[:, 2] = np.where(s >= 0, SLOT_TRANSFORM_BASE + 4 * s, 0)
             uv_l[:, 3] = np.where(s >= 0, SLOT_NORMAL_BASE + 3 * s, 0)
             strips = stripify(tris[ids[members]], join=None)
-            chunks, index = pack_chunks(strips, uv_l, nrm_i, pos, MAX_CHUNK_VERTICES, return_index=True)
+            if shadow:  # positions + a per-vertex transform address, no UV or normal section
+                chunks, index = pack_chunks(strips, None, None, pos, MAX_CHUNK_VERTICES,
+                                            shadow_slots=uv_l[:, 2].astype("<u4"), return_index=True)
+            else:
+                chunks, index = pack_chunks(strips, uv_l, nrm_i, pos, MAX_CHUNK_VERTICES, return_index=True)
             if gtype == GROUP_MORPH:
                 meshes = [Mesh([c], morphs=[MorphKey(deltas=di[k][ix].astype("i1")) for k in range(morph_keys)])
                           for c, ix in zip(chunks, index)]
@@ -501,13 +507,16 @@ def _encode_lod(name, mesh, pal, file_id, step, morph_keys, report) -> SubModel:
 
 
 def model_to_mpf(model, ratios=(1.0, 0.5, 0.25), names=("Body3000", "Body1500", "Body750"), step: float = 0.25,
-                 max_bones: int = 3, file_id: int = 0, pose_time: float | None = None, clip: str | None = None):
+                 max_bones: int = 3, file_id: int = 0, pose_time: float | None = None, clip: str | None = None,
+                 shadow: str | None = "BodyShdw750"):
     """Encode a piste rider as an SSX Tricky body ``.mpf``: ``(MpfFile, report)``.
 
     Each LOD (``ratios`` of the triangles, :func:`make_lods`) becomes a sub-model named from
     ``names``; weights are quantised to ``step`` (25 %: the game's steps) with at most
     ``max_bones`` bones; triangles are partitioned into links of at most 25 palette matrices and
-    their strips cut into chunks of at most 55 vertices.
+    their strips cut into chunks of at most 55 vertices. ``shadow``: the name of a shadow
+    sub-model (group type 17, positions and transform addresses only) made from the last LOD, or
+    None for none.
 
     ``report``: ``lods`` (triangles, stored vertices, chunks, links, palette size per LOD),
     ``weights_changed`` (vertices whose weights moved), ``max_weight_error``,
@@ -568,4 +577,8 @@ def model_to_mpf(model, ratios=(1.0, 0.5, 0.25), names=("Body3000", "Body1500", 
     report.update(weights_changed=wchg, max_weight_error=werr, max_bind_error_m=berr, max_pose_error_m=perr,
                   step=float(step), max_bones=int(max_bones), pose=f"{clip}@{pose_time if pose_time is not None else 'mid'}"
                   if clip else "bind")
+    if shadow:
+        sub = _encode_lod(shadow, lods[-1].mesh, lods[-1].palette, file_id, step, 0, report, shadow=True)
+        sub.bones = bones.copy()
+        subs.append(sub)
     return MpfFile(models=subs), report
