@@ -8,6 +8,9 @@ Sections (every configuration interleaved frame by frame in one process; medians
 2. **Terrain**: the default course flown down the track: the GPU-resident path with geomorphing
    (the default), without geomorphing, the CPU tessellation path (vertices streamed every frame),
    the PS2 two-pass light map, LOD off.
+   Then each renderer change against what it replaced (A/B on the same frames, with the mean pixel
+   difference): per-mode terrain shader vs the run-time ``u_mode`` if-chain, nearest-mip vs
+   trilinear base texture, geomorphing, resident vs streamed vertices.
 3. **Completed scene**: six riders chased by the camera, objects, projected shadows, specular: the
    full scene, without shadows / specular, and a per-pass profile (``glFinish`` around each pass:
    what llvmpipe spends in each).
@@ -151,6 +154,58 @@ def terrain_section(args, floor_ms: list) -> dict:
     record("frame", "terrain CPU side (cull + LOD + index list + upload)", "<= 0.5 ms (+upload)", f"{a['cpu']:.2f} ms",
            f"CPU path {c['cpu']:.2f} ms", f"{c['cpu'] / max(a['cpu'], 1e-9):.1f}x")
     return out
+
+
+# ---------------------------------------------------------------------------------------- effects
+def effects_section(args) -> None:
+    """Each renderer change against what it replaced, A/B interleaved on the same frames: the terrain
+    shader compiled per mode vs the run-time ``u_mode`` if-chain it replaced, the base texture's
+    nearest-mip bilinear vs trilinear filtering, geomorphing on vs off, resident vs streamed."""
+    import moderngl
+
+    from piste.render import TerrainRenderer
+    from piste.render.context import load_shader
+    from piste.world.camera import track_camera
+    from piste.world.course import TRACK_HALF_WIDTH, default_course, track_centerline
+
+    net = default_course()
+    line = track_centerline()
+    kw = dict(size=tuple(args.size), track=line, track_half_width=TRACK_HALF_WIDTH, lod_morph=False)
+    new = TerrainRenderer(net, **kw)
+    chain = TerrainRenderer(net, ctx=new.ctx, **kw)
+    tri = TerrainRenderer(net, ctx=new.ctx, **kw)
+    morph = TerrainRenderer(net, ctx=new.ctx, **{**kw, "lod_morph": True})
+    stream = TerrainRenderer(net, ctx=new.ctx, **{**kw, "resident": False})
+    # the if-chain shader: the same source with the mode as a uniform again
+    fs = load_shader("terrain.frag.glsl").replace("const int u_mode = TERRAIN_MODE;", "uniform int u_mode;")
+    old = new.ctx.program(vertex_shader=load_shader("terrain.vert.glsl"), fragment_shader=fs)
+    old["u_mode"].value = 0
+    chain.terrain._programs[0] = chain.terrain._apply(old)
+    tri.terrain.base.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+    cams = [track_camera(line, t) for t in np.linspace(0.1, 0.9, args.frames)]
+    V = {"now (per-mode shader, nearest-mip, resident, morph off)": new,
+         "u_mode if-chain (before)": chain, "trilinear base texture (before)": tri,
+         "geomorph on": morph, "CPU path, streamed vertices (before)": stream}
+    for r in V.values():
+        r.render(cams[0])
+    res = {k: [] for k in V}
+    imgs = {k: [] for k in V}
+    for cam in cams:
+        for name, r in V.items():
+            f = r.render(cam)
+            res[name].append(f.timings["total"])
+            imgs[name].append(f.image)
+    print(f"\n== each change's effect, A/B interleaved over {args.frames} terrain frames (frame ms, median [range]) ==")
+    base = med(res[next(iter(V))])
+    for name, ts in res.items():
+        diff = np.mean([np.abs(a.astype(int) - b).mean() for a, b in zip(imgs[name], imgs[next(iter(V))])])
+        print(f"  {name:58s} {rng_str(ts)}  {med(ts) / base:5.2f}x   mean pixel diff {diff:.3f}")
+    for name in ("u_mode if-chain (before)", "trilinear base texture (before)", "CPU path, streamed vertices (before)"):
+        record("frame", f"effect: {name.replace(' (before)', '')} -> now", "faster", f"{base:.1f} ms",
+               f"{med(res[name]):.1f} ms", f"{med(res[name]) / base:.2f}x")
+    old.release()
+    for r in V.values():
+        r.release()
 
 
 # ---------------------------------------------------------------------------------------- scene
@@ -338,6 +393,7 @@ def main(argv=None) -> int:
     floor_ms: list = []
     if not args.scene:
         terrain_section(args, floor_ms)
+        effects_section(args)
     scene_section(args, floor_ms)
     if not (args.scene or args.no_scaling):
         scaling_section(args)

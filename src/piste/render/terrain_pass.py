@@ -154,7 +154,9 @@ class TerrainPass:
             self.base.release()
         self.base = self._texture(image, "base texture")
         self.base.build_mipmaps()
-        self.base.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        # bilinear within the nearest mip level: trilinear (LINEAR_MIPMAP_LINEAR) costs llvmpipe ~14 %
+        # of the terrain draw for a mean difference of 0.02 levels on the default course
+        self.base.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
         self.base.repeat_x = self.base.repeat_y = True
         # anisotropic filtering triples the fill cost on llvmpipe (15 -> 42 ms a frame): off
 
