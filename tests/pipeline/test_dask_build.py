@@ -154,3 +154,20 @@ def test_killed_worker_resumes_byte_identical(tmp_path, monkeypatch):
     # written find them on disk and skip the work
     assert r.built + r.skipped == 18 and r.built >= 9
     assert _files(tmp_path / "dask") == _files(tmp_path / "local")
+
+
+def test_tiled_scene_errors(tmp_path, capsys):
+    from piste.cli import main
+
+    (tmp_path / "d.toml").write_text('[terrain]\ntiles = "d.tiles"\n')
+    assert main(["build", str(tmp_path / "d.toml"), "--quiet"]) == 2
+    assert "needs a height-field terrain" in capsys.readouterr().err
+    np.savez(tmp_path / "h.npz", z=np.zeros((13, 13)), dx=1.0)
+    (tmp_path / "t.toml").write_text('[terrain]\nsource = "h.npz"\ntiles = "t.tiles"\ntile_patches = 1\n')
+    assert main(["build", str(tmp_path / "t.toml"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "terrain.tile_patches" in err and "line 4" in err
+    with pytest.raises(ConfigError, match="exactly one of"):
+        from piste.pipeline.dask_build import dask_client
+
+        dask_client()
