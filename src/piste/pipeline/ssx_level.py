@@ -86,11 +86,14 @@ class SsxLevel:
 
 
 def level_files(path) -> tuple[Path | None, Path | None]:
-    """``(NAME.ssh, NAME_L.ssh)`` beside ``NAME.pbd`` (case-insensitive), each None if absent."""
+    """``(NAME.ssh, NAME_L.ssh)`` beside ``NAME.pbd`` (case-insensitive), each None if absent.
+    The game's 8.3-style names may drop the stem's last character for the light maps
+    (``elysium.pbd`` -> ``elysiu_L.ssh``), so that name is tried second."""
     path = Path(path)
     names = {p.name.lower(): p for p in path.parent.iterdir()} if path.parent.is_dir() else {}
     stem = path.stem.lower()
-    return names.get(f"{stem}.ssh"), names.get(f"{stem}_l.ssh")
+    light = names.get(f"{stem}_l.ssh") or (names.get(f"{stem[:-1]}_l.ssh") if len(stem) > 1 else None)
+    return names.get(f"{stem}.ssh"), light
 
 
 def texture_atlas(bank: SshBank | None, cell: int = 64, gutter: int = 8):

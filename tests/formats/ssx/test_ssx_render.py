@@ -84,3 +84,12 @@ def test_reference_image(level, gl, mode):
     ref = np.asarray(Image.open(ref_path).convert("RGB")).astype(int)
     diff = np.abs(img.astype(int) - ref)
     assert diff.mean() < 1.5 and np.percentile(diff, 99) < 12, (diff.mean(), np.percentile(diff, 99))
+
+
+def test_light_map_bank_with_the_games_short_name(tmp_path):
+    from piste.pipeline.ssx_level import level_files
+
+    make_level(rows=1, cols=1).write(tmp_path, "elysium")
+    (tmp_path / "elysium_L.ssh").rename(tmp_path / "elysiu_L.ssh")
+    ssh, lssh = level_files(tmp_path / "elysium.pbd")
+    assert ssh.name == "elysium.ssh" and lssh.name == "elysiu_L.ssh"

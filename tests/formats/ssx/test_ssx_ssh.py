@@ -46,25 +46,70 @@ def test_layout_facts():
     size, count = struct.unpack_from("<II", data, 4)
     assert size == len(data) and count == 3
     assert data[16:20] == b"tex0"
+    # the game's writer: header + directory reserved in 112 bytes (<= 12 images), "Buy ERTS" right
+    # after the directory, "Buy ERTS" before every later image, none after the last
     off = struct.unpack_from("<I", data, 20)[0]
-    assert data[off - 8:off] == b"Buy ERTS" or b"Buy ERTS" in data[16 + 24:off]
+    assert off == 112 and data[16 + 24:16 + 32] == b"Buy ERTS"
+    off1, off2 = struct.unpack_from("<I", data, 28)[0], struct.unpack_from("<I", data, 36)[0]
+    assert data[off1 - 16:off1 - 8] == b"Buy ERTS" and data[off2 - 16:off2 - 8] == b"Buy ERTS"
+    assert b"Buy ERTS" not in data[off2:]
     word, w, h = struct.unpack_from("<Ihh", data, off)
-    assert word & 0xFF == 2 and (w, h) == (8, 16) and (word >> 8) == 16 + 128  # image chunk: header + pixels
+    assert word & 0xFF == 2 and (w, h) == (8, 16) and (word >> 8) == 16 + 128  # explicit size
     pal = off + (word >> 8)
-    word2, pw, ph = struct.unpack_from("<Ihh", data, pal)
-    assert word2 & 0xFF == 33 and pw * ph == 256
+    word2, pw, ph, px = struct.unpack_from("<Ihhh", data, pal)
+    assert word2 == 33 and pw * ph == 256 and px == 256  # palette: implied size 0, x = colour count
+    name = pal + 16 + 1024
+    assert data[name:name + 4] == b"\x70\0\0\0" and data[name + 4:name + 11] == b"snow_a\0"
     # the 4-bit image: two pixels a byte, the left one in the low nibble
     im = _bank().images[1]
-    off1 = struct.unpack_from("<I", data, 28)[0]
     first = data[off1 + 16]
     assert first == (im.pixels[0, 0] | (im.pixels[0, 1] << 4))
+    # 4 bytes of 8 for 15 images -> the 128-byte steps: 112 + 128 for 13..28 images
+    many = SshBank([SshImage(f"{i:04d}", 5, np.zeros((2, 2, 4), np.uint8), long_name="") for i in range(13)])
+    assert struct.unpack_from("<I", many.to_bytes(), 20)[0] == 240
+
+
+def test_swizzled_8bit_and_clut_order_round_trip():
+    rng = np.random.default_rng(3)
+    pix = rng.integers(0, 256, (32, 64), dtype=np.uint8)
+    pal = rng.integers(0, 256, (256, 4), dtype=np.uint8)
+    bank = SshBank([SshImage("swz0", 2, pix, pal, flags=0x2000, long_name="", palette_flags=0x2000)])
+    data = bank.to_bytes()
+    back = parse_ssh(data).images[0]
+    np.testing.assert_array_equal(back.pixels, pix)
+    np.testing.assert_array_equal(back.palette, pal)
+    assert parse_ssh(data).to_bytes() == data
+    # stored bytes follow the spec's block decomposition and CLUT bit swap
+    from piste.formats.ssx.ssh import clut_order, swizzle8_order
+
+    off = struct.unpack_from("<I", data, 20)[0]
+    stored = np.frombuffer(data, np.uint8, 64 * 32, off + 16)
+    np.testing.assert_array_equal(stored[swizzle8_order(64, 32)], pix.ravel())
+    x, y = 5, 3
+    block, swap = 0, (((y + 2) >> 2) & 1) * 4
+    src = block + ((((y & ~3) >> 1) + (y & 1)) & 7) * 64 * 2 + ((x + swap) & 7) * 4 + ((y >> 1) & 1) + ((x >> 2) & 2)
+    assert stored[src] == pix[y, x]
+    assert clut_order(256)[8] == 16 and clut_order(256)[16] == 8 and clut_order(256)[7] == 7
+    pal_off = off + 16 + 64 * 32 + 16
+    np.testing.assert_array_equal(np.frombuffer(data, np.uint8, 4, pal_off + 4 * 16), pal[8])
+
+
+def test_display_decode_undoes_half_bright():
+    from piste.formats.ssx.ssh import half_bright
+
+    pal = np.array([[0, 64, 128, 128], [10, 20, 30, 0]], np.uint8)
+    im = SshImage("a", 2, np.array([[0, 1]], np.uint8), pal)
+    np.testing.assert_array_equal(im.rgba()[0, 0], [0, 127, 255, 255])
+    np.testing.assert_array_equal(half_bright(im.rgba())[0, 0], [0, 64, 128, 128])
+    full = SshImage("b", 2, np.array([[0]], np.uint8), np.array([[200, 100, 50, 255]], np.uint8))
+    np.testing.assert_array_equal(full.rgba()[0, 0], [200, 100, 50, 255])  # full range: left alone
 
 
 def test_half_range_alpha():
     bank = synthetic_textures(1)
     im = bank.images[0]
-    assert (im.palette[:, 3] == 0x80).all()
-    assert (im.rgba()[..., 3] == 255).all()
+    assert (im.palette[:, 3] == 0x80).all() and im.palette[:, :3].max() <= 128  # stored half-bright
+    assert (im.rgba()[..., 3] == 255).all() and im.rgba()[..., :3].max() > 200
 
 
 def test_unknown_chunk_and_swizzle_and_refpack():
@@ -76,8 +121,13 @@ def test_unknown_chunk_and_swizzle_and_refpack():
         parse_ssh(bytes(bad), "x.ssh")
     assert "image 0 ('tex0')" in str(e.value) and e.value.field == "chunk type"
     sw = bytearray(data)
-    struct.pack_into("<I", sw, off + 12, 0x2000)
-    with pytest.raises(FormatError, match="swizzled images .* not supported yet"):
+    off1 = struct.unpack_from("<I", data, 28)[0]  # the 4-bit image
+    struct.pack_into("<I", sw, off1 + 12, 0x2000)
+    with pytest.raises(FormatError, match="swizzled 4-bit images .* not supported yet"):
+        parse_ssh(bytes(sw), "x.ssh")
+    sw = bytearray(data)
+    struct.pack_into("<I", sw, off + 12, 0x2000)  # an 8x16 8-bit image: no swizzle covers that size
+    with pytest.raises(FormatError, match="not a size the PS2 8-bit swizzle covers"):
         parse_ssh(bytes(sw), "x.ssh")
     rp = bytearray(data)
     rp[off] = 130

@@ -4,10 +4,11 @@
 Facts (``/work/shared/SSX-FORMATS.md``): per patch ``PatchName``, ``LightMapPoint[4]``,
 ``UVPoints[4][2]``, ``Points[16][3]`` (raw Bézier points, row-major, game units), ``SurfaceType``,
 ``TrickOnlyPatch``, ``TexturePath`` (``"NNNN.png"``) and ``LightmapID``.  piste writes
-``{"Patches": [...]}`` and reads that or a bare list.  Textures are written as RGBA PNGs with
-alpha expanded to full range; light-map pages as the stored ``(Cs, As)`` RGBA (alpha as stored,
-128 = 1.0).  Reading a project back quantises each texture to an 8-bit palette (exact when it has
-at most 256 colours).
+``{"Patches": [...]}`` and reads that or a bare list.  Textures are written as display RGBA PNGs
+(the half-bright storage undone, :meth:`SshImage.rgba`); light-map pages as the stored ``(Cs,
+As)`` RGBA (never brightened, 128 = 1.0).  Reading a project back stores each texture half-bright
+again (``(c + 1) // 2``) as an 8-bit palette (exact for a level texture written by piste: at most
+256 colours, brightened from half-bright).
 
 API
 ---
@@ -29,7 +30,7 @@ import numpy as np
 from piste.errors import FormatError
 from piste.formats.atomic import write_bytes_atomic
 from piste.formats.ssx.pbd import Pbd, parse_pbd, records_from_arrays
-from piste.formats.ssx.ssh import PAGE_SIZE, SshBank, SshImage, lightmap_bank
+from piste.formats.ssx.ssh import PAGE_SIZE, SshBank, SshImage, half_bright, lightmap_bank
 from piste.formats.ssx.synth import pbd_bytes
 
 __all__ = ["write_project", "read_project", "Project"]
@@ -110,10 +111,9 @@ class Project:
 
 
 def _indexed(name: str, rgba: np.ndarray) -> SshImage:
-    """An 8-bit indexed image with half-range palette alpha (exact for <= 256 colours)."""
+    """An 8-bit indexed image stored half-bright (exact for <= 256 colours)."""
     h, w = rgba.shape[:2]
-    stored = rgba.copy()
-    stored[..., 3] = (rgba[..., 3].astype(np.uint16) + 1) // 2
+    stored = half_bright(rgba)
     flat = stored.reshape(-1, 4)
     colours, idx = np.unique(flat, axis=0, return_inverse=True)
     if len(colours) > 256:

@@ -8,12 +8,27 @@ i16 y, u32 flags (``0x2000`` = swizzled).  Types: 1 4-bit indexed, 2 8-bit index
 RGBA, 33 palette (RGBA), 112 long name, 130 RefPack-compressed 8-bit.  Alpha is half range
 (``0x80`` = opaque, up to 255 over-bright in light maps).
 
-Handled: types 1, 2, 5 with palettes (33) and long names (112).  Not handled yet, each a clear
-:class:`~piste.errors.FormatError`: swizzled images (flag ``0x2000``), RefPack images (130),
-any other chunk type.  Assumptions beyond the fact sheet (checked only against piste's own
-writer): 4-bit pixels hold the left pixel in the low nibble; palettes are stored in index order
-(no PS2 CSM1 block reordering); a long-name chunk's NUL-terminated text follows its 4-byte
-type/size word.
+Layout facts checked against OpenSlope's ``Trailmap/specs/210-textures-ssh.md`` (Apache-2.0 prose):
+4-bit pixels hold the left pixel in the **low** nibble; a chunk size of 0 means "implied by the
+dimensions" (an image's chunks run to the next image's offset, or to its ``Buy ERTS``
+terminator); the game's writer reserves the header and directory in 128-byte steps (112 bytes for
+up to 12 images, +128 per further 16), writes ``Buy ERTS`` before every image but the first
+(which it follows in the directory padding), gives indexed image chunks an explicit size and
+palette, RGBA and long-name chunks size 0, and puts a (usually empty) long-name chunk
+(``70 00 00 00`` + NUL-terminated text, 16-aligned) on every image.  :meth:`SshBank.to_bytes`
+writes that layout.
+
+Flag ``0x2000`` (swizzled): on a palette chunk the entries are in the PS2 CLUT order (bits 3 and
+4 of the index swapped), undone on reading and redone on writing; on an 8-bit image chunk the
+pixels are in the PS2 block-swizzled layout (the spec's block decomposition), undone and redone
+likewise.  Not handled yet, each a clear :class:`~piste.errors.FormatError`: swizzled 4-bit and
+32-bit images, RefPack images (type 130), any unknown chunk type.
+
+Half-bright storage (the PS2's 128 = 1.0): :meth:`SshImage.rgba` is the display decode of the
+spec: alpha doubled (capped at 255) when no value exceeds 128, and RGB brightened ``clamp(2c - 1,
+0, 255)`` when the image's opaque RGB does not exceed 128 (a full-range image is left alone);
+:func:`half_bright` is the inverse used when encoding.  Light-map pages are never brightened
+(:func:`lightmap_pages` returns the stored ``Cs``/``As``).
 
 Light maps: pages are 128 x 128 RGBA (type 5) cut without gutters into 16 x 16 tiles of 8 x 8
 texels; a patch's tile is applied with ``u`` and ``v`` transposed (tile row = ``u``, column =
@@ -41,7 +56,8 @@ from piste.formats.atomic import write_bytes_atomic
 
 __all__ = [
     "SshImage", "SshBank", "read_ssh", "parse_ssh", "write_ssh", "lightmap_pages", "lightmap_bank",
-    "extract_tiles", "place_tiles", "tile_origins", "PAGE_SIZE", "TILE", "SWIZZLED",
+    "extract_tiles", "place_tiles", "tile_origins", "PAGE_SIZE", "TILE", "SWIZZLED", "half_bright",
+    "swizzle8_order", "clut_order",
 ]
 
 MAGIC = b"SHPS"
@@ -60,6 +76,35 @@ MAX_SIDE = 4096
 _CHUNK = struct.Struct("<I4hI")
 
 
+def swizzle8_order(w: int, h: int) -> np.ndarray:
+    """PS2 block swizzle of an 8-bit image (210-textures-ssh): ``(h * w,)`` int, the stored byte of
+    output pixel ``y * w + x``.  Raises ValueError when the size does not give a permutation."""
+    y, x = np.mgrid[0:h, 0:w].astype(np.int64)
+    block = (y & ~15) * w + (x & ~15) * 2
+    swap = (((y + 2) >> 2) & 1) * 4
+    pos_y = (((y & ~3) >> 1) + (y & 1)) & 7
+    column = pos_y * w * 2 + ((x + swap) & 7) * 4
+    byte = ((y >> 1) & 1) + ((x >> 2) & 2)
+    src = (block + column + byte).ravel()
+    if w % 16 or h % 4 or src.max(initial=0) >= w * h or len(np.unique(src)) != w * h:
+        raise ValueError(f"{w}x{h} is not a size the PS2 8-bit swizzle covers")
+    return src
+
+
+def clut_order(k: int) -> np.ndarray:
+    """PS2 CLUT order of a ``k``-entry palette: stored position of entry ``i`` (bits 3 and 4 of the
+    index swapped), ``(k,)`` int; ``k`` must be a multiple of 32."""
+    i = np.arange(k)
+    return (i & 0xE7) | ((i & 8) << 1) | ((i & 16) >> 1)
+
+
+def half_bright(rgba) -> np.ndarray:
+    """The inverse of the display decode (:meth:`SshImage.rgba`): RGB ``(c + 1) // 2`` and alpha
+    ``(a + 1) // 2``, ``(..., 4) uint8``."""
+    a = np.asarray(rgba, dtype=np.uint16)
+    return ((a + 1) // 2).astype(np.uint8)
+
+
 @dataclass
 class SshImage:
     """One image of a bank.
@@ -70,8 +115,9 @@ class SshImage:
     kind : 1 (4-bit indexed), 2 (8-bit indexed) or 5 (32-bit RGBA)
     pixels : (h, w) uint8 palette indices (kinds 1, 2) or (h, w, 4) uint8 RGBA as stored (kind 5)
     palette : (k, 4) uint8 RGBA as stored (alpha half range), indexed kinds only
-    x, y, flags : the image chunk's header fields
-    long_name : text of a long-name chunk, if any
+    x, y, flags : the image chunk's header fields (flags ``0x2000``: stored swizzled)
+    long_name : text of a long-name chunk ("" for the game's empty ones), or None for none
+    palette_flags : the palette chunk's flags (``0x2000``: stored in the PS2 CLUT order)
     """
 
     name: str
@@ -82,6 +128,7 @@ class SshImage:
     y: int = 0
     flags: int = 0
     long_name: str | None = None
+    palette_flags: int = 0
 
     @property
     def width(self) -> int:
@@ -98,15 +145,26 @@ class SshImage:
         return self.palette[self.pixels]
 
     def rgba(self) -> np.ndarray:
-        """``(h, w, 4) uint8`` for display: alpha expanded to full range (``min(2 a, 255)``)."""
-        out = self.stored_rgba().copy()
-        out[..., 3] = np.minimum(out[..., 3].astype(np.uint16) * 2, 255).astype(np.uint8)
-        return out
+        """``(h, w, 4) uint8`` for display, the half-bright storage undone (module docstring):
+        alpha doubled (cap 255) when no stored alpha exceeds 128; RGB ``clamp(2 c - 1, 0, 255)``
+        when no opaque pixel's RGB exceeds 128.  Guards leave full-range images as stored."""
+        out = self.stored_rgba().astype(np.int32)
+        alpha = out[..., 3]
+        if alpha.max(initial=0) <= 128:
+            out[..., 3] = np.minimum(alpha * 2, 255)
+        opaque = out[..., 3] > 0
+        if not opaque.any() or out[..., :3][opaque].max(initial=0) <= 128:
+            out[..., :3] = np.clip(out[..., :3] * 2 - 1, 0, 255)
+        return out.astype(np.uint8)
 
     def _data(self) -> bytes:
         if self.kind == RGBA32:
             return np.ascontiguousarray(self.pixels, dtype=np.uint8).tobytes()
         if self.kind == 2:
+            if self.flags & SWIZZLED:
+                stored = np.empty(self.width * self.height, np.uint8)
+                stored[swizzle8_order(self.width, self.height)] = np.asarray(self.pixels, np.uint8).ravel()
+                return stored.tobytes()
             return np.ascontiguousarray(self.pixels, dtype=np.uint8).tobytes()
         flat = np.asarray(self.pixels, dtype=np.uint8).ravel()
         if len(flat) % 2:
@@ -131,6 +189,15 @@ class SshImage:
                 raise ValidationError(f"ssh image {self.name!r}: index {int(p.max())} past its {len(pal)}-colour palette")
         else:
             raise ValidationError(f"ssh image {self.name!r}: kind must be 1, 2 or 5, got {self.kind}")
+        if self.flags & SWIZZLED:
+            if self.kind != 2:
+                raise ValidationError(f"ssh image {self.name!r}: only 8-bit images can be written swizzled")
+            try:
+                swizzle8_order(self.width, self.height)
+            except ValueError as exc:
+                raise ValidationError(f"ssh image {self.name!r}: {exc}") from None
+        if self.palette_flags & SWIZZLED and (self.palette is None or len(self.palette) % 32):
+            raise ValidationError(f"ssh image {self.name!r}: a CLUT-ordered palette needs a multiple of 32 colours")
         if len(self.name.encode("latin-1", "replace")) > 4:
             raise ValidationError(f"ssh image {self.name!r}: names are at most 4 characters")
 
@@ -153,46 +220,55 @@ class SshBank:
         for im in self.images:
             im.validate()
         n = len(self.images)
-        head_len = 16 + 8 * n
-        body = bytearray()
+        # the game's writer: header + directory reserved in 128-byte steps, "Buy ERTS" right after
+        # the directory, then the images, "Buy ERTS" (16-aligned) between them, none after the last
+        reserved = 112 + 128 * (-(-max(n - 12, 0) // 16))
+        blobs = [_encode_image(im) for im in self.images]
         offsets = []
-        pos = head_len
-        for im in self.images:
-            pad = bytearray(SEPARATOR)
-            while (pos + len(pad)) % 16:
-                pad += b"\0"
-            body += pad
-            pos += len(pad)
+        pos = reserved
+        for k, blob in enumerate(blobs):
             offsets.append(pos)
-            blob = _encode_image(im)
-            body += blob
-            pos += len(blob)
-        out = bytearray(MAGIC + struct.pack("<II", head_len + len(body), n) + self.creator)
+            pos += len(blob) + (16 if k < n - 1 else 0)
+        out = bytearray(MAGIC + struct.pack("<II", pos, n) + self.creator)
         for im, off in zip(self.images, offsets):
             out += im.name.encode("latin-1", "replace").ljust(4, b"\0")[:4] + struct.pack("<I", off)
-        return bytes(out + body)
+        out += SEPARATOR
+        out += b"\0" * (reserved - len(out))
+        for k, blob in enumerate(blobs):
+            out += blob
+            if k < n - 1:
+                out += SEPARATOR + b"\0" * 8
+        return bytes(out)
 
 
-def _chunk(kind: int, data: bytes, w: int, h: int, x: int = 0, y: int = 0, flags: int = 0, last: bool = False) -> bytes:
+def _chunk(kind: int, data: bytes, w: int, h: int, x: int = 0, y: int = 0, flags: int = 0,
+           explicit: bool = True) -> bytes:
     body = data + b"\0" * (-(16 + len(data)) % 16)
-    size = 0 if last else 16 + len(body)
+    size = 16 + len(body) if explicit else 0
     return _CHUNK.pack(kind | (size << 8), w, h, x, y, flags) + body
 
 
 def _encode_image(im: SshImage) -> bytes:
-    chunks = [(im.kind, im._data(), im.width, im.height, im.x, im.y, im.flags)]
+    """The game's chunk chain: an indexed image chunk with an explicit size, then its palette
+    (size 0, x = the colour count); an RGBA chunk with size 0; then the long-name chunk."""
+    out = _chunk(im.kind, im._data(), im.width, im.height, im.x, im.y, im.flags, explicit=im.kind in INDEXED)
     if im.kind in INDEXED:
         pal = np.ascontiguousarray(im.palette, dtype=np.uint8)
-        chunks.append((PALETTE, pal.tobytes(), len(pal), 1, 0, 0, 0))
-    out = b""
-    for i, c in enumerate(chunks):
-        last = i == len(chunks) - 1 and im.long_name is None
-        out += _chunk(*c, last=last)
+        if im.palette_flags & SWIZZLED:
+            stored = np.empty_like(pal)
+            stored[clut_order(len(pal))] = pal
+            pal = stored
+        out += _chunk(PALETTE, pal.tobytes(), len(pal), 1, len(pal), 0, im.palette_flags, explicit=False)
     if im.long_name is not None:
         text = im.long_name.encode("latin-1", "replace") + b"\0"
         text += b"\0" * (-(4 + len(text)) % 16)
-        out += struct.pack("<I", LONG_NAME) + text  # size 0: the last chunk
+        out += struct.pack("<I", LONG_NAME) + text
     return out
+
+
+def _implied_size(kind: int, w: int, h: int) -> int:
+    data = {1: (w * h + 1) // 2, 2: w * h, 5: w * h * 4, PALETTE: w * h * 4}.get(kind, 0)
+    return 16 + data + (-(16 + data) % 16)
 
 
 def parse_ssh(data: bytes, path=None) -> SshBank:
@@ -211,37 +287,45 @@ def parse_ssh(data: bytes, path=None) -> SshBank:
     directory = [(data[16 + 8 * i:20 + 8 * i].rstrip(b"\0").decode("latin-1"),
                   struct.unpack_from("<I", data, 20 + 8 * i)[0]) for i in range(n)]
     images = []
+    starts = sorted({off for _, off in directory} | {size})
     for i, (name, off) in enumerate(directory):
         where = f"image {i} ({name!r})"
         if off + 16 > size:
             raise FormatError(path, f"{where}: offset {off} lies past the end ({size} bytes)", field="offset")
-        images.append(_parse_image(data, off, name, where, path))
+        end = next(e for e in starts if e > off) if off < size else size
+        term = data.find(SEPARATOR, off, end)
+        images.append(_parse_image(data, off, term if term >= 0 else end, name, where, path))
     return SshBank(images, creator)
 
 
-def _parse_image(data: bytes, off: int, name: str, where: str, path) -> SshImage:
+def _parse_image(data: bytes, off: int, end: int, name: str, where: str, path) -> SshImage:
+    """Walk an image's chunks from ``off`` to ``end`` (the next image or its terminator); a chunk
+    size of 0 is implied by the chunk's dimensions."""
     size = len(data)
     pos = off
     image = None
     palette = None
+    palette_flags = 0
     long_name = None
     for _ in range(64):
-        if pos + 4 > size:
-            raise FormatError(path, f"{where}: chunk at {pos} lies past the end", field="chunk")
+        if pos + 4 > end:
+            break
         word = struct.unpack_from("<I", data, pos)[0]
         kind, csize = word & 0xFF, word >> 8
-        if kind == LONG_NAME:
-            end = pos + csize if csize else size
-            long_name = data[pos + 4:end].lstrip(b"\0").split(b"\0", 1)[0].decode("latin-1")
+        if kind == LONG_NAME:  # its size bytes are unused: NUL-terminated text, the last chunk
+            long_name = data[pos + 4:end].split(b"\0", 1)[0].decode("latin-1")
+            break
         else:
             if pos + 16 > size:
                 raise FormatError(path, f"{where}: chunk header at {pos} is truncated", field="chunk")
             _, w, h, x, y, flags = _CHUNK.unpack_from(data, pos)
             body = pos + 16
+            if csize == 0:
+                csize = _implied_size(kind, w, h)
             if kind in INDEXED or kind == RGBA32:
-                if flags & SWIZZLED:
-                    raise FormatError(path, f"{where}: swizzled images (flag 0x2000) are not supported yet",
-                                      field="flags")
+                if flags & SWIZZLED and kind != 2:
+                    raise FormatError(path, f"{where}: swizzled {'4-bit' if kind == 1 else '32-bit'} images (flag 0x2000) "
+                                            "are not supported yet", field="flags")
                 if not (0 < w <= MAX_SIDE and 0 < h <= MAX_SIDE):
                     raise FormatError(path, f"{where}: image size {w}x{h} outside 1..{MAX_SIDE}", field="size")
                 nbytes = {1: (w * h + 1) // 2, 2: w * h, 5: w * h * 4}[kind]
@@ -252,6 +336,11 @@ def _parse_image(data: bytes, off: int, name: str, where: str, path) -> SshImage
                 if kind == RGBA32:
                     pix = raw.reshape(h, w, 4).copy()
                 elif kind == 2:
+                    if flags & SWIZZLED:
+                        try:
+                            raw = raw[swizzle8_order(w, h)]
+                        except ValueError as exc:
+                            raise FormatError(path, f"{where}: swizzled image: {exc}", field="flags") from None
                     pix = raw.reshape(h, w).copy()
                 else:
                     pix = np.stack([raw & 15, raw >> 4], axis=1).ravel()[: w * h].reshape(h, w).copy()
@@ -262,14 +351,18 @@ def _parse_image(data: bytes, off: int, name: str, where: str, path) -> SshImage
                     raise FormatError(path, f"{where}: palette of {w}x{h} colours is out of range or truncated",
                                       field="palette")
                 palette = np.frombuffer(data, np.uint8, count=4 * k, offset=body).reshape(k, 4).copy()
+                palette_flags = flags
+                if flags & SWIZZLED:
+                    if k % 32:
+                        raise FormatError(path, f"{where}: a CLUT-ordered palette of {k} colours (not a multiple "
+                                                "of 32) is not supported yet", field="palette")
+                    palette = palette[clut_order(k)]
             elif kind == REFPACK:
                 raise FormatError(path, f"{where}: RefPack-compressed images (type 130) are not supported yet",
                                   field="chunk type")
             else:
                 raise FormatError(path, f"{where}: unknown chunk type {kind} at offset {pos} (known: 1, 2, 5, 33, "
                                         "112, 130)", field="chunk type")
-        if csize == 0:
-            break
         pos += csize
     if image is None:
         raise FormatError(path, f"{where}: no image chunk (type 1, 2 or 5)", field="chunk type")
@@ -280,7 +373,7 @@ def _parse_image(data: bytes, off: int, name: str, where: str, path) -> SshImage
         if pix.size and int(pix.max()) >= len(palette):
             raise FormatError(path, f"{where}: pixel index {int(pix.max())} past the {len(palette)}-colour palette",
                               field="pixels")
-    return SshImage(name, kind, pix, palette, x, y, flags, long_name)
+    return SshImage(name, kind, pix, palette, x, y, flags, long_name, palette_flags)
 
 
 def read_ssh(path) -> SshBank:
@@ -320,7 +413,7 @@ def lightmap_bank(pages) -> SshBank:
     pages = np.asarray(pages)
     if pages.dtype != np.uint8 or pages.ndim != 4 or pages.shape[1:] != (PAGE_SIZE, PAGE_SIZE, 4):
         raise ValidationError(f"light-map pages must be (P, 128, 128, 4) uint8, got {pages.shape} {pages.dtype}")
-    return SshBank([SshImage(f"{i:04d}", RGBA32, pages[i].copy()) for i in range(len(pages))])
+    return SshBank([SshImage(f"{i:04d}", RGBA32, pages[i].copy(), long_name="") for i in range(len(pages))])
 
 
 def tile_origins(rect, page, n_pages: int | None = None, path=None) -> np.ndarray:

@@ -98,7 +98,8 @@ def synthetic_net(rows: int = 2, cols: int = 3, seed: int = 0, patch_size: float
 
 
 def synthetic_textures(count: int = 3, size: int = 32, seed: int = 0) -> SshBank:
-    """``count`` textures: 8-bit indexed snow, rock and 4-bit ice (repeating), half-range alpha."""
+    """``count`` textures: 8-bit indexed snow, rock and 4-bit ice (repeating), stored the game's
+    way: half-bright colours and alpha (128 = 1.0), an empty long name."""
     rng = np.random.default_rng(seed + 7)
     tints = [(236, 240, 250), (120, 110, 100), (180, 215, 240), (230, 205, 150)]
     images = []
@@ -109,11 +110,11 @@ def synthetic_textures(count: int = 3, size: int = 32, seed: int = 0) -> SshBank
         base = np.array(tints[t % len(tints)], np.float64)
         ramp = np.linspace(0.55, 1.0, k)[:, None]
         pal = np.empty((k, 4), np.uint8)
-        pal[:, :3] = np.clip(np.rint(base * ramp), 0, 255)
+        pal[:, :3] = (np.clip(np.rint(base * ramp), 0, 255).astype(np.int64) + 1) // 2  # stored half-bright
         pal[:, 3] = 0x80
         pattern = 0.5 + 0.25 * np.sin(2 * np.pi * (xx + 2 * yy * (t + 1)) / size) + 0.25 * rng.random((size, size))
         idx = np.clip((pattern * (k - 1)).astype(np.int64), 0, k - 1).astype(np.uint8)
-        images.append(SshImage(f"{t:04d}", 1 if four_bit else 2, idx, pal, long_name=f"synthetic_{t}"))
+        images.append(SshImage(f"{t:04d}", 1 if four_bit else 2, idx, pal, long_name=""))
     return SshBank(images)
 
 
