@@ -51,7 +51,7 @@ test-latest: system test-tools
 
 # Re-record constraints.txt from the current venv (after a deliberate upgrade).
 lock:
-	$(BIN)/pip freeze --exclude-editable | grep -v '^-e ' > constraints.txt
+	$(BIN)/pip freeze --all --exclude-editable | grep -v -e '^-e ' -e '^pip==' > constraints.txt
 
 # The documentation site (Sphinx + sphinx-gallery): docs/_build/html/index.html.
 docs: setup
