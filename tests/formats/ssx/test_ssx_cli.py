@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from piste.cli import main
 from piste.formats.ssx import read_pbd, read_ssh
@@ -48,8 +49,6 @@ def _need(tool: str, package: str):
     import os
     import shutil
 
-    import pytest
-
     if shutil.which(tool) is None:
         msg = f"{tool} not installed (apt-get install {package}; tools/setup-test-tools.sh)"
         if os.environ.get("PISTE_REQUIRE_TOOLS"):
@@ -57,13 +56,13 @@ def _need(tool: str, package: str):
         pytest.skip(msg)
 
 
+@pytest.mark.slow
 def test_view_window_under_xvfb(tmp_path, gl_context):
     """`piste view LEVEL.pbd` opens a window (Xvfb) and draws the level in ps2 mode."""
     import os
     import subprocess
     import sys
 
-    import pytest
     from PIL import Image
 
     _need("xvfb-run", "xvfb")
