@@ -12,6 +12,12 @@ matrices; all per-mesh precomputation (quantization, bone-space copies, the spar
 once before timing, as the game does offline.
 
 Also printed per case: palette size at step 0.25 / 0.1 and the ps2-budget batches.
+
+Then the six riders side by side against Panda3D's C++ CPU skinning (``GeomVertexData.
+animateVertices`` with a ``TransformBlendTable``: exact linear blend skinning), every contender
+timed alike (interleaved rounds, medians with [min-max]): piste's blended palette compiled (numba)
+and as the scipy sparse product, piste's exact float64 LBS, Panda3D (bone matrices set through its
+Python API, then the C++ skinning, positions and normals copied out as piste returns them).
 """
 
 from __future__ import annotations
@@ -22,6 +28,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _timing import interleaved, ms, record, stat  # noqa: E402
 
 from piste.character import default_rider, palette
 from piste.formats import load_gltf
@@ -90,10 +99,120 @@ def cases(quick: bool):
     return out
 
 
+def panda_mesh(me, n_bones):
+    """A Panda3D GeomVertexData of ``me`` skinned by a TransformBlendTable of ``n_bones``
+    UserVertexTransforms (Panda's own CPU animation path); returns ``(vdata, transforms)``."""
+    from panda3d.core import (Geom, GeomVertexAnimationSpec, GeomVertexArrayFormat, GeomVertexData,
+                              GeomVertexFormat, GeomVertexWriter, InternalName, SparseArray, TransformBlend,
+                              TransformBlendTable, UserVertexTransform)
+
+    arr = GeomVertexArrayFormat()
+    arr.addColumn(InternalName.getVertex(), 3, Geom.NTFloat32, Geom.CPoint)
+    arr.addColumn(InternalName.getNormal(), 3, Geom.NTFloat32, Geom.CNormal)
+    tb = GeomVertexArrayFormat()
+    tb.addColumn(InternalName.getTransformBlend(), 1, Geom.NTUint16, Geom.CIndex)
+    fmt = GeomVertexFormat()
+    fmt.addArray(arr)
+    fmt.addArray(tb)
+    spec = GeomVertexAnimationSpec()
+    spec.setPanda()
+    fmt.setAnimation(spec)
+    fmt = GeomVertexFormat.registerFormat(fmt)
+    vd = GeomVertexData(me.name, fmt, Geom.UHDynamic)
+    vd.uncleanSetNumRows(me.n_vertices)
+    mv = memoryview(vd.modifyArray(0)).cast("B").cast("f")
+    np.frombuffer(mv, np.float32)[:] = np.concatenate([me.positions, me.normals], 1).astype(np.float32).ravel()
+    xf = [UserVertexTransform(f"bone{i}") for i in range(n_bones)]
+    tbt = TransformBlendTable()
+    w = me.weights / np.maximum(me.weights.sum(1, keepdims=True), 1e-12)
+    idx = []
+    for v in range(me.n_vertices):
+        b = TransformBlend()
+        for j, ww in zip(me.joints[v], w[v]):
+            if ww > 0:
+                b.addTransform(xf[int(j)], float(ww))
+        idx.append(tbt.addBlend(b))
+    tbt.setRows(SparseArray.lowerOn(me.n_vertices))
+    vd.setTransformBlendTable(tbt)
+    wr = GeomVertexWriter(vd, InternalName.getTransformBlend())
+    for i in idx:
+        wr.setData1i(int(i))
+    return vd, xf
+
+
+def panda_skin(vd, xf, skin_matrices):
+    """One frame: set the bone matrices (Panda: row vectors, so transposed), skin in C++, copy out."""
+    from panda3d.core import LMatrix4f, Thread
+
+    m = np.asarray(skin_matrices, dtype=np.float32)
+    for i, t in enumerate(xf):
+        t.setMatrix(LMatrix4f(*m[i].T.ravel()))
+    an = vd.animateVertices(True, Thread.getCurrentThread())
+    out = np.frombuffer(memoryview(an.getArray(0)).cast("B"), np.float32).reshape(-1, 6)
+    return out[:, :3].copy(), out[:, 3:].copy()
+
+
+def six_riders_vs_panda(rounds: int) -> None:
+    from piste.character.skinning import _blend_nb
+
+    rider = default_rider()
+    sk = rider.skeleton
+    me = rider.meshes[0]
+    names = ["ride", "crouch", "grab", "spin", "ride", "grab"]
+    poses = [(n, 0.2 * i + 0.1) for i, n in enumerate(names)]
+    frame = [0]
+
+    def mats():  # a new pose every call (so no one can cache)
+        frame[0] += 1
+        return np.stack([sk.skin_matrices(rider.clips[n].sample(t + 0.01 * frame[0], loop=True)) for n, t in poses])
+
+    stacks = [mats() for _ in range(8)]
+    bm = BlendedMesh.build(me, 0.25, 3)
+    k = [0]
+
+    def nxt():
+        k[0] = (k[0] + 1) % len(stacks)
+        return stacks[k[0]]
+
+    fns = {}
+    if _blend_nb is not None:
+        fns["piste blended, compiled (numba)"] = lambda: bm.apply_many(nxt())
+    fns["piste blended, scipy sparse"] = lambda: bm.apply_many(nxt(), use_numba=False)
+    fns["piste exact LBS (float64 numpy)"] = lambda: [skin_exact(me, m) for m in nxt()]
+    try:
+        import panda3d  # noqa: F401
+    except ImportError:
+        print("\nPanda3D not installed (pip install 'piste[bench]'): the peer comparison is skipped")
+        panda = None
+    else:
+        panda = [panda_mesh(me, sk.n_bones) for _ in range(6)]
+        p, n = panda_skin(*panda[0], stacks[0][0])
+        pe, ne = skin_exact(me, stacks[0][0])
+        print(f"\nPanda3D vs piste exact: max position difference {np.abs(p - pe).max():.1e} "
+              f"(the model is {np.ptp(pe, axis=0).max():.2f} m tall)")
+        fns["Panda3D animateVertices (C++)"] = lambda: [panda_skin(vd, xf, m) for (vd, xf), m in zip(panda, nxt())]
+    t = interleaved(fns, rounds, warmup=2)
+    verts = 6 * me.n_vertices
+    print(f"== six riders side by side ({verts:,} vertices a frame), {rounds} interleaved rounds ==")
+    for name, ts in t.items():
+        print(f"  {name:34s} {ms(ts):>28s}  {verts / stat(ts)[0] / 1e6:7.1f} M vertices/s")
+    if panda is not None:
+        best = "piste blended, compiled (numba)" if _blend_nb is not None else "piste blended, scipy sparse"
+        pm, p_lo, p_hi = stat(t["Panda3D animateVertices (C++)"])
+        sm = stat(t[best])[0]
+        print(f"{best} is {pm / sm:.1f}x Panda3D (target >= 4x: {'met' if pm / sm >= 4 else 'missed'}); "
+              f"note Panda3D does exact LBS with every influence, piste the talk's quantized palette")
+        record("skinning", "six riders vs Panda3D CPU skinning", ">= 4x", f"{verts / sm / 1e6:.0f} M verts/s",
+               f"{verts / pm / 1e6:.1f} M verts/s", f"{pm / sm:.1f}x", pm / sm >= 4)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="rider cases only, shorter timing")
+    ap.add_argument("--rounds", type=int, help="interleaved rounds of the Panda3D comparison (default 40, quick 15)")
     args = ap.parse_args(argv)
+    six_riders_vs_panda(args.rounds or (15 if args.quick else 40))
+    print()
     min_time = 0.1 if args.quick else 0.25
     print("skinning throughput, M vertices/s (positions + normals), ratio to the exact numpy reference")
     hdr = (f"{'case':14s} {'verts':>7s} | {'exact':>6s} {'lbs32':>6s} {'post':>6s} {'bl.25':>6s} {'bl.1':>6s} "

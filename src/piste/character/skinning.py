@@ -50,6 +50,43 @@ from piste.character.palette import Palette, _top_weights, palette as _palette
 from piste.character.palette import palette as make_palette
 from piste.errors import ConfigError, ValidationError
 
+try:  # optional compiled kernel (the 'fast' extra); the numpy/scipy path is the reference
+    import os as _os
+
+    if _os.environ.get("PISTE_NO_NUMBA"):
+        raise ImportError("disabled by PISTE_NO_NUMBA")
+    import numba as _numba
+except ImportError:
+    _numba = None
+
+
+def _blend_py(pal, index, pos, nrm, out_p, out_n, normalize):
+    """Every vertex of every instance by its palette matrix: ``pal (n, p, 3, 4)``, ``index (v,)``,
+    ``pos/nrm (v, 3)`` float32 -> ``out_p/out_n (n, v, 3)`` float32 (the same float32 operations in
+    the same order as the sparse product and :func:`normalize_rows`)."""
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
+    for i in range(pal.shape[0]):
+        for v in range(index.shape[0]):
+            k = index[v]
+            x, y, z = pos[v, 0], pos[v, 1], pos[v, 2]
+            a, b, c = nrm[v, 0], nrm[v, 1], nrm[v, 2]
+            for r in range(3):
+                out_p[i, v, r] = pal[i, k, r, 0] * x + pal[i, k, r, 1] * y + pal[i, k, r, 2] * z + pal[i, k, r, 3]
+                out_n[i, v, r] = pal[i, k, r, 0] * a + pal[i, k, r, 1] * b + pal[i, k, r, 2] * c
+            if normalize:
+                nx, ny, nz = out_n[i, v, 0], out_n[i, v, 1], out_n[i, v, 2]
+                length = np.sqrt(nx * nx + ny * ny + nz * nz)
+                if length == zero:
+                    length = one
+                inv = one / length
+                out_n[i, v, 0] = nx * inv
+                out_n[i, v, 1] = ny * inv
+                out_n[i, v, 2] = nz * inv
+
+
+_blend_nb = _numba.njit(cache=True, nogil=True, boundscheck=False)(_blend_py) if _numba is not None else None
+
 __all__ = ["skin", "skin_exact", "PostTransformMesh", "BlendedMesh", "SCHEMES", "normalize_rows", "skinning_report"]
 
 SCHEMES = ("exact", "post_transform", "blended")
@@ -194,6 +231,8 @@ class BlendedMesh:
         if palette.index.shape[0] != v or n.shape[0] != v:
             raise ValidationError(f"palette has {palette.index.shape[0]} vertices, positions {v}, normals {n.shape[0]}")
         self.n_vertices = v
+        self._pos3, self._nrm3 = p, n  # (v, 3) float32 each, for the compiled kernel
+        self._index = np.ascontiguousarray(palette.index, dtype=np.int64)
         self._pos_h = np.concatenate([p, np.ones((v, 1), np.float32)], axis=1)  # (v, 4)
         self._nrm_h = np.concatenate([n, np.zeros((v, 1), np.float32)], axis=1)  # (v, 4)
         self._matrices = np.empty((palette.size, 3, 4), np.float32)
@@ -244,13 +283,20 @@ class BlendedMesh:
         m12 = m[..., :nb, :3, :].astype(np.float32).reshape(m.shape[:-3] + (nb, 12))
         return np.matmul(self._weights, m12).reshape(m.shape[:-3] + (self.palette.size, 3, 4))
 
-    def apply_many(self, skin_matrices, normalize: bool = True):
+    def apply_many(self, skin_matrices, normalize: bool = True, use_numba: bool | None = None):
         """Skin ``n`` instances at once (e.g. six riders in different poses): ``skin_matrices
-        (n, b, 4, 4)`` -> ``positions (n, v, 3)``, ``normals (n, v, 3)`` float32. With scipy this is
-        one sparse x dense product over all instances."""
+        (n, b, 4, 4)`` -> ``positions (n, v, 3)``, ``normals (n, v, 3)`` float32. With numba one
+        compiled pass over all vertices of all instances (``use_numba=False``: one scipy sparse x
+        dense product, the reference)."""
         pal = self.palette_matrices(skin_matrices)  # (n, p, 3, 4)
         n = pal.shape[0]
         v = self.n_vertices
+        if _blend_nb is not None and use_numba is not False:
+            pos = np.empty((n, v, 3), np.float32)
+            nrm = np.empty((n, v, 3), np.float32)
+            _blend_nb(np.ascontiguousarray(pal, dtype=np.float32), self._index, self._pos3, self._nrm3, pos, nrm,
+                      bool(normalize))
+            return pos, nrm
         if self._sparse is not None:
             out = np.ascontiguousarray((self._sparse @ pal.reshape(n, -1).T).T)  # (n, 6v)
             pos = out[:, : 3 * v].reshape(n, v, 3)
@@ -264,10 +310,13 @@ class BlendedMesh:
                 normalize_rows(nrm[i])
         return pos, nrm
 
-    def apply(self, skin_matrices, normalize: bool = True):
+    def apply(self, skin_matrices, normalize: bool = True, use_numba: bool | None = None):
         """Skin one frame: generate the palette ``(p, 3, 4)`` then transform every vertex by its
         entry. Returns ``positions (v, 3) float32`` and ``normals (v, 3) float32`` (unit if
         ``normalize``)."""
+        if _blend_nb is not None and use_numba is not False:
+            pos, nrm = self.apply_many(np.asarray(skin_matrices)[None], normalize=normalize)
+            return pos[0], nrm[0]
         m = self.palette_matrices(skin_matrices)
         v = self.n_vertices
         if self._sparse is not None:
