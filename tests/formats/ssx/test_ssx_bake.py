@@ -84,3 +84,23 @@ def test_files_written_the_games_way(baked):
     # a level loaded from the written files renders the baked light
     lv = load_level(out)
     assert lv.info["lightmaps_file"] == "OUT_L.ssh"
+
+
+def test_bake_is_the_same_in_worker_processes(baked):
+    level, b, _ = baked
+    again = bake_level(level, loads_lights(LIGHTS), shadows=True, jobs=2, chunk=4)
+    np.testing.assert_array_equal(again.pages, b.pages)
+    np.testing.assert_array_equal(again.lightmap_rect, b.lightmap_rect)
+
+
+def test_bake_with_the_lights_of_a_scene_file(tmp_path):
+    from piste.cli import main
+
+    path = make_level(rows=1, cols=2, seed=1).write(tmp_path, "SC")
+    (tmp_path / "lights.toml").write_text('[[lights]]\ntype = "ambient"\ncolor = [1.0, 0.2, 0.2]\nintensity = 0.9\n')
+    assert main(["bake", str(path), "--format", "ssx-tricky", "--scene", str(tmp_path / "lights.toml"),
+                 "--quiet", "--jobs", "1"]) == 0
+    pages = lightmap_pages(read_ssh(tmp_path / "SC_L.ssh"))
+    tiles = extract_tiles(pages, read_pbd(path).lightmap_rect, read_pbd(path).lightmap_page)
+    # a red ambient light alone: As = the red channel of CL = round(0.9 * 128) everywhere
+    assert (tiles[..., 3] == round(0.9 * 128)).all()
