@@ -231,3 +231,136 @@ def apply_uv_transform(uv: np.ndarray, m: np.ndarray) -> np.ndarray:
         return uv
     uv = np.asarray(uv, dtype=np.float64)
     return uv @ m[:2, :2].T + m[:2, 2]
+
+
+# ---------------------------------------------------------------------------------------------
+class Node_:
+    """Attribute access to one JSON object of a glTF document, the way pygltflib exposes it
+    (``prim.attributes.POSITION``, ``a.componentType``; a key that is absent reads as None).
+    ``extensions`` and ``extras`` stay plain dicts; objects and lists of objects are wrapped on
+    first access."""
+
+    __slots__ = ("_d", "_c")
+
+    def __init__(self, d: dict):
+        object.__setattr__(self, "_d", d)
+        object.__setattr__(self, "_c", {})
+
+    def __getattr__(self, key):
+        if key.startswith("__"):
+            raise AttributeError(key)
+        c = self._c
+        if key in c:
+            return c[key]
+        v = self._d.get(key)
+        if key not in ("extensions", "extras"):
+            v = _wrap(v)
+        c[key] = v
+        return v
+
+    def __setattr__(self, key, value):
+        self._c[key] = value
+
+    def get(self, key, default=None):
+        """dict-style access (morph targets are read both ways)."""
+        return getattr(self, key) if key in self._d else default
+
+    def __repr__(self) -> str:
+        return f"Node_({self._d!r})"
+
+
+def _wrap(v):
+    if isinstance(v, dict):
+        return Node_(v)
+    if isinstance(v, list) and v and any(isinstance(x, dict) for x in v):
+        return [Node_(x) if isinstance(x, dict) else x for x in v]
+    return v
+
+
+class Document(Node_):
+    """A parsed glTF document with pygltflib's reading API (``g.nodes``, ``g.binary_blob()``),
+    made straight from the JSON that :func:`piste.formats.limits.precheck_gltf` already parsed:
+    pygltflib's own ``GLTF2().load`` (dataclasses-json) took 70-95 % of ``load_gltf``'s time on the
+    sample models (``benchmarks/bench_gltf.py``)."""
+
+    __slots__ = ("_blob",)
+
+    def __init__(self, doc: dict, blob: bytes | None):
+        super().__init__(doc)
+        object.__setattr__(self, "_blob", blob)
+
+    def binary_blob(self):
+        return self._blob
+
+
+#: where a glTF document holds JSON objects (arrays of objects, and object-valued fields), checked
+#: before attribute access so a number or string there is a FormatError naming it, not a traceback
+_TOP_ARRAYS = ("accessors", "animations", "buffers", "bufferViews", "cameras", "images", "materials", "meshes",
+               "nodes", "samplers", "scenes", "skins", "textures")
+_NESTED = {
+    "accessors": ("sparse", ("sparse", "indices"), ("sparse", "values")),
+    "animations": ("[channels]", "[samplers]"),
+    "meshes": ("[primitives]",),
+    "materials": ("pbrMetallicRoughness", ("pbrMetallicRoughness", "baseColorTexture"),
+                  ("pbrMetallicRoughness", "metallicRoughnessTexture"), "normalTexture", "occlusionTexture",
+                  "emissiveTexture"),
+    "cameras": ("perspective", "orthographic"),
+}
+
+
+def _check_shapes(path, doc: dict) -> None:
+    def need(v, fld, kind=dict):
+        if not isinstance(v, kind):
+            what = "a JSON object" if kind is dict else "an array"
+            raise FormatError(path, f"expected {what}, got {type(v).__name__} ({str(v)[:40]})", field=fld)
+
+    for key in ("asset",) if "asset" in doc else ():
+        need(doc[key], key)
+    for key in _TOP_ARRAYS:
+        if key not in doc:
+            continue
+        need(doc[key], key, list)
+        for i, item in enumerate(doc[key]):
+            need(item, f"{key}[{i}]")
+            for sub in _NESTED.get(key, ()):
+                if isinstance(sub, str) and sub.startswith("["):
+                    name = sub[1:-1]
+                    if name in item:
+                        need(item[name], f"{key}[{i}].{name}", list)
+                        for j, x in enumerate(item[name]):
+                            need(x, f"{key}[{i}].{name}[{j}]")
+                            if name == "primitives":
+                                if "attributes" in x:
+                                    need(x["attributes"], f"{key}[{i}].primitives[{j}].attributes")
+                                for k, t in enumerate(x.get("targets") or []):
+                                    need(t, f"{key}[{i}].primitives[{j}].targets[{k}]")
+                            if name == "channels" and "target" in x:
+                                need(x["target"], f"{key}[{i}].channels[{j}].target")
+                    continue
+                chain = (sub,) if isinstance(sub, str) else sub
+                v = item
+                for c in chain:
+                    v = v.get(c) if isinstance(v, dict) else None
+                if v is not None:
+                    need(v, f"{key}[{i}]." + ".".join(chain))
+
+
+def read_document(path, doc: dict) -> Document:
+    """A :class:`Document` of ``doc`` (the file's JSON) with the GLB binary chunk of ``path``, if any
+    (the GLB framing was checked by ``precheck_gltf``)."""
+    import struct
+
+    _check_shapes(path, doc)
+    blob = None
+    with open(path, "rb") as f:
+        head = f.read(20)
+        if head[:4] == b"glTF" and len(head) == 20:
+            _, _, length = struct.unpack_from("<4sII", head, 0)
+            clen = struct.unpack_from("<I", head, 12)[0]
+            f.seek(20 + clen)
+            ch = f.read(8)
+            if len(ch) == 8:
+                blen, btype = struct.unpack("<II", ch)
+                if btype == 0x004E4942:
+                    blob = f.read(min(blen, max(length - 28 - clen, 0)))
+    return Document(doc, blob)
