@@ -4,7 +4,7 @@
     piste ssx render LEVEL.pbd --out x.png [--lightmap modulate|ps2]
     piste ssx view LEVEL.pbd                       a window (or one off-screen frame without a display)
     piste ssx bake LEVEL.pbd [--lights L.toml | --scene S.toml] [--out NEW.pbd]
-    piste ssx convert LEVEL.pbd --to npz|multitool --out PATH
+    piste ssx convert LEVEL.pbd --to npz|multitool|gltf --out PATH
     piste ssx make DIR [--rows R --cols C --name NAME]   a synthetic level (piste's own encoder)
 
 ``piste render LEVEL.pbd``, ``piste view LEVEL.pbd`` and ``piste bake LEVEL.pbd --format ssx-tricky``
@@ -31,7 +31,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--scene", metavar="TOML", help="bake: take the lights from this scene file")
     parser.add_argument("--no-shadows", action="store_true", help="bake: no shadow rays")
     parser.add_argument("--jobs", type=int, default=1, help="bake: worker processes (0 = every core)")
-    parser.add_argument("--to", choices=("npz", "multitool"), help="convert: the output kind")
+    parser.add_argument("--to", choices=("npz", "multitool", "gltf"),
+                        help="convert: a PatchNet .npz, a Multitool project folder, or glTF (.glb/.gltf: the "
+                             "terrain with the level's textures and light map, as `piste export` writes it)")
     parser.add_argument("--rows", type=int, default=2, help="make: patch rows")
     parser.add_argument("--cols", type=int, default=3, help="make: patch columns")
     parser.add_argument("--name", default="SYNTH", help="make: the level's name")
@@ -154,7 +156,9 @@ def run(args) -> int:
         return bake_pbd(args.level, args.out, args.lights, args.scene, not args.no_shadows, args.jobs)
     if args.action == "convert":
         if args.to is None or args.out is None:
-            raise ConfigError("convert needs --to npz|multitool and --out PATH")
+            raise ConfigError("convert needs --to npz|multitool|gltf and --out PATH")
+        if args.to == "gltf":
+            return gltf_pbd(args.level, args.out)
         from piste.pipeline.ssx_level import load_level
 
         level = load_level(_pbd_path(args.level))
@@ -193,4 +197,26 @@ def view_pbd(args) -> int:
     run_window(make_view, default_camera(level.net), size=tuple(args.size), caption=f"piste view {level.path.name}",
                opts=ViewOptions(lightmap_mode=args.lightmap), frames=args.frames,
                screenshot=out if args.frames else None)
+    return 0
+
+
+def gltf_pbd(level_path, out) -> int:
+    """The level as glTF: a scene ``terrain = { ssx_pbd = LEVEL }`` built in a temporary folder (no
+    files beside the level) and exported like ``piste export``."""
+    import json
+    import tempfile
+    from pathlib import Path
+
+    from piste.commands.export import export_bundle
+    from piste.pipeline import load_bundle
+    from piste.pipeline.build import build_scene
+
+    level = _pbd_path(level_path).resolve()
+    with tempfile.TemporaryDirectory() as d:
+        scene = Path(d) / f"{level.stem}.toml"
+        scene.write_text(f"name = {json.dumps(level.stem)}\nterrain = {{ ssx_pbd = {json.dumps(str(level))} }}\n")
+        r = build_scene(scene, use_cache=False)
+        report = export_bundle(load_bundle(r.path), out)
+    print(f"wrote {out} ({report.bytes / 1e6:.2f} MB): terrain {report.terrain_triangles:,} triangles with the "
+          "level's textures and light map")
     return 0

@@ -34,6 +34,12 @@ def test_cli_end_to_end(tmp_path, capsys, monkeypatch, gl):
     np.testing.assert_allclose(net.control_points, read_pbd(lv).to_net().control_points)
     assert main(["ssx", "convert", str(lv), "--to", "multitool", "--out", str(tmp_path / "proj")]) == 0
     assert (tmp_path / "proj" / "Patches.json").is_file()
+    assert main(["ssx", "convert", str(lv), "--to", "gltf", "--out", str(tmp_path / "lv.glb")]) == 0
+    import pygltflib
+
+    g = pygltflib.GLTF2().load(str(tmp_path / "lv.glb"))
+    assert len(g.images) == 2 and len(g.meshes) >= 1  # the level's texture atlas and its light map
+    assert sorted(p.name for p in tmp_path.iterdir() if p.suffix in (".toml", ".piste")) == []
 
 
 def test_cli_bad_level(tmp_path, capsys):
