@@ -229,3 +229,25 @@ def test_materials_alpha_sides_transform_emissive_unlit(tmp_path):
     g3.save(str(tmp_path / "bad.glb"))
     with pytest.raises(FormatError, match="alphaMode"):
         load_gltf(tmp_path / "bad.glb")
+
+
+def test_document_reads_like_pygltflib():
+    """gltf_ext.Document (what load_gltf reads through) gives the same fields and binary chunk as
+    pygltflib's own parse on every sample model."""
+    from piste.formats.gltf_ext import read_document
+    from piste.formats.limits import precheck_gltf
+
+    files = sorted(p for p in DATA.glob("*/*") if p.suffix.lower() in (".glb", ".gltf"))
+    assert len(files) >= 8
+    for f in files:
+        a = read_document(f, precheck_gltf(f))
+        b = pygltflib.GLTF2().load(str(f))
+        assert (a.binary_blob() is None) == (b.binary_blob() is None)
+        if a.binary_blob() is not None:
+            assert a.binary_blob()[:len(b.binary_blob())] == b.binary_blob()
+        assert [n.name for n in a.nodes or []] == [n.name for n in b.nodes or []]
+        assert [x.count for x in a.accessors] == [x.count for x in b.accessors]
+        for ma, mb in zip(a.meshes or [], b.meshes or []):
+            for pa, pb in zip(ma.primitives, mb.primitives):
+                assert pa.attributes.POSITION == pb.attributes.POSITION and pa.indices == pb.indices
+        assert a.nodes[0].no_such_field is None and a.extensions is None or isinstance(a.extensions, dict)
