@@ -67,7 +67,7 @@ def test_failed_tile_is_named(tmp_path):
     from piste.pipeline.dask_build import build_tiles_dask
 
     with distributed.LocalCluster(n_workers=1, processes=False, protocol="tcp://", host="127.0.0.1",
-                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+                                  dashboard_address="127.0.0.1:0") as cluster, distributed.Client(cluster) as client:
         with pytest.raises(TileError, match=r"tile \(1, 0\) failed in step 'fit'.*row 15, column 2"):
             build_tiles_dask(spec, client)
 
@@ -80,7 +80,8 @@ def test_dask_local_cluster_is_byte_identical_and_resumes(tmp_path):
     build_tiles(local)
     spec = synthetic_spec(tmp_path / "dask", 9, tile_patches=4, res=2, spacing=20.0, cell=90.0)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp://",
-                                  host="127.0.0.1", dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+                                  host="127.0.0.1", dashboard_address="127.0.0.1:0") as cluster, \
+            distributed.Client(cluster) as client:
         r = build_tiles_dask(spec, client)
         assert r.built == 18
         assert _files(tmp_path / "dask") == _files(tmp_path / "local")  # byte-identical, index included
@@ -146,7 +147,7 @@ def test_killed_worker_resumes_byte_identical(tmp_path, monkeypatch):
     spec = synthetic_spec(tmp_path / "dask", 12, tile_patches=4, res=2, spacing=20.0)
     spec.source = _KillOnce(**{f.name: getattr(spec.source, f.name) for f in dataclasses.fields(SyntheticSource)})
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, protocol="tcp://",
-                                  host="127.0.0.1", dashboard_address=None) as cluster, \
+                                  host="127.0.0.1", dashboard_address="127.0.0.1:0") as cluster, \
             distributed.Client(cluster) as client:
         r = build_tiles_dask(spec, client)
     assert (tmp_path / "killed").exists()  # a worker really died (tile (1, 1)'s fit)

@@ -21,6 +21,7 @@ on the others (or let dask-jobqueue / dask-kubernetes do it: piste only needs th
 
 from __future__ import annotations
 
+import sys
 import time
 
 from piste.errors import ConfigError
@@ -40,8 +41,8 @@ def _distributed():
 
 def dask_client(dask: str | None = None, scheduler: str | None = None, workers: int | None = None,
                 threads_per_worker: int = 1, processes: bool = True):
-    """A :class:`distributed.Client`: ``dask="local"`` starts a LocalCluster on 127.0.0.1 (no
-    dashboard), ``scheduler="tcp://HOST:PORT"`` connects to one.  Close it when done."""
+    """A :class:`distributed.Client`: ``dask="local"`` starts a LocalCluster on 127.0.0.1 (its
+    dashboard on a free loopback port), ``scheduler="tcp://HOST:PORT"`` connects to one.  Close it when done."""
     distributed = _distributed()
     if (dask is None) == (scheduler is None):
         raise ConfigError("give exactly one of --dask local and --scheduler tcp://HOST:PORT")
@@ -51,7 +52,7 @@ def dask_client(dask: str | None = None, scheduler: str | None = None, workers: 
                               "for a cluster use --scheduler tcp://HOST:PORT")
         cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=threads_per_worker,
                                            processes=processes, protocol="tcp://", host="127.0.0.1",
-                                           dashboard_address=None,
+                                           dashboard_address="127.0.0.1:0",
                                            silence_logs=40)
         client = distributed.Client(cluster)
         client._piste_cluster = cluster
@@ -95,7 +96,8 @@ def build_tiles_dask(spec: TiledSpec, client, progress: bool = False) -> TiledRe
         from tqdm import tqdm
 
         bar = tqdm(total=len(futures), desc="tiles (dask)", unit="task", leave=False)
-        print(f"Dask dashboard: {client.dashboard_link}", flush=True) if client.dashboard_link else None
+        if client.dashboard_link:
+            print(f"Dask dashboard: {client.dashboard_link}", file=sys.stderr, flush=True)
     results = {}
     try:
         for fut in distributed.as_completed(futures):

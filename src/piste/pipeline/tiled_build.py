@@ -12,7 +12,8 @@ and returns a few numbers.  Two passes:
    cast no shadow here), the **far field** (the tile's patch-corner grid with colours: a coarse
    stand-in the runtime draws for distant tiles), and per-cell **visibility** bitsets of the tile's
    patches from eyes over the tile (:func:`piste.pipeline.visibility.compute_visibility`, horizon
-   method).
+   method, 180 azimuths, cells of at least a quarter tile; the tile itself is the only occluder, and
+   the streaming renderer does not use them yet: it culls whole tiles by the view frustum).
 
 Every task is a pure function of its inputs: the single-machine build (:func:`build_tiles`) and the
 Dask build (:mod:`piste.pipeline.dask_build`) run the same tasks and write the same bytes.  A task
@@ -35,8 +36,15 @@ from pathlib import Path
 
 import numpy as np
 
-from piste.errors import PisteError, ValidationError
+from piste.errors import ConfigError, PisteError, ValidationError
+from piste.lighting.lightmap import encode_half_bright, sample_points
+from piste.lighting.lights import default_lights, dumps_lights, light_terms, loads_lights, shade
+from piste.lighting.shadows import shadow_visibility
+from piste.pipeline.build import scene_lights
 from piste.pipeline.cache import content_key
+from piste.pipeline.sources import load_heightfield
+from piste.pipeline.visibility import compute_visibility
+from piste.terrain.net import PatchNet
 from piste.terrain.tiles import TILE_FIT_VERSION, TILES_FORMAT, TileGrid, TileStore, fit_tile, neighbourhood_net
 
 __all__ = ["TiledSpec", "TiledResult", "ArraySource", "FileSource", "SyntheticSource", "TileError", "fit_task",
@@ -97,8 +105,6 @@ class FileSource:
         k = (str(p), st.st_mtime_ns, st.st_size, self.spec.height_scale, self.spec.height_offset,
              str(self.spec.nodata), self.spec.vertical_units, self.spec.key, self.spec.spacing)
         if k not in _FILE_CACHE:
-            from piste.pipeline.sources import load_heightfield
-
             _FILE_CACHE.clear()  # one DEM at a time per process
             _FILE_CACHE[k] = load_heightfield(self.spec)
         return _FILE_CACHE[k]
@@ -224,14 +230,10 @@ class TiledSpec:
                            list(self.eye_heights))
 
     def lights(self):
-        from piste.lighting.lights import loads_lights
-
         return loads_lights(self.lights_toml, "<lights>") if self.lights_toml else _default_lights()
 
 
 def _default_lights():
-    from piste.lighting.lights import default_lights
-
     return default_lights()
 
 
@@ -276,10 +278,6 @@ def lit_task(spec: TiledSpec, ty: int, tx: int, *_deps) -> dict:
 
 
 def _bake_tile(spec: TiledSpec, ty: int, tx: int) -> tuple[dict, dict]:
-    from piste.lighting.lightmap import encode_half_bright, sample_points
-    from piste.lighting.lights import light_terms, shade
-    from piste.lighting.shadows import shadow_visibility
-
     g, res = spec.grid, spec.res
     store = spec.store
     lights = spec.lights()
@@ -317,9 +315,6 @@ def _bake_tile(spec: TiledSpec, ty: int, tx: int) -> tuple[dict, dict]:
     arrays = {"texels": texels, "far_positions": far, "far_colors": far_rgb,
               "meta": np.array([lo[2], hi[2], n], dtype=np.float64)}
     if spec.cell > 0:
-        from piste.pipeline.visibility import compute_visibility
-        from piste.terrain.net import PatchNet
-
         tile = PatchNet(ring_net.control_points[centre], tol=ring_net.tol, name=f"tile {ty},{tx}")
         vis = compute_visibility(tile, cell=spec.cell, eye_heights=spec.eye_heights, method="horizon", azimuths=180)
         va, vm = vis.to_arrays()
@@ -399,10 +394,6 @@ def build_tiles(spec: TiledSpec, progress: bool = False) -> TiledResult:
 
 def spec_from_scene(scene, root=None, res: int | None = None) -> TiledSpec:
     """The :class:`TiledSpec` of a scene whose terrain is a height field (``terrain.tiles``)."""
-    from piste.errors import ConfigError
-    from piste.lighting.lights import dumps_lights
-    from piste.pipeline.build import scene_lights
-
     ts = scene.terrain
     if ts.kind not in ("heightfield", "geotiff"):
         raise ConfigError(f"{scene.path}: a tiled build needs a height-field terrain (GeoTIFF, PNG or .npz), "
@@ -411,8 +402,12 @@ def spec_from_scene(scene, root=None, res: int | None = None) -> TiledSpec:
     grid = TileGrid(src.shape, ts.samples_per_patch, ts.tile_patches, src.spacing)
     check_grid(grid)
     root = Path(root) if root is not None else (ts.tiles or Path(scene.path).with_suffix(".tiles"))
+    # per-tile visibility costs ~15 s a tile at 16 cells (horizon sweeps, loaded 2-core machine): cells
+    # of at least a quarter tile keep it to a fraction of the bake
+    tile_m = ts.tile_patches * ts.samples_per_patch * max(src.spacing)
+    cell = max(scene.visibility.cell, tile_m / 4.0) if scene.visibility.enabled else 0.0
     return TiledSpec(str(root), src, grid, dumps_lights(scene_lights(scene)), res=res or scene.lightmap.res,
-                     shadows=scene.lightmap.shadows, cell=scene.visibility.cell if scene.visibility.enabled else 0.0,
+                     shadows=scene.lightmap.shadows, cell=cell,
                      eye_heights=tuple(scene.visibility.eye_heights), name=scene.name)
 
 
