@@ -168,8 +168,9 @@ class Chunk:
     normals : (v, 3) int16 or None    /32768; None on shadow chunks
     shadow_slots : (v,) uint32 or None  per-vertex transform address of shadow chunks
     table_words : (2,) uint32         the strip-table header's 2nd and 3rd words (14, 114; 0 = shadow)
-    raw : dict                        tag bytes kept as read (preamble, gif, strip_tail (s, 12),
-                                      section heads, pads, trailer); regenerated when laid out anew
+    raw : dict                        as read: ``strip_tail (s, 3) uint32`` (each strip entry after its
+                                      count) and ``span`` (blob offsets of the chunk: its tag bytes,
+                                      kept in the sub-model's source); regenerated when laid out anew
     offset : int | None               blob offset it was read from
     """
 
@@ -414,8 +415,10 @@ def pack_chunks(strips, uv, normals, positions, max_vertices: int = MAX_CHUNK_VE
 
 # ------------------------------------------------------------------------------------ reading
 class _Reader:
-    def __init__(self, path, data: bytes, base: int, size: int, where: str):
+    def __init__(self, path, data: bytes, base: int, size: int, where: str, buf: bytearray | None = None):
         self.path, self.data, self.base, self.size, self.where = path, data, base, size, where
+        # arrays are writable views of one private copy of the file (no copy per array)
+        self.buf = bytearray(data) if buf is None else buf
         self.claimed = []  # (offset, size) blob-relative
 
     def err(self, field_name: str, message: str) -> FormatError:
@@ -435,7 +438,7 @@ class _Reader:
         self.need(off, dtype.itemsize * count, field_name)
         if claim and count:
             self.claimed.append((off, dtype.itemsize * count))
-        return np.frombuffer(self.data, dtype, count, self.base + off).copy()
+        return np.frombuffer(self.buf, dtype, count, self.base + off)
 
     def raw(self, off: int, n: int, field_name: str) -> bytes:
         self.need(off, n, field_name)
@@ -448,51 +451,47 @@ class _Reader:
 
 
 def _read_chunk(r: _Reader, off: int, where: str) -> tuple:
-    """Parse one chunk at blob offset ``off``; returns ``(Chunk, next offset)``."""
-    raw = {"preamble": r.raw(off, 32, f"{where}.preamble")}
-    raw["gif"] = r.raw(off + 32, 16, f"{where}.gif_tag")
-    hdr = r.arr(off + 48, "<u4", 4, f"{where}.strip_table")
+    """Parse one chunk at blob offset ``off``; returns ``(Chunk, next offset)``. The chunk's
+    whole span (tags included) is claimed at once; its tag bytes stay in the sub-model's source."""
+    r.need(off, 64, f"{where}.strip_table")
+    b0 = r.base + off
+    hdr = np.frombuffer(r.buf, "<u4", 4, b0 + 48)
     n_strips, n_vert = int(hdr[0]), int(hdr[3])
     if n_strips > MAX_VERTICES_READ:
         raise r.err(f"{where}.strip_count", f"{where}: strip count {n_strips} is more than {MAX_VERTICES_READ}")
     if n_vert > MAX_VERTICES_READ:
         raise r.err(f"{where}.vertex_count", f"{where}: vertex count {n_vert} is more than {MAX_VERTICES_READ}")
-    strips = r.arr(off + 64, "<u4", 4 * n_strips, f"{where}.strips").reshape(n_strips, 4)
-    lengths = strips[:, 0].copy()
-    raw["strip_tail"] = strips[:, 1:].copy()
+    r.need(off + 64, 16 * n_strips, f"{where}.strips")
+    strips = np.frombuffer(r.buf, "<u4", 4 * n_strips, b0 + 64).reshape(n_strips, 4)
+    lengths = strips[:, 0]
     if int(lengths.sum()) != n_vert:
         raise r.err(f"{where}.strip_lengths", f"{where}: strip lengths sum to {int(lengths.sum())} but the "
                                                f"strip table declares {n_vert} vertices")
-    p = off + 64 + 16 * n_strips
     shadow = int(hdr[2]) == 0
-    heads, pads = [], []
-
-    def section(p, item, name):
-        heads.append(r.raw(p, 48, f"{where}.{name}_header"))
-        end = p + 48 + item * n_vert
-        pads.append(r.raw(end, _align(end) - end, f"{where}.{name}_padding"))
-        return p + 48, _align(end)
-
+    p = off + 64 + 16 * n_strips
+    at = []
+    for item in ((16,) if shadow else (8, 6, 12)):  # 48-byte section header, data, 16-alignment
+        at.append(p + 48)
+        p = _align(p + 48 + item * n_vert)
+    end = p + 32  # transfer tags after the positions
+    names = ("positions",) if shadow else ("uv", "normals", "positions")
+    r.need(off, end - off, f"{where}.{names[-1] if end - off > 0 else 'data'}")
+    r.claimed.append((off, end - off))
+    base = r.base
     uv = normals = slots = None
     if not shadow:
-        q, p = section(p, 8, "uv")
-        uv = r.arr(q, "<i2", 4 * n_vert, f"{where}.uv").reshape(n_vert, 4)
-        q, p = section(p, 6, "normals")
-        normals = r.arr(q, "<i2", 3 * n_vert, f"{where}.normals").reshape(n_vert, 3)
-        q, p = section(p, 12, "positions")
-        pos = r.arr(q, "<f4", 3 * n_vert, f"{where}.positions").reshape(n_vert, 3)
+        uv = np.frombuffer(r.buf, "<i2", 4 * n_vert, base + at[0]).reshape(n_vert, 4)
+        normals = np.frombuffer(r.buf, "<i2", 3 * n_vert, base + at[1]).reshape(n_vert, 3)
+        pos = np.frombuffer(r.buf, "<f4", 3 * n_vert, base + at[2]).reshape(n_vert, 3)
     else:
-        q, p = section(p, 16, "positions")
-        both = r.arr(q, "<u4", 4 * n_vert, f"{where}.positions").reshape(n_vert, 4)
+        both = np.frombuffer(r.buf, "<u4", 4 * n_vert, base + at[0]).reshape(n_vert, 4)
         pos = both[:, :3].copy().view("<f4")
         slots = both[:, 3].copy()
-    if not np.all(np.isfinite(pos)):
+    if not np.isfinite(pos).all():
         raise r.err(f"{where}.positions", f"{where}: positions contain NaN or infinity")
-    raw["trailer"] = r.raw(p, 32, f"{where}.trailer")
-    raw["heads"], raw["pads"] = heads, pads
     ch = Chunk(strip_lengths=lengths, positions=pos, uv=uv, normals=normals, shadow_slots=slots,
-               table_words=hdr[1:3].copy(), raw=raw, offset=off)
-    return ch, p + 32
+               table_words=hdr[1:3], raw={"strip_tail": strips[:, 1:], "span": (off, end)}, offset=off)
+    return ch, end
 
 
 def _read_stream(r: _Reader, off: int, where: str) -> tuple:
@@ -526,11 +525,11 @@ def _read_morphs(r: _Reader, off: int, count: int, size: int, where: str) -> lis
     return keys
 
 
-def _read_submodel(path, data: bytes, base: int, entry, index: int) -> tuple:
+def _read_submodel(path, data: bytes, base: int, entry, index: int, buf: bytearray | None = None) -> tuple:
     name = bytes(entry["name"]).split(b"\0", 1)[0].decode("ascii", "replace")
     where = f"sub-model {index} {name!r}"
     size = int(entry["size"])
-    r = _Reader(path, data, base, size, where)
+    r = _Reader(path, data, base, size, where, buf)
     sec = {k: int(v) for k, v in zip(_SECTIONS, entry["sections"])}
     cnt = {k: int(v) for k, v in zip(_COUNTS, entry["counts"])}
     for k, v in cnt.items():
@@ -546,14 +545,20 @@ def _read_submodel(path, data: bytes, base: int, entry, index: int) -> tuple:
     sub.materials = r.arr(sec["materials"], MATERIAL_DTYPE, cnt["materials"], "materials")
     ph = r.arr(sec["palettes"], PALHDR_DTYPE, cnt["palettes"], "palettes")
     sub.palette_consts = ph["const"].copy()
-    pal_off = []
-    for i, h in enumerate(ph):
-        e = r.arr(int(h["offset"]), PALETTE_ENTRY_DTYPE, int(h["count"]), f"palette{i}.entries")
-        total = int(e["weight"].astype(np.int64).sum())
-        if total != 100:
-            raise r.err(f"palette{i}.weight", f"weight palette {i}: weights sum to {total} %, expected 100")
-        sub.palettes.append(e)
-        pal_off.append(int(h["offset"]))
+    pal_off = [int(o) for o in ph["offset"]]
+    n_ent = ph["count"].astype(np.int64)
+    ends = np.asarray(pal_off, np.int64) + 4 * n_ent
+    if len(ph) and n_ent.min() > 0 and np.array_equal(ends[:-1], pal_off[1:]):  # contiguous: one read
+        allent = r.arr(pal_off[0], PALETTE_ENTRY_DTYPE, int(n_ent.sum()), "palettes.entries")
+        sub.palettes = np.split(allent, np.cumsum(n_ent)[:-1])
+        totals = np.add.reduceat(allent["weight"].astype(np.int64), np.concatenate([[0], np.cumsum(n_ent)[:-1]]))
+    else:
+        sub.palettes = [r.arr(o, PALETTE_ENTRY_DTYPE, int(c), f"palette{i}.entries")
+                        for i, (o, c) in enumerate(zip(pal_off, n_ent))]
+        totals = np.array([int(e["weight"].astype(np.int64).sum()) for e in sub.palettes], np.int64)
+    if np.any(totals != 100):
+        i = int(np.argmax(totals != 100))
+        raise r.err(f"palette{i}.weight", f"weight palette {i}: weights sum to {int(totals[i])} %, expected 100")
     rh = r.arr(sec["weight_refs"], REF_DTYPE, cnt["weight_refs"], "weight_refs")
     refs, refs_off = [], []
     for i, h in enumerate(rh):
@@ -585,13 +590,16 @@ def _read_submodel(path, data: bytes, base: int, entry, index: int) -> tuple:
                 raise r.err(f"{gw}.weight_refs", f"{gw}: link {n_link} has no weight-reference list "
                                                  f"(the model has {len(refs)})")
             nslot = len(refs[n_link])
-            for mi, m in enumerate(meshes):
-                for ci, c in enumerate(m.chunks):
-                    s = c.slots
-                    if s.size and (int(s.min()) < 0 or int(s.max()) >= nslot):
-                        raise r.err(f"{gw}.mesh{mi}.chunk{ci}.uv", f"{gw}.mesh{mi}.chunk{ci}: vertex weight slot "
-                                    f"{int(s.max() if s.max() >= nslot else s.min())} is outside the link's "
-                                    f"{nslot}-entry weight-reference list")
+            cs = [(mi, ci, c) for mi, m in enumerate(meshes) for ci, c in enumerate(m.chunks)]
+            if cs:
+                allslots = np.concatenate([c.slots for _, _, c in cs])
+                if allslots.size and (int(allslots.min()) < 0 or int(allslots.max()) >= nslot):
+                    for mi, ci, c in cs:  # name the first chunk at fault
+                        s = c.slots
+                        if s.size and (int(s.min()) < 0 or int(s.max()) >= nslot):
+                            raise r.err(f"{gw}.mesh{mi}.chunk{ci}.uv", f"{gw}.mesh{mi}.chunk{ci}: vertex weight "
+                                        f"slot {int(s.max() if s.max() >= nslot else s.min())} is outside the "
+                                        f"link's {nslot}-entry weight-reference list")
             links.append(Link(meshes=meshes, refs=refs[n_link], offset=int(g["link_offset"]) + 8 * li,
                               refs_offset=refs_off[n_link]))
             n_link += 1
@@ -644,12 +652,13 @@ def parse_mpf(data: bytes, path="<bytes>") -> MpfFile:
     mpf = MpfFile(models=[], format_id=fmt, dir_tail=data[dir_off + 80 * count:dir_off + 80 * count + 4],
                   source=data, path=str(path))
     claimed = [(0, 12), (dir_off, 80 * count + 4)]
+    buf = bytearray(data)
     for i, e in enumerate(entries):
         base, size = start + int(e["offset"]), int(e["size"])
         if base + size > len(data):
             raise FormatError(path, f"sub-model {i}: blob of {size} bytes at offset {base} runs past the end of "
                                     f"the {len(data)}-byte file", field=f"directory[{i}].offset")
-        sub, gaps = _read_submodel(path, data, base, e, i)
+        sub, gaps = _read_submodel(path, data, base, e, i, buf)
         mpf.models.append(sub)
         claimed.append((base, size))
         for o, n in gaps:

@@ -57,7 +57,7 @@ from piste.errors import ConfigError, ValidationError
 from piste.formats.ssx.mpf import (
     BONE_DTYPE, GROUP_MORPH, GROUP_RENDER, GROUP_SHADOW, MATERIAL_DTYPE, MAX_CHUNK_VERTICES, MAX_GROUP_MATRICES,
     MORPH_SCALE, NORMAL_SCALE, PALETTE_ENTRY_DTYPE, SLOT_NORMAL_BASE, SLOT_TRANSFORM_BASE, UV_SCALE, Group, Link,
-    Mesh, MorphKey, MpfFile, SubModel, pack_chunks,
+    Mesh, MorphKey, MpfFile, SubModel, pack_chunks, strip_triangles,
 )
 from piste.transforms import compose_trs, invert_affine, matrix_to_quat
 
@@ -205,42 +205,48 @@ def _palette_tables(sub: SubModel, base: dict, new_index: np.ndarray):
 
 
 def _decode_sub(sub: SubModel, pal_bones, pal_pct, weld: bool):
-    """Arrays of one sub-model's render and morph groups (shadow groups skipped)."""
-    pos, nrm, uv, pidx, tris, morph = [], [], [], [], [], []
-    off = 0
+    """Arrays of one sub-model's render and morph groups (shadow groups skipped); the chunks are
+    gathered first and decoded in one vectorised pass (strips -> triangles, slots -> palettes)."""
+    pos, nrm, uv, refs_cat, ref_base, nvs, strips, morph = [], [], [], [], [], [], [], []
     k = sub.morph_keys
+    nref = 0
     for g in sub.groups:
         if g.type == GROUP_SHADOW:
             continue
         for lk in g.links:
-            refs = np.asarray(lk.refs, np.int64)
+            refs_cat.append(np.asarray(lk.refs, np.int64))
             for m in lk.meshes:
-                nv = m.n_vertices
-                d = np.zeros((k, nv, 3), np.float32)
+                chunks = [c for c in m.chunks if not c.shadow]
+                if not chunks:
+                    continue
+                nv = sum(c.n_vertices for c in chunks)
+                d = np.zeros((k, nv, 3), np.int8)
                 for ki, key in enumerate(m.morphs[:k]):
                     n = min(nv, len(key.deltas))
                     d[ki, :n] = key.deltas[:n]
-                moff = 0
-                for c in m.chunks:
-                    if c.shadow:
-                        continue
+                morph.append(d)
+                for c in chunks:
                     pos.append(c.positions)
-                    nrm.append(c.normals_float())
-                    uv.append(c.uv_float())
-                    pidx.append(refs[c.slots])
-                    tris.append(c.triangles() + off)
-                    morph.append(d[:, moff:moff + c.n_vertices])
-                    off += c.n_vertices
-                    moff += c.n_vertices
+                    nrm.append(c.normals)
+                    uv.append(c.uv)
+                    strips.append(c.strip_lengths)
+                    nvs.append(c.n_vertices)
+                    ref_base.append(nref)
+            nref += len(lk.refs)
     if not pos:
         return None
     a = SSX_TO_PISTE.astype(np.float32)
-    pos = (np.concatenate(pos) @ a.T) * np.float32(CM)
-    nrm = np.concatenate(nrm) @ a.T
-    uv = np.concatenate(uv)
-    pidx = np.concatenate(pidx)
-    tris = np.concatenate(tris)
-    morph = np.concatenate(morph, axis=1) @ a.T * np.float32(CM / MORPH_SCALE)
+    raw_pos = np.concatenate(pos)
+    uv_raw = np.concatenate(uv)
+    slots = (uv_raw[:, 2].astype(np.int64) - SLOT_TRANSFORM_BASE) // 4
+    pidx = np.concatenate(refs_cat)[np.repeat(np.asarray(ref_base, np.int64), nvs) + slots]
+    tris = strip_triangles(np.concatenate(strips))
+    p0, p1, p2 = raw_pos[tris[:, 0]], raw_pos[tris[:, 1]], raw_pos[tris[:, 2]]
+    tris = tris[~((p0 == p1).all(1) | (p1 == p2).all(1) | (p0 == p2).all(1))]  # degenerate
+    pos = (raw_pos @ a.T) * np.float32(CM)
+    nrm = (np.concatenate(nrm).astype(np.float32) / np.float32(NORMAL_SCALE)) @ a.T
+    uv = uv_raw[:, :2].astype(np.float32) / np.float32(UV_SCALE)
+    morph = np.concatenate(morph, axis=1).astype(np.float32) @ a.T * np.float32(CM / MORPH_SCALE)
     if weld and len(pos):
         key = np.concatenate([pos, nrm, uv, pidx[:, None].astype(np.float32),
                               morph.transpose(1, 0, 2).reshape(len(pos), -1)], axis=1)
