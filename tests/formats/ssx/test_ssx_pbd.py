@@ -202,3 +202,13 @@ def test_failed_write_leaves_nothing(level, tmp_path):
     with pytest.raises(ValidationError, match="patch 0"):
         write_pbd(p, out)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_to_net_widens_the_weld_for_looser_seams():
+    # seams up to ~3 game units apart: the 1-unit weld would leave them open; 4 units welds them
+    lv = make_level(rows=1, cols=2, seed=1, jitter=1.4)
+    net = lv.pbd.to_net()
+    assert len(net.shared_edges) == 1 and net.tol == pytest.approx(0.04)
+    assert len(lv.pbd.to_net(tol=0.01).shared_edges) == 0  # an explicit tolerance is taken as given
+    # the usual near-equal seams keep the 1-unit weld
+    assert make_level(rows=1, cols=2, seed=1).pbd.to_net().tol == pytest.approx(0.01)

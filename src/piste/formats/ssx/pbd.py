@@ -313,21 +313,41 @@ class Pbd:
         Parameters
         ----------
         scale : metres per game unit
-        tol : weld tolerance in metres (default 1 game unit: the game's shared boundaries are
-            near-equal, float32 at up to ~2e4 units, not bit-equal)
+        tol : weld tolerance in metres.  Default: chosen from 1, 4 and 16 game units, the smallest
+            that welds as many patch corners as 16 units does (the game's shared boundaries are
+            near-equal, float32 at up to ~2e4 units, not bit-equal); should the net's C0 check
+            still fail, the next larger one is tried
         lightmap_rect : (n, 4) PatchNet-style ``(u0, v0, u1, v1)`` atlas rects (default: piste's
             own layout; see :func:`piste.pipeline.ssx_level.load_level` for the game's pages)
         """
-        if tol is None:
-            tol = 1.0 * scale
-        try:
-            return PatchNet(np.asarray(self.control_points) * scale, uv=self.uv[:, UV_TO_NET],
-                            lightmap_rect=lightmap_rect, tol=tol, name=name or self._name())
-        except ValidationError as exc:
-            raise FormatError(self.path, str(exc), field="patches") from None
+        cp = np.asarray(self.control_points) * scale
+        tols = [tol] if tol is not None else [t * scale for t in _weld_candidates(self.control_points)]
+        for k, t in enumerate(tols):
+            try:
+                return PatchNet(cp, uv=self.uv[:, UV_TO_NET], lightmap_rect=lightmap_rect, tol=t,
+                                name=name or self._name())
+            except ValidationError as exc:
+                if k == len(tols) - 1 or "C0" not in str(exc):
+                    raise FormatError(self.path, str(exc), field="patches") from None
 
     def _name(self) -> str:
         return Path(self.path).name if self.path is not None else "pbd"
+
+
+def _weld_candidates(cp) -> list:
+    """Weld tolerances (game units) to try, smallest first: of 1, 4 and 16 units, those from the
+    smallest that pairs up as many patch corners as 16 units does."""
+    from scipy.spatial import cKDTree
+
+    steps = [1.0, 4.0, 16.0]
+    corners = np.asarray(cp)[:, CORNER_IJ[:, 0], CORNER_IJ[:, 1]].reshape(-1, 3)
+    if len(corners) < 2:
+        return steps
+    pairs = cKDTree(corners).query_pairs(steps[-1], output_type="ndarray")
+    dist = np.linalg.norm(corners[pairs[:, 0]] - corners[pairs[:, 1]], axis=1)
+    counts = [int((dist <= t).sum()) for t in steps]
+    first = next(i for i, c in enumerate(counts) if c == counts[-1])
+    return steps[first:]
 
 
 def _fail(path, msg, field=None):
