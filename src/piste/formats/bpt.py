@@ -16,6 +16,7 @@ import numpy as np
 
 from piste.errors import FormatError
 from piste.formats import limits, safe_io
+from piste.formats.atomic import write_bytes_atomic
 
 #: largest .bpt read (a patch takes ~400 bytes of text: ~2.6 million patches)
 MAX_BPT_BYTES = 1 << 30
@@ -84,8 +85,6 @@ def read_bpt(path) -> np.ndarray:
 
 def write_bpt(path, control_points) -> None:
     """Write ``(n, 4, 4, 3)`` control points as a ``.bpt`` file (atomically)."""
-    from piste.formats.atomic import write_bytes_atomic
-
     cp = np.asarray(control_points, dtype=np.float64).reshape(-1, 16, 3)
     out = [str(len(cp))]
     for patch in cp:

@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from piste.errors import ValidationError
+from piste.terrain.bezier import eval_edges, grid_params
 
 __all__ = [
     "AtlasLayout",
@@ -132,8 +133,6 @@ def with_lightmap_layout(net, res: int = 8, gutter: int = 1, inplace: bool = Fal
 def lightmap_params(res: int) -> tuple[np.ndarray, np.ndarray]:
     """Parameters of a tile's texel centres: ``(u, v)`` each ``(res * res,)`` float64, row-major
     with ``u`` fastest (index ``j * res + i`` is ``(i / (res-1), j / (res-1))``)."""
-    from piste.terrain.bezier import grid_params
-
     return grid_params(int(res))
 
 
@@ -164,8 +163,6 @@ def sample_points(net, res: int, smooth_seams: bool = True) -> tuple[np.ndarray,
     positions (n, res*res, 3) float64, normals (n, res*res, 3) float64 (unit).  Sample ``j*res + i``
     is parameter ``(i/(res-1), j/(res-1))``.
     """
-    from piste.terrain.bezier import eval_edges
-
     u, v = lightmap_params(res)
     pos, nrm = net.evaluate(u, v)
     pos = np.ascontiguousarray(pos, dtype=np.float64)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from piste.lighting.lights import DirectionalLight, Lights, light_vectors
+from piste.terrain.query import ray_intersect
 
 __all__ = ["shadow_rays", "shadow_visibility", "ray_offset"]
 
@@ -50,8 +51,6 @@ def shadow_rays(light, positions, normals, eps: float):
 
 
 def _exact_occluded(net, origins, directions, t_max) -> np.ndarray:
-    from piste.terrain.query import ray_intersect
-
     if len(origins) == 0:
         return np.zeros(0, dtype=bool)
     hits = ray_intersect(net, origins, directions, t_max=t_max, any_hit=True)

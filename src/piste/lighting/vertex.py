@@ -41,6 +41,7 @@ from functools import lru_cache
 import numpy as np
 
 from piste.errors import ValidationError
+from piste.lighting.lights import Lights, light_terms, light_vectors
 
 __all__ = ["VertexLights", "choose_lights", "choose_lights_many", "vertex_light", "light_strengths", "LUMA"]
 
@@ -108,8 +109,6 @@ class VertexLights:
 @lru_cache(maxsize=512)
 def _single(light):
     """A one-light :class:`Lights` (cached: lights are immutable and hashable)."""
-    from piste.lighting.lights import Lights
-
     return Lights((light,))
 
 
@@ -127,8 +126,6 @@ def light_strengths(lights, positions):
     directions : (m, L, 3) float64, unit vectors from each position towards each light
     colors : (m, L, 3) float64, ``intensity * colour * attenuation * cone`` (signed)
     """
-    from piste.lighting.lights import light_terms, light_vectors
-
     positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     m = len(positions)
     direct = lights.direct

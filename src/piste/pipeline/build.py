@@ -39,7 +39,21 @@ from pathlib import Path
 import numpy as np
 
 from piste.errors import ConfigError
+from piste.formats.bundle import camera_to_dict, write_bundle
+from piste.lighting.baker import BAKE_VERSION, bake_lightmap
+from piste.lighting.lights import Lights, default_lights
+from piste.pipeline.bundle_objects import camera_from_dict
+from piste.pipeline.cache import Cache, content_key
+from piste.pipeline.characters import CHARACTERS_VERSION, character_arrays
+from piste.pipeline.gltf_import import import_gltf
+from piste.pipeline.sources import add_rider_clips, load_object_mesh, load_rider_model, load_terrain, object_matrices, rider_matrices
 from piste.pipeline.ssx_level import bundle_arrays, level_key
+from piste.pipeline.visibility import Visibility, compute_visibility, culling_report
+from piste.terrain.net import PatchNet
+from piste.world.camera import Camera, track_camera
+from piste.world.course import track_centerline
+from piste.world.objects import ObjectSet, bake_vertex_colors, compress_mesh, normal_matrix, object_texture
+from piste.world.scene_file import SceneFile, load_scene
 
 __all__ = ["build_scene", "BuildResult", "default_cache_dir", "BUILD_VERSION", "scene_lights", "scene_cameras"]
 
@@ -84,9 +98,6 @@ def _json_lights(lights) -> dict:
 def scene_lights(scene, gltf_cache: dict | None = None):
     """The scene's :class:`piste.lighting.Lights`: inline ``[[lights]]`` plus every ``[[gltf]]``
     file's lights; the default course's lights when the scene gives none."""
-    from piste.lighting.lights import Lights, default_lights
-    from piste.pipeline.gltf_import import import_gltf
-
     items = list(scene.lights)
     for g in scene.gltf:
         if g.lights:
@@ -103,10 +114,6 @@ def scene_lights(scene, gltf_cache: dict | None = None):
 
 def scene_cameras(scene, net, centerline, gltf_cache: dict | None = None) -> list:
     """The scene's cameras as manifest dicts (``name``, eye, target, ..., optional ``track``)."""
-    from piste.formats.bundle import camera_to_dict
-    from piste.pipeline.gltf_import import import_gltf
-    from piste.world.camera import Camera, track_camera
-
     out = []
     for c in scene.cameras:
         if c.track is not None:
@@ -154,8 +161,6 @@ def scene_cameras(scene, net, centerline, gltf_cache: dict | None = None) -> lis
 
 
 def _file_key(path) -> str:
-    from piste.pipeline.cache import content_key
-
     return content_key(Path(path))
 
 
@@ -170,10 +175,6 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
     jobs : light-map bake worker processes (1 = in this process)
     use_cache : False recomputes every step (and stores nothing)
     """
-    from piste.formats.bundle import write_bundle
-    from piste.pipeline.cache import Cache, content_key
-    from piste.world.scene_file import SceneFile, load_scene
-
     t_all = time.perf_counter()
     if not isinstance(scene, SceneFile):
         scene = load_scene(scene)
@@ -214,19 +215,13 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
                               *((ts.nodata, ts.vertical_units) if ts.kind == "geotiff" else ()))
 
     def make_terrain():
-        from piste.pipeline.sources import load_terrain
-
         net = load_terrain(ts)
         a = {"control_points": net.control_points, "uv": net.uv}
         if ts.kind == "default":
-            from piste.world.course import track_centerline
-
             a["centerline"] = track_centerline(ts.seed)
         return a, {"name": net.name, "tol": float(net.tol)}
 
     ta, tm = step("terrain", terrain_key, make_terrain)
-    from piste.terrain.net import PatchNet
-
     net = PatchNet(ta["control_points"], uv=ta["uv"], tol=tm["tol"], name=tm["name"])
     centerline = ta.get("centerline")
     arrays["terrain/control_points"] = net.control_points
@@ -243,8 +238,6 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
     manifest["cameras"] = scene_cameras(scene, net, centerline, gltf_cache)
 
     # -------------------------------------------------------------- light map
-    from piste.lighting.baker import BAKE_VERSION, bake_lightmap
-
     lm_spec = scene.lightmap
     lm_key = content_key(BUILD_VERSION, "lightmap", BAKE_VERSION, terrain_key, manifest["lights"], lm_spec.res,
                          lm_spec.gutter, lm_spec.shadows)
@@ -286,15 +279,10 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
             msrc = model if model.startswith("builtin:") else _file_key(model)
             own = [r for r in scene.riders if r.model == model]
             clip_srcs = sorted({(r.clips_from, json.dumps(r.bone_map, sort_keys=True)) for r in own if r.clips_from})
-            from piste.pipeline.characters import CHARACTERS_VERSION
-
             ch_key = content_key(BUILD_VERSION, "characters", CHARACTERS_VERSION, msrc, ratios,
                                  [(_file_key(f), b) for f, b in clip_srcs])
 
             def make_characters(model=model, clip_srcs=clip_srcs):
-                from piste.pipeline.characters import character_arrays
-                from piste.pipeline.sources import add_rider_clips, load_rider_model
-
                 m = load_rider_model(model, allow_paths=scene.allow_paths)
                 m = add_rider_clips(m, [(f, json.loads(b)) for f, b in clip_srcs], allow_paths=scene.allow_paths)
                 return character_arrays(m, ratios=ratios)
@@ -311,8 +299,6 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
         result.steps["characters"] = {"cached": all(d["cached"] for d in steps_done),
                                       "seconds": sum(d["seconds"] for d in steps_done),
                                       "key": steps_done[0]["key"], "models": len(models)}
-        from piste.pipeline.sources import rider_matrices
-
         arrays["riders/matrix"] = rider_matrices(net, scene.riders)
         for r in scene.riders:
             cid = cid_of[r.model]
@@ -355,8 +341,6 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
     # -------------------------------------------------------------- visibility
     vs = scene.visibility
     if vs.enabled:
-        from piste.pipeline.visibility import Visibility, compute_visibility
-
         vis_key = content_key(BUILD_VERSION, "visibility", terrain_key, vs.cell, list(vs.eye_heights), vs.method)
 
         def make_visibility():
@@ -414,9 +398,6 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
 
 def _objects_arrays(net, objects, sources, lights, allow_paths=()):
     """Compressed meshes per model, instance arrays and baked vertex colours of the placed objects."""
-    from piste.pipeline.sources import load_object_mesh, object_matrices
-    from piste.world.objects import ObjectSet, bake_vertex_colors, compress_mesh, normal_matrix, object_texture
-
     kinds = []
     meshes = {}
     for s in sources:
@@ -459,13 +440,8 @@ def _objects_arrays(net, objects, sources, lights, allow_paths=()):
 def _visibility_report(net, vis, cameras, centerline) -> dict:
     """% of patches drawn, frustum alone vs frustum + visibility: along the track (default course)
     and from the scene's cameras."""
-    from piste.pipeline.bundle_objects import camera_from_dict
-    from piste.pipeline.visibility import culling_report
-
     out = {}
     if centerline is not None:
-        from piste.world.camera import track_camera
-
         cams = [track_camera(centerline, float(t), height=9.0) for t in np.linspace(0.02, 0.98, 49)]
         out["track"] = culling_report(net, vis, cams)
     cams = [camera_from_dict(c) for c in cameras]

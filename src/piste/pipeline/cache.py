@@ -24,6 +24,7 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
+from piste.formats.atomic import write_bytes_atomic
 
 __all__ = ["Hasher", "content_key", "Cache", "npz_bytes", "read_npz_bytes"]
 
@@ -138,8 +139,6 @@ class Cache:
         p = self.path(step, key)
         if p is None:
             return
-        from piste.formats.atomic import write_bytes_atomic
-
         data = dict(arrays)
         data["__meta__"] = np.frombuffer(json.dumps(meta or {}, sort_keys=True, default=_json_default).encode(), np.uint8)
         write_bytes_atomic(p, npz_bytes(data))

@@ -27,7 +27,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from piste.character import batch_mesh, make_lods, stripify
+from piste.character.lod import LOD
+from piste.character.model import Clip, Model, Skeleton, SkinnedMesh, Track
+from piste.character.palette import Palette
 from piste.errors import ConfigError, FormatError
+from piste.world.riders import merged_mesh as _merged
 
 __all__ = ["character_arrays", "model_from_arrays", "lods_from_arrays", "merged_mesh", "CLIP_RATE",
            "CHARACTERS_VERSION"]
@@ -41,8 +46,6 @@ DEFAULT_STEPS = (0.1, 0.2, 0.25)
 def merged_mesh(model):
     """One :class:`SkinnedMesh` of every skinned primitive of ``model`` (texture: the first one's);
     see :func:`piste.world.riders.merged_mesh`."""
-    from piste.world.riders import merged_mesh as _merged
-
     return _merged(model)
 
 
@@ -53,8 +56,6 @@ def _steps(ratios, steps):
 
 def character_arrays(model, ratios=(1.0, 0.5, 0.25), steps=None, max_bones: int = 3, rate: float = CLIP_RATE):
     """Everything the runtime needs of a rider model, pre-processed: ``(arrays, meta)``."""
-    from piste.character import batch_mesh, make_lods, stripify
-
     if model.skeleton is None:
         raise ConfigError(f"rider model {model.name!r} has no skeleton: riders need a skinned glTF")
     sk = model.skeleton
@@ -128,8 +129,6 @@ def _morphs(arrays: dict, prefix: str, meta: dict) -> dict:
 
 def model_from_arrays(arrays: dict, prefix: str, meta: dict):
     """The rider :class:`Model` (skeleton, LOD-0 mesh with texture, clips as LINEAR tracks)."""
-    from piste.character.model import Clip, Model, Skeleton, SkinnedMesh, Track
-
     g = lambda k: arrays[prefix + k]  # noqa: E731
     sk = Skeleton(meta["bones"], g("skeleton/parents"), g("skeleton/rest_translation"), g("skeleton/rest_rotation"),
                   g("skeleton/rest_scale"), g("skeleton/inverse_bind"))
@@ -155,10 +154,6 @@ def model_from_arrays(arrays: dict, prefix: str, meta: dict):
 
 def lods_from_arrays(arrays: dict, prefix: str, meta: dict, model=None) -> list:
     """The LODs as built (meshes and palettes), :class:`piste.character.LOD` items."""
-    from piste.character.lod import LOD
-    from piste.character.model import SkinnedMesh
-    from piste.character.palette import Palette
-
     out = []
     for i, info in enumerate(meta["lods"]):
         g = lambda k: arrays[f"{prefix}lod{i}/{k}"]  # noqa: E731

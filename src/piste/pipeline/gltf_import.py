@@ -55,6 +55,11 @@ from pathlib import Path
 import numpy as np
 
 from piste.errors import ConfigError
+from piste.formats.atomic import write_bytes_atomic
+from piste.formats.gltf import load_gltf
+from piste.lighting.lights import DirectionalLight, PointLight, SpotLight
+from piste.transforms import matrix_to_quat
+from piste.world.camera import Camera
 
 __all__ = ["axis_matrix", "import_gltf", "convert_lights", "convert_cameras", "write_scene_gltf", "DEFAULT_WHITE_LUX"]
 
@@ -80,8 +85,6 @@ def _unit(v) -> tuple:
 def convert_lights(model_lights, up: str = "y", offset=(0.0, 0.0, 0.0), scale: float = 1.0,
                    white: float = DEFAULT_WHITE_LUX) -> list:
     """piste lights for :class:`piste.character.Light` items (see the module docstring)."""
-    from piste.lighting.lights import DirectionalLight, PointLight, SpotLight
-
     a = axis_matrix(up)
     off = np.asarray(offset, dtype=np.float64)
     out = []
@@ -114,8 +117,6 @@ def convert_lights(model_lights, up: str = "y", offset=(0.0, 0.0, 0.0), scale: f
 
 def convert_cameras(model_cameras, up: str = "y", offset=(0.0, 0.0, 0.0), scale: float = 1.0) -> dict:
     """``{name: piste.world.camera.Camera}`` for :class:`piste.character.Camera` items."""
-    from piste.world.camera import Camera
-
     a = axis_matrix(up)
     off = np.asarray(offset, dtype=np.float64)
     out = {}
@@ -138,8 +139,6 @@ def convert_cameras(model_cameras, up: str = "y", offset=(0.0, 0.0, 0.0), scale:
 
 def import_gltf(spec) -> tuple[list, dict]:
     """Lights and cameras of a :class:`piste.world.scene_file.GltfSpec`'s file, in piste's terms."""
-    from piste.formats.gltf import load_gltf
-
     model = load_gltf(spec.file, allow_paths=getattr(spec, "allow_paths", ()))
     lights = convert_lights(model.lights, spec.up, spec.offset, spec.scale, spec.white) if spec.lights else []
     cameras = convert_cameras(model.cameras, spec.up, spec.offset, spec.scale) if spec.cameras else {}
@@ -149,8 +148,6 @@ def import_gltf(spec) -> tuple[list, dict]:
 # ----------------------------------------------------------------------------- writing
 def _quat_looking(forward, up) -> list:
     """glTF node rotation ``[x, y, z, w]`` whose -Z axis is ``forward`` and +Y is (nearly) ``up``."""
-    from piste.transforms import matrix_to_quat
-
     f = np.asarray(_unit(forward))
     u = np.asarray(up, dtype=np.float64)
     r = np.cross(f, u)
@@ -177,8 +174,6 @@ def write_scene_gltf(path, lights=(), cameras=(), up: str = "y") -> Path:
     cameras : dicts with ``name``, ``eye``, ``target``, optional ``yfov`` (radians), ``znear``, ``zfar``
     """
     import pygltflib
-
-    from piste.formats.atomic import write_bytes_atomic
 
     inv = axis_matrix(up).T  # piste -> file
     nodes, defs, cams = [], [], []

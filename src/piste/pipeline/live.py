@@ -30,6 +30,15 @@ from pathlib import Path
 
 from piste.errors import PisteError
 from piste.extras import require
+from piste.pipeline.build import build_scene
+from piste.pipeline.bundle_objects import load_bundle
+from piste.pipeline.preview import ScenePreview, camera_at
+from piste.render import window
+from piste.render.context import save_png
+from piste.render.frame import DEFAULT_FOG_DENSITY
+from piste.render.sky_pass import HORIZON
+from piste.render.window import HELP, SceneView, ViewFrame, ViewOptions, _wrap_screen, has_display, print_benchmark, riders_in_view
+from piste.world.scene_file import load_scene
 
 __all__ = ["LiveScene", "LiveView", "run_headless", "run_window", "add_scene_arguments", "run_view"]
 
@@ -57,9 +66,6 @@ class LiveScene:
     """
 
     def __init__(self, path, bundle=None, cache_dir=None, size=None, camera: str | None = None, ctx=None):
-        from piste.pipeline.bundle_objects import load_bundle
-        from piste.pipeline.preview import ScenePreview
-
         self.path = Path(path)
         self.is_bundle = self.path.suffix.lower() == ".piste"
         self.bundle_path = Path(bundle) if bundle is not None else self.path.with_suffix(".piste")
@@ -78,9 +84,6 @@ class LiveScene:
         self.preview = ScenePreview(self.bundle, size=size, ctx=ctx)
 
     def _build(self):
-        from piste.pipeline.build import build_scene
-        from piste.world.scene_file import load_scene
-
         try:
             scene = load_scene(self.path)
             self._files = scene.source_files()
@@ -98,8 +101,6 @@ class LiveScene:
         a failed rebuild keeps the old one and sets :attr:`last_error`."""
         if not self.changed():
             return False
-        from piste.pipeline.bundle_objects import load_bundle
-
         self._stamps = _stamp(self._files)
         try:
             if not self.is_bundle:
@@ -117,8 +118,6 @@ class LiveScene:
 
     def render(self, t: float = 0.0):
         """The current frame ``(H, W, 3) uint8`` from the chosen camera."""
-        from piste.pipeline.preview import camera_at
-
         return self.preview.render(camera_at(self.bundle, self.camera), t)
 
     def release(self) -> None:
@@ -129,8 +128,6 @@ def run_headless(live: LiveScene, out_dir, frames: int | None = None, seconds: f
                  interval: float = 0.1, log=None) -> list:
     """Render ``out_dir/frame_0000.png`` now and one more frame after every change, until ``frames``
     frames were written or ``seconds`` passed (None: until interrupted).  Returns the PNG paths."""
-    from piste.render.context import save_png
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     log = log or (lambda msg: print(msg, file=sys.stderr))
@@ -179,8 +176,6 @@ class LiveView:
         return self.live.bundle.visibility is not None
 
     def attach(self, ctx) -> None:
-        from piste.render.window import _wrap_screen
-
         self.ctx = ctx
         _wrap_screen(self.live.preview.terrain, ctx)
 
@@ -198,16 +193,11 @@ class LiveView:
         return None
 
     def draw(self, camera, t, opts):
-        from piste.render.window import SceneView, ViewFrame, riders_in_view
-
         p = self.live.preview
         p.terrain.set_visibility(self._vis if opts.visibility else None)
         if p.renderer is not None:
             p.scene.visibility = self.live.bundle.visibility if opts.visibility else None
             return SceneView(p.renderer).draw(camera, t, opts)
-        from piste.render.frame import DEFAULT_FOG_DENSITY
-        from piste.render.sky_pass import HORIZON
-
         mesh = p.terrain.prepare(camera, lod=opts.lod)
         frame = p.terrain.draw(camera, mesh, lightmap_mode=opts.lightmap_mode, debug=opts.debug, read=False)
         extra = {}
@@ -229,8 +219,6 @@ def run_window(live_factory, camera=None, size=(640, 448), caption="piste view",
     """Show a live scene in the fly-through window (:func:`piste.render.window.run_window`),
     reloading on change.  ``live_factory(ctx) -> LiveScene`` (the scene's GL objects live in the
     window's context).  Returns the window's state dict."""
-    from piste.render import window
-
     holder = {}
 
     def make(ctx):
@@ -254,8 +242,6 @@ def add_scene_arguments(parser) -> None:
 
 def run_view(args) -> int:
     """``piste view SCENE``: the live preview (see the module docstring)."""
-    from piste.render.window import has_display
-
     size = tuple(args.size) if getattr(args, "size", None) else None
     if args.headless or not has_display():
         live = LiveScene(args.scene, size=size, camera=args.camera)
@@ -270,16 +256,12 @@ def run_view(args) -> int:
             return 0
         finally:
             live.release()
-    from piste.render.window import HELP, ViewOptions, print_benchmark
-
     path = Path(args.scene)
 
     def factory(ctx):
         return LiveScene(path, size=size, camera=args.camera, ctx=ctx)
 
     def start_camera(view):
-        from piste.pipeline.preview import camera_at
-
         return camera_at(view.live.bundle, args.camera)
 
     size = size or (640, 448)

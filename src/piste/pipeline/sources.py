@@ -25,11 +25,21 @@ from pathlib import Path
 import numpy as np
 
 from piste.character.retarget import add_clips
+from piste.character.rider import default_rider
 from piste.errors import ConfigError, FormatError, PisteError
+from piste.formats.geotiff import read_geotiff
 from piste.formats.gltf import load_gltf
 from piste.formats.limits import MAX_HEIGHTFIELD_SAMPLES
 from piste.formats.safe_io import check_regular
+from piste.pipeline.gltf_import import axis_matrix
 from piste.pipeline.ssx_level import load_level
+from piste.pipeline.ssx_rider import load_mpf_rider
+from piste.terrain.fit import fit_heightfield
+from piste.terrain.net import PatchNet
+from piste.terrain.query import height_at
+from piste.world.course import default_course
+from piste.world.objects import ObjectMesh, make_mesh
+from piste.world.riders import surface_frame
 
 #: largest height-field file (PNG, .npz) read
 MAX_HEIGHTFIELD_FILE_BYTES = 1 << 30
@@ -42,8 +52,6 @@ def load_heightfield(spec) -> tuple[np.ndarray, tuple]:
     """``(z (H, W) float64 metres, (dx, dy))`` of a height-field terrain spec."""
     path = Path(spec.path)
     if spec.kind == "geotiff":
-        from piste.formats.geotiff import read_geotiff
-
         dem = read_geotiff(path, fill=spec.nodata, vertical_units=spec.vertical_units)
         z, spacing = dem.z, spec.spacing or dem.spacing
     elif path.suffix.lower() == ".npz":
@@ -145,11 +153,7 @@ def _npz_heightfield(path, spec) -> tuple:
 
 def load_terrain(spec):
     """The :class:`piste.terrain.PatchNet` a :class:`~piste.world.scene_file.TerrainSpec` names."""
-    from piste.terrain.net import PatchNet
-
     if spec.kind == "default":
-        from piste.world.course import default_course
-
         return default_course(spec.seed)
     if spec.kind == "ssx_pbd":  # UVs into the level's texture atlas (piste.pipeline.ssx_level)
         return load_level(spec.path).net
@@ -158,8 +162,6 @@ def load_terrain(spec):
     if spec.kind == "net":
         return PatchNet.load(spec.path)
     if spec.kind in ("heightfield", "geotiff"):
-        from piste.terrain.fit import fit_heightfield
-
         z, spacing = load_heightfield(spec)
         return fit_heightfield(z, spacing, samples_per_patch=spec.samples_per_patch, smooth=spec.smooth,
                                name=Path(spec.path).name)
@@ -170,15 +172,9 @@ def load_rider_model(model: str, allow_paths=()):
     """A rider :class:`piste.character.Model`: ``builtin:rider`` or a skinned glTF file (whose URIs
     may also read ``allow_paths``, see :func:`piste.formats.gltf.load_gltf`)."""
     if model == "builtin:rider":
-        from piste.character.rider import default_rider
-
         return default_rider(0)
     if model.lower().endswith(".mpf"):  # scene key model = "ssx:RIDER.mpf"
-        from piste.pipeline.ssx_rider import load_mpf_rider
-
         return load_mpf_rider(model)
-    from piste.formats.gltf import load_gltf
-
     m = load_gltf(model, allow_paths=allow_paths)
     if m.skeleton is None or not m.clips:
         raise ConfigError(f"{model}: a rider model needs a skin and at least one animation")
@@ -199,13 +195,8 @@ def add_rider_clips(model, sources, allow_paths=()):
 def load_object_mesh(model: str, allow_paths=()):
     """An object mesh (object space Z up, base at the origin): a built-in kind or a glTF file's
     meshes merged (glTF Y up turned Z up, see :mod:`piste.pipeline.gltf_import`)."""
-    from piste.world.objects import ObjectMesh, make_mesh
-
     if model.startswith("builtin:"):
         return make_mesh(model.split(":", 1)[1])
-    from piste.formats.gltf import load_gltf
-    from piste.pipeline.gltf_import import axis_matrix
-
     m = load_gltf(model, allow_paths=allow_paths)
     if not m.meshes:
         raise ConfigError(f"{model}: no meshes to use as an object")
@@ -227,8 +218,6 @@ def heading_vector(degrees: float) -> np.ndarray:
 def rider_matrices(net, riders) -> np.ndarray:
     """``(n, 4, 4)`` rider -> world matrices (the rider model is Y up, board along +X) standing on
     the exact surface, oriented to the slope, travelling along each rider's heading."""
-    from piste.world.riders import surface_frame
-
     if not riders:
         return np.zeros((0, 4, 4))
     xy = np.array([r.position[:2] for r in riders], dtype=np.float64)
@@ -253,8 +242,6 @@ def rider_matrices(net, riders) -> np.ndarray:
 def object_matrices(net, objects) -> np.ndarray:
     """``(m, 4, 4)`` object -> world matrices: upright, rotated by the heading, scaled, standing on
     the surface (z from :func:`piste.terrain.query.height_at` unless the position gives it)."""
-    from piste.terrain.query import height_at
-
     if not objects:
         return np.zeros((0, 4, 4))
     xy = np.array([o.position[:2] for o in objects], dtype=np.float64)

@@ -39,6 +39,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from piste.errors import ConfigError
+from piste.terrain.bezier import evaluate
+from piste.terrain.query import height_at, ray_intersect
+from piste.transforms import cull_boxes
 
 __all__ = ["Visibility", "compute_visibility", "culling_report", "patch_targets", "is_heightfield"]
 
@@ -114,8 +117,6 @@ class Visibility:
 # ----------------------------------------------------------------------------- targets, eyes
 def patch_targets(net, params=(0.1, 0.5, 0.9)) -> np.ndarray:
     """Sample points of every patch, ``(n, k*k, 3)`` float64, at parameters ``params`` x ``params``."""
-    from piste.terrain.bezier import evaluate
-
     p = np.asarray(params, dtype=np.float64)
     u, v = np.meshgrid(p, p, indexing="ij")
     pts = evaluate(net.control_points, u.ravel(), v.ravel(), normals=False)
@@ -125,8 +126,6 @@ def patch_targets(net, params=(0.1, 0.5, 0.9)) -> np.ndarray:
 def is_heightfield(net, samples: int = 64) -> bool:
     """Whether the net is a graph over xy (each patch's xy map is one-to-one and patches don't
     overlap): tested on the patches' sample points (z up normals everywhere, cells covered once)."""
-    from piste.terrain.bezier import evaluate
-
     t = np.linspace(0.02, 0.98, 5)
     u, v = np.meshgrid(t, t, indexing="ij")
     out = evaluate(net.control_points, u.ravel(), v.ravel(), normals=True)
@@ -153,8 +152,6 @@ def _grid_for(net, cell: float):
 
 def _eye_points(net, origin, shape, cell, eye_heights):
     """Eye points and which cells they serve: ``eyes (k, 3)``, ``owner`` list of (cell, eye) pairs."""
-    from piste.terrain.query import height_at
-
     rows, cols = shape
     lo, hi = net.bounds
     inset = 1e-3 * cell
@@ -178,8 +175,6 @@ class _HeightGrid:
 
     def __init__(self, net, spacing: float, margin: float):
         from scipy.ndimage import minimum_filter
-
-        from piste.terrain.query import height_at
 
         lo, hi = net.bounds
         self.origin = lo[:2]
@@ -237,8 +232,6 @@ def _horizon_visible(grid: _HeightGrid, eyes: np.ndarray, targets: np.ndarray, a
 
 
 def _rays_visible(net, eyes: np.ndarray, targets: np.ndarray, margin: float) -> np.ndarray:
-    from piste.terrain.query import ray_intersect
-
     tgt = targets + np.array([0.0, 0.0, margin])
     o = np.repeat(eyes, len(tgt), axis=0)
     d = np.tile(tgt, (len(eyes), 1)) - o
@@ -353,8 +346,6 @@ def culling_report(net, vis: Visibility, cameras) -> dict:
     dict: ``frames``, ``patches``, ``frustum_pct`` and ``visible_pct`` (mean % of all patches
     drawn), ``drawn_ratio`` (visible / frustum), ``saved_pct`` (100 * (1 - ratio)).
     """
-    from piste.transforms import cull_boxes
-
     lo, hi = net.patch_bounds
     centre = np.ascontiguousarray(((lo + hi) / 2.0).T)
     half = np.ascontiguousarray(((hi - lo) / 2.0).T)

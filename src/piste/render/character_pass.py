@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from piste.character import rider as _rider
 from piste.errors import RenderError
 from piste.render.context import load_shader
 
@@ -47,8 +48,6 @@ def specular_map(texture) -> np.ndarray:
     rails 0.9, the jacket and sleeves 0.3 (waterproof shell), everything else 0.  Green =
     shininess scale (lenses and board sharp, jacket broad).
     """
-    from piste.character import rider as _rider
-
     tex = np.asarray(texture)
     h, w = tex.shape[:2]
     out = np.zeros((h, w, 4), np.uint8)
@@ -83,8 +82,6 @@ def rider_textures(texture, n: int) -> list:
     """``n`` variants of a rider texture atlas ``(H, W, 4) uint8``, one jacket colour each
     (:data:`JACKETS`): the jacket and sleeve tiles' dominant colour (and its darker zip shade) is
     replaced, keeping the stripes.  Variant 0 keeps the original colours."""
-    from piste.character import rider as _rider
-
     tex = np.asarray(texture)
     tiles = getattr(_rider, "_TILES", {})
     h, w = tex.shape[:2]

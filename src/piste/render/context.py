@@ -21,6 +21,7 @@ import numpy as np
 
 from piste.errors import RenderError
 from piste.extras import require as require_extra
+from piste.formats.atomic import atomic_path
 
 __all__ = ["create_context", "Offscreen", "save_png", "load_shader", "check_gl_error", "APT_PACKAGES"]
 
@@ -149,8 +150,6 @@ class Offscreen:
 def save_png(path, image) -> Path:
     """Write ``image`` ``(H, W, 3|4) uint8`` (or ``(H, W)``) to ``path`` as PNG, atomically."""
     from PIL import Image
-
-    from piste.formats.atomic import atomic_path
 
     img = np.asarray(image)
     if img.dtype != np.uint8 or img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (3, 4)):

@@ -19,8 +19,10 @@ from piste.errors import ConfigError
 from piste.render.context import Offscreen, check_gl_error, create_context
 from piste.render.sky_pass import HORIZON, SkyPass
 from piste.render.terrain_pass import TerrainPass
+from piste.render.textures import placeholder_lightmap, track_field
 from piste.terrain.cull import patch_tree
 from piste.terrain.resident import morph_setting, resident_terrain
+from piste.terrain.tessellate import tessellate
 
 from piste.transforms import cull_boxes  # noqa: E402  (re-exported)
 
@@ -111,13 +113,9 @@ class TerrainRenderer:
         if isinstance(lightmap, str):
             if lightmap != "placeholder":
                 raise ConfigError(f"lightmap must be 'placeholder', an atlas image or None, got {lightmap!r}")
-            from piste.render.textures import placeholder_lightmap
-
             lightmap = placeholder_lightmap(net)
         self.terrain = TerrainPass(self.ctx, lightmap=lightmap, base_texture=base_texture)
         if track is not None:
-            from piste.render.textures import track_field
-
             self.terrain.set_track(*track_field(track, net.bounds), half_width=track_half_width)
         self.sky = SkyPass(self.ctx)
         self.lod_kwargs = {k: v for k, v in (("near", lod_near), ("far", lod_far)) if v is not None}
@@ -171,8 +169,6 @@ class TerrainRenderer:
 
         ``levels`` overrides the LOD (an ``(e,)`` array or one int for every edge).
         """
-        from piste.terrain.tessellate import tessellate
-
         t = timings if timings is not None else {}
         if levels is None and self.resident:  # GPU-resident blocks: only culling, LOD and indices here
             t0 = time.perf_counter()

@@ -25,7 +25,9 @@ from __future__ import annotations
 import numpy as np
 
 from piste.errors import ConfigError, RenderError
+from piste.lighting.lights import DirectionalLight, SpotLight
 from piste.render.context import load_shader
+from piste.world.objects import bake_vertex_colors
 
 __all__ = ["ObjectPass", "instance_rows", "light_uniforms", "MAX_POINT_LIGHTS"]
 
@@ -58,8 +60,6 @@ def instance_rows(objects) -> np.ndarray:
 def light_uniforms(lights) -> dict:
     """The ``points`` mode's uniforms from a :class:`piste.lighting.Lights`: every direct light
     (at most :data:`MAX_POINT_LIGHTS`) as position/type, direction/range, colour/falloff and cone."""
-    from piste.lighting.lights import DirectionalLight, SpotLight
-
     direct = lights.direct
     if len(direct) > MAX_POINT_LIGHTS:
         raise ConfigError(f"object lighting 'points': at most {MAX_POINT_LIGHTS} direct lights, the world has {len(direct)}")
@@ -155,8 +155,6 @@ class ObjectPass:
                 info["baked"] = None
 
     def _baked_textures(self):
-        from piste.world.objects import bake_vertex_colors
-
         if self.colors is not None:
             baked = self.colors
         elif self.lights is None:

@@ -20,6 +20,7 @@ from collections import deque
 import numpy as np
 
 from piste.render.textures import LOD_COLORS
+from piste.terrain.stats import TALK
 
 __all__ = ["StatsHistory", "overlay_image", "OverlayPass", "LOD_COLOURS"]
 
@@ -64,8 +65,6 @@ class StatsHistory:
 
     def table_rows(self) -> list[tuple[str, str, str]]:
         """The talk's statistics over the recorded frames: ``(label, this view, the talk)``."""
-        from piste.terrain.stats import TALK
-
         if not self.frames:
             return []
         fs = self.frames

@@ -29,8 +29,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from piste.character.animation import clip_time, sample_track
+from piste.character.morph import FaceSkin, face_weights
+from piste.errors import ConfigError
+from piste.render.character_pass import CharacterPass
 from piste.render.context import check_gl_error
+from piste.render.frame import DEFAULT_FOG_DENSITY, TerrainRenderer
+from piste.render.object_pass import ObjectPass
+from piste.render.shadow_pass import ShadowPass, shadow_matrices, shadow_patches
+from piste.render.sky_pass import HORIZON
 from piste.terrain.cull import patch_tree
+from piste.world.course import TRACK_HALF_WIDTH
 
 __all__ = ["SceneRenderer", "SceneImage", "summarize_scene"]
 
@@ -81,12 +90,6 @@ class SceneRenderer:
     def __init__(self, scene, size=(640, 448), ctx=None, lightmap="placeholder", object_lighting: str = "dynamic",
                  shadows: bool = True, specular: bool = True, shadow_tile: int = 128, casts=(),
                  face: str | None = "morph", **terrain_kw):
-        from piste.render.character_pass import CharacterPass
-        from piste.render.frame import TerrainRenderer
-        from piste.render.object_pass import ObjectPass
-        from piste.render.shadow_pass import ShadowPass
-        from piste.world.course import TRACK_HALF_WIDTH
-
         self.scene = scene
         terrain_kw.setdefault("track", scene.line)
         terrain_kw.setdefault("track_half_width", TRACK_HALF_WIDTH)
@@ -110,8 +113,6 @@ class SceneRenderer:
             b = c.lods[-1].mesh.bounds()
             self.cast_radius.append(0.5 * float(np.linalg.norm(b[1] - b[0])) + 0.25)
         self.caster_radius = self.cast_radius[0]
-        from piste.character.morph import FaceSkin
-
         self.face = face
         self.faces = [[FaceSkin(lod.mesh, lod.palette.index, face) for lod in c.lods] if face else []
                       for c in self.casts]
@@ -128,10 +129,6 @@ class SceneRenderer:
         debug view (e.g. "lod"); ``count_rider_pixels`` counts the riders' pixels that pass the depth
         test (an occlusion query: ``stats["rider_pixels"]``); ``face_time`` is the face animation's
         time (default ``t``)."""
-        from piste.render.frame import DEFAULT_FOG_DENSITY
-        from piste.render.shadow_pass import shadow_matrices, shadow_patches
-        from piste.render.sky_pass import HORIZON
-
         fog = DEFAULT_FOG_DENSITY if fog is None else fog
         w, h = self.size
         tm = {}
@@ -228,8 +225,6 @@ class SceneRenderer:
     def face_weights(cast, state, t: float, face_t: float, riders) -> np.ndarray:
         """Morph weights ``(len(riders), k)`` of ``cast``'s riders: their clip's weight track
         when it has one for the whole mesh (a glTF morph animation), else the procedural face."""
-        from piste.character.morph import face_weights
-
         mesh = cast.lods[0].mesh
         k = mesh.morph_positions.shape[0]
         out = face_weights(mesh.morph_names, face_t, riders)
@@ -241,8 +236,6 @@ class SceneRenderer:
             tracks = [tr for tr in (clip.weight_tracks.values() if clip is not None else ())
                       if np.asarray(tr.values).reshape(len(tr.times), -1).shape[1] == k]
             if len(tracks) == 1:
-                from piste.character.animation import clip_time, sample_track
-
                 tt = clip_time(float(times[r]) - t + face_t, clip.duration, True)
                 out[j] = np.asarray(sample_track(tracks[0], tt), np.float32).reshape(k)
         return out
@@ -267,8 +260,6 @@ def summarize_scene(images) -> dict:
     """Means over frames: every timing (``<stage>_ms``), ``fps`` from the mean total, and the mean
     counts (rider triangles, objects, shadow patches)."""
     if not images:
-        from piste.errors import ConfigError
-
         raise ConfigError("summarize_scene: no frames")
     out = {f"{k}_ms": float(np.mean([im.timings[k] for im in images])) for k in images[0].timings}
     out["cpu_median_ms"] = float(np.median([im.timings["cpu"] for im in images]))

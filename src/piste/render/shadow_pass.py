@@ -34,6 +34,7 @@ import numpy as np
 
 from piste.errors import RenderError
 from piste.render.context import load_shader
+from piste.world.camera import look_at, orthographic
 
 __all__ = ["shadow_matrices", "shadow_patches", "shadow_triangles", "ShadowPass", "SHADE"]
 
@@ -50,8 +51,6 @@ def shadow_matrices(centers, radius, sun_direction, reach: float = 40.0) -> np.n
     sun_direction : (3,) the way the sun's light travels
     reach : how far behind the caster (along the light) the shadow can land, metres
     """
-    from piste.world.camera import look_at, orthographic
-
     c = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
     r = np.broadcast_to(np.asarray(radius, dtype=np.float64), (len(c),))
     d = np.asarray(sun_direction, dtype=np.float64)

@@ -40,8 +40,12 @@ from pathlib import Path
 import numpy as np
 
 from piste.errors import ConfigError, FormatError
+from piste.render.context import Offscreen, create_context, save_png
+from piste.render.video import VideoWriter
+from piste.render.window import ViewFrame, ViewOptions, has_display, print_benchmark, run_window
 from piste.terrain.bezier import evaluate, grid_params
-from piste.terrain.tiles import TileStore
+from piste.terrain.tiles import TileGrid, TileStore
+from piste.world.camera import Camera
 
 __all__ = ["TileCache", "StreamingRenderer", "TileMesh", "near_mesh", "far_mesh", "mesh_bytes", "fly_path",
            "render_flight", "render_flight_cli", "StreamingView", "view_tiles"]
@@ -343,8 +347,6 @@ class StreamingRenderer:
 
     def __init__(self, root, size=(640, 448), budget_bytes: int = 256 << 20, near_radius: float | None = None,
                  ctx=None, background=SKY):
-        from piste.render.context import Offscreen, create_context
-
         self.cache = TileCache(root, budget_bytes=budget_bytes, near_radius=near_radius)
         self.ctx = ctx or create_context()
         self.size = (int(size[0]), int(size[1]))
@@ -431,9 +433,6 @@ def fly_path(index: dict, frames: int, fps: float = 30.0, speed: float = 100.0, 
              fov: float = 60.0, far: float | None = None):
     """Cameras of a straight flight across the world's diagonal at ``speed`` m/s, ``height`` m
     above the tiles' top, looking ahead and down."""
-    from piste.terrain.tiles import TileGrid
-    from piste.world.camera import Camera
-
     g = TileGrid.from_dict(index["grid"])
     b = np.array([t["bounds"] for t in index["tiles"].values()])
     lo, hi = b[:, 0].min(0), b[:, 1].max(0)
@@ -455,8 +454,6 @@ def render_flight(root, out=None, size=(640, 448), frames: int = 1, fps: float =
 
     Returns ``{"frames", "ms" (per frame), "resident_mb" (max), "near", "far"}``.
     """
-    from piste.render.context import save_png
-
     import contextlib
 
     root = Path(root)
@@ -466,8 +463,6 @@ def render_flight(root, out=None, size=(640, 448), frames: int = 1, fps: float =
         with contextlib.ExitStack() as stack:
             writer = None
             if video is not None:
-                from piste.render.video import VideoWriter
-
                 writer = stack.enter_context(VideoWriter(video, fps=int(fps)))
             cams = fly_path(r.cache.index, frames, fps, speed)
             if progress:
@@ -538,14 +533,10 @@ class StreamingView:
         return self.renderer.fbo
 
     def attach(self, ctx) -> None:
-        from piste.render.context import Offscreen
-
         self.renderer.fbo.release()
         self.renderer.fbo = Offscreen.wrap(ctx, ctx.screen)
 
     def draw(self, camera, t: float, opts):
-        from piste.render.window import ViewFrame
-
         self.renderer.render(camera, read=False)
         st = self.renderer.stats
         total = sum(self.renderer.cache.patches.values())
@@ -562,8 +553,6 @@ def view_tiles(args) -> int:
     display, one frame off-screen to ``--out``."""
     import sys
 
-    from piste.render.window import ViewOptions, has_display, print_benchmark, run_window
-
     root = Path(args.scene)
     if not root.is_dir():
         raise ConfigError(f"{root}: no such tiled world (build one: piste build SCENE with terrain.tiles)")
@@ -572,8 +561,6 @@ def view_tiles(args) -> int:
     index = TileStore(root).read_index()
     path = list(fly_path(index, max(int(args.benchmark or 1), 1)))
     if not has_display():
-        from piste.render.context import save_png
-
         print("piste view: no display, so no window; rendering one frame of the tiled world off-screen to "
               f"{args.out} instead (run under a desktop or `xvfb-run piste view`)", file=sys.stderr)
         r = StreamingRenderer(root, size=(w, h), budget_bytes=budget)

@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from piste.errors import ValidationError
+from piste.terrain.bezier import grid_params
 
 __all__ = ["snow_texture", "placeholder_lightmap", "lightmap_atlas_size", "track_field", "LOD_COLORS", "SUN_DIRECTION"]
 
@@ -94,8 +95,6 @@ def placeholder_lightmap(net, res: int = 8, sun=SUN_DIRECTION, gutter: int = 1) 
 
     Returns ``(H, W, 4) uint8`` (alpha 255), see the module docstring for the layout.
     """
-    from piste.terrain.bezier import grid_params
-
     W, H = lightmap_atlas_size(net, res)
     u, v = grid_params(res)  # index j*res + i is (u_i, v_j)
     _, nrm = net.evaluate(u, v)  # (n, res*res, 3)

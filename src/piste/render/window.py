@@ -35,6 +35,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from piste.errors import RenderError
+from piste.formats.atomic import atomic_path
+from piste.render.context import Offscreen, save_png
+from piste.render.overlay import OverlayPass, StatsHistory, overlay_image
+from piste.world.camera import FlyCamera
 
 __all__ = ["has_display", "run_window", "ViewOptions", "ViewFrame", "TerrainView", "SceneView", "HELP",
            "riders_in_view", "print_benchmark"]
@@ -84,8 +88,6 @@ def riders_in_view(camera, anchors, radius: float = 1.2) -> int:
 
 
 def _wrap_screen(renderer_terrain, ctx) -> None:
-    from piste.render.context import Offscreen
-
     renderer_terrain.target.release()
     renderer_terrain.target = Offscreen.wrap(ctx, ctx.screen)
 
@@ -191,10 +193,6 @@ def run_window(make_view, camera, size=(640, 448), caption: str = "piste view", 
     except ImportError:
         raise RenderError("`piste view` needs pyglet: pip install 'piste[gl]' (or use `piste demo` for images)") from None
     import moderngl
-
-    from piste.render.context import save_png
-    from piste.render.overlay import OverlayPass, StatsHistory, overlay_image
-    from piste.world.camera import FlyCamera
 
     log = log or (lambda msg: print(msg, file=sys.stderr))
     opts = opts or ViewOptions()
@@ -394,8 +392,6 @@ def run_window(make_view, camera, size=(640, 448), caption: str = "piste view", 
         st["toggles"] = {"lightmap_mode": opts.lightmap_mode, "debug": opts.debug, "lod": opts.lod,
                          "visibility": opts.visibility, "overlay": opts.overlay}
         if state is not None:
-            from piste.formats.atomic import atomic_path
-
             rec = {k: v for k, v in st.items() if k not in ("cam", "quit", "error", "overlay_at", "moved_keys")}
             with atomic_path(state) as tmp:
                 tmp.write_text(json.dumps(rec, indent=1))

@@ -53,7 +53,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from piste.character.morph import vertex_normals
 from piste.errors import ConfigError, ValidationError
+from piste.lighting.lights import Lights, shade
+from piste.lighting.vertex import choose_lights_many, vertex_light
+from piste.terrain.query import eval_points, height_at
 
 __all__ = [
     "ObjectMesh",
@@ -234,8 +238,6 @@ def _rock():
     r = 1.0 + 0.12 * np.sin(v @ k.T * 2.0 + ph).sum(1) / 2.0
     p = v * r[:, None]
     p[:, 2] = np.maximum(p[:, 2], -0.35) + 0.35  # a flat base, buried a little
-    from piste.character.morph import vertex_normals
-
     n = vertex_normals(p.astype(np.float32), f.astype(np.uint32))
     uv = _tile_uv(np.stack([0.5 + 0.5 * np.arctan2(v[:, 1], v[:, 0]) / np.pi, 0.5 + 0.5 * v[:, 2]], 1), "rock")
     return ObjectMesh("rock", p, n, uv, f)
@@ -519,8 +521,6 @@ def _frame(x_axis, z_axis):
 
 
 def _surface(net, xy):
-    from piste.terrain.query import eval_points, height_at
-
     z, hit, patch, uv = height_at(net, xy)
     if not np.all(hit):
         raise ValidationError(f"place_objects: {int((~hit).sum())} object positions lie off the terrain")
@@ -658,8 +658,6 @@ def place_objects(net, centerline, lights=None, seed: int = 0, n_trees: int = 22
     center = np.einsum("nij,nj->ni", matrix[:, :3, :3], co) + matrix[:, :3, 3]
     vl = None
     if lights is not None:
-        from piste.lighting.vertex import choose_lights_many
-
         vl = choose_lights_many(lights, center)
     counts = {k: int(np.count_nonzero(kind == i)) for i, k in enumerate(kinds_t)}
     return ObjectSet(meshes, kinds_t, kind, matrix, normal_matrix(matrix), center, radius, vl, object_texture(), counts)
@@ -672,8 +670,6 @@ def bake_vertex_colors(objects: ObjectSet, lights, instances=None) -> dict:
     Returns ``{kind: (k, v, 3) uint8}`` half-bright (128 = 1.0, up to 2x over-bright), instances in
     the order of ``objects.instances(kind)`` (or of ``instances`` restricted to each kind).
     """
-    from piste.lighting.lights import shade
-
     out = {}
     for ki, kname in enumerate(objects.kinds):
         idx = objects.instances(kname) if instances is None else np.asarray(instances)[objects.kind[instances] == ki]
@@ -699,9 +695,6 @@ def lighting_report(objects: ObjectSet, lights) -> dict:
     lights kept as point/spot lights evaluated per vertex; 4 x 64 bytes of light data an object).
     Errors are in linear light units (1.0 = white), over all instance vertices.
     """
-    from piste.lighting.lights import Lights, shade
-    from piste.lighting.vertex import choose_lights_many, vertex_light
-
     vl = objects.lights if objects.lights is not None else choose_lights_many(lights, objects.center)
     baked = bake_vertex_colors(objects, lights)
     err = {"dynamic": [], "baked": [], "points": []}

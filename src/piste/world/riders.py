@@ -44,7 +44,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from piste.character import default_rider
+from piste.character.model import SkinnedMesh
+from piste.character.skeleton import world_from_local
 from piste.errors import ConfigError, ValidationError
+from piste.terrain.query import eval_points, height_at
+from piste.transforms import compose_trs
+from piste.world.camera import Camera
 
 __all__ = ["RiderSet", "RiderState", "ClipTable", "follow_camera", "surface_frame", "DEFAULT_PACK", "merged_mesh",
            "rider_model", "pack_for"]
@@ -164,9 +170,6 @@ class ClipTable:
     def skin_matrices(self, clip_ids, times, model_matrices=None, loop: bool = True) -> np.ndarray:
         """Skin matrices ``(n, b, 4, 4)`` (bind space -> world when ``model_matrices (n, 4, 4)``
         is given, else -> model space)."""
-        from piste.character.skeleton import world_from_local
-        from piste.transforms import compose_trs
-
         tr, rot, sc = self.local(clip_ids, times, loop)
         sk = self.skeleton
         world = world_from_local(compose_trs(tr, rot, sc), sk.parents, sk.levels)
@@ -192,8 +195,6 @@ def surface_frame(net, xy, heading, probe_xy=None):
     probes' heights ``(k,)``, NaN off the terrain, when ``probe_xy`` is given);
     raises ValidationError for rider points off the terrain.
     """
-    from piste.terrain.query import eval_points, height_at
-
     xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     n_pts = len(xy)
     if probe_xy is not None:
@@ -260,8 +261,6 @@ class RiderSet:
     def __init__(self, net, centerline, model=None, pack=DEFAULT_PACK, start: float = 150.0, speed: float = 11.0,
                  rate: float = 60.0):
         if model is None:
-            from piste.character import default_rider
-
             model = default_rider(0)
         self.net = net
         self.model = model
@@ -341,8 +340,6 @@ def follow_camera(state: RiderState, i: int = 0, behind: float = 7.0, height: fl
     the rider's carving heading: the camera stays calm through the turns), ``height`` above it,
     looking at a point ``look_ahead`` metres ahead along the track, 1 m above the snow; kept ``clearance`` metres above the terrain (the height probed by
     ``RiderSet.state(t, camera_rider=i, camera_behind=behind)``, else queried from ``net``)."""
-    from piste.world.camera import Camera
-
     if state.track_dir is not None:
         f = np.append(state.track_dir[i], 0.0)
     else:
@@ -354,8 +351,6 @@ def follow_camera(state: RiderState, i: int = 0, behind: float = 7.0, height: fl
     if state.probe_z is not None and len(state.probe_z) and np.isfinite(state.probe_z[0]):
         ground = float(state.probe_z[0])
     elif net is not None:
-        from piste.terrain.query import height_at
-
         z, hit, _, _ = height_at(net, eye[None, :2])
         ground = float(z[0]) if hit[0] else None
     if ground is not None:
@@ -369,8 +364,6 @@ def follow_camera(state: RiderState, i: int = 0, behind: float = 7.0, height: fl
 def merged_mesh(model):
     """One :class:`~piste.character.model.SkinnedMesh` of every skinned primitive of ``model``
     (texture: the first one's).  Morph targets are merged by name."""
-    from piste.character.model import SkinnedMesh
-
     meshes = [m for m in model.meshes if m.skinned] or list(model.meshes)
     if not meshes:
         raise ConfigError(f"rider model {model.name!r} has no meshes")

@@ -31,7 +31,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from piste.character import BlendedMesh, default_rider, make_batches, make_lods
 from piste.errors import ConfigError
+from piste.lighting.lights import DirectionalLight, default_lights
+from piste.lighting.vertex import choose_lights_many
+from piste.world.course import TRACK_HALF_WIDTH, default_course, track_centerline
+from piste.world.objects import place_objects
+from piste.world.riders import RiderSet, follow_camera
 
 __all__ = ["Scene", "SceneFrame", "LOD_DISTANCES", "sun_light", "orient_outward"]
 
@@ -43,8 +49,6 @@ LOD_DISTANCES = (14.0, 35.0)
 
 def sun_light(lights):
     """The strongest directional light of ``lights`` (the one that casts projected shadows), or None."""
-    from piste.lighting.lights import DirectionalLight
-
     d = [x for x in lights.direct if isinstance(x, DirectionalLight)]
     if not d:
         return None
@@ -134,9 +138,6 @@ class Scene:
 
     def __init__(self, net, centerline, lights, model=None, objects=None, follow: int = 0,
                  lod_distances=LOD_DISTANCES, camera_kw=None, **riders_kw):
-        from piste.character import BlendedMesh, default_rider, make_lods
-        from piste.world.riders import RiderSet
-
         self.net = net
         self.line = np.asarray(centerline, dtype=np.float64)
         self.lights = lights
@@ -158,10 +159,6 @@ class Scene:
     def default(cls, seed: int = 0, lights=None, objects: bool = True, model=None, **kw) -> "Scene":
         """The default course of ``seed`` with its default lights (:func:`piste.lighting.default_lights`),
         six riders and the placed objects."""
-        from piste.lighting.lights import default_lights
-        from piste.world.course import TRACK_HALF_WIDTH, default_course, track_centerline
-        from piste.world.objects import place_objects
-
         net = default_course(seed)
         line = track_centerline(seed)
         lights = lights if lights is not None else default_lights()
@@ -171,8 +168,6 @@ class Scene:
     # ------------------------------------------------------------------ stats
     def character_stats(self) -> list[dict]:
         """Per LOD: name, triangles, vertices, bones, palette matrices (the talk: ~250 / 150 / 75)."""
-        from piste.character import make_batches
-
         out = []
         for lod in self.lods:
             batches = make_batches(lod.mesh.indices, lod.palette.index)
@@ -189,8 +184,6 @@ class Scene:
 
     # ------------------------------------------------------------------ a frame
     def camera(self, state, aspect: float = 640.0 / 448.0, fov_y: float = 60.0):
-        from piste.world.riders import follow_camera
-
         kw = {"behind": CAMERA_BEHIND, "height": 2.6, "look_ahead": 9.0}
         kw.update(self.camera_kw)
         return follow_camera(state, self.follow, net=self.net, aspect=aspect, fov_y=fov_y, far=4000.0, **kw)
@@ -198,8 +191,6 @@ class Scene:
     def update(self, t: float, aspect: float = 640.0 / 448.0, fov_y: float = 60.0, camera=None) -> SceneFrame:
         """The CPU work of one frame at ``t`` seconds (see the module docstring).  ``camera``
         overrides the chase camera."""
-        from piste.lighting.vertex import choose_lights_many
-
         tm = {}
         t0 = time.perf_counter()
         st = self.riders.state(t, camera_rider=self.follow if camera is None else None,

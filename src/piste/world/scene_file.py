@@ -120,6 +120,7 @@ from pathlib import Path
 from piste.errors import ConfigError, PisteError, ValidationError
 from piste.formats.limits import precheck_gltf
 from piste.formats.safe_io import check_regular, resolve_reference
+from piste.lighting.lights import AmbientLight, DirectionalLight, PointLight, SpotLight
 
 __all__ = [
     "SceneFile",
@@ -675,8 +676,6 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
 
 def _light(c: _Checker):
     from dataclasses import fields
-
-    from piste.lighting.lights import AmbientLight, DirectionalLight, PointLight, SpotLight
 
     kinds = {"ambient": AmbientLight, "directional": DirectionalLight, "point": PointLight, "spot": SpotLight}
     kind = c.get("type", "str", required=True)
