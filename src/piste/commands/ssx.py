@@ -6,6 +6,7 @@
     piste ssx bake LEVEL.pbd [--lights L.toml | --scene S.toml] [--out NEW.pbd]
     piste ssx convert LEVEL.pbd --to npz|multitool|gltf --out PATH
     piste ssx make DIR [--rows R --cols C --name NAME]   a synthetic level (piste's own encoder)
+    piste ssx import PROJECT_DIR --out NEW.pbd     a Multitool project as a level (+ .ssh, _L.ssh)
 
 ``piste render LEVEL.pbd``, ``piste view LEVEL.pbd`` and ``piste bake LEVEL.pbd --format ssx-tricky``
 run the same code.
@@ -13,14 +14,14 @@ run the same code.
 
 from __future__ import annotations
 
-ACTIONS = ("info", "render", "view", "bake", "convert", "make")
+ACTIONS = ("info", "render", "view", "bake", "convert", "make", "import")
 
 
 def add_arguments(parser) -> None:
     from piste.commands.demo import _size
 
     parser.add_argument("action", choices=ACTIONS, help="what to do")
-    parser.add_argument("level", help="LEVEL.pbd (for make: the output folder)")
+    parser.add_argument("level", help="LEVEL.pbd (make: the output folder; import: the Multitool project folder)")
     parser.add_argument("--out", help="render: PNG (default out/ssx.png); bake: the .pbd to write (default: the "
                                       "level itself, with NAME_L.ssh beside it); convert: the .npz or project folder")
     parser.add_argument("--lightmap", choices=("modulate", "ps2"), default="modulate", help="light-map mode")
@@ -129,6 +130,21 @@ def run(args) -> int:
             raise ConfigError("--rows and --cols must be >= 1")
         path = make_level(rows=args.rows, cols=args.cols).write(Path(args.level), args.name)
         print(f"wrote {path} and {path.stem}.ssh, {path.stem}_L.ssh beside it")
+        return 0
+    if args.action == "import":
+        from piste.formats.ssx.multitool import read_project
+        from piste.formats.ssx.pbd import write_pbd
+        from piste.formats.ssx.ssh import write_ssh
+
+        if not args.out or not str(args.out).lower().endswith(".pbd"):
+            raise ConfigError("import needs --out NEW.pbd")
+        out = Path(args.out)
+        pbd, textures, lightmaps = read_project(args.level).to_level()
+        write_pbd(pbd, out)
+        write_ssh(textures, out.with_name(f"{out.stem}.ssh"))
+        write_ssh(lightmaps, out.with_name(f"{out.stem}_L.ssh"))
+        print(f"wrote {out} ({len(pbd)} patches), {out.stem}.ssh ({len(textures)} textures), "
+              f"{out.stem}_L.ssh ({len(lightmaps)} pages)")
         return 0
     if args.action == "info":
         from piste.pipeline.ssx_level import load_level

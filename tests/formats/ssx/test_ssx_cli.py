@@ -34,6 +34,10 @@ def test_cli_end_to_end(tmp_path, capsys, monkeypatch, gl):
     np.testing.assert_allclose(net.control_points, read_pbd(lv).to_net().control_points)
     assert main(["ssx", "convert", str(lv), "--to", "multitool", "--out", str(tmp_path / "proj")]) == 0
     assert (tmp_path / "proj" / "Patches.json").is_file()
+    assert main(["ssx", "import", str(tmp_path / "proj"), "--out", str(tmp_path / "back" / "LV2.pbd")]) == 0
+    back = read_pbd(tmp_path / "back" / "LV2.pbd")
+    np.testing.assert_allclose(back.control_points, read_pbd(lv).control_points, atol=0.05)
+    assert len(read_ssh(tmp_path / "back" / "LV2.ssh")) == 3 and len(read_ssh(tmp_path / "back" / "LV2_L.ssh")) == 1
     assert main(["ssx", "convert", str(lv), "--to", "gltf", "--out", str(tmp_path / "lv.glb")]) == 0
     import pygltflib
 
