@@ -4,10 +4,13 @@ Prints, per model: bytes of all clips as glTF stores them, compressed bytes, rat
 and the achieved ACL-style object-space error (at the default bound 1e-4 x skeleton size and a
 looser 1e-3 x size); then for each morph mesh the memory, cost and error of morph targets vs
 null bones. Plain script, not a test.
+
+Run: ``.venv/bin/python benchmarks/bench_animation.py [--quick]`` (``--quick``: the first two models)
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import time
 from pathlib import Path
@@ -19,8 +22,13 @@ from piste.character.compress import default_tolerances
 DATA = Path(os.environ.get("PISTE_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")) / "gltf"
 
 
-def main():
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="only the first two models")
+    args = ap.parse_args(argv)
     files = sorted(p for p in DATA.glob("*/*") if p.suffix in (".gltf", ".glb"))
+    if args.quick:
+        files = files[:2]
     print(f"{'model':18s} {'bound':>9s} {'vdist':>7s} {'clips':>5s} {'bytes before':>12s} {'after':>7s} "
           f"{'ratio':>6s} {'max err':>9s} {'keys':>11s} {'time s':>6s}")
     for f in files:

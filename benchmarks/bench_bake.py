@@ -10,8 +10,8 @@ Plain script, not a test.  ``--quick``: 8x8 only.
 
 from __future__ import annotations
 
+import argparse
 import os
-import sys
 import time
 
 import numpy as np
@@ -42,8 +42,10 @@ def naive_bake(net, lights, res, patches):
     return out
 
 
-def main():
-    quick = "--quick" in sys.argv
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="8x8 texels only")
+    quick = ap.parse_args(argv).quick
     net, dt = timed(default_course)
     lights = default_lights()
     print(f"default course: {len(net)} patches (built in {dt:.2f} s); lights: {len(lights)} "

@@ -50,14 +50,7 @@ from piste.character.palette import Palette, _top_weights, palette as _palette
 from piste.character.palette import palette as make_palette
 from piste.errors import ConfigError, ValidationError
 
-try:  # optional compiled kernel (the 'fast' extra); the numpy/scipy path is the reference
-    import os as _os
-
-    if _os.environ.get("PISTE_NO_NUMBA"):
-        raise ImportError("disabled by PISTE_NO_NUMBA")
-    import numba as _numba
-except ImportError:
-    _numba = None
+from piste._jit import lazy_njit
 
 
 def _blend_py(pal, index, pos, nrm, out_p, out_n, normalize):
@@ -85,7 +78,7 @@ def _blend_py(pal, index, pos, nrm, out_p, out_n, normalize):
                 out_n[i, v, 2] = nz * inv
 
 
-_blend_nb = _numba.njit(cache=True, nogil=True, boundscheck=False)(_blend_py) if _numba is not None else None
+_blend_nb = lazy_njit(_blend_py)  # optional compiled kernel (the 'fast' extra); scipy/numpy is the reference
 
 __all__ = ["skin", "skin_exact", "PostTransformMesh", "BlendedMesh", "SCHEMES", "normalize_rows", "skinning_report"]
 
@@ -242,7 +235,14 @@ class BlendedMesh:
         rows = np.repeat(np.arange(palette.size), palette.bones.shape[1])
         np.add.at(self._weights, (rows, palette.bones.reshape(-1)), palette.weights.reshape(-1))
         self._sparse = None
-        if use_sparse is None or use_sparse:
+        self._use_sparse = use_sparse
+        if use_sparse or (use_sparse is None and _blend_nb is None):  # with numba: built if ever needed
+            self._make_sparse()
+
+    def _make_sparse(self) -> None:
+        use_sparse, palette = self._use_sparse, self.palette
+        p, n = self._pos3, self._nrm3
+        if self._sparse is None and (use_sparse is None or use_sparse):
             try:
                 import scipy.sparse as sp
             except ImportError:  # pragma: no cover - scipy is in the dev environment
@@ -297,6 +297,7 @@ class BlendedMesh:
             _blend_nb(np.ascontiguousarray(pal, dtype=np.float32), self._index, self._pos3, self._nrm3, pos, nrm,
                       bool(normalize))
             return pos, nrm
+        self._make_sparse()
         if self._sparse is not None:
             out = np.ascontiguousarray((self._sparse @ pal.reshape(n, -1).T).T)  # (n, 6v)
             pos = out[:, : 3 * v].reshape(n, v, 3)
@@ -319,6 +320,7 @@ class BlendedMesh:
             return pos[0], nrm[0]
         m = self.palette_matrices(skin_matrices)
         v = self.n_vertices
+        self._make_sparse()
         if self._sparse is not None:
             out = self._sparse @ m.reshape(-1)
             pos = out[: 3 * v].reshape(v, 3)

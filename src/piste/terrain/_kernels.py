@@ -1,7 +1,8 @@
 """Compiled inner loops of the terrain's per-frame work, each with a numpy twin.
 
 numba is optional (the ``fast`` extra; also in ``dev`` and ``bench``): with it these loops are
-compiled once (cached on disk next to this module); without it, or with ``PISTE_NO_NUMBA=1`` in
+compiled on first use (cached on disk next to this module; numba is imported then, so a fresh
+process does not pay for it before it needs it); without it, or with ``PISTE_NO_NUMBA=1`` in
 the environment, the numpy versions run.  Both give bit-identical outputs (the tests compare them);
 nothing here does floating-point arithmetic, only copies and integer offsets.
 
@@ -16,27 +17,14 @@ cull_tree          depth-first frustum walk of a :class:`piste.terrain.cull.Patc
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
-try:  # pragma: no cover - exercised where numba is installed
-    if os.environ.get("PISTE_NO_NUMBA"):
-        raise ImportError("disabled by PISTE_NO_NUMBA")
-    import numba
-
-    HAVE_NUMBA = True
-except ImportError:
-    numba = None
-    HAVE_NUMBA = False
+from piste._jit import HAVE_NUMBA, lazy_njit
 
 __all__ = ["HAVE_NUMBA", "frame_indices", "gather_cached", "ragged_arange", "side_lod", "cull_tree"]
 
 
-def _jit(fn):
-    if not HAVE_NUMBA:
-        return None
-    return numba.njit(cache=True, nogil=True, boundscheck=False)(fn)
+_jit = lazy_njit  # compiled on first call (numba is imported then, not when piste is)
 
 
 def ragged_arange(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
