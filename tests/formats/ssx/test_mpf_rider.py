@@ -230,3 +230,24 @@ def test_encode_a_gltf_rider(gltf_model):
     assert r["renamed_bones"] and all(len(v) <= 16 for v in r["renamed_bones"].values())
     names = mpf_to_model(parse_mpf(mpf_bytes(f))).skeleton.names
     assert len(set(names)) == fox.skeleton.n_bones and all(len(n) <= 16 for n in names)
+
+
+def test_schemes_batches_strips_on_the_decoded_rider(rider, decoded):
+    """What piste does to a glTF rider works on the decoded one: the three skinning schemes agree
+    as they should, PS2 batches from the file's palette pass check_batches, strips round-trip."""
+    from piste.character import batch_mesh, check_batches, stripify, unstripify
+    from piste.character.strips import canonical_triangles
+
+    sk = decoded.skeleton
+    m = sk.skin_matrices(rider.clips["grab"].sample(0.7, skeleton=sk))
+    mesh = decoded.meshes[0]
+    exact, _ = skin(mesh, m, scheme="exact")
+    post, _ = skin(mesh, m, scheme="post_transform", inverse_bind=sk.inverse_bind)
+    blended, _ = skin(mesh, m, scheme="blended", step=0.25, max_bones=3)
+    assert np.abs(post - exact).max() < 1e-4
+    assert np.abs(blended - exact).max() < 1e-4  # the file's weights are already in 25 % steps
+    for lod in decoded.lods:
+        batches = batch_mesh(lod.mesh, "ps2", palette=lod.palette)
+        check_batches(batches, lod.mesh.indices, lod.palette.index, "ps2")
+        s = stripify(lod.mesh.indices)
+        assert np.array_equal(canonical_triangles(unstripify(s)), canonical_triangles(lod.mesh.indices))
