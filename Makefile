@@ -14,8 +14,11 @@ demo: setup
 test: setup test-tools
 	$(BIN)/python -m pytest -q
 
+# Every benchmark (peers from the bench extra, side by side), then one table: goal / piste / peer / ratio.
+# BENCH_ARGS=--full for the long runs (default: each benchmark's --quick).
 bench: setup
-	for b in benchmarks/bench_*.py; do $(BIN)/python $$b || exit 1; done
+	$(BIN)/pip install -q -c constraints.txt -e '.[bench]'
+	$(BIN)/python benchmarks/summary.py $(BENCH_ARGS)
 
 setup: system $(VENV)/.installed
 

@@ -174,8 +174,9 @@ def peer_section(net, vis, rounds: int) -> None:
               f"  {name:42s} {ms(ts):>30s}  {pts / med / 1e6:9.3f} M points/s")
     for peer, name in peers.items():
         med = stat(t[name])[0]
-        record("terrain", f"surface points vs {peer}", ">= 1000x", f"{pts / base / 1e6:.2f} M pts/s",
-               f"{pts / med / 1e6:.4f} M pts/s", f"{med / base:.0f}x", med / base >= 1000)
+        goal = ">= 1000x" if peer == "geomdl" else "(peer)"
+        record("terrain", f"surface points vs {peer}", goal, f"{pts / base / 1e6:.2f} M pts/s",
+               f"{pts / med / 1e6:.4f} M pts/s", f"{med / base:.0f}x", med / base >= 1000 if peer == "geomdl" else None)
 
 
 def grid_of(n_patches: int, size: float = 10.0):
