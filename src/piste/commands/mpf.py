@@ -36,10 +36,11 @@ def add_arguments(p) -> None:
 
 
 def _info(f) -> dict:
-    from piste.formats.ssx.mpf import game_limits
+    from piste.formats.ssx.mpf import game_limits, tag_differences
 
     out = {"file": f.path, "format_id": f.format_id, "sub_models": [], "unknown": [list(u) for u in f.unknown],
-           "game_limits": [list(x) for x in game_limits(f)]}
+           "game_limits": [list(x) for x in game_limits(f)],
+           "tag_differences": [list(x) for x in tag_differences(f)]}
     for s in f.models:
         chunks = [c for lk in s.links for m in lk.meshes for c in m.chunks]
         out["sub_models"].append({
@@ -67,6 +68,9 @@ def run(args) -> int:
                   f"triangles {s['triangles']:>5}  morph keys {s['morph_keys']}")
         for w, o, n, note in info["unknown"]:
             print(f"  unknown: {w} @ {o} ({n} bytes): {note}")
+        for w, n, total, nb in info["tag_differences"]:
+            print(f"  {w}: {n} of {total} chunks carry tag bytes piste's layout would write differently "
+                  f"({nb} bytes; kept as read unless the blob is laid out anew)")
         for w, problem in info["game_limits"]:
             print(f"  over the game's limits: {w}: {problem}")
         if not info["game_limits"]:

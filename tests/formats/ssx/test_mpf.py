@@ -197,3 +197,18 @@ def test_game_limits():
     g = small_mpf()
     g.models[0].name, g.models[1].name = "ZZZZZZZZZZZZZZZA", "ZZZZZZZZZZZZZZZB"
     assert any("15 characters" in p for _, p in game_limits(g))
+
+
+def test_tag_differences_name_chunks_with_foreign_tags():
+    from piste.formats.ssx.mpf import tag_differences
+
+    b = bytearray(mpf_bytes(small_mpf()))
+    f = parse_mpf(bytes(b))
+    assert tag_differences(f) == []
+    c = f.models[0].groups[0].links[0].meshes[0].chunks[0]
+    base = 176 + int(np.frombuffer(bytes(b), DIR_DTYPE, 1, 12)[0]["offset"])
+    b[base + c.offset + 8:base + c.offset + 12] = b"\x01\x02\x03\x04"  # a VIF code piste would not write
+    g = parse_mpf(bytes(b))
+    assert tag_differences(g) == [("Body3000", 1, len([x for lk in g.models[0].links for m in lk.meshes
+                                                         for x in m.chunks]), 4)]
+    assert mpf_bytes(g) == bytes(b)  # kept

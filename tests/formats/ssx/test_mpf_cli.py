@@ -18,6 +18,7 @@ def test_mpf_cli_end_to_end(tmp_path, capsys):
     assert [s["name"] for s in info["sub_models"]] == ["Body3000", "Body1500", "BodyShdw750"]
     assert info["sub_models"][2]["groups"] == [17]
     assert info["sub_models"][0]["max_link_matrices"] <= 25 and info["unknown"] == [] and info["game_limits"] == []
+    assert info["tag_differences"] == []
     assert main(["mpf", "copy", str(out), str(tmp_path / "C.mpf")]) == 0
     assert (tmp_path / "C.mpf").read_bytes() == out.read_bytes()
     assert main(["mpf", "export", str(out), str(tmp_path / "R.glb")]) == 0

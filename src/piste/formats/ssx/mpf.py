@@ -72,6 +72,7 @@ MpfFile, SubModel, Group, Link, Mesh, Chunk, MorphKey
 pack_chunks(strips, uv, normals, positions, max_vertices=55) -> list[Chunk]  (the encoder's packer)
 strip_triangles(strip_lengths) -> (t, 3) int64   local vertex indices of a chunk's strips
 game_limits(mpf) -> list[(sub-model, problem)]     what the game would not take (55 / 25 / 25 % steps)
+tag_differences(mpf) -> list                       chunks whose kept tag bytes differ from piste's layout
 """
 
 from __future__ import annotations
@@ -86,7 +87,7 @@ from piste.formats.atomic import write_bytes_atomic
 
 __all__ = [
     "MpfFile", "SubModel", "Group", "Link", "Mesh", "Chunk", "MorphKey", "read_mpf", "parse_mpf", "write_mpf",
-    "mpf_bytes", "pack_chunks", "strip_triangles", "game_limits", "FORMAT_TRICKY_PS2", "MAX_CHUNK_VERTICES", "MAX_GROUP_MATRICES",
+    "mpf_bytes", "pack_chunks", "strip_triangles", "game_limits", "tag_differences", "FORMAT_TRICKY_PS2", "MAX_CHUNK_VERTICES", "MAX_GROUP_MATRICES",
     "UV_SCALE", "NORMAL_SCALE", "MORPH_SCALE", "BONE_DTYPE", "MATERIAL_DTYPE", "IK_DTYPE", "DIR_DTYPE",
     "PALETTE_ENTRY_DTYPE", "GROUP_RENDER", "GROUP_SHADOW", "GROUP_MORPH", "SLOT_TRANSFORM_BASE", "SLOT_NORMAL_BASE",
 ]
@@ -689,6 +690,36 @@ def read_mpf(path) -> MpfFile:
     if size > MAX_FILE_BYTES:
         raise FormatError(path, f"{size} bytes is more than the {MAX_FILE_BYTES}-byte limit for a model file")
     return parse_mpf(p.read_bytes(), path)
+
+
+def tag_differences(mpf: MpfFile) -> list:
+    """Chunks whose stored bytes differ from what piste's layout writes for the same values (the
+    VIF/DMA tags piste does not interpret: kept as read, regenerated only when a blob is laid out
+    anew): ``(sub-model, chunks that differ, chunks, bytes that differ)`` per sub-model read from
+    a file; empty for files piste wrote."""
+    out = []
+    for s in mpf.models:
+        if s.source is None:
+            continue
+        n = nbytes = total = 0
+        for lk in s.links:
+            for m in lk.meshes:
+                for c in m.chunks:
+                    span = c.raw.get("span")
+                    if span is None:
+                        continue
+                    total += 1
+                    have = np.frombuffer(s.source, np.uint8, span[1] - span[0], span[0])
+                    mine = np.frombuffer(_chunk_bytes(c), np.uint8)
+                    if have.size != mine.size:
+                        n += 1
+                        nbytes += max(have.size, mine.size)
+                    elif not np.array_equal(have, mine):
+                        n += 1
+                        nbytes += int(np.count_nonzero(have != mine))
+        if n:
+            out.append((s.name, n, total, nbytes))
+    return out
 
 
 def game_limits(mpf: MpfFile) -> list:
