@@ -1,0 +1,99 @@
+"""glTF objects keep their textures: regions packed into the objects' atlas, UVs remapped."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from piste.character.model import Model, SkinnedMesh
+from piste.formats.gltf import load_gltf
+from piste.pipeline.object_atlas import pack_object_atlas, primitive_images
+from piste.world.objects import object_texture
+
+DATA = Path("/work/shared/data/gltf")
+if not DATA.is_dir():
+    DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "gltf"
+
+
+def _nearest(img, uv):
+    h, w = img.shape[:2]
+    x = np.clip(np.round(uv[:, 0] * w - 0.5), 0, w - 1).astype(int)
+    y = np.clip(np.round(uv[:, 1] * h - 0.5), 0, h - 1).astype(int)
+    return img[y, x]
+
+
+def test_regions_sample_like_the_original_textures():
+    cm = load_gltf(DATA / "CesiumMan" / "CesiumMan.glb")
+    solid = SkinnedMesh("red", np.zeros((3, 3)), np.array([[0, 1, 2]]), base_color=np.array([1.0, 0.0, 0.0, 1.0]))
+    model = Model("m", None, [cm.meshes[0], solid])
+    imgs = primitive_images(model)
+    assert imgs[0][2].shape == cm.meshes[0].texture.shape and imgs[1][2][0, 0].tolist() == [255, 0, 0, 255]
+    uv = np.concatenate([cm.meshes[0].uv, np.full((3, 2), 0.5, np.float32)])
+    base = object_texture()
+    atlas, new = pack_object_atlas(base, {"gltf_cm": (uv, imgs)}, max_size=4096)
+    assert np.array_equal(atlas[:base.shape[0], :base.shape[1]], base)  # the built-in tiles stay put
+    nv = cm.meshes[0].n_vertices
+    tex = cm.meshes[0].texture
+    h, w = tex.shape[:2]
+    # texel-centre mapping: original texel (round(u (w-1)), round(v (h-1))) is the atlas texel sampled
+    u = np.clip(cm.meshes[0].uv.astype(np.float64), 0, 1)
+    want = tex[np.round(u[:, 1] * (h - 1)).astype(int), np.round(u[:, 0] * (w - 1)).astype(int)]
+    got = _nearest(atlas, new["gltf_cm"][:nv].astype(np.float64))
+    assert (np.abs(got.astype(int) - want.astype(int)).max(axis=1) <= 0).mean() > 0.99
+    assert (_nearest(atlas, new["gltf_cm"][nv:]) == [255, 0, 0, 255]).all()
+    # regions never overlap the base and stay inside the atlas
+    assert new["gltf_cm"].min() >= 0 and new["gltf_cm"].max() <= 1
+    assert (new["gltf_cm"][:, 1] * atlas.shape[0] >= base.shape[0]).all()
+
+
+def test_scene_with_a_gltf_object_keeps_its_texture(tmp_path):
+    """A scene's glTF object (CesiumMan's mesh): the bundle's object atlas holds its texture and
+    the object's decoded UVs sample it (what the object pass draws)."""
+    import shutil
+
+    from piste.pipeline.build import build_scene
+    from piste.pipeline.bundle_objects import load_bundle
+    from piste.world.scene_file import load_scene
+
+    shutil.copy(DATA / "CesiumMan" / "CesiumMan.glb", tmp_path / "man.glb")
+    n, spacing = 9, 4.0
+    y, x = np.mgrid[0:n, 0:n] * spacing
+    np.savez(tmp_path / "hill.npz", z=10.0 - 0.1 * y, dx=np.float64(spacing))
+    (tmp_path / "s.toml").write_text("""name = "statue"
+[terrain]
+source = "hill.npz"
+[lightmap]
+res = 8
+[visibility]
+enabled = false
+[[objects]]
+model = "man.glb"
+position = [16.0, 16.0]
+scale = 3.0
+[[objects]]
+model = "builtin:tree"
+position = [8.0, 8.0]
+[[cameras]]
+name = "main"
+eye = [16.0, 2.0, 14.0]
+target = [16.0, 16.0, 11.0]
+""")
+    b = load_bundle(build_scene(load_scene(tmp_path / "s.toml"), out=tmp_path / "s.piste").path)
+    objs = b.objects()
+    k = [x for x in objs.kinds if x.startswith("gltf_")][0]
+    _, _, uv = objs.meshes[k].decode()
+    tex = load_gltf(DATA / "CesiumMan" / "CesiumMan.glb").meshes[0].texture
+    src_uv = np.clip(load_gltf(DATA / "CesiumMan" / "CesiumMan.glb").meshes[0].uv.astype(np.float64), 0, 1)
+    atlas = objs.texture
+    got = _nearest(atlas, uv.astype(np.float64)).astype(int)
+    h, w = tex.shape[:2]
+    if max(h, w) <= 256:
+        want = tex[np.round(src_uv[:, 1] * (h - 1)).astype(int), np.round(src_uv[:, 0] * (w - 1)).astype(int)]
+        assert (np.abs(got - want).max(axis=1) <= 2).mean() > 0.95  # 16-bit UV quantization
+    else:  # scaled down into the atlas: colours agree on average
+        want = tex[np.round(src_uv[:, 1] * (h - 1)).astype(int), np.round(src_uv[:, 0] * (w - 1)).astype(int)]
+        assert np.abs(got[:, :3].mean(0) - want[:, :3].mean(0)).max() < 12
+    # the built-in tree still samples the built-in tiles (top-left of the atlas)
+    _, _, tuv = objs.meshes["tree"].decode()
+    assert (tuv[:, 1] * atlas.shape[0] <= object_texture().shape[0]).all()
