@@ -61,7 +61,8 @@ everything piste does not interpret survives and an unedited file is written bac
 When the shape changes (or for a model piste built), the blob is laid out anew as above.
 :attr:`MpfFile.unknown` lists every byte range no parsed structure claims (gaps, trailing bytes,
 non-zero unused fields; zero alignment padding under 16 bytes is not listed); they are kept, never
-silently dropped.
+silently dropped. Chunk tag bytes are claimed by their chunk (and kept); :func:`tag_differences`
+names the chunks whose tags differ from what piste would write, i.e. what a re-layout would change.
 
 API
 ---
