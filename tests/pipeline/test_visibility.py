@@ -20,7 +20,7 @@ def ridge_net():
 
 
 def test_ridge_hides_the_far_side(ridge_net):
-    vis = V.compute_visibility(ridge_net, cell=64.0, eye_heights=(1.7,))
+    vis = V.compute_visibility(ridge_net, cell=64.0, eye_heights=(1.7, 20.0))  # the band holds the camera
     assert vis.method == "horizon" and vis.shape == (4, 4)
     near = vis.patches_at((100.0, 20.0, 0.0))
     lo, hi = ridge_net.patch_bounds
@@ -78,7 +78,7 @@ def test_bitsets_round_trip_and_lookup(ridge_net):
 def test_culling_report_counts(ridge_net):
     from piste.world.camera import Camera
 
-    vis = V.compute_visibility(ridge_net, cell=64.0, eye_heights=(1.7,))
+    vis = V.compute_visibility(ridge_net, cell=64.0, eye_heights=(1.7, 20.0))  # the band holds the camera
     cams = [Camera(np.array([128.0, 10.0, 12.0]), np.array([128.0, 250.0, 0.0]), far=1000.0)]
     rep = V.culling_report(ridge_net, vis, cams)
     assert rep["frames"] == 1 and rep["patches"] == len(ridge_net)

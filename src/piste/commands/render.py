@@ -76,6 +76,13 @@ def run(args) -> int:
     for out in (args.out, args.video):  # unwritable outputs are reported before rendering
         if out:
             check_writable_folder(Path(out).parent)
+    if b.visibility is not None:  # cameras above the visibility band draw without the sets: say so
+        from piste.pipeline.preview import camera_at
+        from piste.pipeline.visibility import band_warnings
+
+        cams = [camera_at(b, args.camera, i, args.frames) for i in range(args.frames)]
+        for msg in band_warnings(b.net, b.visibility, cams, [f"{args.camera or 'camera'} frame {i}" for i in range(len(cams))])[:1]:
+            print(f"warning: {msg}", file=sys.stderr)
     stats = render_frames(b, args.camera, args.frames, size=size, fps=args.fps, video=args.video, first_png=args.out,
                           progress=not args.quiet and sys.stderr.isatty() and args.frames > 1)
     if stats and "frustum_patches" in stats[0]:

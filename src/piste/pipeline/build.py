@@ -48,7 +48,8 @@ from piste.pipeline.characters import CHARACTERS_VERSION, character_arrays
 from piste.pipeline.gltf_import import import_gltf
 from piste.pipeline.sources import add_rider_clips, load_object_mesh, load_rider_model, load_terrain, object_matrices, rider_matrices
 from piste.pipeline.ssx_level import bundle_arrays, level_key
-from piste.pipeline.visibility import Visibility, compute_visibility, culling_report
+from piste.pipeline.visibility import (Visibility, camera_eyes, compute_visibility, culling_report,
+                                       scene_eye_heights)
 from piste.terrain.net import PatchNet
 from piste.world.camera import Camera, track_camera
 from piste.world.course import track_centerline
@@ -341,20 +342,26 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
     # -------------------------------------------------------------- visibility
     vs = scene.visibility
     if vs.enabled:
-        vis_key = content_key(BUILD_VERSION, "visibility", terrain_key, vs.cell, list(vs.eye_heights), vs.method)
+        # the band the scene needs: the file's heights up to its highest camera eye (along its
+        # flight) or rider head above the snow (piste.pipeline.visibility.scene_eye_heights)
+        heads = (np.asarray(arrays["riders/matrix"])[:, :3, 3] + [0.0, 0.0, 1.7]) if "riders/matrix" in arrays \
+            else np.zeros((0, 3))
+        eye_heights = scene_eye_heights(net, vs.eye_heights,
+                                        np.concatenate([camera_eyes(manifest["cameras"], centerline), heads]), vs.cell)
+        vis_key = content_key(BUILD_VERSION, "visibility", terrain_key, vs.cell, list(eye_heights), vs.method)
 
         def make_visibility():
-            v = compute_visibility(net, vs.cell, vs.eye_heights, method=vs.method, progress=progress)
+            v = compute_visibility(net, vs.cell, eye_heights, method=vs.method, progress=progress)
             return v.to_arrays()
 
         va, vmeta = step("visibility", vis_key, make_visibility)
         # the objects' bits on their own: moving an object does not redo the patches
         obj_method = "rays" if 0 < len(spheres) <= OBJECT_RAYS_MAX else vmeta["method"]
-        ov_key = content_key(BUILD_VERSION, "object_visibility", terrain_key, spheres, vs.cell, list(vs.eye_heights),
+        ov_key = content_key(BUILD_VERSION, "object_visibility", terrain_key, spheres, vs.cell, list(eye_heights),
                              obj_method)
 
         def make_object_visibility():
-            v = compute_visibility(net, vs.cell, vs.eye_heights, objects=spheres, method=obj_method, patches=False)
+            v = compute_visibility(net, vs.cell, eye_heights, objects=spheres, method=obj_method, patches=False)
             return {"object_bits": v.object_bits}, {"method": obj_method}
 
         if len(spheres):
@@ -365,9 +372,12 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
             result.steps["object_visibility"] = {"cached": True, "seconds": 0.0, "key": "none"}
         arrays["visibility/patch_bits"] = va["patch_bits"]
         arrays["visibility/object_bits"] = obits
+        extra = {k: va[k] for k in ("ground_min", "level_bits") if k in va}  # the band (Visibility.in_band)
+        for k, v in extra.items():
+            arrays[f"visibility/{k}"] = v
         vmeta = dict(vmeta, n_objects=int(len(spheres)))
         manifest["visibility"] = vmeta
-        vis = Visibility.from_arrays({"patch_bits": va["patch_bits"], "object_bits": obits}, vmeta)
+        vis = Visibility.from_arrays({"patch_bits": va["patch_bits"], "object_bits": obits, **extra}, vmeta)
         manifest["report"] = {"visibility": _visibility_report(net, vis, manifest["cameras"], centerline)}
     else:
         result.steps["visibility"] = {"cached": True, "seconds": 0.0, "key": "none"}

@@ -177,7 +177,9 @@ def bundle_from_data(data: BundleData) -> Bundle:
     vis = None
     if man.get("visibility"):
         vis = Visibility.from_arrays({"patch_bits": arrays["visibility/patch_bits"],
-                                      "object_bits": arrays["visibility/object_bits"]}, man["visibility"])
+                                      "object_bits": arrays["visibility/object_bits"],
+                                      **{k: arrays[f"visibility/{k}"] for k in ("ground_min", "level_bits")
+                                         if f"visibility/{k}" in arrays}}, man["visibility"])
     line = arrays.get("terrain/centerline")
     return Bundle(path, man, arrays, net, lightmap, lights, cameras, vis, line)
 

@@ -30,6 +30,14 @@ API
 Visibility                                   grid + bitsets; ``patches_at(eye)``, ``objects_at(eye)``
 compute_visibility(net, cell, eye_heights, objects=None, method="auto") -> Visibility
 culling_report(net, vis, cameras) -> dict    % of patches drawn: frustum alone vs frustum + visibility
+scene_eye_heights(net, base, eyes) -> heights  the band a scene needs (its cameras' and riders' eyes)
+band_warnings(net, vis, cameras) -> messages   cameras above the band (their frames draw without the sets)
+
+The band: the sets hold for eyes from the snow up to the highest sampled height (on a height field
+an eye sees no less from higher up); a set per sampled height (``level_bits``) keeps the culling
+of low eyes when the band reaches high: an eye gets the set of the lowest sampled height at or
+above its own.  An eye above it (measured from its cell's lowest sampled
+ground) gets no set, so everything is drawn: culling is lost there, never a pixel.
 """
 
 from __future__ import annotations
@@ -38,12 +46,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from piste.errors import ConfigError
+from piste.errors import ConfigError, FormatError
 from piste.terrain.bezier import evaluate
 from piste.terrain.query import height_at, ray_intersect
 from piste.transforms import cull_boxes
+from piste.world.camera import track_camera
 
-__all__ = ["Visibility", "compute_visibility", "culling_report", "patch_targets", "is_heightfield"]
+__all__ = ["Visibility", "compute_visibility", "culling_report", "patch_targets", "is_heightfield", "height_above",
+           "scene_eye_heights", "band_warnings", "camera_eyes"]
 
 #: most eye-point x target tests one visibility computation may allocate (bytes of booleans)
 MAX_VISIBILITY_WORK = 2 << 30
@@ -71,6 +81,23 @@ class Visibility:
     n_objects: int
     method: str = "horizon"
     eye_heights: tuple = (1.7, 9.0)
+    ground_min: np.ndarray | None = None  # (cells,) lowest sampled ground of each cell (the band's floor)
+    level_bits: np.ndarray | None = None  # (levels - 1, cells, ceil(n / 8)): patches seen from eyes up to
+    #                                       each lower sampled height (the top level is patch_bits)
+
+    @property
+    def band(self) -> float:
+        """Metres above the snow up to which the sets hold (the highest sampled eye: on a height
+        field an eye sees no less from higher up, so the top sample covers the band below it)."""
+        return float(max(self.eye_heights)) if self.eye_heights else 0.0
+
+    def in_band(self, eye) -> bool:
+        """Whether ``eye (3,)`` is within the band over its cell (conservatively: measured from the
+        cell's lowest sampled ground); True outside the grid (nothing is culled there anyway)."""
+        c = self.cell_of(eye)
+        if c < 0 or self.ground_min is None:
+            return True
+        return float(np.asarray(eye, dtype=np.float64).reshape(-1)[2]) <= float(self.ground_min[c]) + self.band
 
     def cell_of(self, eye) -> int:
         """Cell index of an eye position ``(3,)`` (or ``(2,)``), -1 outside the grid."""
@@ -82,16 +109,24 @@ class Visibility:
         return int(ij[1] * cols + ij[0])
 
     def patches_at(self, eye) -> np.ndarray | None:
-        """``(n,) bool`` patches visible from the cell holding ``eye``; None outside the grid (draw all)."""
+        """``(n,) bool`` patches visible from the cell holding ``eye``; None outside the grid or above
+        the band (:meth:`in_band`): draw all."""
         c = self.cell_of(eye)
-        if c < 0:
+        if c < 0 or not self.in_band(eye):  # above the sampled band: the sets may miss what it sees
             return None
-        return np.unpackbits(self.patch_bits[c], count=self.n_patches, bitorder="little").astype(bool)
+        bits = self.patch_bits[c]
+        if self.level_bits is not None and self.ground_min is not None and len(self.level_bits):
+            # the lowest sampled height at or above the eye's (measured from the cell's lowest ground)
+            h = float(np.asarray(eye, dtype=np.float64).reshape(-1)[2]) - float(self.ground_min[c])
+            j = int(np.searchsorted(np.asarray(self.eye_heights, dtype=np.float64), h - 1e-9))
+            if j < len(self.level_bits):
+                bits = self.level_bits[j, c]
+        return np.unpackbits(bits, count=self.n_patches, bitorder="little").astype(bool)
 
     def objects_at(self, eye) -> np.ndarray | None:
         """``(m,) bool`` objects visible from the cell holding ``eye``; None outside the grid."""
         c = self.cell_of(eye)
-        if c < 0:
+        if c < 0 or not self.in_band(eye):
             return None
         return np.unpackbits(self.object_bits[c], count=self.n_objects, bitorder="little").astype(bool)
 
@@ -102,6 +137,10 @@ class Visibility:
     def to_arrays(self) -> tuple[dict, dict]:
         """``(arrays, meta)`` for a bundle or the cache."""
         arrays = {"patch_bits": self.patch_bits, "object_bits": self.object_bits}
+        if self.ground_min is not None:
+            arrays["ground_min"] = np.asarray(self.ground_min, np.float32)
+        if self.level_bits is not None:
+            arrays["level_bits"] = self.level_bits
         meta = {"origin": [float(x) for x in self.origin], "cell": float(self.cell), "shape": [int(x) for x in self.shape],
                 "n_patches": int(self.n_patches), "n_objects": int(self.n_objects), "method": self.method,
                 "eye_heights": [float(x) for x in self.eye_heights]}
@@ -109,9 +148,22 @@ class Visibility:
 
     @classmethod
     def from_arrays(cls, arrays: dict, meta: dict) -> "Visibility":
+        cells = int(np.prod(meta["shape"]))
+        pb = np.asarray(arrays["patch_bits"])
+        gm, lb = arrays.get("ground_min"), arrays.get("level_bits")
+        if gm is not None and np.shape(gm) != (cells,):
+            raise FormatError(None, f"expected ({cells},) cell ground heights, got {np.shape(gm)}",
+                              field="visibility/ground_min")
+        if lb is not None and (np.ndim(lb) != 3 or np.shape(lb)[1:] != pb.shape
+                               or np.shape(lb)[0] >= max(len(meta.get("eye_heights", ())), 1)):
+            raise FormatError(None, f"expected (levels < {len(meta.get('eye_heights', ()))}, {pb.shape[0]}, "
+                                    f"{pb.shape[1] if pb.ndim == 2 else '?'}) level bits, got {np.shape(lb)}",
+                              field="visibility/level_bits")
         return cls(np.asarray(meta["origin"], dtype=np.float64), float(meta["cell"]), tuple(meta["shape"]),
                    arrays["patch_bits"], arrays["object_bits"], int(meta["n_patches"]), int(meta["n_objects"]),
-                   meta.get("method", "horizon"), tuple(meta.get("eye_heights", ())))
+                   meta.get("method", "horizon"), tuple(meta.get("eye_heights", ())),
+                   np.asarray(arrays["ground_min"], np.float64) if "ground_min" in arrays else None,
+                   arrays.get("level_bits"))
 
 
 # ----------------------------------------------------------------------------- targets, eyes
@@ -265,7 +317,7 @@ def compute_visibility(net, cell: float = 50.0, eye_heights=(1.7, 9.0), objects=
     """
     if not cell > 0:
         raise ConfigError(f"visibility: cell must be > 0 metres, got {cell}")
-    heights = tuple(float(h) for h in eye_heights)
+    heights = tuple(sorted({float(h) for h in eye_heights}))
     if not heights:
         raise ConfigError("visibility: eye_heights must name at least one height")
     if method == "auto":
@@ -316,22 +368,88 @@ def compute_visibility(net, cell: float = 50.0, eye_heights=(1.7, 9.0), objects=
             it = tqdm(chunks, desc="visibility (rays)", unit="eyes", leave=False)
         for ch in it:
             vis_eye[ch] = _rays_visible(net, eyes[ch], targets, margin)
-    # per ground point: union over heights; per cell: union over its five ground points
+    # per ground point and level: union over the heights up to it (the top level: all heights);
+    # per cell: union over its five ground points
     g = len(xy)
-    per_point = vis_eye.reshape(len(heights), g, -1).any(axis=0)  # (g, targets)
+    per_level = np.logical_or.accumulate(vis_eye.reshape(len(heights), g, -1), axis=0)  # (H, g, targets)
     point_valid = valid.reshape(len(heights), g).any(axis=0)
     cells = rows * cols
-    cell_vis = np.zeros((cells, len(targets)), dtype=bool)
     cell_ok = np.zeros(cells, dtype=bool)
     for j in range(nodes.shape[1]):
-        cell_vis |= per_point[nodes[:, j]]
         cell_ok |= point_valid[nodes[:, j]]
-    cell_vis[~cell_ok] = True  # no eye on the terrain: keep everything
-    pv = cell_vis[:, : n * k].reshape(cells, n, k).any(axis=2) if k else np.ones((cells, n), dtype=bool)
-    ov = cell_vis[:, n * k:].reshape(cells, 2, m).any(axis=1) if m else np.zeros((cells, 0), bool)
-    pbits = np.packbits(pv, axis=1, bitorder="little")
-    obits = np.packbits(ov, axis=1, bitorder="little") if m else np.zeros((cells, 0), np.uint8)
-    return Visibility(origin, float(cell), shape, pbits, obits, n, m, method, heights)
+    levels_p, levels_o = [], []
+    for per_point in per_level:
+        cell_vis = np.zeros((cells, len(targets)), dtype=bool)
+        for j in range(nodes.shape[1]):
+            cell_vis |= per_point[nodes[:, j]]
+        cell_vis[~cell_ok] = True  # no eye on the terrain: keep everything
+        pv = cell_vis[:, : n * k].reshape(cells, n, k).any(axis=2) if k else np.ones((cells, n), dtype=bool)
+        ov = cell_vis[:, n * k:].reshape(cells, 2, m).any(axis=1) if m else np.zeros((cells, 0), bool)
+        levels_p.append(np.packbits(pv, axis=1, bitorder="little"))
+        levels_o.append(np.packbits(ov, axis=1, bitorder="little") if m else np.zeros((cells, 0), np.uint8))
+    pbits, obits = levels_p[-1], levels_o[-1]
+    lbits = np.stack(levels_p[:-1]) if len(levels_p) > 1 and k else None
+    gz = np.where(hit, zg, np.inf)[nodes].min(axis=1)  # each cell's lowest sampled ground
+    gz = np.where(np.isfinite(gz), gz, -np.inf)  # no ground sampled: every eye is "in band"... and all is kept
+    return Visibility(origin, float(cell), shape, pbits, obits, n, m, method, heights, gz, lbits)
+
+
+def height_above(net, eyes) -> np.ndarray:
+    """``(k,)`` metres of each eye ``(k, 3)`` above the terrain under it (NaN off the terrain)."""
+    e = np.asarray(eyes, dtype=np.float64).reshape(-1, 3)
+    z, hit, _, _ = height_at(net, e[:, :2])
+    return np.where(hit, e[:, 2] - z, np.nan)
+
+
+def scene_eye_heights(net, base=(1.7, 9.0), eyes=(), cell: float = 50.0, slack: float = 1.1) -> tuple:
+    """The heights above the snow to sample for a scene: ``base`` plus the band's top, the highest
+    of ``eyes (k, 3)`` (its cameras along their paths, its riders' heads) above the lowest ground
+    within a ``cell`` around it (what :meth:`Visibility.in_band` measures from), times ``slack``,
+    rounded up to a metre.  Visibility from a height field only grows with the eye's height, so
+    sets sampled up to the top hold for every eye the scene's cameras reach."""
+    heights = sorted({float(h) for h in base})
+    e = np.asarray(eyes, dtype=np.float64).reshape(-1, 3)
+    if len(e):
+        off = np.stack(np.meshgrid(*(np.linspace(-cell, cell, 5),) * 2, indexing="xy"), -1).reshape(-1, 2)
+        xy = (e[:, None, :2] + off[None]).reshape(-1, 2)
+        z, hit, _, _ = height_at(net, xy)
+        ground = np.where(hit, z, np.inf).reshape(len(e), -1).min(axis=1)
+        h = e[:, 2] - ground
+        h = h[np.isfinite(h)]
+        if len(h):
+            top = float(np.ceil(h.max() * slack))
+            if top > heights[-1]:
+                heights.append(top)
+    return tuple(heights)
+
+
+def camera_eyes(cameras, centerline=None, samples: int = 16) -> np.ndarray:
+    """Every eye ``(k, 3)`` the scene's cameras (bundle manifest dicts) reach: fixed eyes, and
+    ``samples`` points along each track camera's flight."""
+    out = []
+    for c in cameras:
+        if c.get("track") and centerline is not None:
+            a, b = c["track"]
+            for f in np.linspace(float(a), float(b), samples):
+                out.append(track_camera(centerline, float(f), height=c.get("height", 9.0)).eye)
+        elif c.get("eye") is not None:
+            out.append(np.asarray(c["eye"], dtype=np.float64))
+    return np.asarray(out, dtype=np.float64).reshape(-1, 3)
+
+
+def band_warnings(net, vis: Visibility, cameras, names=None) -> list:
+    """A message per camera (``cameras``: Camera objects; ``names``: their labels) whose eye is
+    above the visibility band (:meth:`Visibility.in_band`): the sets are not used there (every
+    patch drawn), so culling is lost, never pixels."""
+    out = []
+    for i, cam in enumerate(cameras):
+        if not vis.in_band(cam.eye):
+            h = height_above(net, cam.eye)[0]
+            label = names[i] if names is not None else f"camera {i}"
+            out.append(f"{label} is {h:.1f} m above the terrain, above the visibility band ({vis.band:g} m): "
+                       f"its frames draw without the visibility sets (add its height to [visibility] eye_heights "
+                       f"or rebuild: the build derives the band from the scene's cameras)")
+    return out
 
 
 def culling_report(net, vis: Visibility, cameras) -> dict:
