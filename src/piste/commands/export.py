@@ -193,7 +193,7 @@ def export_bundle(bundle, path, level=4, instancing: str = "ext", with_base_text
 
 
 def run(args) -> int:
-    from piste.commands.render import load_or_build
+    from piste.pipeline.open_scene import load_or_build
 
     b = load_or_build(args.scene, args.quiet)
     r = export_bundle(b, args.out, level=args.level, instancing=args.instancing,
