@@ -287,3 +287,59 @@ def test_real_files_round_trip_and_convert():
             assert m.skeleton.n_bones > 0 and m.n_triangles > 0
             models += 1
     assert models > 0
+
+
+@st.composite
+def skinned_models(draw):
+    """A random chain skeleton and a random grid mesh with up to 4 random influences a vertex
+    (many distinct combinations: several links of <= 25 palettes, long strips cut into chunks)."""
+    from piste.character.model import Model, Skeleton, SkinnedMesh
+
+    rng = np.random.default_rng(draw(st.integers(0, 2 ** 31)))
+    nb = draw(st.integers(2, 12))
+    t = rng.normal(size=(nb, 3)) * 0.1
+    t[0] = 0
+    world = np.cumsum(t, axis=0)
+    ib = np.tile(np.eye(4), (nb, 1, 1))
+    ib[:, :3, 3] = -world
+    sk = Skeleton([f"j{i}" for i in range(nb)], np.arange(nb) - 1, t, np.tile([0, 0, 0, 1.0], (nb, 1)),
+                  np.ones((nb, 3)), ib)
+    gx, gy = draw(st.integers(2, 30)), draw(st.integers(2, 12))
+    y, x = np.mgrid[0:gy, 0:gx]
+    pos = np.stack([x * 0.05, y * 0.05, rng.normal(size=x.shape) * 0.01], -1).reshape(-1, 3)
+    q = (y[:-1, :-1] * gx + x[:-1, :-1]).ravel()
+    tri = np.concatenate([np.stack([q, q + 1, q + gx], 1), np.stack([q + 1, q + gx + 1, q + gx], 1)])
+    v = len(pos)
+    joints = rng.integers(0, nb, (v, 4))
+    w = rng.random((v, 4)) * (rng.random((v, 4)) < 0.6)
+    w[:, 0] += 0.05
+    w /= w.sum(1, keepdims=True)
+    mesh = SkinnedMesh("m", pos, tri, uv=rng.random((v, 2)), joints=joints, weights=w, skinned=True)
+    return Model("rand", skeleton=sk, meshes=[mesh])
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(skinned_models())
+def test_hypothesis_encode_decode(model):
+    from piste.character import palette
+    from piste.formats.ssx.mpf import game_limits
+    from piste.formats.ssx.mpf_model import model_to_mpf, mpf_to_model
+
+    f, r = model_to_mpf(model, ratios=(1.0,), names=("Body3000",), shadow=None)
+    assert game_limits(f) == [] and r["max_bind_error_m"] < 1e-6
+    b = mpf_bytes(f)
+    m = mpf_to_model(parse_mpf(b))
+    src = model.meshes[0]
+    got = m.lods[0].mesh
+    assert got.n_triangles == src.n_triangles
+    # every decoded vertex is a source vertex with the source's quantised weights
+    from scipy.spatial import cKDTree
+
+    d, j = cKDTree(src.positions).query(got.positions)
+    assert d.max() < 1e-6
+    pb, pw = palette(src, 0.25, 3).vertex_weights()
+    gb, gw = m.lods[0].palette.vertex_weights()
+    nb = model.skeleton.n_bones
+    dense = lambda b_, w_, n: np.add.at(z := np.zeros((n, nb)), (np.repeat(np.arange(n), b_.shape[1]), b_.reshape(-1)),  # noqa: E731
+                                        w_.reshape(-1)) or z
+    assert np.allclose(dense(gb, gw, len(gb)), dense(pb, pw, len(pb))[j], atol=1e-6)
