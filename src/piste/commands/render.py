@@ -26,22 +26,10 @@ def add_arguments(parser) -> None:
 
 
 def load_or_build(scene, quiet: bool = True):
-    """A loaded bundle for ``scene``: a ``.piste`` file, or a ``.toml`` scene built (cached) beside it."""
-    import sys
-    from pathlib import Path
+    """A loaded bundle for ``scene`` (see :func:`piste.pipeline.open_scene.load_or_build`)."""
+    from piste.pipeline.open_scene import load_or_build as _load_or_build
 
-    from piste.errors import ConfigError
-    from piste.pipeline.bundle_objects import load_bundle
-
-    p = Path(scene)
-    if p.suffix.lower() == ".piste":
-        return load_bundle(p)
-    if p.suffix.lower() != ".toml":
-        raise ConfigError(f"{scene}: expected a scene (.toml) or a bundle (.piste)")
-    from piste.pipeline.build import build_scene
-
-    r = build_scene(p, progress=not quiet and sys.stderr.isatty())
-    return load_bundle(r.path)
+    return _load_or_build(scene, quiet)
 
 
 def run(args) -> int:
