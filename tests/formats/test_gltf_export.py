@@ -330,3 +330,18 @@ def test_glb_container_layout(tmp_path):
     js = json.loads(data[20:20 + jlen])
     assert js["asset"]["version"] == "2.0" and js["scenes"][0]["nodes"] == [0]
     assert js["nodes"][0]["name"] == "piste" and np.allclose(js["nodes"][0]["rotation"], [-0.5 ** 0.5, 0, 0, 0.5 ** 0.5])
+
+
+def test_missing_tool_fails_under_require_tools(monkeypatch, tmp_path):
+    """With PISTE_REQUIRE_TOOLS=1 a missing validator or Blender fails the test instead of skipping."""
+    import gltf_tools
+
+    monkeypatch.setattr(gltf_tools.shutil, "which", lambda name: None)
+    monkeypatch.setenv("PISTE_REQUIRE_TOOLS", "1")
+    with pytest.raises(pytest.fail.Exception, match="PISTE_REQUIRE_TOOLS=1 but node is not installed"):
+        gltf_tools.validate(tmp_path / "x.glb")
+    with pytest.raises(pytest.fail.Exception, match="blender is not installed"):
+        gltf_tools.blender_import(tmp_path / "x.glb", tmp_path)
+    monkeypatch.setenv("PISTE_REQUIRE_TOOLS", "0")
+    with pytest.raises(pytest.skip.Exception):
+        gltf_tools.validate(tmp_path / "x.glb")
