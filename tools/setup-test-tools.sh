@@ -26,7 +26,7 @@ fi
 # tools/gltf_validate.mjs.
 GLTF_APT=""
 command -v blender >/dev/null 2>&1 || GLTF_APT="$GLTF_APT blender"
-dpkg -s python3-numpy >/dev/null 2>&1 || python3 -c "import numpy" >/dev/null 2>&1 || GLTF_APT="$GLTF_APT python3-numpy"
+dpkg -s python3-numpy >/dev/null 2>&1 || GLTF_APT="$GLTF_APT python3-numpy"  # Blender's Python (Debian's), not the venv
 if [ -n "$GLTF_APT" ]; then
   echo "installing glTF test tools:$GLTF_APT"
   $SUDO apt-get update -qq
