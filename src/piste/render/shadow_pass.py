@@ -185,7 +185,11 @@ class ShadowPass:
         self.tile = int(tile)
         w, h = self.tile * self.n_max, self.tile
         self.texture = ctx.texture((w, h), 4)
-        self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        # mip-mapped (a few levels: tiles sit side by side): a distant rider's shadow covers a few
+        # pixels, and point samples of its thin limbs and board would break it into dashes
+        self.mip_levels = max(0, min(4, int(np.log2(self.tile)) - 3))
+        self.texture.build_mipmaps(0, self.mip_levels)
+        self.texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self.texture.repeat_x = self.texture.repeat_y = False
         self.fbo = ctx.framebuffer(color_attachments=[self.texture])
         self.caster = ctx.program(vertex_shader=load_shader("shadow_caster.vert.glsl"),
@@ -273,6 +277,7 @@ class ShadowPass:
         p["u_mvp"].write(np.asarray(vp, dtype=np.float32).T.tobytes())
         p["u_depth_bias"].value = float(depth_bias)
         p["u_shade"].value = tuple(float(x) for x in shade)
+        self.texture.build_mipmaps(0, self.mip_levels)  # this frame's casters
         self.texture.use(3)
         ctx.enable(moderngl.DEPTH_TEST | moderngl.BLEND)
         ctx.depth_func = "<="
