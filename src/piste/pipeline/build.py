@@ -33,19 +33,21 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from piste.errors import ConfigError
 from piste.formats.bundle import camera_to_dict, write_bundle
+from piste.formats.gltf import load_gltf
 from piste.lighting.baker import BAKE_VERSION, bake_lightmap
 from piste.lighting.lights import Lights, default_lights
 from piste.pipeline.bundle_objects import camera_from_dict
 from piste.pipeline.cache import Cache, content_key
 from piste.pipeline.characters import CHARACTERS_VERSION, character_arrays
 from piste.pipeline.gltf_import import import_gltf
+from piste.pipeline.object_atlas import pack_object_atlas, primitive_images
 from piste.pipeline.sources import add_rider_clips, load_object_mesh, load_rider_model, load_terrain, object_matrices, rider_matrices
 from piste.pipeline.ssx_level import bundle_arrays, level_key
 from piste.pipeline.visibility import (Visibility, camera_eyes, compute_visibility, culling_report,
@@ -324,7 +326,8 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
         srcs = sorted({o.model for o in scene.objects})
         src_keys = [m if m.startswith("builtin:") else _file_key(m) for m in srcs]
         placements = [(o.name, o.model, list(o.position), o.heading, o.scale) for o in scene.objects]
-        obj_key = content_key(BUILD_VERSION, "objects", terrain_key, srcs, src_keys, placements, manifest["lights"])
+        obj_key = content_key(BUILD_VERSION, "objects", "object_atlas/1", terrain_key, srcs, src_keys, placements,
+                              manifest["lights"])
 
         def make_objects():
             return _objects_arrays(net, scene.objects, srcs, lights, scene.allow_paths)
@@ -415,7 +418,12 @@ def _objects_arrays(net, objects, sources, lights, allow_paths=()):
         kind = s.split(":", 1)[1] if s.startswith("builtin:") else "gltf_" + "".join(
             ch if ch.isalnum() else "_" for ch in Path(s).stem)
         kinds.append(kind)
-        meshes[kind] = compress_mesh(mesh)
+        meshes[kind] = mesh
+    # glTF objects keep their own base colours: regions of the objects' atlas (pipeline.object_atlas)
+    parts = {k: (meshes[k].uv, primitive_images(load_gltf(s, allow_paths=allow_paths)))
+             for s, k in zip(sources, kinds) if not s.startswith("builtin:")}
+    texture, uvs = pack_object_atlas(object_texture(), parts, {k: m.uv for k, m in meshes.items() if k not in parts})
+    meshes = {k: compress_mesh(replace(m, uv=uvs[k]) if k in uvs else m) for k, m in meshes.items()}
     kind_of = dict(zip(sources, kinds))
     matrix = object_matrices(net, objects)
     kind = np.array([kinds.index(kind_of[o.model]) for o in objects], dtype=np.int64)
@@ -428,7 +436,7 @@ def _objects_arrays(net, objects, sources, lights, allow_paths=()):
         c = (p.min(0) + p.max(0)) / 2.0
         center[i] = m[:3, :3] @ c + m[:3, 3]
         radius[i] = float(np.linalg.norm(p - c, axis=1).max()) * abs(o.scale)
-    objs = ObjectSet(meshes, tuple(kinds), kind, matrix, normal_matrix(matrix), center, radius, None, object_texture(),
+    objs = ObjectSet(meshes, tuple(kinds), kind, matrix, normal_matrix(matrix), center, radius, None, texture,
                      {k: int(np.count_nonzero(kind == i)) for i, k in enumerate(kinds)})
     colors = bake_vertex_colors(objs, lights)
     a = {"kind": kind, "matrix": matrix, "center": center, "radius": radius, "texture": objs.texture}
