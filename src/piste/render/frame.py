@@ -26,7 +26,7 @@ from piste.terrain.tessellate import tessellate
 
 from piste.transforms import cull_boxes  # noqa: E402  (re-exported)
 
-__all__ = ["TerrainRenderer", "Frame", "summarize", "cull_boxes", "DEFAULT_FOG_DENSITY"]
+__all__ = ["TerrainRenderer", "Frame", "summarize", "cull_boxes", "DEFAULT_FOG_DENSITY", "scene_fog_density"]
 
 _RESOLVE_VS = """
 #version 330
@@ -49,6 +49,17 @@ void main() {
 
 #: fog density per metre (about 45 % haze at 1 km)
 DEFAULT_FOG_DENSITY = 6e-4
+#: the scene size (xy diagonal, metres) the default density is made for: the default course
+FOG_REFERENCE_SIZE = 1077.0
+
+
+def scene_fog_density(net, density: float = DEFAULT_FOG_DENSITY) -> float:
+    """Fog in units of the scene's size: ``density`` per metre for scenes up to the default
+    course's size, thinner in proportion for larger ones (a 1 km-spacing DEM would otherwise be
+    uniform haze: the same share of the view fogged at any scale)."""
+    lo, hi = net.bounds
+    diag = float(np.hypot(*(np.asarray(hi[:2], float) - np.asarray(lo[:2], float))))
+    return float(density) * min(1.0, FOG_REFERENCE_SIZE / max(diag, 1e-9))
 
 
 @dataclass
@@ -124,6 +135,7 @@ class TerrainRenderer:
         self._centre = np.ascontiguousarray(((lo + hi) / 2.0).T)  # (3, n): boxes as centre +- half
         self._half = np.ascontiguousarray(((hi - lo) / 2.0).T)
         self.mesh = None
+        self.fog_density = scene_fog_density(net)  # what fog="scene" uses
         self._hdr = None  # the half-float target of ps2 frames (made when first needed)
         self._resolve = None  # its resolve pass
         self.active = self.target  # where the current frame is drawn (see draw / resolve)
@@ -192,7 +204,7 @@ class TerrainRenderer:
 
     # ------------------------------------------------------------------ a frame
     def render(self, camera, lod: bool = True, lightmap_mode: str = "modulate", debug: str | None = None,
-               fog: float | None = DEFAULT_FOG_DENSITY, sky: bool = True, clear=(0.0, 0.0, 0.0, 1.0),
+               fog: float | None | str = "scene", sky: bool = True, clear=(0.0, 0.0, 0.0, 1.0),
                levels=None, read: bool = True) -> Frame:
         """Render one frame of the terrain seen by ``camera`` (its aspect is set to the target's).
 
@@ -201,7 +213,8 @@ class TerrainRenderer:
         lod : per-edge distance LOD (False: every patch 8x8)
         lightmap_mode : "modulate" (one pass) or "ps2" (base pass + blended light-map pass)
         debug : None, "base", "lightmap", "lod" (patches coloured by LOD + wireframe), "wire"
-        fog : density per metre (None or 0: no fog); debug views have no fog
+        fog : density per metre (None or 0: no fog; "scene": :attr:`fog_density`, the default
+            density scaled to the scene's size, :func:`scene_fog_density`); debug views have no fog
         sky : draw the gradient sky (else the clear colour shows)
         levels : override the LOD levels (``(e,)`` or an int)
         read : read the image back
@@ -213,7 +226,7 @@ class TerrainRenderer:
                          read=read, timings=t)
 
     def draw(self, camera, mesh, lightmap_mode: str = "modulate", debug: str | None = None,
-             fog: float | None = DEFAULT_FOG_DENSITY, sky: bool = True, clear=(0.0, 0.0, 0.0, 1.0),
+             fog: float | None | str = "scene", sky: bool = True, clear=(0.0, 0.0, 0.0, 1.0),
              read: bool = True, timings: dict | None = None, resolve: bool = True) -> Frame:
         """Upload and draw a given :class:`TerrainMesh` (any mesh with its fields) for ``camera``;
         the second half of :meth:`render`.  ``resolve=False`` leaves a ps2 frame in the half-float
@@ -228,6 +241,8 @@ class TerrainRenderer:
         self.active = self._hdr_target() if lightmap_mode == "ps2" and debug is None else self.target
         self.active.use()
         self.active.clear(clear)
+        if isinstance(fog, str):
+            fog = self.fog_density
         fog_rgba = None if not fog or debug is not None else (*HORIZON, float(fog))
         self.terrain.draw(vp, camera.eye, lightmap_mode=lightmap_mode, debug=debug, fog=fog_rgba)
         if sky:

@@ -34,7 +34,7 @@ from piste.character.morph import FaceSkin, face_weights
 from piste.errors import ConfigError
 from piste.render.character_pass import CharacterPass
 from piste.render.context import check_gl_error
-from piste.render.frame import DEFAULT_FOG_DENSITY, TerrainRenderer
+from piste.render.frame import TerrainRenderer
 from piste.render.object_pass import ObjectPass
 from piste.render.shadow_pass import ShadowPass, shadow_matrices, shadow_patches
 from piste.render.sky_pass import HORIZON
@@ -129,7 +129,7 @@ class SceneRenderer:
         debug view (e.g. "lod"); ``count_rider_pixels`` counts the riders' pixels that pass the depth
         test (an occlusion query: ``stats["rider_pixels"]``); ``face_time`` is the face animation's
         time (default ``t``)."""
-        fog = DEFAULT_FOG_DENSITY if fog is None else fog
+        fog = self.terrain.fog_density if fog is None else fog  # the scene's size (scene_fog_density)
         w, h = self.size
         tm = {}
         t0 = time.perf_counter()
