@@ -97,3 +97,25 @@ target = [16.0, 16.0, 11.0]
     # the built-in tree still samples the built-in tiles (top-left of the atlas)
     _, _, tuv = objs.meshes["tree"].decode()
     assert (tuv[:, 1] * atlas.shape[0] <= object_texture().shape[0]).all()
+
+
+def test_double_sided_materials_get_back_faces():
+    from dataclasses import replace
+
+    from piste.formats.gltf_ext import MaterialInfo
+    from piste.world.objects import ObjectMesh
+
+    a = SkinnedMesh("a", np.eye(3), np.array([[0, 1, 2]]), material=MaterialInfo(double_sided=True))
+    b = SkinnedMesh("b", np.eye(3) + 2, np.array([[0, 1, 2]]), material=MaterialInfo())
+    model = Model("m", None, [a, b])
+    merged = ObjectMesh("m", np.concatenate([a.positions, b.positions]), np.concatenate([a.normals, b.normals]),
+                        np.zeros((6, 2)), np.array([[0, 1, 2], [3, 4, 5]]))
+    from piste.pipeline.object_atlas import double_sided
+
+    out, imgs = double_sided(merged, model, primitive_images(model))
+    assert out.n_vertices == 9 and len(out.indices) == 3
+    assert out.indices[2].tolist() == [8, 7, 6]  # a's triangle reversed on its copies
+    assert np.allclose(out.normals[6:], -a.normals) and np.allclose(out.positions[6:], a.positions)
+    assert [(x[0], x[1]) for x in imgs] == [(0, 3), (3, 6), (6, 9)]
+    same, imgs2 = double_sided(merged, replace(model, meshes=[b, b]), primitive_images(model))
+    assert same is merged and len(imgs2) == 2

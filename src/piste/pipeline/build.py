@@ -47,7 +47,7 @@ from piste.pipeline.bundle_objects import camera_from_dict
 from piste.pipeline.cache import Cache, content_key
 from piste.pipeline.characters import CHARACTERS_VERSION, character_arrays
 from piste.pipeline.gltf_import import import_gltf
-from piste.pipeline.object_atlas import pack_object_atlas, primitive_images
+from piste.pipeline.object_atlas import double_sided, pack_object_atlas, primitive_images
 from piste.pipeline.sources import add_rider_clips, load_object_mesh, load_rider_model, load_terrain, object_matrices, rider_matrices
 from piste.pipeline.ssx_level import bundle_arrays, level_key
 from piste.pipeline.visibility import (Visibility, camera_eyes, compute_visibility, culling_report,
@@ -326,7 +326,7 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
         srcs = sorted({o.model for o in scene.objects})
         src_keys = [m if m.startswith("builtin:") else _file_key(m) for m in srcs]
         placements = [(o.name, o.model, list(o.position), o.heading, o.scale) for o in scene.objects]
-        obj_key = content_key(BUILD_VERSION, "objects", "object_atlas/1", terrain_key, srcs, src_keys, placements,
+        obj_key = content_key(BUILD_VERSION, "objects", "object_atlas/2", terrain_key, srcs, src_keys, placements,
                               manifest["lights"])
 
         def make_objects():
@@ -419,9 +419,14 @@ def _objects_arrays(net, objects, sources, lights, allow_paths=()):
             ch if ch.isalnum() else "_" for ch in Path(s).stem)
         kinds.append(kind)
         meshes[kind] = mesh
-    # glTF objects keep their own base colours: regions of the objects' atlas (pipeline.object_atlas)
-    parts = {k: (meshes[k].uv, primitive_images(load_gltf(s, allow_paths=allow_paths)))
-             for s, k in zip(sources, kinds) if not s.startswith("builtin:")}
+    # glTF objects keep their own base colours (regions of the objects' atlas) and double-sided
+    # materials (back faces added): pipeline.object_atlas
+    parts = {}
+    for s, k in zip(sources, kinds):
+        if not s.startswith("builtin:"):
+            gm = load_gltf(s, allow_paths=allow_paths)
+            meshes[k], imgs = double_sided(meshes[k], gm, primitive_images(gm))
+            parts[k] = (meshes[k].uv, imgs)
     texture, uvs = pack_object_atlas(object_texture(), parts, {k: m.uv for k, m in meshes.items() if k not in parts})
     meshes = {k: compress_mesh(replace(m, uv=uvs[k]) if k in uvs else m) for k, m in meshes.items()}
     kind_of = dict(zip(sources, kinds))

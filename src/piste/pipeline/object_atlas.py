@@ -9,10 +9,15 @@ centres: ``u' = (x0 + 0.5 + u (w - 1)) / W``.  KHR_texture_transform is already 
 (:mod:`piste.formats.gltf_ext`).  The atlas is RGBA uint8, rows are ``v`` from 0 (no flip), like
 the built-in one.
 
+Double-sided materials (``doubleSided: true``) are made double-sided in the geometry: the
+primitive's triangles are added again, reversed, on copies of its vertices with negated normals
+(the object pass culls back faces and lights with the normal).
+
 API
 ---
 primitive_images(model) -> list[(v0, v1, (h, w, 4) uint8)]   per mesh, in load_object_mesh's order
 pack_object_atlas(base, parts, builtin=None, max_size=256, gutter=2) -> (atlas, {kind: uv (v, 2) float32})
+double_sided(mesh, model, images) -> (ObjectMesh, images)  back faces added for doubleSided materials
 """
 
 from __future__ import annotations
@@ -20,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 from PIL import Image
 
-__all__ = ["primitive_images", "pack_object_atlas"]
+__all__ = ["primitive_images", "pack_object_atlas", "double_sided"]
 
 
 def _srgb_u8(c) -> np.ndarray:
@@ -113,3 +118,34 @@ def pack_object_atlas(base, parts: dict, builtin: dict | None = None, max_size: 
     for kind, uv in (builtin or {}).items():  # the base stays at the top-left: scale its UVs
         out[kind] = (np.asarray(uv, dtype=np.float64) * [sx, sy]).astype(np.float32)
     return atlas, out
+
+
+def double_sided(mesh, model, images):
+    """``mesh`` (the merged ObjectMesh of ``model``'s meshes, in order) with every primitive whose
+    material is double-sided given reversed back-face triangles on its own vertex copies, and
+    ``images`` (:func:`primitive_images`) extended with those copies' ranges.  Returns
+    ``(mesh, images)``."""
+    from dataclasses import replace as _replace
+
+    ranges = []
+    for m, (v0, v1, img) in zip(model.meshes, images):
+        info = getattr(m, "material", None)
+        if info is not None and getattr(info, "double_sided", False):
+            ranges.append((v0, v1, img))
+    if not ranges:
+        return mesh, list(images)
+    pos, nrm, uv, tri = mesh.positions, mesh.normals, mesh.uv, mesh.indices.astype(np.int64)
+    add_p, add_n, add_uv, add_t = [], [], [], []
+    out_images = list(images)
+    n = len(pos)
+    for a, b, img in ranges:
+        sel = tri[(tri[:, 0] >= a) & (tri[:, 0] < b)]
+        add_p.append(pos[a:b])
+        add_n.append(-nrm[a:b])
+        add_uv.append(uv[a:b])
+        add_t.append(sel[:, ::-1] - a + n)
+        out_images.append((n, n + b - a, img))
+        n += b - a
+    mesh = _replace(mesh, positions=np.concatenate([pos] + add_p), normals=np.concatenate([nrm] + add_n),
+                    uv=np.concatenate([uv] + add_uv), indices=np.concatenate([tri] + add_t).astype(np.uint32))
+    return mesh, out_images
