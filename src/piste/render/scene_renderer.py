@@ -36,7 +36,7 @@ from piste.render.character_pass import CharacterPass
 from piste.render.context import check_gl_error
 from piste.render.frame import TerrainRenderer
 from piste.render.object_pass import ObjectPass
-from piste.render.shadow_pass import ShadowPass, shadow_matrices, shadow_patches
+from piste.render.shadow_pass import ShadowPass, sun_visibility, shadow_matrices, shadow_patches
 from piste.render.sky_pass import HORIZON
 from piste.terrain.cull import patch_tree
 from piste.world.course import TRACK_HALF_WIDTH
@@ -105,6 +105,9 @@ class SceneRenderer:
         self.characters = self.cast_passes[0]
         self.objects = ObjectPass(self.ctx, scene.objects, scene.lights, mode=object_lighting) if scene.objects is not None else None
         self.shadows = ShadowPass(self.ctx, n_max=n, tile=shadow_tile) if shadows else None
+        if self.shadows is not None and scene.sun is not None:
+            # riders' shadows darken only terrain that sees the sun (no double darkening)
+            self.shadows.set_sunlight(*sun_visibility(scene.net, scene.sun.direction))
         self.specular = bool(specular)
         self.patch_lo, self.patch_hi = scene.net.patch_bounds
         # caster bounding sphere per model: the low LOD's bind-pose extent (riders lift and spin: a margin)

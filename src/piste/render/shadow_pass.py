@@ -34,9 +34,10 @@ import numpy as np
 
 from piste.errors import RenderError
 from piste.render.context import load_shader
+from piste.terrain.query import height_at
 from piste.world.camera import look_at, orthographic
 
-__all__ = ["shadow_matrices", "shadow_patches", "shadow_triangles", "ShadowPass", "SHADE"]
+__all__ = ["shadow_matrices", "shadow_patches", "shadow_triangles", "ShadowPass", "SHADE", "sun_visibility"]
 
 #: colour multiplier in full shadow (what the sun adds over the sky's blue ambient is taken away)
 SHADE = (0.55, 0.6, 0.75)
@@ -174,6 +175,52 @@ def shadow_triangles(mesh, patch_lists, light_vp=None):
     return pos, idx, np.stack([first, per], 1)
 
 
+def sun_visibility(net, sun_direction, spacing: float | None = None, soften: float = 1.0):
+    """Where a height-field terrain sees the sun: ``(field (H, W) float32 0..1, rect (x0, y0, x1, y1))``.
+
+    A grid of ``spacing`` metres (default: a quarter of the median patch) over the net's xy; each
+    point marches towards the sun and is shadowed when the terrain rises above the sun's ray
+    (a point 0.5 m above the snow, so the surface does not shadow itself).  ``soften`` blurs the
+    edge (grid cells).  Points off the terrain count as sunlit.
+    """
+    from scipy.ndimage import gaussian_filter
+
+    lo, hi = net.bounds
+    step = float(spacing) if spacing is not None else max(float(np.median(net.patch_size)) / 4.0, 0.5)
+    nx = int(np.ceil((hi[0] - lo[0]) / step)) + 1
+    ny = int(np.ceil((hi[1] - lo[1]) / step)) + 1
+    x = lo[0] + step * np.arange(nx)
+    y = lo[1] + step * np.arange(ny)
+    xy = np.stack(np.meshgrid(x, y, indexing="xy"), -1).reshape(-1, 2)
+    z, hit, _, _ = height_at(net, np.minimum(xy, hi[:2]))
+    zg = np.where(hit, z, -np.inf).reshape(ny, nx)
+    d = -np.asarray(sun_direction, dtype=np.float64)
+    d = d / np.linalg.norm(d)  # towards the sun
+    horiz = float(np.hypot(d[0], d[1]))
+    lit = np.ones((ny, nx), bool)
+    if horiz > 1e-6 and d[2] > 0:
+        u = d[:2] / horiz
+        tan_e = d[2] / horiz
+        rise = float(hi[2] - lo[2])
+        n_steps = int(min(np.ceil(rise / max(tan_e, 1e-3) / step), 4 * max(nx, ny))) + 1
+        base = np.where(np.isfinite(zg), zg, np.inf) + 0.5
+        iy, ix = np.mgrid[0:ny, 0:nx]
+        for k in range(1, n_steps + 1):
+            r = k * step
+            jx = np.rint(ix + u[0] * k).astype(np.int64)
+            jy = np.rint(iy + u[1] * k).astype(np.int64)
+            ok = (jx >= 0) & (jx < nx) & (jy >= 0) & (jy < ny)
+            if not ok.any():
+                break
+            h = np.full((ny, nx), -np.inf)
+            h[ok] = zg[jy[ok], jx[ok]]
+            lit &= ~(h > base + r * tan_e)
+    f = lit.astype(np.float32)
+    if soften:
+        f = gaussian_filter(f, soften).astype(np.float32)
+    return f, (float(x[0]), float(y[0]), float(x[-1]), float(y[-1]))
+
+
 class ShadowPass:
     """The shadow texture (``n_max`` tiles of ``tile`` x ``tile`` side by side) and both draws."""
 
@@ -197,6 +244,9 @@ class ShadowPass:
         self.receiver = ctx.program(vertex_shader=load_shader("shadow_receiver.vert.glsl"),
                                     fragment_shader=load_shader("shadow_receiver.frag.glsl"))
         self.receiver["u_shadow"].value = 3
+        self.receiver["u_sunlit"].value = 4
+        self.sunlit = None
+        self.set_sunlight(None)
         self._casts: dict = {}  # per caster group (one per rider model): its buffers
         self._recv = {"pos": None, "idx": None, "vao": None}
         self.light_vp = np.zeros((0, 4, 4))
@@ -245,6 +295,22 @@ class ShadowPass:
             c["vao"].render(moderngl.TRIANGLES, vertices=nt, first=i * nt)
         ctx.enable(moderngl.DEPTH_TEST)
 
+    def set_sunlight(self, field=None, rect=(0.0, 0.0, 1.0, 1.0)) -> None:
+        """Where the terrain itself sees the sun: ``field (H, W)`` float 0..1 over world xy
+        ``rect = (x0, y0, x1, y1)`` (:func:`sun_visibility`), rows along y.  A rider's shadow
+        darkens only sunlit terrain (inside the terrain's own shadow the light map already lacks
+        the sun).  None: sunlit everywhere."""
+        import moderngl
+
+        f = np.ones((1, 1), np.float32) if field is None else np.asarray(field, np.float32)
+        if self.sunlit is not None:
+            self.sunlit.release()
+        self.sunlit = self.ctx.texture((f.shape[1], f.shape[0]), 1, np.ascontiguousarray(f).tobytes(), dtype="f4")
+        self.sunlit.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.sunlit.repeat_x = self.sunlit.repeat_y = False
+        x0, y0, x1, y1 = (float(v) for v in rect)
+        self.receiver["u_sun_rect"].value = (x0, y0, max(x1 - x0, 1e-9), max(y1 - y0, 1e-9))
+
     def read_tiles(self) -> np.ndarray:
         """The shadow texture ``(tile, n_max * tile) uint8`` coverage, top row first (debugging, tests)."""
         data = np.frombuffer(self.texture.read(), np.uint8).reshape(self.tile, self.tile * self.n_max, 4)
@@ -279,6 +345,7 @@ class ShadowPass:
         p["u_shade"].value = tuple(float(x) for x in shade)
         self.texture.build_mipmaps(0, self.mip_levels)  # this frame's casters
         self.texture.use(3)
+        self.sunlit.use(4)
         ctx.enable(moderngl.DEPTH_TEST | moderngl.BLEND)
         ctx.depth_func = "<="
         ctx.depth_mask = False
@@ -303,5 +370,5 @@ class ShadowPass:
             for key in ("vao", "pos", "idx"):
                 if d.get(key) is not None:
                     d[key].release()
-        for obj in (self.fbo, self.texture, self.caster, self.receiver):
+        for obj in (self.fbo, self.texture, self.caster, self.receiver, self.sunlit):
             obj.release()

@@ -5,6 +5,8 @@
 uniform sampler2D u_shadow;
 uniform vec4 u_tile;    // x0, y0, width, height of this rider's tile in the shadow texture (0..1)
 uniform vec3 u_shade;   // colour multiplier in full shadow
+uniform sampler2D u_sunlit;  // 1 where the terrain sees the sun, 0 in its own shadow (no double darkening)
+uniform vec4 u_sun_rect;     // x0, y0, width, height of u_sunlit over world xy
 in vec3 v_light;
 in vec3 v_world;
 out vec4 f_color;
@@ -13,6 +15,7 @@ void main() {
     if (any(lessThan(t, vec2(0.0))) || any(greaterThan(t, vec2(1.0))) || v_light.z < -1.0 || v_light.z > 1.0) {
         discard;
     }
-    float s = texture(u_shadow, u_tile.xy + t * u_tile.zw).r;
+    float s = texture(u_shadow, u_tile.xy + t * u_tile.zw).r
+            * texture(u_sunlit, (v_world.xy - u_sun_rect.xy) / u_sun_rect.zw).r;
     f_color = vec4(mix(vec3(1.0), u_shade, s), 1.0);
 }
