@@ -25,7 +25,7 @@ def world(tmp_path_factory):
 
 def test_pages_nearest_tiles_within_the_budget(world):
     one = S.mesh_bytes(8 * 2 + 1, 8 * 2 + 1)  # a near tile's mesh
-    far = S.mesh_bytes(9, 9) * 36
+    far = (S.mesh_bytes(9, 9) + S.mesh_bytes(5, 5) + S.mesh_bytes(3, 3) + S.mesh_bytes(2, 2)) * 36  # strides 1..8
     cache = S.TileCache(world, budget_bytes=far + 3 * one + 100, near_radius=1000.0)
     try:
         assert cache.resident_bytes == far and not cache.near  # far stand-ins for every tile up front
@@ -42,7 +42,10 @@ def test_pages_nearest_tiles_within_the_budget(world):
             seen |= set(cache.near)
         assert len(seen) > 6 and cache.loaded_count >= len(seen)  # tiles were paged out and in
         kinds = [k for _, k, _ in cache.draw_list()]
-        assert kinds.count("near") == 3 and kinds.count("far") == 33
+        assert kinds.count("near") == 3 and kinds.count("far1") == 33
+        # far tiles coarsen with distance: stride 1 next to the eye, 8 across the world
+        strides = {cache.far_stride((100.0, 100.0), t) for t in cache.bounds}
+        assert strides == {1, 2, 4, 8} and cache.far_stride((100.0, 100.0), (0, 0)) == 1
     finally:
         cache.close()
     with pytest.raises(ConfigError, match="below the far field"):
@@ -55,6 +58,8 @@ def test_meshes_share_tile_borders(world):
     fa, fb = S.far_mesh(a, 10.0), S.far_mesh(b, 10.0)
     ga, gb = fa.positions[:81].reshape(9, 9, 3), fb.positions[:81].reshape(9, 9, 3)
     assert np.array_equal(ga[:, -1], gb[:, 0])  # far grids meet exactly
+    coarse = S.far_mesh(a, 10.0, stride=4).positions[:9].reshape(3, 3, 3)  # corners 0, 4, 8
+    assert np.array_equal(coarse, ga[::4, ::4])
     na = S.near_mesh(store.read("fit", 2, 2), a, (8, 8), 10.0)
     nb = S.near_mesh(store.read("fit", 2, 3), b, (8, 8), 10.0)
     pa, pb = na.positions[:17 * 17].reshape(17, 17, 3), nb.positions[:17 * 17].reshape(17, 17, 3)
@@ -109,6 +114,7 @@ def test_far_stand_ins_while_loading_and_cli(world, gl, tmp_path, capsys):
     r = S.StreamingRenderer(world, size=(96, 64), budget_bytes=4 << 20, ctx=gl)
     try:
         cam = next(S.fly_path(r.cache.index, 1))
+        cam = Camera(cam.eye, cam.eye + np.array([60.0, 60.0, -400.0]), near=1.0, far=6000.0)  # the tile below
         img = r.render(cam, wait=False)  # nothing near yet: far stand-ins only, still a full picture
         assert r.stats["far"] > 0 and img.std() > 5
         r.cache.wait_idle()

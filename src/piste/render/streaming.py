@@ -19,7 +19,8 @@ higher, the other tile's skirt closes the gap; skirts are hidden under the terra
 Paging
 ------
 :class:`TileCache` (no OpenGL; testable alone) keeps every far tile within the view distance
-(loaded up front: 15 bytes a patch) and chooses near tiles by distance from the eye (nearest
+(loaded up front at corner strides 1, 2, 4 and 8, drawn coarser with distance: about 20 bytes a
+patch) and chooses near tiles by distance from the eye (nearest
 first, within ``near_radius``) while their bytes fit ``budget_bytes``; a loader thread builds the
 near meshes, the renderer uploads finished ones and releases evicted ones.  ``resident_bytes``
 (far + near meshes, the CPU copies; the GPU holds the same arrays) never exceeds the budget.
@@ -51,6 +52,8 @@ __all__ = ["TileCache", "StreamingRenderer", "TileMesh", "near_mesh", "far_mesh"
            "render_flight", "render_flight_cli", "StreamingView", "view_tiles"]
 
 SKY = (0.80, 0.86, 0.93)
+#: corner strides of the far levels (every tile keeps all of them: 1 + 1/4 + 1/16 + 1/64 of the grid)
+FAR_STRIDES = (1, 2, 4, 8)
 
 _VERT = """#version 330
 uniform mat4 u_vp;
@@ -124,14 +127,23 @@ def _with_skirts(pos: np.ndarray, rgb: np.ndarray, tris: np.ndarray, sides: list
                     np.concatenate(ts).astype(np.uint32))
 
 
-def far_mesh(lit: dict, depth: float) -> TileMesh:
-    """The far stand-in of a tile: its corner grid ``(ny+1, nx+1)`` plus skirts."""
+def _stride_index(n: int, stride: int) -> np.ndarray:
+    """``0, stride, 2 stride, ...`` and always the last of ``n``."""
+    i = np.arange(0, n, stride)
+    return i if i[-1] == n - 1 else np.append(i, n - 1)
+
+
+def far_mesh(lit: dict, depth: float, stride: int = 1) -> TileMesh:
+    """The far stand-in of a tile: its corner grid ``(ny+1, nx+1)`` (every ``stride``-th corner, the
+    border rows always kept) plus skirts."""
     g = np.asarray(lit["far_positions"], dtype=np.float64)
+    c = np.asarray(lit["far_colors"])
+    ri, ci = _stride_index(g.shape[0], stride), _stride_index(g.shape[1], stride)
+    g, c = g[ri][:, ci], c[ri][:, ci]
     rows, cols = g.shape[:2]
     idx = np.arange(rows * cols).reshape(rows, cols)
     sides = [idx[0], idx[:, -1], idx[-1], idx[:, 0]]
-    return _with_skirts(g.reshape(-1, 3), np.asarray(lit["far_colors"]).reshape(-1, 3), _grid_triangles(rows, cols),
-                        sides, depth)
+    return _with_skirts(g.reshape(-1, 3), c.reshape(-1, 3), _grid_triangles(rows, cols), sides, depth)
 
 
 def near_mesh(fit: dict, lit: dict, grid_shape: tuple, depth: float) -> TileMesh:
@@ -177,6 +189,8 @@ class TileCache:
     root : a tiled world folder (``piste build`` with ``terrain.tiles``)
     budget_bytes : the most bytes of tile meshes held at once
     near_radius : metres (from the eye to a tile's rectangle) within which tiles get near meshes
+        (default 0.3 tile: the eye's tile and the ones whose border is close; the near mesh has
+        2 (res - 1)^2 triangles a patch, the far levels 2 / stride^2)
     view_distance : far tiles beyond this are not loaded (default: the whole world)
     """
 
@@ -189,7 +203,7 @@ class TileCache:
         self.budget = int(budget_bytes)
         s = g.samples_per_patch
         tile_size = g.tile_patches * s * max(g.spacing)
-        self.near_radius = float(near_radius) if near_radius is not None else 1.5 * tile_size
+        self.near_radius = float(near_radius) if near_radius is not None else 0.3 * tile_size
         self.view_distance = view_distance
         self.res = int(self.index["res"])
         self._lock = threading.Lock()
@@ -205,10 +219,11 @@ class TileCache:
         self._near_estimate = {t: self._near_bytes(int(self.index["tiles"][f"{t[0]},{t[1]}"]["patches"]), t)
                                for t in self.bounds}
         self._far_bytes = 0
+        self.far_lod_distance = 0.5 * tile_size
         for t in sorted(self.bounds):
-            mesh = far_mesh(self._read("lit", t, ("far_positions", "far_colors")), self._depth(t))
-            self.far[t] = mesh
-            self._far_bytes += mesh.nbytes
+            lit = self._read("lit", t, ("far_positions", "far_colors"))
+            self.far[t] = {k: far_mesh(lit, self._depth(t), k) for k in FAR_STRIDES}
+            self._far_bytes += sum(m.nbytes for m in self.far[t].values())
         if self._far_bytes > self.budget:
             raise ConfigError(f"streaming budget {self.budget / 2**20:.1f} MiB is below the far field's "
                               f"{self._far_bytes / 2**20:.1f} MiB: raise it")
@@ -316,11 +331,25 @@ class TileCache:
         if self.errors:
             raise self.errors[0]
 
-    def draw_list(self) -> list:
-        """``[(tile, "near" | "far", TileMesh)]``: a near mesh where one is resident, else the far one."""
+    def far_stride(self, eye, t) -> int:
+        """The far level of tile ``t`` seen from ``eye``: corner stride 1 within ``far_lod_distance``,
+        2 within twice that, 4 within four times, else 8."""
+        d = self.distance(eye, t) / self.far_lod_distance
+        return next((k for k in FAR_STRIDES if d < k), FAR_STRIDES[-1])
+
+    def draw_list(self, eye=None) -> list:
+        """``[(tile, level, TileMesh)]``: a near mesh where one is resident, else the far one at the
+        stride for ``eye`` (``"far1"``, ``"far2"``, ...; the full corner grid without ``eye``)."""
         with self._lock:
             near = dict(self.near)
-        return [(t, "near", near[t]) if t in near else (t, "far", self.far[t]) for t in sorted(self.far)]
+        out = []
+        for t in sorted(self.far):
+            if t in near:
+                out.append((t, "near", near[t]))
+            else:
+                k = self.far_stride(eye, t) if eye is not None else 1
+                out.append((t, f"far{k}", self.far[t][k]))
+        return out
 
     def close(self) -> None:
         self._stop = True
@@ -402,7 +431,7 @@ class StreamingRenderer:
         self.prog["u_fog"].value = (0.6 * cam.far, cam.far)
         drawn = {"near": 0, "far": 0, "culled": 0, "near_patches": 0, "far_patches": 0, "triangles": 0}
         live = set()
-        for t, level, mesh in self.cache.draw_list():
+        for t, level, mesh in self.cache.draw_list(cam.eye):
             b = self.cache.bounds[t]
             lo, hi = b[0].copy(), b[1].copy()
             lo[2] -= self.cache._depth(t)  # skirts
@@ -412,8 +441,9 @@ class StreamingRenderer:
             key = (t, level)
             live.add(key)
             self._vao(key, mesh).render(moderngl.TRIANGLES)
-            drawn[level] += 1
-            drawn[f"{level}_patches"] += self.cache.patches[t]
+            kind = "near" if level == "near" else "far"
+            drawn[kind] += 1
+            drawn[f"{kind}_patches"] += self.cache.patches[t]
             drawn["triangles"] += len(mesh.indices)
         for key in [k for k in self._gpu if k[1] == "near" and k not in live and k[0] not in self.cache.near]:
             self._release(key)  # evicted near tiles leave the GPU too
