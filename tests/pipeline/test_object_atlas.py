@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from piste.character.model import Model, SkinnedMesh
 from piste.formats.gltf import load_gltf
@@ -119,3 +120,52 @@ def test_double_sided_materials_get_back_faces():
     assert [(x[0], x[1]) for x in imgs] == [(0, 3), (3, 6), (6, 9)]
     same, imgs2 = double_sided(merged, replace(model, meshes=[b, b]), primitive_images(model))
     assert same is merged and len(imgs2) == 2
+
+
+@pytest.mark.gl
+def test_rendered_gltf_object_shows_its_own_texture(tmp_path, gl):
+    """A magenta-textured glTF box placed in a scene is drawn magenta (the built-in atlas has no
+    magenta): the object pass samples the object's own region of the atlas."""
+    from piste.formats.gltf_export import CharacterExport, export_gltf
+    from piste.pipeline.build import build_scene
+    from piste.pipeline.bundle_objects import load_bundle
+    from piste.pipeline.preview import ScenePreview
+    from piste.world.objects import make_mesh
+    from piste.world.scene_file import load_scene
+
+    box = make_mesh("sign")
+    tex = np.zeros((8, 8, 4), np.uint8)
+    tex[...] = (255, 0, 255, 255)
+    mesh = SkinnedMesh("box", box.positions @ np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0]]).T * 4,  # piste Z up -> glTF Y up
+                       box.indices, normals=box.normals @ np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0]]).T,
+                       uv=np.full((box.n_vertices, 2), 0.5), texture=tex)
+    export_gltf(tmp_path / "magenta.glb", characters=[CharacterExport(Model("box", None, [mesh]), name="box")], up="z")
+    n, spacing = 9, 4.0
+    y, x = np.mgrid[0:n, 0:n] * spacing
+    np.savez(tmp_path / "hill.npz", z=np.zeros_like(x, dtype=float), dx=np.float64(spacing))
+    (tmp_path / "s.toml").write_text("""name = "magenta"
+[terrain]
+source = "hill.npz"
+[lightmap]
+res = 8
+[visibility]
+enabled = false
+[[objects]]
+model = "magenta.glb"
+position = [16.0, 16.0]
+[[lights]]
+type = "ambient"
+intensity = 1.0
+[[cameras]]
+name = "main"
+eye = [16.0, -2.0, 8.0]
+target = [16.0, 16.0, 2.0]
+""")
+    b = load_bundle(build_scene(load_scene(tmp_path / "s.toml"), out=tmp_path / "s.piste").path)
+    p = ScenePreview(b, size=(96, 64), ctx=gl)
+    try:
+        img = p.render(b.camera("main"), t=0.0).astype(int)
+    finally:
+        p.release()
+    magenta = (img[..., 0] > img[..., 1] + 60) & (img[..., 2] > img[..., 1] + 60)
+    assert magenta.sum() > 50, magenta.sum()
