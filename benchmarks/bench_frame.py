@@ -390,6 +390,9 @@ def main(argv=None) -> int:
     ap.add_argument("--no-scaling", action="store_true", help="skip the scaling tables")
     args = ap.parse_args(argv)
     args.frames = args.frames or (8 if args.quick else 30)
+    from piste import _jit
+
+    _jit.warm_up()  # compile / load the numba kernels before timing (else the first frames run numpy)
     floor_ms: list = []
     if not args.scene:
         terrain_section(args, floor_ms)

@@ -255,6 +255,9 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, help="interleaved rounds per measurement (default 30, quick 10)")
     args = ap.parse_args(argv)
     rounds = args.rounds or (10 if args.quick else 30)
+    from piste import _jit
+
+    _jit.warm_up()  # compile / load the numba kernels before timing (else the first frames run numpy)
     net, vis = frame_section(rounds)
     peer_section(net, vis, 3 if args.quick else 7)
     scaling_section((2560, 10_000, 40_000) if args.quick else (2560, 10_000, 40_000, 160_000), rounds)

@@ -1,38 +1,98 @@
-"""Optional compilation with numba, loaded lazily.
+"""Optional compilation with numba, loaded lazily and warmed in the background.
 
-``HAVE_NUMBA`` says whether numba is installed (found without importing it: importing numba costs
-~0.2 s, which a fresh process should not pay before its first frame).  ``lazy_njit(fn)`` returns a
-callable that compiles ``fn`` with ``numba.njit(cache=True)`` on its first call (later processes
-load the compiled code from the on-disk cache), or None without numba.  ``PISTE_NO_NUMBA=1``
-disables numba everywhere (the numpy twins run; tests compare the two bit for bit).
+``HAVE_NUMBA`` says whether numba is installed (found without importing it: importing numba and
+loading its cached kernels costs a fresh process ~0.8 s, which it should not pay before its first
+frame).  ``lazy_njit(fn, example)`` returns a kernel compiled with ``numba.njit(cache=True)``:
+
+* ``kernel(*args)`` compiles (or loads from the on-disk cache) on first call, synchronously;
+* ``kernel.ready()`` is True once compiled; the first time it is asked (and False) it starts one
+  background thread that imports numba and warms every registered kernel with its ``example()``
+  arguments.  Dispatchers that have a numpy twin use the compiled kernel only when ready, so the
+  first frames run the numpy paths (bit-identical results) while numba loads.
+
+``warm_up()`` compiles everything now (benchmarks and tests call it before timing or comparing).
+``PISTE_NO_NUMBA=1`` disables numba everywhere.
 """
 
 from __future__ import annotations
 
 import importlib.util
 import os
+import threading
 
-__all__ = ["HAVE_NUMBA", "lazy_njit"]
+__all__ = ["HAVE_NUMBA", "lazy_njit", "warm_up", "warm_up_async"]
 
 HAVE_NUMBA = not os.environ.get("PISTE_NO_NUMBA") and importlib.util.find_spec("numba") is not None
+_KERNELS: list = []
+_LOCK = threading.Lock()  # compilation
+_START = threading.Lock()  # starting the warm-up thread
+_THREAD: list = [None]
 
 
 class _Lazy:
-    def __init__(self, fn):
+    def __init__(self, fn, example=None):
         self.fn = fn
+        self.example = example
         self.compiled = None
         self.__doc__ = fn.__doc__
         self.__name__ = fn.__name__
 
+    def _compile(self):
+        with _LOCK:
+            if self.compiled is None:
+                import numba
+
+                self.compiled = numba.njit(cache=True, nogil=True, boundscheck=False)(self.fn)
+        return self.compiled
+
+    def warm(self) -> None:
+        c = self._compile()
+        if self.example is not None:
+            c(*self.example())  # loads (or compiles) the specialisation for these types
+
+    def ready(self) -> bool:
+        """Compiled and loaded (else start warming all kernels in the background, once)."""
+        if self.compiled is not None and (self.example is None or self.compiled.signatures):
+            return True
+        warm_up_async()
+        return False
+
     def __call__(self, *args):
         c = self.compiled
         if c is None:
-            import numba
-
-            c = self.compiled = numba.njit(cache=True, nogil=True, boundscheck=False)(self.fn)
+            c = self._compile()
         return c(*args)
 
 
-def lazy_njit(fn):
-    """``fn`` compiled on first call (numba), or None when numba is not available."""
-    return _Lazy(fn) if HAVE_NUMBA else None
+def lazy_njit(fn, example=None):
+    """``fn`` compiled on first call (numba), or None when numba is not available.  ``example()``
+    returns arguments of the types it is called with (for the background warm-up)."""
+    if not HAVE_NUMBA:
+        return None
+    k = _Lazy(fn, example)
+    _KERNELS.append(k)
+    return k
+
+
+def warm_up() -> None:
+    """Compile / load every registered kernel now (no-op without numba)."""
+    for k in list(_KERNELS):
+        k.warm()
+
+
+def warm_up_async() -> None:
+    """Start warming every kernel in a background thread (once per process)."""
+    if not HAVE_NUMBA or _THREAD[0] is not None:
+        return
+    with _START:
+        if _THREAD[0] is None:
+            t = threading.Thread(target=_warm_quietly, name="piste-numba-warm-up", daemon=True)
+            _THREAD[0] = t
+            t.start()
+
+
+def _warm_quietly() -> None:
+    try:
+        warm_up()
+    except Exception:  # pragma: no cover - a failed warm-up leaves the numpy paths in use
+        pass

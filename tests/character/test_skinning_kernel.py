@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from piste import _jit
 from piste.character import default_rider
 from piste.character import skinning
 from piste.character.skinning import BlendedMesh
@@ -11,6 +12,7 @@ from piste.character.skinning import BlendedMesh
 @pytest.mark.skipif(skinning._blend_nb is None, reason="numba not installed: only the scipy/numpy path exists")
 @pytest.mark.parametrize("normalize", [True, False])
 def test_compiled_blend_bit_identical_to_sparse(normalize):
+    _jit.warm_up()
     rider = default_rider()
     sk, me = rider.skeleton, rider.meshes[0]
     mats = np.stack([sk.skin_matrices(rider.clips[n].sample(0.3 * i + 0.1, loop=True))

@@ -23,6 +23,7 @@ def test_resident_without_morph_draws_the_cpu_paths_picture(gl, grid_net, kw):
     for resident in (False, True):
         r = TerrainRenderer(net, size=(96, 64), ctx=gl, lod_near=14.0, lod_far=30.0, track=track,
                             track_half_width=4.0, lod_morph=False, resident=resident)
+        r.resident_wait = True  # the resident path from the first frame (not the CPU path while it builds)
         try:
             frame = r.render(cam, **kw)
             assert isinstance(r.mesh, ResidentMesh if resident else TerrainMesh)
@@ -35,6 +36,29 @@ def test_resident_without_morph_draws_the_cpu_paths_picture(gl, grid_net, kw):
     assert (diff > 0).mean() < 1e-3, f"{(diff > 0).sum()} pixels differ"
 
 
+def test_first_frames_do_not_wait_for_the_vertex_blocks(gl, grid_net):
+    """A fresh renderer draws at once on the CPU path (visible patches only) while the resident
+    blocks build in the background; then it switches, with the same picture (morph off)."""
+    import time
+
+    net = grid_net(4, 4, size=10.0, relief=5.0)
+    cam = Camera([4.0, -6.0, 12.0], [22.0, 22.0, 0.0], fov_y=60)
+    r = TerrainRenderer(net, size=(96, 64), ctx=gl, lod_near=14.0, lod_far=30.0, lod_morph=False)
+    try:
+        first = r.render(cam)
+        assert isinstance(r.mesh, TerrainMesh)
+        deadline = time.time() + 60
+        while not isinstance(r.mesh, ResidentMesh):
+            assert time.time() < deadline, "the resident blocks never arrived"
+            time.sleep(0.05)
+            later = r.render(cam)
+        assert later.triangles == first.triangles
+        diff = np.abs(later.image.astype(int) - first.image.astype(int))
+        assert diff.mean() < 0.05 and diff.max() <= 8
+    finally:
+        r.release()
+
+
 def test_geomorph_factors_reach_the_gpu(gl, grid_net):
     """Factor 1 everywhere draws the unmorphed picture exactly; factor 0 puts every fine vertex on
     the coarser level's shape (the picture changes); the live factors sit in between."""
@@ -45,6 +69,7 @@ def test_geomorph_factors_reach_the_gpu(gl, grid_net):
     kw = dict(fog=0, sky=False)
     r = TerrainRenderer(net, size=(160, 120), ctx=gl, lod_near=12.0, lod_far=25.0, lightmap=None,
                         base_texture=checker, lod_morph=True)
+    r.resident_wait = True
     try:
         mesh = r.prepare(cam)
         assert mesh.morph and 0.0 < mesh.factors[:net.n_edges].min() < 1.0  # some edges inside a morph band

@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from piste import _jit
 from piste.terrain import PatchNet, tessellate
 from piste.terrain import _kernels
 from piste.terrain.cull import PatchTree
@@ -153,6 +154,7 @@ def test_morph_factor_falls_to_zero_at_the_switch():
 
 @pytest.mark.skipif(not _kernels.HAVE_NUMBA, reason="numba not installed: only the numpy path exists")
 def test_numba_and_numpy_frames_bit_identical():
+    _jit.warm_up()
     net = PatchNet.from_bpt(TEAPOT)
     r = ResidentTerrain(net)
     for eye in ([0, -6, 3], [3, 1, 1], [20, 20, 10]):
@@ -169,6 +171,7 @@ def test_numba_and_numpy_frames_bit_identical():
 @pytest.mark.skipif(not _kernels.HAVE_NUMBA, reason="numba not installed: only the numpy path exists")
 @pytest.mark.parametrize("seed", range(3))
 def test_compiled_cpu_tessellation_bit_identical_to_numpy(seed):
+    _jit.warm_up()
     net = grid_net(4, 5, seed=seed)
     rng = np.random.default_rng(seed)
     levels = rng.choice([4, 6, 8], net.n_edges)

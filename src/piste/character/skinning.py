@@ -78,7 +78,17 @@ def _blend_py(pal, index, pos, nrm, out_p, out_n, normalize):
                 out_n[i, v, 2] = nz * inv
 
 
-_blend_nb = lazy_njit(_blend_py)  # optional compiled kernel (the 'fast' extra); scipy/numpy is the reference
+def _ex_blend():
+    return (np.zeros((1, 1, 3, 4), np.float32), np.zeros(1, np.int64), np.zeros((1, 3), np.float32),
+            np.zeros((1, 3), np.float32), np.zeros((1, 1, 3), np.float32), np.zeros((1, 1, 3), np.float32), True)
+
+
+_blend_nb = lazy_njit(_blend_py, _ex_blend)  # optional compiled kernel (the 'fast' extra); scipy/numpy is the reference
+
+
+def _compiled(use_numba) -> bool:
+    """Use the compiled kernel: forced (True), never (False), or when numba has loaded (None)."""
+    return _blend_nb is not None and (use_numba or (use_numba is None and _blend_nb.ready()))
 
 __all__ = ["skin", "skin_exact", "PostTransformMesh", "BlendedMesh", "SCHEMES", "normalize_rows", "skinning_report"]
 
@@ -291,13 +301,14 @@ class BlendedMesh:
         pal = self.palette_matrices(skin_matrices)  # (n, p, 3, 4)
         n = pal.shape[0]
         v = self.n_vertices
-        if _blend_nb is not None and use_numba is not False:
+        if _compiled(use_numba):
             pos = np.empty((n, v, 3), np.float32)
             nrm = np.empty((n, v, 3), np.float32)
             _blend_nb(np.ascontiguousarray(pal, dtype=np.float32), self._index, self._pos3, self._nrm3, pos, nrm,
                       bool(normalize))
             return pos, nrm
-        self._make_sparse()
+        if use_numba is False or _blend_nb is None:  # the reference (while numba loads: the einsum below)
+            self._make_sparse()
         if self._sparse is not None:
             out = np.ascontiguousarray((self._sparse @ pal.reshape(n, -1).T).T)  # (n, 6v)
             pos = out[:, : 3 * v].reshape(n, v, 3)
@@ -315,12 +326,13 @@ class BlendedMesh:
         """Skin one frame: generate the palette ``(p, 3, 4)`` then transform every vertex by its
         entry. Returns ``positions (v, 3) float32`` and ``normals (v, 3) float32`` (unit if
         ``normalize``)."""
-        if _blend_nb is not None and use_numba is not False:
-            pos, nrm = self.apply_many(np.asarray(skin_matrices)[None], normalize=normalize)
+        if _compiled(use_numba):
+            pos, nrm = self.apply_many(np.asarray(skin_matrices)[None], normalize=normalize, use_numba=True)
             return pos[0], nrm[0]
         m = self.palette_matrices(skin_matrices)
         v = self.n_vertices
-        self._make_sparse()
+        if use_numba is False or _blend_nb is None:
+            self._make_sparse()
         if self._sparse is not None:
             out = self._sparse @ m.reshape(-1)
             pos = out[: 3 * v].reshape(v, 3)

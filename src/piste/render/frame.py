@@ -119,6 +119,7 @@ class TerrainRenderer:
         self.net = net
         self.lod_morph = morph_setting(lod_morph)
         self.resident = bool(resident)
+        self.resident_wait = False  # True: block on the first frame until the vertex blocks are built
         self.ctx = ctx if ctx is not None else create_context()
         self.target = Offscreen(self.ctx, size)
         if isinstance(lightmap, str):
@@ -182,9 +183,11 @@ class TerrainRenderer:
         ``levels`` overrides the LOD (an ``(e,)`` array or one int for every edge).
         """
         t = timings if timings is not None else {}
-        if levels is None and self.resident:  # GPU-resident blocks: only culling, LOD and indices here
+        # GPU-resident blocks: only culling, LOD and indices here.  Until they are built (in the
+        # background, so a fresh process draws at once) frames take the CPU path, visible patches only.
+        res = resident_terrain(self.net, wait=self.resident_wait) if levels is None and self.resident else None
+        if res is not None:
             t0 = time.perf_counter()
-            res = resident_terrain(self.net)
             pids = self.visible(camera)
             t1 = time.perf_counter()
             mesh = res.frame(camera.eye, patches=pids, lod=lod, morph=self.lod_morph, **self.lod_kwargs)
@@ -197,7 +200,7 @@ class TerrainRenderer:
         t1 = time.perf_counter()
         pids = self.visible(camera)
         t2 = time.perf_counter()
-        mesh = tessellate(self.net, levels, patches=pids)
+        mesh = tessellate(self.net, levels, patches=pids, cache=False if self.resident else None)
         t3 = time.perf_counter()
         t.update(lod=(t1 - t0) * 1e3, cull=(t2 - t1) * 1e3, tessellate=(t3 - t2) * 1e3)
         return mesh

@@ -53,7 +53,12 @@ def _frame_indices_py(key, base, tmpl, tstart, tcount, out_start, out):
             out[o + j] = tmpl[s + j] + b
 
 
-_frame_indices_nb = _jit(_frame_indices_py)
+def _ex_frame_indices():
+    i8, u4 = np.zeros(1, np.int64), np.zeros(3, np.uint32)
+    return i8, np.zeros(1, np.uint32), u4, i8, np.full(1, 3, np.int64), np.array([0, 3], np.int64), u4.copy()
+
+
+_frame_indices_nb = _jit(_frame_indices_py, _ex_frame_indices)
 
 
 def frame_indices(key: np.ndarray, base: np.ndarray, tmpl: np.ndarray, tstart: np.ndarray, tcount: np.ndarray,
@@ -77,7 +82,7 @@ def frame_indices(key: np.ndarray, base: np.ndarray, tmpl: np.ndarray, tstart: n
     start = np.zeros(len(key) + 1, dtype=np.int64)
     np.cumsum(cnt, out=start[1:])
     total = int(start[-1])
-    if (HAVE_NUMBA if use_numba is None else use_numba) and total:
+    if (ready(_frame_indices_nb) if use_numba is None else use_numba) and total:
         out = np.empty(total, dtype=np.uint32)
         _frame_indices_nb(key, base.astype(np.uint32), tmpl, tstart, tcount, start, out)
         return out, start
@@ -125,7 +130,24 @@ def _gather_cached_py(pids, shape_of, vertex_start, tri_start, src_start, src_le
             i1[t0 + k] = t1[ts + k] + v0
 
 
-_gather_cached_nb = _jit(_gather_cached_py)
+def _ex_gather():
+    i8 = np.zeros(1, np.int64)
+    two = np.array([0, 1], np.int64)
+    return (i8, i8, two, two, i8, np.full(1, 4, np.int64), i8, i8, np.zeros((1, 3), np.uint32), np.zeros(65, np.int64),
+            np.zeros((16, 14), np.float32), np.zeros((1, 14), np.float32), np.zeros((1, 3), np.uint32))
+
+
+_gather_cached_nb = _jit(_gather_cached_py, _ex_gather)
+
+
+def ready(kernel) -> bool:
+    """Whether ``kernel`` is compiled and loaded (False without numba; the first False starts the
+    background warm-up of every kernel, see :mod:`piste._jit`)."""
+    return kernel is not None and kernel.ready()
+
+
+def gather_ready() -> bool:
+    return ready(_gather_cached_nb)
 
 
 def gather_cached(pids, shape_of, vertex_start, tri_start, src_start, src_level, src_slot, tri_src_start, tris,
@@ -196,7 +218,16 @@ def _side_lod_py(pids, side_edge, edge_mid, degenerate, eye, near, far, band, lo
         key[i] = k
 
 
-_side_lod_nb = _jit(_side_lod_py)
+def _ex_side_lod():
+    return (np.zeros(1, np.int64), np.zeros((1, 4), np.int64), np.zeros((1, 3)), np.zeros(1, np.bool_), np.zeros(3),
+            60.0, 180.0, 0.3, True, True, 1, np.ones(1024, np.float32), np.zeros(1, np.int64))
+
+
+_side_lod_nb = _jit(_side_lod_py, _ex_side_lod)
+
+
+def side_lod_ready() -> bool:
+    return ready(_side_lod_nb)
 
 
 def side_lod(pids, side_edge, edge_mid, degenerate, eye, near, far, band, lod, morph, factors) -> np.ndarray:
@@ -286,7 +317,16 @@ def _cull_tree_py(node_lo, node_hi, leaf_start, leaf_end, lo_sorted, hi_sorted, 
     return cnt
 
 
-_cull_tree_nb = _jit(_cull_tree_py)
+def _ex_cull():
+    box = np.zeros((1, 3))
+    return (box, box, np.zeros(1, np.int64), np.ones(1, np.int64), box, box, 0, np.zeros((6, 4)), np.zeros(1, np.int64))
+
+
+_cull_tree_nb = _jit(_cull_tree_py, _ex_cull)
+
+
+def cull_ready() -> bool:
+    return ready(_cull_tree_nb)
 
 
 def cull_tree(node_lo, node_hi, leaf_start, leaf_end, lo_sorted, hi_sorted, depth, planes) -> np.ndarray:

@@ -109,7 +109,7 @@ class PatchTree:
         int64 ascending: the same set as :func:`piste.transforms.cull_boxes` over every box.
         Compiled depth-first walk with numba, else a level-by-level numpy walk (same result)."""
         planes = np.asarray(planes, dtype=np.float64)
-        if _kernels.HAVE_NUMBA if use_numba is None else use_numba:
+        if _kernels.cull_ready() if use_numba is None else use_numba:
             pos = _kernels.cull_tree(self.node_lo, self.node_hi, self.leaf_start, self.leaf_end, self.lo_sorted,
                                      self.hi_sorted, self.depth, planes)
             return np.sort(self.order[pos])

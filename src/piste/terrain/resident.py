@@ -41,6 +41,7 @@ ResidentMesh.to_mesh()                   the same frame as a classic TerrainMesh
 from __future__ import annotations
 
 import os
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -324,7 +325,7 @@ class ResidentTerrain:
         else:
             pids = patch_tree(net).cull(planes)
         fac = self.factors
-        if side_levels is None and _kernels.HAVE_NUMBA and use_numba is not False:
+        if side_levels is None and (use_numba or (use_numba is None and _kernels.side_lod_ready())):
             key = _kernels.side_lod(pids, self.side_edge, self.edge_mid, self.degenerate, eye, near, far, morph_band,
                                     lod, morph or not lod, fac)
             return self._mesh(pids, key, morph, use_numba)
@@ -386,13 +387,50 @@ def morph_setting(explicit: bool | None = None) -> bool:
     return True if explicit is None else bool(explicit)
 
 
-def resident_terrain(net: PatchNet, levels=LEVELS) -> ResidentTerrain:
-    """The :class:`ResidentTerrain` of ``net`` at ``levels``, built once and kept on the net (rebuilt
-    when its UVs or light-map rects change)."""
+def resident_terrain(net: PatchNet, levels=LEVELS, wait: bool = True) -> ResidentTerrain | None:
+    """The :class:`ResidentTerrain` of ``net`` at ``levels`` with its vertex blocks, built once and
+    kept on the net (rebuilt when its UVs or light-map rects change).
+
+    ``wait=False`` never blocks: it returns None while the blocks are built in a background thread
+    (started by the first such call), so a fresh process can draw its first frames on the CPU path
+    (only the visible patches evaluated) instead of waiting ~0.3 s for every patch at every level.
+    """
     key = tuple(int(x) for x in levels)
     store = net.__dict__.setdefault("_resident", {})
+    pending = net.__dict__.setdefault("_resident_pending", {})
     r = store.get(key)
-    if r is None or r.stale():
+    if r is not None and not r.stale():
+        return r
+    job = pending.get(key)
+    if job is not None and not job["thread"].is_alive():
+        pending.pop(key)
+        if job["error"] is not None:
+            raise job["error"]
+        r = job["result"]
+        if r is not None and not r.stale():
+            store[key] = r
+            return r
+        job = None
+    if wait:
+        if job is not None:
+            job["thread"].join()
+            return resident_terrain(net, levels, wait=True)
         r = ResidentTerrain(net, key)
+        r.vertices  # noqa: B018  (build the blocks now)
         store[key] = r
-    return r
+        return r
+    if job is None:
+        job = {"result": None, "error": None}
+
+        def build():
+            try:
+                rr = ResidentTerrain(net, key)
+                rr.vertices  # noqa: B018
+                job["result"] = rr
+            except Exception as exc:  # re-raised by the next call, on the caller's thread
+                job["error"] = exc
+
+        job["thread"] = threading.Thread(target=build, name="piste-resident-terrain", daemon=True)
+        pending[key] = job
+        job["thread"].start()
+    return None

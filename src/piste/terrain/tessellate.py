@@ -540,7 +540,7 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False, cache:
     if cache is None:
         cache = len(net) * 116 * VERTEX_FLOATS * 4 < 512 * 2**20
     indices = np.empty((T, 3), dtype=np.uint32)
-    if cache and _kernels.HAVE_NUMBA and use_numba is not False:
+    if cache and (use_numba or (use_numba is None and _kernels.gather_ready())):
         vert = _gather_compiled(net, pids, side_lv, shapes, shape_of, vertex_start, tri_start, indices)
         pos, nrm, param = vert[:, 0:3], vert[:, 3:6], vert[:, 6:8]
         uv, uv_lm, uv_proj = vert[:, 8:10], vert[:, 10:12], vert[:, 12:14]
