@@ -18,6 +18,8 @@ load_terrain, load_rider_model, load_object_mesh   reading a scene's sources (so
 load_bundle, Bundle, lights_from_dict, camera_from_dict   a built bundle as scene objects (bundle_objects.py)
 ScenePreview, render_image, render_frames, camera_at   the runtime: rendering a bundle (preview.py)
 build_default_scene                     the built-in default scene `piste demo` builds (default_scene.py)
+TiledSpec, build_tiles, TileError       large worlds: fit/bake/visibility a tile at a time (tiled_build.py)
+build_tiles_dask, dask_client, build_scene_tiles   the same tasks on a Dask cluster (dask_build.py)
 LiveScene, run_headless                 watch, rebuild, reload: ``piste view SCENE`` (live.py)
 
 The scene file itself is :mod:`piste.world.scene_file` (``load_scene``); the bundle format is
@@ -34,8 +36,12 @@ from piste.pipeline.live import LiveScene, run_headless
 from piste.pipeline.preview import ScenePreview, camera_at, render_frames, render_image
 from piste.pipeline.sources import load_object_mesh, load_rider_model, load_terrain
 from piste.pipeline.visibility import Visibility, compute_visibility, culling_report
+from piste.pipeline.tiled_build import TiledSpec, TileError, build_tiles, spec_from_scene, synthetic_spec
+from piste.pipeline.dask_build import build_scene_tiles, build_tiles_dask, dask_client
 
 __all__ = [
+    "TiledSpec", "TileError", "build_tiles", "spec_from_scene", "synthetic_spec", "build_scene_tiles",
+    "build_tiles_dask", "dask_client",
     "build_scene",
     "load_bundle",
     "build_default_scene",

@@ -17,6 +17,7 @@ snow_texture          procedural tileable snow base texture
 placeholder_lightmap  PLACEHOLDER light-map atlas from the normals and a fixed sun
 track_field           signed distance across a track on a world x-y grid (projected texture)
 LOD_COLORS            debug colours of 4x4 / 6x6 / 8x8 / glue patches
+StreamingRenderer     a tiled world paged in and out by distance under a memory budget (streaming.py)
 
 Interactive window: :func:`piste.render.window.run_window` (pyglet, imported lazily).
 """
@@ -28,6 +29,7 @@ from piste.render.sky_pass import SkyPass
 from piste.render.terrain_pass import DEBUG_VIEWS, LIGHTMAP_MODES, TerrainPass
 from piste.render.textures import LOD_COLORS, lightmap_atlas_size, placeholder_lightmap, snow_texture, track_field
 from piste.render.video import VideoWriter
+from piste.render.streaming import StreamingRenderer, TileCache, render_flight
 
 __all__ = [
     "create_context",
@@ -50,4 +52,7 @@ __all__ = [
     "placeholder_lightmap",
     "lightmap_atlas_size",
     "LOD_COLORS",
+    "StreamingRenderer",
+    "TileCache",
+    "render_flight",
 ]
