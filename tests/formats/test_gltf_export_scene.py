@@ -141,6 +141,7 @@ def test_reimport_matches_the_bundle(small_bundle, tmp_path):
     for r, clip in (("rider", "ride"), ("other", "spin")):
         m = next(x for x in back.meshes if x.name == f"{r}:{src.group}")
         assert np.array_equal(m.positions, src.positions) and np.array_equal(m.indices, src.indices)
+        assert m.morph_names == src.morph_names and np.allclose(m.morph_positions, src.morph_positions, atol=1e-7)
         names = np.array(back.skeleton.names)
         live = src.weights > 0
         assert np.array_equal(names[m.joints.astype(int)][live],
@@ -220,6 +221,7 @@ def test_blender_imports_the_default_scene(tmp_path):
         assert arm["bones"] and set(arm["bones"]) == {f"{rd['name']}:{n}" for n in model.skeleton.names}
         mesh = seen["meshes"][f"{rd['name']}:{model.meshes[0].group}"]
         assert mesh["armature"] == rd["name"] and mesh["polygons"] == model.meshes[0].n_triangles
+        assert mesh["shape_keys"][1:] == list(model.meshes[0].morph_names)  # "Basis" first, then the morphs
         # bone heads at the rider's placement (Blender's bones start at the joints)
         wm = b.arrays["riders/matrix"][i] @ model.skeleton.world_matrices()
         for j, n in enumerate(model.skeleton.names):
