@@ -263,6 +263,8 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
     arrays["lightmap/rects"] = la["rects"]
     if "base_texture" in la:
         arrays["terrain/base_texture"] = la["base_texture"]
+    if "source" in la:  # an SSX level's stored Cs / As texels (ps2 mode, piste.render.ssx_pass)
+        arrays["lightmap/source"] = la["source"]
     net.lightmap_rect = la["rects"].copy()
     manifest["lightmap"] = {"res": lm_spec.res, "gutter": lm_spec.gutter, "shadows": lm_spec.shadows,
                             "atlas_size": [int(la["atlas"].shape[1]), int(la["atlas"].shape[0])],

@@ -38,6 +38,7 @@ from piste.render.frame import DEFAULT_FOG_DENSITY, TerrainRenderer
 from piste.render.object_pass import ObjectPass
 from piste.render.scene_renderer import SceneRenderer
 from piste.render.sky_pass import HORIZON
+from piste.render.ssx_pass import SsxTerrainRenderer
 from piste.render.video import VideoWriter
 from piste.world.camera import track_camera
 from piste.world.course import TRACK_HALF_WIDTH
@@ -240,7 +241,11 @@ class ScenePreview:
         else:
             self.scene = None
             self.renderer = None
-            self.terrain = TerrainRenderer(bundle.net, size=self.size, ctx=self.ctx, lightmap=atlas, **kw)
+            if "lightmap/source" in bundle.arrays and opt["lightmap"] == "bundle":  # an SSX level: ps2 mode
+                self.terrain = SsxTerrainRenderer(bundle.net, bundle.arrays["lightmap/source"], size=self.size,
+                                                  ctx=self.ctx, lightmap=atlas, **kw)  # blends its stored Cs/As
+            else:
+                self.terrain = TerrainRenderer(bundle.net, size=self.size, ctx=self.ctx, lightmap=atlas, **kw)
             objs = bundle.objects()
             self.objects = None
             if objs is not None:

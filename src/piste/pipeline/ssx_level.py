@@ -25,7 +25,7 @@ level_files(path) -> (ssh or None, light-map ssh or None)
 bake_level(level, lights, shadows=True, jobs=1) -> BakedPages
 write_baked(level, baked, out_pbd=None) -> (pbd path, _L.ssh path)
 level_key(path) -> str                        content hash of the .pbd and its banks (build cache key)
-bundle_arrays(path) -> {atlas, rects, base_texture}   what ``piste build`` stores for an SSX terrain
+bundle_arrays(path) -> {atlas, rects, source, base_texture}   what ``piste build`` stores for an SSX terrain
 SSX_TRICKY_LOD = {"near": 30.0, "far": 150.0}     the ssx_tricky preset's switch distances (m)
 """
 
@@ -263,13 +263,14 @@ def level_key(path) -> str:
     parts = []
     for p in (path, *level_files(path)):
         parts += ["-"] if p is None else [p.name, p.read_bytes()]
-    return content_key("ssx-level/1", *parts)
+    return content_key("ssx-level/2", *parts)
 
 
 def bundle_arrays(path) -> dict:
     """What a scene build stores for an SSX terrain (``[terrain] ssx_pbd = ...``): the level's own
-    light map as the bundle's linear ``atlas (h, w, 3) float32`` with its ``rects (n, 4)``, and the
-    level textures as ``base_texture (H, W, 4) uint8`` (the net's UVs point into it)."""
+    light map as the bundle's linear ``atlas (h, w, 3) float32`` with its ``rects (n, 4)``, the
+    stored texels as ``source (h, w, 4) uint8`` (Cs, As: ps2 mode) and the level textures as
+    ``base_texture (H, W, 4) uint8`` (the net's UVs point into it)."""
     level = load_level(path)
     return {"atlas": level.light.astype(np.float32), "rects": level.net.lightmap_rect.astype(np.float32),
-            "base_texture": level.base_atlas}
+            "base_texture": level.base_atlas, "source": level.source}

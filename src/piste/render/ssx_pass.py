@@ -13,7 +13,8 @@ API
 ---
 SourcePass(ctx)                 .set_source((h, w, 4) uint8), .draw(mesh, mvp, stage)
 render_level(level, camera, size, lightmap_mode, ctx=None, renderer=None) -> (H, W, 3) uint8
-level_renderer(level, size, ctx=None) -> TerrainRenderer with the level's atlases and LOD preset
+SsxTerrainRenderer(net, source, **TerrainRenderer kwargs)   ps2 mode with the stored Cs/As
+level_renderer(level, size, ctx=None) -> SsxTerrainRenderer with the level's atlases and LOD preset
 LevelView(renderer)             the window's view of a level (M toggles modulate / ps2)
 """
 
@@ -28,7 +29,8 @@ from piste.render.context import check_gl_error, load_shader
 from piste.render.frame import TerrainRenderer
 from piste.render.window import TerrainView, ViewFrame
 
-__all__ = ["SourcePass", "render_level", "render_level_rgba", "level_renderer", "LevelView", "SSX_LOD"]
+__all__ = ["SourcePass", "SsxTerrainRenderer", "render_level", "render_level_rgba", "level_renderer", "LevelView",
+           "SSX_LOD"]
 
 #: the ssx_tricky preset's LOD switch distances in metres (3000 / 15000 game units)
 SSX_LOD = (30.0, 150.0)
@@ -128,72 +130,89 @@ class SourcePass:
         self.prog.release()
 
 
+class SsxTerrainRenderer(TerrainRenderer):
+    """A :class:`TerrainRenderer` whose ``ps2`` mode blends an SSX level's stored light-map texels
+    (``source (h, w, 4) uint8``: RGB = Cs, A = As, laid out by the net's ``lightmap_rect``) over the
+    base texture with :class:`SourcePass`, as the GS does; every other mode is the terrain
+    renderer's own.  Used by ``piste render|view LEVEL.pbd`` and, for scene files with an
+    ``ssx_pbd`` terrain, by the preview (bundle member ``lightmap/source``)."""
+
+    def __init__(self, net, source, **kwargs):
+        super().__init__(net, **kwargs)
+        self.ssx_source = SourcePass(self.ctx)
+        self.ssx_source.set_source(source)
+
+    def render(self, camera, lod: bool = True, lightmap_mode: str = "modulate", debug: str | None = None,
+               read: bool = True, levels=None, **kwargs):
+        if lightmap_mode != "ps2" or debug is not None:
+            return super().render(camera, lod=lod, lightmap_mode=lightmap_mode, debug=debug, read=read,
+                                  levels=levels, **kwargs)
+        cam = replace(camera, aspect=self.size[0] / self.size[1])
+        mesh = self.prepare(cam, lod=lod, levels=levels if levels is not None else self.levels(cam, lod))
+        kwargs.pop("fog", None)
+        frame = self.draw(cam, mesh, debug="base", read=False, **kwargs)
+        self.ssx_source.upload(mesh)  # a CPU-tessellated TerrainMesh (explicit levels above)
+        self.target.use()
+        self.ssx_source.draw(cam.view_projection())
+        self.ctx.finish()
+        check_gl_error(self.ctx, "drawing the SSX light-map pass")
+        if read:
+            frame.image = self.target.read().copy()
+        return frame
+
+    def source_frame(self, camera, lod: bool = True) -> np.ndarray:
+        """The stored texels under each pixel, unblended: ``(H, W, 4) uint8`` (RGB = Cs, A = As;
+        background alpha 0), for checking the blend against the GS formula."""
+        cam = replace(camera, aspect=self.size[0] / self.size[1])
+        mesh = self.prepare(cam, lod=lod, levels=self.levels(cam, lod))
+        self.draw(cam, mesh, debug="base", read=False, sky=False, clear=(0.0, 0.0, 0.0, 0.0))
+        self.ssx_source.upload(mesh)
+        self.target.use()
+        self.ssx_source.draw(cam.view_projection(), stage="raw")
+        self.ctx.finish()
+        return self.target.read().copy()
+
+    def release(self) -> None:
+        self.ssx_source.release()
+        super().release()
+
+
 def level_renderer(level, size=(640, 448), ctx=None, lod_near: float = SSX_LOD[0], lod_far: float = SSX_LOD[1]):
-    """A :class:`TerrainRenderer` for ``level`` (an :class:`piste.pipeline.ssx_level.SsxLevel` or
-    anything with ``net``, ``base_atlas``, ``light``, ``source``) with the ``ssx_tricky`` LOD preset,
-    and a :class:`SourcePass` attached as ``renderer.ssx_source``."""
-    r = TerrainRenderer(level.net, size=size, ctx=ctx, lightmap=level.light, base_texture=level.base_atlas,
-                        lod_near=lod_near, lod_far=lod_far)
-    r.ssx_source = SourcePass(r.ctx)
-    r.ssx_source.set_source(level.source)
-    return r
+    """An :class:`SsxTerrainRenderer` for ``level`` (an :class:`piste.pipeline.ssx_level.SsxLevel`
+    or anything with ``net``, ``base_atlas``, ``light``, ``source``) with the ``ssx_tricky`` LOD
+    preset."""
+    return SsxTerrainRenderer(level.net, level.source, size=size, ctx=ctx, lightmap=level.light,
+                              base_texture=level.base_atlas, lod_near=lod_near, lod_far=lod_far)
 
 
 def render_level(level, camera, size=(640, 448), lightmap_mode: str = "modulate", ctx=None, renderer=None,
-                 lod: bool = True, fog: float | None = None, stage: str = "blend") -> np.ndarray:
-    """One frame of ``level`` seen by ``camera``: ``(H, W, 3) uint8``.
-
-    ``lightmap_mode``: "modulate" (base x CL in one pass), "ps2" (base, then the stored Cs/As
-    blended as the GS does), "base" (the base textures alone) or "source" (the stored Cs/As texels
-    without blending: RGB = Cs, and ``stage="raw"`` reads alpha As / 2 from the fourth channel; use
-    :func:`render_level_rgba`)."""
+                 lod: bool = True, fog: float | None = None) -> np.ndarray:
+    """One frame of ``level`` seen by ``camera``: ``(H, W, 3) uint8`` (see :func:`render_level_rgba`)."""
     return render_level_rgba(level, camera, size, lightmap_mode, ctx, renderer, lod, fog)[..., :3]
 
 
 def render_level_rgba(level, camera, size=(640, 448), lightmap_mode: str = "modulate", ctx=None, renderer=None,
                       lod: bool = True, fog: float | None = None) -> np.ndarray:
-    """As :func:`render_level` with the alpha channel, ``(H, W, 4) uint8``."""
+    """One frame ``(H, W, 4) uint8``.  ``lightmap_mode``: "modulate" (base x CL in one pass), "ps2"
+    (base, then the stored Cs/As blended as the GS does), "base" (the base textures alone, on a
+    transparent background) or "source" (the stored Cs/As texels unblended, background alpha 0)."""
     modes = ("modulate", "ps2", "base", "source")
     if lightmap_mode not in modes:
         raise ConfigError(f"lightmap mode must be one of {', '.join(modes)}, got {lightmap_mode!r}")
     own = renderer is None
     r = renderer if renderer is not None else level_renderer(level, size, ctx)
     try:
-        cam = replace(camera, aspect=r.size[0] / r.size[1])
-        levels = r.levels(cam, lod)
-        mesh = r.prepare(cam, levels=levels)  # explicit levels: a CPU-tessellated TerrainMesh
-        if lightmap_mode == "modulate":
-            return r.draw(cam, mesh, lightmap_mode="modulate", fog=fog).image
-        r.draw(cam, mesh, debug="base", read=False, clear=(0.0, 0.0, 0.0, 0.0), sky=lightmap_mode != "source")
-        if lightmap_mode in ("ps2", "source"):
-            src = r.ssx_source
-            src.upload(mesh)
-            r.target.use()
-            src.draw(cam.view_projection(), stage="raw" if lightmap_mode == "source" else "blend")
-            r.ctx.finish()
-            check_gl_error(r.ctx, "drawing the SSX light-map pass")
-        return r.target.read().copy()
+        if lightmap_mode == "source":
+            return r.source_frame(camera, lod=lod)
+        if lightmap_mode == "base":
+            cam = replace(camera, aspect=r.size[0] / r.size[1])
+            return r.render(cam, lod=lod, debug="base", sky=False, clear=(0.0, 0.0, 0.0, 0.0)).image.copy()
+        return r.render(camera, lod=lod, lightmap_mode=lightmap_mode, fog=fog).image.copy()
     finally:
         if own:
-            r.ssx_source.release()
             r.release()
 
 
 class LevelView(TerrainView):
-    """``piste view LEVEL.pbd``: the level in the window; ``ps2`` mode draws the stored Cs/As pass."""
-
-    def draw(self, camera, t: float, opts) -> ViewFrame:
-        if opts.lightmap_mode != "ps2" or opts.debug is not None:
-            return super().draw(camera, t, opts)
-        r = self.renderer
-        cam = replace(camera, aspect=r.size[0] / r.size[1])
-        mesh = r.prepare(cam, levels=r.levels(cam, opts.lod))
-        frame = r.draw(cam, mesh, debug="base", read=False)
-        r.ssx_source.upload(mesh)
-        r.target.use()
-        r.ssx_source.draw(cam.view_projection())
-        return ViewFrame(camera, frame, {})
-
-    def release(self) -> None:
-        self.renderer.ssx_source.release()
-        super().release()
+    """``piste view LEVEL.pbd``: the level in the window (M toggles modulate / ps2: the stored
+    Cs/As pass of :class:`SsxTerrainRenderer`)."""

@@ -35,7 +35,6 @@ def _render(level, gl, mode):
     try:
         return render_level_rgba(level, _camera(level), lightmap_mode=mode, renderer=r)
     finally:
-        r.ssx_source.release()
         r.release()
 
 

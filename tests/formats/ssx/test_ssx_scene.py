@@ -87,3 +87,31 @@ def test_gltf_export_carries_the_level_textures(folder, tmp_path):
         images.append(np.asarray(Image.open(io.BytesIO(blob[bv.byteOffset:bv.byteOffset + bv.byteLength]))))
     atlas = load_level(folder / "LV.pbd").base_atlas
     assert any(i.shape == atlas.shape and (i == atlas).all() for i in images)
+
+
+def test_scene_ps2_mode_blends_the_stored_texels(folder, gl):
+    from dataclasses import replace
+
+    from piste.pipeline import load_bundle
+    from piste.pipeline.preview import ScenePreview, camera_at
+    from piste.pipeline.ssx_level import load_level
+    from piste.render.ssx_pass import SsxTerrainRenderer, level_renderer, render_level
+
+    scene = folder / "ps2.toml"
+    scene.write_text('terrain = { ssx_pbd = "LV.pbd" }\n\n[render]\nsize = [96, 64]\nlightmap_mode = "ps2"\n')
+    b = load_bundle(build_scene(scene, use_cache=False).path)
+    assert b.arrays["lightmap/source"].dtype == np.uint8
+    p = ScenePreview(b, ctx=gl)
+    try:
+        assert isinstance(p.terrain, SsxTerrainRenderer)
+        img = p.render().astype(int)
+        cam = replace(camera_at(b), aspect=96 / 64)
+    finally:
+        p.release()
+    level = load_level(folder / "LV.pbd")
+    r = level_renderer(level, (96, 64), ctx=gl)
+    try:
+        want = render_level(level, cam, lightmap_mode="ps2", renderer=r).astype(int)
+    finally:
+        r.release()
+    assert np.abs(img - want).mean() < 1.0
