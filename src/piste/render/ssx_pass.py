@@ -27,7 +27,7 @@ import numpy as np
 from piste.errors import ConfigError, RenderError
 from piste.render.context import check_gl_error, load_shader
 from piste.render.frame import TerrainRenderer
-from piste.render.window import TerrainView, ViewFrame
+from piste.render.window import TerrainView
 
 __all__ = ["SourcePass", "SsxTerrainRenderer", "render_level", "render_level_rgba", "level_renderer", "LevelView",
            "SSX_LOD"]
