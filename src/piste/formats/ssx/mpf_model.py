@@ -204,6 +204,26 @@ def _palette_tables(sub: SubModel, base: dict, new_index: np.ndarray):
     return bones, pct
 
 
+def _weld(key: np.ndarray):
+    """Rows of ``key (n, c) float32`` that are bit-identical: ``first (u,)`` (one row of each
+    kind, in first-seen order of the sorted hashes) and ``inverse (n,)``. Rows are hashed to 64
+    bits and the hashes sorted; a collision (never seen) falls back to sorting the whole rows."""
+    k = np.ascontiguousarray(key, np.float32)
+    words = k.view(np.uint32).astype(np.uint64)
+    h = np.full(len(k), 1469598103934665603, np.uint64)
+    with np.errstate(over="ignore"):
+        for c in range(words.shape[1]):
+            h = (h ^ words[:, c]) * np.uint64(1099511628211)
+            h ^= h >> np.uint64(29)
+    _, first, inv = np.unique(h, return_index=True, return_inverse=True)
+    inv = inv.reshape(-1)
+    if not np.array_equal(k[first][inv].view(np.uint32), k.view(np.uint32)):  # a hash collision
+        v = k.view(np.dtype((np.void, 4 * k.shape[1]))).ravel()
+        _, first, inv = np.unique(v, return_index=True, return_inverse=True)
+        inv = inv.reshape(-1)
+    return first, inv
+
+
 def _decode_sub(sub: SubModel, pal_bones, pal_pct, weld: bool):
     """Arrays of one sub-model's render and morph groups (shadow groups skipped); the chunks are
     gathered first and decoded in one vectorised pass (strips -> triangles, slots -> palettes)."""
@@ -248,11 +268,8 @@ def _decode_sub(sub: SubModel, pal_bones, pal_pct, weld: bool):
     uv = uv_raw[:, :2].astype(np.float32) / np.float32(UV_SCALE)
     morph = np.concatenate(morph, axis=1).astype(np.float32) @ a.T * np.float32(CM / MORPH_SCALE)
     if weld and len(pos):
-        key = np.concatenate([pos, nrm, uv, pidx[:, None].astype(np.float32),
-                              morph.transpose(1, 0, 2).reshape(len(pos), -1)], axis=1)
-        key = np.ascontiguousarray(key).view(np.dtype((np.void, key.dtype.itemsize * key.shape[1]))).ravel()
-        _, first, inv = np.unique(key, return_index=True, return_inverse=True)
-        inv = inv.reshape(-1)
+        first, inv = _weld(np.concatenate([pos, nrm, uv, pidx[:, None].astype(np.float32),
+                                           morph.transpose(1, 0, 2).reshape(len(pos), -1)], axis=1))
         pos, nrm, uv, pidx, morph = pos[first], nrm[first], uv[first], pidx[first], morph[:, first]
         tris = inv[tris]
         keep = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])
