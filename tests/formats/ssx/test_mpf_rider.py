@@ -251,3 +251,15 @@ def test_schemes_batches_strips_on_the_decoded_rider(rider, decoded):
         check_batches(batches, lod.mesh.indices, lod.palette.index, "ps2")
         s = stripify(lod.mesh.indices)
         assert np.array_equal(canonical_triangles(unstripify(s)), canonical_triangles(lod.mesh.indices))
+
+
+def test_weld_groups_bit_identical_rows():
+    from piste.formats.ssx.mpf_model import _weld
+
+    rng = np.random.default_rng(3)
+    rows = rng.normal(size=(50, 7)).astype(np.float32)
+    key = rows[rng.integers(0, 50, 400)]
+    key[0, 0] = -0.0 if key[0, 0] == 0 else key[0, 0]
+    first, inv = _weld(key)
+    assert np.array_equal(key[first][inv], key)
+    assert len(first) == len(np.unique(key, axis=0))
