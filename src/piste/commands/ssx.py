@@ -6,6 +6,7 @@
     piste ssx bake LEVEL.pbd [--lights L.toml | --scene S.toml] [--out NEW.pbd]
     piste ssx convert LEVEL.pbd --to npz|multitool|gltf --out PATH
     piste ssx make DIR [--rows R --cols C --name NAME]   a synthetic level (piste's own encoder)
+    piste ssx make DIR --from NET.npz|NET.bpt|default  the level from any piste patch net (metres)
     piste ssx import PROJECT_DIR --out NEW.pbd     a Multitool project as a level (+ .ssh, _L.ssh)
 
 ``piste render LEVEL.pbd``, ``piste view LEVEL.pbd`` and ``piste bake LEVEL.pbd --format ssx-tricky``
@@ -38,6 +39,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--rows", type=int, default=2, help="make: patch rows")
     parser.add_argument("--cols", type=int, default=3, help="make: patch columns")
     parser.add_argument("--name", default="SYNTH", help="make: the level's name")
+    parser.add_argument("--from", dest="from_net", metavar="NET",
+                        help="make: the patches of a saved PatchNet (.npz), a .bpt, or 'default' (the default "
+                             "course) instead of a synthetic slope; placeholder textures and light maps (bake next)")
     parser.add_argument("--frames", type=int, help="view: quit after N frames")
 
 
@@ -128,7 +132,13 @@ def run(args) -> int:
 
         if args.rows < 1 or args.cols < 1:
             raise ConfigError("--rows and --cols must be >= 1")
-        path = make_level(rows=args.rows, cols=args.cols).write(Path(args.level), args.name)
+        net = None
+        if args.from_net:
+            from piste.commands.bake import _load_net
+
+            net = _load_net(None if args.from_net == "default" else args.from_net)
+        path = make_level(net=net, rows=args.rows, cols=args.cols, jitter=0.0 if net is not None else 0.02,
+                          n_textures=1 if net is not None else 3).write(Path(args.level), args.name)
         print(f"wrote {path} and {path.stem}.ssh, {path.stem}_L.ssh beside it")
         return 0
     if args.action == "import":

@@ -32,6 +32,10 @@ def test_cli_end_to_end(tmp_path, capsys, monkeypatch, gl):
     assert main(["ssx", "convert", str(lv), "--to", "npz", "--out", str(tmp_path / "lv.npz")]) == 0
     net = PatchNet.load(tmp_path / "lv.npz")
     np.testing.assert_allclose(net.control_points, read_pbd(lv).to_net().control_points)
+    # and any piste net back into a level
+    assert main(["ssx", "make", str(tmp_path / "fromnet"), "--from", str(tmp_path / "lv.npz"), "--name", "N"]) == 0
+    np.testing.assert_allclose(read_pbd(tmp_path / "fromnet" / "N.pbd").to_net().control_points, net.control_points,
+                               atol=1e-4)
     assert main(["ssx", "convert", str(lv), "--to", "multitool", "--out", str(tmp_path / "proj")]) == 0
     assert (tmp_path / "proj" / "Patches.json").is_file()
     assert main(["ssx", "import", str(tmp_path / "proj"), "--out", str(tmp_path / "back" / "LV2.pbd")]) == 0
