@@ -140,6 +140,15 @@ def test_rendered_gltf_object_shows_its_own_texture(tmp_path, gl):
                        box.indices, normals=box.normals @ np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0]]).T,
                        uv=np.full((box.n_vertices, 2), 0.5), texture=tex)
     export_gltf(tmp_path / "magenta.glb", characters=[CharacterExport(Model("box", None, [mesh]), name="box")], up="z")
+    from dataclasses import replace
+
+    from piste.formats.gltf_ext import MaterialInfo
+
+    clear = tex.copy()
+    clear[...] = (0, 255, 0, 0)  # green, fully transparent, alpha MASK: never drawn
+    hidden = replace(mesh, texture=clear, material=MaterialInfo(alpha_mode="MASK", alpha_cutoff=0.5),
+                     positions=mesh.positions + [0.0, 0.0, -3.0])
+    export_gltf(tmp_path / "clear.glb", characters=[CharacterExport(Model("clear", None, [hidden]), name="c")], up="z")
     n, spacing = 9, 4.0
     y, x = np.mgrid[0:n, 0:n] * spacing
     np.savez(tmp_path / "hill.npz", z=np.zeros_like(x, dtype=float), dx=np.float64(spacing))
@@ -153,6 +162,10 @@ enabled = false
 [[objects]]
 model = "magenta.glb"
 position = [16.0, 16.0]
+[[objects]]
+model = "clear.glb"
+position = [16.0, 16.0]
+heading = 30.0
 [[lights]]
 type = "ambient"
 intensity = 1.0
@@ -169,3 +182,20 @@ target = [16.0, 16.0, 2.0]
         p.release()
     magenta = (img[..., 0] > img[..., 1] + 60) & (img[..., 2] > img[..., 1] + 60)
     assert magenta.sum() > 50, magenta.sum()
+    green = (img[..., 1] > img[..., 0] + 60) & (img[..., 1] > img[..., 2] + 60)
+    assert green.sum() == 0, green.sum()
+
+
+def test_alpha_modes_baked_for_the_shader():
+    from piste.formats.gltf_ext import MaterialInfo
+
+    tex = np.zeros((2, 2, 4), np.uint8)
+    tex[..., :3] = 200
+    tex[..., 3] = [[10, 100], [150, 250]]
+    meshes = [SkinnedMesh(mode, np.eye(3), np.array([[0, 1, 2]]), texture=tex,
+                          material=MaterialInfo(alpha_mode=mode, alpha_cutoff=0.5 if mode != "MASK" else 0.3))
+              for mode in ("OPAQUE", "MASK", "BLEND")]
+    imgs = primitive_images(Model("m", None, meshes))
+    assert (imgs[0][2][..., 3] == 255).all()
+    assert imgs[1][2][..., 3].tolist() == [[0, 255], [255, 255]]  # cutoff 0.3 = 77
+    assert imgs[2][2][..., 3].tolist() == [[0, 0], [255, 255]]

@@ -395,8 +395,11 @@ def _add_character(b: _Builder, c: CharacterExport, root_children: list, scene_r
                 targets.append({"POSITION": b.accessor(m.morph_positions[ti], target=_ARRAY_BUFFER, minmax=True),
                                 "NORMAL": b.accessor(m.morph_normals[ti], target=_ARRAY_BUFFER)})
             tex = b.texture(m.texture) if m.texture is not None else None
-            mat = b.material(name=p + m.name, pbrMetallicRoughness=_pbr(b, m.base_color, tex),
-                             alphaMode="BLEND" if float(m.base_color[3]) < 1.0 else "OPAQUE")
+            info = getattr(m, "material", None)  # an imported glTF material (piste.formats.gltf_ext.MaterialInfo)
+            mode = getattr(info, "alpha_mode", None) or ("BLEND" if float(m.base_color[3]) < 1.0 else "OPAQUE")
+            mat = b.material(name=p + m.name, pbrMetallicRoughness=_pbr(b, m.base_color, tex), alphaMode=mode,
+                             alphaCutoff=float(info.alpha_cutoff) if mode == "MASK" else None,
+                             doubleSided=bool(getattr(info, "double_sided", False)) or None)
             prims.append(b.G.Primitive(attributes=attrs, indices=b.indices(m.indices, nv), material=mat, mode=4,
                                        targets=targets or None))
         extras = {"targetNames": names} if k else None

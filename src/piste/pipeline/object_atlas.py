@@ -9,6 +9,10 @@ centres: ``u' = (x0 + 0.5 + u (w - 1)) / W``.  KHR_texture_transform is already 
 (:mod:`piste.formats.gltf_ext`).  The atlas is RGBA uint8, rows are ``v`` from 0 (no flip), like
 the built-in one.
 
+Alpha: OPAQUE primitives get alpha 255 (glTF ignores it); MASK keeps texels at or above its
+``alphaCutoff`` (255) and drops the rest (0), and BLEND is drawn the same way at 0.5 (no sorting):
+the object shader discards texels with alpha below 0.5.
+
 Double-sided materials (``doubleSided: true``) are made double-sided in the geometry: the
 primitive's triangles are added again, reversed, on copies of its vertices with negated normals
 (the object pass culls back faces and lights with the normal).
@@ -54,6 +58,14 @@ def primitive_images(model) -> list:
             img = np.round(np.clip(img, 0, 255)).astype(np.uint8)
         else:
             img = np.tile(_srgb_u8(f), (4, 4, 1))
+        info = getattr(m, "material", None)
+        mode = getattr(info, "alpha_mode", "OPAQUE") if info is not None else "OPAQUE"
+        img = img.copy()
+        if mode == "OPAQUE":  # glTF: alpha is ignored
+            img[..., 3] = 255
+        else:  # MASK (its cutoff) and BLEND (drawn as MASK at 0.5): the object shader discards alpha < 0.5
+            cut = float(getattr(info, "alpha_cutoff", 0.5)) if mode == "MASK" else 0.5
+            img[..., 3] = np.where(img[..., 3] >= round(cut * 255), 255, 0).astype(np.uint8)
         out.append((v0, v1, img))
         v0 = v1
     return out
