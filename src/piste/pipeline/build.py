@@ -328,7 +328,7 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
         srcs = sorted({o.model for o in scene.objects})
         src_keys = [m if m.startswith("builtin:") else _file_key(m) for m in srcs]
         placements = [(o.name, o.model, list(o.position), o.heading, o.scale) for o in scene.objects]
-        obj_key = content_key(BUILD_VERSION, "objects", "object_atlas/2", terrain_key, srcs, src_keys, placements,
+        obj_key = content_key(BUILD_VERSION, "objects", "object_atlas/3", terrain_key, srcs, src_keys, placements,
                               manifest["lights"])
 
         def make_objects():
