@@ -25,21 +25,10 @@ def add_arguments(parser) -> None:
 
 
 def _load_net(path):
-    from pathlib import Path
+    """See :func:`piste.pipeline.open_scene.load_net`."""
+    from piste.pipeline.open_scene import load_net
 
-    from piste.errors import ConfigError
-    from piste.terrain import PatchNet
-
-    if path is None:
-        from piste.world.course import default_course
-
-        return default_course()
-    p = Path(path)
-    if p.suffix.lower() == ".bpt":
-        return PatchNet.from_bpt(p)
-    if p.suffix.lower() == ".npz":
-        return PatchNet.load(p)
-    raise ConfigError(f"{path}: expected a .bpt or .npz patch net")
+    return load_net(path)
 
 
 def run(args) -> int:

@@ -134,7 +134,7 @@ def run(args) -> int:
             raise ConfigError("--rows and --cols must be >= 1")
         net = None
         if args.from_net:
-            from piste.commands.bake import _load_net
+            from piste.pipeline.open_scene import load_net as _load_net
 
             net = _load_net(None if args.from_net == "default" else args.from_net)
         path = make_level(net=net, rows=args.rows, cols=args.cols, jitter=0.0 if net is not None else 0.02,

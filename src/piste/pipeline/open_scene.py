@@ -4,6 +4,7 @@ first (with the step cache beside it).  Used by ``piste render``, ``piste export
 API
 ---
 load_or_build(scene, quiet=True) -> Bundle
+load_net(path=None) -> PatchNet         a .bpt / .npz patch net, or the default course (``piste bake``, ``piste ssx``)
 """
 
 from __future__ import annotations
@@ -14,8 +15,22 @@ from pathlib import Path
 from piste.errors import ConfigError
 from piste.pipeline.build import build_scene
 from piste.pipeline.bundle_objects import Bundle, load_bundle
+from piste.terrain.net import PatchNet
+from piste.world.course import default_course
 
-__all__ = ["load_or_build"]
+__all__ = ["load_or_build", "load_net"]
+
+
+def load_net(path=None) -> PatchNet:
+    """The patch net in ``path`` (``.bpt`` or a saved ``.npz`` net), or the default course when None."""
+    if path is None:
+        return default_course()
+    p = Path(path)
+    if p.suffix.lower() == ".bpt":
+        return PatchNet.from_bpt(p)
+    if p.suffix.lower() == ".npz":
+        return PatchNet.load(p)
+    raise ConfigError(f"{path}: expected a .bpt or .npz patch net")
 
 
 def load_or_build(scene, quiet: bool = True) -> Bundle:
