@@ -211,10 +211,10 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="rider cases only, shorter timing")
     ap.add_argument("--rounds", type=int, help="interleaved rounds of the Panda3D comparison (default 40, quick 15)")
     args = ap.parse_args(argv)
-    six_riders_vs_panda(args.rounds or (15 if args.quick else 40))
     from piste import _jit
 
     _jit.warm_up()  # compile / load the numba kernels before timing (else the first frames run numpy)
+    six_riders_vs_panda(args.rounds or (15 if args.quick else 40))
     print()
     min_time = 0.1 if args.quick else 0.25
     print("skinning throughput, M vertices/s (positions + normals), ratio to the exact numpy reference")
