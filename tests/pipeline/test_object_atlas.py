@@ -199,3 +199,23 @@ def test_alpha_modes_baked_for_the_shader():
     assert (imgs[0][2][..., 3] == 255).all()
     assert imgs[1][2][..., 3].tolist() == [[0, 255], [255, 255]]  # cutoff 0.3 = 77
     assert imgs[2][2][..., 3].tolist() == [[0, 0], [255, 255]]
+
+
+def test_rider_with_several_materials_keeps_each_colour():
+    """RobotExpressive as a rider: its 19 skinned primitives (base-colour factors, no textures) merge
+    into one mesh whose packed texture gives every vertex its own primitive's colour."""
+    from piste.pipeline.characters import merged_mesh
+    from piste.pipeline.object_atlas import _srgb_u8
+
+    m = load_gltf(DATA / "RobotExpressive" / "RobotExpressive.glb")
+    prims = [x for x in m.meshes if x.skinned]
+    mm = merged_mesh(m)
+    got = _nearest(mm.texture, mm.uv.astype(np.float64))
+    want = np.concatenate([np.tile(_srgb_u8(p.base_color), (p.n_vertices, 1)) for p in prims])
+    assert np.array_equal(got, want)
+    assert len({tuple(c) for c in want.tolist()}) >= 3
+    # a single-primitive rider is untouched (the default rider's texture and UVs stay as they are)
+    from piste.character import default_rider
+
+    r = default_rider(0)
+    assert merged_mesh(r) is r.meshes[0]

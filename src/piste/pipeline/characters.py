@@ -32,6 +32,7 @@ from piste.character.lod import LOD
 from piste.character.model import Clip, Model, Skeleton, SkinnedMesh, Track
 from piste.character.palette import Palette
 from piste.errors import ConfigError, FormatError
+from piste.pipeline.object_atlas import pack_object_atlas, primitive_images
 from piste.world.riders import merged_mesh as _merged
 
 __all__ = ["character_arrays", "model_from_arrays", "lods_from_arrays", "merged_mesh", "CLIP_RATE",
@@ -39,14 +40,24 @@ __all__ = ["character_arrays", "model_from_arrays", "lods_from_arrays", "merged_
 
 CLIP_RATE = 30.0
 #: what the character step writes (part of its cache key): 2 = morph targets per LOD
-CHARACTERS_VERSION = 2
+CHARACTERS_VERSION = 3  # 3: several primitives keep their own base colours (one packed texture)
 DEFAULT_STEPS = (0.1, 0.2, 0.25)
 
 
 def merged_mesh(model):
-    """One :class:`SkinnedMesh` of every skinned primitive of ``model`` (texture: the first one's);
-    see :func:`piste.world.riders.merged_mesh`."""
-    return _merged(model)
+    """One :class:`SkinnedMesh` of every skinned primitive of ``model`` (see
+    :func:`piste.world.riders.merged_mesh`); with several primitives their base colours (texture x
+    factor, or the factor) are packed into one texture and the UVs remapped
+    (:func:`piste.pipeline.object_atlas.pack_object_atlas`), so each keeps its own material."""
+    from dataclasses import replace
+
+    mesh = _merged(model)
+    prims = [m for m in model.meshes if m.skinned] or list(model.meshes)
+    if len(prims) < 2:
+        return mesh
+    imgs = primitive_images(Model(model.name, None, prims))
+    tex, uvs = pack_object_atlas(np.zeros((0, 0, 4), np.uint8), {"rider": (mesh.uv, imgs)})
+    return replace(mesh, uv=uvs["rider"], texture=tex)
 
 
 def _steps(ratios, steps):
