@@ -271,6 +271,11 @@ def test_objects_instancing_ext_and_nodes_agree(tmp_path):
         if mode == "ext":
             assert "EXT_mesh_gpu_instancing" in d["extensionsUsed"] and "extensionsRequired" not in d
     assert worlds["ext"] == worlds["nodes"] and len(worlds["ext"]) == 7
+    # an atlas with cut-out texels (alpha 0) is exported as alphaMode MASK
+    o.texture[:4, :4, 3] = 0
+    export_gltf(tmp_path / "mask.glb", objects=o)
+    _, d = _doc(tmp_path / "mask.glb")
+    assert d["materials"][0]["alphaMode"] == "MASK" and d["materials"][0]["alphaCutoff"] == 0.5
 
 
 # ----------------------------------------------------------------------------- lights, cameras

@@ -459,7 +459,9 @@ def _add_objects(b: _Builder, o: ObjectsExport, instancing: str, root_children: 
     if kind.size and (kind.min() < 0 or kind.max() >= len(kinds)):
         raise ValidationError(f"objects: kind index out of range for {len(kinds)} kinds")
     tex = b.texture(o.texture) if o.texture is not None else None
-    mat = b.material(name="objects", pbrMetallicRoughness=_pbr(b, None, tex))
+    cut = o.texture is not None and np.asarray(o.texture).shape[-1] == 4 and int(np.asarray(o.texture)[..., 3].min()) < 255
+    mat = b.material(name="objects", pbrMetallicRoughness=_pbr(b, None, tex),  # alpha: pipeline.object_atlas's cut-outs
+                     alphaMode="MASK" if cut else None, alphaCutoff=0.5 if cut else None)
     t, r, s, ok = _trs(mats) if len(mats) else (None, None, None, np.zeros(0, bool))
     names = list(o.names) if o.names is not None else [f"{kinds[k]}{i}" for i, k in enumerate(kind)]
 
