@@ -274,6 +274,7 @@ def test_objects_instancing_ext_and_nodes_agree(tmp_path):
     # an atlas with cut-out texels (alpha 0) is exported as alphaMode MASK
     o.texture[:4, :4, 3] = 0
     export_gltf(tmp_path / "mask.glb", objects=o)
+    assert_valid(tmp_path / "mask.glb")
     _, d = _doc(tmp_path / "mask.glb")
     assert d["materials"][0]["alphaMode"] == "MASK" and d["materials"][0]["alphaCutoff"] == 0.5
 
