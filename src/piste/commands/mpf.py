@@ -77,7 +77,7 @@ def run(args) -> int:
             print("  within the game's limits (<= 55 vertices a chunk, <= 25 palettes a link, 25 % weight steps)")
         return 0
     if args.mpf_command == "encode":
-        from piste.formats.ssx.mpf_model import model_to_mpf
+        from piste.formats.ssx.mpf_encode import model_to_mpf
         from piste.pipeline.sources import load_rider_model
 
         if len(args.ratios) > 3:

@@ -21,7 +21,7 @@ from piste.formats.ssx.mpf import (
 @pytest.fixture(scope="module")
 def golden():
     from piste.character import default_rider
-    from piste.formats.ssx.mpf_model import model_to_mpf
+    from piste.formats.ssx.mpf_encode import model_to_mpf
 
     f, _ = model_to_mpf(default_rider(0), ratios=(1.0, 0.25), names=("Body3000", "Body750"))
     return mpf_bytes(f)
@@ -323,7 +323,8 @@ def skinned_models(draw):
 def test_hypothesis_encode_decode(model):
     from piste.character import palette
     from piste.formats.ssx.mpf import game_limits
-    from piste.formats.ssx.mpf_model import model_to_mpf, mpf_to_model
+    from piste.formats.ssx.mpf_encode import model_to_mpf
+    from piste.formats.ssx.mpf_model import mpf_to_model
 
     f, r = model_to_mpf(model, ratios=(1.0,), names=("Body3000",), shadow=None)
     assert game_limits(f) == [] and r["max_bind_error_m"] < 1e-6

@@ -8,9 +8,8 @@ import pytest
 from scipy.spatial import cKDTree
 
 from piste.character import BlendedMesh, default_rider, make_lods, palette, skin
-from piste.formats.ssx.mpf_model import (
-    euler_to_matrix, matrix_to_euler, model_to_mpf, mpf_to_model,
-)
+from piste.formats.ssx.mpf_encode import model_to_mpf
+from piste.formats.ssx.mpf_model import euler_to_matrix, matrix_to_euler, mpf_to_model
 from piste.formats.ssx.mpf import DIR_DTYPE, mpf_bytes, parse_mpf, read_mpf, write_mpf
 
 
@@ -27,7 +26,14 @@ def encoded(rider):
 
 @pytest.fixture(scope="module")
 def decoded(encoded):
-    return mpf_to_model(parse_mpf(encoded[2]))
+    return parse_mpf(encoded[2]).to_model()
+
+
+def test_to_model_method_is_mpf_to_model(encoded, decoded):
+    m = mpf_to_model(parse_mpf(encoded[2]))
+    assert m.skeleton.names == decoded.skeleton.names
+    assert [lod.n_triangles for lod in m.lods] == [lod.n_triangles for lod in decoded.lods]
+    assert np.array_equal(m.meshes[0].positions, decoded.meshes[0].positions)
 
 
 def test_euler_round_trip():

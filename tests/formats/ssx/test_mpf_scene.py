@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from piste.formats.ssx.mpf import write_mpf
-from piste.formats.ssx.mpf_model import model_to_mpf
+from piste.formats.ssx.mpf_encode import model_to_mpf
 
 SCENE = """\
 name = "mpf"

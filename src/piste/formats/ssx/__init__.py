@@ -28,6 +28,7 @@ __all__ = [
     "make_level", "SynthLevel",
 ]
 from piste.formats.ssx.mpf import MpfFile, SubModel, mpf_bytes, parse_mpf, read_mpf, write_mpf  # noqa: E402
-from piste.formats.ssx.mpf_model import SsxModel, model_to_mpf, mpf_to_model  # noqa: E402
+from piste.formats.ssx.mpf_model import SsxModel, mpf_to_model  # noqa: E402
+from piste.formats.ssx.mpf_encode import model_to_mpf  # noqa: E402
 __all__ += ["MpfFile", "SubModel", "read_mpf", "parse_mpf", "write_mpf", "mpf_bytes",  # SSX Tricky models (.mpf)
             "SsxModel", "mpf_to_model", "model_to_mpf"]

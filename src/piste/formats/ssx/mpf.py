@@ -1,7 +1,9 @@
 """SSX Tricky (PS2) rider and board models, ``.mpf``: read, edit, write back byte for byte.
 
-Pure bytes <-> arrays (numpy); conversion to piste's character :class:`~piste.character.Model`
-and the encoder from a piste rider live in :mod:`piste.formats.ssx.mpf_model`.
+Bytes <-> arrays (numpy). ``MpfFile.to_model()`` converts to piste's character
+:class:`~piste.character.Model` (:mod:`piste.formats.ssx.mpf_model`); the encoder from a piste
+rider is :mod:`piste.formats.ssx.mpf_encode`; the layout constants are in
+:mod:`piste.formats.ssx.mpf_layout`.
 
 Facts (``/work/shared/SSX-FORMATS.md`` and OpenSlope's Apache-2.0 prose spec
 ``Trailmap/specs/240-models-mpf.md``; no code from the GPL tools was read into this module)
@@ -69,7 +71,7 @@ API
 read_mpf(path) -> MpfFile / parse_mpf(data, path) -> MpfFile
 write_mpf(mpf, path) -> list[str]          atomic; returns notes (what was laid out anew)
 mpf_bytes(mpf) -> bytes
-MpfFile, SubModel, Group, Link, Mesh, Chunk, MorphKey
+MpfFile, SubModel, Group, Link, Mesh, Chunk, MorphKey; MpfFile.to_model(*other_files) -> SsxModel
 pack_chunks(strips, uv, normals, positions, max_vertices=55) -> list[Chunk]  (the encoder's packer)
 strip_triangles(strip_lengths) -> (t, 3) int64   local vertex indices of a chunk's strips
 game_limits(mpf) -> list[(sub-model, problem)]     what the game would not take (55 / 25 / 25 % steps)
@@ -85,6 +87,13 @@ import numpy as np
 
 from piste.errors import FormatError, ValidationError
 from piste.formats.atomic import write_bytes_atomic
+from piste.formats.ssx.mpf_layout import (  # noqa: F401  (re-exported: the module's public names)
+    BONE_DTYPE, DIR_DTYPE, FORMAT_TRICKY_PS2, GROUP_DTYPE, GROUP_MORPH, GROUP_RENDER, GROUP_SHADOW, IK_DTYPE,
+    LINK_DTYPE, MATERIAL_DTYPE, MAX_CHUNK_VERTICES, MAX_FILE_BYTES, MAX_GROUP_MATRICES, MAX_VERTICES_READ,
+    MESH_DTYPE, MORPH_SCALE, NORMAL_SCALE, PALETTE_CONST, PALETTE_ENTRY_DTYPE, PALHDR_DTYPE, REF_DTYPE,
+    SLOT_NORMAL_BASE, SLOT_TRANSFORM_BASE, UV_SCALE, strip_triangles,
+)
+from piste.formats.ssx.mpf_model import mpf_to_model
 
 __all__ = [
     "MpfFile", "SubModel", "Group", "Link", "Mesh", "Chunk", "MorphKey", "read_mpf", "parse_mpf", "write_mpf",
@@ -92,36 +101,6 @@ __all__ = [
     "UV_SCALE", "NORMAL_SCALE", "MORPH_SCALE", "BONE_DTYPE", "MATERIAL_DTYPE", "IK_DTYPE", "DIR_DTYPE",
     "PALETTE_ENTRY_DTYPE", "GROUP_RENDER", "GROUP_SHADOW", "GROUP_MORPH", "SLOT_TRANSFORM_BASE", "SLOT_NORMAL_BASE",
 ]
-
-FORMAT_TRICKY_PS2 = 8
-MAX_CHUNK_VERTICES = 55
-MAX_GROUP_MATRICES = 25
-UV_SCALE = 4096.0
-NORMAL_SCALE = 32768.0
-MORPH_SCALE = 12.8  # stored i8 units per model unit
-SLOT_TRANSFORM_BASE = 14
-SLOT_NORMAL_BASE = 114
-GROUP_RENDER, GROUP_SHADOW, GROUP_MORPH = 1, 17, 256
-PALETTE_CONST = 36
-MAX_VERTICES_READ = 4096  # per chunk; the game's limit is 55, a hostile count is refused
-MAX_FILE_BYTES = 64 << 20
-
-DIR_DTYPE = np.dtype([("name", "S16"), ("offset", "<u4"), ("size", "<u4"), ("sections", "<u4", (7,)),
-                      ("unused8", "V8"), ("counts", "<i2", (7,)), ("file_id", "i1"), ("pad", "V1"),
-                      ("unused4", "V4")])
-BONE_DTYPE = np.dtype([("name", "S16"), ("parent_file", "<i2"), ("parent_bone", "<i2"), ("flags", "<i2"),
-                       ("mirror", "<i2"), ("translation", "<f4", (3,)), ("rotation", "<f4", (3,)),
-                       ("mirror_offset", "<f4", (3,)), ("mirror_scale", "<f4", (6,))])
-MATERIAL_DTYPE = np.dtype([("textures", "V4", (5,)), ("blend", "<f4"), ("unused", "<f4", (2,))])
-IK_DTYPE = np.dtype([("position", "<f4", (3,)), ("bone", "<u4")])
-GROUP_DTYPE = np.dtype([("type", "<u4"), ("material", "<u4"), ("unknown", "<u4"), ("link_count", "<u4"),
-                        ("link_offset", "<u4")])
-LINK_DTYPE = np.dtype([("offset", "<u4"), ("count", "<u4")])
-MESH_DTYPE = np.dtype([("mesh_offset", "<u4"), ("morph_offset", "<u4"), ("morph_size", "<u4")])
-REF_DTYPE = np.dtype([("count", "<u4"), ("offset", "<u4")])
-PALHDR_DTYPE = np.dtype([("count", "<u4"), ("offset", "<u4"), ("const", "<u4")])
-PALETTE_ENTRY_DTYPE = np.dtype([("weight", "<i2"), ("bone", "u1"), ("file", "u1")])
-assert DIR_DTYPE.itemsize == 80 and BONE_DTYPE.itemsize == 84 and MATERIAL_DTYPE.itemsize == 32
 
 _SECTIONS = ("bones", "ik", "groups", "mesh_data", "materials", "weight_refs", "palettes")
 _COUNTS = ("palettes", "weight_refs", "groups", "bones", "materials", "ik", "morph_keys")
@@ -350,24 +329,13 @@ class MpfFile:
     def names(self) -> list:
         return [m.name for m in self.models]
 
+    def to_model(self, *others: "MpfFile", name: str | None = None, weld: bool = True):
+        """piste's :class:`~piste.character.Model` of this file (plus ``others``, e.g. the head
+        file of a body file): :func:`piste.formats.ssx.mpf_model.mpf_to_model`."""
+        return mpf_to_model(self, *others, name=name, weld=weld)
+
 
 # ------------------------------------------------------------------------------------ strips
-def strip_triangles(strip_lengths) -> np.ndarray:
-    """Chunk-local triangles ``(t, 3) int64`` of consecutive strips of the given lengths: in a
-    strip, triangle ``i`` is ``(i, i+1, i+2)`` for even ``i`` and ``(i+1, i, i+2)`` for odd ``i``."""
-    n = np.asarray(strip_lengths, dtype=np.int64).reshape(-1)
-    n = n[n >= 3]
-    if n.size == 0:
-        return np.zeros((0, 3), np.int64)
-    starts = np.concatenate([[0], np.cumsum(np.asarray(strip_lengths, np.int64))])[:-1][
-        np.asarray(strip_lengths, np.int64) >= 3]
-    ntri = n - 2
-    local = np.arange(ntri.sum()) - np.repeat(np.cumsum(ntri) - ntri, ntri)
-    a = np.repeat(starts, ntri) + local
-    odd = (local % 2) == 1
-    return np.stack([np.where(odd, a + 1, a), np.where(odd, a, a + 1), a + 2], axis=1)
-
-
 def pack_chunks(strips, uv, normals, positions, max_vertices: int = MAX_CHUNK_VERTICES, shadow_slots=None,
                 return_index: bool = False):
     """Pack non-indexed strips into chunks of at most ``max_vertices`` vertices.
