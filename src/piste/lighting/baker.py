@@ -33,7 +33,8 @@ import numpy as np
 from piste.errors import FormatError, OutputError, ValidationError
 from piste.formats.atomic import atomic_path, write_bytes_atomic
 from piste.formats.safe_io import check_regular, loads_json, read_regular
-from piste.lighting.lightmap import LightMap, assemble_atlas, atlas_layout, encode_half_bright, inputs_key, sample_points
+from piste.lighting.lightmap import (LightMap, assemble_atlas, atlas_layout, encode_half_bright, inputs_key,
+                                    sample_points, weld_seam_light)
 from piste.lighting.lights import Lights, default_lights, light_terms, shade
 from piste.lighting.shadows import shadow_visibility
 from piste.workers import die_with_parent, kill_pool
@@ -48,7 +49,7 @@ __all__ = [
 ]
 
 #: bumped whenever the baker's output for the same input changes
-BAKE_VERSION = "piste.lightmap-bake/1"
+BAKE_VERSION = "piste.lightmap-bake/2"  # 2: seams welded (weld_seam_light), fold-aware seam normals
 MANIFEST_FORMAT = "piste.lightmap/1"
 #: largest light-map file (png / npz) read when verifying a bake folder
 MAX_LIGHTMAP_BYTES = 4 << 30
@@ -226,6 +227,7 @@ def bake_lightmap(
         if bar is not None:
             bar.close()
 
+    tiles = weld_seam_light(net, tiles)  # both tiles of every seam hold the same light, folds included
     atlas = assemble_atlas(tiles, layout)
     manifest = {
         "format": MANIFEST_FORMAT,

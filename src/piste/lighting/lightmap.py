@@ -25,8 +25,11 @@ Atlas conventions
 
 Seams: sample points on a shared edge are the same points in both patches (evaluated once per edge
 with the symmetric edge evaluator) and get one normal, the normalised mean of the patches'
-normals (at corners: of every patch at the welded corner).  Lighting on a shared edge is then
-bit-identical in both tiles and C0-only nets show no crease at seams.
+normals (at corners: of every patch at the welded corner), while the patches agree within 60
+degrees; past 90 degrees (a fold) each keeps its own, smoothly in between (:func:`seam_weight`:
+no switch along an edge whose fold angle changes).  The baker then welds the light along every
+seam (:func:`weld_seam_light`): both tiles hold the same values, folds included, so no seam shows
+a jump and C0-only nets show no crease at seams.
 """
 
 from __future__ import annotations
@@ -43,6 +46,8 @@ from piste.errors import ValidationError
 from piste.terrain.bezier import eval_edges, grid_params
 
 __all__ = [
+    "weld_seam_light",
+    "seam_weight",
     "AtlasLayout",
     "atlas_layout",
     "with_lightmap_layout",
@@ -148,6 +153,19 @@ def _normalize(v: np.ndarray) -> np.ndarray:
     return v / np.where(length > 0.0, length, 1.0)[..., None]
 
 
+#: seam normals are averaged fully while two patches' normals are within 60 degrees, not at all
+#: beyond 90 degrees (a fold), smoothly in between (cosines); the light itself is then welded
+#: along every shared edge (:func:`weld_seam_light`), so no tile pair shows a jump
+SEAM_FULL, SEAM_NONE = float(np.cos(np.radians(60.0))), 0.0
+
+
+def seam_weight(cos_angle) -> np.ndarray:
+    """How much of a neighbour's normal a seam sample takes: 1 while the normals are within 60
+    degrees (``cos >= SEAM_FULL``), 0 beyond 90 degrees, a smoothstep between."""
+    x = np.clip((np.asarray(cos_angle, dtype=np.float64) - SEAM_NONE) / (SEAM_FULL - SEAM_NONE), 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
 def sample_points(net, res: int, smooth_seams: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Light-map sample points of every patch on the exact surface, with normals.
 
@@ -191,11 +209,13 @@ def sample_points(net, res: int, smooth_seams: bool = True) -> tuple[np.ndarray,
         fa, fb = sf[pa, sa], sf[pb, sb]
         na = np.where(fa[:, None, None], na[:, ::-1], na)
         nb = np.where(fb[:, None, None], nb[:, ::-1], nb)
-        agree = (na * nb).sum(-1) > 0.0  # never blend patches that face opposite ways
-        mean = _normalize(na + nb)
-        mean = np.where(agree[..., None], mean, np.nan)
-        for p, s, f, own in ((pa, sa, fa, na), (pb, sb, fb, nb)):
-            m = np.where(np.isnan(mean), own, mean)
+        # average only where right: fully (one normal for both: bit-identical light) while the two
+        # normals are within SEAM_FULL of each other, not at all past SEAM_NONE (a real fold keeps
+        # its crease), and smoothly in between, so no jump runs along an edge whose fold angle
+        # changes along it (the old all-or-nothing rule at 90 degrees switched mid-edge)
+        w = seam_weight((na * nb).sum(-1))[..., None]
+        for p, s, f, own, other in ((pa, sa, fa, na, nb), (pb, sb, fb, nb, na)):
+            m = np.where(w >= 1.0, _normalize(na + nb), _normalize(own + w * other))
             m = np.where(f[:, None, None], m[:, ::-1], m)
             nrm[p[:, None], slots[s]] = m
 
@@ -203,13 +223,56 @@ def sample_points(net, res: int, smooth_seams: bool = True) -> tuple[np.ndarray,
     corner_slot = np.array([0, res - 1, res * res - 1, (res - 1) * res])  # c0..c3
     cid = np.asarray(net.corner_ids).ravel()  # (n*4,)
     cn = own_nrm[:, corner_slot].reshape(-1, 3)
-    total = np.zeros((int(cid.max()) + 1, 3))
-    np.add.at(total, cid, cn)
-    mean = _normalize(total)[cid]
-    keep = (mean * cn).sum(-1) > 0.0
-    cn = np.where(keep[:, None], mean, cn)
-    nrm[:, corner_slot] = cn.reshape(n, 4, 3)
+    # each patch's corner: the mean of the corner's normals weighted by how well they agree with
+    # its own (seam_weight), so patches on one side of a fold share a normal, the fold stays sharp
+    order = np.argsort(cid, kind="stable")
+    out = cn.copy()
+    starts = np.flatnonzero(np.r_[True, cid[order][1:] != cid[order][:-1]])
+    ends = np.r_[starts[1:], len(order)]
+    for a, b in zip(starts, ends):
+        if b - a < 2:
+            continue
+        g = order[a:b]
+        wts = seam_weight(cn[g] @ cn[g].T)  # (k, k), 1 on the diagonal
+        out[g] = _normalize(wts @ cn[g])
+        full = (wts >= 1.0).all()
+        if full:  # all agree: one normal, bit-identical in every tile
+            out[g] = _normalize(cn[g].sum(0))[None]
+    nrm[:, corner_slot] = out.reshape(n, 4, 3)
     return pos, nrm
+
+
+def weld_seam_light(net, tiles) -> np.ndarray:
+    """Light ``tiles (n, res, res, C)`` with every shared edge's samples set to the mean of both
+    patches' values and every welded corner's to the mean over its patches, so the two tiles of a
+    seam hold the same light even across a fold (where the normals are not averaged and each side
+    is lit by its own): no jump at the seam, the crease spread over one texel each side.  Samples
+    that already agree (smooth seams: one shared normal) are unchanged.  Returns a new array."""
+    t = np.array(tiles, dtype=np.float32, copy=True)
+    n, res = t.shape[0], t.shape[1]
+    flat = t.reshape(n, res * res, -1)
+    slots = _side_slots(res)
+    sf = np.asarray(net.side_flip)
+    shared = np.asarray(net.shared_edges)
+    if len(shared):
+        pa, pb = net.edge_patches[shared, 0], net.edge_patches[shared, 1]
+        sa, sb = net.edge_sides[shared, 0], net.edge_sides[shared, 1]
+        fa, fb = sf[pa, sa], sf[pb, sb]
+        la = flat[pa[:, None], slots[sa]]
+        lb = flat[pb[:, None], slots[sb]]
+        la = np.where(fa[:, None, None], la[:, ::-1], la)
+        lb = np.where(fb[:, None, None], lb[:, ::-1], lb)
+        mean = 0.5 * (la + lb)
+        for p, s_, f in ((pa, sa, fa), (pb, sb, fb)):
+            flat[p[:, None], slots[s_]] = np.where(f[:, None, None], mean[:, ::-1], mean)
+    corner_slot = np.array([0, res - 1, res * res - 1, (res - 1) * res])
+    cid = np.asarray(net.corner_ids).ravel()
+    cl = flat[:, corner_slot].reshape(n * 4, -1).astype(np.float64)
+    total = np.zeros((int(cid.max()) + 1, cl.shape[1]))
+    np.add.at(total, cid, cl)
+    count = np.bincount(cid, minlength=len(total))[:, None]
+    flat[:, corner_slot] = (total / np.maximum(count, 1))[cid].reshape(n, 4, -1).astype(np.float32)
+    return t
 
 
 # --------------------------------------------------------------------------- atlas sampling
