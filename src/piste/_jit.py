@@ -34,6 +34,7 @@ class _Lazy:
         self.fn = fn
         self.example = example
         self.compiled = None
+        self._ready = False
         self.__doc__ = fn.__doc__
         self.__name__ = fn.__name__
 
@@ -52,7 +53,10 @@ class _Lazy:
 
     def ready(self) -> bool:
         """Compiled and loaded (else start warming all kernels in the background, once)."""
+        if self._ready:
+            return True
         if self.compiled is not None and (self.example is None or self.compiled.signatures):
+            self._ready = True  # (numba's ``signatures`` costs ~50 us a call: ask once)
             return True
         warm_up_async()
         return False
