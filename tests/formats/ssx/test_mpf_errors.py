@@ -101,6 +101,27 @@ def test_nan_bone(golden):
     _fail(b, "bone 3: bind translation or rotation is NaN", "bones.translation")
 
 
+def test_mesh_headers_repeating_one_stream_are_refused():
+    """A hostile file pointing 2,000 mesh headers at one 40-chunk stream: parsed once, then refused
+    (80,000 chunk references) instead of decoding the same geometry 2,000 times."""
+    from piste.formats.ssx.mpf import BONE_DTYPE, PALETTE_ENTRY_DTYPE, Group, Link, Mesh, MpfFile, SubModel, pack_chunks
+
+    n = 55 * 40
+    uv = np.zeros((n, 4), "<i2")
+    uv[:, 2], uv[:, 3] = 14, 114
+    nrm, pos = np.zeros((n, 3), "<i2"), np.zeros((n, 3), "<f4")
+    big = pack_chunks([np.arange(i, i + 55) for i in range(0, n, 55)], uv, nrm, pos)
+    small = [Mesh(pack_chunks([np.arange(3)], uv, nrm, pos)) for _ in range(1999)]
+    sub = SubModel("Body3000", bones=np.zeros(1, BONE_DTYPE), palettes=[np.array([(100, 0, 0)], PALETTE_ENTRY_DTYPE)],
+                   groups=[Group(1, 0, [Link([Mesh(big)] + small, np.array([0], "<u4"))])])
+    b = bytearray(mpf_bytes(MpfFile([sub])))
+    f = parse_mpf(bytes(b))
+    hdr0 = _blob_base(bytes(b), 0) + f.models[0].groups[0].links[0].meshes[0].offset
+    for i in range(1, 2000):
+        b[hdr0 + 12 * i:hdr0 + 12 * i + 4] = b[hdr0:hdr0 + 4]
+    _fail(b, "chunk references", "mesh_offset")
+
+
 def _first_chunk(golden):
     f = parse_mpf(golden)
     c = f.models[0].groups[0].links[0].meshes[0].chunks[0]

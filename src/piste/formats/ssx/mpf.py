@@ -102,6 +102,7 @@ __all__ = [
     "PALETTE_ENTRY_DTYPE", "GROUP_RENDER", "GROUP_SHADOW", "GROUP_MORPH", "SLOT_TRANSFORM_BASE", "SLOT_NORMAL_BASE",
 ]
 
+MAX_CHUNK_REFS = 1 << 16  # chunks referenced by one sub-model's mesh headers (a rider: a few hundred)
 _SECTIONS = ("bones", "ik", "groups", "mesh_data", "materials", "weight_refs", "palettes")
 _COUNTS = ("palettes", "weight_refs", "groups", "bones", "materials", "ik", "morph_keys")
 _NONE = 0xFFFFFFFF
@@ -539,7 +540,8 @@ def _read_submodel(path, data: bytes, base: int, entry, index: int, buf: bytearr
         refs.append(a)
         refs_off.append(int(h["offset"]))
     gh = r.arr(sec["groups"], GROUP_DTYPE, cnt["groups"], "groups")
-    n_link = 0
+    n_link = n_refs = 0
+    streams: dict = {}
     for gi, g in enumerate(gh):
         links = []
         lh = r.arr(int(g["link_offset"]), LINK_DTYPE, int(g["link_count"]), f"group{gi}.links")
@@ -549,7 +551,14 @@ def _read_submodel(path, data: bytes, base: int, entry, index: int, buf: bytearr
             meshes = []
             for mi, m in enumerate(mh):
                 mw = f"{gw}.mesh{mi}"
-                chunks, end = _read_stream(r, int(m["mesh_offset"]), mw)
+                mo = int(m["mesh_offset"])
+                if mo not in streams:  # a stream named by several mesh headers is parsed once
+                    streams[mo] = _read_stream(r, mo, mw)
+                chunks, end = streams[mo]
+                n_refs += len(chunks)
+                if n_refs > MAX_CHUNK_REFS:
+                    raise r.err(f"{mw}.mesh_offset", f"{mw}: more than {MAX_CHUNK_REFS} chunk references "
+                                                     f"(mesh headers naming the same streams over and over)")
                 morphs = []
                 if int(m["morph_offset"]) != _NONE and sub.morph_keys:
                     morphs = _read_morphs(r, int(m["mesh_offset"]) + int(m["morph_offset"]), sub.morph_keys,
