@@ -218,6 +218,11 @@ class TileCache:
         # the bytes of a tile's near mesh, estimated exactly from its patch count
         self._near_estimate = {t: self._near_bytes(int(self.index["tiles"][f"{t[0]},{t[1]}"]["patches"]), t)
                                for t in self.bounds}
+        #: the tiles in a fixed order, their boxes ``(n, 3)`` (skirts included below)
+        self.tiles = sorted(self.bounds)
+        self.lo = np.array([self.bounds[t][0] for t in self.tiles])
+        self.hi = np.array([self.bounds[t][1] for t in self.tiles])
+        self.lo[:, 2] -= [self._depth(t) for t in self.tiles]
         self._far_bytes = 0
         self.far_lod_distance = 0.5 * tile_size
         for t in sorted(self.bounds):
@@ -293,11 +298,18 @@ class TileCache:
         dy = max(b[0, 1] - eye[1], 0.0, eye[1] - b[1, 1])
         return float(np.hypot(dx, dy))
 
+    def distances(self, eye) -> np.ndarray:
+        """:meth:`distance` to every tile of :attr:`tiles` at once, ``(n,)`` float64."""
+        eye = np.asarray(eye, dtype=np.float64)[:2]
+        d = np.maximum(np.maximum(self.lo[:, :2] - eye, eye - self.hi[:, :2]), 0.0)
+        return np.hypot(d[:, 0], d[:, 1])
+
     def update(self, eye) -> None:
         """Choose the near set for ``eye``: nearest tiles first within ``near_radius`` while the
         budget allows; evict the others at once, queue the missing ones for the loader."""
-        eye = np.asarray(eye, dtype=np.float64)
-        order = sorted((self.distance(eye, t), t) for t in self.bounds)
+        dist = self.distances(eye)
+        close = np.nonzero(dist <= self.near_radius)[0]
+        order = [(float(dist[i]), self.tiles[i]) for i in close[np.argsort(dist[close], kind="stable")]]
         room = self.budget - self._far_bytes
         want = []
         for d, t in order:
@@ -337,17 +349,24 @@ class TileCache:
         d = self.distance(eye, t) / self.far_lod_distance
         return next((k for k in FAR_STRIDES if d < k), FAR_STRIDES[-1])
 
-    def draw_list(self, eye=None) -> list:
+    def draw_list(self, eye=None, mask=None) -> list:
         """``[(tile, level, TileMesh)]``: a near mesh where one is resident, else the far one at the
-        stride for ``eye`` (``"far1"``, ``"far2"``, ...; the full corner grid without ``eye``)."""
+        stride for ``eye`` (``"far1"``, ``"far2"``, ...; the full corner grid without ``eye``);
+        ``mask (n,)`` bool keeps only those of :attr:`tiles`."""
         with self._lock:
             near = dict(self.near)
+        if eye is not None:
+            d = self.distances(eye) / self.far_lod_distance
+            strides = np.select([d < k for k in FAR_STRIDES[:-1]], FAR_STRIDES[:-1], FAR_STRIDES[-1])
+        else:
+            strides = np.ones(len(self.tiles), int)
         out = []
-        for t in sorted(self.far):
+        for i in (range(len(self.tiles)) if mask is None else np.nonzero(mask)[0]):
+            t = self.tiles[i]
             if t in near:
                 out.append((t, "near", near[t]))
             else:
-                k = self.far_stride(eye, t) if eye is not None else 1
+                k = int(strides[i])
                 out.append((t, f"far{k}", self.far[t][k]))
         return out
 
@@ -357,10 +376,11 @@ class TileCache:
         self._thread.join(timeout=5)
 
 
-def _aabb_visible(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
-    """An axis-aligned box against inward frustum planes (the positive vertex test)."""
-    p = np.where(planes[:, :3] >= 0.0, hi, lo)
-    return bool(((p * planes[:, :3]).sum(1) + planes[:, 3] >= 0.0).all())
+def _boxes_visible(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Axis-aligned boxes ``lo, hi (n, 3)`` against inward frustum planes ``(6, 4)`` (the positive
+    vertex test): ``(n,)`` bool, False only for boxes wholly outside one plane."""
+    p = np.where(planes[None, :, :3] >= 0.0, hi[:, None, :], lo[:, None, :])  # (n, 6, 3)
+    return ((p * planes[None, :, :3]).sum(-1) + planes[None, :, 3] >= 0.0).all(-1)
 
 
 class StreamingRenderer:
@@ -431,13 +451,9 @@ class StreamingRenderer:
         self.prog["u_fog"].value = (0.6 * cam.far, cam.far)
         drawn = {"near": 0, "far": 0, "culled": 0, "near_patches": 0, "far_patches": 0, "triangles": 0}
         live = set()
-        for t, level, mesh in self.cache.draw_list(cam.eye):
-            b = self.cache.bounds[t]
-            lo, hi = b[0].copy(), b[1].copy()
-            lo[2] -= self.cache._depth(t)  # skirts
-            if not _aabb_visible(planes, lo, hi):
-                drawn["culled"] += 1
-                continue
+        visible = _boxes_visible(planes, self.cache.lo, self.cache.hi)
+        drawn["culled"] = int((~visible).sum())
+        for t, level, mesh in self.cache.draw_list(cam.eye, visible):
             key = (t, level)
             live.add(key)
             self._vao(key, mesh).render(moderngl.TRIANGLES)
