@@ -210,3 +210,32 @@ def test_glb_chunk_length_past_end_refused(tmp_path):
     p.write_bytes(glb)
     with pytest.raises(FormatError, match=r"bad\.glb, field 'chunk0.length'"):
         load_gltf(p)
+
+
+def test_200k_nodes_refused_before_parsing(tmp_path):
+    p = tmp_path / "many.gltf"
+    p.write_text(json.dumps({"asset": {"version": "2.0"}, "nodes": [{}] * 200_000}))
+    with pytest.raises(FormatError, match=r"many\.gltf, field 'nodes': count 200000 is more than the limit"):
+        load_gltf(p)
+
+
+def test_huge_number_arrays_refused_before_walking(tmp_path):
+    p = tmp_path / "big.gltf"
+    p.write_text(json.dumps({"asset": {"version": "2.0"}, "accessors": [{"max": [0] * 2_000_000}]}))
+    with pytest.raises(FormatError, match=r"big\.gltf: more than .* values"):
+        load_gltf(p)
+
+
+@pytest.mark.parametrize("doc, field", [
+    ({"scenes": "red"}, "scenes"), ({"scene": True}, "scene"), ({"nodes": [{"mesh": -1}]}, "nodes[0].mesh"),
+    ({"nodes": [{"translation": [1, 2]}]}, "nodes[0].translation"), ({"accessors": [{"count": "eight"}]},
+                                                                         "accessors[0].count"),
+    ({"meshes": [{"primitives": [{"attributes": {"POSITION": 1.5}}]}]}, "meshes[0].primitives[0].attributes.POSITION"),
+    ({"cameras": [{"perspective": {"yfov": None}}]}, "cameras[0].perspective.yfov"),
+])
+def test_wrong_json_types_name_the_field(tmp_path, doc, field):
+    p = tmp_path / "t.gltf"
+    p.write_text(json.dumps({"asset": {"version": "2.0"}, **doc}))
+    with pytest.raises(FormatError) as ei:
+        load_gltf(p)
+    assert f"t.gltf, field {field!r}" in str(ei.value)

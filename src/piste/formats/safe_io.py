@@ -25,6 +25,7 @@ check_regular(path, max_bytes, owner=None, field=None) -> int       size in byte
 decode_data_uri(uri, max_bytes, owner=None, field=None) -> bytes
 loads_json(data, path, max_depth=MAX_JSON_DEPTH) -> object         json.loads with bounded nesting
 json_depth(obj) -> int                                              nesting depth (iterative)
+text_depth(text) -> int                                             nesting depth of JSON text, unparsed
 Limits: MAX_MODEL_BYTES, MAX_BUFFER_BYTES, MAX_IMAGE_BYTES, MAX_IMAGE_PIXELS, MAX_JSON_DEPTH
 """
 
@@ -38,6 +39,8 @@ import re
 import stat
 import urllib.parse
 from pathlib import Path
+
+import numpy as np
 
 from piste.errors import FormatError
 
@@ -206,13 +209,30 @@ def json_depth(obj) -> int:
     return depth
 
 
+_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.S)
+
+
+def text_depth(data) -> int:
+    """Deepest ``[`` / ``{`` nesting of JSON text, found without parsing (strings skipped), so a
+    deep document is refused before a recursive parser sees it."""
+    raw = data.encode("utf-8", "surrogatepass") if isinstance(data, str) else bytes(data)
+    b = np.frombuffer(_STRING.sub(b'""', raw), dtype=np.uint8)
+    opens = (b == ord("[")) | (b == ord("{"))
+    br = opens[opens | (b == ord("]")) | (b == ord("}"))]  # the brackets only, in order
+    return int(np.cumsum(np.where(br, 1, -1)).max(initial=0))
+
+
 def loads_json(data, path, max_depth: int = MAX_JSON_DEPTH, field: str | None = None):
     """``json.loads(data)`` whose errors (syntax, encoding, nesting deeper than ``max_depth``) are
-    FormatErrors naming ``path``."""
+    FormatErrors naming ``path``; the nesting is measured on the text before parsing."""
+    if text_depth(data) > max_depth:
+        raise _err(path, field, f"JSON nested too deeply (more than {max_depth} levels)")
     try:
         doc = json.loads(data)
     except RecursionError:
         raise _err(path, field, f"JSON nested too deeply (more than {max_depth} levels)") from None
+    except json.JSONDecodeError as e:
+        raise FormatError(path, f"not valid JSON: {e.msg} (column {e.colno})", line=e.lineno, field=field) from None
     except (ValueError, TypeError) as e:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
         raise _err(path, field, f"not valid JSON ({e})") from None
     if json_depth(doc) > max_depth:
