@@ -365,3 +365,15 @@ def test_hypothesis_encode_decode(model):
     dense = lambda b_, w_, n: np.add.at(z := np.zeros((n, nb)), (np.repeat(np.arange(n), b_.shape[1]), b_.reshape(-1)),  # noqa: E731
                                         w_.reshape(-1)) or z
     assert np.allclose(dense(gb, gw, len(gb)), dense(pb, pw, len(pb))[j], atol=1e-6)
+
+
+def test_write_is_atomic(golden, tmp_path):
+    from piste.formats.ssx.mpf import write_mpf
+
+    out = tmp_path / "RIDER.mpf"
+    out.write_bytes(b"previous")
+    f = parse_mpf(golden)
+    f.models[0].palettes[0]["weight"][0] += 1
+    with pytest.raises(ValidationError):
+        write_mpf(f, out)
+    assert out.read_bytes() == b"previous" and [p.name for p in tmp_path.iterdir()] == ["RIDER.mpf"]
