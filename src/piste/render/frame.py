@@ -21,7 +21,7 @@ from piste.render.sky_pass import HORIZON, SkyPass
 from piste.render.terrain_pass import TerrainPass
 from piste.render.textures import placeholder_lightmap, track_field
 from piste.terrain.cull import patch_tree
-from piste.terrain.resident import morph_setting, resident_terrain
+from piste.terrain.resident import morph_setting, resident_fits, resident_terrain
 from piste.terrain.tessellate import tessellate
 
 from piste.transforms import cull_boxes  # noqa: E402  (re-exported)
@@ -103,7 +103,8 @@ class TerrainRenderer:
     lod_morph : geomorph between LOD levels (False: the talk's exact positions, which pop); None:
         on unless the CLI's ``--lod-morph off`` says otherwise (:func:`piste.terrain.resident.morph_setting`)
     resident : keep every patch's vertices on the GPU and send only index lists (False: tessellate
-        on the CPU every frame, the talk's way; same triangles)
+        on the CPU every frame, the talk's way; same triangles).  Nets too big for
+        :data:`piste.terrain.resident.RESIDENT_BUDGET` (~46k patches) take the CPU path.
 
     ``ps2`` light-map mode renders into a half-float (RGBA16F) target and resolves it into the
     8-bit one (or the window) at the end of the frame: the blend's ``As`` reaches 2.0 (the PS2's
@@ -185,7 +186,8 @@ class TerrainRenderer:
         t = timings if timings is not None else {}
         # GPU-resident blocks: only culling, LOD and indices here.  Until they are built (in the
         # background, so a fresh process draws at once) frames take the CPU path, visible patches only.
-        res = resident_terrain(self.net, wait=self.resident_wait) if levels is None and self.resident else None
+        use = self.resident and levels is None and resident_fits(self.net)
+        res = resident_terrain(self.net, wait=self.resident_wait) if use else None
         if res is not None:
             t0 = time.perf_counter()
             pids = self.visible(camera)

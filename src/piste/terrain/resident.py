@@ -54,7 +54,8 @@ from piste.terrain.lod import DEFAULT_FAR, DEFAULT_NEAR, LEVELS
 from piste.terrain.net import SIDE_CORNERS, PatchNet
 from piste.terrain.tessellate import MAX_LEVEL, VERTEX_FLOATS, _cache, _glue_sources, get_shape, tessellate
 
-__all__ = ["ResidentTerrain", "ResidentMesh", "RESIDENT_FLOATS", "MORPH_BAND", "resident_terrain", "morph_setting"]
+__all__ = ["ResidentTerrain", "ResidentMesh", "RESIDENT_FLOATS", "MORPH_BAND", "RESIDENT_BUDGET", "resident_terrain",
+           "resident_fits", "morph_setting"]
 
 #: floats per resident vertex: position 3, morph target 3, uv 2, light-map uv 2, morph slot 1
 RESIDENT_FLOATS = 11
@@ -373,6 +374,18 @@ class ResidentTerrain:
             morph=bool(morph),
             n_vertices=int(self.shape_verts[key].sum()),
         )
+
+
+#: memory the resident blocks (and the per-level vertex cache they are built from) may take
+RESIDENT_BUDGET = 512 * 2**20
+
+
+def resident_fits(net: PatchNet, levels=LEVELS, budget: int = RESIDENT_BUDGET) -> bool:
+    """Whether ``net``'s resident blocks (44 bytes a vertex) plus the vertex cache they come from
+    (56 bytes) stay within ``budget`` bytes (``N x 116 x 100``: about 46k patches for 512 MB).
+    Bigger nets are drawn on the CPU path, visible patches evaluated per frame."""
+    block = sum(int(n) * int(n) for n in levels)
+    return len(net) * block * (RESIDENT_FLOATS + VERTEX_FLOATS) * 4 <= budget
 
 
 def morph_setting(explicit: bool | None = None) -> bool:
