@@ -202,7 +202,7 @@ class TerrainRenderer:
         t1 = time.perf_counter()
         pids = self.visible(camera)
         t2 = time.perf_counter()
-        mesh = tessellate(self.net, levels, patches=pids, cache=False if self.resident else None)
+        mesh = tessellate(self.net, levels, patches=pids, cache=False if use else None)
         t3 = time.perf_counter()
         t.update(lod=(t1 - t0) * 1e3, cull=(t2 - t1) * 1e3, tessellate=(t3 - t2) * 1e3)
         return mesh
