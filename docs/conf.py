@@ -32,6 +32,7 @@ extensions = [
 templates_path = []
 exclude_patterns = ["_build", "auto_examples/*.ipynb", "auto_examples/*.py", "auto_examples/*.zip"]
 html_theme = "alabaster"
+html_math_renderer = "piste_text"  # no MathJax from a CDN: the site works offline
 html_static_path = []
 html_title = f"piste {release}"
 html_theme_options = {

@@ -108,6 +108,43 @@ def example_scraper(block, block_vars, gallery_conf, **kwargs):
     return figure_rst(paths, gallery_conf["src_dir"])
 
 
+# ----------------------------------------------------------------------------- math without a CDN
+# The site must work offline (CI and users behind firewalls): formulas are rendered as HTML text
+# (Unicode symbols, <sub>/<sup>) instead of MathJax from a CDN.
+_SYMBOLS = {r"\times": "×", r"\sum": "Σ", r"\cdot": "·", r"\leq": "≤", r"\geq": "≥", r"\max": "max",
+            r"\min": "min", r"\frac": "", r"\left": "", r"\right": "", r"\,": " ", r"\;": " ", r"\ ": " "}
+
+
+def math_html(latex: str) -> str:
+    import html
+    import re
+
+    t = latex
+    for k, v in _SYMBOLS.items():
+        t = t.replace(k, v)
+    t = re.sub(r"\\(mathrm|mathbf|text|operatorname)\{([^{}]*)\}", r"\2", t)
+    t = html.escape(t)
+    t = re.sub(r"_\{([^{}]*)\}", r"<sub>\1</sub>", t)
+    t = re.sub(r"_([A-Za-z0-9*])", r"<sub>\1</sub>", t)
+    t = re.sub(r"\^\{([^{}]*)\}", r"<sup>\1</sup>", t)
+    t = re.sub(r"\^([A-Za-z0-9*])", r"<sup>\1</sup>", t)
+    return t.replace("{", "").replace("}", "")
+
+
+def _visit_inline(self, node):
+    self.body.append(f'<span class="math">{math_html(node.astext())}</span>')
+    from docutils import nodes
+
+    raise nodes.SkipNode
+
+
+def _visit_block(self, node):
+    self.body.append(f'<div class="math"><p>{math_html(node.astext())}</p></div>')
+    from docutils import nodes
+
+    raise nodes.SkipNode
+
+
 # ----------------------------------------------------------------------------- hooks
 def _generate(app) -> None:
     import sys
@@ -126,4 +163,5 @@ def _generate(app) -> None:
 
 def setup(app):
     app.connect("builder-inited", _generate)
+    app.add_html_math_renderer("piste_text", (_visit_inline, None), (_visit_block, None))
     return {"version": "1", "parallel_read_safe": True}
