@@ -45,6 +45,7 @@ def test_no_pixel_lost_at_any_height(gl):
     vis = compute_visibility(net, 32.0, heights)
     low = compute_visibility(net, 32.0, (1.7, 9.0))  # the old fixed band
     r = TerrainRenderer(net, size=(96, 64), ctx=gl)
+    r.resident_wait = True  # every frame on the same (resident) path: pixel-exact comparisons
     try:
         culled, lost_without_guard = 0, 0
         for h, cam in views:

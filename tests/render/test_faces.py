@@ -84,6 +84,7 @@ def test_rendered_face_moves(gl, rider_scene, mode):
 
     cam = _face_camera(rider_scene, 1.0)
     r = SceneRenderer(rider_scene, size=(160, 112), ctx=gl, lightmap=None, shadows=False, face=mode)
+    r.terrain.resident_wait = True  # every frame on the same (resident) path
     try:
         opened = r.render(1.0, camera=cam, face_time=1.0).image[..., :3].astype(int)
         closed = r.render(1.0, camera=cam, face_time=0.075).image[..., :3].astype(int)  # mid-blink
@@ -111,6 +112,7 @@ def test_gltf_expressions_play(gl, gltf_model, rider_scene):
     top = mt[:3, 3] + mt[:3, 1] * (cast.lods[0].mesh.bounds()[1][1] * 0.85)
     cam = Camera(top + mt[:3, 2] * 2.0, top, fov_y=40.0, near=0.05, far=500.0)
     r = SceneRenderer(s, size=(160, 112), ctx=gl, lightmap=None, shadows=False, casts=[cast])
+    r.terrain.resident_wait = True
     try:
         imgs = [r.render(1.0, camera=cam, face_time=ft).image[..., :3].astype(int) for ft in (0.0, 1.0, 3.0)]
     finally:

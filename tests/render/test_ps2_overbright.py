@@ -34,6 +34,7 @@ def test_ps2_equals_modulate_over_bright(gl, course):
 
     net, line, atlas = course
     r = TerrainRenderer(net, size=(160, 112), ctx=gl, lightmap=atlas, track=line, track_half_width=TRACK_HALF_WIDTH)
+    r.resident_wait = True  # both modes on the same (resident) path
     try:
         for f in (0.15, 0.5, 0.85):
             cam = track_camera(line, f)
@@ -58,6 +59,7 @@ def test_ps2_scene_resolves_into_the_target(gl, course):
     net, line, atlas = course
     scene = Scene.default(0, objects=False)
     r = SceneRenderer(scene, size=(160, 112), ctx=gl, lightmap=atlas)
+    r.terrain.resident_wait = True
     try:
         a = r.render(0.5, lightmap_mode="modulate", count_rider_pixels=True)
         b = r.render(0.5, lightmap_mode="ps2", count_rider_pixels=True)

@@ -27,6 +27,7 @@ def test_two_models_drawn_together(gl, gltf_model, course_scene):
     assert cast.lods[0].palette.size != s.lods[0].palette.size or cast.model.skeleton.n_bones != s.model.skeleton.n_bones
     alone = SceneRenderer(s, size=(160, 112), ctx=gl, lightmap=None)
     both = SceneRenderer(s, size=(160, 112), ctx=gl, lightmap=None, casts=[cast])
+    alone.terrain.resident_wait = both.terrain.resident_wait = True
     try:
         a = alone.render(0.5, count_rider_pixels=True)
         b = both.render(0.5, count_rider_pixels=True)

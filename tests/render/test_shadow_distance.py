@@ -36,6 +36,7 @@ def test_distant_shadow_is_not_dashed(gl, one_rider):
     from piste.render.scene_renderer import SceneRenderer
 
     r = SceneRenderer(one_rider, size=(320, 224), ctx=gl, lightmap=None, face=None)
+    r.terrain.resident_wait = True
     try:
         assert r.shadows.mip_levels >= 3
         for t in (1.0, 2.0):
