@@ -44,6 +44,8 @@ import numpy as np
 
 from piste.errors import FormatError
 from piste.formats.atomic import atomic_path
+from piste.formats.bundle_schema import MAX_MEMBER_BYTES, check_manifest
+from piste.formats.safe_io import loads_json
 
 __all__ = ["BUNDLE_FORMAT", "REQUIRED_MEMBERS", "write_bundle", "read_bundle", "read_manifest", "BundleData",
            "camera_to_dict", "load_bundle"]
@@ -108,9 +110,9 @@ def _manifest(path: Path, zf: zipfile.ZipFile) -> dict:
         raise FormatError(path, "not a piste bundle: no manifest.json member", field="manifest.json") from None
     except (zipfile.BadZipFile, zlib.error, OSError) as exc:
         raise FormatError(path, f"corrupt member ({exc})", field="manifest.json") from None
-    try:
-        man = json.loads(raw.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+    try:  # nesting bounded before parsing (safe_io), so no RecursionError
+        man = loads_json(raw.decode("utf-8"), path, field="manifest.json")
+    except UnicodeDecodeError as exc:
         raise FormatError(path, f"manifest is not valid JSON ({exc})", field="manifest.json") from None
     if not isinstance(man, dict):
         raise FormatError(path, "manifest must be a JSON object", field="manifest.json")
@@ -120,6 +122,7 @@ def _manifest(path: Path, zf: zipfile.ZipFile) -> dict:
                                 "`piste build`", field="format")
     if not isinstance(man.get("members"), dict):
         raise FormatError(path, "manifest has no 'members' table", field="members")
+    check_manifest(man, path)  # every field the loaders read has its type and a sane size
     return man
 
 
@@ -137,6 +140,9 @@ def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool) -
         member = f"{name}.npy"
         if member not in names:
             raise FormatError(path, "member listed in the manifest is missing", field=member)
+        if zf.getinfo(member).file_size > MAX_MEMBER_BYTES:  # a zip bomb: checked before inflating
+            raise FormatError(path, f"member of {zf.getinfo(member).file_size} bytes is larger than the limit of "
+                                    f"{MAX_MEMBER_BYTES}", field=member)
         try:
             data = zf.read(member)
         except (zipfile.BadZipFile, zlib.error, OSError) as exc:

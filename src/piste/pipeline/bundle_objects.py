@@ -18,12 +18,13 @@ camera_from_dict(d) -> Camera          :func:`piste.formats.bundle.camera_to_dic
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from piste.errors import ConfigError, FormatError
+from piste.errors import ConfigError, FormatError, PisteError
 from piste.formats.bundle import BundleData, camera_to_dict, read_bundle
 from piste.lighting.lightmap import LightMap
 from piste.lighting.lights import AmbientLight, DirectionalLight, Lights, PointLight, SpotLight
@@ -55,6 +56,28 @@ def camera_from_dict(d: dict) -> Camera:
     """The :class:`piste.world.camera.Camera` of a manifest entry (:func:`camera_to_dict`)."""
     return Camera(np.array(d["eye"]), np.array(d["target"]), up=np.array(d["up"]), fov_y=d["fov_y"], near=d["near"],
                   far=d["far"], ortho_height=d.get("ortho_height"))
+
+
+def _manifest_errors(fn):
+    """A damaged manifest (its SHA-256 sums cover the arrays, not the manifest) or inconsistent
+    arrays give a FormatError naming the bundle, never a raw KeyError / ValueError (issue 10)."""
+
+    @functools.wraps(fn)
+    def wrapper(obj, *args, **kwargs):
+        path = getattr(obj, "path", None)
+        try:
+            return fn(obj, *args, **kwargs)
+        except FormatError as exc:
+            if exc.path is not None:
+                raise
+            raise FormatError(path, str(exc).split(": ", 1)[-1], field=exc.field) from None
+        except PisteError as exc:  # a light or camera the manifest describes is invalid
+            raise FormatError(path, f"invalid manifest entry: {exc}", field="manifest.json") from None
+        except (KeyError, TypeError, ValueError, IndexError, AttributeError, ZeroDivisionError, OverflowError) as exc:
+            raise FormatError(path, f"damaged bundle: the manifest does not match its arrays "
+                                    f"({type(exc).__name__}: {exc})", field="manifest.json") from None
+
+    return wrapper
 
 
 @dataclass
@@ -95,6 +118,7 @@ class Bundle:
             raise ConfigError(f"{self.path}: no camera {name!r}; the scene has {', '.join(self.cameras)}")
         return self.cameras[name]
 
+    @_manifest_errors
     def objects(self):
         """The placed objects as a :class:`piste.world.objects.ObjectSet` (None when there are none)."""
         if "objects" in self._cache:
@@ -124,11 +148,13 @@ class Bundle:
         self._cache["objects"] = objs
         return objs
 
+    @_manifest_errors
     def vertex_colors(self) -> dict:
         """Baked per-instance vertex colours ``{kind: (k, v, 3) uint8}`` half-bright."""
         info = self.manifest.get("objects") or {}
         return {k: self.arrays[f"objects/colors/{k}"] for k in info.get("kinds", ())}
 
+    @_manifest_errors
     def rider_model(self):
         """The riders' character :class:`piste.character.Model` (skeleton, LOD-0 mesh, clips) or None."""
         if "rider_model" in self._cache:
@@ -142,6 +168,7 @@ class Bundle:
         self._cache["rider_model"] = m
         return m
 
+    @_manifest_errors
     def rider_lods(self):
         """The riders' LODs (:class:`piste.character.LOD` list, palettes as built) or None."""
         if "rider_lods" in self._cache:
@@ -155,6 +182,7 @@ class Bundle:
         return lods
 
 
+@_manifest_errors
 def bundle_from_data(data: BundleData) -> Bundle:
     """Build the terrain net, light map, lights, cameras and visibility of a read bundle (objects
     and characters are built when first asked for).  Raises :class:`~piste.errors.FormatError`
