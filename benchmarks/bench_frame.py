@@ -26,11 +26,16 @@ Run: ``.venv/bin/python benchmarks/bench_frame.py [--quick] [--frames N] [--size
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
+# one BLAS thread: on 2 shared cores OpenBLAS's spinning worker threads steal the CPU from whatever
+# runs next (llvmpipe's threads, the next contender), which made every timing after a BLAS call noisy
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _timing import fit_exponent, record  # noqa: E402

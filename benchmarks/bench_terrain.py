@@ -21,11 +21,16 @@ Run: ``.venv/bin/python benchmarks/bench_terrain.py [--quick] [--rounds N]``
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
+# one BLAS thread: on 2 shared cores OpenBLAS's spinning worker threads steal the CPU from whatever
+# runs next (llvmpipe's threads, the next contender), which made every timing after a BLAS call noisy
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _timing import copy_bandwidth, fit_exponent, interleaved, ms, record, stat  # noqa: E402
@@ -98,7 +103,7 @@ def frame_section(rounds: int) -> None:
     }
     if not _kernels.HAVE_NUMBA:
         fns.pop("CPU tessellation, compiled (numba)")
-    t = interleaved(fns, rounds, warmup=2)
+    t = interleaved(fns, rounds, warmup=3, inner=3)  # 3 calls a round: fewer one-off stalls in the median
     f = res.frame(eye, planes)
     print(f"\n== one frame: {len(vis)} visible patches, {tris:,} triangles, {mesh.n_vertices:,} vertices, "
           f"{nbytes / 1e6:.2f} MB of CPU-tessellated output; resident index list {f.indices.nbytes / 1e3:.0f} kB ==")
