@@ -20,7 +20,7 @@ import importlib.util
 import os
 import threading
 
-__all__ = ["HAVE_NUMBA", "lazy_njit", "warm_up", "warm_up_async"]
+__all__ = ["HAVE_NUMBA", "KERNEL_MODULES", "lazy_njit", "warm_up", "warm_up_async"]
 
 HAVE_NUMBA = not os.environ.get("PISTE_NO_NUMBA") and importlib.util.find_spec("numba") is not None
 _KERNELS: list = []
@@ -78,8 +78,16 @@ def lazy_njit(fn, example=None):
     return k
 
 
+#: the modules that define kernels (imported by the warm-up, so it does not depend on import order)
+KERNEL_MODULES = ("piste.terrain._kernels", "piste.character.skinning")
+
+
 def warm_up() -> None:
-    """Compile / load every registered kernel now (no-op without numba)."""
+    """Compile / load every kernel now (no-op without numba)."""
+    if not HAVE_NUMBA:
+        return
+    for name in KERNEL_MODULES:
+        importlib.import_module(name)
     for k in list(_KERNELS):
         k.warm()
 

@@ -13,6 +13,7 @@ from piste.character.skinning import BlendedMesh
 @pytest.mark.parametrize("normalize", [True, False])
 def test_compiled_blend_bit_identical_to_sparse(normalize):
     _jit.warm_up()
+    assert skinning._blend_nb.ready()  # else the default call below would run numpy
     rider = default_rider()
     sk, me = rider.skeleton, rider.meshes[0]
     mats = np.stack([sk.skin_matrices(rider.clips[n].sample(0.3 * i + 0.1, loop=True))

@@ -155,6 +155,7 @@ def test_morph_factor_falls_to_zero_at_the_switch():
 @pytest.mark.skipif(not _kernels.HAVE_NUMBA, reason="numba not installed: only the numpy path exists")
 def test_numba_and_numpy_frames_bit_identical():
     _jit.warm_up()
+    assert _kernels.side_lod_ready() and _kernels.cull_ready() and _kernels.ready(_kernels._frame_indices_nb)
     net = PatchNet.from_bpt(TEAPOT)
     r = ResidentTerrain(net)
     for eye in ([0, -6, 3], [3, 1, 1], [20, 20, 10]):
@@ -172,6 +173,7 @@ def test_numba_and_numpy_frames_bit_identical():
 @pytest.mark.parametrize("seed", range(3))
 def test_compiled_cpu_tessellation_bit_identical_to_numpy(seed):
     _jit.warm_up()
+    assert _kernels.gather_ready()  # else both calls below would run numpy
     net = grid_net(4, 5, seed=seed)
     rng = np.random.default_rng(seed)
     levels = rng.choice([4, 6, 8], net.n_edges)
