@@ -4,7 +4,6 @@ buffer lies outside its folder is refused by a scene, and loads when the scene n
 from __future__ import annotations
 
 import json
-import os
 
 import numpy as np
 import pytest
@@ -71,9 +70,3 @@ def test_bad_allow_paths(layout, value, msg):
     with pytest.raises(ConfigError, match=msg):
         loads_scene(f"allow_paths = {value}\n", layout / "scene.toml")
 
-
-@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs named pipes")
-def test_terrain_source_fifo_refused(tmp_path):
-    os.mkfifo(tmp_path / "h.png")
-    with pytest.raises(ConfigError, match="not a regular file"):
-        loads_scene('[terrain]\nsource = "h.png"\n', tmp_path / "scene.toml")

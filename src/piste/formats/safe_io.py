@@ -26,6 +26,7 @@ decode_data_uri(uri, max_bytes, owner=None, field=None) -> bytes
 loads_json(data, path, max_depth=MAX_JSON_DEPTH) -> object         json.loads with bounded nesting
 json_depth(obj) -> int                                              nesting depth (iterative)
 text_depth(text) -> int                                             nesting depth of JSON text, unparsed
+toml_depth(text) -> int                                             nesting depth of TOML text, unparsed
 Limits: MAX_MODEL_BYTES, MAX_BUFFER_BYTES, MAX_IMAGE_BYTES, MAX_IMAGE_PIXELS, MAX_JSON_DEPTH
 """
 
@@ -220,6 +221,15 @@ def text_depth(data) -> int:
     opens = (b == ord("[")) | (b == ord("{"))
     br = opens[opens | (b == ord("]")) | (b == ord("}"))]  # the brackets only, in order
     return int(np.cumsum(np.where(br, 1, -1)).max(initial=0))
+
+
+_TOML_STRING = re.compile(r'"""(?:[^\\]|\\.)*?"""|\'\'\'.*?\'\'\'|"(?:[^"\\\n]|\\.)*"|\'[^\'\n]*\'|#[^\n]*', re.S)
+
+
+def toml_depth(text: str) -> int:
+    """Deepest ``[`` / ``{`` nesting of TOML text (strings and comments skipped), measured before
+    parsing: :mod:`tomllib` recurses on nested arrays and would raise RecursionError."""
+    return text_depth(_TOML_STRING.sub('""', text).replace('"', " "))
 
 
 def loads_json(data, path, max_depth: int = MAX_JSON_DEPTH, field: str | None = None):

@@ -71,6 +71,7 @@ from pathlib import Path
 import numpy as np
 
 from piste.errors import FormatError, ValidationError
+from piste.formats.safe_io import toml_depth
 
 __all__ = [
     "AmbientLight",
@@ -337,6 +338,8 @@ def loads_lights(text: str, path="<string>") -> Lights:
     """
     import tomllib
 
+    if toml_depth(text) > 32:  # before tomllib, which recurses (RecursionError)
+        raise FormatError(path, "arrays or tables nested more than 32 deep")
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -119,7 +119,7 @@ from pathlib import Path
 
 from piste.errors import ConfigError, PisteError, ValidationError
 from piste.formats.limits import precheck_gltf
-from piste.formats.safe_io import check_regular, resolve_reference
+from piste.formats.safe_io import check_regular, resolve_reference, toml_depth
 from piste.lighting.lights import AmbientLight, DirectionalLight, PointLight, SpotLight
 
 __all__ = [
@@ -141,6 +141,8 @@ __all__ = [
 
 BUILTIN_MODELS = ("builtin:rider", "builtin:tree", "builtin:sign", "builtin:rock", "builtin:rail")
 HEIGHTFIELD_IMAGES = (".png", ".tif", ".tiff", ".pgm")
+#: deepest array / table nesting a scene file may have (real ones nest 2 or 3 deep)
+MAX_TOML_DEPTH = 32
 #: [lod] preset -> (near, far) metres: piste's own, and SSX Tricky's 3000 / 15000 game units
 LOD_PRESETS = {"piste": (60.0, 180.0), "ssx_tricky": (30.0, 150.0)}
 
@@ -506,6 +508,8 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     import tomllib
 
     path = Path(path)
+    if toml_depth(text) > MAX_TOML_DEPTH:  # before tomllib, which recurses (RecursionError)
+        raise SceneError(path, f"arrays or tables nested more than {MAX_TOML_DEPTH} deep")
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -748,6 +752,8 @@ def _npz_is_net(path: Path) -> bool:
 def load_scene(path) -> SceneFile:
     """Read and validate the scene file at ``path`` (see the module docstring)."""
     path = Path(path)
+    if path.exists() and not path.is_dir() and not path.is_file():  # a device or pipe would hang the read
+        raise SceneError(path, "not a regular file, expected a scene .toml file")
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -756,4 +762,6 @@ def load_scene(path) -> SceneFile:
         raise SceneError(path, "is a folder, expected a scene .toml file") from None
     except UnicodeDecodeError as exc:
         raise SceneError(path, f"not UTF-8 text ({exc.reason})") from None
+    except OSError as exc:
+        raise SceneError(path, f"cannot read: {exc.strerror or exc}") from None
     return loads_scene(text, path)
