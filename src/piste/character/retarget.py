@@ -10,7 +10,7 @@ through a **bone map** ``{source bone: target bone}``:
   default rider's names: ``pelvis``, ``spine1..3``, ``neck``, ``head``, ``clavicle_l``,
   ``upperarm_l``, ``lowerarm_l``, ``hand_l``, ``thigh_l``, ``shin_l``, ``foot_l``, ``toe_l`` and the
   ``_r`` side) and joined on them.  Labels come from the names when they say it (the rider's own
-  names; Mixamo's ``mixamorig:LeftUpLeg``; ``Left``/``Right``/``.L``/``_R``/``L``-suffixed
+  names; Mixamo's ``mixamorig:LeftUpLeg``; SSX Tricky's ``hips``, ``l_clav``, ``l_thigh``, ``r_calf``; ``Left``/``Right``/``.L``/``_R``/``L``-suffixed
   names like ``UpperArm.L``, ``b_LeftForeArm_010``, ``thigh_l``), and otherwise from the
   **hierarchy and rest geometry** (files whose joints are just ``node12``, like CesiumMan): the
   pelvis is the first bone with three long chains below it (two legs and the spine), the chest
@@ -71,6 +71,10 @@ _WORDS = {
     "shin": "shin", "calf": "shin", "lowerleg": "shin", "leg": "shin", "knee": "shin",
     "foot": "foot", "ankle": "foot",
     "toe": "toe", "toes": "toe", "toebase": "toe", "ball": "toe",
+    # SSX Tricky's rider bones (``hips``, ``l_clav``, ``l_thigh``, ...: OpenSlope spec 240) and kin
+    "clav": "clavicle", "clavical": "clavicle", "torso": "spine", "waist": "spine", "skull": "head",
+    "bicep": "upperarm", "uarm": "upperarm", "farm": "lowerarm", "forarm": "lowerarm", "lowarm": "lowerarm",
+    "elbow": "lowerarm",
 }
 #: numbered chains: "<word><n>" -> role stem by n (Fox's b_LeftLeg01 / 02, b_LeftFoot01 / 02)
 _NUMBERED = {("leg", 1): "thigh", ("leg", 2): "shin", ("foot", 1): "foot", ("foot", 2): "toe"}
@@ -246,7 +250,8 @@ def bone_roles(sk) -> dict[str, str]:
                 roles[i] = r
     # number a spine chain: first spine1, last spine3 (the chest), between spine2
     sp = [i for i in sorted(roles) if roles[i] == "spine"]
-    if sp:
+    if sp:  # with generic ones, names that are roles join the chain (SSX-style spine, spine1, chest)
+        sp = [i for i in sorted(roles) if roles[i] in ("spine", "spine1", "spine2", "spine3")]
         for k, i in enumerate(sp):
             roles[i] = "spine1" if k == 0 else ("spine3" if k == len(sp) - 1 else "spine2")
         if len(sp) > 3:
@@ -257,9 +262,11 @@ def bone_roles(sk) -> dict[str, str]:
 
 def builtin_bone_map(source, target) -> dict[str, str]:
     """``{source bone: target bone}`` joined on :func:`bone_roles`; bones with the same name in both
-    are mapped to themselves first."""
-    out = {n: n for n in source.names if target.get(n) is not None}
+    are mapped to themselves first, unless both are labelled with different roles (a false
+    friend: the rider's ``spine1`` is not an SSX rig's ``spine1`` when that one is its chest)."""
     rs, rt = bone_roles(source), bone_roles(target)
+    out = {n: n for n in source.names if target.get(n) is not None and (
+        n not in rs or n not in rt or rs[n] == rt[n])}
     by_role = {r: n for n, r in rt.items()}
     mapped_targets = set(out.values())
     for n, r in rs.items():
