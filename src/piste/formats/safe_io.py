@@ -210,7 +210,9 @@ def json_depth(obj) -> int:
     return depth
 
 
-_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.S)
+# "unrolled" string patterns: a run of plain characters is one regex step (no backtracking state
+# per character: the naive (?:[^"\\]|\\.)* needed gigabytes on a 40 MB data URI)
+_STRING = re.compile(rb'"[^"\\]*(?:\\.[^"\\]*)*"', re.S)
 
 
 def text_depth(data) -> int:
@@ -223,7 +225,8 @@ def text_depth(data) -> int:
     return int(np.cumsum(np.where(br, 1, -1)).max(initial=0))
 
 
-_TOML_STRING = re.compile(r'"""(?:[^\\]|\\.)*?"""|\'\'\'.*?\'\'\'|"(?:[^"\\\n]|\\.)*"|\'[^\'\n]*\'|#[^\n]*', re.S)
+_TOML_STRING = re.compile(r'"""[^\\"]*(?:(?:\\.|"(?!""))[^\\"]*)*"""|\'\'\'.*?\'\'\'|"[^"\\\n]*(?:\\.[^"\\\n]*)*"'
+                          r'|\'[^\'\n]*\'|#[^\n]*', re.S)
 
 
 def toml_depth(text: str) -> int:
