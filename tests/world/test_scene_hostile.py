@@ -36,3 +36,9 @@ def test_scene_file_fifo_refused(tmp_path):
     os.mkfifo(tmp_path / "s.toml")
     with pytest.raises(ConfigError, match="not a regular file"):
         load_scene(tmp_path / "s.toml")
+
+
+def test_path_too_long_for_the_file_system(tmp_path):
+    text = '[[objects]]\nmodel = "' + "a" * 10000 + '"\nposition = [1.0, 2.0]\n'
+    with pytest.raises(ConfigError, match=r"s\.toml, line 2, key 'objects\[0\]\.model': cannot use the path"):
+        loads_scene(text, tmp_path / "s.toml")

@@ -67,6 +67,7 @@ scene file.  Every table and key is optional except where noted::
     [[riders]]
     name = "rider 1"
     model = "builtin:rider"       # or a .gltf/.glb file, or "ssx:RIDER.mpf" (SSX Tricky)
+    texture = "RIDER.ssh"         # ssx: models only: the texture bank (default: RIDER.ssh beside it)
     position = [200.0, 150.0]     # x, y on the snow (z from the surface), or [x, y, z]
     heading = 0.0                 # degrees about +z, 0 = travelling +y (down the course)
     clip = "ride"
@@ -119,6 +120,7 @@ from pathlib import Path
 
 from piste.errors import ConfigError, PisteError, ValidationError
 from piste.formats.limits import precheck_gltf
+from piste.formats.ssx.mpf_model import mpf_partners
 from piste.formats.safe_io import check_regular, resolve_reference, toml_depth
 from piste.lighting.lights import AmbientLight, DirectionalLight, PointLight, SpotLight
 
@@ -273,6 +275,7 @@ class ActorSpec:
     line: int | None = None
     clips_from: str | None = None     # riders: a glTF file whose clips are retargeted onto the model
     bone_map: object = None           # riders: "builtin" or {clip bone: model bone} (piste.character.retarget)
+    texture: str | None = None        # ssx: riders: the .ssh texture bank given (None: found beside the .mpf)
 
     @property
     def builtin(self) -> str | None:
@@ -368,6 +371,10 @@ class SceneFile:
         for g in gltfs:
             files.add(Path(g))
             files.update(_gltf_dependencies(Path(g), self.allow_paths))
+        for a in self.riders:  # an .mpf's _head.mpf partner and texture banks
+            if a.model.lower().endswith(".mpf"):
+                head, banks = mpf_partners(a.model, a.texture)
+                files.update(Path(f).resolve() for f in ([head] if head is not None else []) + banks)
         return sorted(files)
 
 
@@ -478,10 +485,14 @@ def _array(c_parent: _Checker, key: str) -> list:
 
 def _file(c: _Checker, key: str, base: Path, suffixes=None) -> Path:
     rel = c.get(key, "str", required=True)
-    p = (base / rel).resolve()
-    if not p.exists():
+    try:  # a name too long for the file system, a NUL, a loop of links: one clear error
+        p = (base / rel).resolve()
+        exists, regular = p.exists(), p.is_file()
+    except (OSError, ValueError) as exc:
+        raise c.error(key, f"cannot use the path {rel[:80]!r}: {getattr(exc, 'strerror', None) or exc}") from None
+    if not exists:
         raise c.error(key, f"no such file: {rel!r} (looked for {p})")
-    if not p.is_file():  # a folder, device or pipe: never opened (a pipe would hang the loader)
+    if not regular:  # a folder, device or pipe: never opened (a pipe would hang the loader)
         raise c.error(key, f"{rel!r} is not a regular file (looked for {p})")
     if suffixes and p.suffix.lower() not in suffixes:
         raise c.error(key, f"expected a {' / '.join(suffixes)} file, got {rel!r}")
@@ -496,8 +507,12 @@ def _allow_paths(top: _Checker, base: Path) -> tuple:
         raise top.error("allow_paths", f"expected an array of folder paths, got {v!r}")
     out = []
     for rel in v:
-        p = (base / rel).resolve()
-        if not p.is_dir():
+        try:
+            p = (base / rel).resolve()
+            is_dir = p.is_dir()
+        except (OSError, ValueError) as exc:
+            raise top.error("allow_paths", f"cannot use the path {rel[:80]!r}: {getattr(exc, 'strerror', None) or exc}") from None
+        if not is_dir:
             raise top.error("allow_paths", f"{rel!r} is not a folder (looked for {p})")
         out.append(p)
     return tuple(out)
@@ -616,7 +631,7 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     for kind in ("riders", "objects"):
         for i, a in enumerate(_array(top, kind)):
             keys = {"name", "model", "position", "heading", "scale"} | (
-                {"clip", "phase", "clips_from", "bone_map"} if kind == "riders" else set())
+                {"clip", "phase", "clips_from", "bone_map", "texture"} if kind == "riders" else set())
             a.allow(keys)
             default_model = "builtin:rider" if kind == "riders" else None
             model = a.get("model", "str", default_model, required=default_model is None)
@@ -647,6 +662,10 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
                 spec.bone_map = bm
             elif "bone_map" in a.table:
                 raise a.error("bone_map", "needs clips_from = \"<a .gltf/.glb with the clips>\"")
+            if "texture" in a.table:  # an SSX texture bank for an ssx: rider (piste.pipeline.ssx_rider)
+                if not model.lower().endswith(".mpf"):
+                    raise a.error("texture", "only an ssx:<RIDER.mpf> model takes a texture bank (.ssh)")
+                spec.texture = str(_file(a, "texture", base, (".ssh",)))
             (scene.riders if kind == "riders" else scene.objects).append(spec)
 
     # lights
@@ -752,7 +771,11 @@ def _npz_is_net(path: Path) -> bool:
 def load_scene(path) -> SceneFile:
     """Read and validate the scene file at ``path`` (see the module docstring)."""
     path = Path(path)
-    if path.exists() and not path.is_dir() and not path.is_file():  # a device or pipe would hang the read
+    try:
+        special = path.exists() and not path.is_dir() and not path.is_file()
+    except OSError as exc:
+        raise SceneError(path, f"cannot read: {exc.strerror or exc}") from None
+    if special:  # a device or pipe would hang the read
         raise SceneError(path, "not a regular file, expected a scene .toml file")
     try:
         text = path.read_text(encoding="utf-8")
