@@ -62,6 +62,9 @@ def add_arguments(parser) -> None:
                              "pre-calculated RGBs, or dynamic point and spot lights")
     parser.add_argument("--no-shadows", action="store_true", help="full scene without projected rider shadows")
     parser.add_argument("--no-specular", action="store_true", help="full scene without the riders' specular pass")
+    parser.add_argument("--rider-model", action="append", default=[], metavar="FILE[:N]",
+                        help="full scene: add N riders (default 2) of a skinned, animated glTF model to the pack "
+                             "(repeatable: any number of different rider models)")
 
 
 def lightmap_for(net, lighting: str):

@@ -64,6 +64,9 @@ def run_scene(args, bundle, lightmap, lighting: str, t0: float) -> int:
         raise ConfigError(f"--start {args.start}: the riders need 120 m of track ahead; use at most "
                           f"{(length - 120.0) / length:.2f}")
     scene = Scene(net, line, lights, objects=objs, start=start)
+    from piste.commands.view import rider_casts  # --rider-model: other models' riders beside the pack
+
+    scene.casts = [Scene(net, line, lights, model=m, pack=pack, start=start) for m, pack in rider_casts(args.rider_model)]
     preview = ScenePreview(bundle, size=(w, h), scene=scene, lightmap=lightmap, object_lighting=args.objects,
                            shadows=not args.no_shadows, specular=not args.no_specular, lightmap_mode=args.lightmap)
     renderer = preview.renderer
