@@ -49,7 +49,7 @@ def test_bundle_bytes(small_bundle, tmp_path_factory, data):
 
 
 @given(data=st.data())
-@fuzz_settings(60)
+@fuzz_settings(100)
 def test_bundle_manifest(small_bundle, tmp_path_factory, data):
     with zipfile.ZipFile(small_bundle) as zf:
         doc = json.loads(zf.read("manifest.json"))

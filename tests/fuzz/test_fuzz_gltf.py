@@ -56,7 +56,7 @@ def test_seeds_load(seed):
 
 @pytest.mark.skipif(not SEEDS, reason="no seed models")
 @given(data=st.data())
-@fuzz_settings(12)
+@fuzz_settings(20)
 def test_gltf_bytes(seed, data):
     original = seed.read_bytes()
     mutated = data.draw(byte_mutations(original))
@@ -67,7 +67,7 @@ def test_gltf_bytes(seed, data):
 
 @pytest.mark.skipif(not SEEDS, reason="no seed models")
 @given(data=st.data())
-@fuzz_settings(30)
+@fuzz_settings(50)
 def test_gltf_structure(seed, data):
     original = seed.read_bytes()
     if seed.suffix == ".glb":

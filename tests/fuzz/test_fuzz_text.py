@@ -101,7 +101,7 @@ def test_scene_bytes(scene_seed, data):
 
 
 @given(data=st.data())
-@fuzz_settings(25)
+@fuzz_settings(40)
 def test_scene_structure(scene_seed, data):
     doc = tomllib.loads(scene_seed.read_text())
     target = scene_seed.with_name("mutant.toml")
