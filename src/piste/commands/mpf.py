@@ -2,7 +2,8 @@
 
   piste mpf info RIDER.mpf                      sub-models, bones, palettes, chunks, unknown bytes
   piste mpf encode OUT.mpf [--model M.glb]      a piste rider (default: the built-in one) as an .mpf,
-                                                with the quantisation report (--report R.json)
+                                                and its texture as OUT.ssh (8-bit indexed; --no-texture:
+                                                none), with the quantisation report (--report R.json)
   piste mpf export RIDER.mpf OUT.glb            the decoded rider (+ shared clips) as glTF
   piste mpf copy RIDER.mpf OUT.mpf              read and write back (byte-identical when unedited)
 """
@@ -27,9 +28,13 @@ def add_arguments(p) -> None:
     e.add_argument("--ratios", type=float, nargs="+", default=[1.0, 0.5, 0.25],
                    help="triangle ratio of each LOD (Body3000, Body1500, Body750; default 1 0.5 0.25)")
     e.add_argument("--report", help="also write the quantisation report as JSON here")
+    e.add_argument("--no-texture", action="store_true",
+                   help="do not write the rider's texture as OUT.ssh (an 8-bit indexed SSX texture bank)")
     x = sub.add_parser("export", help="export the decoded rider with the shared clips to glTF")
     x.add_argument("file", help="an .mpf (a _body.mpf reads its _head.mpf partner too)")
     x.add_argument("out", help="output .glb or .gltf")
+    x.add_argument("--texture", action="append",
+                   help="an .ssh texture bank (repeatable; default: the .ssh with the model's stem beside it)")
     c = sub.add_parser("copy", help="read and write back (byte-identical when nothing changed)")
     c.add_argument("file")
     c.add_argument("out")
@@ -84,7 +89,20 @@ def run(args) -> int:
             raise ConfigError("at most three LODs (Body3000, Body1500, Body750)")
         model = load_rider_model(args.model)
         f, report = model_to_mpf(model, ratios=tuple(args.ratios))
+        bank = None
+        if not args.no_texture:
+            from piste.formats.ssx.mpf_encode import texture_bank
+
+            bank, report["texture"] = texture_bank(model)
         write_mpf(f, args.out)
+        if bank is not None:
+            from piste.formats.ssx.ssh import write_ssh
+
+            ssh = Path(args.out).with_suffix(".ssh")
+            write_ssh(bank, ssh)
+            t = report["texture"]
+            print(f"wrote {ssh}: {t['name']!r} {t['size'][0]}x{t['size'][1]} 8-bit, {t['colours']} colours, "
+                  f"mean error {t['mean_error']:.2f} / max {t['max_error']} levels" + (f" ({t['note']})" if t["note"] else ""))
         if args.report:
             from piste.formats.atomic import write_bytes_atomic
 
@@ -99,7 +117,7 @@ def run(args) -> int:
         from piste.formats.gltf_export import CharacterExport, export_gltf
         from piste.pipeline.ssx_rider import load_mpf_rider
 
-        model = load_mpf_rider(args.file)
+        model = load_mpf_rider(args.file, texture=args.texture)
         r = export_gltf(args.out, characters=[CharacterExport(model, name=model.name)])
         print(f"wrote {r.path} ({r.bytes} bytes)")
         return 0

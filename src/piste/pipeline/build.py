@@ -41,6 +41,7 @@ import numpy as np
 from piste.errors import ConfigError
 from piste.formats.bundle import camera_to_dict, write_bundle
 from piste.formats.gltf import load_gltf
+from piste.formats.ssx.mpf_model import mpf_partners
 from piste.lighting.baker import BAKE_VERSION, bake_lightmap
 from piste.lighting.lights import Lights, default_lights
 from piste.pipeline.bundle_objects import camera_from_dict
@@ -50,6 +51,7 @@ from piste.pipeline.gltf_import import import_gltf
 from piste.pipeline.object_atlas import double_sided, pack_object_atlas, primitive_images
 from piste.pipeline.sources import add_rider_clips, load_object_mesh, load_rider_model, load_terrain, object_matrices, rider_matrices
 from piste.pipeline.ssx_level import bundle_arrays, level_key
+from piste.pipeline.ssx_rider import load_mpf_rider
 from piste.pipeline.visibility import (Visibility, camera_eyes, compute_visibility, culling_report,
                                        scene_eye_heights)
 from piste.terrain.net import PatchNet
@@ -284,11 +286,14 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
             msrc = model if model.startswith("builtin:") else _file_key(model)
             own = [r for r in scene.riders if r.model == model]
             clip_srcs = sorted({(r.clips_from, json.dumps(r.bone_map, sort_keys=True)) for r in own if r.clips_from})
+            tex = next((r.texture for r in own if getattr(r, "texture", None)), None)  # an .mpf's .ssh bank
+            partners = mpf_partners(model, tex) if model.lower().endswith(".mpf") else (None, [])
             ch_key = content_key(BUILD_VERSION, "characters", CHARACTERS_VERSION, msrc, ratios,
-                                 [(_file_key(f), b) for f, b in clip_srcs])
+                                 [(_file_key(f), b) for f, b in clip_srcs],
+                                 [_file_key(f) for f in [partners[0]] + partners[1] if f is not None])
 
-            def make_characters(model=model, clip_srcs=clip_srcs):
-                m = load_rider_model(model, allow_paths=scene.allow_paths)
+            def make_characters(model=model, clip_srcs=clip_srcs, tex=tex):
+                m = load_mpf_rider(model, texture=tex) if tex else load_rider_model(model, allow_paths=scene.allow_paths)
                 m = add_rider_clips(m, [(f, json.loads(b)) for f, b in clip_srcs], allow_paths=scene.allow_paths)
                 return character_arrays(m, ratios=ratios)
 

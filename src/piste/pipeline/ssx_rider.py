@@ -22,13 +22,87 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from piste.character.retarget import builtin_bone_map, retarget_clip
 from piste.character.rider import default_rider
 from piste.errors import ConfigError
 from piste.formats.ssx.mpf import read_mpf
-from piste.formats.ssx.mpf_model import mpf_to_model
+from piste.formats.ssx.mpf_model import mpf_partners, mpf_to_model
+from piste.formats.ssx.ssh import read_ssh
+from piste.pipeline.object_atlas import pack_object_atlas
+from piste.world.riders import merged_mesh
 
-__all__ = ["load_mpf_rider", "shared_clips"]
+__all__ = ["load_mpf_rider", "shared_clips", "apply_texture_banks", "material_images"]
+
+
+def material_images(model, banks, where=()) -> list:
+    """One ``(h, w, 4) uint8`` display image (half-bright undone) per entry of ``model.materials``:
+    the bank image whose 4-character name is the material's main texture id (first bank first,
+    as the game resolves ids by shortname); failing that, image ``i`` of the first bank for
+    material index ``i`` (piste's assumption for banks whose names do not match); else None.
+    ``model.notes`` lists the materials that found no image."""
+    named = {}
+    for bank in banks:
+        for im in bank.images:
+            named.setdefault(im.name.rstrip("\0 "), im)
+    first = banks[0].images if banks else []
+    out = []
+    for tid, mi in model.materials:
+        im = named.get(tid) if tid else None
+        how = "by name"
+        if im is None and 0 <= mi < len(first):
+            im, how = first[mi], f"by index (image {mi} of {where[0] if where else 'the first bank'})"
+        if im is None:
+            model.notes.append(f"material {mi} ({tid or 'no id'}): no image in the texture bank(s); drawn white")
+            out.append(None)
+            continue
+        if how != "by name":
+            model.notes.append(f"material {mi} ({tid or 'no id'}): no image named {tid!r}; textured {how}")
+        out.append(im.rgba())
+    return out
+
+
+def apply_texture_banks(model, banks, where=()) -> object:
+    """Texture a decoded ``.mpf`` rider (:class:`~piste.formats.ssx.mpf_model.SsxModel`) from
+    ``banks`` (:class:`~piste.formats.ssx.ssh.SshBank`): each material's image
+    (:func:`material_images`); one material's image is the rider's texture as it is (its UVs
+    unchanged, so tiling survives), several are packed into one texture
+    (:func:`piste.pipeline.object_atlas.pack_object_atlas`, UVs clamped into each region) with the
+    UVs of the meshes and of the file's LODs remapped alike. The top-LOD meshes become one mesh
+    carrying that texture (what the character build step and glTF export take). In place; returns
+    ``model``."""
+    imgs = material_images(model, banks, where)
+    if not any(i is not None for i in imgs):
+        return model
+    white = np.full((4, 4, 4), 255, np.uint8)
+    imgs = [white if i is None else i for i in imgs]
+    meshes = list(model.meshes) + [lod.mesh for lod in model.lods]
+    mats = list(model.mesh_materials) + list(model.lod_materials)
+    used = sorted({int(k) for m in mats for k in np.unique(m)})
+    if len(used) == 1:
+        tex = imgs[used[0]]
+        uvs = [m.uv for m in meshes]
+    else:
+        uv = np.concatenate([m.uv for m in meshes])
+        mat = np.concatenate(mats)
+        order = np.argsort(mat, kind="stable")
+        bounds = np.searchsorted(mat[order], used + [used[-1] + 1])
+        parts = [(int(bounds[k]), int(bounds[k + 1]), imgs[u]) for k, u in enumerate(used)]
+        tex, packed = pack_object_atlas(np.zeros((0, 0, 4), np.uint8), {"rider": (uv[order], parts)})
+        back = np.empty_like(packed["rider"])
+        back[order] = packed["rider"]
+        cuts = np.cumsum([0] + [m.n_vertices for m in meshes])
+        uvs = [back[a:b] for a, b in zip(cuts[:-1], cuts[1:])]
+    for m, u in zip(meshes, uvs):
+        m.uv = np.ascontiguousarray(u, np.float32)
+        m.texture = tex
+    if len(model.meshes) > 1:
+        one = merged_mesh(model)
+        one.texture = tex
+        model.meshes = [one]
+        model.mesh_materials = [np.concatenate(model.mesh_materials)]
+    return model
 
 
 def shared_clips(model) -> tuple:
@@ -55,19 +129,19 @@ def shared_clips(model) -> tuple:
     return clips, len(driven)
 
 
-def load_mpf_rider(path) -> object:
+def load_mpf_rider(path, texture=None) -> object:
     """Read an ``.mpf`` rider (plus its ``_head.mpf`` partner when ``path`` is a ``_body.mpf``),
-    convert it and give it the shared clips."""
+    convert it, texture it from its ``.ssh`` bank(s) (``texture``: a path or a list; default: the
+    banks with the model files' stems beside them, :func:`piste.formats.ssx.mpf_model.mpf_partners`)
+    and give it the shared clips."""
     path = Path(path)
-    files = [read_mpf(path)]
-    stem = path.stem
-    if stem.lower().endswith("_body"):
-        head = path.with_name(stem[:-5] + ("_HEAD" if stem.endswith("_BODY") else "_head") + path.suffix)
-        if head.is_file():
-            files.append(read_mpf(head))
-    model = mpf_to_model(*files, name=stem)
+    head, banks = mpf_partners(path, texture)
+    files = [read_mpf(path)] + ([read_mpf(head)] if head is not None else [])
+    model = mpf_to_model(*files, name=path.stem)
     if not model.meshes:
         raise ConfigError(f"{path}: no render sub-models to draw")
+    if banks:
+        apply_texture_banks(model, [read_ssh(b) for b in banks], [str(b) for b in banks])
     model.clips, driven = shared_clips(model)
     if driven == 0:
         model.notes.append("none of the shared clips' bones are in this model: it stands in its bind pose")

@@ -3,6 +3,11 @@
 ``model_to_mpf(model)`` -> ``(MpfFile, report)``: each LOD a sub-model (``Body3000`` /
 ``Body1500`` / ``Body750``) and a ``BodyShdw750`` shadow model, within the game's limits (<= 55
 vertices a chunk, <= 25 palette matrices a link, weights in 25 % steps, at most 3 bones a vertex).
+
+``texture_bank(model)`` -> ``(SshBank, report)``: the rider's texture as the character texture bank
+the game keeps beside the model (``RIDER.ssh``): one 8-bit indexed image (type 2, <= 256-colour
+RGBA palette quantised with Pillow, stored half-bright) named for the material's main texture id
+(``suit``), its sides powers of two of at most 256 texels (the sizes the game's banks use).
 Frames, units and the bone-record conventions it writes are described in
 :mod:`piste.formats.ssx.mpf_model` (they are what the decoder reads back).
 """
@@ -22,9 +27,13 @@ from piste.formats.ssx.mpf import (
     Mesh, MorphKey, MpfFile, SubModel, pack_chunks,
 )
 from piste.formats.ssx.mpf_model import CM, SSX_TO_PISTE, matrix_to_euler
+from piste.formats.ssx.ssh import SshBank, SshImage, half_bright
 from piste.transforms import invert_affine
 
-__all__ = ["model_to_mpf"]
+__all__ = ["model_to_mpf", "texture_bank", "MATERIAL_ID"]
+
+#: the main texture id of the one material the encoder writes (an image of that name in the bank)
+MATERIAL_ID = "suit"
 
 
 def _mirror_name(name: str) -> str:
@@ -177,7 +186,7 @@ def _encode_lod(name, mesh, pal, file_id, step, morph_keys, report, shadow: bool
             report["max_chunk_vertices"] = max(report["max_chunk_vertices"], max(c.n_vertices for c in chunks))
         groups.append(Group(gtype, 0, links))
     mat = np.zeros(1, MATERIAL_DTYPE)
-    mat["textures"][0, 0] = np.void(b"suit")
+    mat["textures"][0, 0] = np.void(MATERIAL_ID.encode("ascii"))
     mat["unused"] = 1.0 / 255.0
     return SubModel(name=name, file_id=file_id, materials=mat, groups=groups, palettes=palettes,
                     morph_keys=morph_keys if is_morph.any() else 0)
@@ -259,3 +268,52 @@ def model_to_mpf(model, ratios=(1.0, 0.5, 0.25), names=("Body3000", "Body1500", 
         sub.bones = bones.copy()
         subs.append(sub)
     return MpfFile(models=subs), report
+
+
+def _pow2(n: int, cap: int) -> int:
+    p = 8
+    while p < n and p < cap:
+        p *= 2
+    return p
+
+
+def texture_bank(model, name: str = MATERIAL_ID, max_size: int = 256):
+    """The rider's texture as an ``.ssh`` bank: ``(SshBank, report)``, or ``(None, report)`` when
+    no mesh has a texture. The first textured mesh's texture is used (a model whose primitives
+    carry different textures keeps only that one: ``report['note']`` says so); it is resized to
+    power-of-two sides of at most ``max_size``, stored half-bright (:func:`half_bright`) and
+    quantised to 256 colours with Pillow. ``report``: ``size``, ``colours``, ``mean_error`` and
+    ``max_error`` (8-bit RGBA levels, the bank's display decode vs the resized texture)."""
+    from PIL import Image
+
+    texs = [m.texture for m in model.meshes if m.texture is not None]
+    report = {"name": name, "note": ""}
+    if not texs:
+        report["note"] = "the model has no texture: no bank written"
+        return None, report
+    if any(t is not texs[0] and (t.shape != texs[0].shape or not np.array_equal(t, texs[0])) for t in texs[1:]):
+        report["note"] = f"{len(texs)} primitives carry different textures: only the first one's is written"
+    src = np.ascontiguousarray(texs[0], np.uint8)
+    if src.ndim != 3 or src.shape[2] not in (3, 4):
+        raise ValidationError(f"model {model.name!r}: expected an (h, w, 3|4) texture, got {src.shape}")
+    if src.shape[2] == 3:
+        src = np.concatenate([src, np.full(src.shape[:2] + (1,), 255, np.uint8)], axis=2)
+    h, w = src.shape[:2]
+    size = (_pow2(w, max_size), _pow2(h, max_size))
+    img = Image.fromarray(src, "RGBA")
+    if size != (w, h):
+        img = img.resize(size, Image.Resampling.LANCZOS)
+    want = np.asarray(img, np.uint8)
+    stored = half_bright(want)
+    colours, inv = np.unique(stored.reshape(-1, 4), axis=0, return_inverse=True)
+    if len(colours) <= 256:  # exact
+        idx, pal = inv.reshape(stored.shape[:2]).astype(np.uint8), colours.astype(np.uint8)
+    else:
+        q = Image.fromarray(stored, "RGBA").quantize(256, method=Image.Quantize.FASTOCTREE)
+        idx = np.asarray(q, np.uint8)
+        pal = np.asarray(q.getpalette("RGBA"), np.uint8).reshape(-1, 4)[: int(idx.max()) + 1].copy()
+    im = SshImage(name, 2, idx, pal, long_name="")
+    err = np.abs(im.rgba().astype(np.int16) - want.astype(np.int16))
+    report.update(size=[int(size[0]), int(size[1])], source_size=[int(w), int(h)], colours=int(len(pal)),
+                  mean_error=float(err.mean()), max_error=int(err.max()))
+    return SshBank([im], creator=b"G277"), report

@@ -31,11 +31,15 @@ Frames and units (piste's assumptions where the facts are silent)
 * Morph-key triangles (any vertex that moves in a morph target) go to group type 256, one chunk
   per mesh header so the deltas are parallel to that chunk; the rest to type-1 render groups.
 * Materials: one record (``suit``), blend 0, the two unread floats 1/255. Textures live in the
-  character ``.ssh`` banks, not in the ``.mpf``; decoded models have none (``texture=None``).
+  character ``.ssh`` banks, not in the ``.mpf``; decoded models carry none (``texture=None``) but
+  name each vertex's material (``SsxModel.materials``), and :mod:`piste.pipeline.ssx_rider` applies
+  a bank. :func:`mpf_partners` names the files that go with a rider: the ``_head.mpf`` beside a
+  ``_body.mpf``, and texture banks (given, or ``<stem>.ssh`` beside each model file).
 
 API
 ---
 mpf_to_model(*files, name=None) -> SsxModel
+mpf_partners(path, texture=None) -> (head .mpf or None, [texture .ssh banks])
 MpfFile.to_model(*other_files)  (the same, from the byte module)
 SsxModel: Model + ``lods``, ``notes``
 euler_to_matrix / matrix_to_euler, SSX_TO_PISTE
@@ -45,6 +49,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from math import gcd
+from pathlib import Path
 
 import numpy as np
 
@@ -57,7 +62,7 @@ from piste.formats.ssx.mpf_layout import (
 )
 from piste.transforms import compose_trs, invert_affine, matrix_to_quat
 
-__all__ = ["SsxModel", "mpf_to_model", "euler_to_matrix", "matrix_to_euler", "SSX_TO_PISTE", "LOD_TIERS", "CM"]
+__all__ = ["SsxModel", "mpf_to_model", "mpf_partners", "euler_to_matrix", "matrix_to_euler", "SSX_TO_PISTE", "LOD_TIERS", "CM"]
 
 #: SSX (x, y, z) -> piste (x, z, -y)
 SSX_TO_PISTE = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -69,11 +74,17 @@ _LOD_NAMES = ("high", "medium", "low")
 @dataclass
 class SsxModel(Model):
     """A :class:`Model` decoded from ``.mpf`` files: ``lods`` (:class:`LOD` per tier, the file's
-    palettes), ``notes`` (what could not be represented), ``files`` (the MpfFile objects)."""
+    palettes), ``notes`` (what could not be represented), ``files`` (the MpfFile objects);
+    ``materials`` (each distinct ``(main texture id, material index)`` of the sub-models' material
+    records) with ``mesh_materials`` / ``lod_materials`` naming each vertex's material (its
+    group's), so a texture bank can be applied (:mod:`piste.pipeline.ssx_rider`)."""
 
     lods: list = field(default_factory=list)
     notes: list = field(default_factory=list)
     files: list = field(default_factory=list)
+    materials: list = field(default_factory=list)       # [(main texture id, material index)], distinct
+    mesh_materials: list = field(default_factory=list)  # per mesh: (v,) int32 index into materials
+    lod_materials: list = field(default_factory=list)   # per LOD: (v,) int32 index into materials
 
 
 # ----------------------------------------------------------------------------------- rotations
@@ -208,7 +219,7 @@ def _weld(key: np.ndarray):
 def _decode_sub(sub, pal_bones, pal_pct, weld: bool):
     """Arrays of one sub-model's render and morph groups (shadow groups skipped); the chunks are
     gathered first and decoded in one vectorised pass (strips -> triangles, slots -> palettes)."""
-    pos, nrm, uv, refs_cat, ref_base, nvs, strips, morph = [], [], [], [], [], [], [], []
+    pos, nrm, uv, refs_cat, ref_base, nvs, strips, morph, mats = [], [], [], [], [], [], [], [], []
     k = sub.morph_keys
     nref = 0
     for g in sub.groups:
@@ -227,6 +238,7 @@ def _decode_sub(sub, pal_bones, pal_pct, weld: bool):
                     d[ki, :n] = key.deltas[:n]
                 morph.append(d)
                 for c in chunks:
+                    mats.append(np.full(c.n_vertices, g.material, np.int64))
                     pos.append(c.positions)
                     nrm.append(c.normals)
                     uv.append(c.uv)
@@ -248,20 +260,21 @@ def _decode_sub(sub, pal_bones, pal_pct, weld: bool):
     nrm = (np.concatenate(nrm).astype(np.float32) / np.float32(NORMAL_SCALE)) @ a.T
     uv = uv_raw[:, :2].astype(np.float32) / np.float32(UV_SCALE)
     morph = np.concatenate(morph, axis=1).astype(np.float32) @ a.T * np.float32(CM / MORPH_SCALE)
+    mats = np.concatenate(mats)
     if weld and len(pos):
-        first, inv = _weld(np.concatenate([pos, nrm, uv, pidx[:, None].astype(np.float32),
+        first, inv = _weld(np.concatenate([pos, nrm, uv, pidx[:, None].astype(np.float32), mats[:, None].astype(np.float32),
                                            morph.transpose(1, 0, 2).reshape(len(pos), -1)], axis=1))
-        pos, nrm, uv, pidx, morph = pos[first], nrm[first], uv[first], pidx[first], morph[:, first]
+        pos, nrm, uv, pidx, morph, mats = pos[first], nrm[first], uv[first], pidx[first], morph[:, first], mats[first]
         tris = inv[tris]
         keep = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])
         tris = tris[keep]
     ln = np.linalg.norm(nrm, axis=1, keepdims=True)
     nrm = np.where(ln > 0, nrm / np.maximum(ln, 1e-12), np.array([0, 1, 0], np.float32))
-    return pos, nrm, uv, pidx, tris, morph
+    return pos, nrm, uv, pidx, tris, morph, mats
 
 
 def _mesh_from(name, arrays, pal_bones, pal_pct, morph_names):
-    pos, nrm, uv, pidx, tris, morph = arrays
+    pos, nrm, uv, pidx, tris, morph = arrays[:6]
     bones, pct = pal_bones[pidx], pal_pct[pidx]
     order = np.argsort(-pct, axis=1, kind="stable")[:, :4]
     j = np.take_along_axis(bones, order, 1)
@@ -320,9 +333,10 @@ def mpf_to_model(*files, name: str | None = None, weld: bool = True) -> SsxModel
     if not ordered:
         raise ValidationError("the .mpf files hold no render sub-models")
     lods, top_meshes = [], []
+    materials, mat_of, lod_mats, top_mats = [], {}, [], []  # (texture id, index) per distinct material
     for li, t in enumerate(ordered):
         subs = tiers[t]
-        meshes, pidx_all, off = [], [], 0
+        meshes, pidx_all, off, vmats = [], [], 0, []
         bones_all, pct_all = [], []
         for s in subs:
             pb, pp = _palette_tables(s, base, new_index)
@@ -331,6 +345,9 @@ def mpf_to_model(*files, name: str | None = None, weld: bool = True) -> SsxModel
                 continue
             mnames = [f"{s.name}.morph{i}" for i in range(s.morph_keys)]
             meshes.append(_mesh_from(s.name, arrays, pb, pp, mnames))
+            ids = [_texture_id(s, int(mi)) for mi in range(max(int(arrays[6].max(initial=0)) + 1, 0))]
+            lut = np.array([mat_of.setdefault((tid, mi), len(mat_of)) for mi, tid in enumerate(ids)], np.int32)
+            vmats.append(lut[arrays[6]])
             bones_all.append(pb)
             pct_all.append(pp)
             pidx_all.append(arrays[3] + off)
@@ -343,14 +360,25 @@ def mpf_to_model(*files, name: str | None = None, weld: bool = True) -> SsxModel
         pal = _file_palette(pb, pp, np.concatenate(pidx_all))
         merged = _merge(f"{name or 'mpf'}/{t or 'lod'}", meshes)
         lods.append(LOD(_LOD_NAMES[li] if li < 3 else f"lod{li}", merged, pal, 1.0, float(pal.step), 0.0))
+        lod_mats.append(np.concatenate(vmats))
         if not top_meshes:
-            top_meshes = meshes
+            top_meshes, top_mats = meshes, vmats
     n0 = max(lods[0].n_triangles, 1)
     for lod in lods:
         lod.ratio = lod.n_triangles / n0
     nm = name or (files[0].path and str(files[0].path).rsplit("/", 1)[-1].rsplit(".", 1)[0]) or "mpf"
+    materials = sorted(mat_of, key=mat_of.get)
     return SsxModel(name=nm, skeleton=sk, meshes=top_meshes, lods=lods, notes=notes, files=list(files),
-                    path=files[0].path)
+                    path=files[0].path, materials=materials, mesh_materials=top_mats, lod_materials=lod_mats)
+
+
+def _texture_id(sub, i: int) -> str:
+    """The main texture id (4 characters, e.g. ``suit``) of material ``i`` of ``sub`` ("" when
+    the slot is empty or the index is past the material records)."""
+    if not 0 <= i < len(sub.materials):
+        return ""
+    raw = bytes(sub.materials["textures"][i, 0])
+    return raw.split(b"\0", 1)[0].decode("ascii", "replace").strip()
 
 
 def _merge(name, meshes):
@@ -365,3 +393,27 @@ def _merge(name, meshes):
                        normals=np.concatenate([m.normals for m in meshes]), uv=np.concatenate([m.uv for m in meshes]),
                        joints=np.concatenate([m.joints for m in meshes]),
                        weights=np.concatenate([m.weights for m in meshes]), skinned=True, group=name)
+
+
+def _beside(path: Path, stem: str, suffix: str) -> Path | None:
+    for suf in (suffix.lower(), suffix.upper()):
+        q = path.with_name(stem + suf)
+        if q.is_file():
+            return q
+    return None
+
+
+def mpf_partners(path, texture=None) -> tuple:
+    """The files that go with the rider model ``path``: ``(head, banks)``. ``head``: the
+    ``<name>_head.mpf`` beside a ``<name>_body.mpf`` (None when absent or not a body file);
+    ``banks``: ``texture`` (a path or a list of paths, as given) or else the ``.ssh`` banks with the
+    same stem beside the model and its head file (``RIDER.ssh``, ``mac_body.ssh``, ``mac_head.ssh``)."""
+    path = Path(path)
+    stem, head = path.stem, None
+    if stem.lower().endswith("_body"):
+        head = _beside(path, stem[:-5] + ("_HEAD" if stem.endswith("_BODY") else "_head"), path.suffix)
+    if texture is not None:
+        banks = [Path(t) for t in ([texture] if isinstance(texture, (str, Path)) else texture)]
+    else:
+        banks = [b for b in (_beside(path, stem, ".ssh"), head and _beside(head, head.stem, ".ssh")) if b is not None]
+    return head, banks
