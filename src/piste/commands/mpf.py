@@ -3,7 +3,9 @@
   piste mpf info RIDER.mpf                      sub-models, bones, palettes, chunks, unknown bytes
   piste mpf encode OUT.mpf [--model M.glb]      a piste rider (default: the built-in one) as an .mpf,
                                                 and its texture as OUT.ssh (8-bit indexed; --no-texture:
-                                                none), with the quantisation report (--report R.json)
+                                                none), with the quantisation report (--report R.json);
+                                                --split-head: OUT_body.mpf + OUT_head.mpf (head bones
+                                                in file id 2, parented onto body bones by file id)
   piste mpf export RIDER.mpf OUT.glb            the decoded rider (+ shared clips) as glTF
   piste mpf copy RIDER.mpf OUT.mpf              read and write back (byte-identical when unedited)
 """
@@ -28,6 +30,10 @@ def add_arguments(p) -> None:
     e.add_argument("--ratios", type=float, nargs="+", default=[1.0, 0.5, 0.25],
                    help="triangle ratio of each LOD (Body3000, Body1500, Body750; default 1 0.5 0.25)")
     e.add_argument("--report", help="also write the quantisation report as JSON here")
+    e.add_argument("--split-head", action="store_true",
+                   help="write the game's pair OUT_body.mpf + OUT_head.mpf (the head bone's subtree and the "
+                        "head's triangles in the head file, file id 2)")
+    e.add_argument("--head-bone", help="with --split-head: the bone whose subtree is the head file (default: the head)")
     e.add_argument("--no-texture", action="store_true",
                    help="do not write the rider's texture as OUT.ssh (an 8-bit indexed SSX texture bank)")
     x = sub.add_parser("export", help="export the decoded rider with the shared clips to glTF")
@@ -88,17 +94,33 @@ def run(args) -> int:
         if len(args.ratios) > 3:
             raise ConfigError("at most three LODs (Body3000, Body1500, Body750)")
         model = load_rider_model(args.model)
-        f, report = model_to_mpf(model, ratios=tuple(args.ratios))
+        out = Path(args.out)
+        if args.split_head:
+            from piste.formats.ssx.mpf_encode import model_to_mpf_pair
+
+            f, head, report = model_to_mpf_pair(model, head_bone=args.head_bone, ratios=tuple(args.ratios))
+            base = out.stem[:-5] if out.stem.lower().endswith("_body") else out.stem
+            out = out.with_name(base + "_body" + out.suffix)
+            head_out = out.with_name(base + "_head" + out.suffix)
+        elif args.head_bone:
+            raise ConfigError("--head-bone needs --split-head")
+        else:
+            f, report = model_to_mpf(model, ratios=tuple(args.ratios))
         bank = None
         if not args.no_texture:
             from piste.formats.ssx.mpf_encode import texture_bank
 
             bank, report["texture"] = texture_bank(model)
-        write_mpf(f, args.out)
+        write_mpf(f, out)
+        if args.split_head:
+            write_mpf(head, head_out)
+            sp = report["split"]
+            print(f"wrote {head_out}: head bones {', '.join(sp['head_bones'])}; head / body triangles "
+                  + ", ".join(f"{x['head']} / {x['body']}" for x in sp["lods"]))
         if bank is not None:
             from piste.formats.ssx.ssh import write_ssh
 
-            ssh = Path(args.out).with_suffix(".ssh")
+            ssh = out.with_suffix(".ssh")
             write_ssh(bank, ssh)
             t = report["texture"]
             print(f"wrote {ssh}: {t['name']!r} {t['size'][0]}x{t['size'][1]} 8-bit, {t['colours']} colours, "
@@ -107,7 +129,7 @@ def run(args) -> int:
             from piste.formats.atomic import write_bytes_atomic
 
             write_bytes_atomic(args.report, json.dumps(report, indent=1).encode())
-        print(f"wrote {args.out}: " + ", ".join(f"{x['name']} {x['triangles']} triangles / {x['palette']} palettes / "
+        print(f"wrote {out}: " + ", ".join(f"{x['name']} {x['triangles']} triangles / {x['palette']} palettes / "
                                                 f"{x['chunks']} chunks" for x in report["lods"]))
         print(f"weights in {int(report['step'] * 100)} % steps: {report['weights_changed']} vertices changed, max "
               f"weight error {report['max_weight_error']:.3f}; max position error {report['max_bind_error_m'] * 1000:.4f} mm "

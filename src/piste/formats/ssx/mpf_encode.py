@@ -4,6 +4,13 @@
 ``Body1500`` / ``Body750``) and a ``BodyShdw750`` shadow model, within the game's limits (<= 55
 vertices a chunk, <= 25 palette matrices a link, weights in 25 % steps, at most 3 bones a vertex).
 
+``model_to_mpf_pair(model)`` -> ``(body MpfFile, head MpfFile, report)``: the game's split of a rider
+into ``<name>_body.mpf`` (file id 0: ``Body3000`` / ``1500`` / ``750`` + shadow) and
+``<name>_head.mpf`` (file id 2: ``Head3000`` / ``1500`` / ``750``): the head bone's subtree goes to
+the head file, its root parented onto a body bone by (file id 0, bone); each LOD's triangles whose
+three vertices weigh at least half on head bones go to the head sub-model; palette entries name
+their bone by (file id, bone in that file), across the two files where a vertex needs it.
+
 ``texture_bank(model)`` -> ``(SshBank, report)``: the rider's texture as the character texture bank
 the game keeps beside the model (``RIDER.ssh``): one 8-bit indexed image (type 2, <= 256-colour
 RGBA palette quantised with Pillow, stored half-bright) named for the material's main texture id
@@ -14,10 +21,13 @@ Frames, units and the bone-record conventions it writes are described in
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from piste.character.lod import make_lods
 from piste.character.model import Skeleton, SkinnedMesh
+from piste.character.retarget import bone_roles
 from piste.character.skinning import BlendedMesh, skin_exact
 from piste.character.strips import stripify
 from piste.errors import ConfigError, ValidationError
@@ -30,7 +40,10 @@ from piste.formats.ssx.mpf_model import CM, SSX_TO_PISTE, matrix_to_euler
 from piste.formats.ssx.ssh import SshBank, SshImage, half_bright
 from piste.transforms import invert_affine
 
-__all__ = ["model_to_mpf", "texture_bank", "MATERIAL_ID"]
+__all__ = ["model_to_mpf", "model_to_mpf_pair", "texture_bank", "MATERIAL_ID", "HEAD_FILE_ID"]
+
+#: the file id of a rider's head file (OpenSlope spec 240: 0 body, 1 board, 2 head)
+HEAD_FILE_ID = 2
 
 #: the main texture id of the one material the encoder writes (an image of that name in the bank)
 MATERIAL_ID = "suit"
@@ -127,7 +140,8 @@ def _links(tri_pal: list, cap: int) -> list:
     return out
 
 
-def _encode_lod(name, mesh, pal, file_id, step, morph_keys, report, shadow: bool = False) -> SubModel:
+def _encode_lod(name, mesh, pal, file_id, step, morph_keys, report, shadow: bool = False,
+                bone_ref=None) -> SubModel:
     a = SSX_TO_PISTE.T
     pos = (mesh.positions.astype(np.float64) @ a.T / CM).astype("<f4")
     nrm = mesh.normals.astype(np.float64) @ a.T
@@ -138,8 +152,10 @@ def _encode_lod(name, mesh, pal, file_id, step, morph_keys, report, shadow: bool
     uv_i[:, :2] = np.clip(uvs, -32768, 32767)
     pct = int(round(step * 100))
     palettes = []
-    for bb, uu in zip(pal.bones, pal.units):
-        ent = [(int(u) * pct, int(b_), file_id) for b_, u in zip(bb, uu) if u > 0]
+    for bb, uu in zip(pal.bones, pal.units):  # bone_ref: skeleton bone -> (file id, bone in that file)
+        ent = [(int(u) * pct, int(b_), file_id) if bone_ref is None else (int(u) * pct, int(bone_ref[b_][1]),
+                                                                         int(bone_ref[b_][0]))
+               for b_, u in zip(bb, uu) if u > 0]
         palettes.append(np.array(ent, PALETTE_ENTRY_DTYPE))
     tris = mesh.indices.astype(np.int64)
     tri_pal = [tuple(sorted(set(x))) for x in pal.index[tris].tolist()]
@@ -194,7 +210,7 @@ def _encode_lod(name, mesh, pal, file_id, step, morph_keys, report, shadow: bool
 
 def model_to_mpf(model, ratios=(1.0, 0.5, 0.25), names=("Body3000", "Body1500", "Body750"), step: float = 0.25,
                  max_bones: int = 3, file_id: int = 0, pose_time: float | None = None, clip: str | None = None,
-                 shadow: str | None = "BodyShdw750"):
+                 shadow: str | None = "BodyShdw750", _split=None):
     """Encode a piste rider as an SSX Tricky body ``.mpf``: ``(MpfFile, report)``.
 
     Each LOD (``ratios`` of the triangles, :func:`make_lods`) becomes a sub-model named from
@@ -233,9 +249,34 @@ def model_to_mpf(model, ratios=(1.0, 0.5, 0.25), names=("Body3000", "Body1500", 
         pose = c.sample(c.duration / 2 if pose_time is None else pose_time, skeleton=sk)
     skin_m = sk.skin_matrices(pose)
     subs, wchg, werr, berr, perr = [], 0, 0.0, 0.0, 0.0
-    for nm, lod in zip(names, lods):
+    head_subs, ref = [], None
+    if _split is not None:
+        head, head_names, head_id = _split
+        if head_id == file_id:
+            raise ConfigError(f"the head file needs a file id other than the body's ({file_id})")
+        bones, head_rec, ref = _split_records(bones, sk, head, file_id, head_id)
+        on_head = np.zeros(sk.n_bones, bool)
+        on_head[head] = True
+        report["split"] = {"head_bones": [sk.names[i] for i in head], "lods": []}
+    for li, (nm, lod) in enumerate(zip(names, lods)):
         m, pal = lod.mesh, lod.palette
-        sub = _encode_lod(nm, m, pal, file_id, step, m.n_morphs, report)
+        if _split is None:
+            sub = _encode_lod(nm, m, pal, file_id, step, m.n_morphs, report)
+        else:  # triangles whose vertices weigh >= 1/2 on head bones go to the head file
+            vh = (m.weights * on_head[m.joints.astype(np.int64)]).sum(1) >= 0.5
+            th = vh[m.indices.astype(np.int64)].all(1)
+            parts = []
+            for mask in (~th, th):
+                sm, vs = _submesh(m, mask)
+                parts.append((sm, _subpalette(pal, vs)))
+            (bm, bp), (hm, hp) = parts
+            sub = _encode_lod(nm, bm, bp, file_id, step, bm.n_morphs, report, bone_ref=ref)
+            hname = head_names[li] if li < len(head_names) else f"Head{li}"
+            if hm.n_triangles:
+                hs = _encode_lod(hname, hm, hp, head_id, step, hm.n_morphs, report, bone_ref=ref)
+                hs.bones = head_rec.copy()
+                head_subs.append(hs)
+            report["split"]["lods"].append({"body": int(bm.n_triangles), "head": int(hm.n_triangles)})
         sub.bones = bones.copy()
         subs.append(sub)
         # weights: dense original vs quantised
@@ -256,6 +297,8 @@ def model_to_mpf(model, ratios=(1.0, 0.5, 0.25), names=("Body3000", "Body1500", 
         got, _ = BlendedMesh(pal, back.astype(np.float32), m.normals).apply(skin_m)
         perr = max(perr, float(np.linalg.norm(got - ref, axis=1).max(initial=0.0)))
         chunks = [c for lk in sub.links for me in lk.meshes for c in me.chunks]
+        if _split is not None and head_subs and head_subs[-1].name == hname:
+            chunks += [c for lk in head_subs[-1].links for me in lk.meshes for c in me.chunks]
         report["lods"].append({"name": nm, "triangles": int(m.n_triangles), "palette": int(pal.size),
                                "links": len(sub.links), "chunks": len(chunks),
                                "stored_vertices": int(sum(c.n_vertices for c in chunks)),
@@ -264,9 +307,12 @@ def model_to_mpf(model, ratios=(1.0, 0.5, 0.25), names=("Body3000", "Body1500", 
                   step=float(step), max_bones=int(max_bones), pose=f"{clip}@{pose_time if pose_time is not None else 'mid'}"
                   if clip else "bind")
     if shadow:
-        sub = _encode_lod(shadow, lods[-1].mesh, lods[-1].palette, file_id, step, 0, report, shadow=True)
+        sub = _encode_lod(shadow, lods[-1].mesh, lods[-1].palette, file_id, step, 0, report, shadow=True,
+                          bone_ref=ref)
         sub.bones = bones.copy()
         subs.append(sub)
+    if _split is not None:
+        return MpfFile(models=subs), MpfFile(models=head_subs), report
     return MpfFile(models=subs), report
 
 
@@ -317,3 +363,74 @@ def texture_bank(model, name: str = MATERIAL_ID, max_size: int = 256):
     report.update(size=[int(size[0]), int(size[1])], source_size=[int(w), int(h)], colours=int(len(pal)),
                   mean_error=float(err.mean()), max_error=int(err.max()))
     return SshBank([im], creator=b"G277"), report
+
+
+def _submesh(mesh: SkinnedMesh, tri_mask: np.ndarray):
+    """The triangles ``tri_mask`` of ``mesh`` on their own vertices: ``(SkinnedMesh, vertex ids)``."""
+    tris = mesh.indices[tri_mask].astype(np.int64)
+    vs, inv = np.unique(tris, return_inverse=True)
+    mp = mesh.morph_positions[:, vs] if mesh.n_morphs else None
+    sub = SkinnedMesh(name=mesh.name, positions=mesh.positions[vs], indices=inv.reshape(-1, 3),
+                      normals=mesh.normals[vs], uv=mesh.uv[vs], joints=mesh.joints[vs], weights=mesh.weights[vs],
+                      morph_positions=mp, morph_names=list(mesh.morph_names) if mp is not None else [],
+                      skinned=True, group=mesh.group)
+    return sub, vs
+
+
+def _subpalette(pal, vs):
+    """``pal`` restricted to the entries the vertices ``vs`` use (index renumbered)."""
+    used, inv = np.unique(pal.index[vs], return_inverse=True)
+    return replace(pal, bones=pal.bones[used], weights=pal.weights[used], units=pal.units[used],
+                   index=inv.reshape(-1).astype(pal.index.dtype))
+
+
+def _head_bones(sk: Skeleton, head_bone: str | None) -> list:
+    """The head file's bones: ``head_bone`` (default: the bone labelled ``head`` by
+    :func:`piste.character.retarget.bone_roles`, else one named ``head``) and its descendants."""
+    if head_bone is None:
+        roles = bone_roles(sk)
+        head_bone = next((n for n, r in roles.items() if r == "head"), "head")
+    h = sk.get(head_bone)
+    if h is None:
+        raise ConfigError(f"no head bone {head_bone!r} in the skeleton to split the head file at "
+                          f"(bones: {', '.join(sk.names[:10])}, ...)")
+    inside = np.zeros(sk.n_bones, bool)
+    inside[h] = True
+    for i in range(sk.n_bones):  # parents come before children
+        if sk.parents[i] >= 0 and inside[sk.parents[i]]:
+            inside[i] = True
+    if int(sk.parents[h]) < 0:
+        raise ConfigError(f"head bone {head_bone!r} is a root: the head file's bones must hang off a body bone")
+    return [int(i) for i in np.nonzero(inside)[0]]
+
+
+def _split_records(bones: np.ndarray, sk: Skeleton, head: list, body_id: int, head_id: int):
+    """Bone records of the body and head files: parents and mirror partners as (file id, local bone)."""
+    hs = set(head)
+    lists = ([i for i in range(sk.n_bones) if i not in hs], list(head))
+    ref = np.zeros((sk.n_bones, 2), np.int64)
+    for fid, lst in zip((body_id, head_id), lists):
+        for k, i in enumerate(lst):
+            ref[i] = (fid, k)
+    out = []
+    for fid, lst in zip((body_id, head_id), lists):
+        rec = bones[lst].copy()
+        for k, i in enumerate(lst):
+            par = int(sk.parents[i])
+            rec["parent_file"][k], rec["parent_bone"][k] = (-1, -1) if par < 0 else (int(ref[par][0]), int(ref[par][1]))
+            m = int(bones["mirror"][i])
+            rec["mirror"][k] = ref[m][1] if ref[m][0] == fid else k
+        out.append(rec)
+    return out[0], out[1], ref
+
+
+def model_to_mpf_pair(model, head_bone: str | None = None, head_names=("Head3000", "Head1500", "Head750"),
+                      head_file_id: int = HEAD_FILE_ID, **kw):
+    """Encode a piste rider as the game's ``_body.mpf`` + ``_head.mpf`` pair: ``(body, head, report)``.
+
+    ``head_bone`` (default: the skeleton's head) and its descendants become the head file's bones
+    (file id ``head_file_id``; the subtree's root names its body parent by file id 0); see the
+    module docstring for how triangles are divided. ``kw`` as :func:`model_to_mpf` (whose report
+    this extends with ``split``: the head bones and each LOD's head / body triangles)."""
+    head = _head_bones(model.skeleton, head_bone)
+    return model_to_mpf(model, _split=(head, tuple(head_names), int(head_file_id)), **kw)
