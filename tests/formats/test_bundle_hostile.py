@@ -56,3 +56,8 @@ def test_deeply_nested_manifest(tmp_path):
     text = b'{"format": "piste.bundle/1", "members": {}, "x": ' + b"[" * 100_000 + b"]" * 100_000 + b"}"
     with pytest.raises(FormatError, match=r"bad\.piste.*nested too deeply"):
         load_bundle(_bundle(tmp_path, text))
+
+
+def test_disabled_visibility_null_section_loads(tmp_path):
+    b = load_bundle(_bundle(tmp_path, lambda m: m.update(visibility=None)))
+    assert b.visibility is None

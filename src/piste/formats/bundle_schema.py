@@ -102,6 +102,8 @@ def check_manifest(man, path) -> None:
                 raise FormatError(path, f"{where}: expected {'a' if schema[0] not in 'ai' else 'an'} {schema}, "
                                         f"got {_short(v)}", field=fld or None)
             continue
+        if v is None and fld.count(".") == 0 and fld != "members":
+            continue  # an optional section left out (``"visibility": null`` when it is disabled)
         if schema[0] in ("object", "map"):
             if not isinstance(v, dict):
                 raise FormatError(path, f"{where}: expected an object, got {_short(v)}", field=fld or None)
