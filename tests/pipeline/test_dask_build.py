@@ -172,3 +172,15 @@ def test_tiled_scene_errors(tmp_path, capsys):
         from piste.pipeline.dask_build import dask_client
 
         dask_client()
+
+
+def test_tiled_scene_notes_what_it_leaves_out(tmp_path, capsys):
+    from piste.cli import main
+
+    np.savez(tmp_path / "h.npz", z=np.zeros((13, 13)), dx=5.0)
+    (tmp_path / "t.toml").write_text('[terrain]\nsource = "h.npz"\nsamples_per_patch = 3\ntiles = "t.tiles"\n'
+                                     'tile_patches = 2\n[lightmap]\nres = 2\n[visibility]\nenabled = false\n'
+                                     '[[objects]]\nmodel = "builtin:tree"\nposition = [10.0, 10.0]\n')
+    assert main(["build", str(tmp_path / "t.toml"), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "16 patches in 2 x 2 tiles" in out and "1 riders and objects are not placed" in out

@@ -125,9 +125,15 @@ def build_scene_tiles(scene, out=None, dask: str | None = None, scheduler: str |
     else the scene's path with suffix ``.tiles``)."""
     spec = spec_from_scene(scene, root=out)
     if dask is None and scheduler is None:
-        return build_tiles(spec, progress=progress)
-    client = dask_client(dask, scheduler, workers=workers)
-    try:
-        return build_tiles_dask(spec, client, progress=progress)
-    finally:
-        close_client(client)
+        r = build_tiles(spec, progress=progress)
+    else:
+        client = dask_client(dask, scheduler, workers=workers)
+        try:
+            r = build_tiles_dask(spec, client, progress=progress)
+        finally:
+            close_client(client)
+    extra = len(scene.riders) + len(scene.objects)
+    if extra:
+        r.notes.append(f"a tiled world holds the terrain and its light maps only: the scene's {extra} riders and "
+                       "objects are not placed (not supported yet)")
+    return r

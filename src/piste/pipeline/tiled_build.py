@@ -356,6 +356,7 @@ class TiledResult:
     seconds: float
     fit: dict
     lit: dict
+    notes: list = field(default_factory=list)
 
     @property
     def built(self) -> int:
@@ -370,8 +371,9 @@ class TiledResult:
         samples = sum(r.get("samples", 0) for r in self.lit.values())
         bake_s = sum(r["seconds"] for r in self.lit.values())
         rate = f", bake {samples / bake_s:,.0f} samples/s" if bake_s > 0 and samples else ""
-        return (f"built {self.root} ({g.n_patches:,} patches in {g.shape[0]} x {g.shape[1]} tiles) in "
-                f"{self.seconds:.2f} s: {self.built} tile steps computed, {self.skipped} reused{rate}")
+        return "\n".join([f"built {self.root} ({g.n_patches:,} patches in {g.shape[0]} x {g.shape[1]} tiles) in "
+                          f"{self.seconds:.2f} s: {self.built} tile steps computed, {self.skipped} reused{rate}"]
+                         + [f"  note: {n}" for n in self.notes])
 
 
 def build_tiles(spec: TiledSpec, progress: bool = False) -> TiledResult:
