@@ -103,3 +103,17 @@ def test_build_cache_tracks_the_head_partner(pair, tmp_path, piste_cache):
     head.models[0].bones["translation"][1] += 1.0  # move the jaw 1 cm
     write_mpf(head, tmp_path / "mac_head.mpf")
     assert not build_scene(load_scene(tmp_path / "s.toml")).steps["characters"]["cached"]
+
+
+def test_split_rider_keeps_its_face_morphs_and_texture(tmp_path):
+    """The LOD meshes (what the character build step takes) carry both files' morph targets, and
+    the texture bank written beside the body textures the head's material too."""
+    assert main(["mpf", "encode", str(tmp_path / "eddie_body.mpf"), "--split-head", "--ratios", "1", "0.5"]) == 0
+    assert (tmp_path / "eddie_body.ssh").is_file() and (tmp_path / "eddie_head.mpf").is_file()
+    r = load_mpf_rider(tmp_path / "eddie_body.mpf")
+    assert r.materials == [("suit", 0)] and r.meshes[0].texture is not None
+    lod = r.lods[0].mesh
+    assert {n.split(".")[0] for n in lod.morph_names} == {"Body3000", "Head3000"}
+    moved = np.abs(lod.morph_positions).max(axis=(0, 2)) > 0
+    head_bones = [r.skeleton.get("head"), r.skeleton.get("jaw")]
+    assert moved.any() and np.isin(lod.joints[moved], head_bones).any()

@@ -388,11 +388,19 @@ def _merge(name, meshes):
                            joints=m.joints, weights=m.weights, morph_positions=m.morph_positions,
                            morph_names=m.morph_names, skinned=True, group=name)
     off = np.cumsum([0] + [m.n_vertices for m in meshes])[:-1]
+    names = list(dict.fromkeys(n for m in meshes for n in m.morph_names))  # e.g. Body3000.morph0, Head3000.morph0
+    morph = None
+    if names:  # each target's deltas on its own sub-model's vertices, zeros elsewhere
+        morph = np.zeros((len(names), sum(m.n_vertices for m in meshes), 3), np.float32)
+        for m, o in zip(meshes, off):
+            for j, n in enumerate(m.morph_names):
+                morph[names.index(n), o:o + m.n_vertices] = m.morph_positions[j]
     return SkinnedMesh(name=name, positions=np.concatenate([m.positions for m in meshes]),
                        indices=np.concatenate([m.indices + o for m, o in zip(meshes, off)]),
                        normals=np.concatenate([m.normals for m in meshes]), uv=np.concatenate([m.uv for m in meshes]),
                        joints=np.concatenate([m.joints for m in meshes]),
-                       weights=np.concatenate([m.weights for m in meshes]), skinned=True, group=name)
+                       weights=np.concatenate([m.weights for m in meshes]), morph_positions=morph,
+                       morph_names=names, skinned=True, group=name)
 
 
 def _beside(path: Path, stem: str, suffix: str) -> Path | None:
