@@ -44,6 +44,7 @@ def test_first_frames_do_not_wait_for_the_vertex_blocks(gl, grid_net):
     net = grid_net(4, 4, size=10.0, relief=5.0)
     cam = Camera([4.0, -6.0, 12.0], [22.0, 22.0, 0.0], fov_y=60)
     r = TerrainRenderer(net, size=(96, 64), ctx=gl, lod_near=14.0, lod_far=30.0, lod_morph=False)
+    r.resident_wait = False  # the interactive setting (the default waits: timing-independent pictures)
     try:
         first = r.render(cam)
         assert isinstance(r.mesh, TerrainMesh)

@@ -120,7 +120,10 @@ class TerrainRenderer:
         self.net = net
         self.lod_morph = morph_setting(lod_morph)
         self.resident = bool(resident)
-        self.resident_wait = False  # True: block on the first frame until the vertex blocks are built
+        # True (default): the first frame waits for the vertex blocks, so every frame's picture is the
+        # same whatever the timing; False (interactive windows): draw at once on the CPU path while
+        # they build in the background
+        self.resident_wait = True
         self.ctx = ctx if ctx is not None else create_context()
         self.target = Offscreen(self.ctx, size)
         if isinstance(lightmap, str):
@@ -184,8 +187,8 @@ class TerrainRenderer:
         ``levels`` overrides the LOD (an ``(e,)`` array or one int for every edge).
         """
         t = timings if timings is not None else {}
-        # GPU-resident blocks: only culling, LOD and indices here.  Until they are built (in the
-        # background, so a fresh process draws at once) frames take the CPU path, visible patches only.
+        # GPU-resident blocks: only culling, LOD and indices here.  With resident_wait=False, until they
+        # are built in the background, frames take the CPU path (visible patches only).
         use = self.resident and levels is None and resident_fits(self.net)
         res = resident_terrain(self.net, wait=self.resident_wait) if use else None
         if res is not None:
