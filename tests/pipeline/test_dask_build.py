@@ -109,6 +109,13 @@ def test_cli_build_tiled_scene_with_dask_local(tmp_path, capsys):
                  "--out", str(tmp_path / "d.tiles")]) == 0
     assert "0 reused" in capsys.readouterr().out
     assert _files(tmp_path / "d.tiles") == local
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=1, processes=False, protocol="tcp://", host="127.0.0.1",
+                                  dashboard_address="127.0.0.1:0") as cluster:  # a "remote" scheduler
+        assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
+        assert main(["build", str(tmp_path / "w.toml"), "--quiet", "--scheduler", cluster.scheduler_address,
+                     "--out", str(tmp_path / "s.tiles")]) == 0
+    assert _files(tmp_path / "s.tiles") == local
     assert main(["build", str(tmp_path / "w.toml"), "--quiet", "--dask", "remote"]) == 2
     assert "--dask takes 'local'" in capsys.readouterr().err
     with pytest.raises(ConfigError, match="tcp://HOST"):
