@@ -95,7 +95,8 @@ _FILE_CACHE: dict = {}
 @dataclass(frozen=True)
 class FileSource:
     """A scene's height field (a :class:`~piste.world.scene_file.TerrainSpec` of kind geotiff,
-    heightfield): read once per process, windows cut from it."""
+    heightfield): read whole once per process (kept as float32 when that loses nothing: a
+    10,000 x 10,000 DEM holds 400 MB a process), windows cut from it."""
 
     spec: object = field(repr=False)
 
@@ -106,7 +107,11 @@ class FileSource:
              str(self.spec.nodata), self.spec.vertical_units, self.spec.key, self.spec.spacing)
         if k not in _FILE_CACHE:
             _FILE_CACHE.clear()  # one DEM at a time per process
-            _FILE_CACHE[k] = load_heightfield(self.spec)
+            z, spacing = load_heightfield(self.spec)
+            z32 = z.astype(np.float32)
+            if np.array_equal(z32, z):  # e.g. a float32 GeoTIFF in metres: half the memory, the same values
+                z = z32
+            _FILE_CACHE[k] = (z, spacing)
         return _FILE_CACHE[k]
 
     @property
@@ -118,7 +123,7 @@ class FileSource:
         return tuple(self._load()[1])
 
     def window(self, rows: slice, cols: slice) -> np.ndarray:
-        return self._load()[0][rows, cols]
+        return np.asarray(self._load()[0][rows, cols], dtype=np.float64)
 
     def source_key(self) -> str:
         import hashlib
