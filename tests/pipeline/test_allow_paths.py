@@ -70,3 +70,20 @@ def test_bad_allow_paths(layout, value, msg):
     with pytest.raises(ConfigError, match=msg):
         loads_scene(f"allow_paths = {value}\n", layout / "scene.toml")
 
+
+
+def test_build_uses_allow_paths_and_does_not_reuse_a_permitted_step(layout):
+    """`piste build` reads the object's buffer only while the scene allows its folder; the cached
+    objects step built with the permission is not reused once the permission is gone."""
+    from piste.pipeline.build import build_scene
+
+    z = np.add.outer(np.linspace(0, 4, 9), np.linspace(0, 2, 9))
+    np.savez(layout / "h.npz", z=z, dx=np.array(10.0))
+    body = ('[terrain]\nsource = "h.npz"\n[lightmap]\nres = 4\n[visibility]\nenabled = false\n'
+            '[[objects]]\nmodel = "models/thing.gltf"\nposition = [20.0, 20.0]\n')
+    (layout / "s.toml").write_text('allow_paths = ["assets"]\n' + body)
+    r = build_scene(layout / "s.toml", out=layout / "s.piste", cache_dir=layout / "cache")
+    assert r.path.exists()
+    (layout / "s.toml").write_text(body)
+    with pytest.raises(FormatError, match="leaves the model's folder"):
+        build_scene(layout / "s.toml", out=layout / "s2.piste", cache_dir=layout / "cache")

@@ -169,6 +169,12 @@ def _file_key(path) -> str:
     return content_key(Path(path))
 
 
+def _allow_key(scene) -> tuple:
+    """The scene's ``allow_paths`` as cache-key parts (none when empty, so existing keys stand):
+    a step built while a folder was allowed is not reused once it no longer is."""
+    return (("allow_paths", [str(p) for p in scene.allow_paths]),) if getattr(scene, "allow_paths", ()) else ()
+
+
 def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: int = 1, use_cache: bool = True) -> BuildResult:
     """Build the bundle of ``scene`` (a :class:`~piste.world.scene_file.SceneFile` or a path).
 
@@ -290,7 +296,8 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
             partners = mpf_partners(model, tex) if model.lower().endswith(".mpf") else (None, [])
             ch_key = content_key(BUILD_VERSION, "characters", CHARACTERS_VERSION, msrc, ratios,
                                  [(_file_key(f), b) for f, b in clip_srcs],
-                                 [_file_key(f) for f in [partners[0]] + partners[1] if f is not None])
+                                 [_file_key(f) for f in [partners[0]] + partners[1] if f is not None],
+                                 *_allow_key(scene))
 
             def make_characters(model=model, clip_srcs=clip_srcs, tex=tex):
                 m = load_mpf_rider(model, texture=tex) if tex else load_rider_model(model, allow_paths=scene.allow_paths)
@@ -334,7 +341,7 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
         src_keys = [m if m.startswith("builtin:") else _file_key(m) for m in srcs]
         placements = [(o.name, o.model, list(o.position), o.heading, o.scale) for o in scene.objects]
         obj_key = content_key(BUILD_VERSION, "objects", "object_atlas/3", terrain_key, srcs, src_keys, placements,
-                              manifest["lights"])
+                              manifest["lights"], *_allow_key(scene))
 
         def make_objects():
             return _objects_arrays(net, scene.objects, srcs, lights, scene.allow_paths)
