@@ -42,3 +42,14 @@ def test_path_too_long_for_the_file_system(tmp_path):
     text = '[[objects]]\nmodel = "' + "a" * 10000 + '"\nposition = [1.0, 2.0]\n'
     with pytest.raises(ConfigError, match=r"s\.toml, line 2, key 'objects\[0\]\.model': cannot use the path"):
         loads_scene(text, tmp_path / "s.toml")
+
+
+def test_huge_toml_refused_before_parsing(tmp_path):
+    from piste.errors import FormatError
+    from piste.lighting import loads_lights
+
+    text = 'name = "' + "a" * (17 << 20) + '"\n'
+    with pytest.raises(ConfigError, match=r"s\.toml: .* more than the limit"):
+        loads_scene(text, tmp_path / "s.toml")
+    with pytest.raises(FormatError, match=r"l\.toml: .* more than the limit"):
+        loads_lights(text, tmp_path / "l.toml")

@@ -57,6 +57,7 @@ __all__ = [
     "MAX_IMAGE_BYTES",
     "MAX_IMAGE_PIXELS",
     "MAX_JSON_DEPTH",
+    "MAX_TOML_BYTES",
 ]
 
 #: largest model file (``.gltf`` / ``.glb``) read at all
@@ -69,6 +70,8 @@ MAX_IMAGE_BYTES = 256 << 20
 MAX_IMAGE_PIXELS = 64 << 20
 #: deepest JSON nesting accepted (glTF, bundle manifests); real files nest < 10 deep
 MAX_JSON_DEPTH = 64
+#: largest scene or light TOML text: hand-written files are a few KB (tomllib takes ~1 s per 10 MB)
+MAX_TOML_BYTES = 16 << 20
 
 _SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*:")
 _DRIVE = re.compile(r"^[A-Za-z]:[\\/]")

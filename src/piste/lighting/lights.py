@@ -71,7 +71,7 @@ from pathlib import Path
 import numpy as np
 
 from piste.errors import FormatError, ValidationError
-from piste.formats.safe_io import toml_depth
+from piste.formats.safe_io import MAX_TOML_BYTES, toml_depth
 
 __all__ = [
     "AmbientLight",
@@ -338,6 +338,8 @@ def loads_lights(text: str, path="<string>") -> Lights:
     """
     import tomllib
 
+    if len(text) > MAX_TOML_BYTES:
+        raise FormatError(path, f"{len(text)} characters: more than the limit of {MAX_TOML_BYTES} for a lights file")
     if toml_depth(text) > 32:  # before tomllib, which recurses (RecursionError)
         raise FormatError(path, "arrays or tables nested more than 32 deep")
     try:

@@ -121,7 +121,7 @@ from pathlib import Path
 from piste.errors import ConfigError, PisteError, ValidationError
 from piste.formats.limits import precheck_gltf
 from piste.formats.ssx.mpf_model import mpf_partners
-from piste.formats.safe_io import check_regular, resolve_reference, toml_depth
+from piste.formats.safe_io import MAX_TOML_BYTES, check_regular, resolve_reference, toml_depth
 from piste.lighting.lights import AmbientLight, DirectionalLight, PointLight, SpotLight
 
 __all__ = [
@@ -523,6 +523,8 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     import tomllib
 
     path = Path(path)
+    if len(text) > MAX_TOML_BYTES:
+        raise SceneError(path, f"{len(text)} characters: more than the limit of {MAX_TOML_BYTES} for a scene file")
     if toml_depth(text) > MAX_TOML_DEPTH:  # before tomllib, which recurses (RecursionError)
         raise SceneError(path, f"arrays or tables nested more than {MAX_TOML_DEPTH} deep")
     try:
