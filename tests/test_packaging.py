@@ -29,6 +29,10 @@ def test_core_dependencies_are_only_what_the_numpy_cores_need():
     assert {"moderngl", "pyglet"} <= _req_names(extras["gl"])
     assert "imageio-ffmpeg" in _req_names(extras["video"])
     assert (ROOT / "LICENSE").read_text().startswith("MIT License")
+    assert PYPROJECT["project"]["license"] == "MIT" and PYPROJECT["project"]["license-files"] == ["LICENSE"]
+    import piste
+
+    assert piste.__version__ == PYPROJECT["project"]["version"]
 
 
 def test_every_dependency_is_pinned_in_the_constraints_file():

@@ -12,6 +12,6 @@ render      OpenGL (moderngl) renderer, headless through EGL
 
 from piste.errors import ConfigError, FormatError, PisteError, RenderError, ValidationError
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 __all__ = ["PisteError", "FormatError", "ValidationError", "ConfigError", "RenderError", "__version__"]
