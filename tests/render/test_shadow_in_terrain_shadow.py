@@ -42,3 +42,18 @@ def test_rider_shadow_spares_terrain_in_shadow(gl):
         r.release()
     assert (np.abs(lit.astype(int) - off.astype(int)).max(-1) > 8).sum() > 10  # the riders' shadows
     assert np.array_equal(shaded, off)  # ... not drawn again over the terrain's own shadow
+
+
+def test_sun_visibility_blur_matches_scipy_gaussian_filter():
+    """The numpy blur (no scipy import at run time) is scipy.ndimage.gaussian_filter's filter."""
+    from scipy.ndimage import gaussian_filter
+
+    from piste.render.shadow_pass import _gaussian_blur
+
+    rng = np.random.default_rng(3)
+    for shape in [(40, 57), (3, 5), (1, 9)]:
+        for sigma in (0.3, 1.0, 2.5):
+            f = (rng.random(shape) > 0.5).astype(np.float32)
+            out = _gaussian_blur(f, sigma)
+            assert out.dtype == np.float32 and out.shape == f.shape
+            np.testing.assert_allclose(out, gaussian_filter(f, sigma), atol=1e-6)
