@@ -147,6 +147,13 @@ class TerrainRenderer:
         self.visibility = None  # see set_visibility
         self.cull_stats: dict = {}
 
+    def start_resident(self) -> None:
+        """Start building the resident vertex blocks in the background now (e.g. while the other
+        passes set up); the first :meth:`prepare` with ``resident_wait`` joins it (the same blocks
+        either way).  Nothing when the blocks are not used or already built."""
+        if self.resident and resident_fits(self.net):
+            resident_terrain(self.net, wait=False)
+
     def set_visibility(self, visibility=None) -> None:
         """Pre-computed visibility in front of frustum culling (a bundle's per-cell sets, see
         :class:`piste.pipeline.visibility.Visibility`): any object whose ``patches_at(eye)`` gives an

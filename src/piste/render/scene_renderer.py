@@ -94,6 +94,7 @@ class SceneRenderer:
         terrain_kw.setdefault("track", scene.line)
         terrain_kw.setdefault("track_half_width", TRACK_HALF_WIDTH)
         self.terrain = TerrainRenderer(scene.net, size=size, ctx=ctx, lightmap=lightmap, **terrain_kw)
+        self.terrain.start_resident()  # built while the passes below set up; joined by the first frame
         self.ctx = self.terrain.ctx
         casts = list(casts) or list(getattr(scene, "casts", None) or ())  # a bundle scene lists its own
         self.casts = [scene] + [c for c in casts if len(c.riders)]
