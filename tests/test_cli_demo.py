@@ -42,21 +42,35 @@ def test_demo_options(gl_context, piste_cache, tmp_path, capsys, extra):
 
 def test_demo_is_the_built_default_scene_through_the_render_runtime(gl_context, piste_cache, tmp_path, capsys):
     """``piste demo`` builds the built-in default scene into the cache (once) and draws it with the
-    runtime of ``piste render``: the terrain fly-over's first frame is ``piste render``'s picture of
-    the built bundle from its flight camera, pixel for pixel."""
+    runtime of ``piste render``: the full scene's first frame (six riders following the track, the
+    placed objects: the scene file's ``[pack]`` and ``[auto_objects]``) is ``piste render``'s picture
+    of the built bundle, pixel for pixel; the terrain fly-over is the terrain alone from its flight
+    camera."""
+    from piste.pipeline.bundle_objects import load_bundle
     from piste.pipeline.default_scene import build_default_scene, default_scene_path
+    from piste.pipeline.preview import ScenePreview, camera_at
 
     demo_png, render_png = tmp_path / "demo.png", tmp_path / "render.png"
-    assert main(["demo", "--scene", "terrain", "--size", "64", "48", "--out", str(demo_png), "--no-progress"]) == 0
+    assert main(["demo", "--objects", "baked", "--size", "64", "48", "--out", str(demo_png), "--no-progress"]) == 0
+    assert "Characters: 6 riders" in capsys.readouterr().out
     bundle = default_scene_path(0).with_suffix(".piste")
     assert bundle.is_file() and bundle.parent == piste_cache / "scenes"
     again = build_default_scene(0)  # every step now comes from the build cache
     assert again.path == bundle and set(again.cached) >= {"terrain", "lightmap"}
-    assert main(["render", str(bundle), "--camera", "flight", "--size", "64", "48", "--out", str(render_png),
-                 "--quiet"]) == 0
+    b_ = load_bundle(bundle)
+    assert b_.manifest["pack"] == {"follow": "track", "start": 0.12}
+    assert b_.manifest["auto_objects"]["seed"] == 0 and b_.manifest["auto_objects"]["trees"] == 220
+    assert main(["render", str(bundle), "--size", "64", "48", "--out", str(render_png), "--quiet"]) == 0
     a, b = np.asarray(Image.open(demo_png)), np.asarray(Image.open(render_png))
     assert a.shape == b.shape == (48, 64, 3) and a.std() > 5
     assert np.array_equal(a, b)
+    assert main(["demo", "--scene", "terrain", "--size", "64", "48", "--out", str(demo_png), "--no-progress"]) == 0
+    p = ScenePreview(b_, size=(64, 48), ctx=gl_context, terrain_only=True)
+    try:
+        t = p.render(camera_at(b_, "flight"))
+    finally:
+        p.release()
+    assert p.objects is None and np.array_equal(np.asarray(Image.open(demo_png)), t)
 
 
 def test_demo_rejects_bad_arguments(tmp_path, capsys):

@@ -4,8 +4,8 @@ Writes ``out/demo.png`` (the first frame); with ``--frames N --video out/demo.mp
 the flight.  Prints the talk's statistics table over the frames shown and the frame times.
 
 The demo is ``piste build`` of the built-in default scene (:mod:`piste.pipeline.default_scene`:
-the course of ``--seed``, its lights and baked light map; built once into the piste cache folder,
-then loaded) followed by the runtime that ``piste render`` uses
+the course of ``--seed``, its lights and baked light map, the six riders following the track and
+the objects placed along it; built once into the piste cache folder, then loaded) followed by the runtime that ``piste render`` uses
 (:class:`piste.pipeline.preview.ScenePreview`): one place where a frame is made.
 """
 
@@ -128,7 +128,7 @@ def run(args) -> int:
         from piste.commands.demo_scene import run_scene
 
         return run_scene(args, bundle, lightmap, lighting, t0)
-    preview = ScenePreview(bundle, size=(w, h), lightmap=lightmap, lightmap_mode=args.lightmap)
+    preview = ScenePreview(bundle, size=(w, h), lightmap=lightmap, lightmap_mode=args.lightmap, terrain_only=True)
     lod_on = args.lod == "on"
     # warm-up (not timed): compiled kernels, the terrain's resident vertex blocks, shaders, GL buffers
     from piste._jit import warm_up

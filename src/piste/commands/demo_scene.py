@@ -38,38 +38,27 @@ def _objects_table(scene, lights) -> list[str]:
 
 def run_scene(args, bundle, lightmap, lighting: str, t0: float) -> int:
     """The full scene on the built default course ``bundle`` (see :func:`piste.commands.demo.run`):
-    six riders and the course's objects placed here, drawn by the same runtime as ``piste render``."""
+    the six riders following the track and the course's objects are the default scene file's
+    ``[pack]`` and ``[auto_objects]``, made and drawn by the runtime of ``piste render``
+    (:class:`piste.pipeline.preview.ScenePreview`); ``--start`` moves the pack."""
     import sys
     import time
 
     import numpy as np
 
-    from piste.errors import ConfigError
-    from piste.pipeline.preview import ScenePreview
+    from piste.pipeline.preview import ScenePreview, rider_casts  # --rider-model: other models beside the pack
     from piste.render import summarize
     from piste.render.context import save_png
     from piste.render.scene_renderer import summarize_scene
     from piste.render.video import VideoWriter
     from piste.terrain import format_stats
-    from piste.world.course import TRACK_HALF_WIDTH
-    from piste.world.objects import place_objects
-    from piste.world.scene import Scene
 
     w, h = args.size
-    net, line, lights = bundle.net, bundle.centerline, bundle.lights
-    objs = place_objects(net, line, lights, seed=args.seed, track_half_width=TRACK_HALF_WIDTH)
-    length = float(np.linalg.norm(np.diff(line[:, :2], axis=0), axis=1).sum())
-    start = float(args.start) * length
-    if start > length - 120.0:
-        raise ConfigError(f"--start {args.start}: the riders need 120 m of track ahead; use at most "
-                          f"{(length - 120.0) / length:.2f}")
-    scene = Scene(net, line, lights, objects=objs, start=start)
-    from piste.commands.view import rider_casts  # --rider-model: other models' riders beside the pack
-
-    scene.casts = [Scene(net, line, lights, model=m, pack=pack, start=start) for m, pack in rider_casts(args.rider_model)]
-    preview = ScenePreview(bundle, size=(w, h), scene=scene, lightmap=lightmap, object_lighting=args.objects,
-                           shadows=not args.no_shadows, specular=not args.no_specular, lightmap_mode=args.lightmap)
-    renderer = preview.renderer
+    net, lights = bundle.net, bundle.lights
+    preview = ScenePreview(bundle, size=(w, h), lightmap=lightmap, object_lighting=args.objects,
+                           shadows=not args.no_shadows, specular=not args.no_specular, lightmap_mode=args.lightmap,
+                           start=args.start, casts=rider_casts(args.rider_model))
+    scene, renderer = preview.scene, preview.renderer
     lod_on = args.lod == "on"
     from piste._jit import warm_up
     from piste.terrain.resident import resident_fits, resident_terrain

@@ -68,6 +68,7 @@ def _scene_renderer(args, net, line, atlas, ctx=None):
     import numpy as np
 
     from piste.lighting.lights import default_lights
+    from piste.pipeline.preview import rider_casts
     from piste.render.scene_renderer import SceneRenderer
     from piste.world.course import TRACK_HALF_WIDTH
     from piste.world.objects import place_objects
@@ -82,26 +83,6 @@ def _scene_renderer(args, net, line, atlas, ctx=None):
     face = getattr(args, "face", "morph")
     return SceneRenderer(scene, size=tuple(args.size), ctx=ctx, lightmap=atlas, casts=casts,
                          face=None if face == "off" else face)
-
-
-def rider_casts(specs) -> list:
-    """``FILE[:N]`` specs -> ``[(rider model, pack)]``: N riders (default 2) of each glTF model,
-    placed between the default pack's riders."""
-    from pathlib import Path
-
-    from piste.errors import ConfigError
-    from piste.formats.gltf import load_gltf
-    from piste.world.riders import pack_for, rider_model
-
-    out = []
-    for k, spec in enumerate(specs):
-        path, _, n = str(spec).rpartition(":") if ":" in str(spec) and str(spec).rsplit(":", 1)[1].isdigit() \
-            else (str(spec), "", "2")
-        if not Path(path).is_file():
-            raise ConfigError(f"--rider-model {spec}: no such file {path}")
-        m = rider_model(load_gltf(path))
-        out.append((m, pack_for(m, int(n), ahead=4.0 + 2.0 * k, across=0.0, spacing=9.0)))
-    return out
 
 
 def run(args) -> int:

@@ -1,12 +1,15 @@
 """The built-in default scene: what ``piste demo`` builds (cached) before it renders.
 
 The default course of a seed, its default lights (:func:`piste.lighting.default_lights`) and the
-baked light map (8 x 8 texels a patch, terrain shadows), with a camera flying down the track.  It
+baked light map (8 x 8 texels a patch, terrain shadows), with a camera flying down the track, the
+six riders of the default pack following the track (``[pack] follow = "track"``, the camera chasing
+the first) and the course's trees, signs, rocks and rails placed along it (``[auto_objects]``, the
+course's seed).  It
 is an ordinary scene file, written into the piste cache folder (``$PISTE_CACHE_DIR`` or
 ``~/.cache/piste``, then ``scenes/``) and built by :func:`piste.pipeline.build_scene` with the
 step cache beside it, so the first ``piste demo`` bakes the light map and every later one loads
-the bundle.  The riders and the objects of the demo are placed at run time
-(:mod:`piste.commands.demo_scene`); the pre-processed parts come from the bundle.
+the bundle.  The runtime (:func:`piste.pipeline.preview.track_scene`) makes the pack and the
+objects from those keys.
 
 API
 ---
@@ -26,7 +29,7 @@ from piste.pipeline.build import BuildResult, build_scene
 
 __all__ = ["DEFAULT_SCENE_TOML", "cache_root", "default_scene_path", "build_default_scene"]
 
-#: the built-in default scene (no riders or objects: ``piste demo`` places them at run time)
+#: the built-in default scene
 DEFAULT_SCENE_TOML = """\
 # The built-in default scene of `piste demo` (written by piste.pipeline.default_scene).
 name = "default course (seed {seed})"
@@ -45,6 +48,21 @@ far = 180.0
 
 [visibility]
 enabled = false
+
+[render]
+fog = "auto"
+face = "morph"
+
+[pack]
+follow = "track"
+start = 0.12
+
+[auto_objects]
+seed = {seed}
+trees = 220
+signs = 16
+rocks = 40
+rails = 6
 
 [[cameras]]
 name = "flight"

@@ -12,12 +12,19 @@ bundle's scene differs in two ways, handled here without touching the renderer:
 * objects are lit by the RGBs the build baked into the bundle
   (:meth:`~piste.render.object_pass.ObjectPass.set_vertex_colors`), not baked again.
 
+A scene whose file has ``[pack] follow = "track"`` (the built-in default scene of ``piste demo``)
+gets the riders running down the track, chased by the camera, and ``[auto_objects]`` the course's
+trees, signs, rocks and rails placed along it (:func:`track_scene`): made here, at load, from the
+keys the build carried into the manifest.
+
 A scene without riders is drawn by :class:`piste.render.TerrainRenderer` plus the object pass.
 
 API
 ---
 ScenePreview(bundle, size=None, ctx=None, visibility=True)   ``.render(camera, t) -> (H, W, 3) uint8``,
                                                               ``.stats`` of the last frame, ``.reload(bundle)``
+track_scene(bundle, start=None, casts=()) -> Scene            the [pack] riders + [auto_objects] of a bundle
+rider_casts(["FILE[:N]", ...]) -> [(model, pack rows)]        other rider models beside the pack
 camera_at(bundle, name, i, n) -> Camera                       a scene camera at frame i of n (track cameras fly)
 render_image(bundle, camera=None, size=None, t=0.0) -> image
 render_frames(bundle, camera, frames, size, fps, video=None, first_png=None) -> list of stats
@@ -26,11 +33,13 @@ render_frames(bundle, camera, frames, size, fps, video=None, first_png=None) -> 
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
 from piste.character import BlendedMesh
-from piste.errors import ConfigError
+from piste.errors import ConfigError, FormatError
+from piste.formats.gltf import load_gltf
 from piste.pipeline.bundle_objects import camera_from_dict
 from piste.pipeline.characters import lods_from_arrays, model_from_arrays
 from piste.render.context import create_context, save_png
@@ -42,10 +51,11 @@ from piste.render.ssx_pass import SsxTerrainRenderer
 from piste.render.video import VideoWriter
 from piste.world.camera import track_camera
 from piste.world.course import TRACK_HALF_WIDTH
-from piste.world.riders import ClipTable, RiderState
+from piste.world.objects import place_objects
+from piste.world.riders import ClipTable, RiderState, pack_for, rider_model
 from piste.world.scene import LOD_DISTANCES, Scene, sun_light
 
-__all__ = ["PlacedRiders", "BundleScene", "clip_table", "ScenePreview", "camera_at", "render_image", "render_frames"]
+__all__ = ["PlacedRiders", "BundleScene", "clip_table", "rider_casts", "track_scene", "ScenePreview", "camera_at", "render_image", "render_frames"]
 
 
 class PlacedRiders:
@@ -154,6 +164,74 @@ class BundleScene(Scene):
         return sf
 
 
+#: metres of track the pack needs ahead of its first rider's start
+PACK_TRACK_AHEAD = 120.0
+#: [auto_objects] count keys -> place_objects' keywords
+_AUTO_COUNTS = {"trees": "n_trees", "signs": "n_signs", "rocks": "n_rocks", "rails": "n_rails"}
+
+
+def auto_objects(bundle):
+    """The course's objects placed along the track from the manifest's ``auto_objects``
+    (``{"seed", "trees", "signs", "rocks", "rails"}``, the scene file's ``[auto_objects]``), or None."""
+    auto = bundle.manifest.get("auto_objects")
+    if not auto:
+        return None
+    if bundle.centerline is None:
+        raise FormatError(bundle.path, "auto_objects need the default course's centre line", field="auto_objects")
+    try:
+        kw = {_AUTO_COUNTS[k]: int(auto[k]) for k in _AUTO_COUNTS if k in auto}
+        seed = int(auto.get("seed", 0))
+    except (TypeError, ValueError):
+        raise FormatError(bundle.path, f"manifest.json: auto_objects: expected integers, got {auto!r}",
+                          field="auto_objects") from None
+    if not all(0 <= v <= 10_000 for v in kw.values()):
+        raise FormatError(bundle.path, f"manifest.json: auto_objects: expected counts in 0..10000, got {auto!r}",
+                          field="auto_objects")
+    return place_objects(bundle.net, bundle.centerline, bundle.lights, seed=seed,
+                         track_half_width=TRACK_HALF_WIDTH, **kw)
+
+
+def rider_casts(specs) -> list:
+    """``FILE[:N]`` specs (``--rider-model``) -> ``[(rider model, pack rows)]``: N riders (default 2)
+    of each skinned glTF model, placed between the default pack's riders (``track_scene(casts=)``)."""
+    out = []
+    for k, spec in enumerate(specs):
+        path, _, n = str(spec).rpartition(":") if ":" in str(spec) and str(spec).rsplit(":", 1)[1].isdigit() \
+            else (str(spec), "", "2")
+        if not Path(path).is_file():
+            raise ConfigError(f"--rider-model {spec}: no such file {path}")
+        m = rider_model(load_gltf(path))
+        out.append((m, pack_for(m, int(n), ahead=4.0 + 2.0 * k, across=0.0, spacing=9.0)))
+    return out
+
+
+def track_scene(bundle, start: float | None = None, casts=()):
+    """The :class:`piste.world.scene.Scene` of a bundle built with ``[pack] follow = "track"``: the
+    default pack of riders running down the track (rider 0 at fraction ``start`` of it at t = 0;
+    default: the scene file's ``pack.start``), the camera chasing rider 0, and the ``[auto_objects]``
+    (else the bundle's own objects).  ``casts``: ``[(rider model, pack rows)]`` of other models to
+    run beside the pack (``piste demo --rider-model``)."""
+    pack = bundle.manifest.get("pack") or {}
+    line = bundle.centerline
+    if line is None:
+        raise FormatError(bundle.path, "a [pack] following the track needs the default course's centre line",
+                          field="pack")
+    frac = float(pack.get("start", 0.12)) if start is None else float(start)
+    length = float(np.linalg.norm(np.diff(line[:, :2], axis=0), axis=1).sum())
+    at = frac * length
+    if at > length - PACK_TRACK_AHEAD:
+        raise ConfigError(f"--start {frac}: the riders need {PACK_TRACK_AHEAD:.0f} m of track ahead; use at most "
+                          f"{(length - PACK_TRACK_AHEAD) / length:.2f}")
+    objs = auto_objects(bundle)
+    if objs is None:
+        objs = bundle.objects()
+    net, lights = bundle.net, bundle.lights
+    scene = Scene(net, line, lights, objects=objs, start=at)
+    scene.casts = [Scene(net, line, lights, model=m, pack=rows, start=at) for m, rows in casts]
+    scene.lod_distances = tuple(bundle.manifest.get("lod", {}).get("character", scene.lod_distances))
+    return scene
+
+
 def camera_at(bundle, name: str | None = None, i: int = 0, n: int = 1):
     """The scene camera ``name`` (default: the first) at frame ``i`` of ``n``: a track camera flies
     from its first to its second fraction of the track; other cameras stay put."""
@@ -193,6 +271,13 @@ class ScenePreview:
     object_lighting : "baked" (default: the RGBs the bundle holds), "dynamic" or "points"
     shadows, specular : the riders' projected shadows and specular pass
     lightmap_mode : "modulate" or "ps2" (default: the scene's)
+    start : a ``[pack]`` scene: fraction of the track where rider 0 starts (default: the scene file's)
+    casts : a ``[pack]`` scene: ``[(rider model, pack rows)]`` of other models beside the pack
+    terrain_only : draw the terrain alone (no riders, no objects)
+    face : the riders' faces, "morph", "null_bones" or "off" (default: the scene file's
+        ``render.face``, else "morph")
+    fog : fog density per metre, or "auto" (the default density scaled to the scene's size);
+        default: the scene file's ``render.fog``, else "auto"
 
     After :meth:`render`, ``stats`` holds the frame's counts and ``frame`` the renderer's own
     result (a :class:`piste.render.Frame` for terrain-only scenes, else a
@@ -201,7 +286,8 @@ class ScenePreview:
 
     def __init__(self, bundle, size=None, ctx=None, visibility: bool = True, scene=None, lightmap="bundle",
                  object_lighting: str = "baked", shadows: bool = True, specular: bool = True,
-                 lightmap_mode: str | None = None):
+                 lightmap_mode: str | None = None, start: float | None = None, casts=(),
+                 terrain_only: bool = False, face: str | None = None, fog=None):
         if not (isinstance(lightmap, str) and lightmap in ("bundle", "placeholder")) and lightmap is not None:
             raise ConfigError(f"lightmap must be 'bundle', 'placeholder' or None, got {lightmap!r}")
         self.ctx = ctx if ctx is not None else create_context()
@@ -209,7 +295,9 @@ class ScenePreview:
         self.use_visibility = bool(visibility)
         self.size = tuple(size) if size is not None else tuple(bundle.manifest.get("render", {}).get("size", (640, 448)))
         self.options = {"scene": scene, "lightmap": lightmap, "object_lighting": object_lighting,
-                        "shadows": bool(shadows), "specular": bool(specular), "lightmap_mode": lightmap_mode}
+                        "shadows": bool(shadows), "specular": bool(specular), "lightmap_mode": lightmap_mode,
+                        "start": start, "casts": list(casts), "terrain_only": bool(terrain_only), "face": face,
+                        "fog": fog}
         self.stats: dict = {}
         self.frame = None
         self._setup(bundle)
@@ -228,12 +316,28 @@ class ScenePreview:
         self.lightmap_mode = opt["lightmap_mode"] or man.get("render", {}).get("lightmap_mode", "modulate")
         mode = opt["object_lighting"]
         colors = bundle.vertex_colors()
-        self.follow = opt["scene"] is not None  # a run-time scene: the camera chases its rider
-        if self.follow or man.get("riders"):
-            self.scene = opt["scene"] if self.follow else BundleScene(bundle)
+        rman = man.get("render") or {}
+        face = opt["face"] or rman.get("face") or "morph"
+        if face not in ("morph", "null_bones", "off"):
+            raise ConfigError(f"face must be 'morph', 'null_bones' or 'off', got {face!r}")
+        fog = opt["fog"] if opt["fog"] is not None else rman.get("fog", "auto")
+        if fog != "auto" and (isinstance(fog, (bool, str)) or not isinstance(fog, (int, float)) or not fog >= 0):
+            raise ConfigError(f"fog must be a density per metre >= 0 or 'auto', got {fog!r}")
+        self.face = face
+        self.fog = None if fog == "auto" else float(fog)  # None: the renderer's scene-sized default
+        pack = bool(man.get("pack")) and not opt["terrain_only"]
+        # a run-time scene or riders following the track ([pack]): the camera chases rider 0
+        self.follow = (opt["scene"] is not None or pack) and not opt["terrain_only"]
+        if self.follow or (man.get("riders") and not opt["terrain_only"]):
+            if opt["scene"] is not None:
+                self.scene = opt["scene"]
+            elif pack:
+                self.scene = track_scene(bundle, opt["start"], opt["casts"])
+            else:
+                self.scene = BundleScene(bundle)
             self.renderer = SceneRenderer(self.scene, size=self.size, ctx=self.ctx, lightmap=atlas,
                                           object_lighting=mode, shadows=opt["shadows"], specular=opt["specular"],
-                                          **kw)
+                                          face=None if face == "off" else face, **kw)
             self.terrain = self.renderer.terrain
             self.objects = None
             if self.renderer.objects is not None and mode == "baked" and self.scene.objects is bundle.objects():
@@ -246,11 +350,11 @@ class ScenePreview:
                                                   ctx=self.ctx, lightmap=atlas, **kw)  # blends its stored Cs/As
             else:
                 self.terrain = TerrainRenderer(bundle.net, size=self.size, ctx=self.ctx, lightmap=atlas, **kw)
-            objs = bundle.objects()
+            objs = None if opt["terrain_only"] else (auto_objects(bundle) or bundle.objects())
             self.objects = None
             if objs is not None:
                 self.objects = ObjectPass(self.ctx, objs, bundle.lights, mode=mode,
-                                          colors=colors if mode == "baked" else None)
+                                          colors=colors if mode == "baked" and objs is bundle.objects() else None)
         # the pre-computed visibility in front of frustum culling
         self.terrain.set_visibility(bundle.visibility if self.use_visibility else None)
 
@@ -272,13 +376,13 @@ class ScenePreview:
         cam = replace(camera, aspect=w / h) if camera is not None else None
         if self.renderer is not None:
             img = self.renderer.render(t, camera=cam, lod=lod, lightmap_mode=self.lightmap_mode, debug=debug,
-                                       read=read)
+                                       read=read, fog=self.fog)
             self.frame = img
             self.stats.update(img.stats)
             self.stats.update(self.terrain.cull_stats)
             return img.image[..., :3] if read else None
         frame = self.terrain.render(cam, lod=lod, lightmap_mode=self.lightmap_mode, debug=debug,
-                                    read=read and self.objects is None)
+                                    read=read and self.objects is None, fog="scene" if self.fog is None else self.fog)
         self.frame = frame
         image = frame.image
         if self.objects is not None:
@@ -287,7 +391,8 @@ class ScenePreview:
                 keep = self.bundle.visibility.objects_at(cam.eye)
                 if keep is not None:
                     vis_objs = vis_objs[keep[vis_objs]]
-            self.objects.draw(cam.view_projection(), cam.eye, vis_objs, fog=(*HORIZON, DEFAULT_FOG_DENSITY))
+            density = DEFAULT_FOG_DENSITY if self.fog is None else self.fog
+            self.objects.draw(cam.view_projection(), cam.eye, vis_objs, fog=(*HORIZON, density) if density else None)
             self.ctx.finish()
             self.stats["objects_drawn"] = int(len(vis_objs))
             image = self.terrain.target.read() if read else None
@@ -323,7 +428,9 @@ def render_image(bundle, camera: str | None = None, size=None, t: float = 0.0, c
 def render_frames(bundle, camera: str | None = None, frames: int = 1, size=None, fps: int = 30, video=None,
                   first_png=None, ctx=None, progress: bool = False) -> list:
     """Render ``frames`` frames (time ``i / fps``; track cameras fly), writing the first to
-    ``first_png`` and all to the MP4 ``video`` when given.  Returns each frame's stats."""
+    ``first_png`` and all to the MP4 ``video`` when given.  Returns each frame's stats.  A ``[pack]``
+    scene (riders following the track) with no ``camera`` named is seen by the chase camera, as in
+    ``piste demo``."""
     p = ScenePreview(bundle, size=size, ctx=ctx)
     writer = None
     out = []
@@ -336,7 +443,8 @@ def render_frames(bundle, camera: str | None = None, frames: int = 1, size=None,
 
             it = tqdm(it, desc="rendering", unit="frame", leave=False)
         for i in it:
-            img = p.render(camera_at(bundle, camera, i, frames), i / float(fps))
+            chase = camera is None and p.follow
+            img = p.render(None if chase else camera_at(bundle, camera, i, frames), i / float(fps))
             if i == 0 and first_png is not None:
                 save_png(first_png, img)
             if writer is not None:

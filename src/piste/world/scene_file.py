@@ -54,6 +54,19 @@ scene file.  Every table and key is optional except where noted::
     [render]
     size = [640, 448]
     lightmap_mode = "modulate"    # or "ps2"
+    fog = "auto"                  # density per metre (0: none) or "auto" (6e-4 scaled to the scene's size)
+    face = "morph"                # riders' faces: "morph" targets, their "null_bones" fit, or "off"
+
+    [pack]                        # the default course: riders following the track (piste demo's six,
+    follow = "track"              #   the camera chasing the first; see piste.world.riders.DEFAULT_PACK)
+    start = 0.12                  # fraction of the track where the first rider is at t = 0
+
+    [auto_objects]                # the default course: trees, signs, rocks and rails placed along the
+    seed = 0                      #   track (piste.world.objects.place_objects), beside any [[objects]]
+    trees = 220
+    signs = 16
+    rocks = 40
+    rails = 6
 
     [[gltf]]                      # lights and cameras placed in Blender (KHR_lights_punctual)
     file = "lights.gltf"
@@ -339,6 +352,12 @@ class VisibilitySpec:
 class RenderSpec:
     size: tuple = (640, 448)
     lightmap_mode: str = "modulate"
+    fog: object = "auto"     # density per metre, or "auto" (scaled to the scene's size)
+    face: str = "morph"      # "morph", "null_bones" or "off"
+
+
+#: [auto_objects] keys and their defaults (piste.world.objects.place_objects' counts)
+AUTO_OBJECT_COUNTS = {"trees": 220, "signs": 16, "rocks": 40, "rails": 6}
 
 
 @dataclass
@@ -358,6 +377,8 @@ class SceneFile:
     lod: LodSpec = field(default_factory=LodSpec)
     visibility: VisibilitySpec = field(default_factory=VisibilitySpec)
     render: RenderSpec = field(default_factory=RenderSpec)
+    pack: dict | None = None          # [pack]: {"follow": "track", "start": fraction}
+    auto_objects: dict | None = None  # [auto_objects]: {"seed": int, "trees": n, "signs": n, "rocks": n, "rails": n}
     text: str = ""
     allow_paths: tuple = ()  # absolute folders glTF files may read besides their own (``allow_paths`` key)
 
@@ -537,7 +558,7 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     base = path.resolve().parent
     top = _Checker(path, lines, doc, (), "")
     top.allow({"name", "terrain", "lightmap", "lod", "visibility", "render", "gltf", "riders", "objects", "lights",
-               "cameras", "allow_paths"})
+               "cameras", "allow_paths", "pack", "auto_objects"})
     scene = SceneFile(path=path, name=top.get("name", "str", path.stem), text=text)
     scene.allow_paths = _allow_paths(top, base)
 
@@ -609,13 +630,47 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     if scene.visibility.method not in ("auto", "horizon", "rays"):
         raise vi.error("method", f"expected \"auto\", \"horizon\" or \"rays\", got {scene.visibility.method!r}")
     re_ = _table(top, "render")
-    re_.allow({"size", "lightmap_mode"})
+    re_.allow({"size", "lightmap_mode", "fog", "face"})
     size = re_.get("size", "vec2", (640, 448))
     if not all(float(s).is_integer() and 16 <= s <= 8192 for s in size):
         raise re_.error("size", f"expected [width, height], whole pixels in 16..8192, got {list(size)}")
     scene.render = RenderSpec((int(size[0]), int(size[1])), re_.get("lightmap_mode", "str", "modulate"))
     if scene.render.lightmap_mode not in ("modulate", "ps2"):
         raise re_.error("lightmap_mode", f"expected \"modulate\" or \"ps2\", got {scene.render.lightmap_mode!r}")
+    fog = re_.table.get("fog", "auto")
+    if fog != "auto":
+        fog = re_.get("fog", "float") if not isinstance(fog, str) else None
+        if fog is None or fog < 0:
+            raise re_.error("fog", f"expected a density per metre >= 0 or \"auto\", got {re_.table['fog']!r}")
+    scene.render.fog = fog
+    scene.render.face = re_.get("face", "str", "morph")
+    if scene.render.face not in ("morph", "null_bones", "off"):
+        raise re_.error("face", f"expected \"morph\", \"null_bones\" or \"off\", got {scene.render.face!r}")
+
+    # the default course's riders following the track and objects placed along it
+    pk = _table(top, "pack")
+    if "pack" in top.table:
+        pk.allow({"follow", "start"})
+        follow = pk.get("follow", "str", "track")
+        if follow != "track":
+            raise pk.error("follow", f"expected \"track\", got {follow!r}")
+        start = pk.get("start", "float", 0.12)
+        if not 0.0 <= start <= 1.0:
+            raise pk.error("start", f"expected a fraction of the track in [0, 1], got {start}")
+        if ts.kind != "default":
+            raise pk.error("follow", "riders following the track need the default course (terrain.source = \"default\")")
+        scene.pack = {"follow": follow, "start": start}
+    ao = _table(top, "auto_objects")
+    if "auto_objects" in top.table:
+        ao.allow({"seed", *AUTO_OBJECT_COUNTS})
+        auto = {"seed": ao.get("seed", "int", 0)}
+        for k, d in AUTO_OBJECT_COUNTS.items():
+            auto[k] = ao.get(k, "int", d)
+            if not 0 <= auto[k] <= 10_000:
+                raise ao.error(k, f"expected 0 <= {k} <= 10000, got {auto[k]}")
+        if ts.kind != "default":
+            raise ao.error("seed", "objects placed along the track need the default course (terrain.source = \"default\")")
+        scene.auto_objects = auto
 
     # glTF imports
     for g in _array(top, "gltf"):
@@ -696,6 +751,12 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
         if cs.eye is not None and cs.target is not None and cs.eye == cs.target:
             raise c.error("target", "eye and target are the same point")
         scene.cameras.append(cs)
+    if scene.pack and scene.riders:
+        raise SceneError(path, "give riders as [pack] (following the track) or as [[riders]], not both",
+                         line=lines.get(("pack",)), key="pack")
+    if scene.auto_objects and scene.objects:
+        raise SceneError(path, "give objects as [auto_objects] or as [[objects]], not both",
+                         line=lines.get(("auto_objects",)), key="auto_objects")
     return scene
 
 
