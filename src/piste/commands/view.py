@@ -1,7 +1,10 @@
 """``piste view``: the fast in-game preview of the completed scene in a window.
 
-Without SCENE: the default course with its six riders, objects, projected shadows, specular, the
-light map and the sky (``--terrain-only`` for the terrain alone); the camera flies free from
+Without SCENE: the built-in default scene (:mod:`piste.pipeline.default_scene`, built once and
+cached, the one ``piste demo`` draws) through the runtime
+(:class:`piste.pipeline.preview.ScenePreview` drawing into the window,
+:class:`piste.pipeline.live.PreviewView`): the default course with its six riders, objects,
+projected shadows, specular, the light map and the sky (``--terrain-only`` for the terrain alone); the camera flies free from
 ``--start`` along the track, or chases a rider (``--follow N``; F toggles).  With SCENE (a
 ``.toml`` or ``.piste``): the scene's bundle, rebuilt and reloaded when its files change (see
 :mod:`piste.pipeline.live`).  Keys: see :data:`piste.render.window.HELP`.
@@ -34,8 +37,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--rider-model", action="append", default=[], metavar="FILE[:N]",
                         help="add N riders (default 2) of a skinned, animated glTF model to the default course "
                              "(repeatable: any number of different rider models)")
-    parser.add_argument("--face", choices=("morph", "null_bones", "off"), default="morph",
-                        help="riders' faces: morph targets, their null-bone fit, or the neutral face (default: morph)")
+    parser.add_argument("--face", choices=("morph", "null_bones", "off"),
+                        help="riders' faces: morph targets, their null-bone fit, or the neutral face (default: the "
+                             "scene file's [render] face, else morph)")
     parser.add_argument("--follow", type=int, metavar="N", help="start chasing rider N (F toggles, N next rider)")
     parser.add_argument("--no-overlay", action="store_true", help="start without the statistics overlay (H toggles)")
     parser.add_argument("--frames", type=_positive, help="quit after N frames (for scripted runs)")
@@ -48,41 +52,21 @@ def add_arguments(parser) -> None:
     add_scene_arguments(parser)
 
 
-def _course_view_factory(args, net, line, atlas):
-    """``ctx -> view`` for the default course (terrain only or the whole scene)."""
-    from piste.render.window import SceneView, TerrainView
-    from piste.world.course import TRACK_HALF_WIDTH
-
-    def make(ctx):
-        if args.terrain_only:
-            from piste.render.frame import TerrainRenderer
-
-            return TerrainView(TerrainRenderer(net, size=tuple(args.size), ctx=ctx, lightmap=atlas, track=line,
-                                               track_half_width=TRACK_HALF_WIDTH))
-        return SceneView(_scene_renderer(args, net, line, atlas, ctx))
-
-    return make
-
-
-def _scene_renderer(args, net, line, atlas, ctx=None):
+def course_preview(args, bundle, ctx=None):
+    """The runtime (:class:`piste.pipeline.preview.ScenePreview`) of the built default scene
+    ``bundle`` with the view's flags: the terrain alone or the whole scene, the pack from
+    ``--start``, ``--rider-model`` casts, ``--lighting``, ``--face``."""
     import numpy as np
 
-    from piste.lighting.lights import default_lights
-    from piste.pipeline.preview import rider_casts
-    from piste.render.scene_renderer import SceneRenderer
-    from piste.world.course import TRACK_HALF_WIDTH
-    from piste.world.objects import place_objects
-    from piste.world.scene import Scene
+    from piste.pipeline.preview import PACK_TRACK_AHEAD, ScenePreview, rider_casts
 
-    lights = default_lights()
-    objs = place_objects(net, line, lights, seed=args.seed, track_half_width=TRACK_HALF_WIDTH)
+    lightmap = {"baked": "bundle", "placeholder": "placeholder", "none": None}[args.lighting]
+    line = bundle.centerline
     length = float(np.linalg.norm(np.diff(line[:, :2], axis=0), axis=1).sum())
-    start = min(max(float(args.start), 0.0) * length, max(length - 120.0, 0.0))
-    scene = Scene(net, line, lights, objects=objs, start=start)
-    casts = [Scene(net, line, lights, model=m, pack=pack, start=start) for m, pack in rider_casts(args.rider_model)]
-    face = getattr(args, "face", "morph")
-    return SceneRenderer(scene, size=tuple(args.size), ctx=ctx, lightmap=atlas, casts=casts,
-                         face=None if face == "off" else face)
+    start = min(max(float(args.start), 0.0), max(length - PACK_TRACK_AHEAD, 0.0) / length)  # the pack: 120 m ahead
+    return ScenePreview(bundle, size=tuple(args.size), ctx=ctx, lightmap=lightmap, object_lighting="dynamic",
+                        lightmap_mode=args.lightmap, terrain_only=args.terrain_only, start=start,
+                        casts=rider_casts(args.rider_model), face=args.face)
 
 
 def run(args) -> int:
@@ -99,40 +83,39 @@ def run(args) -> int:
         from piste.pipeline.live import run_view
 
         return run_view(args)
-    from piste.commands.demo import lightmap_for
+    from piste.extras import require
+    from piste.pipeline.bundle_objects import load_bundle
+    from piste.pipeline.default_scene import build_default_scene
+    from piste.pipeline.live import PreviewView
     from piste.render.window import HELP, ViewOptions, has_display, print_benchmark, run_window
     from piste.world.camera import track_camera
-    from piste.world.course import default_course, track_centerline
 
-    net = default_course(args.seed)
-    line = track_centerline(args.seed)
-    net, atlas, _ = lightmap_for(net, args.lighting)
+    require("moderngl", "piste view")
+    # the default course is the built default scene (cached; the one `piste demo` draws) + the runtime
+    result = build_default_scene(args.seed, progress=sys.stderr.isatty())
+    bundle = load_bundle(result.path, verify=False)  # just written or verified by the build's cache
+    line = bundle.centerline
     w, h = args.size
     cam = track_camera(line, args.start, aspect=w / h)
     if not has_display():
-        from piste.render import TerrainRenderer, save_png
-        from piste.world.course import TRACK_HALF_WIDTH
+        from piste.render import save_png
 
         print("piste view: no display (DISPLAY / WAYLAND_DISPLAY unset), so no window; rendering one frame "
               f"off-screen to {args.out} instead (run under a desktop or `xvfb-run piste view`)", file=sys.stderr)
-        if args.terrain_only:
-            r = TerrainRenderer(net, size=(w, h), lightmap=atlas, track=line, track_half_width=TRACK_HALF_WIDTH)
-            try:
-                image = r.render(cam, lightmap_mode=args.lightmap, debug=args.debug).image
-            finally:
-                r.release()
-        else:
-            r = _scene_renderer(args, net, line, atlas)
-            try:
-                image = r.render(0.0, camera=None if args.follow is not None else cam, lightmap_mode=args.lightmap,
-                                 debug=args.debug).image
-            finally:
-                r.release()
-        print(f"wrote {save_png(args.out, image[..., :3])}")
+        p = course_preview(args, bundle)
+        try:
+            if p.scene is not None and args.follow is not None:
+                p.scene.follow = int(args.follow) % len(p.scene.riders)
+            image = p.render(None if (p.follow and args.follow is not None) else cam, 0.0, debug=args.debug)
+        finally:
+            p.release()
+        print(f"wrote {save_png(args.out, image)}")
         return 0
     opts = ViewOptions(lightmap_mode=args.lightmap, debug=args.debug, follow=args.follow,
                        overlay=not args.no_overlay)
-    make = _course_view_factory(args, net, line, atlas)
+
+    def make(ctx):
+        return PreviewView(course_preview(args, bundle, ctx))
     if args.benchmark:
         cams = None
         if args.terrain_only:

@@ -14,10 +14,11 @@ and reloads in place (:func:`run_window`).
 
 API
 ---
-LiveScene(path, bundle=None, cache_dir=None, size=None, camera=None, ctx=None)
+LiveScene(path, bundle=None, cache_dir=None, size=None, camera=None, ctx=None, **preview_kw)
     ``.poll() -> bool`` (rebuilt and reloaded?), ``.render(t) -> image``, ``.last_error``, ``.last_build``
 run_headless(live, out_dir, frames=None, seconds=None, interval=0.1, log=print) -> list of PNG paths
-LiveView(live)                 the fly-through window's view of a LiveScene (piste.render.window)
+PreviewView(preview)           the fly-through window's view of a ScenePreview (piste.render.window)
+LiveView(live)                 the same for a LiveScene, reloaded in place
 run_window(live_factory, camera, size, **window_kw) -> state dict
 add_scene_arguments(parser), run_view(args)    the ``piste view SCENE`` hook (see commands/view.py)
 """
@@ -32,7 +33,7 @@ from piste.errors import PisteError
 from piste.extras import require
 from piste.pipeline.build import build_scene
 from piste.pipeline.bundle_objects import load_bundle
-from piste.pipeline.preview import ScenePreview, camera_at
+from piste.pipeline.preview import BundleScene, ScenePreview, camera_at
 from piste.render import window
 from piste.render.context import save_png
 from piste.render.frame import DEFAULT_FOG_DENSITY
@@ -40,7 +41,7 @@ from piste.render.sky_pass import HORIZON
 from piste.render.window import HELP, SceneView, ViewFrame, ViewOptions, _wrap_screen, has_display, print_benchmark, riders_in_view
 from piste.world.scene_file import load_scene
 
-__all__ = ["LiveScene", "LiveView", "run_headless", "run_window", "add_scene_arguments", "run_view"]
+__all__ = ["LiveScene", "PreviewView", "LiveView", "run_headless", "run_window", "add_scene_arguments", "run_view"]
 
 
 def _stamp(paths) -> dict:
@@ -62,10 +63,13 @@ class LiveScene:
     path : the scene or bundle
     bundle : where to write the built bundle (default: the scene with suffix ``.piste``)
     cache_dir : build cache (default ``.piste-cache`` beside the scene)
-    size, camera, ctx : passed to the preview (camera: a scene camera name)
+    size, camera, ctx : passed to the preview (camera: a scene camera name; None: the first, or the
+        chase camera of a ``[pack]`` scene)
+    preview_kw : more :class:`~piste.pipeline.preview.ScenePreview` options (``face``, ``fog``)
     """
 
-    def __init__(self, path, bundle=None, cache_dir=None, size=None, camera: str | None = None, ctx=None):
+    def __init__(self, path, bundle=None, cache_dir=None, size=None, camera: str | None = None, ctx=None,
+                 **preview_kw):
         self.path = Path(path)
         self.is_bundle = self.path.suffix.lower() == ".piste"
         self.bundle_path = Path(bundle) if bundle is not None else self.path.with_suffix(".piste")
@@ -81,7 +85,7 @@ class LiveScene:
             self._build()
         self._stamps = _stamp(self._files)
         self.bundle = load_bundle(self.bundle_path)
-        self.preview = ScenePreview(self.bundle, size=size, ctx=ctx)
+        self.preview = ScenePreview(self.bundle, size=size, ctx=ctx, **preview_kw)
 
     def _build(self):
         try:
@@ -118,7 +122,8 @@ class LiveScene:
 
     def render(self, t: float = 0.0):
         """The current frame ``(H, W, 3) uint8`` from the chosen camera."""
-        return self.preview.render(camera_at(self.bundle, self.camera), t)
+        chase = self.camera is None and self.preview.follow
+        return self.preview.render(None if chase else camera_at(self.bundle, self.camera), t)
 
     def release(self) -> None:
         self.preview.release()
@@ -149,35 +154,77 @@ def run_headless(live: LiveScene, out_dir, frames: int | None = None, seconds: f
     return written
 
 
-class LiveView:
-    """The window's view of a :class:`LiveScene` (:mod:`piste.render.window`): the bundle's scene
-    drawn straight into the window, reloaded in place; V switches the bundle's visibility sets."""
+class PreviewView:
+    """The window's view of a :class:`~piste.pipeline.preview.ScenePreview` (:mod:`piste.render.window`):
+    the bundle's scene drawn by the runtime straight into the window; V switches the bundle's
+    visibility sets.  ``piste view`` of the default course uses it over the built default scene."""
 
-    def __init__(self, live: LiveScene):
-        self.live = live
+    def __init__(self, preview):
+        self.preview = preview
         self.ctx = None
         self._hook()
 
     def _hook(self) -> None:
-        p = self.live.preview
-        self._vis = getattr(p.terrain, "visibility", None)  # the bundle's sets (TerrainRenderer.set_visibility)
+        self._vis = getattr(self.preview.terrain, "visibility", None)  # the bundle's sets (set_visibility)
+
+    @property
+    def bundle(self):
+        return self.preview.bundle
 
     @property
     def terrain(self):
-        return self.live.preview.terrain
+        return self.preview.terrain
 
     @property
     def riders(self) -> int:
-        p = self.live.preview
+        p = self.preview
         return len(p.scene.riders) if p.renderer is not None else 0
 
     @property
     def has_visibility(self) -> bool:
-        return self.live.bundle.visibility is not None
+        return self.bundle.visibility is not None
 
     def attach(self, ctx) -> None:
         self.ctx = ctx
-        _wrap_screen(self.live.preview.terrain, ctx)
+        _wrap_screen(self.preview.terrain, ctx)
+
+    def poll(self):
+        return None
+
+    def draw(self, camera, t, opts):
+        p = self.preview
+        bundle = self.bundle
+        p.terrain.set_visibility(self._vis if opts.visibility else None)
+        if p.renderer is not None:
+            if isinstance(p.scene, BundleScene):
+                p.scene.visibility = bundle.visibility if opts.visibility else None
+            return SceneView(p.renderer, fog=p.fog).draw(camera, t, opts)
+        mesh = p.terrain.prepare(camera, lod=opts.lod)
+        fog = DEFAULT_FOG_DENSITY if p.fog is None else p.fog
+        frame = p.terrain.draw(camera, mesh, lightmap_mode=opts.lightmap_mode, debug=opts.debug, read=False,
+                               fog="scene" if p.fog is None else p.fog)
+        extra = {}
+        if p.objects is not None:
+            vis = p.objects.objects.visible(camera.frustum_planes(), max_distance=camera.far, eye=camera.eye)
+            if opts.visibility and bundle.visibility is not None and len(vis):
+                keep = bundle.visibility.objects_at(camera.eye)
+                if keep is not None:
+                    vis = vis[keep[vis]]
+            p.objects.draw(camera.view_projection(), camera.eye, vis, fog=(*HORIZON, fog) if fog else None)
+            extra["objects"] = int(len(vis))
+        return ViewFrame(camera, frame, extra)
+
+    def release(self) -> None:
+        self.preview.release()
+
+
+class LiveView(PreviewView):
+    """The window's view of a :class:`LiveScene`: a :class:`PreviewView` of its preview, rebuilt and
+    reloaded in place when the scene's files change."""
+
+    def __init__(self, live: LiveScene):
+        self.live = live
+        super().__init__(live.preview)
 
     def poll(self):
         """Rebuild/reload on change; a message for the log or None."""
@@ -191,25 +238,6 @@ class LiveView:
             live.last_error = None
             return msg
         return None
-
-    def draw(self, camera, t, opts):
-        p = self.live.preview
-        p.terrain.set_visibility(self._vis if opts.visibility else None)
-        if p.renderer is not None:
-            p.scene.visibility = self.live.bundle.visibility if opts.visibility else None
-            return SceneView(p.renderer).draw(camera, t, opts)
-        mesh = p.terrain.prepare(camera, lod=opts.lod)
-        frame = p.terrain.draw(camera, mesh, lightmap_mode=opts.lightmap_mode, debug=opts.debug, read=False)
-        extra = {}
-        if p.objects is not None:
-            vis = p.objects.objects.visible(camera.frustum_planes(), max_distance=camera.far, eye=camera.eye)
-            if opts.visibility and self.live.bundle.visibility is not None and len(vis):
-                keep = self.live.bundle.visibility.objects_at(camera.eye)
-                if keep is not None:
-                    vis = vis[keep[vis]]
-            p.objects.draw(camera.view_projection(), camera.eye, vis, fog=(*HORIZON, DEFAULT_FOG_DENSITY))
-            extra["objects"] = int(len(vis))
-        return ViewFrame(camera, frame, extra)
 
     def release(self) -> None:
         self.live.release()
@@ -244,7 +272,7 @@ def run_view(args) -> int:
     """``piste view SCENE``: the live preview (see the module docstring)."""
     size = tuple(args.size) if getattr(args, "size", None) else None
     if args.headless or not has_display():
-        live = LiveScene(args.scene, size=size, camera=args.camera)
+        live = LiveScene(args.scene, size=size, camera=args.camera, face=getattr(args, "face", None))
         try:
             out = Path(args.out)
             if out.suffix.lower() == ".png":  # view's own default is a PNG path: use a folder beside it
@@ -259,7 +287,7 @@ def run_view(args) -> int:
     path = Path(args.scene)
 
     def factory(ctx):
-        return LiveScene(path, size=size, camera=args.camera, ctx=ctx)
+        return LiveScene(path, size=size, camera=args.camera, ctx=ctx, face=getattr(args, "face", None))
 
     def start_camera(view):
         return camera_at(view.live.bundle, args.camera)

@@ -116,13 +116,15 @@ class TerrainView:
 
 class SceneView:
     """The completed scene (a :class:`piste.render.scene_renderer.SceneRenderer`): riders animate,
-    objects, shadows, specular.  ``opts.follow`` chases that rider with the scene's chase camera."""
+    objects, shadows, specular.  ``opts.follow`` chases that rider with the scene's chase camera;
+    ``fog``: density per metre (None: the renderer's, sized to the scene)."""
 
     has_visibility = False
 
-    def __init__(self, renderer):
+    def __init__(self, renderer, fog: float | None = None):
         self.renderer = renderer
         self.terrain = renderer.terrain
+        self.fog = fog
 
     @property
     def riders(self) -> int:
@@ -136,7 +138,8 @@ class SceneView:
         if opts.follow is not None:
             scene.follow = int(opts.follow) % max(len(scene.riders), 1)
         img = self.renderer.render(t, read=False, camera=None if opts.follow is not None else camera, lod=opts.lod,
-                                   lightmap_mode=opts.lightmap_mode, debug=opts.debug, count_rider_pixels=True)
+                                   lightmap_mode=opts.lightmap_mode, debug=opts.debug, count_rider_pixels=True,
+                                   fog=self.fog)
         cam = img.scene.camera
         s = img.stats
         extra = {"riders": s["riders"], "riders_in_view": riders_in_view(
