@@ -89,7 +89,11 @@ def test_pack_objects_fog_and_face_reach_the_runtime(tmp_path, gl):
         p.release()
         p = ScenePreview(b, size=(64, 48), ctx=gl, terrain_only=True)
         assert not p.follow and p.objects is None and p.renderer is None
-        assert p.render(camera_at(b, "fly")).std() > 1
+        foggy = p.render(camera_at(b, "fly"))  # the scene file's fog on the terrain alone too
+        assert foggy.std() > 1
+        p.release()
+        p = ScenePreview(b, size=(64, 48), ctx=gl, terrain_only=True, fog=0.0)
+        assert np.abs(foggy.astype(int) - p.render(camera_at(b, "fly")).astype(int)).max() > 8
         with pytest.raises(ConfigError, match="120 m of track"):
             ScenePreview(b, size=(64, 48), ctx=gl, start=1.0)
     finally:
