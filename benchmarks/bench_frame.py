@@ -295,6 +295,25 @@ def scene_section(args, floor_ms: list) -> dict:
         one(i / 30.0)
         prof_total.append((time.perf_counter() - t1) * 1e3)
     undo()
+    # A/B: the object programs compiled per (lighting mode, light_only), without the alpha test when no
+    # texel is below its cutoff, against the one program with run-time uniforms they replaced
+    ab = {True: [], False: []}
+    ab_frame = {True: [], False: []}
+    ab_diff = []
+    if r.objects is not None:
+        acc2, undo2 = _profile(r)
+        for i in range(max(args.frames // 2, 3)):
+            pair = {}
+            for spec in (True, False):
+                r.objects.specialised = spec
+                acc2.clear()
+                t1 = time.perf_counter()
+                pair[spec] = one(i / 30.0).image
+                ab_frame[spec].append((time.perf_counter() - t1) * 1e3)
+                ab[spec].append(acc2["objects"][0])
+            ab_diff.append(np.abs(pair[True].astype(int) - pair[False].astype(int)).max())
+        r.objects.specialised = True
+        undo2()
     cols = ("animation", "lod_skinning", "lights", "objects", "terrain_cull", "tessellate", "shadow_cull", "cpu",
             "upload", "terrain_draw", "scene_draw", "readback", "total")
     short = ("anim", "skin", "lights", "objcull", "t.cull", "t.index", "shadcull", "CPU", "upload", "terrain", "scene",
@@ -313,6 +332,16 @@ def scene_section(args, floor_ms: list) -> dict:
     print(f"\nper pass (glFinish around each; frame {med(prof_total):.1f} ms with the extra syncs):")
     for label, ts in sorted(acc.items(), key=lambda kv: -med(kv[1])):
         print(f"  {label:18s} {rng_str(ts)} ms  ({100 * med(ts) / med(prof_total):4.1f} %)")
+    if ab[True]:
+        print(f"\n== each change's effect on the objects pass, A/B interleaved over {len(ab[True])} scene frames "
+              f"(ms, median [range]; frames with the per-pass syncs) ==")
+        for spec, name in ((True, "per-mode object programs, alpha test compiled out (now)"),
+                           (False, "one program, run-time u_mode / u_mode_frag + discard (before)")):
+            print(f"  {name:62s} objects {rng_str(ab[spec])}  {med(ab[spec]) / med(ab[True]):5.2f}x   "
+                  f"frame {rng_str(ab_frame[spec])}")
+        print(f"  max pixel difference {max(ab_diff)} (of 255)")
+        record("frame", "effect: object programs per mode -> now", "faster", f"{med(ab[True]):.1f} ms",
+               f"{med(ab[False]):.1f} ms", f"{med(ab[False]) / med(ab[True]):.2f}x")
     print(f"\nfull scene: {full['rider_triangles']:.0f} rider + {full['object_triangles']:.0f} object + "
           f"{full['terrain_triangles']:.0f} terrain triangles, {full['objects_drawn']:.0f} objects")
     print(f"target 60 fps = 16.7 ms: {m['total']:.1f} ms ({1e3 / m['total']:.1f} fps, "

@@ -35,6 +35,12 @@ MAX_POINT_LIGHTS = 12
 _MODES = {"dynamic": 0, "baked": 1, "points": 2}
 
 
+def _with_defines(source: str, **defines) -> str:
+    """``source`` with ``#define NAME value`` lines after its ``#version`` line."""
+    head, _, rest = source.partition("\n")
+    return head + "\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items()) + rest
+
+
 def instance_rows(objects) -> np.ndarray:
     """Per-instance shader data ``(n, 16, 4) float32``: texels 0-3 the object matrix's columns,
     4-6 the normal matrix's columns, 7-9 the light-direction matrix's rows, 10-12 the
@@ -105,12 +111,16 @@ class ObjectPass:
         self.objects = objects
         self.lights = lights
         self.mode = mode
-        self.prog = ctx.program(vertex_shader=load_shader("object.vert.glsl"),
-                                fragment_shader=load_shader("object.frag.glsl"))
-        self.prog["u_tex"].value = 0
-        self.prog["u_inst"].value = 1
-        self.prog["u_baked"].value = 2
+        self._vs, self._fs = load_shader("object.vert.glsl"), load_shader("object.frag.glsl")
         tex = objects.texture
+        # the alpha test can discard only when some texel is below the cutoff (a filtered sample is a
+        # weighted mean of texels): without such texels the shader is compiled without it
+        self.alpha_test = bool(tex.ndim == 3 and tex.shape[2] == 4 and (np.asarray(tex)[..., 3] < 128).any())
+        # True: a program compiled per (lighting mode, light_only) with constants instead of the
+        # run-time if-chains (the same pictures); False: the one program with uniforms (benchmarks' A/B)
+        self.specialised = True
+        self._programs: dict = {}  # key -> (program, {kind index: vertex array})
+        self.prog = self._program(None)[0]  # the generic program (run-time uniforms)
         h, w = tex.shape[:2]
         self.texture = ctx.texture((w, h), 4, np.ascontiguousarray(tex).tobytes(), alignment=1)
         self.texture.build_mipmaps()
@@ -126,16 +136,43 @@ class ObjectPass:
                    ctx.buffer(np.ascontiguousarray(m.uv).tobytes()),
                    ctx.buffer(np.ascontiguousarray(m.normals).tobytes()),
                    ctx.buffer(np.ascontiguousarray(m.indices).tobytes())]
-            nfmt = "2i1" if m.normal_bits == 8 else "2i2"
-            vao = ctx.vertex_array(self.prog, [(buf[0], "3u2", "in_pos"), (buf[1], "2u2", "in_uv"), (buf[2], nfmt, "in_nrm")],
-                                   buf[3], index_element_size=m.indices.itemsize, skip_errors=True)
-            self.kinds.append({"mesh": m, "buffers": buf, "vao": vao, "baked": None})
+            self.kinds.append({"mesh": m, "buffers": buf, "baked": None})
         self._points = None
         self.colors = None
         if colors is not None:
             self.set_vertex_colors(colors)
         self.drawn = 0
         self.triangles = 0
+
+    def _program(self, key):
+        """``(program, vertex arrays by kind)`` for ``key = (mode id, light_only)`` (None: the
+        generic program), compiled on first use."""
+        got = self._programs.get(key)
+        if got is None:
+            if key is None:
+                vs, fs = self._vs, self._fs
+            else:
+                vs = _with_defines(self._vs, OBJECT_MODE=key[0])
+                fs = _with_defines(self._fs, OBJECT_MODE_FRAG=int(key[1]), OBJECT_ALPHA_TEST=int(self.alpha_test))
+            prog = self.ctx.program(vertex_shader=vs, fragment_shader=fs)
+            for name, unit in (("u_tex", 0), ("u_inst", 1), ("u_baked", 2)):
+                if name in prog:
+                    prog[name].value = unit
+            got = self._programs[key] = (prog, {})
+        return got
+
+    def _vao(self, key, k: int):
+        prog, vaos = self._program(key)
+        vao = vaos.get(k)
+        if vao is None:
+            info = self.kinds[k]
+            m, buf = info["mesh"], info["buffers"]
+            nfmt = "2i1" if m.normal_bits == 8 else "2i2"
+            # only the attributes this program uses (a specialised one may drop the uv or the normal)
+            content = [(b, fmt, name) for b, fmt, name in
+                       ((buf[0], "3u2", "in_pos"), (buf[1], "2u2", "in_uv"), (buf[2], nfmt, "in_nrm")) if name in prog]
+            vao = vaos[k] = self.ctx.vertex_array(prog, content, buf[3], index_element_size=m.indices.itemsize)
+        return vao
 
     def set_vertex_colors(self, colors) -> None:
         """Use pre-calculated RGBs for the baked mode: ``{kind: (k, v, 3) uint8}`` half-bright, the
@@ -191,12 +228,14 @@ class ObjectPass:
         order = vis[np.argsort(objs.kind[vis], kind="stable")]
         self.inst.write(np.ascontiguousarray(self.rows[order]).tobytes(), viewport=(0, 0, 16, len(order)))
         kind_of = objs.kind[order]
-        p = self.prog
+        key = (_MODES[mode], bool(light_only)) if self.specialised else None
+        p = self._program(key)[0]
         p["u_vp"].write(np.asarray(vp, dtype=np.float32).T.tobytes())
         p["u_eye"].value = tuple(float(x) for x in eye)
         p["u_fog"].value = (0.0, 0.0, 0.0, 0.0) if fog is None else tuple(float(x) for x in fog)
-        p["u_mode"].value = _MODES[mode]
-        p["u_mode_frag"].value = 1 if light_only else 0
+        if key is None:
+            p["u_mode"].value = _MODES[mode]
+            p["u_mode_frag"].value = 1 if light_only else 0
         if mode == "points":
             if self._points is None:
                 if self.lights is None:
@@ -222,25 +261,30 @@ class ObjectPass:
             if count == 0:
                 continue
             m = info["mesh"]
-            p["u_base_row"].value = start
-            p["u_pos_offset"].value = tuple(float(x) for x in m.pos_offset)
-            p["u_pos_extent"].value = tuple(float(x) for x in m.pos_extent)
-            p["u_uv_offset"].value = tuple(float(x) for x in m.uv_offset)
-            p["u_uv_extent"].value = tuple(float(x) for x in m.uv_extent)
-            p["u_nmax"].value = float((1 << (m.normal_bits - 1)) - 1)
+            for name, value in (("u_base_row", start), ("u_pos_offset", tuple(float(x) for x in m.pos_offset)),
+                                ("u_pos_extent", tuple(float(x) for x in m.pos_extent)),
+                                ("u_uv_offset", tuple(float(x) for x in m.uv_offset)),
+                                ("u_uv_extent", tuple(float(x) for x in m.uv_extent)),
+                                ("u_nmax", float((1 << (m.normal_bits - 1)) - 1))):
+                if name in p:  # (a specialised program drops what its mode does not use)
+                    p[name].value = value
             if mode == "baked":
                 info["baked"].use(2)
-            info["vao"].render(moderngl.TRIANGLES, vertices=m.indices.size, instances=count)
+            self._vao(key, k).render(moderngl.TRIANGLES, vertices=m.indices.size, instances=count)
             start += count
             self.drawn += count
             self.triangles += count * m.n_triangles
 
     def release(self) -> None:
+        for prog, vaos in self._programs.values():
+            for vao in vaos.values():
+                vao.release()
+            prog.release()
+        self._programs = {}
         for info in self.kinds:
-            info["vao"].release()
             for b in info["buffers"]:
                 b.release()
             if info["baked"] is not None:
                 info["baked"].release()
-        for obj in (self.texture, self.inst, self.prog):
+        for obj in (self.texture, self.inst):
             obj.release()

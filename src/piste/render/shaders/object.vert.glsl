@@ -17,7 +17,11 @@ uniform vec3 u_pos_extent;
 uniform vec2 u_uv_offset;
 uniform vec2 u_uv_extent;
 uniform float u_nmax;        // 127 or 32767
+#ifndef OBJECT_MODE
 uniform int u_mode;
+#else
+const int u_mode = OBJECT_MODE;  // compiled once per mode (a run-time if-chain costs llvmpipe's vertex work)
+#endif
 uniform sampler2D u_baked;   // (instances of this kind) x (vertices) RGBA8
 // mode 2: every direct light of the world (up to 12)
 uniform int u_n_lights;
