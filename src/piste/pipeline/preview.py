@@ -335,9 +335,13 @@ class ScenePreview:
                 self.scene = track_scene(bundle, opt["start"], opt["casts"])
             else:
                 self.scene = BundleScene(bundle)
+            ssx = None
+            if "lightmap/source" in bundle.arrays and opt["lightmap"] == "bundle":  # an SSX level: ps2 mode
+                ssx = SsxTerrainRenderer(bundle.net, bundle.arrays["lightmap/source"], size=self.size, ctx=self.ctx,
+                                         lightmap=atlas, **kw)  # blends its stored Cs/As, riders and all
             self.renderer = SceneRenderer(self.scene, size=self.size, ctx=self.ctx, lightmap=atlas,
                                           object_lighting=mode, shadows=opt["shadows"], specular=opt["specular"],
-                                          face=None if face == "off" else face, **kw)
+                                          face=None if face == "off" else face, terrain=ssx, **kw)
             self.terrain = self.renderer.terrain
             self.objects = None
             if self.renderer.objects is not None and mode == "baked" and self.scene.objects is bundle.objects():

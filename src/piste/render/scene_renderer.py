@@ -85,15 +85,22 @@ class SceneRenderer:
         null-bone fit) or None (the neutral face).  Weights come from the rider's clip when it
         animates them (glTF morph animations), else from :func:`piste.character.morph.face_weights`
         (blink and mouth for the default rider, other models' expressions in turn).
+    terrain : a terrain renderer to draw with instead of making a :class:`TerrainRenderer` (then
+        ``ctx``, ``lightmap`` and the terrain keywords are its own): e.g. an SSX level's
+        :class:`piste.render.ssx_pass.SsxTerrainRenderer`, whose ``ps2`` mode blends the level's
+        stored Cs/As (its public ``ssx_source`` pass) over the base texture, riders and all.
     """
 
     def __init__(self, scene, size=(640, 448), ctx=None, lightmap="placeholder", object_lighting: str = "dynamic",
                  shadows: bool = True, specular: bool = True, shadow_tile: int = 128, casts=(),
-                 face: str | None = "morph", **terrain_kw):
+                 face: str | None = "morph", terrain=None, **terrain_kw):
         self.scene = scene
         terrain_kw.setdefault("track", scene.line)
         terrain_kw.setdefault("track_half_width", TRACK_HALF_WIDTH)
-        self.terrain = TerrainRenderer(scene.net, size=size, ctx=ctx, lightmap=lightmap, **terrain_kw)
+        self.terrain = terrain if terrain is not None else TerrainRenderer(scene.net, size=size, ctx=ctx,
+                                                                           lightmap=lightmap, **terrain_kw)
+        # an SSX level's stored light-map texels: ps2 frames draw the base texture, then this pass
+        self.ssx_source = getattr(self.terrain, "ssx_source", None)
         self.terrain.start_resident()  # built while the passes below set up; joined by the first frame
         self.ctx = self.terrain.ctx
         casts = list(casts) or list(getattr(scene, "casts", None) or ())  # a bundle scene lists its own
@@ -146,7 +153,10 @@ class SceneRenderer:
                 self._add_faces(c, f, faces, t, t if face_time is None else face_time)
         t1 = time.perf_counter()
         tt: dict = {}
-        mesh = self.terrain.prepare(cam, lod=lod, timings=tt)
+        ssx_ps2 = self.ssx_source is not None and lightmap_mode == "ps2" and debug is None
+        # the SSX pass draws a CPU-tessellated mesh: explicit levels (as SsxTerrainRenderer.render)
+        mesh = self.terrain.prepare(cam, lod=lod, timings=tt,
+                                    levels=self.terrain.levels(cam, lod) if ssx_ps2 else None)
         t2 = time.perf_counter()
         patches = []
         sun = self.scene.sun
@@ -168,11 +178,17 @@ class SceneRenderer:
                                             first=first, group=g)
                 first += k
         t4 = time.perf_counter()
-        frame = self.terrain.draw(cam, mesh, lightmap_mode=lightmap_mode, fog=fog, read=False, timings=tt,
-                                  debug=debug)  # a ps2 frame resolves here: the 8-bit frame buffer the rest blends on
+        if ssx_ps2:  # the game's way: base texture Cd, then (Cd - Cs) x As with the level's stored texels
+            frame = self.terrain.draw(cam, mesh, debug="base", read=False, timings=tt)
+            self.ssx_source.upload(mesh)
+            self.terrain.target.use()
+            self.ssx_source.draw(cam.with_aspect(w, h).view_projection())
+        else:
+            frame = self.terrain.draw(cam, mesh, lightmap_mode=lightmap_mode, fog=fog, read=False, timings=tt,
+                                      debug=debug)  # a ps2 frame resolves here: the 8-bit frame buffer the rest blends on
         t5 = time.perf_counter()
         vp = frame_vp = cam.with_aspect(w, h).view_projection()
-        fog_rgba = (*HORIZON, float(fog)) if fog else None
+        fog_rgba = (*HORIZON, float(fog)) if fog and not ssx_ps2 else None  # the SSX ps2 frame has no fog
         if self.shadows is not None and sun is not None:
             self.shadows.draw_receivers(mesh, patches, frame_vp)
         if self.objects is not None:

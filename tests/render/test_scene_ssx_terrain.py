@@ -1,0 +1,39 @@
+"""An SSX level with riders: :class:`~piste.render.scene_renderer.SceneRenderer` draws the terrain
+with the level's :class:`~piste.render.ssx_pass.SsxTerrainRenderer` (``terrain=``), so ``ps2`` mode
+blends the stored Cs/As with riders on screen too, as the terrain-only preview does."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from piste.formats.ssx import make_level
+from piste.pipeline import load_bundle
+from piste.pipeline.build import build_scene
+from piste.pipeline.preview import ScenePreview
+from piste.pipeline.ssx_level import load_level
+from piste.render.ssx_pass import SsxTerrainRenderer
+
+
+def test_riders_on_an_ssx_level_keep_the_stored_light_maps(tmp_path, gl):
+    make_level(rows=2, cols=3, seed=2).write(tmp_path, "LV")
+    lo, hi = load_level(tmp_path / "LV.pbd").net.bounds
+    cx, cy = (np.asarray(lo[:2]) + np.asarray(hi[:2])) / 2
+    scene = tmp_path / "s.toml"
+    scene.write_text(f'terrain = {{ ssx_pbd = "LV.pbd" }}\n[render]\nsize = [96, 64]\nlightmap_mode = "ps2"\n'
+                     f'[[riders]]\nposition = [{cx}, {cy}]\n'
+                     f'[[cameras]]\nname = "c"\neye = [{cx}, {cy - 9}, 10.0]\ntarget = [{cx}, {cy}, 3.0]\n')
+    b = load_bundle(build_scene(scene, use_cache=False).path)
+    p = ScenePreview(b, ctx=gl, shadows=False)
+    try:
+        assert p.renderer is not None and isinstance(p.renderer.terrain, SsxTerrainRenderer)
+        with_rider = p.render().astype(int)
+    finally:
+        p.release()
+    t = ScenePreview(b, ctx=gl, terrain_only=True)
+    try:
+        terrain = t.render().astype(int)
+    finally:
+        t.release()
+    d = np.abs(with_rider - terrain).max(-1)
+    assert (d > 30).sum() >= 5  # the rider is drawn
+    assert np.median(d) == 0 and d.mean() < 0.6  # the rest is the level's own ps2 blend (generic shader: ~1.1)
