@@ -57,12 +57,12 @@ scene file.  Every table and key is optional except where noted::
     fog = "auto"                  # density per metre (0: none) or "auto" (6e-4 scaled to the scene's size)
     face = "morph"                # riders' faces: "morph" targets, their "null_bones" fit, or "off"
 
-    [pack]                        # the default course: riders following the track (piste demo's six,
-    follow = "track"              #   the camera chasing the first; see piste.world.riders.DEFAULT_PACK)
+    [pack]                        # instead of [[riders]], on the default course: riders following the
+    follow = "track"              #   track (piste demo's six, the camera chasing the first)
     start = 0.12                  # fraction of the track where the first rider is at t = 0
 
-    [auto_objects]                # the default course: trees, signs, rocks and rails placed along the
-    seed = 0                      #   track (piste.world.objects.place_objects), beside any [[objects]]
+    [auto_objects]                # instead of [[objects]], on the default course: trees, signs, rocks
+    seed = 0                      #   and rails placed along the track (piste.world.objects.place_objects)
     trees = 220
     signs = 16
     rocks = 40
