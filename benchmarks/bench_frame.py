@@ -295,8 +295,9 @@ def scene_section(args, floor_ms: list) -> dict:
         one(i / 30.0)
         prof_total.append((time.perf_counter() - t1) * 1e3)
     undo()
-    # A/B: the object programs compiled per (lighting mode, light_only), without the alpha test when no
-    # texel is below its cutoff, against the one program with run-time uniforms they replaced
+    # A/B: the object programs compiled per (lighting mode, light_only), instance data as per-instance
+    # attributes, without the alpha test when no texel is below its cutoff, against the one program
+    # with run-time uniforms and the instance texture they replaced
     ab = {True: [], False: []}
     ab_frame = {True: [], False: []}
     ab_diff = []
@@ -335,8 +336,8 @@ def scene_section(args, floor_ms: list) -> dict:
     if ab[True]:
         print(f"\n== each change's effect on the objects pass, A/B interleaved over {len(ab[True])} scene frames "
               f"(ms, median [range]; frames with the per-pass syncs) ==")
-        for spec, name in ((True, "per-mode object programs, alpha test compiled out (now)"),
-                           (False, "one program, run-time u_mode / u_mode_frag + discard (before)")):
+        for spec, name in ((True, "per-mode programs, per-instance attributes, no discard (now)"),
+                           (False, "one program, 14 texelFetch a vertex, u_mode + discard (before)")):
             print(f"  {name:62s} objects {rng_str(ab[spec])}  {med(ab[spec]) / med(ab[True]):5.2f}x   "
                   f"frame {rng_str(ab_frame[spec])}")
         print(f"  max pixel difference {max(ab_diff)} (of 255)")

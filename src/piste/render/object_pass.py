@@ -41,6 +41,17 @@ def _with_defines(source: str, **defines) -> str:
     return head + "\n" + "".join(f"#define {k} {v}\n" for k, v in defines.items()) + rest
 
 
+_INSTANCE_BYTES = 13 * 16  # one instance's packed attributes (see _pack_rows)
+
+
+def _pack_rows(rows: np.ndarray) -> np.ndarray:
+    """:func:`instance_rows` ``(n, 16, 4)`` as the per-instance attributes ``(n, 13, 4) float32``:
+    texels 0-12, with texel 13 (ambient, baked row) in the ``.w`` of texels 4-7 (unused there)."""
+    out = np.ascontiguousarray(rows[:, :13, :], dtype=np.float32).copy()
+    out[:, 4:8, 3] = rows[:, 13, :]
+    return out
+
+
 def instance_rows(objects) -> np.ndarray:
     """Per-instance shader data ``(n, 16, 4) float32``: texels 0-3 the object matrix's columns,
     4-6 the normal matrix's columns, 7-9 the light-direction matrix's rows, 10-12 the
@@ -126,6 +137,7 @@ class ObjectPass:
         self.texture.build_mipmaps()
         self.texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self.rows = instance_rows(objects)
+        self.packed = _pack_rows(self.rows)
         n = max(len(objects), 1)
         self.inst = ctx.texture((16, n), 4, dtype="f4")
         self.inst.filter = (moderngl.NEAREST, moderngl.NEAREST)
@@ -136,7 +148,9 @@ class ObjectPass:
                    ctx.buffer(np.ascontiguousarray(m.uv).tobytes()),
                    ctx.buffer(np.ascontiguousarray(m.normals).tobytes()),
                    ctx.buffer(np.ascontiguousarray(m.indices).tobytes())]
-            self.kinds.append({"mesh": m, "buffers": buf, "baked": None})
+            count = max(int(np.count_nonzero(objects.kind == k)), 1)
+            self.kinds.append({"mesh": m, "buffers": buf, "baked": None,
+                               "instances": ctx.buffer(reserve=count * _INSTANCE_BYTES)})
         self._points = None
         self.colors = None
         if colors is not None:
@@ -152,7 +166,7 @@ class ObjectPass:
             if key is None:
                 vs, fs = self._vs, self._fs
             else:
-                vs = _with_defines(self._vs, OBJECT_MODE=key[0])
+                vs = _with_defines(self._vs, OBJECT_MODE=key[0], OBJECT_INSTANCE_ATTRIBS=1)
                 fs = _with_defines(self._fs, OBJECT_MODE_FRAG=int(key[1]), OBJECT_ALPHA_TEST=int(self.alpha_test))
             prog = self.ctx.program(vertex_shader=vs, fragment_shader=fs)
             for name, unit in (("u_tex", 0), ("u_inst", 1), ("u_baked", 2)):
@@ -171,6 +185,10 @@ class ObjectPass:
             # only the attributes this program uses (a specialised one may drop the uv or the normal)
             content = [(b, fmt, name) for b, fmt, name in
                        ((buf[0], "3u2", "in_pos"), (buf[1], "2u2", "in_uv"), (buf[2], nfmt, "in_nrm")) if name in prog]
+            if key is not None:  # per-instance attributes from this kind's instance buffer (unused ones skipped)
+                names = [f"in_i{j}" for j in range(13) if f"in_i{j}" in prog]
+                fmt = " ".join("4f" if f"in_i{j}" in prog else "16x" for j in range(13)) + "/i"
+                content.append((info["instances"], fmt, *names))
             vao = vaos[k] = self.ctx.vertex_array(prog, content, buf[3], index_element_size=m.indices.itemsize)
         return vao
 
@@ -226,9 +244,14 @@ class ObjectPass:
         if len(vis) == 0:
             return
         order = vis[np.argsort(objs.kind[vis], kind="stable")]
-        self.inst.write(np.ascontiguousarray(self.rows[order]).tobytes(), viewport=(0, 0, 16, len(order)))
         kind_of = objs.kind[order]
         key = (_MODES[mode], bool(light_only)) if self.specialised else None
+        if key is None:
+            self.inst.write(np.ascontiguousarray(self.rows[order]).tobytes(), viewport=(0, 0, 16, len(order)))
+        else:
+            packed = self.packed[order]
+            for k in np.unique(kind_of):
+                self.kinds[int(k)]["instances"].write(np.ascontiguousarray(packed[kind_of == k]).tobytes())
         p = self._program(key)[0]
         p["u_vp"].write(np.asarray(vp, dtype=np.float32).T.tobytes())
         p["u_eye"].value = tuple(float(x) for x in eye)
@@ -282,6 +305,7 @@ class ObjectPass:
             prog.release()
         self._programs = {}
         for info in self.kinds:
+            info["instances"].release()
             for b in info["buffers"]:
                 b.release()
             if info["baked"] is not None:

@@ -37,7 +37,30 @@ out vec3 v_color;
 out vec2 v_uv;
 out vec3 v_world;
 
+#ifdef OBJECT_INSTANCE_ATTRIBS
+// the same 14 texels as per-instance vertex attributes (13 vec4: the normal-matrix and light-direction
+// texels carry the ambient texel in their .w), fetched once per instance by the vertex stage instead of
+// 14 texelFetch calls per vertex; inst() is inlined with constant columns and folds away
+in vec4 in_i0, in_i1, in_i2, in_i3, in_i4, in_i5, in_i6, in_i7, in_i8, in_i9, in_i10, in_i11, in_i12;
+vec4 inst(int col) {
+    if (col == 0) return in_i0;
+    if (col == 1) return in_i1;
+    if (col == 2) return in_i2;
+    if (col == 3) return in_i3;
+    if (col == 4) return vec4(in_i4.xyz, 0.0);
+    if (col == 5) return vec4(in_i5.xyz, 0.0);
+    if (col == 6) return vec4(in_i6.xyz, 0.0);
+    if (col == 7) return vec4(in_i7.xyz, 0.0);
+    if (col == 8) return vec4(in_i8.xyz, 0.0);
+    if (col == 9) return vec4(in_i9.xyz, 0.0);
+    if (col == 10) return in_i10;
+    if (col == 11) return in_i11;
+    if (col == 12) return in_i12;
+    return vec4(in_i4.w, in_i5.w, in_i6.w, in_i7.w);  // 13: ambient + the row in the baked colours
+}
+#else
 vec4 inst(int col) { return texelFetch(u_inst, ivec2(col, u_base_row + gl_InstanceID), 0); }
+#endif
 
 vec3 oct_decode(ivec2 c) {
     vec2 o = max(vec2(c) / u_nmax, vec2(-1.0));
