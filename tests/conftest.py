@@ -78,9 +78,10 @@ def _piste_cache_dir(tmp_path_factory):
     return tmp_path_factory.mktemp("piste-cache")
 
 
-@pytest.fixture
+@pytest.fixture(autouse=True)
 def piste_cache(_piste_cache_dir, monkeypatch):
-    """``PISTE_CACHE_DIR`` pointed at a per-session temporary folder (baked light maps land there,
-    not in the user's ~/.cache)."""
+    """``PISTE_CACHE_DIR`` pointed at a per-session temporary folder for every test (baked light maps
+    and the built default scene land there, not in the user's ~/.cache); a test may point it
+    elsewhere itself."""
     monkeypatch.setenv("PISTE_CACHE_DIR", str(_piste_cache_dir))
     return _piste_cache_dir
