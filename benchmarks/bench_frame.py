@@ -13,7 +13,8 @@ Sections (every configuration interleaved frame by frame in one process; medians
    trilinear base texture, geomorphing, resident vs streamed vertices.
 3. **Completed scene**: six riders chased by the camera, objects, projected shadows, specular: the
    full scene, without shadows / specular, and a per-pass profile (``glFinish`` around each pass:
-   what llvmpipe spends in each).
+   what llvmpipe spends in each); then each scene change A/B on its own pass (the objects' per-mode
+   programs with per-instance attributes; the terrain's back-face culling), with the pixels changed.
 4. **Scaling**: frame time and CPU side against the number of patches (2,560 / 10k / 40k; the
    camera's far plane at 1 km caps the visible set; ``bench_terrain.py`` takes the CPU side to 160k)
    and riders (6 / 24 / 96), with the fitted exponent ``t ~ n^k``.
@@ -295,26 +296,42 @@ def scene_section(args, floor_ms: list) -> dict:
         one(i / 30.0)
         prof_total.append((time.perf_counter() - t1) * 1e3)
     undo()
-    # A/B: the object programs compiled per (lighting mode, light_only), instance data as per-instance
-    # attributes, without the alpha test when no texel is below its cutoff, against the one program
-    # with run-time uniforms and the instance texture they replaced
-    ab = {True: [], False: []}
-    ab_frame = {True: [], False: []}
-    ab_diff = []
-    if r.objects is not None:
-        acc2, undo2 = _profile(r)
+    # A/B, each change against what it replaced (on its own pass, interleaved frame by frame):
+    # * objects: programs compiled per (lighting mode, light_only), instance data as per-instance
+    #   attributes, no alpha test when no texel is below its cutoff, vs the one program with run-time
+    #   uniforms and the instance texture;
+    # * terrain: back-facing triangles culled vs drawn
+    def set_objects(on):
+        r.objects.specialised = on
+
+    def set_cull(on):
+        r.terrain.terrain.cull_back = on
+
+    changes = [("objects", set_objects, "objects: per-mode programs, instance attributes, no discard",
+                "objects: one program, 14 texelFetch a vertex, u_mode + discard"),
+               ("terrain", set_cull, "terrain: back faces culled", "terrain: back faces drawn")]
+    ab_res = []
+    acc2, undo2 = _profile(r)
+    for label, setter, now_name, before_name in changes:
+        if label == "objects" and r.objects is None:
+            continue
+        ab = {True: [], False: []}
+        ab_frame = {True: [], False: []}
+        ab_diff = []
         for i in range(max(args.frames // 2, 3)):
             pair = {}
-            for spec in (True, False):
-                r.objects.specialised = spec
+            for on in (True, False):
+                setter(on)
                 acc2.clear()
                 t1 = time.perf_counter()
-                pair[spec] = one(i / 30.0).image
-                ab_frame[spec].append((time.perf_counter() - t1) * 1e3)
-                ab[spec].append(acc2["objects"][0])
-            ab_diff.append(np.abs(pair[True].astype(int) - pair[False].astype(int)).max())
-        r.objects.specialised = True
-        undo2()
+                pair[on] = one(i / 30.0).image
+                ab_frame[on].append((time.perf_counter() - t1) * 1e3)
+                ab[on].append(acc2[label][0])
+            d = np.abs(pair[True].astype(int) - pair[False].astype(int)).max(-1)
+            ab_diff.append((int(d.max()), int((d > 0).sum())))
+        setter(True)
+        ab_res.append((label, now_name, before_name, ab, ab_frame, ab_diff))
+    undo2()
     cols = ("animation", "lod_skinning", "lights", "objects", "terrain_cull", "tessellate", "shadow_cull", "cpu",
             "upload", "terrain_draw", "scene_draw", "readback", "total")
     short = ("anim", "skin", "lights", "objcull", "t.cull", "t.index", "shadcull", "CPU", "upload", "terrain", "scene",
@@ -333,15 +350,16 @@ def scene_section(args, floor_ms: list) -> dict:
     print(f"\nper pass (glFinish around each; frame {med(prof_total):.1f} ms with the extra syncs):")
     for label, ts in sorted(acc.items(), key=lambda kv: -med(kv[1])):
         print(f"  {label:18s} {rng_str(ts)} ms  ({100 * med(ts) / med(prof_total):4.1f} %)")
-    if ab[True]:
-        print(f"\n== each change's effect on the objects pass, A/B interleaved over {len(ab[True])} scene frames "
-              f"(ms, median [range]; frames with the per-pass syncs) ==")
-        for spec, name in ((True, "per-mode programs, per-instance attributes, no discard (now)"),
-                           (False, "one program, 14 texelFetch a vertex, u_mode + discard (before)")):
-            print(f"  {name:62s} objects {rng_str(ab[spec])}  {med(ab[spec]) / med(ab[True]):5.2f}x   "
-                  f"frame {rng_str(ab_frame[spec])}")
-        print(f"  max pixel difference {max(ab_diff)} (of 255)")
-        record("frame", "effect: object programs per mode -> now", "faster", f"{med(ab[True]):.1f} ms",
+    if ab_res:
+        print("\n== each change's effect on its pass, A/B interleaved over the scene frames (ms, median [range]; "
+              "frames with the per-pass syncs) ==")
+    for label, now_name, before_name, ab, ab_frame, ab_diff in ab_res:
+        for on, name in ((True, now_name + " (now)"), (False, before_name + " (before)")):
+            print(f"  {name:68s} {label} {rng_str(ab[on])}  {med(ab[on]) / med(ab[True]):5.2f}x   "
+                  f"frame {rng_str(ab_frame[on])}")
+        print(f"    pixels: max difference {max(x[0] for x in ab_diff)} (of 255), at most "
+              f"{max(x[1] for x in ab_diff)} pixels a frame differ")
+        record("frame", f"effect: {before_name} -> {now_name}", "faster", f"{med(ab[True]):.1f} ms",
                f"{med(ab[False]):.1f} ms", f"{med(ab[False]) / med(ab[True]):.2f}x")
     print(f"\nfull scene: {full['rider_triangles']:.0f} rider + {full['object_triangles']:.0f} object + "
           f"{full['terrain_triangles']:.0f} terrain triangles, {full['objects_drawn']:.0f} objects")

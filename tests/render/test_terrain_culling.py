@@ -1,0 +1,40 @@
+"""Back-face culling of the terrain: from above the surface the picture is the unculled one (up to
+silhouette pixels); from below, the culled terrain is not drawn at all (so the culling is real)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from piste.render import TerrainRenderer
+from piste.world.camera import Camera
+
+
+def _pair(gl, net, cam, **render_kw):
+    r = TerrainRenderer(net, size=(128, 96), ctx=gl, lod_near=14.0, lod_far=30.0)
+    r.resident_wait = True
+    out = {}
+    try:
+        for cull in (False, True):
+            r.terrain.cull_back = cull
+            out[cull] = r.render(cam, sky=False, fog=0, **render_kw).image
+    finally:
+        r.release()
+    return out
+
+
+def test_culling_keeps_the_picture_from_above(gl, grid_net):
+    net = grid_net(4, 4, size=10.0, relief=5.0, wave=2.0)
+    cam = Camera([4.0, -6.0, 14.0], [22.0, 22.0, 0.0], fov_y=60)
+    for kw in (dict(), dict(lightmap_mode="ps2")):
+        img = _pair(gl, net, cam, **kw)
+        assert (img[True][..., :3].max(-1) > 0).mean() > 0.5  # the terrain fills the view
+        diff = np.abs(img[True].astype(int) - img[False].astype(int)).max(-1)
+        assert (diff > 0).mean() < 0.005, f"{(diff > 0).sum()} pixels differ"
+
+
+def test_culling_drops_the_underside(gl, grid_net):
+    net = grid_net(4, 4, size=10.0, relief=1.0)
+    cam = Camera([20.0, 20.0, -30.0], [20.0, 21.0, 0.0], fov_y=60)  # below, looking up
+    img = _pair(gl, net, cam)
+    assert (img[False][..., :3].max(-1) > 0).mean() > 0.3  # the underside, unculled
+    assert (img[True][..., :3].max(-1) > 0).mean() < 0.01  # culled
