@@ -38,3 +38,21 @@ def test_culling_drops_the_underside(gl, grid_net):
     img = _pair(gl, net, cam)
     assert (img[False][..., :3].max(-1) > 0).mean() > 0.3  # the underside, unculled
     assert (img[True][..., :3].max(-1) > 0).mean() < 0.01  # culled
+
+
+def test_culling_only_when_every_patch_faces_up(gl, grid_net):
+    from piste.render.frame import faces_up
+    from piste.terrain import PatchNet
+
+    net = grid_net(3, 3, size=10.0, relief=2.0)
+    assert faces_up(net)
+    cp = np.array(net.control_points, copy=True)
+    cp[4] = cp[4].transpose(1, 0, 2)  # one patch with u and v swapped: drawn facing down
+    flipped = PatchNet(cp)
+    assert not faces_up(flipped)
+    for n, want in ((net, True), (flipped, False)):
+        r = TerrainRenderer(n, size=(32, 24), ctx=gl)
+        try:
+            assert r.terrain.cull_back is want
+        finally:
+            r.release()

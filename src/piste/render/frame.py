@@ -85,6 +85,19 @@ class Frame:
     timings: dict = field(default_factory=dict)
 
 
+def faces_up(net) -> bool:
+    """Whether every patch of ``net`` faces up: the two triangles of its corner quad (the coarsest
+    tessellation, drawn with the renderer's winding) have normals with z > 0.  Then, seen from
+    above, the first surface a view ray meets is an upper side, and back faces can be culled
+    (a patch net with flipped patches or overhangs is drawn unculled)."""
+    if len(net) == 0:
+        return False
+    m = tessellate(net, 2, cache=False)
+    p = np.asarray(m.positions, dtype=np.float64)[np.asarray(m.indices, dtype=np.int64)]  # (t, 3, 3)
+    a, b = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    return bool(np.all(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0] > 0.0))
+
+
 class TerrainRenderer:
     """Renders a :class:`piste.terrain.PatchNet` off-screen.
 
@@ -131,6 +144,8 @@ class TerrainRenderer:
                 raise ConfigError(f"lightmap must be 'placeholder', an atlas image or None, got {lightmap!r}")
             lightmap = placeholder_lightmap(net)
         self.terrain = TerrainPass(self.ctx, lightmap=lightmap, base_texture=base_texture)
+        # back-face culling only where it cannot cost a picture: every patch faces up
+        self.terrain.cull_back = faces_up(net)
         if track is not None:
             self.terrain.set_track(*track_field(track, net.bounds), half_width=track_half_width)
         self.sky = SkyPass(self.ctx)
