@@ -146,7 +146,7 @@ def test_truncated_and_bad_magic(tmp_path):
     with pytest.raises(FormatError, match="directory") as e:
         parse_ssh(bytes(huge), "x.ssh")
     assert e.value.field == "image count"
-    with pytest.raises(FormatError, match="no such file"):
+    with pytest.raises(FormatError, match="(?i)no such file"):
         read_ssh(tmp_path / "missing.ssh")
 
 

@@ -87,6 +87,7 @@ import numpy as np
 
 from piste.errors import FormatError, ValidationError
 from piste.formats.atomic import write_bytes_atomic
+from piste.formats.safe_io import read_regular
 from piste.formats.ssx.mpf_layout import (  # noqa: F401  (re-exported: the module's public names)
     BONE_DTYPE, DIR_DTYPE, FORMAT_TRICKY_PS2, GROUP_DTYPE, GROUP_MORPH, GROUP_RENDER, GROUP_SHADOW, IK_DTYPE,
     LINK_DTYPE, MATERIAL_DTYPE, MAX_CHUNK_VERTICES, MAX_FILE_BYTES, MAX_GROUP_MATRICES, MAX_VERTICES_READ,
@@ -658,16 +659,7 @@ def parse_mpf(data: bytes, path="<bytes>") -> MpfFile:
 
 def read_mpf(path) -> MpfFile:
     """Read an SSX Tricky ``.mpf`` model file."""
-    p = Path(path)
-    try:
-        size = p.stat().st_size
-    except OSError as e:
-        raise FormatError(path, f"cannot read: {e.strerror or e}") from None
-    if not p.is_file():
-        raise FormatError(path, "not a regular file")
-    if size > MAX_FILE_BYTES:
-        raise FormatError(path, f"{size} bytes is more than the {MAX_FILE_BYTES}-byte limit for a model file")
-    return parse_mpf(p.read_bytes(), path)
+    return parse_mpf(read_regular(Path(path), MAX_FILE_BYTES, what="model file"), path)
 
 
 def tag_differences(mpf: MpfFile) -> list:

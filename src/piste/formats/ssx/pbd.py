@@ -36,6 +36,10 @@ import numpy as np
 
 from piste.errors import FormatError, ValidationError
 from piste.formats.atomic import write_bytes_atomic
+from piste.formats.safe_io import read_regular
+
+#: the largest file the reader accepts (bytes)
+MAX_FILE_BYTES = 512 << 20  # a big retail level is a few tens of MB
 from piste.terrain.net import PatchNet
 
 __all__ = [
@@ -402,12 +406,7 @@ def read_pbd(path) -> Pbd:
     or non-finite coefficients.
     """
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise FormatError(path, "no such file") from None
-    except OSError as exc:
-        raise FormatError(path, f"cannot read ({exc.strerror})") from None
+    data = read_regular(path, MAX_FILE_BYTES, what="level file")  # regular files only, size-capped
     return parse_pbd(data, path)
 
 

@@ -53,6 +53,10 @@ import numpy as np
 
 from piste.errors import FormatError, ValidationError
 from piste.formats.atomic import write_bytes_atomic
+from piste.formats.safe_io import read_regular
+
+#: the largest file the reader accepts (bytes)
+MAX_FILE_BYTES = 256 << 20  # a retail bank is a few MB
 
 __all__ = [
     "SshImage", "SshBank", "read_ssh", "parse_ssh", "write_ssh", "lightmap_pages", "lightmap_bank",
@@ -380,12 +384,7 @@ def read_ssh(path) -> SshBank:
     """Read a ``.ssh`` texture bank; bad input raises :class:`~piste.errors.FormatError` naming the
     file, the image and the field."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise FormatError(path, "no such file") from None
-    except OSError as exc:
-        raise FormatError(path, f"cannot read ({exc.strerror})") from None
+    data = read_regular(path, MAX_FILE_BYTES, what="texture bank")  # regular files only, size-capped
     return parse_ssh(data, path)
 
 
