@@ -37,6 +37,9 @@ __all__ = ["DemRaster", "read_geotiff", "write_geotiff", "MAX_SAMPLES", "UNIT_ME
 
 #: refuse rasters of more samples than this (a hostile header could claim anything)
 MAX_SAMPLES = 1_500_000_000
+#: a compressed raster may decode to at most this many times the file's size (LZW's 12-bit codes
+#: reach ~2,730:1, deflate ~1,032:1); an uncompressed one to at most the file's size
+MAX_EXPANSION = 4096
 #: EPSG linear unit codes -> metres
 UNIT_METRES = {9001: 1.0, 9002: 0.3048, 9003: 1200.0 / 3937.0, 9036: 1000.0}
 _UNIT_NAMES = {"metre": 9001, "meter": 9001, "m": 9001, "foot": 9002, "ft": 9002, "us_survey_foot": 9003,
@@ -85,13 +88,30 @@ class DemRaster:
         return float(self.mask.mean()) if self.mask.size else 0.0
 
 
+_TAG_NAMES = {_TAG_SCALE: "ModelPixelScaleTag", _TAG_TIEPOINT: "ModelTiepointTag",
+              _TAG_TRANSFORM: "ModelTransformationTag", _TAG_GEOKEYS: "GeoKeyDirectoryTag",
+              _TAG_DOUBLES: "GeoDoubleParamsTag"}
+
+
+def _numbers(path: Path, page, code: int, dtype) -> np.ndarray:
+    """A numeric tag's values, ``(n,)`` of ``dtype`` (FormatError naming the tag when it holds text,
+    bytes, or integers past 64 bits)."""
+    value = page.tags[code].value
+    if isinstance(value, (str, bytes)):
+        raise FormatError(path, f"{_TAG_NAMES[code]} must hold numbers, got text", field=_TAG_NAMES[code])
+    try:
+        return np.asarray(value, dtype=dtype).ravel()
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise FormatError(path, f"{_TAG_NAMES[code]} must hold numbers ({exc})", field=_TAG_NAMES[code]) from None
+
+
 def _geokeys(path: Path, page) -> dict:
     """GeoKey id -> value (ints, doubles, or tuples of doubles) from the GeoKeyDirectory."""
     tags = page.tags
     if _TAG_GEOKEYS not in tags:
         return {}
-    raw = np.asarray(tags[_TAG_GEOKEYS].value, dtype=np.int64).ravel()
-    doubles = np.asarray(tags[_TAG_DOUBLES].value, dtype=np.float64).ravel() if _TAG_DOUBLES in tags else np.zeros(0)
+    raw = _numbers(path, page, _TAG_GEOKEYS, np.int64)
+    doubles = _numbers(path, page, _TAG_DOUBLES, np.float64) if _TAG_DOUBLES in tags else np.zeros(0)
     if len(raw) < 4 or len(raw) < 4 + 4 * int(raw[3]):
         raise FormatError(path, f"GeoKeyDirectory of {len(raw)} values is shorter than its header says",
                           field="GeoKeyDirectoryTag")
@@ -123,8 +143,8 @@ def _georeference(path: Path, page, shape) -> tuple[tuple, tuple, bool, float]:
     keys = _geokeys(path, page)
     area = keys.get(_KEY_RASTER, _PIXEL_IS_AREA) != _PIXEL_IS_POINT
     if _TAG_SCALE in tags and _TAG_TIEPOINT in tags:
-        scale = np.asarray(tags[_TAG_SCALE].value, dtype=np.float64).ravel()
-        tie = np.asarray(tags[_TAG_TIEPOINT].value, dtype=np.float64).ravel()
+        scale = _numbers(path, page, _TAG_SCALE, np.float64)
+        tie = _numbers(path, page, _TAG_TIEPOINT, np.float64)
         if len(scale) < 2 or len(tie) < 6:
             raise FormatError(path, f"expected 3 pixel scales and 6 tie-point values, got {len(scale)} and {len(tie)}",
                               field="ModelPixelScaleTag")
@@ -133,7 +153,7 @@ def _georeference(path: Path, page, shape) -> tuple[tuple, tuple, bool, float]:
         i, j, x, y = (float(v) for v in (tie[0], tie[1], tie[3], tie[4]))
         x0, y0 = x - i * sx, y + j * sy  # raster corner/centre (0, 0)
     elif _TAG_TRANSFORM in tags:
-        m = np.asarray(tags[_TAG_TRANSFORM].value, dtype=np.float64).ravel()
+        m = _numbers(path, page, _TAG_TRANSFORM, np.float64)
         if len(m) != 16:
             raise FormatError(path, f"ModelTransformationTag must hold 16 values, got {len(m)}",
                               field="ModelTransformationTag")
@@ -177,7 +197,17 @@ def read_geotiff(path, fill="nearest", vertical_units: str | None = None) -> Dem
         if not tf.pages:
             raise FormatError(path, "not a readable TIFF (no image in the file)")
         page = tf.pages[0]
-        shape = tuple(int(s) for s in page.shape)
+        try:
+            shape = tuple(int(s) for s in page.shape)
+            itemsize = np.dtype(page.dtype).itemsize
+            compressed = int(page.compression) != 1
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise FormatError(path, f"not a readable TIFF image header ({exc})", field="ImageWidth") from None
+        need, size = int(np.prod(shape, dtype=object)) * itemsize, path.stat().st_size
+        if need > size * (MAX_EXPANSION if compressed else 1):
+            raise FormatError(path, f"an image of shape {shape} needs {need:,} bytes of samples, more than a "
+                                    f"{'compressed ' if compressed else ''}file of {size:,} bytes can hold",
+                              field="StripByteCounts")
         if len(shape) == 3 and 1 in (shape[0], shape[-1]):
             shape = tuple(s for s in shape if s != 1) if shape.count(1) < 2 else shape[:2]
         if len(shape) != 2:
