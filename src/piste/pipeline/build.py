@@ -7,6 +7,8 @@ step           reads                                                        make
 ============== ============================================================ =====================
 terrain        the terrain source file bytes (or the course seed), settings control points, UVs
 lightmap       terrain key, lights, res / gutter / shadows                  the baked atlas
+shadow         terrain key, the sun's direction                             where the terrain sees
+                                                                            the sun (riders' shadows)
 characters     the rider model (file bytes or built-in name), LOD ratios    LOD meshes, palettes,
                                                                             batches, strips, clips
 objects        terrain key, object models and placements, lights           compressed meshes,
@@ -44,7 +46,7 @@ from piste.formats.gltf import load_gltf
 from piste.formats.ssx.mpf_model import mpf_partners
 from piste.lighting.baker import BAKE_VERSION, bake_lightmap
 from piste.lighting.lights import Lights, default_lights
-from piste.pipeline.bundle_objects import camera_from_dict
+from piste.pipeline.bundle_objects import camera_from_dict, lights_from_dict
 from piste.pipeline.cache import Cache, content_key
 from piste.pipeline.characters import CHARACTERS_VERSION, character_arrays
 from piste.pipeline.gltf_import import import_gltf
@@ -54,16 +56,20 @@ from piste.pipeline.ssx_level import bundle_arrays, level_key
 from piste.pipeline.ssx_rider import load_mpf_rider
 from piste.pipeline.visibility import (Visibility, camera_eyes, compute_visibility, culling_report,
                                        scene_eye_heights)
+from piste.render.shadow_pass import sun_visibility
 from piste.terrain.net import PatchNet
 from piste.world.camera import Camera, track_camera
 from piste.world.course import track_centerline
 from piste.world.objects import ObjectSet, bake_vertex_colors, compress_mesh, normal_matrix, object_texture
+from piste.world.scene import sun_light
 from piste.world.scene_file import SceneFile, load_scene
 
 __all__ = ["build_scene", "BuildResult", "default_cache_dir", "BUILD_VERSION", "scene_lights", "scene_cameras"]
 
 #: bumped whenever a step's output for the same input changes
 BUILD_VERSION = "piste.build/1"
+#: the sun-visibility step's version (bump when :func:`piste.render.shadow_pass.sun_visibility` changes)
+SHADOW_VERSION = 1
 #: up to this many objects, their visibility bits come from exact rays (cheap, and exact)
 OBJECT_RAYS_MAX = 64
 
@@ -200,7 +206,7 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=7, desc="build", unit="step", leave=False)
+        bar = tqdm(total=8, desc="build", unit="step", leave=False)
 
     def step(name: str, key: str, make):
         t0 = time.perf_counter()
@@ -277,6 +283,25 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
     manifest["lightmap"] = {"res": lm_spec.res, "gutter": lm_spec.gutter, "shadows": lm_spec.shadows,
                             "atlas_size": [int(la["atlas"].shape[1]), int(la["atlas"].shape[0])],
                             "encoding": "float32 linear light, 1.0 = full", "stats": lmeta.get("stats", {})}
+
+    # -------------------------------------------------------------- shadow (sun visibility)
+    # where the terrain sees the sun, for the riders' shadows: computed here, not at every renderer
+    # set-up (~0.2 s of a fresh process's first frame); the sun exactly as the runtime reads it back
+    sun = sun_light(lights_from_dict(manifest["lights"]))
+    if sun is not None:
+        sun_dir = [float(x) for x in np.asarray(sun.direction, dtype=np.float64).ravel()]
+        sv_key = content_key(BUILD_VERSION, "shadow", SHADOW_VERSION, terrain_key, sun_dir)
+
+        def make_shadow():
+            f, rect = sun_visibility(net, sun_dir)
+            return {"sun_visibility": f, "sun_rect": np.asarray(rect, dtype=np.float64)}, {"sun_direction": sun_dir}
+
+        sa, smeta = step("shadow", sv_key, make_shadow)
+        arrays["shadow/sun_visibility"] = sa["sun_visibility"]
+        arrays["shadow/sun_rect"] = sa["sun_rect"]
+        manifest["shadow"] = {"sun_direction": smeta["sun_direction"], "version": SHADOW_VERSION}
+    else:
+        result.steps["shadow"] = {"cached": True, "seconds": 0.0, "key": "none"}
 
     # -------------------------------------------------------------- characters
     manifest["characters"] = {}

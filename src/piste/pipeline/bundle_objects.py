@@ -182,6 +182,26 @@ class Bundle:
         return lods
 
 
+    def sun_visibility(self, direction):
+        """Where the terrain sees a sun shining along ``direction`` (3,), as the build stored it
+        (the ``shadow`` step: ``(field (H, W) float32, rect (x0, y0, x1, y1))``, exactly what
+        :func:`piste.render.shadow_pass.sun_visibility` gives), or None when the bundle has none or
+        holds it for another direction (the runtime then computes it)."""
+        info = self.manifest.get("shadow") or {}
+        f, rect = self.arrays.get("shadow/sun_visibility"), self.arrays.get("shadow/sun_rect")
+        stored = info.get("sun_direction")
+        if f is None or rect is None or stored is None or f.ndim != 2 or np.shape(rect) != (4,):
+            return None
+        try:
+            same = np.array_equal(np.asarray(stored, dtype=np.float64).ravel(),
+                                  np.asarray(direction, dtype=np.float64).ravel())
+        except (TypeError, ValueError):
+            return None
+        if not same:
+            return None
+        return np.asarray(f, dtype=np.float32), tuple(float(x) for x in rect)
+
+
 @_manifest_errors
 def bundle_from_data(data: BundleData) -> Bundle:
     """Build the terrain net, light map, lights, cameras and visibility of a read bundle (objects

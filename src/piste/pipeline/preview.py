@@ -339,9 +339,12 @@ class ScenePreview:
             if "lightmap/source" in bundle.arrays and opt["lightmap"] == "bundle":  # an SSX level: ps2 mode
                 ssx = SsxTerrainRenderer(bundle.net, bundle.arrays["lightmap/source"], size=self.size, ctx=self.ctx,
                                          lightmap=atlas, **kw)  # blends its stored Cs/As, riders and all
+            sun = getattr(self.scene, "sun", None)  # the build's sun visibility when it is this scene's
+            sunlight = bundle.sun_visibility(sun.direction) \
+                if sun is not None and opt["shadows"] and self.scene.net is bundle.net else None
             self.renderer = SceneRenderer(self.scene, size=self.size, ctx=self.ctx, lightmap=atlas,
                                           object_lighting=mode, shadows=opt["shadows"], specular=opt["specular"],
-                                          face=None if face == "off" else face, terrain=ssx, **kw)
+                                          face=None if face == "off" else face, terrain=ssx, sunlight=sunlight, **kw)
             self.terrain = self.renderer.terrain
             self.objects = None
             if self.renderer.objects is not None and mode == "baked" and self.scene.objects is bundle.objects():

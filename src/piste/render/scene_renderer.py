@@ -93,7 +93,7 @@ class SceneRenderer:
 
     def __init__(self, scene, size=(640, 448), ctx=None, lightmap="placeholder", object_lighting: str = "dynamic",
                  shadows: bool = True, specular: bool = True, shadow_tile: int = 128, casts=(),
-                 face: str | None = "morph", terrain=None, **terrain_kw):
+                 face: str | None = "morph", terrain=None, sunlight=None, **terrain_kw):
         self.scene = scene
         terrain_kw.setdefault("track", scene.line)
         terrain_kw.setdefault("track_half_width", TRACK_HALF_WIDTH)
@@ -115,7 +115,9 @@ class SceneRenderer:
         self.shadows = ShadowPass(self.ctx, n_max=n, tile=shadow_tile) if shadows else None
         if self.shadows is not None and scene.sun is not None:
             # riders' shadows darken only terrain that sees the sun (no double darkening)
-            self.shadows.set_sunlight(*sun_visibility(scene.net, scene.sun.direction))
+            # (``sunlight``: the same ``(field, rect)`` pre-computed, e.g. stored in a bundle at build time)
+            self.shadows.set_sunlight(*(sunlight if sunlight is not None else
+                                        sun_visibility(scene.net, scene.sun.direction)))
         self.specular = bool(specular)
         self.patch_lo, self.patch_hi = scene.net.patch_bounds
         # caster bounding sphere per model: the low LOD's bind-pose extent (riders lift and spin: a margin)
