@@ -57,6 +57,9 @@ __all__ = ["TileGrid", "TileStore", "fit_tile", "fit_edge", "tile_net", "neighbo
 TILES_FORMAT = "piste.TiledNet/1"
 #: bumped whenever :func:`fit_tile`'s output for the same input changes
 TILE_FIT_VERSION = "piste.tile-fit/1"
+#: most tiles an index may describe (a hostile grid could claim 10^17; 10^6 tiles of 64 x 64
+#: patches at 30 m a patch cover a continent)
+MAX_TILES = 1_000_000
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)
 
 
@@ -313,10 +316,50 @@ class TileStore:
 
     def grid(self) -> TileGrid:
         index = self.read_index()
+        d = index.get("grid")
+        if not isinstance(d, dict):
+            raise FormatError(self.index_path, f"expected an object, got {type(d).__name__}", field="grid")
+        fields = {"samples": (int, 2), "samples_per_patch": (int, 0), "tile_patches": (int, 0),
+                  "spacing": (float, 2), "origin": (float, 2)}
+        for name, (kind, length) in fields.items():
+            v = d.get(name)
+            items = v if length and isinstance(v, list) and len(v) == length else [v] if not length else None
+            ok = items is not None and all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) and abs(x) < 2**53  # (nan fails too)
+                and (kind is float or float(x).is_integer()) for x in items)
+            if not ok:
+                want = f"{length} finite numbers" if length else "an integer"
+                raise FormatError(self.index_path, f"expected {want}, got {str(v)[:60]}", field=f"grid.{name}")
         try:
-            return TileGrid.from_dict(index["grid"])
-        except (KeyError, TypeError, ValueError, ValidationError) as exc:
+            g = TileGrid.from_dict(d)
+        except ValidationError as exc:
             raise FormatError(self.index_path, f"bad tile grid ({exc})", field="grid") from None
+        if g.shape[0] * g.shape[1] > MAX_TILES:
+            raise FormatError(self.index_path, f"a grid of {g.shape[0]} x {g.shape[1]} tiles: expected at most "
+                                               f"{MAX_TILES:,}", field="grid")
+        return g
+
+    def read_fit(self, grid: TileGrid, ty: int, tx: int) -> dict:
+        """A fitted tile's arrays, checked against the grid: ``{"control_points": (n, 4, 4, 3)
+        float64, "uv": (n, 4, 2) float32}`` with ``n`` the tile's patches (FormatError naming the
+        tile and member when missing, of another shape, or not finite)."""
+        a = self.read("fit", ty, tx)
+        py0, py1, px0, px1 = grid.patch_range(ty, tx)
+        n = (py1 - py0) * (px1 - px0)
+        p = self.path("fit", ty, tx)
+        out = {}
+        for name, shape, dtype in (("control_points", (n, 4, 4, 3), np.float64), ("uv", (n, 4, 2), np.float32)):
+            if name not in a:
+                raise FormatError(p, f"tile ({ty}, {tx}) has no {name}", field=name)
+            v = a[name]
+            if v.shape != shape or v.dtype.kind not in "fiu":
+                raise FormatError(p, f"tile ({ty}, {tx}): expected {shape} numbers, got {v.shape} {v.dtype}",
+                                  field=name)
+            v = v.astype(dtype)
+            if not np.isfinite(v).all():
+                raise FormatError(p, f"tile ({ty}, {tx}) holds non-finite values", field=name)
+            out[name] = v
+        return out
 
     # -- tiles
     def path(self, product: str, ty: int, tx: int) -> Path:
@@ -365,8 +408,8 @@ class TileStore:
 
 def tile_net(store: TileStore, ty: int, tx: int, name: str | None = None) -> PatchNet:
     """The :class:`PatchNet` of one fitted tile."""
-    a = store.read("fit", ty, tx)
     grid = store.grid()
+    a = store.read_fit(grid, ty, tx)
     s = grid.samples_per_patch
     return PatchNet(a["control_points"], uv=a["uv"], tol=1e-6 * s * min(grid.spacing), name=name or f"tile {ty},{tx}")
 
@@ -383,7 +426,7 @@ def neighbourhood_net(store: TileStore, grid: TileGrid, ty: int, tx: int, halo: 
     count = 0
     for y in range(max(ty - halo, 0), min(ty + halo + 1, grid.shape[0])):
         for x in range(max(tx - halo, 0), min(tx + halo + 1, grid.shape[1])):
-            a = store.read("fit", y, x)
+            a = store.read_fit(grid, y, x)
             qy0, qy1, qx0, qx1 = grid.patch_range(y, x)
             gy, gx = np.mgrid[qy0:qy1, qx0:qx1]
             gy, gx = gy.ravel(), gx.ravel()

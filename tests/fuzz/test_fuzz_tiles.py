@@ -1,0 +1,174 @@
+"""Fuzz tiled worlds (piste.terrain.tiles.TileStore): a 2 x 2-tile world written by piste's own
+TileStore in a session fixture, then its ``index.json`` mutated byte-wise and structurally (fields
+of the wrong type, huge and negative counts, non-finite spacings, deep nesting) and its per-tile
+``.npz`` files mutated byte-wise and member by member (wrong shapes, dtypes, non-finite values,
+missing members).  Read as a viewer does: the index, the grid, every tile's net and the welded
+neighbourhood of a tile.  Each case loads or raises a PisteError naming the mutated file, under a
+time and a memory cap (see fuzzlib); a mutated index may be refused at the index or at a tile it
+no longer matches, so its errors must name a file of the world."""
+
+from __future__ import annotations
+
+import io
+import json
+import shutil
+import zipfile
+
+import numpy as np
+import pytest
+from fuzzlib import byte_mutations, check, doc_mutations, dump_json, fuzz_settings
+from hypothesis import given
+from hypothesis import strategies as st
+
+from piste.errors import FormatError
+from piste.terrain.tiles import TILES_FORMAT, TileGrid, TileStore, fit_tile, neighbourhood_net, tile_net
+
+
+@pytest.fixture(scope="session")
+def tiled_world(tmp_path_factory):
+    """A 2 x 2-tile world (25 x 25 samples, 3 samples a patch, 4 patches a tile side)."""
+    root = tmp_path_factory.mktemp("tiles") / "world.tiles"
+    y, x = np.mgrid[0:25, 0:25]
+    z = 5.0 * np.sin(x / 4.0) + 0.3 * y
+    g = TileGrid(z.shape, 3, 4, (2.0, 2.0), (100.0, 200.0))
+    store = TileStore(root)
+    store.write_index({"format": TILES_FORMAT, "grid": g.to_dict(), "tiles": {}})
+    for ty, tx in g.tiles():
+        r, c = g.sample_window(ty, tx)
+        store.write("fit", ty, tx, fit_tile(g, ty, tx, z[r, c]), key=f"k{ty}{tx}")
+    return root
+
+
+def _copy(world, tmp_path_factory):
+    d = tmp_path_factory.mktemp("w") / "world.tiles"
+    shutil.copytree(world, d)
+    return d
+
+
+def _load(index_path):
+    """What a viewer reads: index, grid, every tile's net (at most 16), tile (0, 0)'s neighbourhood."""
+    store = TileStore(index_path.parent)
+    store.read_index()
+    grid = store.grid()
+    for ty, tx in grid.tiles()[:16]:
+        tile_net(store, ty, tx)
+    neighbourhood_net(store, grid, 0, 0, ring=1)
+
+
+def test_seed_loads(tiled_world):
+    assert check(_load, tiled_world / "index.json", "tiles seeds") == "loaded"
+
+
+@given(data=st.data())
+@fuzz_settings(20)
+def test_index_bytes(tiled_world, tmp_path_factory, data):
+    d = _copy(tiled_world, tmp_path_factory)
+    (d / "index.json").write_bytes(data.draw(byte_mutations((tiled_world / "index.json").read_bytes())))
+    check(_load, d / "index.json", "tiles index byte-wise", names="world.tiles")
+
+
+@given(data=st.data())
+@fuzz_settings(40)
+def test_index_structure(tiled_world, tmp_path_factory, data):
+    """index.json fields replaced by wrong types, huge/negative numbers, hostile paths, deleted."""
+    d = _copy(tiled_world, tmp_path_factory)
+    doc = json.loads((tiled_world / "index.json").read_text())
+    (d / "index.json").write_bytes(dump_json(data.draw(doc_mutations(doc))))
+    check(_load, d / "index.json", "tiles index structural", names="world.tiles")
+
+
+@given(data=st.data())
+@fuzz_settings(20)
+def test_tile_bytes(tiled_world, tmp_path_factory, data):
+    d = _copy(tiled_world, tmp_path_factory)
+    name = data.draw(st.sampled_from(sorted(p.name for p in (d / "fit").iterdir())))
+    tile = d / "fit" / name
+    tile.write_bytes(data.draw(byte_mutations(tile.read_bytes())))
+    check(_load, d / "index.json", "tiles npz byte-wise", names=name)
+
+
+ARRAYS = st.sampled_from([
+    np.zeros((0,)), np.zeros((16, 4, 4, 3)), np.zeros((15, 4, 4, 3)), np.zeros((16, 4, 4)), np.zeros((16, 4, 2)),
+    np.full((16, 4, 4, 3), np.nan), np.full((16, 4, 4, 3), 1e308), np.zeros((16, 4, 4, 3), np.complex128),
+    np.array(["a", "b"]), np.array(3.0), np.zeros((16, 4, 2), np.float32), np.full((16, 4, 2), np.inf, np.float32),
+    np.zeros((100_000, 4, 4, 3)), np.zeros((16, 4, 4, 3), bool), np.zeros((4, 16, 4, 3)),
+])
+
+
+@given(data=st.data())
+@fuzz_settings(30)
+def test_tile_members(tiled_world, tmp_path_factory, data):
+    """A tile's members replaced, removed or added (shapes, dtypes, non-finite values)."""
+    d = _copy(tiled_world, tmp_path_factory)
+    name = data.draw(st.sampled_from(sorted(p.name for p in (d / "fit").iterdir())))
+    tile = d / "fit" / name
+    with np.load(tile) as f:
+        arrays = {k: f[k] for k in f.files}
+    for _ in range(data.draw(st.integers(1, 3))):
+        key = data.draw(st.sampled_from(sorted(arrays) + ["control_points", "uv", "extra"]))
+        if data.draw(st.booleans()) and key in arrays:
+            del arrays[key]
+        else:
+            arrays[key] = data.draw(ARRAYS)
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as zf:
+        for k, v in arrays.items():
+            b = io.BytesIO()
+            np.lib.format.write_array(b, v, allow_pickle=False)
+            zf.writestr(k + ".npy", b.getvalue())
+    tile.write_bytes(buf.getvalue())
+    check(_load, d / "index.json", "tiles npz members", names=name)
+
+
+# ------------------------------------------------------------------------------ regressions (findings)
+def _rewrite_tile(world, ty, tx, **arrays):
+    store = TileStore(world)
+    a = dict(store.read("fit", ty, tx))
+    for k, v in arrays.items():
+        if v is None:
+            a.pop(k)
+        else:
+            a[k] = v
+    store.write("fit", ty, tx, a, key="k")
+
+
+@pytest.mark.parametrize("change,field", [
+    ({"control_points": None}, "control_points"),  # was a raw KeyError
+    ({"uv": np.zeros((15, 4, 2))}, "uv"),  # was ValueError: cannot reshape
+    ({"control_points": np.array(["a", "b"])}, "control_points"),  # was ValueError: float('a')
+    ({"control_points": np.full((16, 4, 4, 3), np.nan)}, "control_points"),  # was a ValidationError without the file
+])
+def test_bad_tile_members_name_the_tile_and_member(tiled_world, tmp_path_factory, change, field):
+    d = _copy(tiled_world, tmp_path_factory)
+    _rewrite_tile(d, 0, 1, **change)
+    with pytest.raises(FormatError, match="t_0000_0001.npz") as e:
+        tile_net(TileStore(d), 0, 1)
+    assert e.value.field == field
+
+
+def test_grid_that_no_longer_matches_the_tiles_is_a_format_error(tiled_world, tmp_path_factory):
+    """Finding: tile_patches scaled in index.json gave a raw IndexError in neighbourhood_net."""
+    d = _copy(tiled_world, tmp_path_factory)
+    doc = json.loads((d / "index.json").read_text())
+    doc["grid"]["tile_patches"] = 8
+    (d / "index.json").write_text(json.dumps(doc))
+    store = TileStore(d)
+    with pytest.raises(FormatError, match="t_0000_0000.npz"):
+        neighbourhood_net(store, store.grid(), 0, 0)
+
+
+@pytest.mark.parametrize("key,value", [("samples", [1e308, 25]), ("samples", [25]), ("spacing", [float("nan"), 2.0]),
+                                       ("samples_per_patch", True), ("origin", "here"), ("tile_patches", 2.5),
+                                       ("samples", [10**9, 10**9])])
+def test_hostile_grids_are_refused_naming_the_field(tiled_world, tmp_path_factory, key, value):
+    """Findings: samples of 1e308 (OverflowError), NaN spacing accepted, 10^9 x 10^9 samples of 1-patch
+    tiles (a grid of 10^16 tiles that grid.tiles() would try to list)."""
+    d = _copy(tiled_world, tmp_path_factory)
+    doc = json.loads((d / "index.json").read_text())
+    doc["grid"][key] = value
+    if key == "samples" and value[0] == 10**9:
+        doc["grid"]["tile_patches"] = 1
+    (d / "index.json").write_text(json.dumps(doc, allow_nan=True))
+    with pytest.raises(FormatError, match="index.json") as e:
+        TileStore(d).grid()
+    assert e.value.field in (f"grid.{key}", "grid")
