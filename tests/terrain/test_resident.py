@@ -13,8 +13,8 @@ from piste import _jit
 from piste.terrain import PatchNet, tessellate
 from piste.terrain import _kernels
 from piste.terrain.cull import PatchTree
-from piste.terrain.resident import ResidentTerrain, _side_seq
-from piste.terrain.tessellate import open_edges
+from piste.terrain.resident import ResidentTerrain, _side_seq, uniform_grids
+from piste.terrain.tessellate import VERTEX_FLOATS, _cache, open_edges
 from piste.transforms import cull_boxes, frustum_planes, look_at, perspective
 
 from nets import TEAPOT, grid_net
@@ -184,3 +184,20 @@ def test_compiled_cpu_tessellation_bit_identical_to_numpy(seed):
         for k in ("positions", "normals", "uv", "uv_lightmap", "uv_projected", "param", "indices", "patch_ids",
                   "patch_kind", "patch_levels", "vertex_patch", "vertex_start", "tri_start"):
             assert np.array_equal(getattr(a, k), getattr(b, k)), k
+
+
+@pytest.mark.parametrize("make", [lambda: grid_net(6, 7, seed=5), lambda: grid_net(5, 4, seed=2, flips=False),
+                                  lambda: PatchNet.from_bpt(TEAPOT)])
+def test_uniform_grids_bit_identical_to_the_vertex_cache(make):
+    """The resident blocks' positions and UVs, built without normals, are the vertex cache's bits."""
+    net = make()
+    rng = np.random.default_rng(7)
+    net.lightmap_rect = rng.uniform(0.0, 1.0, (len(net), 4)).astype(np.float32)
+    levels = (3, 4, 6, 8)
+    got = uniform_grids(net, levels)
+    flat, off = _cache(net).grids(net, levels)
+    N = len(net)
+    for n in levels:
+        g = flat[off[n]:off[n] + N * n * n * VERTEX_FLOATS].reshape(N, n * n, VERTEX_FLOATS)
+        assert np.array_equal(got[n][0].view(np.uint32), np.ascontiguousarray(g[..., 0:3]).view(np.uint32))
+        assert np.array_equal(got[n][1].view(np.uint32), np.ascontiguousarray(g[..., 8:12]).view(np.uint32))

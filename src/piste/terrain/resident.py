@@ -52,10 +52,12 @@ from piste.terrain._kernels import frame_indices
 from piste.terrain.cull import patch_tree
 from piste.terrain.lod import DEFAULT_FAR, DEFAULT_NEAR, LEVELS
 from piste.terrain.net import SIDE_CORNERS, PatchNet
-from piste.terrain.tessellate import MAX_LEVEL, VERTEX_FLOATS, _cache, _glue_sources, get_shape, tessellate
+from piste.terrain.bezier import blend_tables, eval_edges, params
+from piste.terrain.tessellate import (MAX_LEVEL, VERTEX_FLOATS, _bilinear_weights, _cache, _glue_sources, get_shape,
+                                      tessellate)
 
 __all__ = ["ResidentTerrain", "ResidentMesh", "RESIDENT_FLOATS", "MORPH_BAND", "RESIDENT_BUDGET", "resident_terrain",
-           "resident_fits", "morph_setting"]
+           "resident_fits", "morph_setting", "uniform_grids"]
 
 #: floats per resident vertex: position 3, morph target 3, uv 2, light-map uv 2, morph slot 1
 RESIDENT_FLOATS = 11
@@ -82,6 +84,47 @@ def _side_seq(n: int, s: int) -> np.ndarray:
     """Local indices along side ``s`` of a uniform level-``n`` shape, corners included, ``(n,)``."""
     a, b = SIDE_CORNERS[s]
     return np.concatenate([[a], 4 + s * (n - 2) + np.arange(n - 2), [b]]).astype(np.int64)
+
+
+def uniform_grids(net: PatchNet, levels) -> dict:
+    """Every patch's uniform grid at each level: ``{n: (positions (N, n^2, 3) float32, uvs (N, n^2, 4)
+    float32: uv then light-map uv)}`` in the :func:`piste.terrain.get_shape` layout.
+
+    Bit-identical to the vertex cache's positions and UVs (``tessellate(net, n, cache=False)``: the
+    same blend-table arithmetic on the same arrays: corners, each edge once in its canonical
+    direction, inner grids by one product per level) without its normals, parameters and projected
+    UVs, which the resident blocks do not hold (about half the cache's build time).
+    """
+    cache = _cache(net)
+    N = len(net)
+    r = net.lightmap_rect
+    lm_corners = np.stack([r[:, [0, 2, 2, 0]], r[:, [1, 1, 3, 3]]], axis=1)  # (N, 2, 4)
+    corner_attr = np.concatenate([net.uv.transpose(0, 2, 1), lm_corners], axis=1)  # (N, 4, 4)
+    flat = cache.packed[np.arange(N)].reshape(N * 3, 16)
+    out = {}
+    for n in (int(x) for x in levels):
+        sh = get_shape((n,) * 4)
+        nv = sh.n_verts
+        pos = np.empty((N, nv, 3), dtype=np.float32)
+        pos[:, :4] = cache.corners
+        if n > 2:
+            edge = eval_edges(cache.edge_cp[np.arange(net.n_edges)], n).reshape(-1, 3)  # (e (n-2), 3)
+            kk = np.arange(n - 2)
+            for s in range(4):
+                rows = (net.side_edge[:, s] * (n - 2))[:, None] + np.where(net.side_flip[:, s][:, None], kk[::-1], kk)
+                o = 4 + int(sh.side_off[s])
+                pos[:, o:o + n - 2] = edge.take(rows, axis=0)
+            ti = params(n)[1:-1]
+            vv, uu = np.meshgrid(ti, ti, indexing="ij")
+            t, _, _ = blend_tables(tuple(uu.ravel()), tuple(vv.ravel()), "float32")
+            pos[:, sh.inner_off:] = (flat @ t).reshape(N, 3, -1).transpose(0, 2, 1)
+        pos += cache.origin32
+        uvs = np.empty((N, nv, 4), dtype=np.float32)
+        attr = (corner_attr.reshape(N * 4, 4) @ _bilinear_weights(sh.param).T).reshape(N, 4, nv)
+        uvs[..., :2] = attr[:, :2].transpose(0, 2, 1)
+        uvs[..., 2:] = attr[:, 2:].transpose(0, 2, 1)
+        out[n] = (pos, uvs)
+    return out
 
 
 @dataclass
@@ -194,17 +237,15 @@ class ResidentTerrain:
     def _build_vertices(self) -> None:
         net = self.net
         N, B = len(net), self.block
-        cache = _cache(net)
-        flat, offset = cache.grids(net, self.levels)
-        grids = {n: flat[offset[n]:offset[n] + N * n * n * VERTEX_FLOATS].reshape(N, n * n, VERTEX_FLOATS)
-                 for n in self.levels}
+        both = uniform_grids(net, self.levels)  # positions and UVs only (no normals)
+        grids = {n: both[n][0] for n in self.levels}
         out = np.empty((N, B, RESIDENT_FLOATS), dtype=np.float32)
         pids = np.arange(N)
         for li, n in enumerate(self.levels):
             g = grids[n]
             blk = out[:, self.level_offset[n]:self.level_offset[n] + n * n]
-            blk[..., 0:3] = g[..., 0:3]
-            blk[..., 6:10] = g[..., 8:12]
+            blk[..., 0:3] = g
+            blk[..., 6:10] = both[n][1]
             # morph slots: corners 0 (target = position), sides their edge, inner n_edges + p
             slot = np.zeros((N, n * n), dtype=np.int64)
             for s in range(4):
