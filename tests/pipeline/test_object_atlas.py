@@ -198,7 +198,10 @@ def test_alpha_modes_baked_for_the_shader():
     imgs = primitive_images(Model("m", None, meshes))
     assert (imgs[0][2][..., 3] == 255).all()
     assert imgs[1][2][..., 3].tolist() == [[0, 255], [255, 255]]  # cutoff 0.3 = 77
-    assert imgs[2][2][..., 3].tolist() == [[0, 0], [255, 255]]
+    assert imgs[2][2][..., 3].tolist() == [[10, 100], [150, 250]]  # BLEND: the alpha as it is
+    from piste.pipeline.object_atlas import blends
+
+    assert blends(Model("m", None, meshes)) and not blends(Model("m", None, meshes[:2]))
 
 
 def test_rider_with_several_materials_keeps_each_colour():
@@ -219,3 +222,67 @@ def test_rider_with_several_materials_keeps_each_colour():
 
     r = default_rider(0)
     assert merged_mesh(r) is r.meshes[0]
+
+
+@pytest.mark.gl
+def test_scene_gltf_blend_object_is_drawn_half_transparent(tmp_path, gl):
+    """A scene file's glTF object with alphaMode BLEND (red, alpha 128) in front of an opaque
+    magenta one: the bundle marks its kind blended and the preview draws the blend of both."""
+    from dataclasses import replace
+
+    from piste.formats.gltf_ext import MaterialInfo
+    from piste.formats.gltf_export import CharacterExport, export_gltf
+    from piste.pipeline.build import build_scene
+    from piste.pipeline.bundle_objects import load_bundle
+    from piste.pipeline.preview import ScenePreview
+    from piste.world.objects import make_mesh
+    from piste.world.scene_file import load_scene
+
+    box = make_mesh("sign")
+    rot = np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0]]).T  # piste Z up -> glTF Y up
+    tex = np.zeros((8, 8, 4), np.uint8)
+    tex[...] = (255, 0, 255, 255)
+    mesh = SkinnedMesh("box", box.positions @ rot * 4, box.indices, normals=box.normals @ rot,
+                       uv=np.full((box.n_vertices, 2), 0.5), texture=tex)
+    export_gltf(tmp_path / "magenta.glb", characters=[CharacterExport(Model("box", None, [mesh]), name="box")], up="z")
+    red = tex.copy()
+    red[...] = (255, 0, 0, 128)
+    quad = np.array([[-4.0, 0, 0], [0, 0, 0], [0, 0, 12], [-4, 0, 12]])  # one layer, facing the camera (-y)
+    glass = SkinnedMesh("glass", quad @ rot, np.array([[0, 1, 2], [0, 2, 3]]), normals=np.tile([0.0, -1, 0], (4, 1)) @ rot,
+                        uv=np.full((4, 2), 0.5), texture=red, material=MaterialInfo(alpha_mode="BLEND"))
+    export_gltf(tmp_path / "glass.glb", characters=[CharacterExport(Model("glass", None, [glass]), name="g")], up="z")
+    n, spacing = 9, 4.0
+    np.savez(tmp_path / "hill.npz", z=np.zeros((n, n)), dx=np.float64(spacing))
+    (tmp_path / "s.toml").write_text("""name = "glass"
+[terrain]
+source = "hill.npz"
+[lightmap]
+res = 8
+[visibility]
+enabled = false
+[[objects]]
+model = "glass.glb"
+position = [16.0, 10.0]
+[[objects]]
+model = "magenta.glb"
+position = [16.0, 16.0]
+[[lights]]
+type = "ambient"
+intensity = 1.0
+[[cameras]]
+name = "main"
+eye = [16.0, -2.0, 8.0]
+target = [16.0, 16.0, 2.0]
+""")
+    b = load_bundle(build_scene(load_scene(tmp_path / "s.toml"), out=tmp_path / "s.piste").path)
+    objs = b.objects()
+    assert objs.blend == ("gltf_glass",)
+    p = ScenePreview(b, size=(96, 64), ctx=gl)
+    try:
+        img = p.render(b.camera("main"), t=0.0).astype(int)
+    finally:
+        p.release()
+    r, g, bl = img[..., 0], img[..., 1], img[..., 2]
+    magenta = (r > g + 60) & (np.abs(bl - r) < 0.15 * r)
+    blended = (g < 30) & (r > 150) & (bl > 0.35 * r) & (bl < 0.65 * r)  # red over magenta: blue halved
+    assert magenta.sum() > 20 and blended.sum() > 20, (magenta.sum(), blended.sum())

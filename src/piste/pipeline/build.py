@@ -50,7 +50,7 @@ from piste.pipeline.bundle_objects import camera_from_dict, lights_from_dict
 from piste.pipeline.cache import Cache, content_key
 from piste.pipeline.characters import CHARACTERS_VERSION, character_arrays
 from piste.pipeline.gltf_import import import_gltf
-from piste.pipeline.object_atlas import double_sided, pack_object_atlas, primitive_images
+from piste.pipeline.object_atlas import blends, double_sided, pack_object_atlas, primitive_images
 from piste.pipeline.sources import add_rider_clips, load_object_mesh, load_rider_model, load_terrain, object_matrices, rider_matrices
 from piste.pipeline.ssx_level import bundle_arrays, level_key
 from piste.pipeline.ssx_rider import load_mpf_rider
@@ -365,7 +365,7 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
         srcs = sorted({o.model for o in scene.objects})
         src_keys = [m if m.startswith("builtin:") else _file_key(m) for m in srcs]
         placements = [(o.name, o.model, list(o.position), o.heading, o.scale) for o in scene.objects]
-        obj_key = content_key(BUILD_VERSION, "objects", "object_atlas/3", terrain_key, srcs, src_keys, placements,
+        obj_key = content_key(BUILD_VERSION, "objects", "object_atlas/4", terrain_key, srcs, src_keys, placements,
                               manifest["lights"], *_allow_key(scene))
 
         def make_objects():
@@ -464,12 +464,16 @@ def _objects_arrays(net, objects, sources, lights, allow_paths=()):
         meshes[kind] = mesh
     # glTF objects keep their own base colours (regions of the objects' atlas) and double-sided
     # materials (back faces added): pipeline.object_atlas
+    # and alphaMode BLEND (drawn blended, sorted: ObjectSet.blend)
     parts = {}
+    blend = []
     for s, k in zip(sources, kinds):
         if not s.startswith("builtin:"):
             gm = load_gltf(s, allow_paths=allow_paths)
             meshes[k], imgs = double_sided(meshes[k], gm, primitive_images(gm))
             parts[k] = (meshes[k].uv, imgs)
+            if blends(gm) and k not in blend:
+                blend.append(k)
     texture, uvs = pack_object_atlas(object_texture(), parts, {k: m.uv for k, m in meshes.items() if k not in parts})
     meshes = {k: compress_mesh(replace(m, uv=uvs[k]) if k in uvs else m) for k, m in meshes.items()}
     kind_of = dict(zip(sources, kinds))
@@ -485,7 +489,7 @@ def _objects_arrays(net, objects, sources, lights, allow_paths=()):
         center[i] = m[:3, :3] @ c + m[:3, 3]
         radius[i] = float(np.linalg.norm(p - c, axis=1).max()) * abs(o.scale)
     objs = ObjectSet(meshes, tuple(kinds), kind, matrix, normal_matrix(matrix), center, radius, None, texture,
-                     {k: int(np.count_nonzero(kind == i)) for i, k in enumerate(kinds)})
+                     {k: int(np.count_nonzero(kind == i)) for i, k in enumerate(kinds)}, tuple(blend))
     colors = bake_vertex_colors(objs, lights)
     a = {"kind": kind, "matrix": matrix, "center": center, "radius": radius, "texture": objs.texture}
     meta = {"kinds": list(kinds), "meshes": {}, "instances": [o.name for o in objects],
@@ -497,7 +501,8 @@ def _objects_arrays(net, objects, sources, lights, allow_paths=()):
                   p + "uv": cm.uv, p + "uv_offset": cm.uv_offset, p + "uv_extent": cm.uv_extent,
                   p + "normals": cm.normals, p + "indices": cm.indices})
         a[f"colors/{k}"] = colors[k]
-        meta["meshes"][k] = {"normal_bits": int(cm.normal_bits), "radius": float(cm.radius), "vertices": cm.n_vertices,
+        meta["meshes"][k] = {"normal_bits": int(cm.normal_bits), "radius": float(cm.radius), "blend": k in blend,
+                             "vertices": cm.n_vertices,
                              "triangles": cm.n_triangles, "bytes": int(cm.nbytes),
                              "bytes_float": int(cm.uncompressed_nbytes(cm.n_vertices, cm.n_triangles))}
     return a, meta

@@ -143,8 +143,9 @@ class Bundle:
             vl = choose_lights_many(self.lights, a["objects/center"])
         tex = a.get("objects/texture")
         counts = {k: int(np.count_nonzero(kind == i)) for i, k in enumerate(kinds)}
+        blend = tuple(k for k in kinds if info["meshes"][k].get("blend", False))  # glTF alphaMode BLEND kinds
         objs = ObjectSet(meshes, kinds, kind, matrix, normal_matrix(matrix), a["objects/center"].astype(np.float64),
-                         a["objects/radius"].astype(np.float64), vl, tex, counts)
+                         a["objects/radius"].astype(np.float64), vl, tex, counts, blend)
         self._cache["objects"] = objs
         return objs
 

@@ -10,8 +10,10 @@ centres: ``u' = (x0 + 0.5 + u (w - 1)) / W``.  KHR_texture_transform is already 
 the built-in one.
 
 Alpha: OPAQUE primitives get alpha 255 (glTF ignores it); MASK keeps texels at or above its
-``alphaCutoff`` (255) and drops the rest (0), and BLEND is drawn the same way at 0.5 (no sorting):
-the object shader discards texels with alpha below 0.5.
+``alphaCutoff`` (255) and drops the rest (0): the object shader discards texels with alpha below
+0.5; BLEND keeps its alpha, and a model with a BLEND primitive is a blended kind
+(:func:`blends`, ``ObjectSet.blend``): the object pass draws it after the opaque kinds with alpha
+blending, sorted back to front (its OPAQUE / MASK primitives, alpha 255 / 0, look the same there).
 
 Double-sided materials (``doubleSided: true``) are made double-sided in the geometry: the
 primitive's triangles are added again, reversed, on copies of its vertices with negated normals
@@ -22,6 +24,7 @@ API
 primitive_images(model) -> list[(v0, v1, (h, w, 4) uint8)]   per mesh, in load_object_mesh's order
 pack_object_atlas(base, parts, builtin=None, max_size=256, gutter=2) -> (atlas, {kind: uv (v, 2) float32})
 double_sided(mesh, model, images) -> (ObjectMesh, images)  back faces added for doubleSided materials
+blends(model) -> bool   whether any primitive's material is alphaMode BLEND
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 from PIL import Image
 
-__all__ = ["primitive_images", "pack_object_atlas", "double_sided"]
+__all__ = ["primitive_images", "pack_object_atlas", "double_sided", "blends"]
 
 
 def _srgb_u8(c) -> np.ndarray:
@@ -63,12 +66,18 @@ def primitive_images(model) -> list:
         img = img.copy()
         if mode == "OPAQUE":  # glTF: alpha is ignored
             img[..., 3] = 255
-        else:  # MASK (its cutoff) and BLEND (drawn as MASK at 0.5): the object shader discards alpha < 0.5
-            cut = float(getattr(info, "alpha_cutoff", 0.5)) if mode == "MASK" else 0.5
+        elif mode == "MASK":  # its cutoff baked: the object shader discards alpha < 0.5
+            cut = float(getattr(info, "alpha_cutoff", 0.5))
             img[..., 3] = np.where(img[..., 3] >= round(cut * 255), 255, 0).astype(np.uint8)
+        # BLEND: the alpha as it is (the object pass's blend programs)
         out.append((v0, v1, img))
         v0 = v1
     return out
+
+
+def blends(model) -> bool:
+    """Whether any of ``model.meshes`` has a material with ``alphaMode`` BLEND."""
+    return any(getattr(getattr(m, "material", None), "alpha_mode", "OPAQUE") == "BLEND" for m in model.meshes)
 
 
 def pack_object_atlas(base, parts: dict, builtin: dict | None = None, max_size: int = 256, gutter: int = 2):

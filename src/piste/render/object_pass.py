@@ -8,6 +8,13 @@ with one instanced draw per kind; each visible instance is one row of 16 RGBA32F
 instance-data texture (object matrix, inverse-transpose normal matrix, its 1 + 3 light matrices),
 rebuilt per frame from rows computed once (:func:`instance_rows`).
 
+Transparency (glTF alphaMode BLEND, the kinds in ``objects.blend``): drawn after the opaque and
+MASK kinds in a second pass of programs that write the texel's alpha, with depth test on, depth
+write off and ``SRC_ALPHA, ONE_MINUS_SRC_ALPHA`` blending; each frame the visible blended instances
+are sorted back to front by the distance of their bounding-sphere centres to the eye (one numpy
+argsort) and drawn in that order, one instanced draw per run of one kind (the triangles within one
+instance are not sorted).
+
 Lighting modes (``mode``): ``dynamic`` (the talk's SSX objects: 1 ambient + 3 directional chosen
 per object), ``baked`` (pre-calculated RGBs per instance vertex, half-bright RGB8, from
 :func:`piste.world.objects.bake_vertex_colors`), ``points`` (every world light evaluated per
@@ -158,25 +165,27 @@ class ObjectPass:
         self.drawn = 0
         self.triangles = 0
 
-    def _program(self, key):
+    def _program(self, key, blend: bool = False):
         """``(program, vertex arrays by kind)`` for ``key = (mode id, light_only)`` (None: the
-        generic program), compiled on first use."""
-        got = self._programs.get(key)
+        generic program) and the blend pass or not, compiled on first use."""
+        got = self._programs.get((key, blend))
         if got is None:
+            frag = {"OBJECT_ALPHA_TEST": 0, "OBJECT_BLEND": 1} if blend else {}
             if key is None:
-                vs, fs = self._vs, self._fs
+                vs, fs = self._vs, _with_defines(self._fs, **frag) if frag else self._fs
             else:
                 vs = _with_defines(self._vs, OBJECT_MODE=key[0], OBJECT_INSTANCE_ATTRIBS=1)
-                fs = _with_defines(self._fs, OBJECT_MODE_FRAG=int(key[1]), OBJECT_ALPHA_TEST=int(self.alpha_test))
+                fs = _with_defines(self._fs, OBJECT_MODE_FRAG=int(key[1]),
+                                   **(frag or {"OBJECT_ALPHA_TEST": int(self.alpha_test)}))
             prog = self.ctx.program(vertex_shader=vs, fragment_shader=fs)
             for name, unit in (("u_tex", 0), ("u_inst", 1), ("u_baked", 2)):
                 if name in prog:
                     prog[name].value = unit
-            got = self._programs[key] = (prog, {})
+            got = self._programs[(key, blend)] = (prog, {})
         return got
 
-    def _vao(self, key, k: int):
-        prog, vaos = self._program(key)
+    def _vao(self, key, k: int, blend: bool = False):
+        prog, vaos = self._program(key, blend)
         vao = vaos.get(k)
         if vao is None:
             info = self.kinds[k]
@@ -243,33 +252,26 @@ class ObjectPass:
         self.triangles = 0
         if len(vis) == 0:
             return
-        order = vis[np.argsort(objs.kind[vis], kind="stable")]
+        blend_kind = np.array([name in objs.blend for name in objs.kinds], dtype=bool)
+        is_blend = blend_kind[objs.kind[vis]]
+        opaque, trans = vis[~is_blend], vis[is_blend]
+        order = opaque[np.argsort(objs.kind[opaque], kind="stable")]
+        if len(trans):  # back to front: farthest bounding-sphere centre first
+            dist = np.linalg.norm(objs.center[trans] - np.asarray(eye, dtype=np.float64), axis=1)
+            trans = trans[np.argsort(-dist, kind="stable")]
         kind_of = objs.kind[order]
         key = (_MODES[mode], bool(light_only)) if self.specialised else None
         if key is None:
-            self.inst.write(np.ascontiguousarray(self.rows[order]).tobytes(), viewport=(0, 0, 16, len(order)))
+            rows = np.concatenate([order, trans])
+            self.inst.write(np.ascontiguousarray(self.rows[rows]).tobytes(), viewport=(0, 0, 16, len(rows)))
         else:
             packed = self.packed[order]
             for k in np.unique(kind_of):
                 self.kinds[int(k)]["instances"].write(np.ascontiguousarray(packed[kind_of == k]).tobytes())
-        p = self._program(key)[0]
-        p["u_vp"].write(np.asarray(vp, dtype=np.float32).T.tobytes())
-        p["u_eye"].value = tuple(float(x) for x in eye)
-        p["u_fog"].value = (0.0, 0.0, 0.0, 0.0) if fog is None else tuple(float(x) for x in fog)
-        if key is None:
-            p["u_mode"].value = _MODES[mode]
-            p["u_mode_frag"].value = 1 if light_only else 0
-        if mode == "points":
-            if self._points is None:
-                if self.lights is None:
-                    raise RenderError("object lighting 'points' needs the world's lights")
-                self._points = light_uniforms(self.lights)
-            for name, val in self._points.items():
-                if name in p:
-                    if isinstance(val, np.ndarray):
-                        p[name].write(val.astype(np.float32).tobytes())
-                    else:
-                        p[name].value = val
+        if mode == "points" and self._points is None:
+            if self.lights is None:
+                raise RenderError("object lighting 'points' needs the world's lights")
+            self._points = light_uniforms(self.lights)
         if mode == "baked" and self.kinds[0]["baked"] is None:
             self._baked_textures()
         self.texture.use(0)
@@ -278,25 +280,70 @@ class ObjectPass:
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         ctx.depth_func = "<"
-        start = 0
-        for k, info in enumerate(self.kinds):
-            count = int(np.count_nonzero(kind_of == k))
-            if count == 0:
-                continue
-            m = info["mesh"]
-            for name, value in (("u_base_row", start), ("u_pos_offset", tuple(float(x) for x in m.pos_offset)),
-                                ("u_pos_extent", tuple(float(x) for x in m.pos_extent)),
-                                ("u_uv_offset", tuple(float(x) for x in m.uv_offset)),
-                                ("u_uv_extent", tuple(float(x) for x in m.uv_extent)),
-                                ("u_nmax", float((1 << (m.normal_bits - 1)) - 1))):
-                if name in p:  # (a specialised program drops what its mode does not use)
-                    p[name].value = value
-            if mode == "baked":
-                info["baked"].use(2)
-            self._vao(key, k).render(moderngl.TRIANGLES, vertices=m.indices.size, instances=count)
-            start += count
-            self.drawn += count
-            self.triangles += count * m.n_triangles
+        if len(order):
+            p = self._uniforms(key, False, vp, eye, fog, mode, light_only)
+            start = 0
+            for k in range(len(self.kinds)):
+                count = int(np.count_nonzero(kind_of == k))
+                if count:
+                    self._draw_kind(p, key, k, start, count, mode, False)
+                    start += count
+        if len(trans):
+            p = self._uniforms(key, True, vp, eye, fog, mode, light_only)
+            ctx.enable(moderngl.BLEND)
+            ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
+            fbo = ctx.fbo  # (the bound framebuffer: moderngl keeps the depth mask there)
+            fbo.depth_mask = False
+            try:
+                tk = objs.kind[trans]
+                cuts = np.flatnonzero(np.diff(tk)) + 1  # runs of one kind, in the sorted order
+                for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(trans)]):
+                    k = int(tk[a])
+                    if key is not None:  # (written between draws: GL keeps the earlier draws' data)
+                        self.kinds[k]["instances"].write(np.ascontiguousarray(self.packed[trans[a:b]]).tobytes())
+                    self._draw_kind(p, key, k, len(order) + int(a), int(b - a), mode, True)
+            finally:
+                fbo.depth_mask = True
+                ctx.blend_func = moderngl.DEFAULT_BLENDING
+                ctx.disable(moderngl.BLEND)
+
+    def _uniforms(self, key, blend, vp, eye, fog, mode, light_only):
+        """The program of ``key`` (blend pass or not) with this draw's uniforms set."""
+        p = self._program(key, blend)[0]
+        p["u_vp"].write(np.asarray(vp, dtype=np.float32).T.tobytes())
+        p["u_eye"].value = tuple(float(x) for x in eye)
+        p["u_fog"].value = (0.0, 0.0, 0.0, 0.0) if fog is None else tuple(float(x) for x in fog)
+        if key is None:
+            p["u_mode"].value = _MODES[mode]
+            p["u_mode_frag"].value = 1 if light_only else 0
+        if mode == "points":
+            for name, val in self._points.items():
+                if name in p:
+                    if isinstance(val, np.ndarray):
+                        p[name].write(val.astype(np.float32).tobytes())
+                    else:
+                        p[name].value = val
+        return p
+
+    def _draw_kind(self, p, key, k: int, start: int, count: int, mode: str, blend: bool) -> None:
+        """``count`` instances of kind ``k`` (rows ``start..`` of the instance texture for the
+        generic program; the kind's instance buffer for a specialised one)."""
+        import moderngl
+
+        info = self.kinds[k]
+        m = info["mesh"]
+        for name, value in (("u_base_row", start), ("u_pos_offset", tuple(float(x) for x in m.pos_offset)),
+                            ("u_pos_extent", tuple(float(x) for x in m.pos_extent)),
+                            ("u_uv_offset", tuple(float(x) for x in m.uv_offset)),
+                            ("u_uv_extent", tuple(float(x) for x in m.uv_extent)),
+                            ("u_nmax", float((1 << (m.normal_bits - 1)) - 1))):
+            if name in p:  # (a specialised program drops what its mode does not use)
+                p[name].value = value
+        if mode == "baked":
+            info["baked"].use(2)
+        self._vao(key, k, blend).render(moderngl.TRIANGLES, vertices=m.indices.size, instances=count)
+        self.drawn += count
+        self.triangles += count * m.n_triangles
 
     def release(self) -> None:
         for prog, vaos in self._programs.values():

@@ -468,6 +468,8 @@ class ObjectSet:
     center : (n, 3) float64 world bounding-sphere centre;  radius : (n,) float64
     lights : VertexLights batch (n) chosen at each centre (the talk's 1 ambient + 3 directional)
     texture : (H, W, 4) uint8 atlas
+    blend : kinds drawn with alpha blending (glTF alphaMode BLEND): after the opaque ones, depth
+        write off, instances sorted back to front (:mod:`piste.render.object_pass`)
     """
 
     meshes: dict
@@ -480,6 +482,7 @@ class ObjectSet:
     lights: object = None
     texture: np.ndarray | None = None
     counts: dict = field(default_factory=dict)
+    blend: tuple = ()
 
     def __len__(self) -> int:
         return len(self.kind)

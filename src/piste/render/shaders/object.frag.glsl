@@ -11,6 +11,9 @@ const int u_mode_frag = OBJECT_MODE_FRAG;
 #ifndef OBJECT_ALPHA_TEST
 #define OBJECT_ALPHA_TEST 1
 #endif
+#ifndef OBJECT_BLEND
+#define OBJECT_BLEND 0
+#endif
 in vec3 v_color;
 in vec2 v_uv;
 in vec3 v_world;
@@ -26,5 +29,10 @@ void main() {
     if (u_fog.a > 0.0) {
         c = mix(c, u_fog.rgb, 1.0 - exp(-u_fog.a * distance(v_world, u_eye)));
     }
+#if OBJECT_BLEND
+    // glTF alphaMode BLEND: the texel's alpha (the blend pass: SRC_ALPHA, ONE_MINUS_SRC_ALPHA)
+    f_color = vec4(c, u_mode_frag == 1 ? 1.0 : t.a);
+#else
     f_color = vec4(c, 1.0);
+#endif
 }
