@@ -172,3 +172,15 @@ def test_hostile_grids_are_refused_naming_the_field(tiled_world, tmp_path_factor
     with pytest.raises(FormatError, match="index.json") as e:
         TileStore(d).grid()
     assert e.value.field in (f"grid.{key}", "grid")
+
+
+@pytest.mark.parametrize("content", ["[" * 100_000 + "]" * 100_000, None])
+def test_index_nested_deeply_or_a_device_is_refused(tiled_world, tmp_path_factory, content):
+    """Finding: a 100,000-deep index.json raised a raw RecursionError; a link to /dev/zero read forever."""
+    d = _copy(tiled_world, tmp_path_factory)
+    (d / "index.json").unlink()
+    if content is None:
+        (d / "index.json").symlink_to("/dev/zero")
+    else:
+        (d / "index.json").write_text(content)
+    assert check(lambda p: TileStore(p.parent).grid(), d / "index.json", "tiles regressions") == "refused"

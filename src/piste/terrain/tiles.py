@@ -48,6 +48,7 @@ import numpy as np
 
 from piste.errors import FormatError, ValidationError
 from piste.formats.atomic import write_bytes_atomic
+from piste.formats.safe_io import loads_json, read_regular
 from piste.terrain.bezier import bernstein
 from piste.terrain.net import PatchNet
 
@@ -60,6 +61,8 @@ TILE_FIT_VERSION = "piste.tile-fit/1"
 #: most tiles an index may describe (a hostile grid could claim 10^17; 10^6 tiles of 64 x 64
 #: patches at 30 m a patch cover a continent)
 MAX_TILES = 1_000_000
+#: largest index.json read (a few hundred bytes a tile)
+MAX_INDEX_BYTES = 1 << 30
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)
 
 
@@ -304,12 +307,9 @@ class TileStore:
         write_bytes_atomic(self.index_path, (json.dumps(index, indent=1, sort_keys=True) + "\n").encode())
 
     def read_index(self) -> dict:
-        try:
-            index = json.loads(self.index_path.read_text())
-        except FileNotFoundError:
-            raise FormatError(self.index_path, "no such file: not a tiled world (run piste build first)") from None
-        except (OSError, ValueError) as exc:
-            raise FormatError(self.index_path, f"not a readable JSON index ({exc})") from None
+        if not self.index_path.exists():
+            raise FormatError(self.index_path, "no such file: not a tiled world (run piste build first)")
+        index = loads_json(read_regular(self.index_path, MAX_INDEX_BYTES), self.index_path)
         if not isinstance(index, dict) or index.get("format") != TILES_FORMAT:
             raise FormatError(self.index_path, f"expected format {TILES_FORMAT!r}", field="format")
         return index

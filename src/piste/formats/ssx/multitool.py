@@ -29,6 +29,7 @@ import numpy as np
 
 from piste.errors import FormatError
 from piste.formats.atomic import write_bytes_atomic
+from piste.formats.safe_io import loads_json, read_regular
 from piste.formats.ssx.pbd import Pbd, parse_pbd, records_from_arrays
 from piste.formats.ssx.ssh import PAGE_SIZE, SshBank, SshImage, half_bright, lightmap_bank
 from piste.formats.ssx.synth import pbd_bytes
@@ -37,6 +38,11 @@ __all__ = ["write_project", "read_project", "Project"]
 
 #: most patches / images a project may hold (hostile files are refused before allocating)
 MAX_PATCHES = 1_000_000
+#: largest Patches.json read (about 2 KB a patch)
+MAX_JSON_BYTES = 1 << 31
+#: texture numbers and LightmapIDs are int16 in the .pbd; light-map pages (64 KiB each) at most this many
+MAX_INDEX = 32767
+MAX_LIGHTMAP_PAGES = 4096
 _NAME = re.compile(r"^[A-Za-z0-9_.\- ]+\.png$")
 
 
@@ -146,12 +152,9 @@ def read_project(folder) -> Project:
     folder = Path(folder)
     jpath = folder if folder.suffix.lower() == ".json" else folder / "Patches.json"
     folder = jpath.parent
-    try:
-        doc = json.loads(jpath.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise FormatError(jpath, "no such file") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise FormatError(jpath, f"not JSON ({exc})") from None
+    if not jpath.exists():
+        raise FormatError(jpath, "no such file")
+    doc = loads_json(read_regular(jpath, MAX_JSON_BYTES), jpath)
     items = doc.get("Patches") if isinstance(doc, dict) else doc
     if not isinstance(items, list):
         raise FormatError(jpath, "expected a list of patches (or {\"Patches\": [...]})", field="Patches")
@@ -173,27 +176,37 @@ def read_project(folder) -> Project:
             cp[k] = np.asarray(p["Points"], dtype=np.float64).reshape(16, 3)
             uv[k] = np.asarray(p["UVPoints"], dtype=np.float32).reshape(4, 2)
             rect[k] = np.asarray(p["LightMapPoint"], dtype=np.float32).reshape(4)
-            page[k] = int(p.get("LightmapID", 0))
-            surf[k] = int(p.get("SurfaceType", 1))
+            lm, st = int(p.get("LightmapID", 0)), int(p.get("SurfaceType", 1))
             trick[k] = bool(p.get("TrickOnlyPatch", False))
             tp = str(p.get("TexturePath", "0000.png"))
         except KeyError as exc:
             raise FormatError(jpath, f"{where}: missing key", field=str(exc.args[0])) from None
-        except (TypeError, ValueError, AttributeError) as exc:
+        except (TypeError, ValueError, AttributeError, OverflowError) as exc:
             raise FormatError(jpath, f"{where}: wrong shape or type ({exc})", field="Points/UVPoints/LightMapPoint") from None
+        if not 0 <= lm < MAX_LIGHTMAP_PAGES:
+            raise FormatError(jpath, f"{where}: LightmapID {lm} is not a page 0..{MAX_LIGHTMAP_PAGES - 1}",
+                              field="LightmapID")
+        if not 0 <= st < 2**32:
+            raise FormatError(jpath, f"{where}: SurfaceType {st} is not a 32-bit unsigned number", field="SurfaceType")
+        page[k], surf[k] = lm, st
         if not np.isfinite(cp[k]).all():
             raise FormatError(jpath, f"{where}: non-finite control point", field="Points")
         if not _NAME.match(tp) or "/" in tp or "\\" in tp:
             raise FormatError(jpath, f"{where}: TexturePath {tp!r} must be a plain 'NNNN.png' name in Textures/",
                               field="TexturePath")
         m = re.match(r"^(\d+)\.png$", tp)
-        tex[k] = int(m.group(1)) if m else tex_files.setdefault(tp, len(tex_files))
+        t = int(m.group(1)) if m else tex_files.setdefault(tp, len(tex_files))
+        if t > MAX_INDEX:
+            raise FormatError(jpath, f"{where}: TexturePath {tp!r} is not a texture 0..{MAX_INDEX}", field="TexturePath")
+        tex[k] = t
         names.append(str(p.get("PatchName", f"Patch {k}")))
     textures = {}
     tdir = folder / "Textures"
     if tdir.is_dir():
         for f in sorted(tdir.glob("*.png")):
             if re.match(r"^\d+\.png$", f.name):
+                if int(f.stem) > MAX_INDEX:
+                    raise FormatError(f, f"a texture is numbered 0..{MAX_INDEX}")
                 textures[int(f.stem)] = _read_png(f, tdir)
             elif f.name in tex_files:
                 textures[tex_files[f.name]] = _read_png(f, tdir)
@@ -202,6 +215,8 @@ def read_project(folder) -> Project:
     if ldir.is_dir():
         for f in sorted(ldir.glob("*.png")):
             if re.match(r"^\d+\.png$", f.name):
+                if int(f.stem) >= MAX_LIGHTMAP_PAGES:
+                    raise FormatError(f, f"a light-map page is numbered 0..{MAX_LIGHTMAP_PAGES - 1}")
                 img = _read_png(f, ldir)
                 if img.shape[:2] != (PAGE_SIZE, PAGE_SIZE):
                     raise FormatError(f, f"a light-map page must be 128x128, got {img.shape[1]}x{img.shape[0]}")

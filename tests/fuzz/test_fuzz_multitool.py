@@ -1,0 +1,147 @@
+"""Fuzz SSX Multitool projects (Patches.json + Textures/ + Lightmaps/): a project written by piste's
+own write_project from a synthetic level (no retail data) in a session fixture, then Patches.json
+mutated byte-wise and structurally (fields of the wrong type, huge values, hostile TexturePath
+names: ``..``, absolute paths, devices), its PNGs mutated byte-wise, and files swapped for links
+leaving the folder.  Read with read_project and turned into a level (Project.to_level).  Each case
+loads or raises a PisteError naming the project's file, under a time and a memory cap (fuzzlib)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+
+import pytest
+from fuzzlib import HOSTILE, byte_mutations, check, doc_mutations, dump_json, fuzz_settings
+from hypothesis import given
+from hypothesis import strategies as st
+
+from piste.errors import FormatError
+
+ssx = pytest.importorskip("piste.formats.ssx")
+from piste.formats.ssx.multitool import read_project, write_project  # noqa: E402
+
+
+@pytest.fixture(scope="session")
+def project(tmp_path_factory):
+    d = tmp_path_factory.mktemp("multitool") / "proj"
+    level = ssx.make_level(rows=2, cols=2, seed=3, n_textures=2)
+    write_project(d, level.pbd, level.textures, level.lightmaps)
+    return d
+
+
+def _copy(project, tmp_path_factory):
+    d = tmp_path_factory.mktemp("m") / "proj"
+    shutil.copytree(project, d)
+    return d
+
+
+def _load(path):
+    read_project(path).to_level()
+
+
+def test_seed_loads(project):
+    assert check(_load, project / "Patches.json", "multitool seeds") == "loaded"
+
+
+@given(data=st.data())
+@fuzz_settings(20)
+def test_patches_bytes(project, tmp_path_factory, data):
+    d = _copy(project, tmp_path_factory)
+    (d / "Patches.json").write_bytes(data.draw(byte_mutations((project / "Patches.json").read_bytes())))
+    check(_load, d / "Patches.json", "multitool json byte-wise", names="proj")
+
+
+@given(data=st.data())
+@fuzz_settings(40)
+def test_patches_structure(project, tmp_path_factory, data):
+    d = _copy(project, tmp_path_factory)
+    doc = json.loads((project / "Patches.json").read_text())
+    (d / "Patches.json").write_bytes(dump_json(data.draw(doc_mutations(doc))))
+    check(_load, d / "Patches.json", "multitool json structural", names="proj")
+
+
+PATHS = st.sampled_from([p for p in HOSTILE if isinstance(p, str)] + [
+    "../0000.png", "..\\0000.png", "/etc/passwd", "Textures/0000.png", "0000.png/..", "..png", "0000.PNG",
+    "99999999999999999999.png", "-1.png", "65536.png", "32768.png", "0001.png", "x.png", "\x00.png", "CON.png"])
+
+
+@given(data=st.data())
+@fuzz_settings(25)
+def test_texture_paths(project, tmp_path_factory, data):
+    """TexturePath / LightmapID of some patches set to hostile names and numbers."""
+    d = _copy(project, tmp_path_factory)
+    doc = json.loads((project / "Patches.json").read_text())
+    for _ in range(data.draw(st.integers(1, 3))):
+        p = doc["Patches"][data.draw(st.integers(0, len(doc["Patches"]) - 1))]
+        if data.draw(st.booleans()):
+            p["TexturePath"] = data.draw(PATHS)
+        else:
+            p["LightmapID"] = data.draw(st.sampled_from([-1, 2**15, 2**31, 2**64, 1e308, "0", None, 999]))
+    (d / "Patches.json").write_text(json.dumps(doc))
+    check(_load, d / "Patches.json", "multitool TexturePath", names="proj")
+
+
+@given(data=st.data())
+@fuzz_settings(20)
+def test_images_bytes(project, tmp_path_factory, data):
+    """A texture or light-map PNG mutated byte-wise."""
+    d = _copy(project, tmp_path_factory)
+    images = sorted(str(p.relative_to(d)) for p in d.rglob("*.png"))
+    rel = data.draw(st.sampled_from(images))
+    (d / rel).write_bytes(data.draw(byte_mutations((d / rel).read_bytes())))
+    check(_load, d / "Patches.json", "multitool png byte-wise", names="proj")
+
+
+@pytest.mark.parametrize("target", ["/etc/hostname", "/dev/zero", "../Patches.json", "missing.png"])
+@pytest.mark.parametrize("where", ["Textures/0000.png", "Lightmaps/0000.png"])
+def test_image_links_leaving_the_folder(project, tmp_path_factory, target, where):
+    """A texture or light-map file that is a link out of its folder (or dangling) is refused."""
+    d = _copy(project, tmp_path_factory)
+    (d / where).unlink()
+    os.symlink(target, d / where)
+    assert check(_load, d / "Patches.json", "multitool links", names="proj") == "refused"
+
+
+def test_json_that_is_a_device_is_refused(project, tmp_path_factory):
+    d = _copy(project, tmp_path_factory)
+    (d / "Patches.json").unlink()
+    os.symlink("/dev/zero", d / "Patches.json")
+    assert check(_load, d / "Patches.json", "multitool links", names="Patches.json") == "refused"
+
+
+# ------------------------------------------------------------------------------ regressions (findings)
+@pytest.mark.parametrize("key,value,field", [
+    ("LightmapID", 32768, "LightmapID"),  # was OverflowError: out of bounds for int16
+    ("LightmapID", -1, "LightmapID"),
+    ("LightmapID", 2**64, "LightmapID"),  # was OverflowError: too large to convert to C long
+    ("SurfaceType", -(10**9), "SurfaceType"),  # was OverflowError: out of bounds for uint32
+    ("LightmapID", 1e308, "LightmapID"),
+    ("TexturePath", "99999999999999999999.png", "TexturePath"),  # was OverflowError
+    ("TexturePath", "../0000.png", "TexturePath"),
+])
+def test_out_of_range_fields_name_the_field(project, tmp_path_factory, key, value, field):
+    d = _copy(project, tmp_path_factory)
+    doc = json.loads((project / "Patches.json").read_text())
+    doc["Patches"][1][key] = value
+    (d / "Patches.json").write_text(json.dumps(doc))
+    with pytest.raises(FormatError, match="Patches.json") as e:
+        read_project(d)
+    assert e.value.field == field
+
+
+def test_deeply_nested_patches_json_is_refused(project, tmp_path_factory):
+    d = _copy(project, tmp_path_factory)
+    (d / "Patches.json").write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(FormatError, match="Patches.json"):
+        read_project(d)
+
+
+@pytest.mark.parametrize("folder,name", [("Textures", "99999999999.png"), ("Lightmaps", "999999.png")])
+def test_huge_image_numbers_are_refused_before_allocating(project, tmp_path_factory, folder, name):
+    """A light-map page numbered 999,999 would have allocated 62 GiB of pages in to_level; a texture
+    numbered 10^11 looped 10^11 times."""
+    d = _copy(project, tmp_path_factory)
+    shutil.copy(d / folder / "0000.png", d / folder / name)
+    with pytest.raises(FormatError, match=name):
+        read_project(d)
