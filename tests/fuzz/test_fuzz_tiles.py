@@ -83,8 +83,22 @@ def test_tile_bytes(tiled_world, tmp_path_factory, data):
     d = _copy(tiled_world, tmp_path_factory)
     name = data.draw(st.sampled_from(sorted(p.name for p in (d / "fit").iterdir())))
     tile = d / "fit" / name
-    tile.write_bytes(data.draw(byte_mutations(tile.read_bytes())))
+    raw = tile.read_bytes()
+    if data.draw(st.booleans()):  # stored, not deflated: mutations reach the .npy headers past the CRC
+        with np.load(tile) as f:
+            raw = _stored_npz({k: f[k] for k in f.files})
+    tile.write_bytes(data.draw(byte_mutations(raw)))
     check(_load, d / "index.json", "tiles npz byte-wise", names=name)
+
+
+def _stored_npz(arrays: dict) -> bytes:
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as zf:
+        for k, v in arrays.items():
+            b = io.BytesIO()
+            np.lib.format.write_array(b, v, allow_pickle=False)
+            zf.writestr(k + ".npy", b.getvalue())
+    return buf.getvalue()
 
 
 ARRAYS = st.sampled_from([
@@ -110,13 +124,7 @@ def test_tile_members(tiled_world, tmp_path_factory, data):
             del arrays[key]
         else:
             arrays[key] = data.draw(ARRAYS)
-    buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w") as zf:
-        for k, v in arrays.items():
-            b = io.BytesIO()
-            np.lib.format.write_array(b, v, allow_pickle=False)
-            zf.writestr(k + ".npy", b.getvalue())
-    tile.write_bytes(buf.getvalue())
+    tile.write_bytes(_stored_npz(arrays))
     check(_load, d / "index.json", "tiles npz members", names=name)
 
 
@@ -184,3 +192,16 @@ def test_index_nested_deeply_or_a_device_is_refused(tiled_world, tmp_path_factor
     else:
         (d / "index.json").write_text(content)
     assert check(lambda p: TileStore(p.parent).grid(), d / "index.json", "tiles regressions") == "refused"
+
+
+def test_tile_member_claiming_a_huge_shape_is_refused_before_allocating(tiled_world, tmp_path_factory):
+    """Finding: a 200-byte tile whose uv.npy header says shape (10^11,) made numpy allocate 373 GiB
+    (a MemoryError under the cap, inside the FormatError)."""
+    d = _copy(tiled_world, tmp_path_factory)
+    hdr = "{'descr': '<f4', 'fortran_order': False, 'shape': (100000000000,), }".ljust(117) + "\n"
+    npy = b"\x93NUMPY\x01\x00" + len(hdr).to_bytes(2, "little") + hdr.encode() + b"\0" * 64
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as zf:
+        zf.writestr("uv.npy", npy)
+    (d / "fit" / "t_0000_0000.npz").write_bytes(buf.getvalue())
+    assert check(lambda p: TileStore(d).read("fit", 0, 0), d / "fit" / "t_0000_0000.npz", "tiles regressions") == "refused"

@@ -63,6 +63,8 @@ TILE_FIT_VERSION = "piste.tile-fit/1"
 MAX_TILES = 1_000_000
 #: largest index.json read (a few hundred bytes a tile)
 MAX_INDEX_BYTES = 1 << 30
+#: largest array in a tile file (inflated)
+MAX_TILE_MEMBER_BYTES = 1 << 30
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)
 
 
@@ -377,8 +379,9 @@ class TileStore:
         """The arrays of one tile (``FormatError`` naming the tile when missing, torn or stale)."""
         p = self.path(product, ty, tx)
         try:
-            with np.load(p, allow_pickle=False) as data:
-                arrays = {k: data[k] for k in data.files}
+            arrays = _read_npz(p)
+        except FormatError:
+            raise
         except FileNotFoundError:
             raise FormatError(p, f"tile ({ty}, {tx}) has no {product!r} output yet") from None
         except Exception as exc:
@@ -404,6 +407,30 @@ class TileStore:
         except Exception:
             return None
         return hashlib.sha256(data).hexdigest() if got == key else None
+
+
+def _read_npz(p: Path) -> dict:
+    """The arrays of ``.npz`` file ``p``, each member's size checked before it is inflated and its
+    ``.npy`` header's shape checked against the member's size before anything is allocated."""
+    out = {}
+    with zipfile.ZipFile(p) as zf:
+        for info in zf.infolist():
+            name = info.filename[:-4] if info.filename.endswith(".npy") else info.filename
+            if info.file_size > MAX_TILE_MEMBER_BYTES:
+                raise FormatError(p, f"member of {info.file_size:,} bytes: more than {MAX_TILE_MEMBER_BYTES:,}",
+                                  field=name)
+            data = zf.read(info)
+            fh = io.BytesIO(data)
+            version = np.lib.format.read_magic(fh)
+            read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            shape, _, dtype = read(fh)
+            need = int(np.prod(shape, dtype=object)) * dtype.itemsize
+            if need > len(data):
+                raise FormatError(p, f"array of shape {tuple(shape)} {dtype} needs {need:,} bytes, the member holds "
+                                     f"{len(data):,}", field=name)
+            fh.seek(0)
+            out[name] = np.lib.format.read_array(fh, allow_pickle=False)
+    return out
 
 
 def tile_net(store: TileStore, ty: int, tx: int, name: str | None = None) -> PatchNet:
