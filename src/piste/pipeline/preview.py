@@ -49,6 +49,7 @@ from piste.render.scene_renderer import SceneRenderer
 from piste.render.sky_pass import HORIZON
 from piste.render.ssx_pass import SsxTerrainRenderer
 from piste.render.video import VideoWriter
+from piste.terrain.resident import resident_fits, resident_terrain
 from piste.world.camera import track_camera
 from piste.world.course import TRACK_HALF_WIDTH
 from piste.world.objects import place_objects
@@ -304,6 +305,9 @@ class ScenePreview:
 
     def _setup(self, bundle) -> None:
         self.bundle = bundle
+        if resident_fits(bundle.net):  # the terrain's resident vertex blocks, built (in the background)
+            resident_terrain(bundle.net, wait=False)  # while the scene and passes set up: a fresh
+            # process's first frame waited ~0.2 s for them when they started with the terrain pass
         man = bundle.manifest
         opt = self.options
         lod = man.get("lod", {})
