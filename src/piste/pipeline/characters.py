@@ -32,6 +32,7 @@ from piste.character.lod import LOD
 from piste.character.model import Clip, Model, Skeleton, SkinnedMesh, Track
 from piste.character.palette import Palette
 from piste.errors import ConfigError, FormatError
+from piste.formats.gltf_ext import MaterialInfo
 from piste.pipeline.object_atlas import pack_object_atlas, primitive_images
 from piste.world.riders import merged_mesh as _merged
 
@@ -40,7 +41,7 @@ __all__ = ["character_arrays", "model_from_arrays", "lods_from_arrays", "merged_
 
 CLIP_RATE = 30.0
 #: what the character step writes (part of its cache key): 2 = morph targets per LOD
-CHARACTERS_VERSION = 3  # 3: several primitives keep their own base colours (one packed texture)
+CHARACTERS_VERSION = 4  # 3: several primitives keep their own base colours (one packed texture); 4: material
 DEFAULT_STEPS = (0.1, 0.2, 0.25)
 
 
@@ -53,11 +54,31 @@ def merged_mesh(model):
 
     mesh = _merged(model)
     prims = [m for m in model.meshes if m.skinned] or list(model.meshes)
+    material = rider_material(prims)
     if len(prims) < 2:
-        return mesh
+        if material is not None and material.alpha_mode == "MASK" and prims[0].texture is not None:
+            tex = np.array(mesh.texture, dtype=np.uint8)  # the cutoff baked into the alpha, as for objects
+            tex[..., 3] = primitive_images(Model(model.name, None, prims[:1]))[0][2][..., 3]
+            mesh = replace(mesh, texture=tex)
+        return replace(mesh, material=material) if material is not None else mesh
     imgs = primitive_images(Model(model.name, None, prims))
     tex, uvs = pack_object_atlas(np.zeros((0, 0, 4), np.uint8), {"rider": (mesh.uv, imgs)})
-    return replace(mesh, uv=uvs["rider"], texture=tex)
+    return replace(mesh, uv=uvs["rider"], texture=tex, material=material)
+
+
+def rider_material(prims):
+    """The one material a rider is drawn with (:class:`piste.formats.gltf_ext.MaterialInfo`, or
+    None when no primitive has a glTF material): ``alpha_mode`` MASK when any primitive is MASK or
+    BLEND (riders have no blend pass: BLEND is cut out at 0.5, the texture's alpha holds each
+    primitive's cutoff baked to 0 / 255 by :func:`primitive_images`), OPAQUE otherwise;
+    ``double_sided`` when any primitive is (the character pass then draws back faces; a rider of
+    single-sided materials has its back faces culled)."""
+    mats = [m.material for m in prims if getattr(m, "material", None) is not None]
+    if not mats:
+        return None
+    mask = any(m.alpha_mode in ("MASK", "BLEND") for m in mats)
+    return MaterialInfo(alpha_mode="MASK" if mask else "OPAQUE", alpha_cutoff=0.5,
+                        double_sided=any(m.double_sided for m in mats))
 
 
 def _steps(ratios, steps):
@@ -86,6 +107,8 @@ def character_arrays(model, ratios=(1.0, 0.5, 0.25), steps=None, max_bones: int 
     a["texture"] = np.ascontiguousarray(tex, dtype=np.uint8)
     meta: dict = {"name": model.name, "bones": list(sk.names), "clips": {}, "lods": [], "rate": float(rate),
                   "max_bones": int(max_bones), "morphs": list(mesh.morph_names)}
+    if mesh.material is not None:  # glTF riders: how the character pass draws them
+        meta["material"] = {"alpha_mode": mesh.material.alpha_mode, "double_sided": bool(mesh.material.double_sided)}
     for cname, clip in sorted(model.clips.items()):
         f = int(np.ceil(clip.duration * rate)) + 1
         times = np.minimum(np.arange(f) / rate, clip.duration)
@@ -138,6 +161,15 @@ def _morphs(arrays: dict, prefix: str, meta: dict) -> dict:
             "morph_names": names[:k]}
 
 
+def _material(meta: dict):
+    m = meta.get("material")
+    if not isinstance(m, dict):
+        return None
+    mode = m.get("alpha_mode", "OPAQUE")
+    return MaterialInfo(alpha_mode=mode if mode in ("OPAQUE", "MASK") else "OPAQUE",
+                        double_sided=bool(m.get("double_sided", False)))
+
+
 def model_from_arrays(arrays: dict, prefix: str, meta: dict):
     """The rider :class:`Model` (skeleton, LOD-0 mesh with texture, clips as LINEAR tracks)."""
     g = lambda k: arrays[prefix + k]  # noqa: E731
@@ -146,7 +178,8 @@ def model_from_arrays(arrays: dict, prefix: str, meta: dict):
     p = "lod0/"
     mesh = SkinnedMesh(name=meta["name"], positions=g(p + "positions"), indices=g(p + "indices"),
                        normals=g(p + "normals"), uv=g(p + "uv"), joints=g(p + "joints"), weights=g(p + "weights"),
-                       texture=g("texture"), skinned=True, group=meta["name"], **_morphs(arrays, prefix + p, meta))
+                       texture=g("texture"), skinned=True, group=meta["name"], material=_material(meta),
+                       **_morphs(arrays, prefix + p, meta))
     rate = float(meta.get("rate", CLIP_RATE))
     clips = {}
     for cname, info in meta.get("clips", {}).items():

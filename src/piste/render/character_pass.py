@@ -12,6 +12,11 @@ Lighting (``character.vert.glsl``): the talk's 1 ambient + 3 directional lights 
 ``ambient + C * max(D * n, 0)``, with each rider's ``D`` and ``C`` chosen at its position from the
 world's lights (:func:`piste.lighting.vertex.choose_lights_many`).
 
+Material (a glTF rider's, :func:`piste.pipeline.characters.rider_material`): alphaMode MASK
+compiles the base pass with the alpha test (texels below 0.5 discarded: the cutoff is baked into the
+texture's alpha); a material that is not double-sided culls back faces (counter-clockwise fronts,
+glTF's winding); no material (the built-in and SSX riders): no alpha test, no culling.
+
 Specular (``character_specular.frag.glsl``): a second pass over the same triangles (GL_LEQUAL, no
 depth writes) adding Blinn-Phong highlights of the sun scaled by a specular map with additive
 blending ``(ONE, ONE)``.  :func:`specular_map` makes the map for the default rider: goggles
@@ -19,7 +24,7 @@ blending ``(ONE, ONE)``.  :func:`specular_map` makes the map for the default rid
 
 API
 ---
-CharacterPass(ctx, lods, texture, spec_map=None, max_riders=6, rider_atlas=True)
+CharacterPass(ctx, lods, texture, spec_map=None, max_riders=6, rider_atlas=True, material=None)
     ``.upload(skinned)``, ``.draw(vp, eye, lights, sun=None, fog=None, specular=True)``
 specular_map(texture) -> (H, W, 4) uint8      r = strength, g = shininess scale
 """
@@ -157,14 +162,22 @@ class CharacterPass:
     max_riders : riders per LOD at most
     rider_atlas : the texture is the default rider's atlas (jacket colours per rider, its specular
         map); False for other models (one texture for all, no specular unless ``spec_map``)
+    material : MaterialInfo or None (alpha mode MASK: alpha test; not double-sided: back faces culled)
     """
 
-    def __init__(self, ctx, lods, texture, spec_map=None, max_riders: int = 6, rider_atlas: bool = True):
+    def __init__(self, ctx, lods, texture, spec_map=None, max_riders: int = 6, rider_atlas: bool = True,
+                 material=None):
         import moderngl
 
         self.ctx = ctx
+        self.alpha_test = material is not None and getattr(material, "alpha_mode", "OPAQUE") in ("MASK", "BLEND")
+        self.cull_back = material is not None and not getattr(material, "double_sided", False)
         vs = load_shader("character.vert.glsl")
-        self.prog = ctx.program(vertex_shader=vs, fragment_shader=load_shader("character.frag.glsl"))
+        fs = load_shader("character.frag.glsl")
+        if self.alpha_test:
+            head, _, rest = fs.partition("\n")
+            fs = head + "\n#define CHARACTER_ALPHA_TEST 1\n" + rest
+        self.prog = ctx.program(vertex_shader=vs, fragment_shader=fs)
         self.prog_spec = ctx.program(vertex_shader=vs, fragment_shader=load_shader("character_specular.frag.glsl"))
         self.prog["u_tex"].value = 0
         self.prog_spec["u_spec"].value = 1
@@ -221,12 +234,24 @@ class CharacterPass:
         import moderngl
 
         ctx = self.ctx
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
+        if self.cull_back:  # a glTF rider of single-sided materials (restored below)
+            ctx.front_face = "ccw"
+            ctx.cull_face = "back"
+            ctx.enable(moderngl.CULL_FACE)
+        ctx.depth_func = "<"
+        try:
+            self._draw(ctx, vp, eye, lights, sun, fog, specular, light_only, base)
+        finally:
+            ctx.disable(moderngl.CULL_FACE)
+
+    def _draw(self, ctx, vp, eye, lights, sun, fog, specular, light_only, base) -> None:
+        import moderngl
+
         vp_bytes = np.asarray(vp, dtype=np.float32).T.tobytes()
         fog = (0.0, 0.0, 0.0, 0.0) if fog is None else tuple(float(x) for x in fog)
         eye = tuple(float(x) for x in eye)
-        ctx.enable(moderngl.DEPTH_TEST)
-        ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
-        ctx.depth_func = "<"
         p = self.prog
         p["u_mvp"].write(vp_bytes)
         p["u_eye"].value = eye

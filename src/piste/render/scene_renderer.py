@@ -108,7 +108,8 @@ class SceneRenderer:
         n = sum(len(c.riders) for c in self.casts)
         self.cast_passes = [
             CharacterPass(self.ctx, c.lods, c.model.meshes[0].texture, max_riders=len(c.riders),
-                          rider_atlas=getattr(c, "rider_atlas", c.model.name == "rider"))
+                          rider_atlas=getattr(c, "rider_atlas", c.model.name == "rider"),
+                          material=getattr(c.model.meshes[0], "material", None))  # a glTF rider's MASK / double-sided
             for c in self.casts]
         self.characters = self.cast_passes[0]
         self.objects = ObjectPass(self.ctx, scene.objects, scene.lights, mode=object_lighting) if scene.objects is not None else None

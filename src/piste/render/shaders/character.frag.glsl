@@ -10,7 +10,12 @@ in vec2 v_uv;
 in vec3 v_world;
 out vec4 f_color;
 void main() {
-    vec3 c = u_mode == 1 ? v_color : texture(u_tex, v_uv).rgb * v_color;
+    vec4 t = texture(u_tex, v_uv);
+#ifdef CHARACTER_ALPHA_TEST
+    // a glTF rider's alphaMode MASK (the cutoff baked into the texture's alpha: 0 or 255)
+    if (u_mode != 1 && t.a < 0.5) discard;
+#endif
+    vec3 c = u_mode == 1 ? v_color : t.rgb * v_color;
     if (u_fog.a > 0.0) {
         c = mix(c, u_fog.rgb, 1.0 - exp(-u_fog.a * distance(v_world, u_eye)));
     }
