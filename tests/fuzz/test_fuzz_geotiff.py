@@ -43,11 +43,30 @@ def test_seed_loads(geotiff_seed):
     assert check(_load, geotiff_seed, "geotiff seeds") == "loaded"
 
 
+@pytest.fixture(scope="session")
+def geotiff_zlib(geotiff_seed):
+    """The seed rewritten deflate-compressed in 4-row strips (same GeoTIFF tags)."""
+    with tifffile.TiffFile(geotiff_seed) as tf:
+        page = tf.pages[0]
+        z = page.asarray()
+        tags = [(t.code, t.dtype, t.count, t.value, False) for t in page.tags.values()
+                if t.code in (_SCALE, _TIE, _GEOKEYS, _NODATA)]
+    out = geotiff_seed.with_name("dem_zlib.tif")
+    tifffile.imwrite(out, z, extratags=tags, compression="zlib", rowsperstrip=4, photometric="minisblack")
+    return out
+
+
+def test_zlib_seed_loads(geotiff_zlib):
+    assert check(_load, geotiff_zlib, "geotiff seeds") == "loaded"
+
+
+@pytest.mark.parametrize("compressed", [False, True], ids=["raw", "zlib"])
 @given(data=st.data())
-@fuzz_settings(25)
-def test_geotiff_bytes(geotiff_seed, tmp_path_factory, data):
+@fuzz_settings(15)
+def test_geotiff_bytes(geotiff_seed, geotiff_zlib, compressed, tmp_path_factory, data):
+    seed = geotiff_zlib if compressed else geotiff_seed
     target = tmp_path_factory.mktemp("m") / "mutant.tif"
-    target.write_bytes(data.draw(byte_mutations(geotiff_seed.read_bytes())))
+    target.write_bytes(data.draw(byte_mutations(seed.read_bytes())))
     check(_load, target, "geotiff byte-wise")
 
 
