@@ -422,21 +422,6 @@ def _edge_normal_cache(net: PatchNet, cache: _NetCache, n: int) -> np.ndarray:
     return store[n]
 
 
-def _ragged_arange(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """Concatenation of ``arange(s, s + c)`` for each pair, vectorised: ``(counts.sum(),)`` int64."""
-    counts = np.asarray(counts, dtype=np.int64)
-    nz = counts > 0
-    starts, counts = np.asarray(starts, dtype=np.int64)[nz], counts[nz]
-    total = int(counts.sum())
-    if total == 0:
-        return np.zeros(0, dtype=np.int64)
-    step = np.ones(total, dtype=np.int64)
-    ends = np.cumsum(counts)
-    step[0] = starts[0]
-    step[ends[:-1]] = starts[1:] - (starts[:-1] + counts[:-1] - 1)
-    return np.cumsum(step)
-
-
 class _Frame:
     """Per-frame evaluation shared by the uniform and glue paths: each edge at its level once,
     inner grids by one blend-table product per (block, level)."""
@@ -616,7 +601,7 @@ def _write_indices(indices, shapes, shape_of, first_of, vertex_start, tri_start,
         s_tstart[gshapes] = np.concatenate([[0], np.cumsum(s_nt[gshapes])[:-1]])
         all_tris = np.concatenate([shapes[g].tris for g in gshapes])
         nt = s_nt[so]
-        tsrc = _ragged_arange(s_tstart[so], nt)
+        tsrc = _kernels.ragged_arange(s_tstart[so], nt)
         indices[tri_start[n_uniform]:] = all_tris[tsrc] + np.repeat(vertex_start[n_uniform:-1], nt)[:, None]
 
 
@@ -693,7 +678,7 @@ def _gather_cached(net, pids, side_lv, m, glue, shapes, shape_of, first_of, vert
         lvl = np.concatenate([x[0] for x in src])
         slot = np.concatenate([x[1] for x in src])
         nv_p = np.array([sh.n_verts for sh in shapes], dtype=np.int64)[so]
-        vsrc = _ragged_arange(start[so], nv_p)
+        vsrc = _kernels.ragged_arange(start[so], nv_p)
         pid = np.repeat(pids[n_uniform:], nv_p)
         lv_v = lvl[vsrc]
         off = np.zeros(MAX_LEVEL + 1, np.int64)
@@ -778,7 +763,7 @@ def _evaluate_frame(net, lv, pids, side_lv, m, glue, shapes, shape_of, first_of,
             dst = (base[rows] + inner_off[rows])[:, None] + np.arange((mm - 2) ** 2)
             pos[dst], nrm[dst] = frame.inner(sub[rows], mm)
         vs = vertex_start[a]
-        vsrc = _ragged_arange(s_vstart[so], nv_p[a:])
+        vsrc = _kernels.ragged_arange(s_vstart[so], nv_p[a:])
         prm = all_param[vsrc]
         param[vs:] = prm
         vp = np.repeat(np.arange(len(sub)), nv_p[a:])
