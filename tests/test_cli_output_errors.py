@@ -10,7 +10,6 @@ import pytest
 
 from piste.cli import main
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
 
 
 @pytest.fixture
@@ -46,9 +45,13 @@ def test_bake_unwritable_output(blocker, capsys):
     _one_line_error(capsys, "bake", str(blocker / "lm"))
 
 
-@pytest.mark.skipif(not (EXAMPLES / "default.piste").exists(), reason="example bundle not built")
-def test_render_unwritable_output(blocker, capsys):
-    assert main(["render", str(EXAMPLES / "default.piste"), "--out", str(blocker / "x" / "r.png"), "--quiet"]) == 2
+def test_render_unwritable_output(tmp_path, blocker, capsys, gl_context):
+    """A bundle built here (no skip: the test makes its own input) rendered into a folder that cannot exist."""
+    (tmp_path / "s.toml").write_text('[lightmap]\nres = 4\n[visibility]\nenabled = false\n')
+    bundle = tmp_path / "s.piste"
+    assert main(["build", str(tmp_path / "s.toml"), "--out", str(bundle), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["render", str(bundle), "--out", str(blocker / "x" / "r.png"), "--quiet", "--size", "32", "24"]) == 2
     _one_line_error(capsys, "render", str(blocker / "x"))
 
 
