@@ -51,7 +51,6 @@ __all__ = ["load_gltf"]
 
 _COMP = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
-_NORM_DIV = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0, 5125: 4294967295.0}
 _FLOAT = 5126
 
 
@@ -178,12 +177,7 @@ class _Reader:
         if a.sparse is not None:
             arr = self._apply_sparse(a, arr, afield)
         if floatify or a.normalized:
-            if a.normalized and a.componentType != _FLOAT:
-                out = arr.astype(np.float64) / _NORM_DIV[a.componentType]
-                if a.componentType in (5120, 5122):
-                    out = np.maximum(out, -1.0)
-            else:
-                out = arr.astype(np.float64)
+            out = gltf_ext.to_float(arr, a.componentType, a.normalized)
             if not np.all(np.isfinite(out)):
                 bad = int(np.flatnonzero(~np.all(np.isfinite(out), axis=1))[0])
                 raise self.err(afield, f"element {bad} is not finite (NaN or infinity)")

@@ -56,6 +56,15 @@ _NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
 _NORM_DIV = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0, 5125: 4294967295.0}
 
 
+def to_float(raw: np.ndarray, component_type: int, normalized: bool) -> np.ndarray:
+    """Accessor values as float64: normalized integers divided by their type's maximum (signed ones
+    clamped at -1, as glTF specifies), everything else cast.  ``(n, c)`` in, ``(n, c) float64`` out."""
+    if normalized and component_type != 5126:
+        out = raw.astype(np.float64) / _NORM_DIV[component_type]
+        return np.maximum(out, -1.0) if component_type in (5120, 5122) else out
+    return raw.astype(np.float64)
+
+
 def vertex_comps(r, core: tuple) -> tuple:
     """Component types allowed for a vertex attribute: ``core`` (the glTF 2.0 core set), widened to
     :data:`QUANTIZED_COMPS` when the file declares KHR_mesh_quantization."""
@@ -128,12 +137,7 @@ def _inject(r, acc_i: int, data: np.ndarray, field: str) -> None:
         raise r.err(field, f"decodes to {data.shape[0]} x {data.shape[1]} values but accessors[{acc_i}] "
                            f"declares {a.count} x {nc}")
     raw = data.astype(_DTYPES[a.componentType])
-    if a.normalized and a.componentType != 5126:
-        f = raw.astype(np.float64) / _NORM_DIV[a.componentType]
-        if a.componentType in (5120, 5122):
-            f = np.maximum(f, -1.0)
-    else:
-        f = raw.astype(np.float64)
+    f = to_float(raw, a.componentType, a.normalized)
     if not np.all(np.isfinite(f)):
         raise r.err(field, "decoded values are not finite")
     r._accessors[(acc_i, False)] = f if a.normalized else raw
