@@ -94,3 +94,16 @@ def test_decompose_negative_scale():
     m = compose_trs([0, 0, 0], [0, 0, 0, 1], [-2, 1, 1])
     t, q, s = decompose_trs(m)
     assert np.allclose(compose_trs(t, q, s), m)
+
+
+@pytest.mark.parametrize("forward, up", [((0.3, -1.0, 0.2), (0, 1, 0)), ((0, 0, -1), (0, 1, 0)), ((0, 1, 0), (0, 1, 0)),
+                                         ((1, 0, 0), (1, 0, 0))])
+def test_look_rotation_points_minus_z_along_forward_and_y_towards_up(forward, up):
+    from piste.transforms import look_rotation, quat_to_matrix
+
+    m = quat_to_matrix(np.array(look_rotation(forward, up, fallback=(0.0, 0.0, 1.0))))
+    f = np.asarray(forward, float) / np.linalg.norm(forward)
+    np.testing.assert_allclose(-m[:3, 2], f, atol=1e-12)
+    np.testing.assert_allclose(m[:3, :3] @ m[:3, :3].T, np.eye(3), atol=1e-12)
+    if np.linalg.norm(np.cross(f, up)) > 1e-6:  # +Y leans towards up, in the plane of forward and up
+        assert m[:3, 1] @ np.asarray(up, float) > 0 and abs(np.cross(f, up) @ m[:3, 1]) < 1e-12

@@ -184,6 +184,22 @@ def matrix_to_quat(m) -> np.ndarray:
     return quat_normalize(q)
 
 
+
+def look_rotation(forward, up, fallback=(1.0, 0.0, 0.0)) -> list:
+    """Rotation ``[x, y, z, w]`` (unit) whose -Z axis is ``forward`` and +Y is (nearly) ``up``: the
+    orientation glTF gives cameras and lights.  Where ``forward`` is parallel to ``up``, the right
+    axis comes from ``forward`` x ``fallback`` instead (or x +X when ``forward`` is near +-X)."""
+    f = np.asarray(forward, dtype=np.float64)
+    f = f / max(np.linalg.norm(f), 1e-300)
+    r = np.cross(f, np.asarray(up, dtype=np.float64))
+    if np.linalg.norm(r) < 1e-9:
+        r = np.cross(f, [1.0, 0.0, 0.0] if abs(f[0]) < 0.9 else list(fallback))
+    r = r / np.linalg.norm(r)
+    m = np.eye(3)
+    m[:, 0], m[:, 1], m[:, 2] = r, np.cross(r, f), -f
+    q = matrix_to_quat(m)
+    return [float(x) for x in q / np.linalg.norm(q)]
+
 def translation_matrix(t) -> np.ndarray:
     """``(..., 4, 4)`` translation matrices of ``t (..., 3)``."""
     t = np.asarray(t, dtype=np.float64)

@@ -63,7 +63,7 @@ import numpy as np
 from piste.errors import ConfigError, ValidationError
 from piste.formats.atomic import atomic_path, write_bytes_atomic
 from piste.terrain.tessellate import tessellate
-from piste.transforms import compose_trs, decompose_trs, matrix_to_quat
+from piste.transforms import compose_trs, decompose_trs, look_rotation
 
 __all__ = ["TerrainExport", "CharacterExport", "ObjectsExport", "ExportReport", "export_gltf", "terrain_mesh",
            "lightmap_to_png_array", "Y_UP_ROOT_ROTATION"]
@@ -182,19 +182,8 @@ def _png(image) -> bytes:
 
 
 def _quat_looking(forward, up) -> list:
-    """Node rotation xyzw whose -Z is ``forward`` and +Y is (nearly) ``up``."""
-    f = np.asarray(forward, dtype=np.float64)
-    f = f / max(np.linalg.norm(f), 1e-300)
-    u = np.asarray(up, dtype=np.float64)
-    r = np.cross(f, u)
-    if np.linalg.norm(r) < 1e-9:
-        r = np.cross(f, [1.0, 0.0, 0.0] if abs(f[0]) < 0.9 else [0.0, 1.0, 0.0])
-    r = r / np.linalg.norm(r)
-    u = np.cross(r, f)
-    m = np.eye(3)
-    m[:, 0], m[:, 1], m[:, 2] = r, u, -f
-    q = matrix_to_quat(m)
-    return [float(x) for x in q / np.linalg.norm(q)]
+    """Node rotation xyzw whose -Z is ``forward`` and +Y is (nearly) ``up`` (Y-up file axes)."""
+    return look_rotation(forward, up, fallback=(0.0, 1.0, 0.0))
 
 
 def _trs(matrix, tol: float = 1e-6):

@@ -58,7 +58,7 @@ from piste.errors import ConfigError
 from piste.formats.atomic import write_bytes_atomic
 from piste.formats.gltf import load_gltf
 from piste.lighting.lights import DirectionalLight, PointLight, SpotLight
-from piste.transforms import matrix_to_quat
+from piste.transforms import look_rotation
 from piste.world.camera import Camera
 
 __all__ = ["axis_matrix", "import_gltf", "convert_lights", "convert_cameras", "write_scene_gltf", "DEFAULT_WHITE_LUX"]
@@ -148,16 +148,7 @@ def import_gltf(spec) -> tuple[list, dict]:
 # ----------------------------------------------------------------------------- writing
 def _quat_looking(forward, up) -> list:
     """glTF node rotation ``[x, y, z, w]`` whose -Z axis is ``forward`` and +Y is (nearly) ``up``."""
-    f = np.asarray(_unit(forward))
-    u = np.asarray(up, dtype=np.float64)
-    r = np.cross(f, u)
-    if np.linalg.norm(r) < 1e-9:
-        r = np.cross(f, [1.0, 0.0, 0.0] if abs(f[0]) < 0.9 else [0.0, 0.0, 1.0])
-    r = r / np.linalg.norm(r)
-    u = np.cross(r, f)
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2] = r, u, -f
-    return [float(x) for x in matrix_to_quat(m)]
+    return look_rotation(forward, up, fallback=(0.0, 0.0, 1.0))
 
 
 def write_scene_gltf(path, lights=(), cameras=(), up: str = "y") -> Path:
