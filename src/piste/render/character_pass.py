@@ -35,7 +35,7 @@ import numpy as np
 
 from piste.character import rider as _rider
 from piste.errors import RenderError
-from piste.render.context import load_shader
+from piste.render.context import load_shader, set_depth_write
 
 __all__ = ["CharacterPass", "specular_map", "rider_textures", "SHININESS", "JACKETS"]
 
@@ -273,13 +273,13 @@ class CharacterPass:
         ctx.blend_equation = moderngl.FUNC_ADD
         ctx.blend_func = (moderngl.ONE, moderngl.ONE, moderngl.ZERO, moderngl.ONE)
         ctx.depth_func = "<="
-        ctx.depth_mask = False
+        set_depth_write(ctx, False)
         try:
             self._draw_all("spec", q, lights)
         finally:
             ctx.disable(moderngl.BLEND)
             ctx.blend_func = moderngl.DEFAULT_BLENDING
-            ctx.depth_mask = True
+            set_depth_write(ctx, True)
             ctx.depth_func = "<"
 
     def _draw_all(self, which, prog, lights) -> None:

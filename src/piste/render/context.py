@@ -10,6 +10,7 @@ Offscreen           colour RGBA8 + depth framebuffer of W x H with ``read() -> (
 save_png            write an (H, W, 3|4) uint8 image atomically
 load_shader         the text of a shader in ``piste/render/shaders``
 check_gl_error      raise RenderError if the context has a pending GL error
+set_depth_write     turn depth writes of the bound framebuffer on/off (``ctx.depth_mask`` is no GL state)
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from piste.errors import RenderError
 from piste.extras import require as require_extra
 from piste.formats.atomic import atomic_path
 
-__all__ = ["create_context", "Offscreen", "save_png", "load_shader", "check_gl_error", "APT_PACKAGES"]
+__all__ = ["create_context", "Offscreen", "save_png", "load_shader", "check_gl_error", "set_depth_write", "APT_PACKAGES"]
 
 #: Debian/Ubuntu packages that provide headless OpenGL through EGL (Mesa llvmpipe without a GPU)
 APT_PACKAGES = ("libegl1", "libgl1", "libgl1-mesa-dri")
@@ -62,6 +63,22 @@ def check_gl_error(ctx, where: str = "") -> None:
     err = ctx.error
     if err != "GL_NO_ERROR":
         raise RenderError(f"OpenGL error {err}" + (f" after {where}" if where else ""))
+
+
+def set_depth_write(ctx, on: bool) -> bool:
+    """Turn writing to the depth buffer on or off for the draws that follow; returns the previous
+    setting.
+
+    moderngl (5.x) keeps the depth mask on the *framebuffer* (``Framebuffer.depth_mask``, applied
+    by ``glDepthMask`` when it is bound or set while bound); ``Context`` has no such property, so
+    ``ctx.depth_mask = False`` only sets a Python attribute and depth is still written.  This sets
+    it on the bound framebuffer, ``ctx.fbo``.  Passes that turn it off restore it (True) in a
+    ``finally``.
+    """
+    fbo = ctx.fbo
+    was = bool(fbo.depth_mask)
+    fbo.depth_mask = bool(on)
+    return was
 
 
 @lru_cache(maxsize=None)

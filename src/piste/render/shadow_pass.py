@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from piste.errors import RenderError
-from piste.render.context import load_shader
+from piste.render.context import load_shader, set_depth_write
 from piste.terrain.query import height_at
 from piste.world.camera import look_at, orthographic
 
@@ -374,7 +374,7 @@ class ShadowPass:
         self.sunlit.use(4)
         ctx.enable(moderngl.DEPTH_TEST | moderngl.BLEND)
         ctx.depth_func = "<="
-        ctx.depth_mask = False
+        set_depth_write(ctx, False)
         ctx.blend_equation = moderngl.FUNC_ADD
         ctx.blend_func = (moderngl.DST_COLOR, moderngl.ZERO, moderngl.ZERO, moderngl.ONE)
         w = 1.0 / self.n_max
@@ -388,7 +388,7 @@ class ShadowPass:
         finally:
             ctx.disable(moderngl.BLEND)
             ctx.blend_func = moderngl.DEFAULT_BLENDING
-            ctx.depth_mask = True
+            set_depth_write(ctx, True)
             ctx.depth_func = "<"
 
     def release(self) -> None:

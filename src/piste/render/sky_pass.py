@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from piste.render.context import load_shader
+from piste.render.context import load_shader, set_depth_write
 from piste.render.textures import SUN_DIRECTION
 
 __all__ = ["SkyPass", "HORIZON", "ZENITH"]
@@ -37,11 +37,11 @@ class SkyPass:
         self.ctx.disable(moderngl.BLEND)
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.depth_func = "<="
-        self.ctx.depth_mask = False
+        set_depth_write(self.ctx, False)
         try:
             self.vao.render(moderngl.TRIANGLES, vertices=3)
         finally:
-            self.ctx.depth_mask = True
+            set_depth_write(self.ctx, True)
             self.ctx.depth_func = "<"
 
     def release(self) -> None:

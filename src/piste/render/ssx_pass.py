@@ -25,7 +25,7 @@ from dataclasses import replace
 import numpy as np
 
 from piste.errors import ConfigError, RenderError
-from piste.render.context import check_gl_error, load_shader
+from piste.render.context import check_gl_error, load_shader, set_depth_write
 from piste.render.frame import TerrainRenderer
 from piste.render.window import TerrainView
 
@@ -90,7 +90,7 @@ class SourcePass:
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.CULL_FACE)
         ctx.depth_func = "<="
-        ctx.depth_mask = False
+        set_depth_write(ctx, False)
         try:
             if stage == "raw":
                 ctx.disable(moderngl.BLEND)
@@ -111,7 +111,7 @@ class SourcePass:
             ctx.blend_equation = moderngl.FUNC_ADD
             ctx.blend_func = moderngl.DEFAULT_BLENDING
             ctx.disable(moderngl.BLEND)
-            ctx.depth_mask = True
+            set_depth_write(ctx, True)
             ctx.depth_func = "<"
 
     def _release_geometry(self) -> None:

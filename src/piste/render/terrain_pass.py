@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from piste.errors import ConfigError, RenderError
-from piste.render.context import load_shader
+from piste.render.context import load_shader, set_depth_write
 from piste.render.textures import LOD_COLORS, snow_texture
 from piste.terrain.resident import ResidentMesh
 
@@ -376,7 +376,7 @@ class TerrainPass:
         q["u_mvp"].write(mvp_bytes)
         q["u_depth_bias"].value = 0.0
         ctx.depth_func = "=="
-        ctx.depth_mask = False
+        set_depth_write(ctx, False)
         ctx.enable(moderngl.BLEND)
         # colour: dst*As - src*As = (Cd - Cs) x As;  alpha: dst*1 + src*0 (destination alpha kept)
         ctx.blend_equation = (moderngl.FUNC_REVERSE_SUBTRACT, moderngl.FUNC_ADD)
@@ -396,7 +396,7 @@ class TerrainPass:
             ctx.blend_equation = moderngl.FUNC_ADD
             ctx.blend_func = moderngl.DEFAULT_BLENDING
             ctx.disable(moderngl.BLEND)
-            ctx.depth_mask = True
+            set_depth_write(ctx, True)
             ctx.depth_func = "<"
 
     def release(self) -> None:
