@@ -27,6 +27,7 @@ enabled = false
 [render]
 fog = {fog}
 face = "{face}"
+object_lod = 2.0
 [pack]
 follow = "track"
 start = 0.2
@@ -52,7 +53,8 @@ def test_keys_parse_with_defaults_and_errors(tmp_path):
     s = loads_scene(SCENE.format(fog='"auto"', face="morph"), tmp_path / "a.toml")
     assert s.pack == {"follow": "track", "start": 0.2}
     assert s.auto_objects == {"seed": 3, "trees": 12, "signs": 2, "rocks": 3, "rails": 1}
-    assert s.render.fog == "auto" and s.render.face == "morph"
+    assert s.render.fog == "auto" and s.render.face == "morph" and s.render.object_lod == 2.0
+    assert loads_scene("", tmp_path / "e.toml").render.object_lod == 0.5
     d = loads_scene("[pack]\n[auto_objects]\n", tmp_path / "b.toml")
     assert d.pack == {"follow": "track", "start": 0.12}
     assert d.auto_objects == {"seed": 0, "trees": 220, "signs": 16, "rocks": 40, "rails": 6}
@@ -60,7 +62,7 @@ def test_keys_parse_with_defaults_and_errors(tmp_path):
     bad = [("[pack]\nfollow = 'rails'\n", "pack.follow"), ("[pack]\nstart = 1.5\n", "pack.start"),
            ("[auto_objects]\ntrees = -1\n", "auto_objects.trees"), ("[auto_objects]\nwho = 1\n", "who"),
            ("[render]\nfog = -0.1\n", "render.fog"), ("[render]\nfog = 'thick'\n", "render.fog"),
-           ("[render]\nface = 'smile'\n", "render.face"),
+           ("[render]\nface = 'smile'\n", "render.face"), ("[render]\nobject_lod = -1\n", "render.object_lod"),
            ("[pack]\n[[riders]]\nposition = [1.0, 2.0]\n", "pack"),
            ("[auto_objects]\n[[objects]]\nmodel = 'builtin:tree'\nposition = [1.0, 2.0]\n", "auto_objects")]
     for text, key in bad:
@@ -80,10 +82,11 @@ def test_pack_objects_fog_and_face_reach_the_runtime(tmp_path, gl):
     try:
         assert p.follow and len(p.scene.riders) == 6 and p.renderer.face == "null_bones" and p.fog == 0.004
         assert len(p.scene.objects) == 18
+        assert b.manifest["render"]["object_lod"] == 2.0 and p.renderer.objects.lod_pixels == 2.0
         foggy = p.render(None, 0.0)  # the chase camera behind rider 0
         p.release()
-        p = ScenePreview(b, size=(64, 48), ctx=gl, fog=0.0, face="off")
-        assert p.renderer.face is None and p.fog == 0.0
+        p = ScenePreview(b, size=(64, 48), ctx=gl, fog=0.0, face="off", object_lod=0.0)
+        assert p.renderer.face is None and p.fog == 0.0 and p.renderer.objects.lod_pixels == 0.0
         clear = p.render(None, 0.0)
         assert np.abs(foggy.astype(int) - clear.astype(int)).max() > 8  # the scene file's fog is drawn
         p.release()

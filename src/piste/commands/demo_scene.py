@@ -57,7 +57,8 @@ def run_scene(args, bundle, lightmap, lighting: str, t0: float) -> int:
     net, lights = bundle.net, bundle.lights
     preview = ScenePreview(bundle, size=(w, h), lightmap=lightmap, object_lighting=args.objects,
                            shadows=not args.no_shadows, specular=not args.no_specular, lightmap_mode=args.lightmap,
-                           start=args.start, casts=rider_casts(args.rider_model))
+                           start=args.start, casts=rider_casts(args.rider_model),
+                           object_lod=getattr(args, "object_lod", None))
     scene, renderer = preview.scene, preview.renderer
     lod_on = args.lod == "on"
     from piste._jit import warm_up
@@ -116,8 +117,11 @@ def run_scene(args, bundle, lightmap, lighting: str, t0: float) -> int:
     print()
     for line_ in _objects_table(scene, lights):
         print(line_)
+    ob = renderer.objects
+    levels = ", ".join(f"{n}" for n in ob.lod_counts) if ob is not None else "-"
     print(f"  drawn per frame (frustum-culled, lighting '{args.objects}'): {sc['objects_drawn']:.0f} objects, "
-          f"{sc['object_triangles']:.0f} triangles")
+          f"{sc['object_triangles']:.0f} triangles; last frame's objects per LOD level {levels} "
+          f"(error <= {ob.lod_pixels if ob is not None else 0:g} px)")
     print()
     print(f"Projected shadows: {len(scene.riders)} low-LOD riders ({scene.lods[-1].n_triangles} triangles each) into "
           f"{renderer.shadows.tile if renderer.shadows else 0}x{renderer.shadows.tile if renderer.shadows else 0} tiles;"

@@ -61,7 +61,7 @@ SCHEMA = obj(
                            clips=mapping(obj(duration=NUM, frames=POS)),
                            lods=arr(obj(name=STR, ratio=NUM, step=NUM, palette=UINT, batches=UINT))),
                ),
-    render=obj(size=arr(POS, 2), lightmap_mode=STR),
+    render=obj(size=arr(POS, 2), lightmap_mode=STR, object_lod=NUM),
 )
 
 

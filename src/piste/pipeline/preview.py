@@ -52,6 +52,7 @@ from piste.render.video import VideoWriter
 from piste.terrain.resident import resident_fits, resident_terrain
 from piste.world.camera import track_camera
 from piste.world.course import TRACK_HALF_WIDTH
+from piste.world.object_lod import DEFAULT_LOD_PIXELS
 from piste.world.objects import place_objects
 from piste.world.riders import ClipTable, RiderState, pack_for, rider_model
 from piste.world.scene import LOD_DISTANCES, Scene, sun_light
@@ -279,6 +280,8 @@ class ScenePreview:
         ``render.face``, else "morph")
     fog : fog density per metre, or "auto" (the default density scaled to the scene's size);
         default: the scene file's ``render.fog``, else "auto"
+    object_lod : the objects' LOD error allowed on screen in pixels (0: full meshes); default: the
+        scene file's ``render.object_lod``, else 0.5
 
     After :meth:`render`, ``stats`` holds the frame's counts and ``frame`` the renderer's own
     result (a :class:`piste.render.Frame` for terrain-only scenes, else a
@@ -288,7 +291,7 @@ class ScenePreview:
     def __init__(self, bundle, size=None, ctx=None, visibility: bool = True, scene=None, lightmap="bundle",
                  object_lighting: str = "baked", shadows: bool = True, specular: bool = True,
                  lightmap_mode: str | None = None, start: float | None = None, casts=(),
-                 terrain_only: bool = False, face: str | None = None, fog=None):
+                 terrain_only: bool = False, face: str | None = None, fog=None, object_lod: float | None = None):
         if not (isinstance(lightmap, str) and lightmap in ("bundle", "placeholder")) and lightmap is not None:
             raise ConfigError(f"lightmap must be 'bundle', 'placeholder' or None, got {lightmap!r}")
         self.ctx = ctx if ctx is not None else create_context()
@@ -298,7 +301,7 @@ class ScenePreview:
         self.options = {"scene": scene, "lightmap": lightmap, "object_lighting": object_lighting,
                         "shadows": bool(shadows), "specular": bool(specular), "lightmap_mode": lightmap_mode,
                         "start": start, "casts": list(casts), "terrain_only": bool(terrain_only), "face": face,
-                        "fog": fog}
+                        "fog": fog, "object_lod": object_lod}
         self.stats: dict = {}
         self.frame = None
         self._setup(bundle)
@@ -329,6 +332,9 @@ class ScenePreview:
             raise ConfigError(f"fog must be a density per metre >= 0 or 'auto', got {fog!r}")
         self.face = face
         self.fog = None if fog == "auto" else float(fog)  # None: the renderer's scene-sized default
+        olod = opt["object_lod"] if opt["object_lod"] is not None else rman.get("object_lod", DEFAULT_LOD_PIXELS)
+        if isinstance(olod, bool) or not isinstance(olod, (int, float)) or not 0 <= olod <= 64:
+            raise ConfigError(f"object_lod must be pixels in 0..64 (0: full meshes), got {olod!r}")
         pack = bool(man.get("pack")) and not opt["terrain_only"]
         # a run-time scene or riders following the track ([pack]): the camera chases rider 0
         self.follow = (opt["scene"] is not None or pack) and not opt["terrain_only"]
@@ -348,7 +354,8 @@ class ScenePreview:
                 if sun is not None and opt["shadows"] and self.scene.net is bundle.net else None
             self.renderer = SceneRenderer(self.scene, size=self.size, ctx=self.ctx, lightmap=atlas,
                                           object_lighting=mode, shadows=opt["shadows"], specular=opt["specular"],
-                                          face=None if face == "off" else face, terrain=ssx, sunlight=sunlight, **kw)
+                                          face=None if face == "off" else face, terrain=ssx, sunlight=sunlight,
+                                          object_lod=float(olod), **kw)
             self.terrain = self.renderer.terrain
             self.objects = None
             if self.renderer.objects is not None and mode == "baked" and self.scene.objects is bundle.objects():
@@ -364,7 +371,7 @@ class ScenePreview:
             objs = None if opt["terrain_only"] else (auto_objects(bundle) or bundle.objects())
             self.objects = None
             if objs is not None:
-                self.objects = ObjectPass(self.ctx, objs, bundle.lights, mode=mode,
+                self.objects = ObjectPass(self.ctx, objs, bundle.lights, mode=mode, lod_pixels=float(olod),
                                           colors=colors if mode == "baked" and objs is bundle.objects() else None)
         # the pre-computed visibility in front of frustum culling
         self.terrain.set_visibility(bundle.visibility if self.use_visibility else None)

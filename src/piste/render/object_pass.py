@@ -15,6 +15,11 @@ are sorted back to front by the distance of their bounding-sphere centres to the
 argsort) and drawn in that order, one instanced draw per run of one kind (the triangles within one
 instance are not sorted).
 
+Levels of detail (:mod:`piste.world.object_lod`): every kind has a chain of index lists over its one
+set of vertices; each frame a visible instance takes the coarsest level whose simplification error,
+projected at its distance, stays under ``lod_pixels`` (default half a pixel), and each (kind, level)
+is one instanced draw.  ``lod_pixels=0`` draws every instance in full.
+
 Lighting modes (``mode``): ``dynamic`` (the talk's SSX objects: 1 ambient + 3 directional chosen
 per object), ``baked`` (pre-calculated RGBs per instance vertex, half-bright RGB8, from
 :func:`piste.world.objects.bake_vertex_colors`), ``points`` (every world light evaluated per
@@ -22,7 +27,7 @@ vertex: dynamic point and spot lights with attenuation and cone).
 
 API
 ---
-ObjectPass(ctx, objects, lights, mode="dynamic")   ``.draw(vp, eye, visible, fog=None, mode=None)``
+ObjectPass(ctx, objects, lights, mode="dynamic", lod_pixels=0.5)   ``.draw(vp, eye, visible, fog=None, mode=None)``
 instance_rows(objects) -> (n, 16, 4) float32
 light_uniforms(lights) -> dict of the ``points`` mode's uniform arrays
 """
@@ -34,6 +39,7 @@ import numpy as np
 from piste.errors import ConfigError, RenderError
 from piste.lighting.lights import DirectionalLight, SpotLight
 from piste.render.context import load_shader
+from piste.world.object_lod import DEFAULT_LOD_PIXELS, choose_lods, instance_scale, object_lods
 from piste.world.objects import bake_vertex_colors
 
 __all__ = ["ObjectPass", "instance_rows", "light_uniforms", "MAX_POINT_LIGHTS"]
@@ -118,9 +124,12 @@ class ObjectPass:
     colors : the baked mode's pre-calculated RGBs ``{kind: (k, v, 3) uint8}`` half-bright (e.g. a
         bundle's ``vertex_colors()``; default: baked from ``lights`` on first use), see
         :meth:`set_vertex_colors`
+    lod_pixels : the projected simplification error an instance may show (pixels); 0 draws every
+        instance with its full mesh (:attr:`lod_pixels` may be changed between frames)
     """
 
-    def __init__(self, ctx, objects, lights=None, mode: str = "dynamic", colors=None):
+    def __init__(self, ctx, objects, lights=None, mode: str = "dynamic", colors=None,
+                 lod_pixels: float = DEFAULT_LOD_PIXELS):
         import moderngl
 
         if mode not in _MODES:
@@ -148,16 +157,28 @@ class ObjectPass:
         n = max(len(objects), 1)
         self.inst = ctx.texture((16, n), 4, dtype="f4")
         self.inst.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.lod_pixels = float(lod_pixels)
         self.kinds = []
         for k, name in enumerate(objects.kinds):
             m = objects.meshes[name]
+            lods = object_lods(m.decode()[0], m.indices)
+            # every level's indices in one buffer, level after level (drawn with ``first``)
+            idx = np.concatenate([lv.indices.reshape(-1) for lv in lods]).astype(m.indices.dtype)
+            sizes = [lv.indices.size for lv in lods]
             buf = [ctx.buffer(np.ascontiguousarray(m.positions).tobytes()),
                    ctx.buffer(np.ascontiguousarray(m.uv).tobytes()),
                    ctx.buffer(np.ascontiguousarray(m.normals).tobytes()),
-                   ctx.buffer(np.ascontiguousarray(m.indices).tobytes())]
+                   ctx.buffer(np.ascontiguousarray(idx).tobytes())]
             count = max(int(np.count_nonzero(objects.kind == k)), 1)
-            self.kinds.append({"mesh": m, "buffers": buf, "baked": None,
-                               "instances": ctx.buffer(reserve=count * _INSTANCE_BYTES)})
+            self.kinds.append({"mesh": m, "buffers": buf, "baked": None, "lods": lods,
+                               "first": np.cumsum([0] + sizes[:-1]).tolist(), "sizes": sizes,
+                               "instances": [ctx.buffer(reserve=count * _INSTANCE_BYTES) for _ in lods]})
+        n_levels = max((len(info["lods"]) for info in self.kinds), default=1)
+        self.lod_errors = np.full((max(len(self.kinds), 1), n_levels), np.inf)  # (kinds, levels), inf: none
+        for k, info in enumerate(self.kinds):
+            self.lod_errors[k, :len(info["lods"])] = [lv.error for lv in info["lods"]]
+        self.scale = instance_scale(objects.matrix) if len(objects) else np.zeros(0)
+        self.lod_counts = np.zeros(n_levels, np.int64)  # instances drawn at each level last frame
         self._points = None
         self.colors = None
         if colors is not None:
@@ -184,9 +205,9 @@ class ObjectPass:
             got = self._programs[(key, blend)] = (prog, {})
         return got
 
-    def _vao(self, key, k: int, blend: bool = False):
+    def _vao(self, key, k: int, blend: bool = False, level: int = 0):
         prog, vaos = self._program(key, blend)
-        vao = vaos.get(k)
+        vao = vaos.get((k, level))
         if vao is None:
             info = self.kinds[k]
             m, buf = info["mesh"], info["buffers"]
@@ -197,8 +218,8 @@ class ObjectPass:
             if key is not None:  # per-instance attributes from this kind's instance buffer (unused ones skipped)
                 names = [f"in_i{j}" for j in range(13) if f"in_i{j}" in prog]
                 fmt = " ".join("4f" if f"in_i{j}" in prog else "16x" for j in range(13)) + "/i"
-                content.append((info["instances"], fmt, *names))
-            vao = vaos[k] = self.ctx.vertex_array(prog, content, buf[3], index_element_size=m.indices.itemsize)
+                content.append((info["instances"][level], fmt, *names))
+            vao = vaos[(k, level)] = self.ctx.vertex_array(prog, content, buf[3], index_element_size=m.indices.itemsize)
         return vao
 
     def set_vertex_colors(self, colors) -> None:
@@ -254,20 +275,28 @@ class ObjectPass:
             return
         blend_kind = np.array([name in objs.blend for name in objs.kinds], dtype=bool)
         is_blend = blend_kind[objs.kind[vis]]
+        # each instance's level of detail (0: the full mesh), by its projected error
+        level = np.zeros(len(objs), np.int64)
+        level[vis] = choose_lods(self.lod_errors[objs.kind[vis]], objs.center[vis], objs.radius[vis], self.scale[vis],
+                                 vp, self.ctx.viewport[3], self.lod_pixels)
+        self.lod_counts = np.bincount(level[vis], minlength=self.lod_errors.shape[1])
+        n_lv = self.lod_errors.shape[1]
         opaque, trans = vis[~is_blend], vis[is_blend]
-        order = opaque[np.argsort(objs.kind[opaque], kind="stable")]
+        group = objs.kind * n_lv + level  # (n,) one draw per (kind, level)
+        order = opaque[np.argsort(group[opaque], kind="stable")]
         if len(trans):  # back to front: farthest bounding-sphere centre first
             dist = np.linalg.norm(objs.center[trans] - np.asarray(eye, dtype=np.float64), axis=1)
             trans = trans[np.argsort(-dist, kind="stable")]
-        kind_of = objs.kind[order]
+        group_of = group[order]
         key = (_MODES[mode], bool(light_only)) if self.specialised else None
         if key is None:
             rows = np.concatenate([order, trans])
             self.inst.write(np.ascontiguousarray(self.rows[rows]).tobytes(), viewport=(0, 0, 16, len(rows)))
         else:
             packed = self.packed[order]
-            for k in np.unique(kind_of):
-                self.kinds[int(k)]["instances"].write(np.ascontiguousarray(packed[kind_of == k]).tobytes())
+            for g in np.unique(group_of):
+                k, lv = divmod(int(g), n_lv)
+                self.kinds[k]["instances"][lv].write(np.ascontiguousarray(packed[group_of == g]).tobytes())
         if mode == "points" and self._points is None:
             if self.lights is None:
                 raise RenderError("object lighting 'points' needs the world's lights")
@@ -282,12 +311,10 @@ class ObjectPass:
         ctx.depth_func = "<"
         if len(order):
             p = self._uniforms(key, False, vp, eye, fog, mode, light_only)
-            start = 0
-            for k in range(len(self.kinds)):
-                count = int(np.count_nonzero(kind_of == k))
-                if count:
-                    self._draw_kind(p, key, k, start, count, mode, False)
-                    start += count
+            cuts = np.flatnonzero(np.diff(group_of)) + 1  # runs of one (kind, level)
+            for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(order)]):
+                k, lv = divmod(int(group_of[a]), n_lv)
+                self._draw_kind(p, key, k, int(a), int(b - a), mode, False, lv)
         if len(trans):
             p = self._uniforms(key, True, vp, eye, fog, mode, light_only)
             ctx.enable(moderngl.BLEND)
@@ -295,13 +322,13 @@ class ObjectPass:
             fbo = ctx.fbo  # (the bound framebuffer: moderngl keeps the depth mask there)
             fbo.depth_mask = False
             try:
-                tk = objs.kind[trans]
-                cuts = np.flatnonzero(np.diff(tk)) + 1  # runs of one kind, in the sorted order
+                tg = group[trans]
+                cuts = np.flatnonzero(np.diff(tg)) + 1  # runs of one (kind, level), in the sorted order
                 for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(trans)]):
-                    k = int(tk[a])
+                    k, lv = divmod(int(tg[a]), n_lv)
                     if key is not None:  # (written between draws: GL keeps the earlier draws' data)
-                        self.kinds[k]["instances"].write(np.ascontiguousarray(self.packed[trans[a:b]]).tobytes())
-                    self._draw_kind(p, key, k, len(order) + int(a), int(b - a), mode, True)
+                        self.kinds[k]["instances"][lv].write(np.ascontiguousarray(self.packed[trans[a:b]]).tobytes())
+                    self._draw_kind(p, key, k, len(order) + int(a), int(b - a), mode, True, lv)
             finally:
                 fbo.depth_mask = True
                 ctx.blend_func = moderngl.DEFAULT_BLENDING
@@ -325,9 +352,9 @@ class ObjectPass:
                         p[name].value = val
         return p
 
-    def _draw_kind(self, p, key, k: int, start: int, count: int, mode: str, blend: bool) -> None:
-        """``count`` instances of kind ``k`` (rows ``start..`` of the instance texture for the
-        generic program; the kind's instance buffer for a specialised one)."""
+    def _draw_kind(self, p, key, k: int, start: int, count: int, mode: str, blend: bool, level: int = 0) -> None:
+        """``count`` instances of kind ``k`` at LOD ``level`` (rows ``start..`` of the instance texture
+        for the generic program; the (kind, level) instance buffer for a specialised one)."""
         import moderngl
 
         info = self.kinds[k]
@@ -341,9 +368,10 @@ class ObjectPass:
                 p[name].value = value
         if mode == "baked":
             info["baked"].use(2)
-        self._vao(key, k, blend).render(moderngl.TRIANGLES, vertices=m.indices.size, instances=count)
+        self._vao(key, k, blend, level).render(moderngl.TRIANGLES, vertices=info["sizes"][level],
+                                               first=info["first"][level], instances=count)
         self.drawn += count
-        self.triangles += count * m.n_triangles
+        self.triangles += count * info["lods"][level].n_triangles
 
     def release(self) -> None:
         for prog, vaos in self._programs.values():
@@ -352,7 +380,8 @@ class ObjectPass:
             prog.release()
         self._programs = {}
         for info in self.kinds:
-            info["instances"].release()
+            for b in info["instances"]:
+                b.release()
             for b in info["buffers"]:
                 b.release()
             if info["baked"] is not None:

@@ -40,6 +40,7 @@ from piste.render.shadow_pass import ShadowPass, sun_visibility, shadow_matrices
 from piste.render.sky_pass import HORIZON
 from piste.terrain.cull import patch_tree
 from piste.world.course import TRACK_HALF_WIDTH
+from piste.world.object_lod import DEFAULT_LOD_PIXELS
 
 __all__ = ["SceneRenderer", "SceneImage", "summarize_scene"]
 
@@ -73,6 +74,8 @@ class SceneRenderer:
     ctx : moderngl context to share (default: a new headless one)
     lightmap : the terrain's light map (see :class:`piste.render.TerrainRenderer`)
     object_lighting : "dynamic" | "baked" | "points"
+    object_lod : the objects' levels of detail: the simplification error an instance may show, in
+        pixels (0: every object drawn with its full mesh; :class:`piste.render.object_pass.ObjectPass`)
     shadows, specular : draw the projected shadows / the specular pass
     shadow_tile : pixels per rider shadow tile
     casts : more riders with other models: Scene-like objects (``model``, ``lods``, ``skinners``,
@@ -93,7 +96,8 @@ class SceneRenderer:
 
     def __init__(self, scene, size=(640, 448), ctx=None, lightmap="placeholder", object_lighting: str = "dynamic",
                  shadows: bool = True, specular: bool = True, shadow_tile: int = 128, casts=(),
-                 face: str | None = "morph", terrain=None, sunlight=None, **terrain_kw):
+                 face: str | None = "morph", terrain=None, sunlight=None, object_lod: float = DEFAULT_LOD_PIXELS,
+                 **terrain_kw):
         self.scene = scene
         terrain_kw.setdefault("track", scene.line)
         terrain_kw.setdefault("track_half_width", TRACK_HALF_WIDTH)
@@ -112,7 +116,8 @@ class SceneRenderer:
                           material=getattr(c.model.meshes[0], "material", None))  # a glTF rider's MASK / double-sided
             for c in self.casts]
         self.characters = self.cast_passes[0]
-        self.objects = ObjectPass(self.ctx, scene.objects, scene.lights, mode=object_lighting) if scene.objects is not None else None
+        self.objects = ObjectPass(self.ctx, scene.objects, scene.lights, mode=object_lighting,
+                                  lod_pixels=object_lod) if scene.objects is not None else None
         self.shadows = ShadowPass(self.ctx, n_max=n, tile=shadow_tile) if shadows else None
         if self.shadows is not None and scene.sun is not None:
             # riders' shadows darken only terrain that sees the sun (no double darkening)

@@ -56,6 +56,8 @@ scene file.  Every table and key is optional except where noted::
     lightmap_mode = "modulate"    # or "ps2"
     fog = "auto"                  # density per metre (0: none) or "auto" (6e-4 scaled to the scene's size)
     face = "morph"                # riders' faces: "morph" targets, their "null_bones" fit, or "off"
+    object_lod = 0.5              # objects' levels of detail: the simplification error an instance
+                                  #   may show, in pixels (0: every object drawn in full)
 
     [pack]                        # instead of [[riders]], on the default course: riders following the
     follow = "track"              #   track (piste demo's six, the camera chasing the first)
@@ -354,6 +356,7 @@ class RenderSpec:
     lightmap_mode: str = "modulate"
     fog: object = "auto"     # density per metre, or "auto" (scaled to the scene's size)
     face: str = "morph"      # "morph", "null_bones" or "off"
+    object_lod: float = 0.5  # pixels of simplification error an object may show (0: full meshes)
 
 
 #: [auto_objects] keys and their defaults (piste.world.objects.place_objects' counts)
@@ -630,7 +633,7 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     if scene.visibility.method not in ("auto", "horizon", "rays"):
         raise vi.error("method", f"expected \"auto\", \"horizon\" or \"rays\", got {scene.visibility.method!r}")
     re_ = _table(top, "render")
-    re_.allow({"size", "lightmap_mode", "fog", "face"})
+    re_.allow({"size", "lightmap_mode", "fog", "face", "object_lod"})
     size = re_.get("size", "vec2", (640, 448))
     if not all(float(s).is_integer() and 16 <= s <= 8192 for s in size):
         raise re_.error("size", f"expected [width, height], whole pixels in 16..8192, got {list(size)}")
@@ -646,6 +649,9 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     scene.render.face = re_.get("face", "str", "morph")
     if scene.render.face not in ("morph", "null_bones", "off"):
         raise re_.error("face", f"expected \"morph\", \"null_bones\" or \"off\", got {scene.render.face!r}")
+    scene.render.object_lod = re_.get("object_lod", "float", 0.5)
+    if not 0.0 <= scene.render.object_lod <= 64.0:
+        raise re_.error("object_lod", f"expected pixels in 0..64 (0: full meshes), got {scene.render.object_lod!r}")
 
     # the default course's riders following the track and objects placed along it
     pk = _table(top, "pack")

@@ -1,0 +1,132 @@
+"""Levels of detail for objects, chosen per instance by their error in pixels.
+
+A distant tree that covers 20 pixels does not need the 212 triangles of its near self; on a software
+rasterizer the per-triangle cost dominates such objects.  Each object kind gets a chain of index
+lists over **the same vertices** (meshoptimizer's quadric simplifier; seams, where one position
+carries two normals or UVs, collapse as pairs), each with its absolute object-space error in model
+units.  At draw time an instance takes the coarsest level whose error, scaled by the instance and
+projected at its nearest distance, stays under ``max_pixels`` (default half a pixel): the picture
+changes by less than a pixel.  The vertex buffers, baked per-vertex colours (indexed by vertex) and
+compressed formats are shared by every level; only the index list differs.
+
+API
+---
+object_lods(positions (v, 3), indices (t, 3), ratio=0.5, min_triangles=8, max_levels=4) -> [ObjectLOD]
+choose_lods(errors (l,), centers (n, 3), radius (n,), scale (n,), view_projection (4, 4), height_px,
+            max_pixels=0.5) -> (n,) int level per instance
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from piste.errors import ConfigError
+
+__all__ = ["ObjectLOD", "object_lods", "choose_lods", "instance_scale", "DEFAULT_LOD_PIXELS"]
+
+#: the largest projected simplification error an instance may show, in pixels
+DEFAULT_LOD_PIXELS = 0.5
+
+
+@dataclass(frozen=True)
+class ObjectLOD:
+    """One level: ``indices (t, 3)`` into the kind's vertices and its absolute ``error`` (model
+    units, 0 for the full mesh)."""
+
+    indices: np.ndarray
+    error: float
+
+    @property
+    def n_triangles(self) -> int:
+        return len(self.indices)
+
+
+def object_lods(positions, indices, ratio: float = 0.5, min_triangles: int = 8, max_levels: int = 4) -> list:
+    """The level chain of one mesh, level 0 the mesh itself.
+
+    Parameters
+    ----------
+    positions : (v, 3) float vertex positions (model units)
+    indices : (t, 3) int triangles
+    ratio : triangles of each level as a fraction of the one before (a level that does not reach
+        ``1 - (1 - ratio) / 2`` of the previous count is dropped and the chain ends)
+    min_triangles : no level below this many triangles
+    max_levels : at most this many levels (the full mesh included)
+
+    Returns
+    -------
+    list of :class:`ObjectLOD`, errors strictly increasing, triangle counts strictly decreasing.
+    """
+    import meshoptimizer
+
+    if not 0.0 < ratio < 1.0:
+        raise ConfigError(f"object LOD ratio must be in (0, 1), got {ratio}")
+    pos = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
+    idx = np.asarray(indices, dtype=np.int64).reshape(-1, 3)
+    levels = [ObjectLOD(idx.astype(np.uint32), 0.0)]
+    if len(idx) == 0 or len(pos) == 0:
+        return levels
+    # not welded: meshoptimizer pairs the vertices of a seam (same position, other normal or UV)
+    # itself and collapses them together, so each triangle keeps the vertex of its own side
+    src = np.ascontiguousarray(idx.reshape(-1), dtype=np.uint32)
+    last_err = 0.0
+    while len(levels) < max_levels:
+        n_prev = levels[-1].n_triangles
+        target = max(int(n_prev * ratio), int(min_triangles))
+        if target >= n_prev:
+            break
+        dst = np.zeros_like(src)
+        err = np.zeros(1, np.float32)
+        count = meshoptimizer.simplify(dst, src, pos, target_index_count=3 * target, target_error=1e9,
+                                       options=meshoptimizer.SIMPLIFY_ERROR_ABSOLUTE, result_error=err)
+        tris = dst[:count].astype(np.int64).reshape(-1, 3)
+        e = max(float(err[0]), last_err)
+        if len(tris) == 0 or len(tris) > n_prev * (1.0 - (1.0 - ratio) / 2.0) or e <= last_err:
+            break
+        levels.append(ObjectLOD(tris.astype(np.uint32), e))
+        last_err = e
+        # later levels simplify the full mesh again to their own target (errors do not compound)
+    return levels
+
+
+def instance_scale(matrix) -> np.ndarray:
+    """The largest axis scale ``(n,)`` of object matrices ``(n, 4, 4)`` (how much a model-unit
+    error grows in the world)."""
+    m = np.asarray(matrix, dtype=np.float64).reshape(-1, 4, 4)
+    return np.linalg.norm(m[:, :3, :3], axis=1).max(axis=1)
+
+
+def choose_lods(errors, centers, radius, scale, view_projection, height_px: float,
+                max_pixels: float = DEFAULT_LOD_PIXELS) -> np.ndarray:
+    """The level ``(n,) int64`` each instance draws at: the coarsest whose projected error is at most
+    ``max_pixels``.
+
+    Parameters
+    ----------
+    errors : (l,) or (n, l) absolute model-space error of each level (ascending, ``errors[..., 0] == 0``;
+        ``inf`` pads the levels a kind does not have)
+    centers : (n, 3) world bounding-sphere centres;  radius : (n,) their radii
+    scale : (n,) instance scales (:func:`instance_scale`)
+    view_projection : (4, 4) perspective view-projection matrix (column vectors)
+    height_px : the viewport's height in pixels
+    max_pixels : the error allowed on screen (0 or less: always level 0)
+
+    The distance is the instance's nearest view depth (centre depth minus radius, at least the
+    near-plane scale ``1e-3``), so an instance the camera is inside keeps its full mesh.
+    """
+    err = np.asarray(errors, dtype=np.float64)
+    c = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
+    n = len(c)
+    if n == 0 or err.shape[-1] <= 1 or max_pixels <= 0:
+        return np.zeros(n, np.int64)
+    err = np.broadcast_to(err, (n, err.shape[-1]))
+    vp = np.asarray(view_projection, dtype=np.float64)
+    f = float(np.linalg.norm(vp[1, :3]))  # 1 / tan(fov_y / 2) for a rigid view
+    depth = c @ vp[3, :3] + vp[3, 3] - np.asarray(radius, dtype=np.float64)
+    depth = np.maximum(depth, 1e-3)
+    px_per_unit = f * 0.5 * float(height_px) * np.asarray(scale, dtype=np.float64) / depth  # (n,)
+    # level l is fine when err[l] * px_per_unit <= max_pixels; errors ascend, so count the fine ones
+    ok = err * px_per_unit[:, None] <= float(max_pixels)
+    return np.maximum(ok.sum(axis=1) - 1, 0).astype(np.int64)
