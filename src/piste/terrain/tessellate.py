@@ -281,6 +281,7 @@ class _NetCache:
         self.origin32 = self.origin.astype(np.float32)
         self.edge_normals: dict[int, np.ndarray] = {}
         self.grid_levels, self.grid_flat, self.grid_offset, self.grid_snapshot = {}, None, {}, None
+        self.grid_rows_ = None
         self.scale4 = (net.patch_size.astype(np.float32) ** 4).astype(np.float32)
         lo, hi = net.bounds
         self.proj_origin = lo[:2].astype(np.float32)
@@ -292,10 +293,9 @@ class _NetCache:
 
         Rebuilt when the net's corner UVs or light-map rects change (nets are otherwise immutable).
         """
-        snap = self.grid_snapshot
-        if snap is None or not (np.array_equal(snap[0], net.uv) and np.array_equal(snap[1], net.lightmap_rect)):
-            self.grid_levels, self.grid_flat, self.grid_offset = {}, None, {}
-            self.grid_snapshot = (net.uv.copy(), net.lightmap_rect.copy())
+        if self.uv_changed(net):
+            self.grid_levels, self.grid_flat, self.grid_offset, self.grid_rows_ = {}, None, {}, None
+            self.grid_snapshot = (_Snapshot(net.uv), _Snapshot(net.lightmap_rect))
         want = sorted(set(int(n) for n in levels) | set(self.grid_levels))
         if self.grid_flat is None or any(n not in self.grid_levels for n in want):
             for n in want:
@@ -311,6 +311,22 @@ class _NetCache:
                 o += parts[-1].size
             self.grid_flat, self.grid_offset = np.concatenate(parts), offset
         return self.grid_flat, self.grid_offset
+
+    def grid_rows(self, net: PatchNet, used) -> tuple[np.ndarray, np.ndarray]:
+        """The vertex cache as ``(rows, VERTEX_FLOATS)`` float32 and ``level_row (MAX_LEVEL + 1,)
+        int64``, the first row of each level's grid, with every level of ``used`` present."""
+        if self.grid_rows_ is None or any(n not in self.grid_levels for n in used) or self.uv_changed(net):
+            flat, offset = self.grids(net, used)
+            level_row = np.zeros(MAX_LEVEL + 1, np.int64)
+            for n, o in offset.items():
+                level_row[n] = o // VERTEX_FLOATS
+            self.grid_rows_ = (flat.reshape(-1, VERTEX_FLOATS), level_row)
+        return self.grid_rows_
+
+    def uv_changed(self, net: PatchNet) -> bool:
+        """Whether the net's corner UVs or light-map rects differ (bitwise) from the vertex cache's."""
+        snap = self.grid_snapshot
+        return snap is None or not (snap[0].same(net.uv) and snap[1].same(net.lightmap_rect))
 
     def _corner_normals(self, net: PatchNet) -> np.ndarray:
         """Corner normals averaged over every patch meeting at the welded corner, ``(n, 4, 3)`` float32."""
@@ -328,6 +344,39 @@ class _NetCache:
         avg = acc / np.where(length > 1e-12, length, 1.0)[:, None]
         out = np.where((length > 1e-12)[ids, None], avg[ids], nrm.reshape(-1, 3))
         return out.reshape(-1, 4, 3).astype(np.float32)
+
+
+def _raw_bytes(a: np.ndarray, axes=None) -> np.ndarray | None:
+    """The memory of a dense array (C order or any other axis order: ``axes``, largest stride
+    first) as a 1-D uint8 view, else None."""
+    if a.flags.c_contiguous:
+        return a.reshape(-1).view(np.uint8)
+    t = a.transpose(np.argsort(a.strides)[::-1] if axes is None else axes)
+    return t.reshape(-1).view(np.uint8) if t.flags.c_contiguous else None
+
+
+class _Snapshot:
+    """A copy of an array, compared bitwise with the array's current contents (~2 us for the
+    default course's UVs, whatever their memory layout: one pass over the raw bytes, where
+    ``np.array_equal`` on the strided (n, 4, 2) UVs took ~60 us)."""
+
+    def __init__(self, a: np.ndarray):
+        a = np.asarray(a)
+        self.meta = (a.shape, a.strides, a.dtype)
+        self.axes = tuple(int(x) for x in np.argsort(a.strides)[::-1])
+        raw = _raw_bytes(a, self.axes)
+        self.raw = raw.copy() if raw is not None else None
+        self.full = a.copy() if raw is None else None
+
+    def same(self, a: np.ndarray) -> bool:
+        """Whether ``a`` holds the same bits as when the snapshot was taken (any change of shape,
+        dtype or layout counts as a change)."""
+        a = np.asarray(a)
+        if self.raw is None or (a.shape, a.strides, a.dtype) != self.meta:
+            full = self.full
+            return full is not None and a.shape == full.shape and a.dtype == full.dtype and np.array_equal(full, a)
+        raw = _raw_bytes(a, self.axes)
+        return raw is not None and _kernels.same_bytes(raw, self.raw)
 
 
 def _cache(net: PatchNet) -> _NetCache:
@@ -487,8 +536,11 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False, cache:
         default course at levels 4, 6 and 8).  ``False`` evaluates everything this frame with the
         blend tables.  Default: on when the cache stays under 512 MB.  Both give bit-identical
         corners and edges (so both are crack-free); inner points agree to float32 rounding.
-    use_numba : the cached path's gather as one compiled pass (default when numba is installed);
-        False: the numpy path.  Both give bit-identical meshes.
+    use_numba : the cached path compiled (:func:`piste.terrain._kernels.tess_plan`: patches sorted
+        by shape; ``tess_gather``: vertices, indices and vertex -> patch written straight into the
+        outputs).  Default: when numba is installed and its kernels are loaded (see
+        :mod:`piste._jit`); True: whenever numba is installed; False: the numpy path.  Both give
+        bit-identical meshes (``cache=False`` always runs numpy).
 
     Returns
     -------
@@ -497,6 +549,10 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False, cache:
     contiguous slice operations from cached index buffers; glue patches, typically a few percent,
     in one ragged pass over all their shapes.
     """
+    if cache is None:
+        cache = len(net) * 116 * VERTEX_FLOATS * 4 < 512 * 2**20
+    if cache and ((use_numba and _kernels.HAVE_NUMBA) or (use_numba is None and _kernels.gather_ready())):
+        return _tessellate_compiled(net, levels, patches, strips)
     lv = _as_levels(net, levels)
     pids = np.arange(len(net), dtype=np.int64) if patches is None else np.asarray(patches, dtype=np.int64).ravel()
     if len(pids) and (pids.min() < 0 or pids.max() >= len(net)):
@@ -522,22 +578,15 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False, cache:
     tri_start = np.concatenate([[0], np.cumsum(nt_p)]).astype(np.int64)
     V, T = int(vertex_start[-1]), int(tri_start[-1])
     n_uniform = int(np.count_nonzero(~glue))
-    if cache is None:
-        cache = len(net) * 116 * VERTEX_FLOATS * 4 < 512 * 2**20
     indices = np.empty((T, 3), dtype=np.uint32)
-    if cache and (use_numba or (use_numba is None and _kernels.gather_ready())):
-        vert = _gather_compiled(net, pids, side_lv, shapes, shape_of, vertex_start, tri_start, indices)
+    if cache:
+        vert = _gather_cached(net, pids, side_lv, m, glue, shapes, shape_of, first_of, vertex_start, n_uniform)
         pos, nrm, param = vert[:, 0:3], vert[:, 3:6], vert[:, 6:8]
         uv, uv_lm, uv_proj = vert[:, 8:10], vert[:, 10:12], vert[:, 12:14]
     else:
-        if cache:
-            vert = _gather_cached(net, pids, side_lv, m, glue, shapes, shape_of, first_of, vertex_start, n_uniform)
-            pos, nrm, param = vert[:, 0:3], vert[:, 3:6], vert[:, 6:8]
-            uv, uv_lm, uv_proj = vert[:, 8:10], vert[:, 10:12], vert[:, 12:14]
-        else:
-            pos, nrm, param, uv, uv_lm, uv_proj = _evaluate_frame(
-                net, lv, pids, side_lv, m, glue, shapes, shape_of, first_of, vertex_start, n_uniform)
-        _write_indices(indices, shapes, shape_of, first_of, vertex_start, tri_start, n_uniform)
+        pos, nrm, param, uv, uv_lm, uv_proj = _evaluate_frame(
+            net, lv, pids, side_lv, m, glue, shapes, shape_of, first_of, vertex_start, n_uniform)
+    _write_indices(indices, shapes, shape_of, first_of, vertex_start, tri_start, n_uniform)
     vpatch = np.repeat(np.arange(len(pids), dtype=np.int32), nv_p)
     strip_buf = _strips(shapes, shape_of, vertex_start) if strips else None
     return TerrainMesh(
@@ -605,39 +654,79 @@ def _write_indices(indices, shapes, shape_of, first_of, vertex_start, tri_start,
         indices[tri_start[n_uniform]:] = all_tris[tsrc] + np.repeat(vertex_start[n_uniform:-1], nt)[:, None]
 
 
-def _gather_compiled(net, pids, side_lv, shapes, shape_of, vertex_start, tri_start, indices) -> np.ndarray:
-    """The cached path in one compiled pass (:func:`piste.terrain._kernels.gather_cached`): vertices
-    ``(V, VERTEX_FLOATS)`` float32 returned, ``indices`` filled."""
+def _tessellate_compiled(net: PatchNet, levels, patches, strips: bool) -> TerrainMesh:
+    """The cached path compiled (:func:`piste.terrain._kernels.tess_plan` and ``tess_gather``):
+    bit-identical to the numpy path, with no per-frame intermediate the size of the output."""
+    if np.isscalar(levels) or np.ndim(levels) == 0:
+        lv = np.full(net.n_edges, int(levels), dtype=np.int16)
+    else:
+        lv = np.asarray(levels)
+        if lv.shape != (net.n_edges,):
+            raise ValidationError(
+                f"{net.name}: levels must be one int or one per edge, shape ({net.n_edges},), got {lv.shape}"
+            )
+        lv = np.ascontiguousarray(lv, dtype=np.int16)
+    pids = np.arange(len(net), dtype=np.int64) if patches is None else np.asarray(patches, dtype=np.int64).ravel()
+    pids = np.ascontiguousarray(pids)
+    side_edge = net.side_edge
+    if side_edge.dtype != np.int32 or not side_edge.flags.c_contiguous:
+        side_edge = np.ascontiguousarray(side_edge, dtype=np.int32)
+    check, pids, side_lv, kind, shape_of, keys, _ = _kernels.tess_plan(lv, side_edge, pids, len(net), MAX_LEVEL)
+    if check[0] < 2 or check[1] > MAX_LEVEL:
+        raise ValidationError(f"{net.name}: vertices per edge must be in 2..{MAX_LEVEL}, got {check[0]}..{check[1]}")
+    if check[2]:
+        raise ValidationError(f"{net.name}: patch ids must be in 0..{len(net) - 1}")
     if not len(pids):
-        return np.empty((0, VERTEX_FLOATS), dtype=np.float32)
-    cache = _cache(net)
-    tables = _shape_tables(tuple(sh.levels for sh in shapes))
-    flat, offset = cache.grids(net, tables[-1])
-    level_row = np.zeros(MAX_LEVEL + 1, np.int64)
-    for n, o in offset.items():
-        level_row[n] = o // VERTEX_FLOATS
-    vert = np.empty((int(vertex_start[-1]), VERTEX_FLOATS), dtype=np.float32)
-    _kernels.gather_cached(pids, shape_of, vertex_start, tri_start, *tables[:-1], level_row,
-                           flat.reshape(-1, VERTEX_FLOATS), vert, indices)
-    return vert
+        return empty_mesh(strips)
+    stab, src_level, src_slot, tris, used, shapes = _key_tables(tuple(keys.tolist()))
+    grid, level_row = _cache(net).grid_rows(net, used)
+    vert, indices, vpatch, vertex_start, tri_start = _kernels.tess_gather(
+        pids, shape_of, stab, src_level, src_slot, tris, level_row, grid)
+    return TerrainMesh(
+        positions=vert[:, 0:3],
+        normals=vert[:, 3:6],
+        uv=vert[:, 8:10],
+        uv_lightmap=vert[:, 10:12],
+        uv_projected=vert[:, 12:14],
+        param=vert[:, 6:8],
+        indices=indices,
+        patch_ids=pids,
+        patch_kind=kind,
+        patch_levels=side_lv,
+        vertex_patch=vpatch,
+        vertex_start=vertex_start,
+        tri_start=tri_start,
+        strips=_strips(shapes, shape_of, vertex_start) if strips else None,
+    )
+
+
+def key_levels(key: int) -> tuple:
+    """The side levels ``(n0, n1, n2, n3)`` of a shape key (:data:`piste.terrain._kernels.KEY_BASE` digits)."""
+    b = _kernels.KEY_BASE
+    return tuple(int(key // b ** k % b) for k in (3, 2, 1, 0))
 
 
 @lru_cache(maxsize=4096)
-def _shape_tables(levels: tuple):
-    """Flattened per-shape tables of the compiled gather for a tuple of shapes (cached: a moving
-    camera sees the same few combinations): src_start, src_level, src_slot, tri_src_start, tris and
-    the sorted levels used."""
-    shapes = [get_shape(lv) for lv in levels]
-    src = [_glue_sources(lv) for lv in levels]
-    nv = np.array([len(x[0]) for x in src], dtype=np.int64)
-    src_start = np.concatenate([[0], np.cumsum(nv)[:-1]]).astype(np.int64)
-    src_level = np.concatenate([x[0] for x in src]).astype(np.int64) if src else np.zeros(0, np.int64)
-    src_slot = np.concatenate([x[1] for x in src]).astype(np.int64) if src else np.zeros(0, np.int64)
+def _key_tables(keys: tuple):
+    """Per-shape tables of the compiled gather for a tuple of shape keys (cached: a moving camera
+    sees the same few combinations): ``stab (u, 6) int64`` (vertices, triangles, uniform, m, first
+    source entry, first triangle), ``src_level``, ``src_slot``, ``tris (s, 3) uint32``, the levels
+    used, and the shapes."""
+    shapes = [get_shape(key_levels(k)) for k in keys]
+    src = [_glue_sources(sh.levels) for sh in shapes]
+    nv = np.array([sh.n_verts for sh in shapes], dtype=np.int64)
     nt = np.array([len(sh.tris) for sh in shapes], dtype=np.int64)
-    tri_src_start = np.concatenate([[0], np.cumsum(nt)[:-1]]).astype(np.int64)
-    tris = np.concatenate([sh.tris for sh in shapes]).astype(np.uint32) if shapes else np.zeros((0, 3), np.uint32)
-    used = sorted({n for lv in levels for n in lv})
-    return src_start, src_level, src_slot, tri_src_start, tris, used
+    stab = np.zeros((len(shapes), 6), dtype=np.int64)
+    stab[:, 0], stab[:, 1] = nv, nt
+    stab[:, 2] = [sh.uniform for sh in shapes]
+    stab[:, 3] = [sh.m for sh in shapes]
+    stab[1:, 4] = np.cumsum(nv)[:-1]
+    stab[1:, 5] = np.cumsum(nt)[:-1]
+    src_level = np.concatenate([x[0] for x in src]).astype(np.int64)
+    src_slot = np.concatenate([x[1] for x in src]).astype(np.int64)
+    tris = np.ascontiguousarray(np.concatenate([sh.tris for sh in shapes]).astype(np.uint32))
+    used = tuple(sorted({n for sh in shapes for n in sh.levels}))
+    return stab, src_level, src_slot, tris, used, shapes  # (writeable: numba types read-only arrays apart)
 
 
 @lru_cache(maxsize=None)
