@@ -11,6 +11,7 @@ save_png            write an (H, W, 3|4) uint8 image atomically
 load_shader         the text of a shader in ``piste/render/shaders``
 check_gl_error      raise RenderError if the context has a pending GL error
 set_depth_write     turn depth writes of the bound framebuffer on/off (``ctx.depth_mask`` is no GL state)
+flush               glFlush: start the GL on what was issued, without waiting (pipelined frames)
 """
 
 from __future__ import annotations
@@ -176,3 +177,32 @@ def save_png(path, image) -> Path:
         Image.fromarray(np.ascontiguousarray(img)).save(tmp, format="PNG")
         tmp.chmod(0o644)  # mkstemp makes 0600 files; an image is for everyone
     return path
+
+
+@lru_cache(maxsize=1)
+def _gl_flush():
+    """``glFlush`` of the GL library (GLVND's ``libGL``/``libOpenGL`` dispatch to the current
+    context, EGL or GLX alike), or None when neither library loads."""
+    import ctypes
+
+    for name in ("libGL.so.1", "libOpenGL.so.0"):
+        try:
+            fn = ctypes.CDLL(name).glFlush
+        except (OSError, AttributeError):
+            continue
+        fn.restype = None
+        fn.argtypes = []
+        return fn
+    return None
+
+
+def flush(ctx) -> bool:
+    """Hand the commands issued so far to the GL (``glFlush``, which moderngl does not expose) without
+    waiting for them: llvmpipe's rasterizer threads start on the frame while the caller goes on (the
+    next frame's CPU work).  Returns False where no GL library gave ``glFlush`` (then nothing
+    overlaps, and everything is still drawn by the next read or finish)."""
+    fn = _gl_flush()
+    if fn is None:
+        return False
+    fn()
+    return True

@@ -257,10 +257,12 @@ class TerrainRenderer:
 
     def draw(self, camera, mesh, lightmap_mode: str = "modulate", debug: str | None = None,
              fog: float | None | str = "scene", sky: bool = True, clear=(0.0, 0.0, 0.0, 1.0),
-             read: bool = True, timings: dict | None = None, resolve: bool = True) -> Frame:
+             read: bool = True, timings: dict | None = None, resolve: bool = True, sync: bool = True) -> Frame:
         """Upload and draw a given :class:`TerrainMesh` (any mesh with its fields) for ``camera``;
         the second half of :meth:`render`.  ``resolve=False`` leaves a ps2 frame in the half-float
-        target (:attr:`active`, still bound) for more passes; :meth:`resolve` finishes it."""
+        target (:attr:`active`, still bound) for more passes; :meth:`resolve` finishes it.
+        ``sync=False`` (with ``read=False``) returns without waiting for the GL (more passes follow;
+        the ``draw`` timing is then the issue time only)."""
         camera = replace(camera, aspect=self.size[0] / self.size[1])
         t = {"lod": 0.0, "cull": 0.0, "tessellate": 0.0}
         t.update(timings or {})
@@ -279,7 +281,8 @@ class TerrainRenderer:
             self.sky.draw(vp)  # last: only where no terrain was drawn
         if resolve:
             self.resolve()
-        self.ctx.finish()
+        if sync or read:
+            self.ctx.finish()
         t2 = time.perf_counter()
         image = self.target.read() if read else None
         t3 = time.perf_counter()

@@ -33,7 +33,7 @@ from piste.character.animation import clip_time, sample_track
 from piste.character.morph import FaceSkin, face_weights
 from piste.errors import ConfigError
 from piste.render.character_pass import CharacterPass
-from piste.render.context import check_gl_error
+from piste.render.context import check_gl_error, flush
 from piste.render.frame import TerrainRenderer
 from piste.render.object_pass import ObjectPass
 from piste.render.shadow_pass import ShadowPass, sun_visibility, shadow_matrices, shadow_patches
@@ -148,9 +148,42 @@ class SceneRenderer:
         debug view (e.g. "lod"); ``count_rider_pixels`` counts the riders' pixels that pass the depth
         test (an occlusion query: ``stats["rider_pixels"]``); ``face_time`` is the face animation's
         time (default ``t``)."""
-        fog = self.terrain.fog_density if fog is None else fog  # the scene's size (scene_fog_density)
+        plan = self._plan(t, camera=camera, lod=lod, lightmap_mode=lightmap_mode, debug=debug, face_time=face_time)
+        self._issue(plan, fog=fog, light_only=light_only, count_rider_pixels=count_rider_pixels)
+        return self._finish(plan, read)
+
+    def frames(self, times, read: bool = True, fog: float | None = None, cameras=None, lod: bool = True,
+               lightmap_mode: str = "modulate", face_times=None):
+        """Render the scene at each of ``times``, pipelined: yields a :class:`SceneImage` per time, the
+        same pictures as :meth:`render`.  While the GL rasterizes frame ``i`` (handed over with
+        ``glFlush``, not waited for), the CPU work of frame ``i + 1`` (animation, skinning, LOD,
+        culling, shadow frustums) runs; then frame ``i`` is read back.  On llvmpipe that overlaps the
+        rasterizer threads with the Python side.  ``cameras``: one camera (or None: the chase camera)
+        per time; ``face_times``: the face animation's time per frame (default ``times``).
+
+        A frame's ``timings["total"]`` covers its issue, wait and read-back (not its overlapped CPU
+        work, which is in ``timings["cpu"]``); measure throughput by wall time over the loop."""
+        times = [float(x) for x in times]
+        cams = list(cameras) if cameras is not None else [None] * len(times)
+        faces = list(face_times) if face_times is not None else [None] * len(times)
+        if len(cams) != len(times) or len(faces) != len(times):
+            raise ConfigError(f"frames: {len(times)} times need as many cameras and face times, "
+                              f"got {len(cams)} and {len(faces)}")
+        kw = dict(lod=lod, lightmap_mode=lightmap_mode)
+        plan = self._plan(times[0], camera=cams[0], face_time=faces[0], **kw) if times else None
+        for i in range(len(times)):
+            self._issue(plan, fog=fog)
+            flush(self.ctx)
+            nxt = self._plan(times[i + 1], camera=cams[i + 1], face_time=faces[i + 1], **kw) \
+                if i + 1 < len(times) else None
+            yield self._finish(plan, read)
+            plan = nxt
+
+    def _plan(self, t: float, camera=None, lod: bool = True, lightmap_mode: str = "modulate",
+              debug: str | None = None, face_time: float | None = None) -> dict:
+        """A frame's CPU side (no GL call): scene update (animation, LOD, skinning, lights, object
+        culling), faces, terrain LOD / culling / indices, shadow frustums and their patches."""
         w, h = self.size
-        tm = {}
         t0 = time.perf_counter()
         sf = self.scene.update(t, aspect=w / h, camera=camera)
         cam = sf.camera
@@ -167,6 +200,7 @@ class SceneRenderer:
                                     levels=self.terrain.levels(cam, lod) if ssx_ps2 else None)
         t2 = time.perf_counter()
         patches = []
+        light_vp = None
         sun = self.scene.sun
         if self.shadows is not None and sun is not None:
             centers = np.concatenate([f.riders.anchor + f.riders.normal * 0.9 for f in frames])
@@ -174,6 +208,18 @@ class SceneRenderer:
             light_vp = shadow_matrices(centers, radius, sun.direction)
             patches = shadow_patches(self.patch_lo, self.patch_hi, light_vp, candidates=mesh.patch_ids,
                                      tree=patch_tree(self.scene.net))
+        t3 = time.perf_counter()
+        return dict(sf=sf, cam=cam, frames=frames, mesh=mesh, patches=patches, light_vp=light_vp, tt=tt,
+                    ssx_ps2=ssx_ps2, lightmap_mode=lightmap_mode, debug=debug, stamps=[t0, t1, t2, t3])
+
+    def _issue(self, plan: dict, fog: float | None = None, light_only: bool = False,
+               count_rider_pixels: bool = False) -> None:
+        """A planned frame's GPU work, issued (uploads, casters, terrain, receivers, objects, riders);
+        :meth:`_finish` waits for it."""
+        fog = self.terrain.fog_density if fog is None else fog  # the scene's size (scene_fog_density)
+        w, h = self.size
+        sf, cam, frames, mesh, tt = plan["sf"], plan["cam"], plan["frames"], plan["mesh"], plan["tt"]
+        ssx_ps2, light_vp, sun = plan["ssx_ps2"], plan["light_vp"], self.scene.sun
         t3 = time.perf_counter()
         # ---- GPU work (uploads count as CPU time: they are memcpy on the CPU side)
         for cp, f in zip(self.cast_passes, frames):
@@ -187,65 +233,77 @@ class SceneRenderer:
                 first += k
         t4 = time.perf_counter()
         if ssx_ps2:  # the game's way: base texture Cd, then (Cd - Cs) x As with the level's stored texels
-            frame = self.terrain.draw(cam, mesh, debug="base", read=False, timings=tt)
+            frame = self.terrain.draw(cam, mesh, debug="base", read=False, timings=tt, sync=False)
             self.ssx_source.upload(mesh)
             self.terrain.target.use()
             self.ssx_source.draw(cam.with_aspect(w, h).view_projection())
         else:
-            frame = self.terrain.draw(cam, mesh, lightmap_mode=lightmap_mode, fog=fog, read=False, timings=tt,
-                                      debug=debug)  # a ps2 frame resolves here: the 8-bit frame buffer the rest blends on
+            frame = self.terrain.draw(cam, mesh, lightmap_mode=plan["lightmap_mode"], fog=fog, read=False, timings=tt,
+                                      debug=plan["debug"], sync=False)  # a ps2 frame resolves here: the 8-bit frame buffer the rest blends on
         t5 = time.perf_counter()
         vp = frame_vp = cam.with_aspect(w, h).view_projection()
         fog_rgba = (*HORIZON, float(fog)) if fog and not ssx_ps2 else None  # the SSX ps2 frame has no fog
         if self.shadows is not None and sun is not None:
-            self.shadows.draw_receivers(mesh, patches, frame_vp)
+            self.shadows.draw_receivers(mesh, plan["patches"], frame_vp)
         if self.objects is not None:
             self.objects.draw(vp, cam.eye, sf.objects_visible, fog=fog_rgba, light_only=light_only)
         query = self.ctx.query(samples=True) if count_rider_pixels else None
+        rider_pixels = 0
         for cp, f in zip(self.cast_passes, frames):
             if query is not None:
                 with query:
                     cp.draw(vp, cam.eye, f.rider_lights, sun=None, fog=fog_rgba, light_only=light_only)
-                pixels = int(query.samples)
-                rider_pixels = pixels + (rider_pixels if cp is not self.cast_passes[0] else 0)
+                rider_pixels += int(query.samples)
             if query is None or (self.specular and not light_only):
                 # with the query the base pass is drawn inside it; the specular pass adds on top
                 cp.draw(vp, cam.eye, f.rider_lights, sun=sun if self.specular else None, fog=fog_rgba,
                         light_only=light_only, base=query is None)
+        plan.update(frame=frame, rider_pixels=rider_pixels if query is not None else None,
+                    objects_drawn=self.objects.drawn if self.objects is not None else 0,
+                    object_triangles=self.objects.triangles if self.objects is not None else 0,
+                    rider_triangles=int(sum(cp.triangles for cp in self.cast_passes)),
+                    shadow_triangles=self.shadows.triangles if self.shadows is not None else 0)
+        plan["stamps"] += [t3, t4, t5]
+
+    def _finish(self, plan: dict, read: bool) -> SceneImage:
+        """Wait for an issued frame, read it back, and gather its timings and counts."""
         self.ctx.finish()
         t6 = time.perf_counter()
         image = self.terrain.target.read() if read else None
         t7 = time.perf_counter()
         check_gl_error(self.ctx, "drawing the scene")
+        t0, t1, t2, t3, t3b, t4, t5 = plan["stamps"]
+        sf, frames, frame, tt, patches = plan["sf"], plan["frames"], plan["frame"], plan["tt"], plan["patches"]
+        tm = {}
         tm.update(sf.timings)
         for f in frames[1:]:
             for k, v in f.timings.items():
                 tm[k] = tm.get(k, 0.0) + v
         tm.update(terrain_lod=tt.get("lod", 0.0), terrain_cull=tt.get("cull", 0.0), tessellate=tt.get("tessellate", 0.0),
-                  shadow_cull=(t3 - t2) * 1e3, upload=frame.timings["upload"] + (t4 - t3) * 1e3,
+                  shadow_cull=(t3 - t2) * 1e3, upload=frame.timings["upload"] + (t4 - t3b) * 1e3,
                   terrain_draw=frame.timings["draw"], scene_draw=(t6 - t5) * 1e3, readback=(t7 - t6) * 1e3)
         # the talk's CPU side: animation, skinning, LOD, tessellation, culling
         tm["cpu"] = (sf.timings["cpu"] + tm["terrain_lod"] + tm["terrain_cull"] + tm["tessellate"] + tm["shadow_cull"])
         tm["gpu"] = tm["upload"] + tm["terrain_draw"] + tm["scene_draw"] + tm["readback"]
-        tm["total"] = (t7 - t0) * 1e3
+        tm["total"] = (t3 - t0 + t7 - t3b) * 1e3  # (pipelined: the CPU side ran while the frame before drew)
         counts = [len(p) for p in patches]
         union = int(len(np.unique(np.concatenate(patches)))) if patches else 0
         stats = {
             "riders": int(sum(len(f.riders) for f in frames)),
             "rider_lod": [int(x) for f in frames for x in f.rider_lod],
-            "rider_triangles": int(sum(cp.triangles for cp in self.cast_passes)),
+            "rider_triangles": plan["rider_triangles"],
             "rider_models": len(self.casts),
-            "objects_drawn": self.objects.drawn if self.objects is not None else 0,
-            "object_triangles": self.objects.triangles if self.objects is not None else 0,
+            "objects_drawn": plan["objects_drawn"],
+            "object_triangles": plan["object_triangles"],
             "shadow_patches": int(sum(counts)),
             "shadow_patches_union": union,
             "shadow_patches_per_rider": counts,
-            "shadow_triangles": self.shadows.triangles if self.shadows is not None else 0,
+            "shadow_triangles": plan["shadow_triangles"],
             "terrain_patches": frame.patches,
             "terrain_triangles": frame.triangles,
         }
-        if query is not None:
-            stats["rider_pixels"] = rider_pixels
+        if plan["rider_pixels"] is not None:
+            stats["rider_pixels"] = plan["rider_pixels"]
         frame.image = image
         return SceneImage(image, frame, sf, patches, stats, tm, frames[1:])
 
