@@ -3,7 +3,8 @@ machine's copy bandwidth, surface evaluation against geomdl and `bezier`, and sc
 
 1. One frame of the default course (a camera on the track, LOD + culling as the renderer does):
    the resident path's CPU side (hierarchical culling + per-side LOD + index list: no vertex is
-   written), the CPU tessellation path (compiled with numba and numpy; for export and tests), the
+   written), the CPU tessellation path (compiled with numba, the compiled path as it was before
+   issue 15's rewrite (commit db55903) as the A/B baseline, and numpy; for export and tests), the
    frame evaluated from scratch, and the old per-frame LOD + flat culling; all interleaved.  The
    tessellation's bytes written per second are printed as a fraction of a numpy copy of as many
    bytes (the machine's floor for moving that output).
@@ -68,6 +69,122 @@ def mesh_bytes(m) -> int:
                                                "indices"))
 
 
+# ------------------------------------------------------------------------------------------------
+# The compiled CPU tessellation path as it was before issue 15 item 1's rewrite (commit db55903),
+# kept here only as the A/B baseline: numpy front half (levels, argsort by shape key, per-patch
+# offsets), per-frame np.array_equal of the net's UVs against the vertex cache's snapshot, and the
+# old fused gather kernel (signed offsets, a per-vertex uniformity test).  Same outputs.
+def _gather_cached_before(pids, shape_of, vertex_start, tri_start, src_start, src_level, src_slot, tri_src_start,
+                          tris, level_row, grid, vert, indices):
+    nf = grid.shape[1]
+    g1 = grid.reshape(-1)
+    v1 = vert.reshape(-1)
+    i1 = indices.reshape(-1)
+    t1 = tris.reshape(-1)
+    for i in range(pids.shape[0]):
+        p = pids[i]
+        g = shape_of[i]
+        v0 = vertex_start[i]
+        nv = vertex_start[i + 1] - v0
+        s0 = src_start[g]
+        n0 = src_level[s0]
+        uniform = True
+        for k in range(nv):
+            if src_level[s0 + k] != n0 or src_slot[s0 + k] != k:
+                uniform = False
+                break
+        if uniform:
+            a = (level_row[n0] + p * n0 * n0) * nf
+            b = v0 * nf
+            for q in range(nv * nf):
+                v1[b + q] = g1[a + q]
+        else:
+            for k in range(nv):
+                n = src_level[s0 + k]
+                a = (level_row[n] + p * n * n + src_slot[s0 + k]) * nf
+                b = (v0 + k) * nf
+                for f in range(nf):
+                    v1[b + f] = g1[a + f]
+        t0 = tri_start[i] * 3
+        nt = (tri_start[i + 1] - tri_start[i]) * 3
+        ts = tri_src_start[g] * 3
+        for k in range(nt):
+            i1[t0 + k] = t1[ts + k] + v0
+
+
+class TessellateBefore:
+    """``tessellate(net, levels, patches)`` (cached, compiled) as of commit db55903."""
+
+    def __init__(self, net):
+        import numba
+
+        self.kernel = numba.njit(nogil=True, boundscheck=False)(_gather_cached_before)
+        self.net = net
+        self.snap = (net.uv.copy(), net.lightmap_rect.copy())
+        self.tables = {}
+
+    def _shape_tables(self, levels: tuple):
+        from piste.terrain.tessellate import _glue_sources, get_shape
+
+        if levels not in self.tables:
+            shapes = [get_shape(lv) for lv in levels]
+            src = [_glue_sources(lv) for lv in levels]
+            nv = np.array([len(x[0]) for x in src], dtype=np.int64)
+            src_start = np.concatenate([[0], np.cumsum(nv)[:-1]]).astype(np.int64)
+            src_level = np.concatenate([x[0] for x in src]).astype(np.int64)
+            src_slot = np.concatenate([x[1] for x in src]).astype(np.int64)
+            nt = np.array([len(sh.tris) for sh in shapes], dtype=np.int64)
+            tri_src_start = np.concatenate([[0], np.cumsum(nt)[:-1]]).astype(np.int64)
+            tris = np.concatenate([sh.tris for sh in shapes]).astype(np.uint32)
+            used = sorted({n for lv in levels for n in lv})
+            self.tables[levels] = (src_start, src_level, src_slot, tri_src_start, tris, used)
+        return self.tables[levels]
+
+    def __call__(self, levels, patches):
+        from piste.terrain.tessellate import (MAX_LEVEL, VERTEX_FLOATS, TerrainMesh, _as_levels, _cache,
+                                              get_shape)
+
+        net = self.net
+        lv = _as_levels(net, levels)
+        pids = np.asarray(patches, dtype=np.int64).ravel()
+        if len(pids) and (pids.min() < 0 or pids.max() >= len(net)):
+            raise ValueError("patch ids")
+        side_lv = lv[net.side_edge[pids]].astype(np.int64)
+        m = side_lv.max(axis=1)
+        glue = (side_lv != m[:, None]).any(axis=1)
+        key = ((((glue * 65 + m) * 65 + side_lv[:, 0]) * 65 + side_lv[:, 1]) * 65 + side_lv[:, 2]) * 65 + side_lv[:, 3]
+        order = np.argsort(key, kind="stable")
+        pids, side_lv, m, key, glue = pids[order], side_lv[order], m[order], key[order], glue[order]
+        new = np.empty(len(key), dtype=bool)
+        new[:1] = True
+        np.not_equal(key[1:], key[:-1], out=new[1:])
+        first_of = np.flatnonzero(new)
+        shape_of = np.cumsum(new) - 1
+        shapes = [get_shape(tuple(side_lv[i].tolist())) for i in first_of]
+        s_nv = np.array([sh.n_verts for sh in shapes], dtype=np.int64)
+        s_nt = np.array([len(sh.tris) for sh in shapes], dtype=np.int64)
+        nv_p, nt_p = s_nv[shape_of], s_nt[shape_of]
+        vertex_start = np.concatenate([[0], np.cumsum(nv_p)]).astype(np.int64)
+        tri_start = np.concatenate([[0], np.cumsum(nt_p)]).astype(np.int64)
+        V, T = int(vertex_start[-1]), int(tri_start[-1])
+        indices = np.empty((T, 3), dtype=np.uint32)
+        tables = self._shape_tables(tuple(sh.levels for sh in shapes))
+        if not (np.array_equal(self.snap[0], net.uv) and np.array_equal(self.snap[1], net.lightmap_rect)):
+            raise RuntimeError("UVs changed")  # (the old vertex cache's per-frame check, same cost)
+        flat, offset = _cache(net).grids(net, tables[-1])
+        level_row = np.zeros(MAX_LEVEL + 1, np.int64)
+        for n, o in offset.items():
+            level_row[n] = o // VERTEX_FLOATS
+        vert = np.empty((V, VERTEX_FLOATS), dtype=np.float32)
+        self.kernel(pids, shape_of, vertex_start, tri_start, *tables[:-1], level_row, flat.reshape(-1, VERTEX_FLOATS),
+                    vert, indices)
+        vpatch = np.repeat(np.arange(len(pids), dtype=np.int32), nv_p)
+        return TerrainMesh(positions=vert[:, 0:3], normals=vert[:, 3:6], uv=vert[:, 8:10], uv_lightmap=vert[:, 10:12],
+                           uv_projected=vert[:, 12:14], param=vert[:, 6:8], indices=indices, patch_ids=pids,
+                           patch_kind=np.where(glue, 0, m).astype(np.int8), patch_levels=side_lv.astype(np.int16),
+                           vertex_patch=vpatch, vertex_start=vertex_start, tri_start=tri_start)
+
+
 def frame_section(rounds: int) -> None:
     from piste.terrain import _kernels, edge_levels, tessellate, visible_patches
     from piste.terrain.cull import patch_tree
@@ -93,16 +210,24 @@ def frame_section(rounds: int) -> None:
     tris, nbytes = mesh.n_triangles, mesh_bytes(mesh)
     src = np.ones(nbytes // 4, np.float32)
     dst = np.empty_like(src)
+    before = TessellateBefore(net) if _kernels.HAVE_NUMBA else None
+    if before is not None:
+        same = before(levels, vis)
+        for k in ("positions", "normals", "uv", "uv_lightmap", "uv_projected", "param", "indices", "patch_ids",
+                  "patch_kind", "patch_levels", "vertex_patch", "vertex_start", "tri_start"):
+            assert getattr(same, k).tobytes() == getattr(mesh, k).tobytes(), k  # the A/B compare like with like
     fns = {
         "resident CPU side (tree cull + LOD + index list)": lambda: res.frame(eye, planes),
         "old CPU side: LOD (all edges) + flat cull": lambda: (edge_levels(net, eye), visible_patches(net, eye, target)),
         "CPU tessellation, compiled (numba)": lambda: tessellate(net, levels, patches=vis),
+        "CPU tessellation, compiled, before (db55903)": lambda: before(levels, vis),
         "CPU tessellation, numpy": lambda: tessellate(net, levels, patches=vis, use_numba=False),
         "evaluated every frame (cache=False)": lambda: tessellate(net, levels, patches=vis, cache=False),
         "numpy copy of the tessellation's bytes": lambda: np.copyto(dst, src),
     }
     if not _kernels.HAVE_NUMBA:
         fns.pop("CPU tessellation, compiled (numba)")
+        fns.pop("CPU tessellation, compiled, before (db55903)")
     t = interleaved(fns, rounds, warmup=3, inner=3)  # 3 calls a round: fewer one-off stalls in the median
     f = res.frame(eye, planes)
     print(f"\n== one frame: {len(vis)} visible patches, {tris:,} triangles, {mesh.n_vertices:,} vertices, "
@@ -125,9 +250,19 @@ def frame_section(rounds: int) -> None:
     print(f"\nterrain CPU side per frame (resident): {rc * 1e3:.3f} ms (target <= 0.5 ms: "
           f"{'met' if rc <= 5e-4 else 'missed'}); the old LOD + cull alone took {old * 1e3:.3f} ms before "
           f"tessellating ({old / rc:.1f}x)")
-    print(f"CPU tessellation path: {tris / tess / 1e6:.1f} M triangles/s (target >= 100: "
-          f"{'met' if tris / tess >= 1e8 else 'missed'}), {copy_med / tess:.2f} of the numpy copy bandwidth for "
-          f"its output bytes ({nbytes / copy_med / 1e9:.1f} GB/s); numpy path {tris / tess_np / 1e6:.1f} M triangles/s")
+    rates = tris / t[key]
+    print(f"CPU tessellation path: {tris / tess / 1e6:.1f} M triangles/s [{rates.min() / 1e6:.1f}-"
+          f"{rates.max() / 1e6:.1f}] (target >= 100: {'met' if tris / tess >= 1e8 else 'missed'}), "
+          f"{copy_med / tess:.2f} of the numpy copy bandwidth for its output bytes ({nbytes / copy_med / 1e9:.1f} GB/s); "
+          f"numpy path {tris / tess_np / 1e6:.1f} M triangles/s")
+    if before is not None:
+        b = t["CPU tessellation, compiled, before (db55903)"]
+        ratio = b / t[key]  # per round: the A/B pairs ran back to back
+        print(f"compiled path before/after (interleaved, same rounds): {tris / stat(b)[0] / 1e6:.1f} -> "
+              f"{tris / tess / 1e6:.1f} M triangles/s, {np.median(ratio):.2f}x faster "
+              f"[{ratio.min():.2f}-{ratio.max():.2f} over the rounds]")
+        record("terrain", "CPU tessellation, compiled: before (db55903) -> after", "(speed-up)",
+               f"{tris / tess / 1e6:.1f} M/s", f"before {tris / stat(b)[0] / 1e6:.1f} M/s", f"{np.median(ratio):.2f}x")
     record("terrain", "terrain CPU side / frame, default course", "<= 0.5 ms", f"{rc * 1e3:.3f} ms",
            f"old LOD+cull {old * 1e3:.3f} ms", f"{old / rc:.1f}x", rc <= 5e-4)
     record("terrain", "CPU tessellation (typical frame)", ">= 100 M tris/s", f"{tris / tess / 1e6:.1f} M/s",
@@ -255,7 +390,7 @@ def scaling_section(sizes, rounds: int) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
     ap.add_argument("--quick", action="store_true", help="fewer rounds, nets up to 40k patches")
     ap.add_argument("--rounds", type=int, help="interleaved rounds per measurement (default 30, quick 10)")
     args = ap.parse_args(argv)
