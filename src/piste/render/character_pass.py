@@ -36,6 +36,7 @@ import numpy as np
 from piste.character import rider as _rider
 from piste.errors import RenderError
 from piste.render.context import load_shader, set_depth_write
+from piste.render.textures import mipmapped_texture
 
 __all__ = ["CharacterPass", "specular_map", "rider_textures", "SHININESS", "JACKETS"]
 
@@ -194,15 +195,14 @@ class CharacterPass:
         self.texture = self.textures[0]
         self.spec = self._tex(spec)
         for t in self.textures + [self.spec]:
-            t.build_mipmaps()
             t.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         progs = {"base": self.prog, "spec": self.prog_spec}
         self.lods = [_LodBuffers(ctx, lod.mesh, max_riders, progs) for lod in lods]
         self.riders = [np.zeros(0, np.int64) for _ in lods]
 
     def _tex(self, img):
-        h, w = img.shape[:2]
-        return self.ctx.texture((w, h), 4, np.ascontiguousarray(img).tobytes(), alignment=1)
+        """A mip-mapped texture (levels computed on the CPU: no GPU mipmap blit to compile)."""
+        return mipmapped_texture(self.ctx, img)
 
     @property
     def triangles(self) -> int:

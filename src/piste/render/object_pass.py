@@ -39,6 +39,7 @@ import numpy as np
 from piste.errors import ConfigError, RenderError
 from piste.lighting.lights import DirectionalLight, SpotLight
 from piste.render.context import load_shader
+from piste.render.textures import mipmapped_texture
 from piste.world.object_lod import DEFAULT_LOD_PIXELS, choose_lods, instance_scale, object_lods
 from piste.world.objects import bake_vertex_colors
 
@@ -148,9 +149,7 @@ class ObjectPass:
         self.specialised = True
         self._programs: dict = {}  # key -> (program, {kind index: vertex array})
         self.prog = self._program(None)[0]  # the generic program (run-time uniforms)
-        h, w = tex.shape[:2]
-        self.texture = ctx.texture((w, h), 4, np.ascontiguousarray(tex).tobytes(), alignment=1)
-        self.texture.build_mipmaps()
+        self.texture = mipmapped_texture(ctx, tex)  # levels computed on the CPU: no GPU mipmap blit to compile
         self.texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self.rows = instance_rows(objects)
         self.packed = _pack_rows(self.rows)

@@ -27,7 +27,7 @@ import numpy as np
 
 from piste.errors import ConfigError, RenderError
 from piste.render.context import load_shader, set_depth_write
-from piste.render.textures import LOD_COLORS, snow_texture
+from piste.render.textures import LOD_COLORS, mipmapped_texture, snow_texture
 from piste.terrain.resident import ResidentMesh
 
 __all__ = ["TerrainPass", "LIGHTMAP_MODES", "DEBUG_VIEWS"]
@@ -142,12 +142,14 @@ class TerrainPass:
         self._stamp += 1
 
     # ------------------------------------------------------------------ textures
-    def _texture(self, image, name: str):
+    def _texture(self, image, name: str, mipmaps: bool = False):
         img = np.asarray(image)
         if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] not in (3, 4):
             raise RenderError(f"{name}: expected an (H, W, 3|4) uint8 image, got {img.shape} {img.dtype}")
         if img.shape[2] == 3:
             img = np.concatenate([img, np.full(img.shape[:2] + (1,), 255, np.uint8)], axis=2)
+        if mipmaps:  # the levels computed on the CPU (no GPU mipmap blit to compile at start-up)
+            return mipmapped_texture(self.ctx, img)
         h, w = img.shape[:2]
         return self.ctx.texture((w, h), 4, np.ascontiguousarray(img).tobytes(), alignment=1)
 
@@ -157,8 +159,7 @@ class TerrainPass:
 
         if self.base is not None:
             self.base.release()
-        self.base = self._texture(image, "base texture")
-        self.base.build_mipmaps()
+        self.base = self._texture(image, "base texture", mipmaps=True)
         # bilinear within the nearest mip level: trilinear (LINEAR_MIPMAP_LINEAR) costs llvmpipe ~14 %
         # of the terrain draw for a mean difference of 0.02 levels on the default course
         self.base.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)

@@ -13,17 +13,24 @@ placeholder_lightmap     (H, W, 4) uint8 atlas lit by a fixed sun from the surfa
                          (a stand-in until baked light maps exist)
 lightmap_atlas_size      (W, H) of the atlas a net's ``lightmap_rect`` describes
 track_field              (H, W) float32 signed distance across a track (metres), a projected texture
+mip_chain                the mip levels of an (H, W, C) uint8 image, as Mesa's glGenerateMipmap makes them
+mipmapped_texture        a moderngl texture with its mip levels computed on the CPU and uploaded
 LOD_COLORS               debug colours of 4x4, 6x6, 8x8 and glue patches
 """
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
+from functools import lru_cache
+
 import numpy as np
 
-from piste.errors import ValidationError
+from piste.errors import RenderError, ValidationError
 from piste.terrain.bezier import grid_params
 
-__all__ = ["snow_texture", "placeholder_lightmap", "lightmap_atlas_size", "track_field", "LOD_COLORS", "SUN_DIRECTION"]
+__all__ = ["snow_texture", "placeholder_lightmap", "lightmap_atlas_size", "track_field", "mip_chain",
+           "mipmapped_texture", "LOD_COLORS", "SUN_DIRECTION"]
 
 #: debug colours (RGB uint8) by patch kind: 4x4 green, 6x6 yellow, 8x8 red, glue (non-uniform) blue
 LOD_COLORS = {
@@ -181,3 +188,105 @@ def track_field(centerline, bounds, texel: float = 0.75) -> tuple[np.ndarray, np
     field = (dist * np.where(side == 0, 1.0, side)).reshape(h, w).astype(np.float32)
     rect = np.array([lo[0], lo[1], lo[0] + w * texel, lo[1] + h * texel])
     return field, rect
+
+
+def mip_chain(image) -> list[np.ndarray]:
+    """The mip levels of ``image`` ``(H, W, C) uint8`` (H and W powers of two) down to 1 x 1.
+
+    Returns ``[image, level 1, ..., level n]``, level ``l`` of shape ``(max(H >> l, 1), max(W >> l,
+    1), C) uint8``.  Each texel is the mean of its 2 x 2 (2 x 1 once an axis is 1 texel) parent
+    texels the way Mesa's ``glGenerateMipmap`` computes it on llvmpipe (a bilinear sample at the
+    corner the four share): the horizontal pairs averaged and rounded half up to 8 bits, then those
+    averaged vertically, likewise (bit-identical to llvmpipe's levels; other drivers' rounding may
+    differ by one step).  Precomputed on the CPU as the PS2 did: no GPU work at load.
+    """
+    img = np.asarray(image)
+    if img.ndim == 2:
+        img = img[..., None]
+    if img.dtype != np.uint8 or img.ndim != 3:
+        raise ValidationError(f"mip_chain: expected an (H, W, C) uint8 image, got {img.shape} {img.dtype}")
+    h, w = img.shape[:2]
+    if h < 1 or w < 1 or h & (h - 1) or w & (w - 1):
+        raise ValidationError(f"mip_chain: image sides must be powers of two, got {w} x {h}")
+    out = [img]
+    lv = img.astype(np.uint16)
+    while lv.shape[0] > 1 or lv.shape[1] > 1:
+        if lv.shape[1] > 1:
+            lv = (lv[:, 0::2] + lv[:, 1::2] + 1) >> 1
+        if lv.shape[0] > 1:
+            lv = (lv[0::2] + lv[1::2] + 1) >> 1
+        out.append(lv.astype(np.uint8))
+    return out
+
+
+# GL enums (OpenGL 3.3 core)
+_GL_TEXTURE_2D, _GL_UNSIGNED_BYTE, _GL_UNPACK_ALIGNMENT = 0x0DE1, 0x1401, 0x0CF5
+_GL_TEXTURE_BASE_LEVEL, _GL_TEXTURE_MAX_LEVEL = 0x813C, 0x813D
+#: components -> (internal format, format) of moderngl's uint8 textures: R8, RG8, RGB8, RGBA8
+_GL_FORMATS = {1: (0x8229, 0x1903), 2: (0x822B, 0x8227), 3: (0x8051, 0x1907), 4: (0x8058, 0x1908)}
+
+
+@lru_cache(maxsize=None)
+def _gl_entry_points():
+    """``(glTexImage2D, glTexParameteri, glPixelStorei)`` from the system's GL dispatch library
+    (libglvnd's ``libOpenGL.so.0``, else ``libGL``), which call into the context current on this
+    thread, as moderngl's own calls do; None where there is no such library (then textures build
+    their mip levels with ``build_mipmaps``)."""
+    names = ("libOpenGL.so.0", "libGL.so.1", lambda: ctypes.util.find_library("OpenGL"),
+             lambda: ctypes.util.find_library("GL"))  # (find_library runs ldconfig: only if needed)
+    for name in names:
+        name = name() if callable(name) else name
+        if not name:
+            continue
+        try:
+            lib = ctypes.CDLL(name)
+            tex_image, tex_param, pixel_store = lib.glTexImage2D, lib.glTexParameteri, lib.glPixelStorei
+        except (OSError, AttributeError):
+            continue
+        u, i = ctypes.c_uint, ctypes.c_int
+        tex_image.argtypes = [u, i, i, i, i, i, u, u, ctypes.c_void_p]
+        tex_param.argtypes = [u, u, i]
+        pixel_store.argtypes = [u, i]
+        for f in (tex_image, tex_param, pixel_store):
+            f.restype = None
+        return tex_image, tex_param, pixel_store
+    return None
+
+
+def mipmapped_texture(ctx, image, cpu: bool = True):
+    """A moderngl texture of ``image`` ``(H, W, C) uint8`` (C = 1..4) with a full mip chain.
+
+    The levels are :func:`mip_chain`'s, uploaded level by level (``glTexImage2D``: moderngl 5
+    allocates mip levels only in ``build_mipmaps``, whose ``glGenerateMipmap`` makes Mesa compile
+    a blit shader for the first texture of each kind in a process, 70-180 ms on llvmpipe, at every
+    start).  Falls back to ``build_mipmaps`` (the GPU's filter: identical on llvmpipe) for sides that
+    are not powers of two, where no GL dispatch library is found, or with ``cpu=False``.  The
+    texture's filter is left at moderngl's default; callers set theirs.  (moderngl does not know
+    of the uploaded levels: ``Texture.read(level=l > 0)`` refuses; sample them instead.)
+    """
+    img = np.ascontiguousarray(image)
+    if img.ndim == 2:
+        img = img[..., None]
+    if img.dtype != np.uint8 or img.ndim != 3 or not 1 <= img.shape[2] <= 4:
+        raise RenderError(f"texture: expected an (H, W, 1..4) uint8 image, got {img.shape} {img.dtype}")
+    h, w, c = img.shape
+    tex = ctx.texture((w, h), c, img.tobytes(), alignment=1)
+    gl = _gl_entry_points() if cpu else None
+    if gl is None or h & (h - 1) or w & (w - 1):
+        tex.build_mipmaps()
+        return tex
+    tex_image, tex_param, pixel_store = gl
+    internal, fmt = _GL_FORMATS[c]
+    levels = mip_chain(img)
+    tex.use(ctx.default_texture_unit)  # bound where moderngl binds the textures it writes
+    pixel_store(_GL_UNPACK_ALIGNMENT, 1)
+    for level, lv in enumerate(levels[1:], start=1):
+        lv = np.ascontiguousarray(lv)
+        tex_image(_GL_TEXTURE_2D, level, internal, lv.shape[1], lv.shape[0], 0, fmt, _GL_UNSIGNED_BYTE,
+                  lv.ctypes.data)
+    tex_param(_GL_TEXTURE_2D, _GL_TEXTURE_BASE_LEVEL, 0)
+    tex_param(_GL_TEXTURE_2D, _GL_TEXTURE_MAX_LEVEL, len(levels) - 1)
+    err = ctx.error
+    if err != "GL_NO_ERROR":
+        raise RenderError(f"uploading a {w}x{h} texture's mip levels: OpenGL error {err}")
+    return tex
