@@ -16,6 +16,7 @@ FIELDS = ("positions", "normals", "uv", "uv_lightmap", "uv_projected", "param", 
           "patch_levels", "vertex_patch", "vertex_start", "tri_start", "strips")
 
 needs_numba = pytest.mark.skipif(not _kernels.HAVE_NUMBA, reason="numba not installed: only the numpy path exists")
+BOTH = [pytest.param(True, marks=needs_numba, id="numba"), pytest.param(False, id="numpy")]
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -69,8 +70,7 @@ def test_both_sorts_of_the_compiled_plan_are_exercised():
         assert_same(tessellate(net, levels, use_numba=True), tessellate(net, levels, use_numba=False))
 
 
-@needs_numba
-@pytest.mark.parametrize("use_numba", [True, False])
+@pytest.mark.parametrize("use_numba", BOTH)
 def test_teapot_both_paths_crack_free(use_numba):
     """A closed model with collapsed edges (degenerate patches): both cached paths crack-free."""
     net = PatchNet.from_bpt(TEAPOT)
@@ -78,11 +78,11 @@ def test_teapot_both_paths_crack_free(use_numba):
         levels = np.random.default_rng(seed).choice([4, 6, 8], net.n_edges)
         mesh = tessellate(net, levels, use_numba=use_numba)
         check_crack_free(net, levels, mesh)
-        assert_same(mesh, tessellate(net, levels, use_numba=not use_numba))
+        if _kernels.HAVE_NUMBA:
+            assert_same(mesh, tessellate(net, levels, use_numba=not use_numba))
 
 
-@needs_numba
-@pytest.mark.parametrize("use_numba", [True, False])
+@pytest.mark.parametrize("use_numba", BOTH)
 def test_cached_paths_match_evaluation(use_numba):
     """Compiled and numpy cached paths against the frame evaluated from scratch (an independent
     route): corners and edges bit for bit, inner points to float32 rounding."""
@@ -98,8 +98,7 @@ def test_cached_paths_match_evaluation(use_numba):
     assert np.allclose(a.uv_lightmap, b.uv_lightmap, atol=1e-6)
 
 
-@needs_numba
-@pytest.mark.parametrize("use_numba", [True, False])
+@pytest.mark.parametrize("use_numba", BOTH)
 @pytest.mark.parametrize("levels, patches, match", [
     (1, None, "2..64"), (65, None, "2..64"), (np.full(3, 4), None, "one per edge"),
     (4, [0, -1], "patch ids"), (4, [10**6], "patch ids"),
@@ -123,8 +122,7 @@ def test_bad_levels_reported_alike():
     assert msgs[0] == msgs[1] and "4..70" in msgs[0]
 
 
-@needs_numba
-@pytest.mark.parametrize("use_numba", [True, False])
+@pytest.mark.parametrize("use_numba", BOTH)
 def test_vertex_cache_follows_in_place_uv_edits(use_numba):
     """One changed UV (a single-ulp edit, in place, in a non-contiguous array) rebuilds the cache."""
     net = grid_net(3, 3, flips=False)
@@ -171,3 +169,17 @@ def test_snapshot_detects_every_change(make):
     assert snap.same(a)
     assert not snap.same(a.astype(np.float64))
     assert not snap.same(a[:2])
+
+
+@needs_numba
+def test_read_only_inputs_use_the_warmed_kernels():
+    """Read-only levels / patch ids (numba types them apart) run the already compiled signatures."""
+    net = grid_net(3, 4, seed=2)
+    levels = np.random.default_rng(2).choice([4, 6, 8], net.n_edges).astype(np.int16)
+    pids = np.arange(0, len(net), 2, dtype=np.int64)
+    ref = tessellate(net, levels, patches=pids, use_numba=False)
+    n_sigs = (len(_kernels._tess_plan_nb.compiled.signatures), len(_kernels._tess_gather_nb.compiled.signatures))
+    levels.setflags(write=False)
+    pids.setflags(write=False)
+    assert_same(tessellate(net, levels, patches=pids, use_numba=True), ref)
+    assert (len(_kernels._tess_plan_nb.compiled.signatures), len(_kernels._tess_gather_nb.compiled.signatures)) == n_sigs

@@ -671,6 +671,8 @@ def _tessellate_compiled(net: PatchNet, levels, patches, strips: bool) -> Terrai
     side_edge = net.side_edge
     if side_edge.dtype != np.int32 or not side_edge.flags.c_contiguous:
         side_edge = np.ascontiguousarray(side_edge, dtype=np.int32)
+    # numba types read-only arrays apart: keep to the warmed-up signature (no compile mid-frame)
+    lv, pids, side_edge = (a if a.flags.writeable else a.copy() for a in (lv, pids, side_edge))
     check, pids, side_lv, kind, shape_of, keys, _ = _kernels.tess_plan(lv, side_edge, pids, len(net), MAX_LEVEL)
     if check[0] < 2 or check[1] > MAX_LEVEL:
         raise ValidationError(f"{net.name}: vertices per edge must be in 2..{MAX_LEVEL}, got {check[0]}..{check[1]}")
