@@ -307,8 +307,13 @@ def scene_section(args, floor_ms: list) -> dict:
     def set_cull(on):
         r.terrain.terrain.cull_back = on
 
+    def set_object_lod(on):
+        r.objects.lod_pixels = 0.5 if on else 0.0
+
     changes = [("objects", set_objects, "objects: per-mode programs, instance attributes, no discard",
                 "objects: one program, 14 texelFetch a vertex, u_mode + discard"),
+               ("objects", set_object_lod, "objects: levels of detail, <= 0.5 px of error",
+                "objects: every instance with its full mesh"),
                ("terrain", set_cull, "terrain: back faces culled", "terrain: back faces drawn")]
     ab_res = []
     acc2, undo2 = _profile(r)
@@ -332,6 +337,19 @@ def scene_section(args, floor_ms: list) -> dict:
         setter(True)
         ab_res.append((label, now_name, before_name, ab, ab_frame, ab_diff))
     undo2()
+    # one frame at a time (render: plan, draw, wait, read) against pipelined frames (frames: the next
+    # frame planned while the GL draws this one), wall time per frame over blocks of 10, interleaved
+    modes = {"one at a time": [], "pipelined": []}
+    for b in range(max(args.frames // 5, 3)):
+        ts = [(b * 10 + i) / 30.0 for i in range(10)]
+        t1 = time.perf_counter()
+        for t in ts:
+            r.render(t)
+        modes["one at a time"].append((time.perf_counter() - t1) * 1e3 / len(ts))
+        t1 = time.perf_counter()
+        for _ in r.frames(ts):
+            pass
+        modes["pipelined"].append((time.perf_counter() - t1) * 1e3 / len(ts))
     cols = ("animation", "lod_skinning", "lights", "objects", "terrain_cull", "tessellate", "shadow_cull", "cpu",
             "upload", "terrain_draw", "scene_draw", "readback", "total")
     short = ("anim", "skin", "lights", "objcull", "t.cull", "t.index", "shadcull", "CPU", "upload", "terrain", "scene",
@@ -361,17 +379,23 @@ def scene_section(args, floor_ms: list) -> dict:
               f"{max(x[1] for x in ab_diff)} pixels a frame differ")
         record("frame", f"effect: {before_name} -> {now_name}", "faster", f"{med(ab[True]):.1f} ms",
                f"{med(ab[False]):.1f} ms", f"{med(ab[False]) / med(ab[True]):.2f}x")
+    print("\n== one frame at a time vs pipelined (wall time a frame over blocks of 10 frames, interleaved) ==")
+    for name, ts in modes.items():
+        print(f"  {name:14s} {rng_str(ts)} ms  ({1e3 / med(ts):5.1f} fps, {med(ts) / fl:5.2f}x the floor)")
+    print(f"  pipelined / one at a time: {med(modes['pipelined']) / med(modes['one at a time']):.2f}x")
+    best = min(med(modes["pipelined"]), med(modes["one at a time"]))
     print(f"\nfull scene: {full['rider_triangles']:.0f} rider + {full['object_triangles']:.0f} object + "
           f"{full['terrain_triangles']:.0f} terrain triangles, {full['objects_drawn']:.0f} objects")
-    print(f"target 60 fps = 16.7 ms: {m['total']:.1f} ms ({1e3 / m['total']:.1f} fps, "
-          f"{'met' if m['total'] <= 16.7 else 'missed'}); CPU side {m['cpu']:.2f} ms (target <= 4: "
-          f"{'met' if m['cpu'] <= 4.0 else 'missed'}); {m['total'] / fl:.1f}x the floor ({fl:.2f} ms; target <= 4x: "
-          f"{'met' if m['total'] <= 4 * fl else 'missed'})")
-    record("frame", "completed scene fps (640x448, llvmpipe)", ">= 60 fps", f"{1e3 / m['total']:.1f} fps",
-           "", "", m["total"] <= 16.7)
+    print(f"target 60 fps = 16.7 ms: {best:.1f} ms a frame, the faster of the two ({1e3 / best:.1f} fps, "
+          f"{'met' if best <= 16.7 else 'missed'}); CPU side {m['cpu']:.2f} ms (target <= 4: "
+          f"{'met' if m['cpu'] <= 4.0 else 'missed'}); {best / fl:.1f}x the floor ({fl:.2f} ms; target <= 4x: "
+          f"{'met' if best <= 4 * fl else 'missed'})")
+    record("frame", "completed scene fps (640x448, llvmpipe)", ">= 60 fps", f"{1e3 / best:.1f} fps",
+           f"pipelined {1e3 / med(modes['pipelined']):.1f}, one at a time {1e3 / med(modes['one at a time']):.1f}",
+           "", best <= 16.7)
     record("frame", "completed scene CPU side", "<= 4 ms", f"{m['cpu']:.2f} ms", "", "", m["cpu"] <= 4.0)
-    record("frame", "completed scene vs machine floor", "<= 4x", f"{m['total']:.1f} ms", f"floor {fl:.2f} ms",
-           f"{m['total'] / fl:.1f}x", m["total"] <= 4 * fl)
+    record("frame", "completed scene vs machine floor", "<= 4x", f"{best:.1f} ms", f"floor {fl:.2f} ms",
+           f"{best / fl:.1f}x", best <= 4 * fl)
     floor.release()
     r.release()
     return out
