@@ -24,6 +24,7 @@ index buffers.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -680,7 +681,8 @@ def _tessellate_compiled(net: PatchNet, levels, patches, strips: bool) -> Terrai
         raise ValidationError(f"{net.name}: patch ids must be in 0..{len(net) - 1}")
     if not len(pids):
         return empty_mesh(strips)
-    stab, src_level, src_slot, tris, used, shapes = _key_tables(tuple(keys.tolist()))
+    stab, used, shapes = _key_tables(tuple(keys.tolist()))
+    _, src_level, src_slot, tris = _SHAPES.arrays
     grid, level_row = _cache(net).grid_rows(net, used)
     vert, indices, vpatch, vertex_start, tri_start = _kernels.tess_gather(
         pids, shape_of, stab, src_level, src_slot, tris, level_row, grid)
@@ -708,27 +710,63 @@ def key_levels(key: int) -> tuple:
     return tuple(int(key // b ** k % b) for k in (3, 2, 1, 0))
 
 
+class _ShapeRegistry:
+    """Every shape the compiled path has met (process-wide, append-only): its row of the per-shape
+    table, its glue sources and its triangles, appended once.  A frame's tables are then rows of
+    these (no per-frame concatenation when a moving camera brings a new mix of shapes)."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.row: dict[int, int] = {}
+        #: (stab (g, 6) int64, src_level, src_slot (s,) int64, tris (t, 3) uint32), replaced whole
+        self.arrays = (np.zeros((0, 6), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                       np.zeros((0, 3), np.uint32))
+
+    def rows(self, keys: tuple) -> np.ndarray:
+        """Rows of ``keys`` (registering new ones), ``(u,) int64``."""
+        if any(k not in self.row for k in keys):
+            with self.lock:
+                new = [k for k in dict.fromkeys(keys) if k not in self.row]
+                if new:
+                    self._append(new)
+        return np.array([self.row[k] for k in keys], dtype=np.int64)
+
+    def _append(self, keys: list) -> None:
+        stab, src_level, src_slot, tris = self.arrays
+        shapes = [get_shape(key_levels(k)) for k in keys]
+        src = [_glue_sources(sh.levels) for sh in shapes]
+        nv = np.array([sh.n_verts for sh in shapes], dtype=np.int64)
+        nt = np.array([len(sh.tris) for sh in shapes], dtype=np.int64)
+        add = np.zeros((len(shapes), 6), dtype=np.int64)
+        add[:, 0], add[:, 1] = nv, nt
+        add[:, 2] = [sh.uniform for sh in shapes]
+        add[:, 3] = [sh.m for sh in shapes]
+        add[:, 4] = len(src_level) + np.concatenate([[0], np.cumsum(nv)[:-1]])
+        add[:, 5] = len(tris) + np.concatenate([[0], np.cumsum(nt)[:-1]])
+        arrays = (np.concatenate([stab, add]),
+                  np.concatenate([src_level] + [x[0] for x in src]).astype(np.int64),
+                  np.concatenate([src_slot] + [x[1] for x in src]).astype(np.int64),
+                  np.ascontiguousarray(np.concatenate([tris] + [sh.tris for sh in shapes]).astype(np.uint32)))
+        self.arrays = arrays  # (one assignment: a reader sees the old or the new tables, both valid)
+        for i, k in enumerate(keys):
+            self.row[k] = len(stab) + i
+
+
+_SHAPES = _ShapeRegistry()
+
+
 @lru_cache(maxsize=4096)
 def _key_tables(keys: tuple):
-    """Per-shape tables of the compiled gather for a tuple of shape keys (cached: a moving camera
+    """Per-shape table of the compiled gather for a tuple of shape keys (cached: a moving camera
     sees the same few combinations): ``stab (u, 6) int64`` (vertices, triangles, uniform, m, first
-    source entry, first triangle), ``src_level``, ``src_slot``, ``tris (s, 3) uint32``, the levels
-    used, and the shapes."""
+    entry in the registry's ``src_level`` / ``src_slot``, first triangle in its ``tris``), the
+    levels used, and the shapes.  Read the registry's arrays after this call (they then hold
+    every row of ``stab``)."""
+    rows = _SHAPES.rows(keys)
+    stab = np.ascontiguousarray(_SHAPES.arrays[0][rows])
     shapes = [get_shape(key_levels(k)) for k in keys]
-    src = [_glue_sources(sh.levels) for sh in shapes]
-    nv = np.array([sh.n_verts for sh in shapes], dtype=np.int64)
-    nt = np.array([len(sh.tris) for sh in shapes], dtype=np.int64)
-    stab = np.zeros((len(shapes), 6), dtype=np.int64)
-    stab[:, 0], stab[:, 1] = nv, nt
-    stab[:, 2] = [sh.uniform for sh in shapes]
-    stab[:, 3] = [sh.m for sh in shapes]
-    stab[1:, 4] = np.cumsum(nv)[:-1]
-    stab[1:, 5] = np.cumsum(nt)[:-1]
-    src_level = np.concatenate([x[0] for x in src]).astype(np.int64)
-    src_slot = np.concatenate([x[1] for x in src]).astype(np.int64)
-    tris = np.ascontiguousarray(np.concatenate([sh.tris for sh in shapes]).astype(np.uint32))
     used = tuple(sorted({n for sh in shapes for n in sh.levels}))
-    return stab, src_level, src_slot, tris, used, shapes  # (writeable: numba types read-only arrays apart)
+    return stab, used, shapes  # (writeable: numba types read-only arrays apart)
 
 
 @lru_cache(maxsize=None)
