@@ -327,6 +327,12 @@ class ShadowPass:
             ctx.viewport = ((first + i) * self.tile, 0, self.tile, self.tile)
             self.caster["u_light_vp"].write(lvp[i].astype(np.float32).T.tobytes())
             c["vao"].render(moderngl.TRIANGLES, vertices=nt, first=i * nt)
+        # this frame's tiles mip-mapped here, before the frame's main passes: glGenerateMipmap must wait
+        # for what it reads, and after the terrain's draw llvmpipe waited for the whole terrain there
+        self.texture.build_mipmaps(0, self.mip_levels)
+        # and finished now (a few small tiles): a texture still being written when a later draw samples
+        # it makes llvmpipe flush and wait for everything issued before that draw (the terrain)
+        ctx.finish()
         ctx.enable(moderngl.DEPTH_TEST)
 
     def set_sunlight(self, field=None, rect=(0.0, 0.0, 1.0, 1.0)) -> None:
@@ -377,7 +383,6 @@ class ShadowPass:
         p["u_mvp"].write(np.asarray(vp, dtype=np.float32).T.tobytes())
         p["u_depth_bias"].value = float(depth_bias)
         p["u_shade"].value = tuple(float(x) for x in shade)
-        self.texture.build_mipmaps(0, self.mip_levels)  # this frame's casters
         self.texture.use(3)
         self.sunlit.use(4)
         ctx.enable(moderngl.DEPTH_TEST | moderngl.BLEND)
