@@ -5,14 +5,26 @@ bake without shadows; a per-patch Python loop over the same equation (the naive 
 with the ratio; the accuracy of the baked maps against the lighting equation evaluated per pixel
 (64 x 64 points per patch on 60 patches, with shadows); and the PS2 blend's error over the scene
 (snow base texture x baked light map).  Target: 8x8 with shadows under 10 s on 2 cores.
-Plain script, not a test.  ``--quick``: 8x8 only.
+
+Then the shadow rays side by side with a real ray tracer, Intel Embree (through ``embreex``, from the
+``bench`` extra): the bake's own rays (origins lifted off the exact surface, unit directions to each
+light, ``t_max``), piste's :func:`~piste.terrain.query.ray_intersect` (any hit, as the baker calls
+it) against Embree's ``rtcOccluded`` on the same terrain tessellated into triangles by piste's
+tessellator (level 8, the talk's finest; ``--full`` also 16 and 32), timed alike (interleaved
+rounds, medians with [min-max]), with the agreement: hit/miss per ray and, for rays both call hit,
+the nearest-hit distances against the tessellation's chord error.  Embree traces a tessellated
+approximation, piste the exact patches: they differ where a ray passes within the chord error of
+the surface (grazing rays, rays starting below the triangles).
+Plain script, not a test.  ``--quick``: 8x8 only, Embree at level 8 only, 3 rounds.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -20,6 +32,9 @@ from piste.lighting import bake_lightmap, default_lights, encode_half_bright, ps
 from piste.lighting.lights import light_terms
 from piste.lighting.shadows import shadow_visibility
 from piste.world.course import default_course
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _timing import interleaved, ms, record, stat  # noqa: E402
 
 
 def timed(fn, *a, **k):
@@ -42,12 +57,160 @@ def naive_bake(net, lights, res, patches):
     return out
 
 
+def bake_rays(net, lights, res):
+    """The bake's shadow rays at ``res`` x ``res`` texels a patch, built as the baker builds them
+    (:func:`~piste.lighting.shadows.shadow_visibility`): origins ``(k, 3)``, unit directions ``(k, 3)``,
+    ``t_max (k,)`` float64 (inf towards the sun)."""
+    from piste.lighting import sample_points
+    from piste.lighting.shadows import ray_offset, shadow_rays
+
+    pos, nrm = sample_points(net, res)
+    pos, nrm = pos.reshape(-1, 3), nrm.reshape(-1, 3)
+    terms = light_terms(lights, pos, nrm)
+    eps = ray_offset(net)
+    o, d, t = [], [], []
+    for col, light in enumerate(lights.direct):
+        if not light.shadows or light.intensity == 0.0:
+            continue
+        idx = np.nonzero(terms[:, col] > 0.0)[0]
+        oo, dd, tt = shadow_rays(light, pos[idx], nrm[idx], eps)
+        o.append(oo), d.append(dd), t.append(tt)
+    return np.concatenate(o), np.concatenate(d), np.concatenate(t)
+
+
+def chord_error(net, mesh, sample: int = 200_000, seed: int = 0) -> tuple[float, float]:
+    """Distance between the exact surface and the triangles of ``mesh`` (a
+    :class:`~piste.terrain.tessellate.TerrainMesh`): at the centroid and edge midpoints (in patch
+    parameters) of up to ``sample`` random triangles, the exact point against the triangle's linear
+    interpolation.  ``(max, p99)`` in model units (an estimate of the tessellation's error)."""
+    from piste.terrain.query import eval_points
+
+    tri = mesh.indices
+    if len(tri) > sample:
+        tri = tri[np.random.default_rng(seed).choice(len(tri), sample, replace=False)]
+    tri = tri.astype(np.int64)
+    patch = mesh.patch_ids[mesh.vertex_patch[tri[:, 0]]]
+    prm = mesh.param[tri].astype(np.float64)  # (t, 3, 2)
+    pos = mesh.positions[tri].astype(np.float64)  # (t, 3, 3)
+    w = np.array([[1, 1, 1], [1, 1, 0], [0, 1, 1], [1, 0, 1]], dtype=np.float64)
+    w /= w.sum(1, keepdims=True)  # centroid and the three edge midpoints
+    err = []
+    for wk in w:
+        uv = np.einsum("k,tkc->tc", wk, prm)
+        exact = eval_points(net.control_points[patch], uv[:, 0], uv[:, 1], derivatives=False)
+        err.append(np.linalg.norm(exact - np.einsum("k,tkc->tc", wk, pos), axis=1))
+    err = np.max(err, axis=0)
+    return float(err.max()), float(np.percentile(err, 99))
+
+
+def embree_peer(net, lights, res: int, levels, rounds: int) -> None:
+    """Shadow rays of the bake: piste's exact any-hit query vs Embree on the tessellated terrain."""
+    print("\n== shadow rays: piste (exact patches) vs Embree via embreex (tessellated triangles) ==")
+    try:
+        import embreex
+        from embreex.mesh_construction import TriangleMesh
+        from embreex.rtcore_scene import EmbreeScene
+    except ImportError as exc:
+        print(f"Embree peer skipped: embreex is not installed ({exc}); pip install 'piste[bench]'")
+        record("bake", "shadow rays vs Embree", "comparable", "", "skipped: embreex not installed", "")
+        return
+    from piste.terrain.query import PatchBVH, clear_cache, ray_intersect
+    from piste.terrain.tessellate import tessellate
+
+    o, d, tmax = bake_rays(net, lights, res)
+    k = len(o)
+    o32, d32 = o.astype(np.float32), d.astype(np.float32)
+    tf32 = np.minimum(tmax, 1e37).astype(np.float32)  # embreex's "no limit" is 1e37
+    print(f"{k:,} shadow rays of the {res}x{res} bake ({np.isinf(tmax).sum():,} to the sun, the rest to point "
+          f"and spot lights); embreex {getattr(embreex, '__version__', '?')}; piste numpy, one process; "
+          f"load {os.getloadavg()[0]:.2f}")
+
+    # build: piste's BVH over exact sub-patches vs piste's tessellation + Embree's BVH
+    def build_piste():
+        clear_cache(net)
+        return PatchBVH(net)
+
+    piste_hits = ray_intersect(net, o, d, t_max=tmax, any_hit=True)  # warms numpy and the cache
+    scenes = {}
+    for lv in levels:
+        t0 = time.perf_counter()
+        mesh = tessellate(net, lv, cache=False)
+        t1 = time.perf_counter()
+        scene = EmbreeScene()
+        TriangleMesh(scene, np.ascontiguousarray(mesh.positions, dtype=np.float32),
+                     np.ascontiguousarray(mesh.indices, dtype=np.int32))
+        scene.run(o32[:1], d32[:1], dists=tf32[:1].copy(), query="OCCLUDED")  # commits (builds the BVH)
+        t2 = time.perf_counter()
+        scenes[lv] = (scene, mesh, t1 - t0, t2 - t1)
+    tb = interleaved({"piste": build_piste}, max(rounds, 3), warmup=0)["piste"]
+    print(f"build: piste PatchBVH {ms(tb)} (median over {len(tb)}); "
+          + "; ".join(f"level {lv}: {len(m.indices):,} triangles, tessellate {a * 1e3:.0f} ms + Embree BVH {b * 1e3:.0f} ms"
+                      for lv, (_, m, a, b) in scenes.items()))
+    _ = ray_intersect(net, o[:10], d[:10], t_max=tmax[:10], any_hit=True)  # rebuild the cached BVH
+
+    out = {}
+
+    def run_piste():
+        out["piste"] = ray_intersect(net, o, d, t_max=tmax, any_hit=True).hit
+
+    fns = {"piste": run_piste}
+    for lv, (scene, _, _, _) in scenes.items():
+        def run_embree(scene=scene, lv=lv):
+            out[lv] = scene.run(o32, d32, dists=tf32.copy(), query="OCCLUDED") >= 0
+        fns[f"embree {lv}"] = run_embree
+    t = interleaved(fns, rounds, warmup=1)
+    pm = stat(t["piste"])[0]
+    c0, w0 = time.process_time(), time.perf_counter()
+    fns[f"embree {levels[0]}"]()
+    c1, w1 = time.process_time(), time.perf_counter()
+    print(f"Embree: CPU time / wall time of one run {(c1 - c0) / (w1 - w0):.2f} (1.0 = one busy core; below it, waiting for the CPU)")
+    print(f"timing ({rounds} interleaved rounds, median [min-max]; load {os.getloadavg()[0]:.2f}):")
+    print(f"  {'contender':28s} {'time / all rays':>28s} {'rays/s':>12s} {'Embree faster':>13s}")
+    print(f"  {'piste ray_intersect (exact)':28s} {ms(t['piste']):>28s} {k / pm:12,.0f}")
+    for lv in scenes:
+        em = stat(t[f"embree {lv}"])[0]
+        print(f"  {f'Embree occluded, level {lv}':28s} {ms(t[f'embree {lv}']):>28s} {k / em:12,.0f} "
+              f"{pm / em:12.0f}x")
+    assert np.array_equal(out["piste"], piste_hits.hit)
+
+    # agreement: hit/miss per ray; nearest-hit distances where both hit, against the chord error
+    print("agreement (Embree traces triangles, piste the exact patches: the difference is the tessellation's):")
+    for lv, (scene, mesh, _, _) in scenes.items():
+        eh = out[lv]
+        ph = piste_hits.hit
+        agree = float((eh == ph).mean())
+        emax, e99 = chord_error(net, mesh)
+        both = np.nonzero(eh | ph)[0]
+        pn = ray_intersect(net, o[both], d[both], t_max=tmax[both], any_hit=False)
+        dist = scene.run(o32[both], d32[both], dists=tf32[both].copy(), query="DISTANCE")
+        eb = dist < tf32[both]
+        bb = pn.hit & eb
+        dt = np.abs(pn.t[bb] - dist[bb].astype(np.float64))
+        cos = np.abs(np.einsum("kc,kc->k", d[both][bb], pn.normal[bb]))
+        off = dt * cos  # the two hits' separation along the surface normal
+        within = float((off <= emax).mean()) if bb.any() else float("nan")
+        print(f"  level {lv:2d}: chord error max {emax:.4f} (p99 {e99:.4f}) model units; hit/miss agree on "
+              f"{agree:.3%} of rays ({int((eh & ~ph).sum()):,} hit only by Embree, {int((ph & ~eh).sum()):,} only by "
+              f"piste); both hit: {int(bb.sum()):,}, |t difference| median {np.median(dt) if bb.any() else 0:.4f} "
+              f"max {dt.max() if bb.any() else 0:.3f}, along the normal within the chord error for {within:.2%}")
+        if lv == levels[0]:
+            em = stat(t[f"embree {lv}"])[0]
+            record("bake", f"shadow rays ({k // 1000}k, any hit) vs Embree, level {lv} triangles",
+                   "comparable", f"{k / pm / 1e3:.0f} k rays/s (exact)", f"Embree {k / em / 1e6:.1f} M rays/s",
+                   f"{pm / em:.0f}x slower; agree {agree:.2%}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="8x8 texels only")
-    quick = ap.parse_args(argv).quick
+    ap.add_argument("--quick", action="store_true", help="8x8 texels only; Embree at level 8 only, 3 rounds")
+    ap.add_argument("--rays", action="store_true", help="only the shadow rays against Embree (no bake)")
+    args = ap.parse_args(argv)
+    quick = args.quick
     net, dt = timed(default_course)
     lights = default_lights()
+    if args.rays:
+        embree_peer(net, lights, 8, (8,) if quick else (8, 16, 32), 3 if quick else 7)
+        return
     print(f"default course: {len(net)} patches (built in {dt:.2f} s); lights: {len(lights)} "
           f"({', '.join(type(x).__name__ for x in lights)}); cores: {os.cpu_count()}")
     print(f"{'res':>5s} {'jobs':>4s} {'shadows':>7s} {'time s':>7s} {'samples':>9s} {'samples/s':>10s} "
@@ -64,6 +227,7 @@ def main(argv=None):
                   f"{st.get('rays_occluded', 0):8,d} {rays / dt if rays else 0:9,.0f}")
     best8 = min(dt for (r, j, sh), (_, dt) in results.items() if r == 8 and sh)
     print(f"8x8 with shadows: best {best8:.2f} s (target < 10 s): {'met' if best8 < 10 else 'MISSED'}")
+    record("bake", "light map 8x8 with shadows, default course", "< 10 s", f"{best8:.2f} s", "", "", best8 < 10)
 
     # the naive peer on a subset
     sub = np.arange(0, len(net), 40)
@@ -111,6 +275,8 @@ def main(argv=None):
         print(f"ps2 blend ({method:5s}) over {rep['pixels']:,} pixels: mean |err| {np.round(rep['mean_abs'], 3).tolist()} "
               f"max {rep['max_abs']} levels, exact {rep['exact_fraction']:.1%}, over-bright {rep['overbright_fraction']:.1%}, "
               f"Cs<0 needed {rep['cs_negative_needed']:,} ({dt:.2f} s)")
+
+    embree_peer(net, lights, 8, (8,) if quick else (8, 16, 32), 3 if quick else 7)
 
 
 if __name__ == "__main__":
