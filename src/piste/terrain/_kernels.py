@@ -22,7 +22,8 @@ import numpy as np
 
 from piste._jit import HAVE_NUMBA, lazy_njit
 
-__all__ = ["HAVE_NUMBA", "frame_indices", "tess_plan", "tess_gather", "same_bytes", "ragged_arange", "side_lod", "cull_tree"]
+__all__ = ["HAVE_NUMBA", "frame_indices", "tess_plan", "tess_gather", "same_bytes", "ragged_arange", "side_lod",
+           "cull_tree"]
 
 
 _jit = lazy_njit  # compiled on first call (numba is imported then, not when piste is)

@@ -577,7 +577,7 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False, cache:
     nv_p, nt_p = s_nv[shape_of], s_nt[shape_of]
     vertex_start = np.concatenate([[0], np.cumsum(nv_p)]).astype(np.int64)
     tri_start = np.concatenate([[0], np.cumsum(nt_p)]).astype(np.int64)
-    V, T = int(vertex_start[-1]), int(tri_start[-1])
+    T = int(tri_start[-1])
     n_uniform = int(np.count_nonzero(~glue))
     indices = np.empty((T, 3), dtype=np.uint32)
     if cache:
