@@ -12,16 +12,16 @@ from piste.errors import RenderError, ValidationError
 from piste.render import Offscreen
 from piste.render.character_pass import CharacterPass, specular_map
 from piste.render.terrain_pass import TerrainPass
-from piste.render.textures import mip_chain, mipmapped_texture, snow_texture
+from piste.render.textures import MipLevels, mip_chain, mipmapped_texture, snow_texture
 
 _VS = "#version 330\nin vec2 p; void main() { gl_Position = vec4(p, 0.0, 1.0); }"
 _FS = ("#version 330\nuniform sampler2D t; uniform int l; out vec4 c;\n"
        "void main() { c = texelFetch(t, ivec2(gl_FragCoord.xy), l); }")
 
 
-def _levels(ctx, tex, w, h, components=4) -> list[np.ndarray]:
-    """Every mip level of ``tex`` (``w x h``) read through the shader (``texelFetch``): moderngl's
-    ``Texture.read`` knows only the levels ``build_mipmaps`` made."""
+def _levels(ctx, tex, w, h, components=4, top=None) -> list[np.ndarray]:
+    """The mip levels of ``tex`` (``w x h``) down to 1 x 1 (or ``top``) read through a shader
+    (``texelFetch``): moderngl's ``Texture.read`` knows only the levels ``build_mipmaps`` made."""
     prog = ctx.program(vertex_shader=_VS, fragment_shader=_FS)
     vbo = ctx.buffer(np.array([-1, -1, 3, -1, -1, 3], dtype="f4").tobytes())
     vao = ctx.vertex_array(prog, [(vbo, "2f", "p")])
@@ -36,7 +36,7 @@ def _levels(ctx, tex, w, h, components=4) -> list[np.ndarray]:
             vao.render()
             out.append(target.read()[::-1, :, :components])  # row 0 = texture row 0
             target.release()
-            if lw == 1 and lh == 1:
+            if (lw == 1 and lh == 1) or level == top:
                 return out
             level += 1
     finally:
@@ -117,3 +117,45 @@ def test_passes_build_no_mip_levels_on_the_gpu(gl, monkeypatch):
         monkeypatch.undo()
         terrain.release()
         riders.release()
+
+
+@pytest.mark.parametrize("size, levels", [((256, 64), 4), ((32, 32), 9), ((8, 2), 3), ((384, 128), 4)])
+def test_mip_levels_drawn_on_the_gpu_are_the_cpu_chain(gl, size, levels):
+    """A render target's levels redrawn by piste's shader (the shadow texture's case): the same
+    levels as :func:`mip_chain` and ``build_mipmaps``, again after level 0 changes; the caller's
+    framebuffer and viewport are kept."""
+    w, h = size
+    rng = np.random.default_rng(w + levels)
+    tex = gl.texture((w, h), 4)
+    ref = gl.texture((w, h), 4)
+    screen = Offscreen(gl, (5, 3))
+    mips = MipLevels(gl, tex, levels)
+    try:
+        assert mips.levels == min(levels, int(np.log2(max(w, h))))
+        for _ in range(2):
+            img = rng.integers(0, 256, (h, w, 4), dtype=np.uint8)
+            tex.write(img.tobytes())
+            ref.write(img.tobytes())
+            screen.use()
+            mips.build()
+            assert gl.fbo is screen.fbo and tuple(gl.viewport) == (0, 0, 5, 3)
+            ref.build_mipmaps(0, mips.levels)
+            got = _levels(gl, tex, w, h, top=mips.levels)
+            assert len(got) == mips.levels + 1
+            if w & (w - 1) == 0:
+                for level, (x, y) in enumerate(zip(got, mip_chain(img))):
+                    assert np.array_equal(x, y), f"level {level}"
+            for level, (x, y) in enumerate(zip(got, _levels(gl, ref, w, h, top=mips.levels))):
+                assert np.abs(x.astype(int) - y.astype(int)).max() <= 1, f"level {level} (GPU's own filter)"
+    finally:
+        mips.release()
+        for obj in (tex, ref):
+            obj.release()
+        screen.release()
+    odd = gl.texture((12, 8), 4)
+    try:
+        assert MipLevels.supported(gl, odd, 2) and not MipLevels.supported(gl, odd, 3)
+        with pytest.raises(RenderError, match="halve exactly 3 times"):
+            MipLevels(gl, odd, 3)
+    finally:
+        odd.release()

@@ -15,6 +15,7 @@ lightmap_atlas_size      (W, H) of the atlas a net's ``lightmap_rect`` describes
 track_field              (H, W) float32 signed distance across a track (metres), a projected texture
 mip_chain                the mip levels of an (H, W, C) uint8 image, as Mesa's glGenerateMipmap makes them
 mipmapped_texture        a moderngl texture with its mip levels computed on the CPU and uploaded
+MipLevels                a render target's mip levels redrawn on the GPU by piste's own shader
 LOD_COLORS               debug colours of 4x4, 6x6, 8x8 and glue patches
 """
 
@@ -23,14 +24,16 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 from functools import lru_cache
+from types import SimpleNamespace
 
 import numpy as np
 
 from piste.errors import RenderError, ValidationError
+from piste.render.context import load_shader
 from piste.terrain.bezier import grid_params
 
 __all__ = ["snow_texture", "placeholder_lightmap", "lightmap_atlas_size", "track_field", "mip_chain",
-           "mipmapped_texture", "LOD_COLORS", "SUN_DIRECTION"]
+           "mipmapped_texture", "MipLevels", "LOD_COLORS", "SUN_DIRECTION"]
 
 #: debug colours (RGB uint8) by patch kind: 4x4 green, 6x6 yellow, 8x8 red, glue (non-uniform) blue
 LOD_COLORS = {
@@ -228,28 +231,29 @@ _GL_FORMATS = {1: (0x8229, 0x1903), 2: (0x822B, 0x8227), 3: (0x8051, 0x1907), 4:
 
 @lru_cache(maxsize=None)
 def _gl_entry_points():
-    """``(glTexImage2D, glTexParameteri, glPixelStorei)`` from the system's GL dispatch library
-    (libglvnd's ``libOpenGL.so.0``, else ``libGL``), which call into the context current on this
-    thread, as moderngl's own calls do; None where there is no such library (then textures build
-    their mip levels with ``build_mipmaps``)."""
+    """``glTexImage2D``, ``glTexParameteri``, ``glPixelStorei`` and ``glFramebufferTexture2D`` (a
+    namespace) from the system's GL dispatch library (libglvnd's ``libOpenGL.so.0``, else
+    ``libGL``), which call into the context current on this thread, as moderngl's own calls do;
+    None where there is no such library (then textures build their mip levels with
+    ``build_mipmaps``)."""
     names = ("libOpenGL.so.0", "libGL.so.1", lambda: ctypes.util.find_library("OpenGL"),
              lambda: ctypes.util.find_library("GL"))  # (find_library runs ldconfig: only if needed)
+    u, i = ctypes.c_uint, ctypes.c_int
+    signatures = {"glTexImage2D": [u, i, i, i, i, i, u, u, ctypes.c_void_p], "glTexParameteri": [u, u, i],
+                  "glPixelStorei": [u, i], "glFramebufferTexture2D": [u, u, u, u, i]}
     for name in names:
         name = name() if callable(name) else name
         if not name:
             continue
         try:
             lib = ctypes.CDLL(name)
-            tex_image, tex_param, pixel_store = lib.glTexImage2D, lib.glTexParameteri, lib.glPixelStorei
+            fns = {f: getattr(lib, f) for f in signatures}
         except (OSError, AttributeError):
             continue
-        u, i = ctypes.c_uint, ctypes.c_int
-        tex_image.argtypes = [u, i, i, i, i, i, u, u, ctypes.c_void_p]
-        tex_param.argtypes = [u, u, i]
-        pixel_store.argtypes = [u, i]
-        for f in (tex_image, tex_param, pixel_store):
-            f.restype = None
-        return tex_image, tex_param, pixel_store
+        for f, args in signatures.items():
+            fns[f].argtypes = args
+            fns[f].restype = None
+        return SimpleNamespace(**fns)
     return None
 
 
@@ -275,18 +279,107 @@ def mipmapped_texture(ctx, image, cpu: bool = True):
     if gl is None or h & (h - 1) or w & (w - 1):
         tex.build_mipmaps()
         return tex
-    tex_image, tex_param, pixel_store = gl
     internal, fmt = _GL_FORMATS[c]
     levels = mip_chain(img)
     tex.use(ctx.default_texture_unit)  # bound where moderngl binds the textures it writes
-    pixel_store(_GL_UNPACK_ALIGNMENT, 1)
+    gl.glPixelStorei(_GL_UNPACK_ALIGNMENT, 1)
     for level, lv in enumerate(levels[1:], start=1):
         lv = np.ascontiguousarray(lv)
-        tex_image(_GL_TEXTURE_2D, level, internal, lv.shape[1], lv.shape[0], 0, fmt, _GL_UNSIGNED_BYTE,
-                  lv.ctypes.data)
-    tex_param(_GL_TEXTURE_2D, _GL_TEXTURE_BASE_LEVEL, 0)
-    tex_param(_GL_TEXTURE_2D, _GL_TEXTURE_MAX_LEVEL, len(levels) - 1)
+        gl.glTexImage2D(_GL_TEXTURE_2D, level, internal, lv.shape[1], lv.shape[0], 0, fmt, _GL_UNSIGNED_BYTE,
+                        lv.ctypes.data)
+    gl.glTexParameteri(_GL_TEXTURE_2D, _GL_TEXTURE_BASE_LEVEL, 0)
+    gl.glTexParameteri(_GL_TEXTURE_2D, _GL_TEXTURE_MAX_LEVEL, len(levels) - 1)
     err = ctx.error
     if err != "GL_NO_ERROR":
         raise RenderError(f"uploading a {w}x{h} texture's mip levels: OpenGL error {err}")
     return tex
+
+
+_GL_FRAMEBUFFER, _GL_COLOR_ATTACHMENT0 = 0x8D40, 0x8CE0
+
+
+class MipLevels:
+    """Mip levels ``1 .. levels`` of an RGBA8 render target (``texture``, whose sides halve exactly
+    ``levels`` times: even, or 1, down to level ``levels - 1``; e.g. 384 x 128 for 4 levels), redrawn from level 0 on the GPU by :meth:`build` with piste's own shader
+    (``mip_level.frag.glsl``: the same 2 x 2 means as :func:`mip_chain` and llvmpipe's
+    ``glGenerateMipmap``).
+
+    Why not ``build_mipmaps``: Mesa's ``glGenerateMipmap`` draws with an internal blit shader
+    that llvmpipe compiles in every process (70-110 ms at the first call: its disk cache keeps only
+    GLSL programs), while this program comes from the shader cache after the first run.  Each
+    level is drawn into a framebuffer holding that level (``glFramebufferTexture2D``; moderngl 5
+    attaches only level 0) while the texture's base and max level are the level above, so the
+    draw never samples the level it writes.  ``build`` leaves blending, depth test and face
+    culling disabled and re-binds the framebuffer and viewport it found.
+
+    ``MipLevels.supported(ctx, texture, levels)``: whether the texture's sides halve exactly and
+    this machine's GL library gives the entry points (else use ``build_mipmaps``).
+    """
+
+    def __init__(self, ctx, texture, levels: int):
+        w, h = texture.size
+        gl = _gl_entry_points()
+        if gl is None:
+            raise RenderError("MipLevels: no GL library with glFramebufferTexture2D (use build_mipmaps)")
+        self.levels = max(0, min(int(levels), int(np.log2(max(w, h)))))
+        if not self.supported(ctx, texture, self.levels):
+            raise RenderError(f"MipLevels: expected an RGBA8 texture whose sides halve exactly {self.levels} "
+                              f"times, got {w} x {h} x {texture.components} {texture.dtype}")
+        self.ctx, self.texture, self._gl = ctx, texture, gl
+        self.sizes = [(max(w >> lv, 1), max(h >> lv, 1)) for lv in range(self.levels + 1)]
+        internal, fmt = _GL_FORMATS[4]
+        texture.use(ctx.default_texture_unit)
+        for lv in range(1, self.levels + 1):  # allocate the levels (contents undefined until build)
+            gl.glTexImage2D(_GL_TEXTURE_2D, lv, internal, *self.sizes[lv], 0, fmt, _GL_UNSIGNED_BYTE, None)
+        self._limits(0, self.levels)
+        self.prog = ctx.program(vertex_shader=load_shader("mip_level.vert.glsl"),
+                                fragment_shader=load_shader("mip_level.frag.glsl"))
+        self.vao = ctx.vertex_array(self.prog, [])
+        self.fbo = ctx.framebuffer(color_attachments=[texture])
+        err = ctx.error
+        if err != "GL_NO_ERROR":
+            raise RenderError(f"MipLevels: allocating {self.levels} levels of a {w}x{h} texture: OpenGL error {err}")
+
+    @staticmethod
+    def supported(ctx, texture, levels: int) -> bool:
+        """Whether :class:`MipLevels` can draw ``levels`` levels of ``texture`` here (else use
+        ``build_mipmaps``)."""
+        w, h = texture.size
+        exact = all(max(s >> lv, 1) == 1 or (s >> lv) % 2 == 0 for s in (w, h) for lv in range(int(levels)))
+        return _gl_entry_points() is not None and exact and texture.components == 4 and texture.dtype == "f1"
+
+    def _limits(self, base: int, top: int) -> None:
+        self._gl.glTexParameteri(_GL_TEXTURE_2D, _GL_TEXTURE_BASE_LEVEL, base)
+        self._gl.glTexParameteri(_GL_TEXTURE_2D, _GL_TEXTURE_MAX_LEVEL, top)
+
+    def build(self) -> None:
+        """Redraw levels ``1 .. levels`` from level 0 (what was drawn into the texture)."""
+        import moderngl
+
+        if self.levels == 0:
+            return
+        ctx, gl, tex = self.ctx, self._gl, self.texture
+        prev, viewport = ctx.fbo, ctx.viewport
+        ctx.disable(moderngl.BLEND | moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        unit = ctx.default_texture_unit
+        self.prog["u_src"].value = unit
+        try:
+            for lv in range(1, self.levels + 1):
+                self.fbo.use()
+                gl.glFramebufferTexture2D(_GL_FRAMEBUFFER, _GL_COLOR_ATTACHMENT0, _GL_TEXTURE_2D, tex.glo, lv)
+                ctx.viewport = (0, 0, *self.sizes[lv])
+                tex.use(unit)
+                self._limits(lv - 1, lv - 1)  # sample only the level above
+                self.vao.render(moderngl.TRIANGLES, vertices=3)
+        finally:
+            tex.use(unit)
+            self._limits(0, self.levels)
+            self.fbo.use()
+            gl.glFramebufferTexture2D(_GL_FRAMEBUFFER, _GL_COLOR_ATTACHMENT0, _GL_TEXTURE_2D, tex.glo, 0)
+            if prev is not None:
+                prev.use()
+            ctx.viewport = viewport
+
+    def release(self) -> None:
+        for obj in (self.fbo, self.vao, self.prog):
+            obj.release()
