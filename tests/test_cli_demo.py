@@ -24,12 +24,13 @@ def test_demo_writes_png_and_mp4(gl_context, piste_cache, tmp_path, capsys):
     assert len(frames) == 2 and frames[0].shape == (64, 96, 3)
     out = capsys.readouterr().out
     assert "lighting baked" in out
-    for text in ("4x4 patches", "average polygons per patch", "LOD + cull + tessellation", "draw", "fps"):
+    for text in ("4x4 patches", "average polygons per patch", "LOD + cull + tessellation", "draw", "fps",
+                 "pipelined loop (wall time / frames)", "objects per LOD level", "(error <= 0.5 px)"):
         assert text in out
     assert sorted(p.name for p in png.parent.iterdir()) == ["demo.mp4", "demo.png"]  # no temp files
 
 
-@pytest.mark.parametrize("extra", [["--lod", "off", "--lightmap", "ps2"], ["--debug", "lod"]])
+@pytest.mark.parametrize("extra", [["--lod", "off", "--lightmap", "ps2"], ["--debug", "lod"], ["--object-lod", "0"]])
 def test_demo_options(gl_context, piste_cache, tmp_path, capsys, extra):
     png = tmp_path / "d.png"
     assert main(["demo", "--size", "64", "48", "--out", str(png), "--no-progress", "--lighting", "placeholder", *extra]) == 0
@@ -38,6 +39,11 @@ def test_demo_options(gl_context, piste_cache, tmp_path, capsys, extra):
     if "off" in extra:
         line = next(ln for ln in out.splitlines() if ln.startswith("8x8 patches"))
         assert "100.0 %" in line
+    if "--object-lod" in extra:  # every object drawn with its full mesh: all at level 0
+        line = next(ln for ln in out.splitlines() if "objects per LOD level" in ln)
+        assert "(error <= 0 px)" in line
+        counts = [int(x) for x in line.split("objects per LOD level")[1].split("(")[0].replace(",", " ").split()]
+        assert counts[0] > 0 and sum(counts[1:]) == 0
 
 
 def test_demo_is_the_built_default_scene_through_the_render_runtime(gl_context, piste_cache, tmp_path, capsys):

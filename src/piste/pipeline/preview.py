@@ -419,6 +419,21 @@ class ScenePreview:
         self.stats.update(terrain_patches=frame.patches, terrain_triangles=frame.triangles)
         return image[..., :3] if read else None
 
+    def frames(self, times, lod: bool = True, read: bool = True):
+        """Frames ``(H, W, 3) uint8`` (None without ``read``) at each of ``times`` along the chase
+        camera, pipelined where the scene has riders (:meth:`piste.render.SceneRenderer.frames`: the
+        next frame's CPU work runs while the GL draws this one); else one :meth:`render` a frame.
+        After each, :attr:`frame` and :attr:`stats` describe that frame."""
+        if self.renderer is None or not self.follow:
+            for t in times:
+                yield self.render(None, t, lod=lod, read=read)
+            return
+        for img in self.renderer.frames(times, read=read, lod=lod, lightmap_mode=self.lightmap_mode, fog=self.fog):
+            self.frame = img
+            self.stats.update(img.stats)
+            self.stats.update(self.terrain.cull_stats)
+            yield img.image[..., :3] if read else None
+
     def _release_passes(self) -> None:
         if self.renderer is not None:
             self.renderer.release()
