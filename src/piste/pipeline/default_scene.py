@@ -47,7 +47,8 @@ near = 60.0
 far = 180.0
 
 [visibility]
-enabled = false
+enabled = true                # the chase camera is inside the sampled band: 10-30 % of the patches
+                              #   in the frustum are hidden behind the slope and not drawn
 
 [render]
 fog = "auto"
