@@ -11,6 +11,10 @@ frame).  ``lazy_njit(fn, example)`` returns a kernel compiled with ``numba.njit(
   first frames run the numpy paths (bit-identical results) while numba loads.
 
 ``warm_up()`` compiles everything now (benchmarks and tests call it before timing or comparing).
+``WarmUpHold()`` holds the background warm-up back until its ``release()``: numba's import holds
+the GIL for most of its ~0.8 s, and a fresh process's first frame (which asks ``ready()``) took
+~0.13 s longer with it running beside; :class:`piste.pipeline.ScenePreview` holds it through its
+set-up and first frame.
 ``PISTE_NO_NUMBA=1`` disables numba everywhere.
 """
 
@@ -20,13 +24,14 @@ import importlib.util
 import os
 import threading
 
-__all__ = ["HAVE_NUMBA", "KERNEL_MODULES", "lazy_njit", "warm_up", "warm_up_async"]
+__all__ = ["HAVE_NUMBA", "KERNEL_MODULES", "lazy_njit", "warm_up", "warm_up_async", "WarmUpHold"]
 
 HAVE_NUMBA = not os.environ.get("PISTE_NO_NUMBA") and importlib.util.find_spec("numba") is not None
 _KERNELS: list = []
 _LOCK = threading.Lock()  # compilation
 _START = threading.Lock()  # starting the warm-up thread
 _THREAD: list = [None]
+_HOLDS = [0, False]  # [holds in force, warm-up asked for while held]
 
 
 class _Lazy:
@@ -97,10 +102,36 @@ def warm_up_async() -> None:
     if not HAVE_NUMBA or _THREAD[0] is not None:
         return
     with _START:
+        if _HOLDS[0]:
+            _HOLDS[1] = True  # started when the last hold is released
+            return
         if _THREAD[0] is None:
             t = threading.Thread(target=_warm_quietly, name="piste-numba-warm-up", daemon=True)
             _THREAD[0] = t
             t.start()
+
+
+class WarmUpHold:
+    """Keep :func:`warm_up_async` from starting its thread until :meth:`release` (idempotent);
+    a warm-up asked for meanwhile starts when the last hold is released.  (:func:`warm_up` is
+    not held.)"""
+
+    def __init__(self):
+        with _START:
+            _HOLDS[0] += 1
+        self.held = True
+
+    def release(self) -> None:
+        with _START:
+            if not self.held:
+                return
+            self.held = False
+            _HOLDS[0] -= 1
+            go = _HOLDS[0] == 0 and _HOLDS[1]
+            if go:
+                _HOLDS[1] = False
+        if go:
+            warm_up_async()
 
 
 def _warm_quietly() -> None:

@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from piste._jit import WarmUpHold
 from piste.character import BlendedMesh
 from piste.errors import ConfigError, FormatError
 from piste.formats.gltf import load_gltf
@@ -304,6 +305,10 @@ class ScenePreview:
                         "fog": fog, "object_lod": object_lod}
         self.stats: dict = {}
         self.frame = None
+        # numba's background import (~0.8 s, mostly holding the GIL) waits until the first frame is
+        # drawn: beside it a fresh process's first frame took ~0.13 s longer (released by the next
+        # frame or release())
+        self._warm_up_hold = WarmUpHold()
         self._setup(bundle)
 
     def _setup(self, bundle) -> None:
@@ -388,6 +393,8 @@ class ScenePreview:
         ``camera`` defaults to the chase camera of a run-time ``scene``, else the scene's first
         camera; ``lod=False`` draws every patch 8x8; ``debug`` is a terrain debug view ("lod",
         "wire", "base", "lightmap")."""
+        if self.frame is not None:  # (a frame was drawn: numba may warm up now)
+            self._warm_up_hold.release()
         w, h = self.size
         if camera is None and not self.follow:
             camera = camera_at(self.bundle)
@@ -433,6 +440,7 @@ class ScenePreview:
             self.stats.update(img.stats)
             self.stats.update(self.terrain.cull_stats)
             yield img.image[..., :3] if read else None
+            self._warm_up_hold.release()
 
     def _release_passes(self) -> None:
         if self.renderer is not None:
@@ -444,6 +452,7 @@ class ScenePreview:
         self.renderer = self.objects = None
 
     def release(self) -> None:
+        self._warm_up_hold.release()
         self._release_passes()
         if self._own_ctx:
             self.ctx.release()
