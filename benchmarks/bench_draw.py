@@ -12,7 +12,10 @@ draws and waits with glFinish):
   GLSL 1.20, base x light map, the same GL state);
 
 both with the buffers already on the GPU ("draw") and with the mesh written into them first
-("upload + draw", as piste's CPU path streams it every frame).  The two pictures are compared
+("upload + draw", as piste's CPU path streams it every frame).  A third, diagnostic contender draws
+on piste's context with moderngl and vispy's minimal shader (GLSL 3.30, base x light map, the same
+textures): where it matches vispy and piste does not, the difference is piste's terrain shader (its
+world-position varying, track, fog and geomorph branches), not the API.  The two pictures are compared
 (mean and max difference, pixels more than 2 levels apart) to show they draw the same thing.
 
 If vispy cannot run headless here, the reason (vispy's error text) is printed and recorded instead
@@ -34,6 +37,66 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _timing import interleaved, ms, record, stat  # noqa: E402
+
+
+_MIN_VS = """#version 330 core
+uniform mat4 u_mvp;
+in vec3 in_pos;
+in vec2 in_uv;
+in vec2 in_uvl;
+out vec2 v_uv;
+out vec2 v_uvl;
+void main() { gl_Position = u_mvp * vec4(in_pos, 1.0); v_uv = in_uv; v_uvl = in_uvl; }
+"""
+_MIN_FS = """#version 330 core
+uniform sampler2D u_base;
+uniform sampler2D u_light;
+in vec2 v_uv;
+in vec2 v_uvl;
+out vec4 f_color;
+void main() { f_color = vec4(texture(u_base, v_uv).rgb * texture(u_light, v_uvl).rgb, 1.0); }
+"""
+
+
+class MinimalShader:
+    """Diagnostic: piste's context and textures, moderngl, vispy's minimal shader."""
+
+    def __init__(self, ctx, terrain_pass):
+        self.ctx, self.tp = ctx, terrain_pass
+        self.prog = ctx.program(vertex_shader=_MIN_VS, fragment_shader=_MIN_FS)
+        self.prog["u_base"].value, self.prog["u_light"].value = 0, 1
+        self.vao, self.bufs = None, []
+
+    def upload(self, mesh) -> None:
+        for b in self.bufs + ([self.vao] if self.vao else []):
+            b.release()
+        ctx = self.ctx
+        self.bufs = [ctx.buffer(np.ascontiguousarray(a, dtype=dt)) for a, dt in
+                     ((mesh.positions, np.float32), (mesh.uv, np.float32), (mesh.uv_lightmap, np.float32),
+                      (mesh.indices, np.uint32))]
+        self.vao = ctx.vertex_array(self.prog, [(self.bufs[0], "3f", "in_pos"), (self.bufs[1], "2f", "in_uv"),
+                                                (self.bufs[2], "2f", "in_uvl")], self.bufs[3], index_element_size=4)
+
+    def draw(self, vp) -> None:
+        import moderngl
+
+        ctx = self.ctx
+        self.tp.base.use(0)
+        self.tp.light.use(1)
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.BLEND)
+        if self.tp.cull_back:
+            ctx.enable(moderngl.CULL_FACE)
+            ctx.cull_face = "back"
+        ctx.depth_func = "<"
+        self.prog["u_mvp"].write(np.asarray(vp, dtype=np.float32).T.tobytes())
+        self.vao.render(moderngl.TRIANGLES)
+        ctx.disable(moderngl.CULL_FACE)
+
+    def release(self) -> None:
+        for b in self.bufs + [self.vao, self.prog]:
+            if b is not None:
+                b.release()
 
 
 def main(argv=None) -> int:
@@ -76,8 +139,11 @@ def main(argv=None) -> int:
     print(f"vispy: {desc}; {gl.glGetParameter(gl.GL_RENDERER)}, {gl.glGetParameter(gl.GL_VERSION)}")
 
     ts = np.linspace(0.3, 0.8, frames) if frames > 1 else [0.3]
-    res = {k: [] for k in ("piste draw", "vispy draw", "piste upload+draw", "vispy upload+draw")}
-    print(f"\n{'camera t':>8s} {'tris':>8s}  " + "  ".join(f"{k:>30s}" for k in res) + f"  {'img mean/max':>13s} {'>2 lv':>6s}")
+    with ctx:
+        mini = MinimalShader(ctx, r.terrain)
+    res = {k: [] for k in ("piste draw", "vispy draw", "piste upload+draw", "vispy upload+draw", "moderngl min. shader")}
+    print(f"\n{'camera t':>8s} {'tris':>8s}  " + "  ".join(f"{k:>30s}" for k in res)
+          + f"  {'vispy-piste img mean/max':>24s} {'>2 lv':>6s} {'min. shader-piste':>17s}")
     for t in ts:
         cam = track_camera(line, t)
         cam = replace(cam, aspect=size[0] / size[1])
@@ -101,11 +167,20 @@ def main(argv=None) -> int:
             vt.upload(mesh)
             vt.draw(vp)
 
+        def mini_draw():
+            with ctx:
+                r.target.use()
+                r.target.clear((0.0, 0.0, 0.0, 1.0))
+                mini.draw(vp)
+                ctx.finish()
+
         with ctx:
             r.terrain.upload(mesh)
+            mini.upload(mesh)
         vt.upload(mesh)
         tt = interleaved({"piste draw": piste_draw, "vispy draw": lambda: vt.draw(vp),
-                          "piste upload+draw": piste_upload_draw, "vispy upload+draw": vispy_upload_draw}, rounds, warmup=2)
+                          "piste upload+draw": piste_upload_draw, "vispy upload+draw": vispy_upload_draw,
+                          "moderngl min. shader": mini_draw}, rounds, warmup=2)
         for k, v in tt.items():
             res[k].append(v)
         # the same picture?
@@ -115,12 +190,15 @@ def main(argv=None) -> int:
         vt.draw(vp)
         b = vt.read()[..., :3].astype(np.int16)
         d = np.abs(a - b)
+        mini_draw()
+        with ctx:
+            dm = np.abs(r.target.read()[..., :3].astype(np.int16) - a)
         if os.environ.get("BENCH_DRAW_DUMP"):
             from PIL import Image
 
             Image.fromarray(np.concatenate([a, b], axis=1).astype(np.uint8)).save(os.environ["BENCH_DRAW_DUMP"])
         print(f"{t:8.2f} {mesh.n_triangles:8,d}  " + "  ".join(f"{ms(tt[k]):>30s}" for k in res)
-              + f"  {d.mean():6.3f}/{d.max():<6d} {(d.max(axis=2) > 2).mean():6.2%}")
+              + f"  {d.mean():17.3f}/{d.max():<6d} {(d.max(axis=2) > 2).mean():6.2%} {dm.mean():10.3f}/{dm.max():<6d}")
 
     allt = {k: np.concatenate(v) for k, v in res.items()}
     print(f"\nall cameras ({frames} x {rounds} interleaved rounds; load {os.getloadavg()[0]:.2f}):")
@@ -130,8 +208,13 @@ def main(argv=None) -> int:
               f"vispy / piste time {v / p:.2f}x")
         record("draw", f"terrain mesh {what} vs vispy.gloo ({size[0]}x{size[1]})", "<= vispy",
                f"{p * 1e3:.2f} ms", f"vispy {v * 1e3:.2f} ms", f"{v / p:.2f}x", p <= v * 1.05)
+    m = stat(allt["moderngl min. shader"])[0]
+    print(f"  diagnostic: moderngl + the minimal shader on piste's context {ms(allt['moderngl min. shader'])}: "
+          f"piste's terrain shader costs {stat(allt['piste draw'])[0] / m:.2f}x the minimal one's time; vispy takes "
+          f"{stat(allt['vispy draw'])[0] / m:.2f}x it")
     vt.release()
     with ctx:
+        mini.release()
         r.release()
     return 0
 
