@@ -138,6 +138,7 @@ def main(argv=None) -> int:
     gl = vt.gl
     print(f"vispy: {desc}; {gl.glGetParameter(gl.GL_RENDERER)}, {gl.glGetParameter(gl.GL_VERSION)}")
 
+    differ = 0.0  # the largest fraction of pixels more than 2 levels apart (vispy vs piste) over the cameras
     ts = np.linspace(0.3, 0.8, frames) if frames > 1 else [0.3]
     with ctx:
         mini = MinimalShader(ctx, r.terrain)
@@ -190,6 +191,7 @@ def main(argv=None) -> int:
         vt.draw(vp)
         b = vt.read()[..., :3].astype(np.int16)
         d = np.abs(a - b)
+        differ = max(differ, float((d.max(axis=2) > 2).mean()))
         mini_draw()
         with ctx:
             dm = np.abs(r.target.read()[..., :3].astype(np.int16) - a)
@@ -205,9 +207,10 @@ def main(argv=None) -> int:
     for what in ("draw", "upload+draw"):
         p, v = stat(allt[f"piste {what}"])[0], stat(allt[f"vispy {what}"])[0]
         print(f"  {what:12s} piste {ms(allt[f'piste {what}'])}   vispy {ms(allt[f'vispy {what}'])}   "
-              f"vispy / piste time {v / p:.2f}x")
-        record("draw", f"terrain mesh {what} vs vispy.gloo ({size[0]}x{size[1]})", "<= vispy",
-               f"{p * 1e3:.2f} ms", f"vispy {v * 1e3:.2f} ms", f"{v / p:.2f}x", p <= v * 1.05)
+              f"piste takes {p / v:.2f}x vispy's time")
+        record("draw", f"terrain mesh {what} vs vispy.gloo ({size[0]}x{size[1]}, "
+               + ("same picture)" if differ < 1e-3 else f"{differ:.1%} of pixels differ)"), "<= vispy's time",
+               f"{p * 1e3:.2f} ms", f"vispy {v * 1e3:.2f} ms", f"piste {p / v:.2f}x vispy's time", p <= v * 1.05)
     m = stat(allt["moderngl min. shader"])[0]
     print(f"  diagnostic: moderngl + the minimal shader on piste's context {ms(allt['moderngl min. shader'])}: "
           f"piste's terrain shader costs {stat(allt['piste draw'])[0] / m:.2f}x the minimal one's time; vispy takes "
