@@ -9,21 +9,21 @@ uniform sampler2D u_light;
 #define TERRAIN_MODE 0
 #endif
 const int u_mode = TERRAIN_MODE;
-uniform vec3 u_eye;
 uniform vec4 u_fog;
 uniform vec3 u_color;
 uniform vec3 u_lod_colors[4];  // glue, 4x4, 6x6, 8x8
 in vec2 v_uv;
 in vec2 v_uvl;
-in vec3 v_world;
+in vec2 v_track;
+in float v_fog;
 flat in float v_kind;
 out vec4 f_color;
 void main() {
     vec3 c;
     if (u_mode == 0) {
-        c = base_color(v_uv, v_world) * texture(u_light, v_uvl).rgb;
+        c = base_color(v_uv, v_track) * texture(u_light, v_uvl).rgb;
     } else if (u_mode == 1) {
-        c = base_color(v_uv, v_world);
+        c = base_color(v_uv, v_track);
     } else if (u_mode == 2) {
         c = texture(u_light, v_uvl).rgb;
     } else if (u_mode == 3 || u_mode == 5) {
@@ -36,8 +36,7 @@ void main() {
         c = u_color;
     }
     if (u_fog.a > 0.0 && u_mode < 4) {
-        float f = 1.0 - exp(-u_fog.a * distance(v_world, u_eye));
-        c = mix(c, u_fog.rgb, f);
+        c = mix(c, u_fog.rgb, v_fog);  // the factor per vertex
     }
     f_color = vec4(c, 1.0);
 }

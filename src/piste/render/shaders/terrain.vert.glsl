@@ -8,7 +8,13 @@
 // slot comes from u_morph (one float per slot, 1024 a row) and the drawn position is
 // target + f (position - target).  Both copies of a shared edge vertex have the same inputs, so
 // they land on the same bits.
+//
+// Per vertex too (the PS2 fogged per vertex): the fog factor v_fog (u_fog.a = density per metre,
+// 0 off) and the track field's coordinates v_track (linear in world x-y, so exact when interpolated).
 uniform mat4 u_mvp;
+uniform vec3 u_eye;
+uniform vec4 u_fog;
+uniform vec4 u_track_rect;   // x0, y0, 1/width, 1/height of the track field in metres
 uniform float u_depth_bias;  // clip-space z offset, a fraction of w (wireframe overlay)
 uniform int u_morph_on;
 uniform sampler2D u_morph;
@@ -21,6 +27,8 @@ in float in_kind;
 out vec2 v_uv;
 out vec2 v_uvl;
 out vec3 v_world;
+out vec2 v_track;
+out float v_fog;
 flat out float v_kind;
 invariant gl_Position;
 void main() {
@@ -35,5 +43,7 @@ void main() {
     v_uv = in_uv;
     v_uvl = in_uvl;
     v_world = p;
+    v_track = (p.xy - u_track_rect.xy) * u_track_rect.zw;
+    v_fog = u_fog.a > 0.0 ? 1.0 - exp(-u_fog.a * distance(p, u_eye)) : 0.0;
     v_kind = in_kind;
 }
