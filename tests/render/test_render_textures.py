@@ -26,6 +26,23 @@ def test_snow_is_bright_deterministic_and_tileable():
         snow_texture(100)
 
 
+def test_snow_noise_is_the_full_spectrum_formula():
+    """The half-spectrum FFTs (rfft2/irfft2) give the texture of the full complex spectrum."""
+    from piste.render.textures import _periodic_noise
+
+    def full(n, rng, beta, lo, hi):
+        f = np.fft.fftfreq(n) * n
+        fr = np.hypot(f[:, None], f[None, :])
+        amp = np.where((fr >= lo) & (fr <= hi), np.maximum(fr, 1.0) ** (-beta / 2.0), 0.0)
+        out = np.real(np.fft.ifft2(np.fft.fft2(rng.standard_normal((n, n))) * amp))
+        return out / max(np.abs(out).max(), 1e-12)
+
+    for n, beta, lo, hi in ((256, 3.0, 1, 32), (64, 1.0, 4, 32), (8, 1.0, 1, 4)):
+        a = _periodic_noise(n, np.random.default_rng(n), beta, lo, hi)
+        b = full(n, np.random.default_rng(n), beta, lo, hi)
+        assert a.shape == (n, n) and np.abs(a - b).max() < 1e-12
+
+
 def _flat_net(n=3, tilt=0.0):
     cp = np.zeros((n, 4, 4, 3))
     i, j = np.meshgrid(np.arange(4), np.arange(4), indexing="ij")
