@@ -1,7 +1,6 @@
 #version 330 core
 // Objects: texture x per-vertex light (u_mode_frag 1: the light alone, for tests), fog.
 uniform sampler2D u_tex;
-uniform vec3 u_eye;
 uniform vec4 u_fog;
 #ifndef OBJECT_MODE_FRAG
 uniform int u_mode_frag;
@@ -16,7 +15,7 @@ const int u_mode_frag = OBJECT_MODE_FRAG;
 #endif
 in vec3 v_color;
 in vec2 v_uv;
-in vec3 v_world;
+in float v_fog;   // 1 - exp(-density x distance), per vertex
 out vec4 f_color;
 void main() {
     vec4 t = texture(u_tex, v_uv);
@@ -27,7 +26,7 @@ void main() {
 #endif
     vec3 c = u_mode_frag == 1 ? v_color : t.rgb * v_color;
     if (u_fog.a > 0.0) {
-        c = mix(c, u_fog.rgb, 1.0 - exp(-u_fog.a * distance(v_world, u_eye)));
+        c = mix(c, u_fog.rgb, v_fog);
     }
 #if OBJECT_BLEND
     // glTF alphaMode BLEND: the texel's alpha (the blend pass: SRC_ALPHA, ONE_MINUS_SRC_ALPHA)

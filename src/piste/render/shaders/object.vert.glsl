@@ -10,6 +10,8 @@
 // u_mode: 0 dynamic (1 ambient + 3 directional, the talk's SSX scheme), 1 baked RGBs (half-bright
 // RGB8, 128 = 1.0, per instance vertex), 2 dynamic point and spot lights (the full equation).
 uniform mat4 u_vp;
+uniform vec3 u_eye;
+uniform vec4 u_fog;          // rgb, density per metre (0: none): the fog factor per vertex (v_fog)
 uniform sampler2D u_inst;
 uniform int u_base_row;
 uniform vec3 u_pos_offset;
@@ -36,6 +38,7 @@ in ivec2 in_nrm;
 out vec3 v_color;
 out vec2 v_uv;
 out vec3 v_world;
+out float v_fog;
 
 #ifdef OBJECT_INSTANCE_ATTRIBS
 // the same 14 texels as per-instance vertex attributes (13 vec4: the normal-matrix and light-direction
@@ -80,6 +83,7 @@ void main() {
     vec3 wn = normalize(nmat * n);
     gl_Position = u_vp * world;
     v_world = world.xyz;
+    v_fog = u_fog.a > 0.0 ? 1.0 - exp(-u_fog.a * distance(world.xyz, u_eye)) : 0.0;
     v_uv = u_uv_offset + u_uv_extent * (vec2(in_uv) / 65535.0);
     vec4 amb = inst(13);
     if (u_mode == 1) {
