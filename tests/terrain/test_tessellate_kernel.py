@@ -1,5 +1,5 @@
-"""The compiled CPU tessellation path (numba: ``_kernels.tess_plan`` + ``tess_gather``) against the
-numpy path, field by field and bit for bit, and the pieces it relies on (bitwise UV snapshots)."""
+"""The compiled CPU tessellation path (numba: ``_kernels.tess_frame``) against the numpy path, field
+by field and bit for bit, and the pieces it relies on (shape registry, bitwise UV snapshots)."""
 
 import numpy as np
 import pytest
@@ -44,11 +44,12 @@ def n_levels_present(levels) -> int:
 @pytest.mark.parametrize("choices", [(4, 6, 8), (2, 3, 4, 5, 6, 7, 8), tuple(range(2, 65)), (6,), (2, 8)])
 @pytest.mark.parametrize("seed", range(3))
 def test_compiled_bit_identical_to_numpy(choices, seed):
-    """Every field, for every patch subset shape: all patches, a shuffled subset with repeats, one."""
-    net = grid_net(6, 7, seed=seed)
+    """Every field, for every patch subset shape: all patches, a shuffled subset with repeats, one.
+    (Many levels: a small net, the vertex cache holds every level: ~30 MB for 2..64 and 6 patches.)"""
+    net = grid_net(6, 7, seed=seed) if len(choices) <= 8 else grid_net(2, 3, seed=seed)
     rng = np.random.default_rng(seed)
     levels = rng.choice(choices, net.n_edges).astype(np.int16)
-    subsets = (None, rng.integers(0, len(net), 30), [int(rng.integers(len(net)))])
+    subsets = (None, rng.integers(0, len(net), 2 * len(net)), [int(rng.integers(len(net)))])
     for patches in subsets:
         for strips in (False, True):
             a = tessellate(net, levels, patches=patches, strips=strips)  # compiled (warmed up)
@@ -62,9 +63,9 @@ def test_compiled_bit_identical_to_numpy(choices, seed):
 def test_both_sorts_of_the_compiled_plan_are_exercised():
     """Few levels present: counting sort on ranked keys; many: the stable argsort.  Both orders must
     equal numpy's stable argsort of the full keys (checked above); here: both branches are reached."""
-    net = grid_net(6, 7, seed=1)
     rng = np.random.default_rng(1)
     for choices, counting in (((4, 6, 8), True), (tuple(range(2, 65)), False)):
+        net = grid_net(6, 7, seed=1) if counting else grid_net(2, 3, seed=1)
         levels = rng.choice(choices, net.n_edges)
         assert (2 * n_levels_present(levels) ** 5 <= 65536) == counting
         assert_same(tessellate(net, levels, use_numba=True), tessellate(net, levels, use_numba=False))
@@ -122,12 +123,20 @@ def test_bad_levels_reported_alike():
     assert msgs[0] == msgs[1] and "4..70" in msgs[0]
 
 
+LAYOUTS = {
+    "permuted": lambda uv: np.ascontiguousarray(uv.transpose(1, 0, 2)).transpose(1, 0, 2),  # as the course's
+    "not dense": lambda uv: np.repeat(uv, 2, axis=2)[:, :, ::2],  # compared in Python, not by the kernel
+    "C": np.ascontiguousarray,
+}
+
+
 @pytest.mark.parametrize("use_numba", BOTH)
-def test_vertex_cache_follows_in_place_uv_edits(use_numba):
-    """One changed UV (a single-ulp edit, in place, in a non-contiguous array) rebuilds the cache."""
+@pytest.mark.parametrize("layout", LAYOUTS)
+def test_vertex_cache_follows_in_place_uv_edits(use_numba, layout):
+    """One changed UV (a single-ulp edit, in place, whatever the array's layout) rebuilds the cache."""
     net = grid_net(3, 3, flips=False)
-    net.uv = np.ascontiguousarray(net.uv.transpose(1, 0, 2)).transpose(1, 0, 2)  # strided, as the course's
-    assert not net.uv.flags.c_contiguous
+    net.uv = LAYOUTS[layout](net.uv)
+    assert np.array_equal(net.uv, grid_net(3, 3, flips=False).uv)
     before = tessellate(net, 4, use_numba=use_numba).uv.copy()
     net.uv[4, 2, 1] = np.nextafter(net.uv[4, 2, 1], np.float32(2))
     after = tessellate(net, 4, use_numba=use_numba)
@@ -178,9 +187,39 @@ def test_read_only_inputs_use_the_warmed_kernels():
     levels = np.random.default_rng(2).choice([4, 6, 8], net.n_edges).astype(np.int16)
     pids = np.arange(0, len(net), 2, dtype=np.int64)
     ref = tessellate(net, levels, patches=pids, use_numba=False)
-    kernels = (_kernels._tess_plan_nb.compiled, _kernels._tess_gather_nb.compiled)
-    n_sigs = [len(k.signatures) for k in kernels]
+    n_sigs = len(_kernels._tess_frame_nb.compiled.signatures)
     levels.setflags(write=False)
     pids.setflags(write=False)
     assert_same(tessellate(net, levels, patches=pids, use_numba=True), ref)
-    assert [len(k.signatures) for k in kernels] == n_sigs
+    assert len(_kernels._tess_frame_nb.compiled.signatures) == n_sigs
+
+
+@needs_numba
+def test_tess_frame_statuses():
+    """The kernel reports unknown shapes and a stale vertex cache instead of reading past them."""
+    from piste.terrain.tessellate import _SHAPES, key_levels
+
+    net = grid_net(2, 2, seed=4)
+    lv = np.full(net.n_edges, 7, np.int16)  # level 7: used by no other test here
+    lv[net.side_edge[0, 1]] = 5
+    pids = np.arange(len(net), dtype=np.int64)
+    empty_registry = (np.zeros(0, np.int64),) * 2 + _SHAPES.arrays[2:]
+    u8 = np.zeros(0, np.uint8)
+    nothing_built = np.full(65, -1, np.int64)
+    grid = np.zeros((0, 14), np.float32)
+    out = _kernels.tess_frame(lv, net.side_edge, pids, len(net), 64, empty_registry, nothing_built, grid, (u8,) * 4)
+    assert out[0] == _kernels.TESS_NEW_SHAPES
+    keys = out[1]
+    assert list(keys) == sorted(keys) and {key_levels(int(k)) for k in keys} >= {(7, 7, 7, 7)}
+    _SHAPES.add(keys.tolist())
+    out = _kernels.tess_frame(lv, net.side_edge, pids, len(net), 64, _SHAPES.arrays, nothing_built, grid, (u8,) * 4)
+    assert out[0] == _kernels.TESS_STALE and len(out[7]) == 0
+    bad = lv.copy()
+    bad[0] = 1
+    out = _kernels.tess_frame(bad, net.side_edge, pids, len(net), 64, _SHAPES.arrays, nothing_built, grid, (u8,) * 4)
+    assert out[0] == _kernels.TESS_INVALID and list(out[2][:2]) == [1, 7]
+    out = _kernels.tess_frame(lv, net.side_edge, pids[:0], len(net), 64, _SHAPES.arrays, nothing_built, grid,
+                              (u8,) * 4)
+    assert out[0] == _kernels.TESS_EMPTY
+    mesh = tessellate(net, lv, use_numba=True)  # registers, builds levels 5 and 7, then draws
+    assert_same(mesh, tessellate(net, lv, use_numba=False))

@@ -9,9 +9,9 @@ nothing here does floating-point arithmetic, only copies and integer offsets.
 Kernels
 -------
 frame_indices      per-frame index list from resident shape templates (vertex pulling by block)
-tess_plan          the CPU tessellation path, first half: patches sorted by shape, shapes found
-tess_gather        second half: vertices copied from the per-level vertex cache and indices
-                   offset per patch, straight into the outputs
+tess_frame         the CPU tessellation path in one call: patches sorted by shape, the vertex
+                   cache checked, vertices copied from it and indices offset per patch,
+                   straight into the outputs
 side_lod           per-side level, shape key and morph factors of the visible patches
 cull_tree          depth-first frustum walk of a :class:`piste.terrain.cull.PatchTree`
 """
@@ -22,7 +22,7 @@ import numpy as np
 
 from piste._jit import HAVE_NUMBA, lazy_njit
 
-__all__ = ["HAVE_NUMBA", "frame_indices", "tess_plan", "tess_gather", "same_bytes", "ragged_arange", "side_lod",
+__all__ = ["HAVE_NUMBA", "frame_indices", "tess_frame", "same_bytes", "ragged_arange", "side_lod",
            "cull_tree"]
 
 
@@ -98,20 +98,16 @@ def frame_indices(key: np.ndarray, base: np.ndarray, tmpl: np.ndarray, tstart: n
 KEY_BASE = 65
 
 
-def _tess_plan_py(lv, side_edge, pids, n_patches, max_level, pids_out, side_out, kind_out, shape_of, ukey, ucount,
-                  check):
-    """The patches ``pids`` sorted by shape key (stable), and the shapes they use.
+#: :func:`tess_frame` status codes
+TESS_OK, TESS_INVALID, TESS_EMPTY, TESS_NEW_SHAPES, TESS_STALE = 0, 1, 2, 3, 4
 
-    Fills the sorted ids ``pids_out``, their side levels ``side_out (p, 4) int16``, their kind
-    ``kind_out (p,) int8`` (the level of a uniform patch, 0 for a glue patch), ``shape_of (p,)``
-    (index into the shapes) and the shapes' keys ``ukey`` and patch counts ``ucount`` (ascending
-    keys).  ``check`` gets the lowest and highest level of ``lv`` and 1 if a patch id is outside
-    ``0..n_patches-1`` (nothing else is written then, nor when a level is outside 2..max_level).
-    Returns the number of shapes.
 
-    The sort is a counting sort over the keys rewritten with the levels present in ``lv`` ranked
-    (the same order; a small key space when few levels are in use, as with distance LOD: 486
-    buckets for 4/6/8), or a stable argsort when too many levels are present for that."""
+def _tess_frame_py(lv, side_edge, pids, n_patches, max_level, reg_keys, reg_rows, stab, src_level, src_slot, tris,
+                   level_row, grid, uv_now, uv_snap, lm_now, lm_snap, pids_out, side_out, kind_out, shape_of, ukey,
+                   check):
+    """One frame of the cached CPU tessellation: sort, check, gather (see :func:`tess_frame`)."""
+    nf0 = grid.shape[1]
+    # -- the patches sorted by shape key (stable), the shapes they use
     p = pids.shape[0]
     ne = lv.shape[0]
     lmin = np.int64(lv[0]) if ne else np.int64(2)
@@ -127,142 +123,175 @@ def _tess_plan_py(lv, side_edge, pids, n_patches, max_level, pids_out, side_out,
     check[0] = lmin
     check[1] = lmax
     check[2] = bad
-    if bad or lmin < 2 or lmax > max_level or p == 0:
-        return 0
-    rank = np.zeros(max_level + 1, np.int64)
-    for e in range(np.uint64(ne)):
-        rank[lv[e]] = 1
-    level_of = np.empty(max_level + 1, np.int64)
-    nl = 0
-    for n in range(max_level + 1):
-        if rank[n]:
-            rank[n] = nl
-            level_of[nl] = n
-            nl += 1
-    n_buckets = 2 * nl ** 5
-    if n_buckets <= 65536:  # counting sort on the ranked key
-        ck = np.empty(p, np.int64)
-        hist = np.zeros(n_buckets, np.int64)
-        for i in range(np.uint64(p)):  # (unsigned indices: no wrap-around tests, ~1.7x faster)
-            q = np.uint64(pids[i])
-            a = rank[np.uint64(lv[np.uint64(side_edge[q, 0])])]
-            b = rank[np.uint64(lv[np.uint64(side_edge[q, 1])])]
-            c = rank[np.uint64(lv[np.uint64(side_edge[q, 2])])]
-            d = rank[np.uint64(lv[np.uint64(side_edge[q, 3])])]
-            m = max(max(a, b), max(c, d))
-            glue = 1 if (a != m or b != m or c != m or d != m) else 0
-            k = ((((glue * nl + m) * nl + a) * nl + b) * nl + c) * nl + d
-            ck[i] = k
-            hist[np.uint64(k)] += 1
-        bucket_shape = np.empty(n_buckets, np.int64)
-        slev = np.empty((p, 4), np.int64)
-        skind = np.empty(p, np.int64)
-        u = 0
-        o = 0
-        for k in range(n_buckets):
-            cnt = hist[k]
-            if cnt:
-                r = k
-                lvl = np.empty(6, np.int64)
-                for dgt in range(5, -1, -1):
-                    lvl[dgt] = r % nl if dgt else r
-                    r //= nl
-                glue = lvl[0]
-                key = glue
-                for dgt in range(1, 6):
-                    key = key * 65 + level_of[lvl[dgt]]
+    u_count = 0
+    if not (bad or lmin < 2 or lmax > max_level or p == 0):
+        rank = np.zeros(max_level + 1, np.int64)
+        for e in range(np.uint64(ne)):
+            rank[lv[e]] = 1
+        level_of = np.empty(max_level + 1, np.int64)
+        nl = 0
+        for n in range(max_level + 1):
+            if rank[n]:
+                rank[n] = nl
+                level_of[nl] = n
+                nl += 1
+        n_buckets = 2 * nl ** 5
+        if n_buckets <= 65536:  # counting sort on the ranked key
+            ck = np.empty(p, np.int64)
+            hist = np.zeros(n_buckets, np.int64)
+            for i in range(np.uint64(p)):  # (unsigned indices: no wrap-around tests, ~1.7x faster)
+                q = np.uint64(pids[i])
+                a = rank[np.uint64(lv[np.uint64(side_edge[q, 0])])]
+                b = rank[np.uint64(lv[np.uint64(side_edge[q, 1])])]
+                c = rank[np.uint64(lv[np.uint64(side_edge[q, 2])])]
+                d = rank[np.uint64(lv[np.uint64(side_edge[q, 3])])]
+                m = max(max(a, b), max(c, d))
+                glue = 1 if (a != m or b != m or c != m or d != m) else 0
+                k = ((((glue * nl + m) * nl + a) * nl + b) * nl + c) * nl + d
+                ck[i] = k
+                hist[np.uint64(k)] += 1
+            bucket_shape = np.empty(n_buckets, np.int64)
+            slev = np.empty((p, 4), np.int64)
+            skind = np.empty(p, np.int64)
+            u = 0
+            o = 0
+            for k in range(n_buckets):
+                cnt = hist[k]
+                if cnt:
+                    r = k
+                    lvl = np.empty(6, np.int64)
+                    for dgt in range(5, -1, -1):
+                        lvl[dgt] = r % nl if dgt else r
+                        r //= nl
+                    glue = lvl[0]
+                    full_key = glue
+                    for dgt in range(1, 6):
+                        full_key = full_key * 65 + level_of[lvl[dgt]]
+                    for s in range(4):
+                        slev[u, s] = level_of[lvl[2 + s]]
+                    skind[u] = 0 if glue else level_of[lvl[1]]
+                    ukey[u] = full_key
+                    bucket_shape[k] = u
+                    u += 1
+                hist[k] = o
+                o += cnt
+            for i in range(np.uint64(p)):
+                k = np.uint64(ck[i])
+                j = np.uint64(hist[k])
+                hist[k] = j + 1
+                g = bucket_shape[k]
+                pids_out[j] = pids[i]
+                shape_of[j] = g
+                g = np.uint64(g)
                 for s in range(4):
-                    slev[u, s] = level_of[lvl[2 + s]]
-                skind[u] = 0 if glue else level_of[lvl[1]]
-                ukey[u] = key
-                ucount[u] = cnt
-                bucket_shape[k] = u
-                u += 1
-            hist[k] = o
-            o += cnt
-        for i in range(np.uint64(p)):
-            k = np.uint64(ck[i])
-            j = np.uint64(hist[k])
-            hist[k] = j + 1
-            g = bucket_shape[k]
-            pids_out[j] = pids[i]
-            shape_of[j] = g
-            g = np.uint64(g)
-            for s in range(4):
-                side_out[j, s] = slev[g, s]
-            kind_out[j] = skind[g]
-        return u
-    key = np.empty(p, np.int64)
-    for i in range(p):
-        q = pids[i]
-        a = np.int64(lv[side_edge[q, 0]])
-        b = np.int64(lv[side_edge[q, 1]])
-        c = np.int64(lv[side_edge[q, 2]])
-        d = np.int64(lv[side_edge[q, 3]])
-        m = max(max(a, b), max(c, d))
-        glue = 1 if (a != m or b != m or c != m or d != m) else 0
-        key[i] = ((((glue * 65 + m) * 65 + a) * 65 + b) * 65 + c) * 65 + d
-    order = np.argsort(key, kind="mergesort")  # stable, as numpy's
-    u = -1
-    prev = -1
-    for j in range(p):
-        i = order[j]
-        k = key[i]
-        if k != prev:
-            u += 1
-            ukey[u] = k
-            ucount[u] = 0
-            prev = k
-        ucount[u] += 1
-        shape_of[j] = u
-        q = pids[i]
-        pids_out[j] = q
-        m = 0
-        for s in range(4):
-            x = lv[side_edge[q, s]]
-            side_out[j, s] = x
-            m = max(m, np.int64(x))
-        kind_out[j] = 0 if k >= 65 ** 5 else m
-    return u + 1
-
-
-def _ex_tess_plan():
-    i8 = np.zeros(1, np.int64)
-    return (np.full(4, 4, np.int16), np.zeros((1, 4), np.int32), i8, 1, 64, i8.copy(), np.zeros((1, 4), np.int16),
-            np.zeros(1, np.int8), i8.copy(), i8.copy(), i8.copy(), np.zeros(3, np.int64))
-
-
-_tess_plan_nb = _jit(_tess_plan_py, _ex_tess_plan)
-
-
-def _tess_gather_py(pids, shape_of, stab, src_level, src_slot, tris, level_row, grid, vertex_start, tri_start):
-    """Vertices, indices and vertex -> patch of the sorted patches ``pids`` from the level-major
-    vertex cache ``grid (rows, f) float32``, in one pass straight into the outputs.
-
-    Offsets are unsigned: numba then drops the negative-index wrap-around test, and the copy loops
-    vectorise (2-4x faster)."""
-    p = pids.shape[0]
+                    side_out[j, s] = slev[g, s]
+                kind_out[j] = skind[g]
+            u_count = u
+        else:
+            key = np.empty(p, np.int64)
+            for i in range(p):
+                q = pids[i]
+                a = np.int64(lv[side_edge[q, 0]])
+                b = np.int64(lv[side_edge[q, 1]])
+                c = np.int64(lv[side_edge[q, 2]])
+                d = np.int64(lv[side_edge[q, 3]])
+                m = max(max(a, b), max(c, d))
+                glue = 1 if (a != m or b != m or c != m or d != m) else 0
+                key[i] = ((((glue * 65 + m) * 65 + a) * 65 + b) * 65 + c) * 65 + d
+            order = np.argsort(key, kind="mergesort")  # stable, as numpy's
+            u = -1
+            prev = -1
+            for j in range(p):
+                i = order[j]
+                k = key[i]
+                if k != prev:
+                    u += 1
+                    ukey[u] = k
+                    prev = k
+                shape_of[j] = u
+                q = pids[i]
+                pids_out[j] = q
+                m = 0
+                for s in range(4):
+                    x = lv[side_edge[q, s]]
+                    side_out[j, s] = x
+                    m = max(m, np.int64(x))
+                kind_out[j] = 0 if k >= 65 ** 5 else m
+            u_count = u + 1
+    u = u_count
+    if u == 0:
+        status = TESS_INVALID if (check[2] or check[0] < 2 or check[1] > max_level) else TESS_EMPTY
+        return (status, 0, np.empty((0, nf0), np.float32), np.empty((0, 3), np.uint32), np.empty(0, np.int32),
+                np.zeros(1, np.int64), np.zeros(1, np.int64))
+    # each shape's row in the registry (binary search of its sorted keys)
+    rows = np.empty(u, np.int64)
+    nreg = reg_keys.shape[0]
+    missing = False
+    for j in range(u):
+        lo = 0
+        hi = nreg
+        k = ukey[j]
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if reg_keys[mid] < k:
+                lo = mid + 1
+            else:
+                hi = mid
+        if lo < nreg and reg_keys[lo] == k:
+            rows[j] = reg_rows[lo]
+        else:
+            missing = True
+    stale = False
+    if not missing:
+        for j in range(u):
+            r = rows[j]
+            if level_row[stab[r, 3]] < 0:
+                stale = True
+            for c in range(6, 10):
+                if level_row[stab[r, c]] < 0:
+                    stale = True
+        d = np.uint64(0)  # the vertex cache's UVs still the net's (bitwise)?
+        if uv_now.shape[0] != uv_snap.shape[0] or lm_now.shape[0] != lm_snap.shape[0]:
+            stale = True
+        else:
+            for a, b in ((uv_now, uv_snap), (lm_now, lm_snap)):
+                n8 = a.shape[0] // 8 * 8
+                a8 = a[:n8].view(np.uint64)
+                b8 = b[:n8].view(np.uint64)
+                for i in range(np.uint64(a8.shape[0])):  # 8 bytes a step, unsigned: vectorised
+                    d |= a8[i] ^ b8[i]
+                for i in range(n8, a.shape[0]):
+                    d |= np.uint64(a[i] ^ b[i])
+            stale = stale or d != 0
+    if missing or stale:
+        return (TESS_NEW_SHAPES if missing else TESS_STALE, u, np.empty((0, nf0), np.float32),
+                np.empty((0, 3), np.uint32), np.empty(0, np.int32), np.zeros(1, np.int64), np.zeros(1, np.int64))
+    # the gather: vertices from the level-major vertex cache, indices offset, vertex -> patch.  Offsets
+    # are unsigned: numba then drops the negative-index wrap-around test and the copies vectorise.
+    p = pids_out.shape[0]
+    vertex_start = np.empty(p + 1, np.int64)
+    tri_start = np.empty(p + 1, np.int64)
     v = 0
     t = 0
     for i in range(p):
         vertex_start[i] = v
         tri_start[i] = t
-        g = shape_of[i]
+        g = rows[shape_of[i]]
         v += stab[g, 0]
         t += stab[g, 1]
     vertex_start[p] = v
     tri_start[p] = t
-    vert = np.empty((v, grid.shape[1]), np.float32)
+    vert = np.empty((v, nf0), np.float32)
     indices = np.empty((t, 3), np.uint32)
     vpatch = np.empty(v, np.int32)
-    nf = np.uint64(grid.shape[1])
+    nf = np.uint64(nf0)
     g1 = grid.reshape(-1)
     v1 = vert.reshape(-1)
     i1 = indices.reshape(-1)
     t1 = tris.reshape(-1)
     for i in range(p):
-        q = np.uint64(pids[i])
-        g = shape_of[i]
+        q = np.uint64(pids_out[i])
+        g = rows[shape_of[i]]
         nv = np.uint64(stab[g, 0])
         v0 = np.uint64(vertex_start[i])
         b = v0 * nf
@@ -286,18 +315,23 @@ def _tess_gather_py(pids, shape_of, stab, src_level, src_slot, tris, level_row, 
         ts = np.uint64(stab[g, 5]) * np.uint64(3)
         for k in range(np.uint64(stab[g, 1]) * np.uint64(3)):
             i1[t0 + k] = t1[ts + k] + off
-    return vert, indices, vpatch
+    return TESS_OK, u, vert, indices, vpatch, vertex_start, tri_start
 
 
-def _ex_tess_gather():
+def _ex_tess_frame():
     i8 = np.zeros(1, np.int64)
-    stab = np.array([[4, 2, 1, 2, 0, 0]], np.int64)
-    return (i8, i8.copy(), stab, np.full(4, 2, np.int64), np.arange(4, dtype=np.int64),
-            np.array([[0, 1, 2], [0, 2, 3]], np.uint32), np.zeros(65, np.int64), np.zeros((4, 14), np.float32),
-            np.zeros(2, np.int64), np.zeros(2, np.int64))
+    stab = np.array([[4, 2, 1, 2, 0, 0, 2, 2, 2, 2]], np.int64)
+    level_row = np.full(65, -1, np.int64)
+    level_row[2] = 0
+    u8 = np.zeros(8, np.uint8)
+    key = np.array([((((0 * 65 + 2) * 65 + 2) * 65 + 2) * 65 + 2) * 65 + 2], np.int64)  # uniform, level 2
+    return (np.full(4, 2, np.int16), np.zeros((1, 4), np.int32), i8, 1, 64, key, i8.copy(), stab,
+            np.full(4, 2, np.int64), np.arange(4, dtype=np.int64), np.array([[0, 1, 2], [0, 2, 3]], np.uint32),
+            level_row, np.zeros((4, 14), np.float32), u8, u8.copy(), u8.copy(), u8.copy(), i8.copy(),
+            np.zeros((1, 4), np.int16), np.zeros(1, np.int8), i8.copy(), i8.copy(), np.zeros(3, np.int64))
 
 
-_tess_gather_nb = _jit(_tess_gather_py, _ex_tess_gather)
+_tess_frame_nb = _jit(_tess_frame_py, _ex_tess_frame)
 
 
 def _same_bytes_py(a, b):
@@ -335,55 +369,59 @@ def ready(kernel) -> bool:
     return kernel is not None and kernel.ready()
 
 
-def gather_ready() -> bool:
-    """Whether the compiled CPU tessellation path (:func:`tess_plan` + :func:`tess_gather`) is ready."""
-    return ready(_tess_plan_nb) and ready(_tess_gather_nb)
+def tess_ready() -> bool:
+    """Whether the compiled CPU tessellation (:func:`tess_frame`) is compiled and loaded."""
+    return ready(_tess_frame_nb)
 
 
-def tess_plan(lv, side_edge, pids, n_patches, max_level):
-    """Compiled first half of the cached CPU tessellation (needs numba; the numpy path is
-    :func:`piste.terrain.tessellate`'s own).
+gather_ready = tess_ready  # (its earlier name)
+
+
+def tess_frame(lv, side_edge, pids, n_patches, max_level, registry, level_row, grid, uv_check):
+    """One frame of the cached CPU tessellation, compiled (needs numba; the numpy path is
+    :func:`piste.terrain.tessellate`'s own).  In one call: the patches sorted by shape key
+    (stable: a counting sort over the keys with the present levels ranked, or an argsort when
+    many levels are present), each shape found in the registry, the vertex cache checked (every
+    level built, the UVs unchanged), then every patch's vertices copied from the level-major cache
+    and its triangles offset to its block, straight into the outputs.
 
     Parameters
     ----------
     lv : (e,) int16, vertices per edge
     side_edge : (n, 4) int32, the net's edge of each side
     pids : (p,) int64, the patches to tessellate
+    registry : ``(keys, rows, stab, src_level, src_slot, tris)``: the known shape keys sorted
+        ``(g,) int64`` and their rows of ``stab (g, 10) int64`` (vertices, triangles, uniform,
+        inner level ``m``, first entry in ``src_level`` / ``src_slot``, first triangle in ``tris
+        (t, 3) uint32``, levels n0..n3); ``src_level`` / ``src_slot`` hold the level and the slot
+        in that level's uniform grid of each vertex of each shape
+    level_row : (max_level + 1,) int64, first row of each level's grid in ``grid (rows, f)
+        float32`` (-1: not built); patch ``q``'s slot ``s`` at level ``n`` is row ``level_row[n]
+        + q n^2 + s``
+    uv_check : ``(uv_now, uv_snap, lm_now, lm_snap)``, 1-D uint8: the net's UVs and light-map
+        rects as raw bytes and the vertex cache's snapshot of them
 
     Returns
     -------
-    ``(check, pids, side_levels, kind, shape_of, keys, counts)``: ``check (3,) int64`` = lowest
-    level, highest level, 1 if a patch id is out of range (then, or if a level is outside
-    ``2..max_level``, the other outputs are meaningless); the patches sorted by shape key
-    (stable), ``(p,) int64``; their ``(p, 4) int16`` side levels; ``(p,) int8`` kind (level of a
-    uniform patch, 0 glue); ``(p,) int64`` index of each one's shape; the shapes' keys
-    (ascending, :data:`KEY_BASE` digits glue, m, n0..n3) and patch counts, ``(u,) int64``."""
+    ``(status, keys, check, pids, side_levels, kind, shape_of, vert, indices, vertex_patch,
+    vertex_start, tri_start)``.  ``status``: :data:`TESS_OK`; :data:`TESS_INVALID` (``check (3,) int64`` holds
+    the lowest and highest level and 1 if a patch id is out of range); :data:`TESS_EMPTY`;
+    :data:`TESS_NEW_SHAPES` (``keys`` has shapes not in the registry) or :data:`TESS_STALE` (a
+    level is not built or the UVs changed): register / rebuild and call again.  ``keys (u,)
+    int64`` the shapes' keys ascending (:data:`KEY_BASE` digits glue, m, n0..n3); the patches
+    sorted ``(p,) int64``, their ``(p, 4) int16`` side levels, ``(p,) int8`` kind (level of a
+    uniform patch, 0 glue) and ``(p,) int64`` index into ``keys``; ``vert (V, f) float32``,
+    ``indices (T, 3) uint32``, ``vertex_patch (V,) int32``, ``vertex_start`` and ``tri_start
+    (p + 1,) int64``."""
     p = len(pids)
-    out = (np.empty(p, np.int64), np.empty((p, 4), np.int16), np.empty(p, np.int8), np.empty(p, np.int64),
-           np.empty(p, np.int64), np.empty(p, np.int64))
+    pids_out, shape_of, ukey = np.empty(p, np.int64), np.empty(p, np.int64), np.empty(p, np.int64)
+    side_out, kind_out = np.empty((p, 4), np.int16), np.empty(p, np.int8)
     check = np.empty(3, np.int64)
-    u = _tess_plan_nb(lv, side_edge, pids, n_patches, max_level, *out, check)
-    return check, out[0], out[1], out[2], out[3], out[4][:u], out[5][:u]
-
-
-def tess_gather(pids, shape_of, stab, src_level, src_slot, tris, level_row, grid):
-    """Compiled second half of the cached CPU tessellation: every patch's vertices copied from the
-    level-major vertex cache ``grid (rows, f) float32`` and its triangles offset to its block,
-    straight into the outputs (needs numba).
-
-    ``stab (u, 6) int64`` holds per shape: vertices, triangles, uniform (0/1), inner level ``m``,
-    first entry in ``src_level``/``src_slot`` (the level and the slot in that level's uniform
-    grid of each vertex of a glue shape) and first triangle in ``tris (s, 3) uint32`` (local
-    triangles of every shape).  ``level_row[n]`` is the first row of level ``n``'s grid; patch
-    ``q``'s slot ``s`` at level ``n`` is row ``level_row[n] + q n^2 + s``.
-
-    Returns ``(vert (V, f) float32, indices (T, 3) uint32, vertex_patch (V,) int32, vertex_start
-    (p + 1,) int64, tri_start (p + 1,) int64)``."""
-    p = len(pids)
-    vertex_start, tri_start = np.empty(p + 1, np.int64), np.empty(p + 1, np.int64)
-    vert, indices, vpatch = _tess_gather_nb(pids, shape_of, stab, src_level, src_slot, tris, level_row, grid,
-                                            vertex_start, tri_start)
-    return vert, indices, vpatch, vertex_start, tri_start
+    status, u, vert, indices, vpatch, vertex_start, tri_start = _tess_frame_nb(
+        lv, side_edge, pids, n_patches, max_level, *registry, level_row, grid, *uv_check, pids_out, side_out,
+        kind_out, shape_of, ukey, check)
+    return (status, ukey[:u], check, pids_out, side_out, kind_out, shape_of, vert, indices, vpatch, vertex_start,
+            tri_start)
 
 
 # ------------------------------------------------------------------------------ LOD per visible side

@@ -312,19 +312,28 @@ class _NetCache:
                 offset[n] = o
                 parts.append(self.grid_levels[n].ravel())
                 o += parts[-1].size
-            self.grid_flat, self.grid_offset = np.concatenate(parts), offset
+            self.grid_flat, self.grid_offset = np.concatenate(parts) if parts else np.zeros(0, np.float32), offset
         return self.grid_flat, self.grid_offset
 
-    def grid_rows(self, net: PatchNet, used) -> tuple[np.ndarray, np.ndarray]:
-        """The vertex cache as ``(rows, VERTEX_FLOATS)`` float32 and ``level_row (MAX_LEVEL + 1,)
-        int64``, the first row of each level's grid, with every level of ``used`` present."""
+    def compiled_state(self, net: PatchNet, used=()) -> tuple:
+        """What :func:`piste.terrain._kernels.tess_frame` reads of the vertex cache, with every
+        level of ``used`` built: ``(grid (rows, VERTEX_FLOATS) float32, level_row (MAX_LEVEL + 1,)
+        int64 (-1: level not built), (uv_now, uv_snap, lm_now, lm_snap) raw bytes)``; the kernel
+        compares the UVs' bytes itself (the net's arrays may be edited in place).  Where the UVs'
+        layout changed or is not dense, the comparison is made here and empty bytes passed."""
         if self.grid_rows_ is None or any(n not in self.grid_levels for n in used) or self.uv_changed(net):
             flat, offset = self.grids(net, used)
-            level_row = np.zeros(MAX_LEVEL + 1, np.int64)
+            level_row = np.full(MAX_LEVEL + 1, -1, np.int64)
             for n, o in offset.items():
                 level_row[n] = o // VERTEX_FLOATS
             self.grid_rows_ = (flat.reshape(-1, VERTEX_FLOATS), level_row)
-        return self.grid_rows_
+        grid, level_row = self.grid_rows_
+        raw = tuple(s.raw_now(a) for s, a in zip(self.grid_snapshot, (net.uv, net.lightmap_rect)))
+        if raw[0] is None or raw[1] is None:
+            if self.uv_changed(net):
+                return self.compiled_state(net, used)
+            raw = ((_NO_BYTES, _NO_BYTES), (_NO_BYTES, _NO_BYTES))
+        return grid, level_row, (raw[0][0], raw[0][1], raw[1][0], raw[1][1])
 
     def uv_changed(self, net: PatchNet) -> bool:
         """Whether the net's corner UVs or light-map rects differ (bitwise) from the vertex cache's."""
@@ -371,6 +380,14 @@ class _Snapshot:
         self.raw = raw.copy() if raw is not None else None
         self.full = a.copy() if raw is None else None
 
+    def raw_now(self, a: np.ndarray):
+        """``(a's raw bytes, the snapshot's)`` when ``a`` has the snapshot's shape, dtype and dense
+        layout (compare those), else None."""
+        if self.raw is None or not isinstance(a, np.ndarray) or (a.shape, a.strides, a.dtype) != self.meta:
+            return None
+        raw = _raw_bytes(a, self.axes)
+        return None if raw is None else (raw, self.raw)
+
     def same(self, a: np.ndarray) -> bool:
         """Whether ``a`` holds the same bits as when the snapshot was taken (any change of shape,
         dtype or layout counts as a change)."""
@@ -380,6 +397,9 @@ class _Snapshot:
             return full is not None and a.shape == full.shape and a.dtype == full.dtype and np.array_equal(full, a)
         raw = _raw_bytes(a, self.axes)
         return raw is not None and _kernels.same_bytes(raw, self.raw)
+
+
+_NO_BYTES = np.zeros(0, np.uint8)
 
 
 def _cache(net: PatchNet) -> _NetCache:
@@ -539,9 +559,9 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False, cache:
         default course at levels 4, 6 and 8).  ``False`` evaluates everything this frame with the
         blend tables.  Default: on when the cache stays under 512 MB.  Both give bit-identical
         corners and edges (so both are crack-free); inner points agree to float32 rounding.
-    use_numba : the cached path compiled (:func:`piste.terrain._kernels.tess_plan`: patches sorted
-        by shape; ``tess_gather``: vertices, indices and vertex -> patch written straight into the
-        outputs).  Default: when numba is installed and its kernels are loaded (see
+    use_numba : the cached path compiled (:func:`piste.terrain._kernels.tess_frame`: patches
+        sorted by shape, then vertices, indices and vertex -> patch written straight into the
+        outputs, in one call).  Default: when numba is installed and its kernels are loaded (see
         :mod:`piste._jit`); True: whenever numba is installed; False: the numpy path.  Both give
         bit-identical meshes (``cache=False`` always runs numpy).
 
@@ -658,7 +678,7 @@ def _write_indices(indices, shapes, shape_of, first_of, vertex_start, tri_start,
 
 
 def _tessellate_compiled(net: PatchNet, levels, patches, strips: bool) -> TerrainMesh:
-    """The cached path compiled (:func:`piste.terrain._kernels.tess_plan` and ``tess_gather``):
+    """The cached path compiled (:func:`piste.terrain._kernels.tess_frame`, one call a frame):
     bit-identical to the numpy path, with no per-frame intermediate the size of the output."""
     if np.isscalar(levels) or np.ndim(levels) == 0:
         lv = np.full(net.n_edges, int(levels), dtype=np.int16)
@@ -676,18 +696,27 @@ def _tessellate_compiled(net: PatchNet, levels, patches, strips: bool) -> Terrai
         side_edge = np.ascontiguousarray(side_edge, dtype=np.int32)
     # numba types read-only arrays apart: keep to the warmed-up signature (no compile mid-frame)
     lv, pids, side_edge = (a if a.flags.writeable else a.copy() for a in (lv, pids, side_edge))
-    check, pids, side_lv, kind, shape_of, keys, _ = _kernels.tess_plan(lv, side_edge, pids, len(net), MAX_LEVEL)
-    if check[0] < 2 or check[1] > MAX_LEVEL:
-        raise ValidationError(f"{net.name}: vertices per edge must be in 2..{MAX_LEVEL}, got {check[0]}..{check[1]}")
-    if check[2]:
-        raise ValidationError(f"{net.name}: patch ids must be in 0..{len(net) - 1}")
-    if not len(pids):
-        return empty_mesh(strips)
-    stab, used, shapes = _key_tables(tuple(keys.tolist()))
-    _, src_level, src_slot, tris = _SHAPES.arrays
-    grid, level_row = _cache(net).grid_rows(net, used)
-    vert, indices, vpatch, vertex_start, tri_start = _kernels.tess_gather(
-        pids, shape_of, stab, src_level, src_slot, tris, level_row, grid)
+    c = _cache(net)
+    for _ in range(4):  # (a new shape, a level not built or edited UVs: register / rebuild, once each)
+        grid, level_row, uv_check = c.compiled_state(net)
+        status, keys, check, pids_s, side_lv, kind, shape_of, vert, indices, vpatch, vertex_start, tri_start = (
+            _kernels.tess_frame(lv, side_edge, pids, len(net), MAX_LEVEL, _SHAPES.arrays, level_row, grid, uv_check))
+        if status == _kernels.TESS_OK:
+            break
+        if status == _kernels.TESS_INVALID:
+            if check[0] < 2 or check[1] > MAX_LEVEL:
+                raise ValidationError(
+                    f"{net.name}: vertices per edge must be in 2..{MAX_LEVEL}, got {check[0]}..{check[1]}")
+            raise ValidationError(f"{net.name}: patch ids must be in 0..{len(net) - 1}")
+        if status == _kernels.TESS_EMPTY:
+            return empty_mesh(strips)
+        if status == _kernels.TESS_NEW_SHAPES:
+            _SHAPES.add(keys.tolist())
+        else:
+            c.compiled_state(net, sorted({n for k in keys.tolist() for n in key_levels(int(k))}))
+    else:  # pragma: no cover - each cause is fixed by one pass
+        raise RuntimeError("compiled tessellation: vertex cache did not settle")
+    strip_buf = _strips([get_shape(key_levels(int(k))) for k in keys], shape_of, vertex_start) if strips else None
     return TerrainMesh(
         positions=vert[:, 0:3],
         normals=vert[:, 3:6],
@@ -696,13 +725,13 @@ def _tessellate_compiled(net: PatchNet, levels, patches, strips: bool) -> Terrai
         uv_projected=vert[:, 12:14],
         param=vert[:, 6:8],
         indices=indices,
-        patch_ids=pids,
+        patch_ids=pids_s,
         patch_kind=kind,
         patch_levels=side_lv,
         vertex_patch=vpatch,
         vertex_start=vertex_start,
         tri_start=tri_start,
-        strips=_strips(shapes, shape_of, vertex_start) if strips else None,
+        strips=strip_buf,
     )
 
 
@@ -714,61 +743,47 @@ def key_levels(key: int) -> tuple:
 
 class _ShapeRegistry:
     """Every shape the compiled path has met (process-wide, append-only): its row of the per-shape
-    table, its glue sources and its triangles, appended once.  A frame's tables are then rows of
-    these (no per-frame concatenation when a moving camera brings a new mix of shapes)."""
+    table, its glue sources and its triangles, appended once, and the keys sorted for the kernel's
+    binary search (:func:`piste.terrain._kernels.tess_frame`)."""
 
     def __init__(self):
         self.lock = threading.Lock()
         self.row: dict[int, int] = {}
-        #: (stab (g, 6) int64, src_level, src_slot (s,) int64, tris (t, 3) uint32), replaced whole
-        self.arrays = (np.zeros((0, 6), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64),
-                       np.zeros((0, 3), np.uint32))
+        #: (keys sorted (g,) int64, their rows (g,), stab (g, 10) int64, src_level, src_slot (s,) int64,
+        #: tris (t, 3) uint32), replaced whole (a reader sees the old or the new tables, both valid)
+        self.arrays = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 10), np.int64),
+                       np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3), np.uint32))
 
-    def rows(self, keys: tuple) -> np.ndarray:
-        """Rows of ``keys`` (registering new ones), ``(u,) int64``."""
-        if any(k not in self.row for k in keys):
-            with self.lock:
-                new = [k for k in dict.fromkeys(keys) if k not in self.row]
-                if new:
-                    self._append(new)
-        return np.array([self.row[k] for k in keys], dtype=np.int64)
-
-    def _append(self, keys: list) -> None:
-        stab, src_level, src_slot, tris = self.arrays
-        shapes = [get_shape(key_levels(k)) for k in keys]
-        src = [_glue_sources(sh.levels) for sh in shapes]
-        nv = np.array([sh.n_verts for sh in shapes], dtype=np.int64)
-        nt = np.array([len(sh.tris) for sh in shapes], dtype=np.int64)
-        add = np.zeros((len(shapes), 6), dtype=np.int64)
-        add[:, 0], add[:, 1] = nv, nt
-        add[:, 2] = [sh.uniform for sh in shapes]
-        add[:, 3] = [sh.m for sh in shapes]
-        add[:, 4] = len(src_level) + np.concatenate([[0], np.cumsum(nv)[:-1]])
-        add[:, 5] = len(tris) + np.concatenate([[0], np.cumsum(nt)[:-1]])
-        arrays = (np.concatenate([stab, add]),
-                  np.concatenate([src_level] + [x[0] for x in src]).astype(np.int64),
-                  np.concatenate([src_slot] + [x[1] for x in src]).astype(np.int64),
-                  np.ascontiguousarray(np.concatenate([tris] + [sh.tris for sh in shapes]).astype(np.uint32)))
-        self.arrays = arrays  # (one assignment: a reader sees the old or the new tables, both valid)
-        for i, k in enumerate(keys):
-            self.row[k] = len(stab) + i
+    def add(self, keys) -> None:
+        """Register the shapes of ``keys`` not registered yet."""
+        with self.lock:
+            new = [int(k) for k in dict.fromkeys(keys) if int(k) not in self.row]
+            if not new:
+                return
+            _, _, stab, src_level, src_slot, tris = self.arrays
+            shapes = [get_shape(key_levels(k)) for k in new]
+            src = [_glue_sources(sh.levels) for sh in shapes]
+            nv = np.array([sh.n_verts for sh in shapes], dtype=np.int64)
+            nt = np.array([len(sh.tris) for sh in shapes], dtype=np.int64)
+            add = np.zeros((len(shapes), 10), dtype=np.int64)
+            add[:, 0], add[:, 1] = nv, nt
+            add[:, 2] = [sh.uniform for sh in shapes]
+            add[:, 3] = [sh.m for sh in shapes]
+            add[:, 4] = len(src_level) + np.concatenate([[0], np.cumsum(nv)[:-1]])
+            add[:, 5] = len(tris) + np.concatenate([[0], np.cumsum(nt)[:-1]])
+            add[:, 6:10] = [sh.levels for sh in shapes]
+            for i, k in enumerate(new):
+                self.row[k] = len(stab) + i
+            keys = np.array(list(self.row), dtype=np.int64)
+            order = np.argsort(keys)
+            self.arrays = (keys[order], np.array(list(self.row.values()), dtype=np.int64)[order],
+                           np.concatenate([stab, add]),
+                           np.concatenate([src_level] + [x[0] for x in src]).astype(np.int64),
+                           np.concatenate([src_slot] + [x[1] for x in src]).astype(np.int64),
+                           np.ascontiguousarray(np.concatenate([tris] + [sh.tris for sh in shapes]).astype(np.uint32)))
 
 
 _SHAPES = _ShapeRegistry()
-
-
-@lru_cache(maxsize=4096)
-def _key_tables(keys: tuple):
-    """Per-shape table of the compiled gather for a tuple of shape keys (cached: a moving camera
-    sees the same few combinations): ``stab (u, 6) int64`` (vertices, triangles, uniform, m, first
-    entry in the registry's ``src_level`` / ``src_slot``, first triangle in its ``tris``), the
-    levels used, and the shapes.  Read the registry's arrays after this call (they then hold
-    every row of ``stab``)."""
-    rows = _SHAPES.rows(keys)
-    stab = np.ascontiguousarray(_SHAPES.arrays[0][rows])
-    shapes = [get_shape(key_levels(k)) for k in keys]
-    used = tuple(sorted({n for sh in shapes for n in sh.levels}))
-    return stab, used, shapes  # (writeable: numba types read-only arrays apart)
 
 
 @lru_cache(maxsize=None)
