@@ -30,7 +30,6 @@ blends(model) -> bool   whether any primitive's material is alphaMode BLEND
 from __future__ import annotations
 
 import numpy as np
-from PIL import Image
 
 __all__ = ["primitive_images", "pack_object_atlas", "double_sided", "blends"]
 
@@ -97,6 +96,8 @@ def pack_object_atlas(base, parts: dict, builtin: dict | None = None, max_size: 
             h, w = img.shape[:2]
             s = min(1.0, max_size / max(h, w))
             if s < 1.0:
+                from PIL import Image  # (here: ~13 ms of imports a renderer loading a bundle never needs)
+
                 img = np.asarray(Image.fromarray(img, "RGBA").resize((max(1, round(w * s)), max(1, round(h * s))),
                                                                      Image.LANCZOS))
             regions.append((kind, k, img))
