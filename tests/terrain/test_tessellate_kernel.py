@@ -23,7 +23,7 @@ BOTH = [pytest.param(True, marks=needs_numba, id="numba"), pytest.param(False, i
 def compiled():
     _jit.warm_up()
     if _kernels.HAVE_NUMBA:
-        assert _kernels.gather_ready()  # else use_numba=None below would run numpy
+        assert _kernels.tess_ready()  # else use_numba=None below would run numpy
 
 
 def assert_same(a, b):

@@ -374,7 +374,7 @@ def tess_ready() -> bool:
     return ready(_tess_frame_nb)
 
 
-gather_ready = tess_ready  # (its earlier name)
+gather_ready = tess_ready  # (its earlier name: tests/terrain/test_resident.py asks it)
 
 
 def tess_frame(lv, side_edge, pids, n_patches, max_level, registry, level_row, grid, uv_check):

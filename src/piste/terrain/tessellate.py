@@ -19,9 +19,9 @@ Per-patch vertex block layout (local indices)::
 
 Everything per frame is a handful of whole-batch numpy operations: one blend-table product per
 inner level, one per (side, level) for edge normals, and ragged gathers of cached per-shape
-index buffers.  With the per-level vertex cache and numba, a frame is two compiled passes
-(:mod:`piste.terrain._kernels`: the patches sorted by shape, then vertices, indices and vertex ->
-patch written straight into the outputs), bit-identical to the numpy path.
+index buffers.  With the per-level vertex cache and numba, a frame is one compiled call
+(:func:`piste.terrain._kernels.tess_frame`: the patches sorted by shape, then vertices, indices
+and vertex -> patch written straight into the outputs), bit-identical to the numpy path.
 """
 
 from __future__ import annotations
@@ -574,7 +574,7 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False, cache:
     """
     if cache is None:
         cache = len(net) * 116 * VERTEX_FLOATS * 4 < 512 * 2**20
-    if cache and ((use_numba and _kernels.HAVE_NUMBA) or (use_numba is None and _kernels.gather_ready())):
+    if cache and ((use_numba and _kernels.HAVE_NUMBA) or (use_numba is None and _kernels.tess_ready())):
         return _tessellate_compiled(net, levels, patches, strips)
     lv = _as_levels(net, levels)
     pids = np.arange(len(net), dtype=np.int64) if patches is None else np.asarray(patches, dtype=np.int64).ravel()
