@@ -50,3 +50,13 @@ def test_a_hold_released_without_a_request_starts_nothing(monkeypatch):
     assert started == []
     _jit.warm_up_async()  # no hold: at once
     assert started == ["piste-numba-warm-up"]
+
+
+def test_a_hold_dropped_without_start_leaves_the_request_to_the_next_ask(monkeypatch):
+    started = fake_warm_up_state(monkeypatch)
+    hold = _jit.WarmUpHold()
+    _jit.warm_up_async()
+    hold.release(start=False)
+    assert started == []
+    _jit.warm_up_async()  # (a kernel's ready() asks again)
+    assert started == ["piste-numba-warm-up"]

@@ -113,21 +113,22 @@ def warm_up_async() -> None:
 
 class WarmUpHold:
     """Keep :func:`warm_up_async` from starting its thread until :meth:`release` (idempotent);
-    a warm-up asked for meanwhile starts when the last hold is released.  (:func:`warm_up` is
-    not held.)"""
+    a warm-up asked for meanwhile starts when the last hold is released (with ``start=False``,
+    e.g. a preview closed after one frame, not: the next ``ready()`` asks again).  (:func:`warm_up`
+    is not held.)"""
 
     def __init__(self):
         with _START:
             _HOLDS[0] += 1
         self.held = True
 
-    def release(self) -> None:
+    def release(self, start: bool = True) -> None:
         with _START:
             if not self.held:
                 return
             self.held = False
             _HOLDS[0] -= 1
-            go = _HOLDS[0] == 0 and _HOLDS[1]
+            go = start and _HOLDS[0] == 0 and _HOLDS[1]
             if go:
                 _HOLDS[1] = False
         if go:

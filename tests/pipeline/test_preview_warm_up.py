@@ -1,6 +1,6 @@
 """ScenePreview holds the background numba warm-up through its set-up and first frame (numba's
 import holds the GIL; beside it a fresh process's first frame took ~0.13 s longer) and lets it
-start with the next frame, or when released."""
+start with the next frame; released without a second frame, it does not start it."""
 
 from __future__ import annotations
 
@@ -62,5 +62,7 @@ def test_warm_up_waits_for_the_first_frame(tmp_path, gl, monkeypatch):
     q = ScenePreview(b, ctx=gl, shadows=False)
     _jit.warm_up_async()
     assert started == []
-    q.release()  # never rendered: the hold goes with it
+    q.release()  # never rendered (or `piste render`'s one frame): the hold goes, numba is not loaded
+    assert started == []
+    _jit.warm_up_async()  # the next ask starts it
     assert started == ["piste-numba-warm-up"]

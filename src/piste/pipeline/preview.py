@@ -307,7 +307,7 @@ class ScenePreview:
         self.frame = None
         # numba's background import (~0.8 s, mostly holding the GIL) waits until the first frame is
         # drawn: beside it a fresh process's first frame took ~0.13 s longer (released by the next
-        # frame or release())
+        # frame; release() drops it without starting numba: `piste render` draws one frame)
         self._warm_up_hold = WarmUpHold()
         self._setup(bundle)
 
@@ -452,7 +452,7 @@ class ScenePreview:
         self.renderer = self.objects = None
 
     def release(self) -> None:
-        self._warm_up_hold.release()
+        self._warm_up_hold.release(start=False)  # (no frames follow: numba need not load)
         self._release_passes()
         if self._own_ctx:
             self.ctx.release()
