@@ -56,6 +56,14 @@ GL_RGBA8 = 0x8058
 GL_DEPTH_COMPONENT24 = 0x81A6
 
 
+def _plain(a, dtype) -> np.ndarray:
+    """``a`` C-contiguous with numpy's own ``dtype`` object.  Arrays made by numba kernels (piste's
+    compiled tessellation) carry an equal but distinct float32 dtype object (``dtype.isbuiltin == 0``);
+    vispy's ``VertexBuffer`` then takes ``(n, 3)`` data for ``3n`` scalars ("All attributes must have
+    the same size")."""
+    return np.ascontiguousarray(a, dtype=dtype).view(dtype)
+
+
 def make_canvas(size):
     """A hidden vispy canvas on the ``egl`` backend: ``(canvas, description)``.  Raises RuntimeError
     (vispy's own message) when vispy cannot create one."""
@@ -124,10 +132,10 @@ class VispyTerrain:
     def upload(self, mesh) -> None:
         """Write a :class:`~piste.terrain.TerrainMesh`'s positions, UVs and indices into the buffers."""
         self.canvas.set_current()
-        self.pos.set_data(np.ascontiguousarray(mesh.positions, dtype=np.float32))
-        self.uv.set_data(np.ascontiguousarray(mesh.uv, dtype=np.float32))
-        self.uvl.set_data(np.ascontiguousarray(mesh.uv_lightmap, dtype=np.float32))
-        self.index.set_data(np.ascontiguousarray(np.asarray(mesh.indices, dtype=np.uint32).ravel()))
+        self.pos.set_data(_plain(mesh.positions, np.float32))
+        self.uv.set_data(_plain(mesh.uv, np.float32))
+        self.uvl.set_data(_plain(mesh.uv_lightmap, np.float32))
+        self.index.set_data(_plain(mesh.indices, np.uint32).ravel())
 
     def draw(self, mvp, clear=(0.0, 0.0, 0.0, 1.0)) -> None:
         """Clear and draw the uploaded mesh into the off-screen target with ``mvp`` (4, 4) (column
