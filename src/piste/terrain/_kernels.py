@@ -420,6 +420,10 @@ def tess_frame(lv, side_edge, pids, n_patches, max_level, registry, level_row, g
     status, u, vert, indices, vpatch, vertex_start, tri_start = _tess_frame_nb(
         lv, side_edge, pids, n_patches, max_level, *registry, level_row, grid, *uv_check, pids_out, side_out,
         kind_out, shape_of, ukey, check)
+    # arrays numba allocated carry dtype objects numpy does not call builtin (some consumers, e.g.
+    # vispy, then misread them): plain views with numpy's own dtypes
+    vert, indices, vpatch = vert.view(np.float32), indices.view(np.uint32), vpatch.view(np.int32)
+    vertex_start, tri_start = vertex_start.view(np.int64), tri_start.view(np.int64)
     return (status, ukey[:u], check, pids_out, side_out, kind_out, shape_of, vert, indices, vpatch, vertex_start,
             tri_start)
 
