@@ -22,7 +22,7 @@ If vispy cannot run headless here, the reason (vispy's error text) is printed an
 of a number.
 
 Run: ``.venv/bin/python benchmarks/bench_draw.py [--quick] [--frames N] [--rounds R] [--size W H]``
-``--quick``: one camera, 5 rounds.
+``--quick``: one camera, 9 rounds.
 """
 
 from __future__ import annotations
@@ -101,13 +101,13 @@ class MinimalShader:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
-    ap.add_argument("--quick", action="store_true", help="one camera, 5 rounds")
+    ap.add_argument("--quick", action="store_true", help="one camera, 9 rounds")
     ap.add_argument("--frames", type=int, default=3, help="cameras down the track (default 3; --quick: 1)")
-    ap.add_argument("--rounds", type=int, default=None, help="interleaved rounds per camera (default 11; --quick: 5)")
+    ap.add_argument("--rounds", type=int, default=None, help="interleaved rounds per camera (default 11; --quick: 9)")
     ap.add_argument("--size", type=int, nargs=2, default=(640, 448), metavar=("W", "H"))
     args = ap.parse_args(argv)
     frames = 1 if args.quick else max(args.frames, 1)
-    rounds = args.rounds or (5 if args.quick else 11)
+    rounds = args.rounds or (9 if args.quick else 11)
     size = tuple(args.size)
 
     from piste.render import TerrainRenderer
