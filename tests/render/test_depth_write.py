@@ -47,6 +47,13 @@ def test_set_depth_write_stops_and_restores_depth_writes(gl):
         target.release()
 
 
+def test_set_depth_write_without_a_bound_framebuffer():
+    """A standalone context before any framebuffer is bound has none to mask (no error)."""
+    from types import SimpleNamespace
+
+    assert set_depth_write(SimpleNamespace(fbo=None), False) is True
+
+
 def _watch(no_write: dict, monkeypatch):
     """Wrap ``VertexArray.render``: each draw with a program of ``no_write`` (program -> name) has
     the depth buffer read before and after; returns (names drawn, names that wrote depth)."""

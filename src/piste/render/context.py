@@ -77,6 +77,8 @@ def set_depth_write(ctx, on: bool) -> bool:
     ``finally``.
     """
     fbo = ctx.fbo
+    if fbo is None:  # (a standalone context before any framebuffer was bound: nothing to mask)
+        return True
     was = bool(fbo.depth_mask)
     fbo.depth_mask = bool(on)
     return was
