@@ -188,7 +188,7 @@ def effects_section(args) -> None:
     fs = load_shader("terrain.frag.glsl").replace("const int u_mode = TERRAIN_MODE;", "uniform int u_mode;")
     old = new.ctx.program(vertex_shader=load_shader("terrain.vert.glsl"), fragment_shader=fs)
     old["u_mode"].value = 0
-    chain.terrain._programs[0] = chain.terrain._apply(old)
+    chain.terrain._programs[chain.terrain._key(0)] = chain.terrain._apply(old)
     tri.terrain.base.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
     for r in (new, chain, tri, morph, stream):
         r.resident_wait = True

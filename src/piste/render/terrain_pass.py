@@ -87,14 +87,15 @@ class TerrainPass:
         self.ctx = ctx
         self._vs = load_shader("terrain.vert.glsl")
         self._fs = load_shader("terrain.frag.glsl")
-        self._programs: dict = {}  # mode id -> the first pass compiled for that mode
+        # (mode id, track on) -> the first pass compiled for that mode, with or without the groomed
+        # track (a run-time ``u_track_on`` branch cost ~20 % of the draw on terrain without a track);
+        # ("ps2", track) the PS2 second pass, ("fog", 0) its fog pass; each compiled on first use
+        self._programs: dict = {}
         # back-facing triangles skipped (not in the debug views): seen from above the surface, the first
         # surface a view ray meets is its upper (front) side, so only silhouette pixels can change
         # (llvmpipe: ~30 % of the terrain pass on the default course); False for nets with overhangs
         # seen from below
         self.cull_back = True
-        self.prog_ps2 = ctx.program(vertex_shader=self._vs, fragment_shader=load_shader("ps2_lightmap.frag.glsl"))
-        self.prog_fog = ctx.program(vertex_shader=self._vs, fragment_shader=load_shader("fog.frag.glsl"))
         # uniforms every terrain program gets (applied when a program is first used / after a change)
         cols = [LOD_COLORS[k] for k in (0, 4, 6, 8)]
         self._uniforms = {"u_base": 0, "u_light": 1, "u_track": 2, "u_track_on": 0, "u_morph": _MORPH_UNIT,
@@ -121,11 +122,31 @@ class TerrainPass:
         """The modulate first-pass program (compiled on first use)."""
         return self._program(_MODE_ID["modulate"])
 
-    def _program(self, mode: int):
-        p = self._programs.get(mode)
+    @property
+    def prog_ps2(self):
+        """The PS2 scheme's second pass, ``(Cd - Cs) x As`` (compiled on first use)."""
+        return self._program("ps2")
+
+    @property
+    def prog_fog(self):
+        """The PS2 scheme's fog pass, blended over the second (compiled on first use)."""
+        return self._program("fog")
+
+    def _key(self, mode):
+        return (mode, 0 if mode == "fog" else int(self._uniforms["u_track_on"]))
+
+    def _program(self, mode):
+        key = self._key(mode)
+        p = self._programs.get(key)
         if p is None:
-            p = self.ctx.program(vertex_shader=self._vs, fragment_shader=_with_defines(self._fs, TERRAIN_MODE=mode))
-            self._programs[mode] = p
+            if mode == "fog":
+                fs = load_shader("fog.frag.glsl")
+            elif mode == "ps2":
+                fs = _with_defines(load_shader("ps2_lightmap.frag.glsl"), TERRAIN_TRACK=key[1])
+            else:
+                fs = _with_defines(self._fs, TERRAIN_MODE=mode, TERRAIN_TRACK=key[1])
+            p = self.ctx.program(vertex_shader=self._vs, fragment_shader=fs)
+            self._programs[key] = p
         return self._apply(p)
 
     def _apply(self, p):
@@ -373,7 +394,7 @@ class TerrainPass:
         import moderngl
 
         ctx = self.ctx
-        q = self._apply(self.prog_ps2)
+        q = self.prog_ps2
         q["u_mvp"].write(mvp_bytes)
         q["u_depth_bias"].value = 0.0
         ctx.depth_func = "=="
@@ -385,7 +406,7 @@ class TerrainPass:
         try:
             self._vao(q).render(moderngl.TRIANGLES, vertices=self.n_indices)
             if fog[3] > 0.0:
-                f = self._apply(self.prog_fog)
+                f = self.prog_fog
                 f["u_mvp"].write(mvp_bytes)
                 f["u_depth_bias"].value = 0.0
                 f["u_eye"].value = eye
@@ -404,8 +425,7 @@ class TerrainPass:
         self._release_vaos()
         for s in self._streams.values():
             s.release()
-        for obj in (self.base, self.light, self.track, self.prog_ps2, self.prog_fog, self._resident_buf,
-                    self._morph_tex, *self._programs.values()):
+        for obj in (self.base, self.light, self.track, self._resident_buf, self._morph_tex, *self._programs.values()):
             if obj is not None:
                 obj.release()
         self._programs = {}

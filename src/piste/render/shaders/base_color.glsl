@@ -5,7 +5,11 @@
 // the same Cd).
 uniform sampler2D u_base;
 uniform sampler2D u_track;
+#ifdef TERRAIN_TRACK
+const int u_track_on = TERRAIN_TRACK;  // compiled per track on / off (a run-time branch costs llvmpipe)
+#else
 uniform int u_track_on;
+#endif
 uniform float u_track_half;  // half width of the groomed track in metres
 
 vec3 base_color(vec2 uv, vec2 track_uv) {
