@@ -224,3 +224,23 @@ def test_tess_frame_statuses():
     assert out[0] == _kernels.TESS_EMPTY
     mesh = tessellate(net, lv, use_numba=True)  # registers, builds levels 5 and 7, then draws
     assert_same(mesh, tessellate(net, lv, use_numba=False))
+
+
+def test_numpy_path_does_not_start_numba():
+    """``use_numba=False`` keeps numba out of the process (its import holds the GIL ~0.8 s): the
+    vertex cache's per-frame UV check must not start the background warm-up either."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = ("import sys; sys.path.insert(0, %r)\n"
+            "from nets import grid_net\n"
+            "from piste import _jit\n"
+            "from piste.terrain import tessellate\n"
+            "net = grid_net(3, 3)\n"
+            "for _ in range(3):\n"
+            "    tessellate(net, 4, use_numba=False)\n"
+            "print(_jit._THREAD[0] is None and 'numba' not in sys.modules)\n") % str(Path(__file__).parent)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "True"

@@ -355,10 +355,13 @@ _same_bytes_nb = _jit(_same_bytes_py, _ex_same_bytes)
 
 def same_bytes(a: np.ndarray, b: np.ndarray, use_numba: bool | None = None) -> bool:
     """Whether two 1-D uint8 arrays hold the same bytes (compiled: one vectorised pass, no
-    temporary; numpy: ``np.array_equal``)."""
+    temporary; numpy: ``np.array_equal``).  Default: compiled once numba has loaded it; unlike
+    the other dispatchers this one does not start numba's warm-up (the numpy tessellation path
+    asks it every frame, and with ``use_numba=False`` it should not pull numba in)."""
     if a.shape != b.shape:
         return False
-    if ready(_same_bytes_nb) if use_numba is None else use_numba:
+    k = _same_bytes_nb
+    if (k is not None and k.compiled is not None and k.ready()) if use_numba is None else use_numba:
         return bool(_same_bytes_nb(a, b))
     return bool(np.array_equal(a, b))
 
