@@ -34,6 +34,7 @@ import numpy as np
 
 from piste.errors import RenderError
 from piste.render.context import load_shader, set_depth_write
+from piste.render.textures import MipLevels
 from piste.terrain.query import height_at
 from piste.world.camera import look_at, orthographic
 
@@ -269,7 +270,12 @@ class ShadowPass:
         # mip-mapped (a few levels: tiles sit side by side): a distant rider's shadow covers a few
         # pixels, and point samples of its thin limbs and board would break it into dashes
         self.mip_levels = max(0, min(4, int(np.log2(self.tile)) - 3))
-        self.texture.build_mipmaps(0, self.mip_levels)
+        # the levels redrawn by piste's own program (textures.MipLevels: from the shader cache, where
+        # Mesa's glGenerateMipmap compiles its blit shader in every process, 70-110 ms at first use)
+        self._mips = MipLevels(ctx, self.texture, self.mip_levels) \
+            if MipLevels.supported(ctx, self.texture, self.mip_levels) else None
+        if self._mips is None:
+            self.texture.build_mipmaps(0, self.mip_levels)
         self.texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self.texture.repeat_x = self.texture.repeat_y = False
         self.fbo = ctx.framebuffer(color_attachments=[self.texture])
@@ -329,7 +335,10 @@ class ShadowPass:
             c["vao"].render(moderngl.TRIANGLES, vertices=nt, first=i * nt)
         # this frame's tiles mip-mapped here, before the frame's main passes: glGenerateMipmap must wait
         # for what it reads, and after the terrain's draw llvmpipe waited for the whole terrain there
-        self.texture.build_mipmaps(0, self.mip_levels)
+        if self._mips is not None and self._mips.levels == self.mip_levels:
+            self._mips.build()
+        else:  # (no exact halving, or mip_levels changed since set-up)
+            self.texture.build_mipmaps(0, self.mip_levels)
         # and finished now (a few small tiles): a texture still being written when a later draw samples
         # it makes llvmpipe flush and wait for everything issued before that draw (the terrain)
         ctx.finish()
@@ -409,5 +418,7 @@ class ShadowPass:
             for key in ("vao", "pos", "idx"):
                 if d.get(key) is not None:
                     d[key].release()
+        if self._mips is not None:
+            self._mips.release()
         for obj in (self.fbo, self.texture, self.caster, self.receiver, self.sunlit):
             obj.release()
