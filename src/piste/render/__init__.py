@@ -5,6 +5,7 @@ Public API
 create_context        a headless moderngl context (RenderError naming the packages if impossible)
 Offscreen             RGBA8 + depth framebuffer with ``read() -> (H, W, 4) uint8``
 save_png              atomic PNG writer
+set_depth_write       depth writes on/off for the bound framebuffer (moderngl's ``ctx.depth_mask`` is no GL state)
 TerrainRenderer       camera -> LOD -> cull -> tessellate -> upload -> draw -> read back
 SceneRenderer         the completed scene: terrain + rider shadows + objects + riders + specular
                       (passes in character_pass, object_pass, shadow_pass; ``summarize_scene``)
@@ -16,18 +17,22 @@ VideoWriter           atomic H.264 MP4 output (imageio-ffmpeg)
 snow_texture          procedural tileable snow base texture
 placeholder_lightmap  PLACEHOLDER light-map atlas from the normals and a fixed sun
 track_field           signed distance across a track on a world x-y grid (projected texture)
+mip_chain, mipmapped_texture, MipLevels
+                      mip levels computed on the CPU and uploaded / redrawn by piste's shader
+                      (no ``glGenerateMipmap``: Mesa compiles its blit in every process)
 LOD_COLORS            debug colours of 4x4 / 6x6 / 8x8 / glue patches
 StreamingRenderer     a tiled world paged in and out by distance under a memory budget (streaming.py)
 
 Interactive window: :func:`piste.render.window.run_window` (pyglet, imported lazily).
 """
 
-from piste.render.context import Offscreen, create_context, save_png
+from piste.render.context import Offscreen, create_context, save_png, set_depth_write
 from piste.render.frame import Frame, TerrainRenderer, cull_boxes, summarize
 from piste.render.scene_renderer import SceneImage, SceneRenderer, summarize_scene
 from piste.render.sky_pass import SkyPass
 from piste.render.terrain_pass import DEBUG_VIEWS, LIGHTMAP_MODES, TerrainPass
-from piste.render.textures import LOD_COLORS, lightmap_atlas_size, placeholder_lightmap, snow_texture, track_field
+from piste.render.textures import (LOD_COLORS, MipLevels, lightmap_atlas_size, mip_chain, mipmapped_texture,
+                                   placeholder_lightmap, snow_texture, track_field)
 from piste.render.video import VideoWriter
 from piste.render.streaming import StreamingRenderer, TileCache, render_flight
 
@@ -35,6 +40,10 @@ __all__ = [
     "create_context",
     "Offscreen",
     "save_png",
+    "set_depth_write",
+    "mip_chain",
+    "mipmapped_texture",
+    "MipLevels",
     "TerrainRenderer",
     "SceneRenderer",
     "SceneImage",
