@@ -172,8 +172,12 @@ def track_field(centerline, bounds, texel: float = 0.75) -> tuple[np.ndarray, np
         order = np.argsort(pts[:, 1])
         xc = np.interp(ys, pts[order, 1], pts[order, 0])
         slope = np.gradient(xc, ys)
-        sign = 1.0 if dy[0] > 0 else -1.0
-        field = sign * (xs[None, :] - xc[:, None]) / np.sqrt(1.0 + slope * slope)[:, None]
+        # (x - x_c) / sqrt(1 + slope^2), negated for a line running down y: in place, one (h, w)
+        # float64 temporary instead of three (the same bits; a fresh process's set-up)
+        field = xs[None, :] - xc[:, None]
+        field /= np.sqrt(1.0 + slope * slope)[:, None]
+        if dy[0] < 0:
+            np.negative(field, out=field)
         rect = np.array([lo[0], lo[1], lo[0] + w * texel, lo[1] + h * texel])
         return field.astype(np.float32), rect
     # any other line: nearest point of the densely resampled line by k-d tree, side by the tangent
