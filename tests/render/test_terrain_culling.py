@@ -56,3 +56,29 @@ def test_culling_only_when_every_patch_faces_up(gl, grid_net):
             assert r.terrain.cull_back is want
         finally:
             r.release()
+
+
+def test_faces_up_equals_the_tessellated_corner_quads(grid_net):
+    """faces_up reads the corner control points; the same answer as the level-2 tessellation's
+    triangles (what it stands for) on nets that face up, flipped ones and a tilted, folded one."""
+    from piste.render.frame import faces_up
+    from piste.terrain import PatchNet, tessellate
+    from piste.world.course import default_course
+
+    def by_tessellation(net):
+        m = tessellate(net, 2, cache=False)
+        p = np.asarray(m.positions, dtype=np.float64)[np.asarray(m.indices, dtype=np.int64)]
+        a, b = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+        return bool(np.all(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0] > 0.0))
+
+    base = grid_net(3, 3, size=10.0, relief=2.0)
+    cp = np.array(base.control_points, copy=True)
+    flipped = cp.copy()
+    flipped[4] = flipped[4].transpose(1, 0, 2)
+    mirrored = cp * np.array([-1.0, 1.0, 1.0])  # every patch wound the other way
+    tilted = cp.copy()
+    tilted[..., 0] += 3.0 * tilted[..., 2]  # sheared in x by height: still up, or folded over
+    nets = [base, PatchNet(flipped), PatchNet(mirrored), PatchNet(tilted), default_course(0)]
+    got = [faces_up(n) for n in nets]
+    assert got == [by_tessellation(n) for n in nets]
+    assert got[0] and not got[1] and not got[2] and got[4]
