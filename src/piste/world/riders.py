@@ -45,6 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from piste.character import default_rider
+from piste.character.animation import sample_poses
 from piste.character.model import SkinnedMesh
 from piste.character.skeleton import world_from_local
 from piste.errors import ConfigError, ValidationError
@@ -102,9 +103,12 @@ class ClipTable:
             clip = model.clips[name]
             f = int(np.ceil(clip.duration * self.rate)) + 1
             times = np.minimum(np.arange(f) / self.rate, clip.duration)
-            for k, tt in enumerate(times):
-                pose = clip.sample(float(tt), skeleton=self.skeleton)
-                self._t[c, k], self._r[c, k], self._s[c, k] = pose.translation, pose.rotation, pose.scale
+            if clip.skeleton is self.skeleton:  # no retargeting: every time in one call per track
+                self._t[c, :f], self._r[c, :f], self._s[c, :f] = sample_poses(clip, times, self.skeleton)
+            else:
+                for k, tt in enumerate(times):
+                    pose = clip.sample(float(tt), skeleton=self.skeleton)
+                    self._t[c, k], self._r[c, k], self._s[c, k] = pose.translation, pose.rotation, pose.scale
             r = self._r[c, :f]
             for k in range(1, f):  # keep neighbouring keys in the same hemisphere (nlerp)
                 flip = (r[k] * r[k - 1]).sum(-1) < 0
