@@ -34,6 +34,8 @@ API
 ---
 ResidentTerrain(net, levels=(4, 6, 8))    the blocks and templates (``vertices (N B, 11) float32``)
 ResidentTerrain.frame(eye, planes, ...)  -> ResidentMesh (indices, patch list, morph factors)
+shape_templates(levels) -> the 81 shapes' block-local index templates (shipped for 4/6/8:
+    shipped_templates / write_templates / TEMPLATES_FILE)
 ResidentMesh.morphed_positions(rows)     CPU twin of the vertex shader's morph (tests, shadows)
 ResidentMesh.to_mesh()                   the same frame as a classic TerrainMesh (debug views, export)
 """
@@ -43,6 +45,7 @@ from __future__ import annotations
 import os
 import threading
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -299,29 +302,12 @@ class ResidentTerrain:
         return tgt
 
     def _build_templates(self) -> None:
-        L = self.levels
-        k = len(L)
-        tm, start, count, kind, nverts = [], [], [], [], []
-        o = 0
-        for key in range(k ** 4):
-            li = [(key // k ** (3 - s)) % k for s in range(4)]
-            lv = tuple(L[i] for i in li)
-            sh = get_shape(lv)
-            lvl, slot = _glue_sources(lv)
-            local = np.array([self.level_offset[int(n)] for n in lvl], dtype=np.int64) + slot
-            t = local[sh.tris].astype(np.uint32).ravel()
-            tm.append(t)
-            start.append(o)
-            count.append(len(t))
-            o += len(t)
-            kind.append(lv[0] if sh.uniform else 0)
-            nverts.append(sh.n_verts)
-        self.tmpl = np.concatenate(tm).astype(np.uint32)
-        self.tmpl_start = np.array(start, dtype=np.int64)
-        self.tmpl_count = np.array(count, dtype=np.int64)
-        self.shape_kind = np.array(kind, dtype=np.int8)
-        self.shape_verts = np.array(nverts, dtype=np.int64)
-        self.level_array = np.array(L, dtype=np.int16)
+        t = shipped_templates(self.levels)
+        if t is None:
+            t = shape_templates(self.levels)
+        self.tmpl, self.tmpl_start, self.tmpl_count = t["tmpl"], t["tmpl_start"], t["tmpl_count"]
+        self.shape_kind, self.shape_verts = t["shape_kind"], t["shape_verts"]
+        self.level_array = np.array(self.levels, dtype=np.int16)
 
     def stale(self) -> bool:
         """True when the net's corner UVs or light-map rects changed since the blocks were built."""
@@ -415,6 +401,69 @@ class ResidentTerrain:
             morph=bool(morph),
             n_vertices=int(self.shape_verts[key].sum()),
         )
+
+
+def shape_templates(levels=LEVELS) -> dict:
+    """The index templates of every patch shape (``3^4`` side-level combinations) over a resident
+    block of ``levels``: ``tmpl`` (concatenated uint32 block-local indices), ``tmpl_start``,
+    ``tmpl_count`` (int64 per shape), ``shape_kind`` (int8: the level of uniform shapes, 0 for glue),
+    ``shape_verts`` (int64 distinct vertices).  Shape key ``((l0 * 3 + l1) * 3 + l2) * 3 + l3``."""
+    L = tuple(int(x) for x in levels)
+    k = len(L)
+    offset, o = {}, 0
+    for n in L:
+        offset[n] = o
+        o += n * n
+    tm, start, count, kind, nverts = [], [], [], [], []
+    o = 0
+    for key in range(k ** 4):
+        li = [(key // k ** (3 - s)) % k for s in range(4)]
+        lv = tuple(L[i] for i in li)
+        sh = get_shape(lv)
+        lvl, slot = _glue_sources(lv)
+        local = np.array([offset[int(n)] for n in lvl], dtype=np.int64) + slot
+        t = local[sh.tris].astype(np.uint32).ravel()
+        tm.append(t)
+        start.append(o)
+        count.append(len(t))
+        o += len(t)
+        kind.append(lv[0] if sh.uniform else 0)
+        nverts.append(sh.n_verts)
+    return {"tmpl": np.concatenate(tm).astype(np.uint32), "tmpl_start": np.array(start, dtype=np.int64),
+            "tmpl_count": np.array(count, dtype=np.int64), "shape_kind": np.array(kind, dtype=np.int8),
+            "shape_verts": np.array(nverts, dtype=np.int64)}
+
+
+#: the default levels' templates as computed by :func:`shape_templates`, shipped with the package
+#: (a fresh process built them in ~45 ms of Python, on the first frame's critical path);
+#: ``tests/terrain/test_resident_templates.py`` checks the file against the code
+TEMPLATES_FILE = Path(__file__).resolve().parents[1] / "data" / "resident_templates.npz"
+
+
+def shipped_templates(levels) -> dict | None:
+    """:func:`shape_templates` of ``levels`` from :data:`TEMPLATES_FILE`, or None when the file is
+    missing, unreadable or for other levels (then the caller computes them)."""
+    try:
+        with np.load(TEMPLATES_FILE, allow_pickle=False) as z:
+            if tuple(int(x) for x in z["levels"]) != tuple(int(x) for x in levels):
+                return None
+            out = {k: z[k] for k in ("tmpl", "tmpl_start", "tmpl_count", "shape_kind", "shape_verts")}
+    except Exception:  # noqa: BLE001 - any unreadable file (OSError, EOFError, ValueError, a pickle refused): compute
+        return None
+    n = len(levels) ** 4
+    if any(len(out[k]) != n for k in ("tmpl_start", "tmpl_count", "shape_kind", "shape_verts")) or \
+            int(out["tmpl_count"].sum()) != len(out["tmpl"]):
+        return None
+    return out
+
+
+def write_templates(path=TEMPLATES_FILE, levels=LEVELS) -> Path:
+    """Write :func:`shape_templates` of ``levels`` to ``path`` (regenerates the shipped file)."""
+    t = shape_templates(levels)
+    path = Path(path)
+    with open(path, "wb") as f:
+        np.savez_compressed(f, levels=np.array(levels, dtype=np.int64), **t)
+    return path
 
 
 #: memory the resident blocks (and the per-level vertex cache they are built from) may take
