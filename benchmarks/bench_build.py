@@ -46,7 +46,7 @@ from piste.render.context import create_context
 t1 = time.perf_counter()
 ctx = create_context()
 t2 = time.perf_counter()
-b = load_bundle(sys.argv[1])
+b = load_bundle(sys.argv[1], warm=True)  # as piste render / demo / view load it
 t3 = time.perf_counter()
 p = ScenePreview(b, size=(640, 448), ctx=ctx)
 t4 = time.perf_counter()

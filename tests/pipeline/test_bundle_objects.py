@@ -60,3 +60,19 @@ def test_bad_terrain_names_the_member(tmp_path):
     with pytest.raises(FormatError) as e:
         load_bundle(path)
     assert e.value.field == "terrain/control_points.npy" and "invalid terrain" in str(e.value)
+
+
+def test_warm_load_starts_the_resident_blocks(tmp_path):
+    """load_bundle(warm=True) (piste demo / render / view) starts the terrain's resident vertex
+    blocks in the background as soon as the net exists; a plain load starts nothing."""
+    from piste.terrain.resident import resident_terrain
+
+    path, _ = _minimal(tmp_path)
+    cold = load_bundle(path)
+    assert not cold.net.__dict__.get("_resident_pending") and not cold.net.__dict__.get("_resident")
+    warm = load_bundle(path, warm=True)
+    jobs = warm.net.__dict__.get("_resident_pending") or {}
+    assert len(jobs) == 1
+    next(iter(jobs.values()))["thread"].join(30)
+    r = resident_terrain(warm.net, wait=False)  # built: returned at once, not started again
+    assert r is not None and r.vertices.shape == (len(warm.net) * r.block, 11)

@@ -98,7 +98,7 @@ def demo_bundle(args):
     from piste.pipeline.default_scene import build_default_scene
 
     result = build_default_scene(args.seed, progress=not args.no_progress and sys.stderr.isatty())
-    bundle = load_bundle(result.path, verify=False)  # just written or verified by the build's cache
+    bundle = load_bundle(result.path, verify=False, warm=True)  # just written or verified by the build's cache
     lightmap = {"baked": "bundle", "placeholder": "placeholder", "none": None}[args.lighting]
     return bundle, lightmap, args.lighting
 

@@ -29,7 +29,7 @@ def load_or_build(scene, quiet: bool = True):
     """A loaded bundle for ``scene`` (see :func:`piste.pipeline.open_scene.load_or_build`)."""
     from piste.pipeline.open_scene import load_or_build as _load_or_build
 
-    return _load_or_build(scene, quiet)
+    return _load_or_build(scene, quiet, warm=True)  # the renderer draws it next: resident blocks at load
 
 
 def run(args) -> int:

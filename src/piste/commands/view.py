@@ -93,7 +93,7 @@ def run(args) -> int:
     require("moderngl", "piste view")
     # the default course is the built default scene (cached; the one `piste demo` draws) + the runtime
     result = build_default_scene(args.seed, progress=sys.stderr.isatty())
-    bundle = load_bundle(result.path, verify=False)  # just written or verified by the build's cache
+    bundle = load_bundle(result.path, verify=False, warm=True)  # just written or verified by the build's cache
     line = bundle.centerline
     w, h = args.size
     cam = track_camera(line, args.start, aspect=w / h)

@@ -7,7 +7,7 @@ sets, and, when first asked for, the placed objects and the riders' character mo
 
 API
 ---
-load_bundle(path, verify=True) -> Bundle
+load_bundle(path, verify=True, warm=False) -> Bundle
 Bundle                 ``.net``, ``.lightmap``, ``.lights``, ``.cameras``, ``.visibility``, ``.centerline``,
                        ``.objects()``, ``.vertex_colors()``, ``.rider_model()``, ``.rider_lods()``,
                        ``.arrays``, ``.manifest``, ``.camera(name)``
@@ -32,6 +32,7 @@ from piste.lighting.vertex import choose_lights_many
 from piste.pipeline.characters import lods_from_arrays, model_from_arrays
 from piste.pipeline.visibility import Visibility
 from piste.terrain.net import PatchNet
+from piste.terrain.resident import resident_fits, resident_terrain
 from piste.world.camera import Camera
 from piste.world.objects import CompressedMesh, ObjectSet, normal_matrix
 
@@ -204,10 +205,11 @@ class Bundle:
 
 
 @_manifest_errors
-def bundle_from_data(data: BundleData) -> Bundle:
+def bundle_from_data(data: BundleData, warm: bool = False) -> Bundle:
     """Build the terrain net, light map, lights, cameras and visibility of a read bundle (objects
     and characters are built when first asked for).  Raises :class:`~piste.errors.FormatError`
-    naming the file and member when they are not valid."""
+    naming the file and member when they are not valid.  ``warm``: as soon as the net exists, start
+    building its GPU-resident vertex blocks in the background (for a renderer about to draw it)."""
     path, man, arrays = data.path, data.manifest, data.arrays
     t = man.get("terrain", {})
     try:
@@ -215,6 +217,8 @@ def bundle_from_data(data: BundleData) -> Bundle:
                        tol=t.get("tol"), name=t.get("name", "terrain"))
     except Exception as exc:
         raise FormatError(path, f"invalid terrain ({exc})", field="terrain/control_points.npy") from None
+    if warm and resident_fits(net):  # overlaps the rest of the load and the renderer's set-up
+        resident_terrain(net, wait=False)
     lm_info = man.get("lightmap", {})
     lightmap = LightMap(atlas=arrays["lightmap/atlas"].astype(np.float32), rects=arrays["lightmap/rects"],
                         res=int(lm_info.get("res", 8)), gutter=int(lm_info.get("gutter", 1)), manifest=lm_info)
@@ -233,12 +237,13 @@ def bundle_from_data(data: BundleData) -> Bundle:
     return Bundle(path, man, arrays, net, lightmap, lights, cameras, vis, line)
 
 
-def load_bundle(path, verify: bool = True) -> Bundle:
+def load_bundle(path, verify: bool = True, warm: bool = False) -> Bundle:
     """Load a ``.piste`` bundle as the scene's objects (:func:`piste.formats.bundle.read_bundle`, then
     :func:`bundle_from_data`).
 
     ``verify`` checks each member's SHA-256 against the manifest (the zip CRC is always checked).
     Raises :class:`~piste.errors.FormatError` on a missing file, a wrong format version, a missing
-    or corrupt member.
+    or corrupt member.  ``warm``: start the terrain's resident vertex blocks in the background at
+    once (``piste demo``/``render``/``view``: a fresh process's first frame waited for them).
     """
-    return bundle_from_data(read_bundle(path, verify))
+    return bundle_from_data(read_bundle(path, verify), warm=warm)

@@ -3,7 +3,7 @@ first (with the step cache beside it).  Used by ``piste render``, ``piste export
 
 API
 ---
-load_or_build(scene, quiet=True) -> Bundle
+load_or_build(scene, quiet=True, warm=False) -> Bundle
 load_net(path=None) -> PatchNet         a .bpt / .npz patch net, or the default course (``piste bake``, ``piste ssx``)
 """
 
@@ -33,12 +33,13 @@ def load_net(path=None) -> PatchNet:
     raise ConfigError(f"{path}: expected a .bpt or .npz patch net")
 
 
-def load_or_build(scene, quiet: bool = True) -> Bundle:
-    """A loaded bundle for ``scene``: a ``.piste`` file, or a ``.toml`` scene built (cached) beside it."""
+def load_or_build(scene, quiet: bool = True, warm: bool = False) -> Bundle:
+    """A loaded bundle for ``scene``: a ``.piste`` file, or a ``.toml`` scene built (cached) beside it.
+    ``warm``: start the terrain's resident vertex blocks at load (see :func:`load_bundle`)."""
     p = Path(scene)
     if p.suffix.lower() == ".piste":
-        return load_bundle(p)
+        return load_bundle(p, warm=warm)
     if p.suffix.lower() != ".toml":
         raise ConfigError(f"{scene}: expected a scene (.toml) or a bundle (.piste)")
     r = build_scene(p, progress=not quiet and sys.stderr.isatty())
-    return load_bundle(r.path)
+    return load_bundle(r.path, warm=warm)
