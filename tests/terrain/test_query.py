@@ -124,6 +124,30 @@ def test_height_at_warped_patch_newton():
     np.testing.assert_allclose(z, pts[:, 2], atol=1e-9)
 
 
+@pytest.mark.parametrize("use_numba", [False, True])
+def test_height_at_compiled_equals_numpy(use_numba):
+    """The compiled Newton (the default once numba has loaded) against the numpy iteration, on a
+    fitted course with misses outside it, a warped patch and the teapot (patches over one another):
+    the same hits and patches, z and (u, v) to 1e-9."""
+    from piste.world.course import default_course
+
+    rng = np.random.default_rng(11)
+    t = np.arange(4) / 3.0
+    cp = np.empty((1, 4, 4, 3))
+    cp[0, :, :, 0] = 10 * t[:, None] + 1.5 * np.sin(3 * t[None, :])
+    cp[0, :, :, 1] = 10 * t[None, :] + 1.0 * t[:, None] ** 2
+    cp[0, :, :, 2] = rng.normal(size=(4, 4))
+    for net in (default_course(0), PatchNet(cp), PatchNet.from_bpt(TEAPOT)):
+        lo, hi = net.bounds
+        xy = rng.uniform(lo[:2] - 5.0, hi[:2] + 5.0, (3000, 2))
+        ref = height_at(net, xy, use_numba=False)
+        got = height_at(net, xy, use_numba=use_numba)
+        assert np.array_equal(ref[1], got[1]) and np.array_equal(ref[2], got[2])
+        np.testing.assert_allclose(got[0], ref[0], atol=1e-9, equal_nan=True)
+        np.testing.assert_allclose(got[3], ref[3], atol=1e-9, equal_nan=True)
+        assert ref[1].any()
+
+
 # --------------------------------------------------------------------------- ray_intersect
 def test_rays_flat_patch_analytic():
     net = flat_net(3, 2.0, z=1.0)

@@ -602,3 +602,87 @@ def cull_tree(node_lo, node_hi, leaf_start, leaf_end, lo_sorted, hi_sorted, dept
     k = _cull_tree_nb(node_lo, node_hi, leaf_start, leaf_end, lo_sorted, hi_sorted, int(depth),
                       np.ascontiguousarray(planes, dtype=np.float64), out)
     return out[:k]
+
+
+# ---------------------------------------------------------------------------- height queries
+def _height_newton_py(cp, p, target, u, v, tol, max_iter, done, z):
+    """Newton on ``Q(u, v).xy = target`` for each (query, patch) pair, as
+    :func:`piste.terrain.query.height_at` iterates in numpy: ``u, v`` updated in place (clipped to
+    ``[-0.5, 1.5]`` a step), ``done`` where ``max |Q.xy - target| <= tol``; then ``z`` at the
+    parameters clipped to ``[0, 1]``.  A pair whose Jacobian is singular stops (not done)."""
+    for k in range(p.shape[0]):
+        c = cp[p[k]]
+        uu = u[k]
+        vv = v[k]
+        for _ in range(max_iter):
+            su = 1.0 - uu
+            sv = 1.0 - vv
+            bu0, bu1, bu2, bu3 = su * su * su, 3.0 * uu * su * su, 3.0 * uu * uu * su, uu * uu * uu
+            bv0, bv1, bv2, bv3 = sv * sv * sv, 3.0 * vv * sv * sv, 3.0 * vv * vv * sv, vv * vv * vv
+            du0, du1 = -3.0 * su * su, 3.0 * su * su - 6.0 * uu * su
+            du2, du3 = 6.0 * uu * su - 3.0 * uu * uu, 3.0 * uu * uu
+            dv0, dv1 = -3.0 * sv * sv, 3.0 * sv * sv - 6.0 * vv * sv
+            dv2, dv3 = 6.0 * vv * sv - 3.0 * vv * vv, 3.0 * vv * vv
+            qx = qy = ux = uy = vx = vy = 0.0
+            for i in range(4):
+                bi = bu0 if i == 0 else (bu1 if i == 1 else (bu2 if i == 2 else bu3))
+                di = du0 if i == 0 else (du1 if i == 1 else (du2 if i == 2 else du3))
+                ax = c[i, 0, 0] * bv0 + c[i, 1, 0] * bv1 + c[i, 2, 0] * bv2 + c[i, 3, 0] * bv3
+                ay = c[i, 0, 1] * bv0 + c[i, 1, 1] * bv1 + c[i, 2, 1] * bv2 + c[i, 3, 1] * bv3
+                ex = c[i, 0, 0] * dv0 + c[i, 1, 0] * dv1 + c[i, 2, 0] * dv2 + c[i, 3, 0] * dv3
+                ey = c[i, 0, 1] * dv0 + c[i, 1, 1] * dv1 + c[i, 2, 1] * dv2 + c[i, 3, 1] * dv3
+                qx += bi * ax
+                qy += bi * ay
+                ux += di * ax
+                uy += di * ay
+                vx += bi * ex
+                vy += bi * ey
+            fx = qx - target[k, 0]
+            fy = qy - target[k, 1]
+            if max(abs(fx), abs(fy)) <= tol:
+                done[k] = True
+                break
+            det = ux * vy - uy * vx
+            if not abs(det) > 1e-300:
+                break
+            uu = min(max(uu - (fx * vy - fy * vx) / det, -0.5), 1.5)
+            vv = min(max(vv - (ux * fy - uy * fx) / det, -0.5), 1.5)
+        u[k] = uu
+        v[k] = vv
+        if done[k]:
+            cu = min(max(uu, 0.0), 1.0)
+            cv = min(max(vv, 0.0), 1.0)
+            su = 1.0 - cu
+            sv = 1.0 - cv
+            bu = (su * su * su, 3.0 * cu * su * su, 3.0 * cu * cu * su, cu * cu * cu)
+            bv = (sv * sv * sv, 3.0 * cv * sv * sv, 3.0 * cv * cv * sv, cv * cv * cv)
+            zz = 0.0
+            for i in range(4):
+                zz += bu[i] * (c[i, 0, 2] * bv[0] + c[i, 1, 2] * bv[1] + c[i, 2, 2] * bv[2] + c[i, 3, 2] * bv[3])
+            z[k] = zz
+
+
+def _ex_height_newton():
+    cp = np.zeros((1, 4, 4, 3))
+    return (cp, np.zeros(1, np.int64), np.zeros((1, 2)), np.zeros(1), np.zeros(1), 1e-9, 30,
+            np.zeros(1, np.bool_), np.zeros(1))
+
+
+_height_newton_nb = _jit(_height_newton_py, _ex_height_newton)
+
+
+def height_newton_ready() -> bool:
+    return ready(_height_newton_nb)
+
+
+def height_newton(cp, p, target, u, v, tol: float, max_iter: int):
+    """Compiled Newton for :func:`piste.terrain.query.height_at` (see :func:`_height_newton_py`):
+    returns ``(u, v, done, z)`` for the ``(m,)`` pairs.  Needs numba."""
+    m = len(p)
+    u = np.ascontiguousarray(u, dtype=np.float64).copy()
+    v = np.ascontiguousarray(v, dtype=np.float64).copy()
+    done = np.zeros(m, dtype=np.bool_)
+    z = np.full(m, np.nan)
+    _height_newton_nb(np.ascontiguousarray(cp, dtype=np.float64), np.ascontiguousarray(p, dtype=np.int64),
+                      np.ascontiguousarray(target, dtype=np.float64), u, v, float(tol), int(max_iter), done, z)
+    return u, v, done, z
