@@ -108,3 +108,33 @@ def test_rider_parts_face_outward():
 
     _, flipped = orient_outward(default_rider(0).meshes[0])
     assert flipped == 0
+
+
+def test_shipped_key_tables_equal_the_posed_ones(tmp_path, monkeypatch):
+    """The seed-0 rider's clip keys shipped as package data (piste/data/rider_keys.npz) equal what the
+    rig's IK poses (regenerate with ``piste.character.rider.write_key_tables()``); without the file
+    the keys are posed and the clips are the same."""
+    import numpy as np
+
+    from piste.character import rider as R
+
+    shipped = R.shipped_key_tables()
+    assert shipped is not None, f"{R.RIDER_KEYS_FILE} is missing or unreadable"
+    J = R._joint_positions(1.0)
+    sk = R._skeleton(J)
+    for name in R.RIDER_CLIPS:
+        rot, tra = R.key_tables(sk, J, name)
+        assert np.array_equal(shipped[name][0], rot) and np.array_equal(shipped[name][1], tra), name
+    with_file = R.default_rider(0)
+    bad = tmp_path / "k.npz"
+    bad.write_bytes(b"not an npz")
+    monkeypatch.setattr(R, "RIDER_KEYS_FILE", bad)
+    assert R.shipped_key_tables() is None
+    posed = R.default_rider(0)
+    for name, clip in posed.clips.items():
+        other = with_file.clips[name]
+        assert clip.tracks.keys() == other.tracks.keys()
+        for bone, bt in clip.tracks.items():
+            for path, tr in bt.items():
+                assert np.array_equal(tr.values, other.tracks[bone][path].values)
+                assert np.array_equal(tr.times, other.tracks[bone][path].times)

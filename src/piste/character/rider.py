@@ -23,6 +23,8 @@ Units are metres, +Y up. The board lies along X (nose at +X, travel direction); 
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from piste.character.model import Clip, Model, Pose, Skeleton, SkinnedMesh, Track
@@ -659,23 +661,68 @@ _DURATIONS = {"ride": 2.0, "crouch": 1.6, "grab": 1.6, "spin": 1.2}
 _KEYS = {"ride": 9, "crouch": 9, "grab": 11, "spin": 13}
 
 
-def _clips(sk, J):
+def key_tables(sk, J, name: str):
+    """The key poses of clip ``name``: ``rotation (b, n, 4)`` (a continuous quaternion path per
+    bone) and ``translation (b, n, 3)``, float64, posed by the rig's IK."""
+    n = _KEYS[name]
+    phases = np.arange(n) / (n - 1)
+    poses = [_key_pose(sk, J, name, ph % 1.0) for ph in phases[:-1]]
+    poses.append(poses[0].copy())  # loop: last key repeats the first
+    if name == "spin":  # keep the root's turn continuous through 360 degrees
+        poses[-1].rotation[_B["root"]] = _axis_angle(_Y, 360.0)
+    rot = np.stack([p.rotation for p in poses], 1)  # (b, n, 4)
+    # make each bone's keys a continuous quaternion path (no sign flips)
+    for k in range(1, n):
+        flip = np.sum(rot[:, k] * rot[:, k - 1], axis=1) < 0
+        rot[flip, k] *= -1
+    tra = np.stack([p.translation for p in poses], 1)
+    return rot, tra
+
+
+#: the seed-0 rider's key tables (:func:`key_tables` of every clip), shipped with the package: the
+#: rig's IK in Python took ~0.2 s of every process that made the default rider (``piste demo``'s
+#: set-up); ``tests/character/test_rider.py`` checks the file against the code
+RIDER_KEYS_FILE = Path(__file__).resolve().parents[1] / "data" / "rider_keys.npz"
+
+
+def shipped_key_tables() -> dict | None:
+    """``{clip: (rotation, translation)}`` from :data:`RIDER_KEYS_FILE`, or None when it is missing,
+    unreadable or of another shape (then the keys are posed)."""
+    try:
+        with np.load(RIDER_KEYS_FILE, allow_pickle=False) as z:
+            out = {n: (z[f"{n}/rotation"], z[f"{n}/translation"]) for n in RIDER_CLIPS}
+    except Exception:  # noqa: BLE001 - any unreadable file: pose the keys instead
+        return None
+    b = len(RIDER_BONES)
+    if any(r.shape != (b, _KEYS[n], 4) or t.shape != (b, _KEYS[n], 3) or r.dtype != np.float64 or t.dtype != np.float64
+           for n, (r, t) in out.items()):
+        return None
+    return out
+
+
+def write_key_tables(path=RIDER_KEYS_FILE) -> Path:
+    """Pose the seed-0 rider's keys and write them to ``path`` (regenerates the shipped file)."""
+    J = _joint_positions(1.0)
+    sk = _skeleton(J)
+    arrays = {}
+    for n in RIDER_CLIPS:
+        arrays[f"{n}/rotation"], arrays[f"{n}/translation"] = key_tables(sk, J, n)
+    path = Path(path)
+    with open(path, "wb") as f:
+        np.savez_compressed(f, **arrays)
+    return path
+
+
+def _clips(sk, J, scale: float = 1.0):
     clips = {}
+    shipped = shipped_key_tables() if scale == 1.0 else None
     for name in RIDER_CLIPS:
         n = _KEYS[name]
         dur = _DURATIONS[name]
         phases = np.arange(n) / (n - 1)
-        poses = [_key_pose(sk, J, name, ph % 1.0) for ph in phases[:-1]]
-        poses.append(poses[0].copy())  # loop: last key repeats the first
-        if name == "spin":  # keep the root's turn continuous through 360 degrees
-            poses[-1].rotation[_B["root"]] = _axis_angle(_Y, 360.0)
+        rot, tra = shipped[name] if shipped is not None else key_tables(sk, J, name)
+        rot, tra = rot.copy(), tra.copy()
         times = phases * dur
-        rot = np.stack([p.rotation for p in poses], 1)  # (b, n, 4)
-        # make each bone's keys a continuous quaternion path (no sign flips)
-        for k in range(1, n):
-            flip = np.sum(rot[:, k] * rot[:, k - 1], axis=1) < 0
-            rot[flip, k] *= -1
-        tra = np.stack([p.translation for p in poses], 1)
         tracks = {}
         rest_q = np.array([0.0, 0.0, 0.0, 1.0])
         for i, bname in enumerate(RIDER_BONES):
@@ -737,4 +784,4 @@ def default_rider(seed: int = 0) -> Model:
                        joints=joints, weights=weights, morph_positions=morph_pos,
                        morph_normals=morph_nrm, morph_names=list(RIDER_MORPHS), texture=tex,
                        base_color=np.ones(4, np.float32), skinned=True, group="rider")
-    return Model(name="rider", skeleton=sk, meshes=[mesh], clips=_clips(sk, J))
+    return Model(name="rider", skeleton=sk, meshes=[mesh], clips=_clips(sk, J, scale))
