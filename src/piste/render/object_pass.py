@@ -293,7 +293,9 @@ class ObjectPass:
             self.inst.write(np.ascontiguousarray(self.rows[rows]).tobytes(), viewport=(0, 0, 16, len(rows)))
         else:
             packed = self.packed[order]
-            for g in np.unique(group_of):
+            # group_of is sorted: its distinct values without np.unique (whose first call imports
+            # numpy.ma, ~15 ms of a fresh process's first frame)
+            for g in group_of[np.r_[True, group_of[1:] != group_of[:-1]]]:
                 k, lv = divmod(int(g), n_lv)
                 self.kinds[k]["instances"][lv].write(np.ascontiguousarray(packed[group_of == g]).tobytes())
         if mode == "points" and self._points is None:

@@ -63,7 +63,7 @@ def shadow_matrices(centers, radius, sun_direction, reach: float = 40.0) -> np.n
     view = np.broadcast_to(look_at(-d * back, np.zeros(3), up), (len(c), 4, 4)).copy()
     view[:, :3, 3] -= c @ view[0, :3, :3].T
     proj = np.zeros((len(c), 4, 4))
-    for i, ri in enumerate(np.unique(r)):  # usually one radius for all
+    for ri in sorted(set(r.tolist())):  # usually one radius for all (np.unique imports numpy.ma)
         sel = r == ri
         proj[sel] = orthographic(-ri, ri, -ri, ri, back - ri, back + reach)
     return proj @ view
