@@ -448,16 +448,21 @@ def _edge_normals(net: PatchNet, cache: _NetCache, edges: np.ndarray, n: int) ->
     return np.where(good, acc / np.where(good, length, 1.0), first)
 
 
-def _as_levels(net: PatchNet, levels) -> np.ndarray:
+def _level_array(net: PatchNet, levels) -> np.ndarray:
+    """``levels`` (one int, or one per edge) as a contiguous ``(e,) int16`` array: the shape is
+    checked here, the values by the caller (the compiled path checks them in its kernel)."""
     if np.isscalar(levels) or np.ndim(levels) == 0:
-        lv = np.full(net.n_edges, int(levels), dtype=np.int16)
-    else:
-        lv = np.asarray(levels)
-        if lv.shape != (net.n_edges,):
-            raise ValidationError(
-                f"{net.name}: levels must be one int or one per edge, shape ({net.n_edges},), got {lv.shape}"
-            )
-        lv = lv.astype(np.int16)
+        return np.full(net.n_edges, int(levels), dtype=np.int16)
+    lv = np.asarray(levels)
+    if lv.shape != (net.n_edges,):
+        raise ValidationError(
+            f"{net.name}: levels must be one int or one per edge, shape ({net.n_edges},), got {lv.shape}"
+        )
+    return np.ascontiguousarray(lv, dtype=np.int16)
+
+
+def _as_levels(net: PatchNet, levels) -> np.ndarray:
+    lv = _level_array(net, levels)
     if lv.min() < 2 or lv.max() > MAX_LEVEL:
         raise ValidationError(f"{net.name}: vertices per edge must be in 2..{MAX_LEVEL}, got {lv.min()}..{lv.max()}")
     return lv
@@ -680,15 +685,7 @@ def _write_indices(indices, shapes, shape_of, first_of, vertex_start, tri_start,
 def _tessellate_compiled(net: PatchNet, levels, patches, strips: bool) -> TerrainMesh:
     """The cached path compiled (:func:`piste.terrain._kernels.tess_frame`, one call a frame):
     bit-identical to the numpy path, with no per-frame intermediate the size of the output."""
-    if np.isscalar(levels) or np.ndim(levels) == 0:
-        lv = np.full(net.n_edges, int(levels), dtype=np.int16)
-    else:
-        lv = np.asarray(levels)
-        if lv.shape != (net.n_edges,):
-            raise ValidationError(
-                f"{net.name}: levels must be one int or one per edge, shape ({net.n_edges},), got {lv.shape}"
-            )
-        lv = np.ascontiguousarray(lv, dtype=np.int16)
+    lv = _level_array(net, levels)
     pids = np.arange(len(net), dtype=np.int64) if patches is None else np.asarray(patches, dtype=np.int64).ravel()
     pids = np.ascontiguousarray(pids)
     side_edge = net.side_edge
