@@ -81,3 +81,16 @@ def test_instance_scale():
     m = np.tile(np.eye(4), (2, 1, 1))
     m[1, :3, :3] = np.diag([2.0, 3.0, 0.5])
     assert np.allclose(instance_scale(m), [1.0, 3.0])
+
+
+def test_choose_lods_orthographic():
+    from piste.world.camera import Camera
+
+    errors = np.array([0.0, 0.01, 0.1, 1.0])
+    # 20 m tall orthographic view on 448 pixels: 22.4 px a metre at any depth
+    vp = Camera(eye=(0, -10, 0), target=(0, 0, 0), ortho_height=20.0, aspect=1.0, near=0.5, far=5000).view_projection()
+    centers = np.array([[0.0, 5.0, 0.0], [0.0, 500.0, 0.0]])
+    lv = choose_lods(errors, centers, np.full(2, 3.0), np.ones(2), vp, 448, 0.5)
+    px = errors * 448 / 20.0
+    want = int((px <= 0.5).sum() - 1)
+    assert lv.tolist() == [want, want] and want == 1

@@ -114,7 +114,8 @@ def choose_lods(errors, centers, radius, scale, view_projection, height_px: floa
     max_pixels : the error allowed on screen (0 or less: always level 0)
 
     The distance is the instance's nearest view depth (centre depth minus radius, at least the
-    near-plane scale ``1e-3``), so an instance the camera is inside keeps its full mesh.
+    near-plane scale ``1e-3``), so an instance the camera is inside keeps its full mesh; an
+    orthographic view scales every depth alike.
     """
     err = np.asarray(errors, dtype=np.float64)
     c = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
@@ -123,9 +124,12 @@ def choose_lods(errors, centers, radius, scale, view_projection, height_px: floa
         return np.zeros(n, np.int64)
     err = np.broadcast_to(err, (n, err.shape[-1]))
     vp = np.asarray(view_projection, dtype=np.float64)
-    f = float(np.linalg.norm(vp[1, :3]))  # 1 / tan(fov_y / 2) for a rigid view
-    depth = c @ vp[3, :3] + vp[3, 3] - np.asarray(radius, dtype=np.float64)
-    depth = np.maximum(depth, 1e-3)
+    f = float(np.linalg.norm(vp[1, :3]))  # 1 / tan(fov_y / 2) for a rigid view (2 / height: orthographic)
+    if np.abs(vp[3, :3]).max() > 0.0:  # perspective: clip w is the view depth
+        depth = c @ vp[3, :3] + vp[3, 3] - np.asarray(radius, dtype=np.float64)
+        depth = np.maximum(depth, 1e-3)
+    else:  # orthographic: the same scale at every depth
+        depth = np.ones(n)
     px_per_unit = f * 0.5 * float(height_px) * np.asarray(scale, dtype=np.float64) / depth  # (n,)
     # level l is fine when err[l] * px_per_unit <= max_pixels; errors ascend, so count the fine ones
     ok = err * px_per_unit[:, None] <= float(max_pixels)
