@@ -291,13 +291,6 @@ class ObjectPass:
         if key is None:
             rows = np.concatenate([order, trans])
             self.inst.write(np.ascontiguousarray(self.rows[rows]).tobytes(), viewport=(0, 0, 16, len(rows)))
-        else:
-            packed = self.packed[order]
-            # group_of is sorted: its distinct values without np.unique (whose first call imports
-            # numpy.ma, ~15 ms of a fresh process's first frame)
-            for g in group_of[np.r_[True, group_of[1:] != group_of[:-1]]]:
-                k, lv = divmod(int(g), n_lv)
-                self.kinds[k]["instances"][lv].write(np.ascontiguousarray(packed[group_of == g]).tobytes())
         if mode == "points" and self._points is None:
             if self.lights is None:
                 raise RenderError("object lighting 'points' needs the world's lights")
@@ -315,6 +308,8 @@ class ObjectPass:
             cuts = np.flatnonzero(np.diff(group_of)) + 1  # runs of one (kind, level)
             for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(order)]):
                 k, lv = divmod(int(group_of[a]), n_lv)
+                if key is not None:  # the run's rows into its (kind, level) instance buffer, used by this draw alone
+                    self.kinds[k]["instances"][lv].write(np.ascontiguousarray(self.packed[order[a:b]]).tobytes())
                 self._draw_kind(p, key, k, int(a), int(b - a), mode, False, lv)
         if len(trans):
             p = self._uniforms(key, True, vp, eye, fog, mode, light_only)
