@@ -77,17 +77,17 @@ def object_lods(positions, indices, ratio: float = 0.5, min_triangles: int = 8, 
         target = max(int(n_prev * ratio), int(min_triangles))
         if target >= n_prev:
             break
+        # each level simplifies the full mesh to its own target (errors do not compound)
         dst = np.zeros_like(src)
         err = np.zeros(1, np.float32)
         count = meshoptimizer.simplify(dst, src, pos, target_index_count=3 * target, target_error=1e9,
                                        options=meshoptimizer.SIMPLIFY_ERROR_ABSOLUTE, result_error=err)
         tris = dst[:count].astype(np.int64).reshape(-1, 3)
-        e = max(float(err[0]), last_err)
+        e = float(err[0])
         if len(tris) == 0 or len(tris) > n_prev * (1.0 - (1.0 - ratio) / 2.0) or e <= last_err:
             break
         levels.append(ObjectLOD(tris.astype(np.uint32), e))
         last_err = e
-        # later levels simplify the full mesh again to their own target (errors do not compound)
     return levels
 
 
