@@ -609,21 +609,17 @@ def tessellate(net: PatchNet, levels, patches=None, strips: bool = False, cache:
     indices = np.empty((T, 3), dtype=np.uint32)
     if cache:
         vert = _gather_cached(net, pids, side_lv, m, glue, shapes, shape_of, first_of, vertex_start, n_uniform)
-        pos, nrm, param = vert[:, 0:3], vert[:, 3:6], vert[:, 6:8]
-        uv, uv_lm, uv_proj = vert[:, 8:10], vert[:, 10:12], vert[:, 12:14]
+        fields = _vertex_fields(vert)
     else:
         pos, nrm, param, uv, uv_lm, uv_proj = _evaluate_frame(
             net, lv, pids, side_lv, m, glue, shapes, shape_of, first_of, vertex_start, n_uniform)
+        fields = {"positions": pos, "normals": nrm, "param": param, "uv": uv, "uv_lightmap": uv_lm,
+                  "uv_projected": uv_proj}
     _write_indices(indices, shapes, shape_of, first_of, vertex_start, tri_start, n_uniform)
     vpatch = np.repeat(np.arange(len(pids), dtype=np.int32), nv_p)
     strip_buf = _strips(shapes, shape_of, vertex_start) if strips else None
     return TerrainMesh(
-        positions=pos,
-        normals=nrm,
-        uv=uv,
-        uv_lightmap=uv_lm,
-        uv_projected=uv_proj,
-        param=param,
+        **fields,
         indices=indices,
         patch_ids=pids,
         patch_kind=np.where(glue, 0, m).astype(np.int8),
@@ -649,6 +645,12 @@ def empty_mesh(strips: bool = False) -> TerrainMesh:
 
 #: floats per cached vertex: position 3, normal 3, param 2, uv 2, light-map uv 2, projected uv 2
 VERTEX_FLOATS = 14
+
+
+def _vertex_fields(vert: np.ndarray) -> dict:
+    """The :class:`TerrainMesh` fields held by cached vertices ``(k, VERTEX_FLOATS)`` (views)."""
+    return {"positions": vert[:, 0:3], "normals": vert[:, 3:6], "param": vert[:, 6:8], "uv": vert[:, 8:10],
+            "uv_lightmap": vert[:, 10:12], "uv_projected": vert[:, 12:14]}
 
 
 def _strips(shapes, shape_of, vertex_start) -> np.ndarray:
@@ -715,12 +717,7 @@ def _tessellate_compiled(net: PatchNet, levels, patches, strips: bool) -> Terrai
         raise RuntimeError("compiled tessellation: vertex cache did not settle")
     strip_buf = _strips([get_shape(key_levels(int(k))) for k in keys], shape_of, vertex_start) if strips else None
     return TerrainMesh(
-        positions=vert[:, 0:3],
-        normals=vert[:, 3:6],
-        uv=vert[:, 8:10],
-        uv_lightmap=vert[:, 10:12],
-        uv_projected=vert[:, 12:14],
-        param=vert[:, 6:8],
+        **_vertex_fields(vert),
         indices=indices,
         patch_ids=pids_s,
         patch_kind=kind,
