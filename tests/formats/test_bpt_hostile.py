@@ -44,3 +44,25 @@ def test_binary_refused(tmp_path):
     (tmp_path / "b.bpt").write_bytes(b"\xff\xfe\x00" * 10)
     with pytest.raises(FormatError, match="not a text file"):
         read_bpt(tmp_path / "b.bpt")
+
+
+@pytest.mark.parametrize("point", ["1e300 0 0", "0 -1e300 0", "0 0 1.7976931348623157e308", "1e9 1e9 1e9"])
+def test_absurd_coordinates_refused_naming_the_line(tmp_path, point):
+    """Issue 24: coordinates near 1e300 once reached scipy's k-d tree (through an infinite welding
+    tolerance) as a raw ValueError; they are refused by the reader, naming the file, line and point."""
+    p = tmp_path / "far.bpt"
+    write_bpt(p, np.zeros((1, 4, 4, 3)))
+    lines = p.read_text().splitlines()
+    lines[7] = point  # control point 5 of patch 0
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(FormatError, match=r"far\.bpt, line 8: expected control point 5 of patch 0 .* within \+-1e\+08"):
+        read_bpt(p)
+
+
+def test_large_but_plausible_coordinates_load(tmp_path):
+    """UTM-sized metres (a northing of 9,999,000 m) are kept."""
+    cp = np.zeros((1, 4, 4, 3))
+    cp[..., 0] = 500_000.0
+    cp[..., 1] = 9_999_000.0 + np.arange(4)[:, None]
+    write_bpt(tmp_path / "utm.bpt", cp)
+    np.testing.assert_array_equal(read_bpt(tmp_path / "utm.bpt"), cp)

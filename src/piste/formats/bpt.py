@@ -21,6 +21,10 @@ from piste.formats.atomic import write_bytes_atomic
 #: largest .bpt read (a patch takes ~400 bytes of text: ~2.6 million patches)
 MAX_BPT_BYTES = 1 << 30
 _MIN_PATCH_BYTES = 4 + 16 * 6  # "3 3\n" and 16 lines of "0 0 0\n"
+#: largest |coordinate| of a control point: 100,000 km, beyond any map projection's metres (UTM
+#: northings stop at 1e7).  Larger values only overflow later (extents, welding tolerances: 1e300
+#: once reached scipy as a raw ValueError), so they are refused here, naming the line.
+MAX_BPT_COORDINATE = 1e8
 
 
 def read_bpt(path) -> np.ndarray:
@@ -47,7 +51,7 @@ def read_bpt(path) -> np.ndarray:
         raise FormatError(path, "empty file: expected a patch count", line=1)
     it = iter(lines)
 
-    def numbers(expected: int, what: str, conv=float):
+    def numbers(expected: int, what: str, conv=float, limit: float | None = None):
         try:
             no, parts = next(it)
         except StopIteration:
@@ -60,6 +64,8 @@ def read_bpt(path) -> np.ndarray:
             raise FormatError(path, f"expected {what}, got {' '.join(parts)!r}", line=no) from None
         if conv is float and not np.all(np.isfinite(vals)):
             raise FormatError(path, f"expected finite {what}, got {' '.join(parts)!r}", line=no)
+        if limit is not None and max(abs(v) for v in vals) > limit:
+            raise FormatError(path, f"expected {what} within +-{limit:g}, got {' '.join(parts)!r}", line=no)
         return no, vals
 
     no, (count,) = numbers(1, "the patch count", int)
@@ -76,7 +82,7 @@ def read_bpt(path) -> np.ndarray:
         if deg != [3, 3]:
             raise FormatError(path, f"patch {p}: only bicubic patches ('3 3') are supported, got {deg}", line=no)
         for k in range(16):
-            _, cp[p, k] = numbers(3, f"control point {k} of patch {p} as 'x y z'")
+            _, cp[p, k] = numbers(3, f"control point {k} of patch {p} as 'x y z'", limit=MAX_BPT_COORDINATE)
     extra = next(it, None)
     if extra is not None:
         raise FormatError(path, f"trailing data after {count} patches", line=extra[0])
