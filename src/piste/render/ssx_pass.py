@@ -67,7 +67,13 @@ class SourcePass:
         self.overbright = bool((img[..., 3] > 128).any())
 
     def upload(self, mesh) -> None:
+        """Upload a terrain mesh's positions, light-map UVs and indices; an empty mesh (nothing in
+        view: the camera sees only sky) uploads nothing and :meth:`draw` then draws nothing (GL
+        buffers cannot be empty)."""
         self._release_geometry()
+        n = int(np.asarray(mesh.indices).size)
+        if n == 0 or len(np.asarray(mesh.positions)) == 0:
+            return
         pos = self.ctx.buffer(np.ascontiguousarray(mesh.positions, dtype=np.float32).tobytes())
         uvl = self.ctx.buffer(np.ascontiguousarray(mesh.uv_lightmap, dtype=np.float32).tobytes())
         idx = self.ctx.buffer(np.ascontiguousarray(mesh.indices, dtype=np.uint32).tobytes())

@@ -92,3 +92,44 @@ def test_light_map_bank_with_the_games_short_name(tmp_path):
     (tmp_path / "elysium_L.ssh").rename(tmp_path / "elysiu_L.ssh")
     ssh, lssh = level_files(tmp_path / "elysium.pbd")
     assert ssh.name == "elysium.ssh" and lssh.name == "elysiu_L.ssh"
+
+
+def _sky_camera(level):
+    """Looking straight up from above the level: no patch in view."""
+    lo, hi = level.net.bounds
+    c = (lo + hi) / 2
+    return Camera(c + np.array([0.0, 0.0, 50.0]), c + np.array([0.0, 1.0, 400.0]), fov_y=50.0, near=0.5, far=500.0)
+
+
+@pytest.mark.parametrize("mode", ["modulate", "ps2", "source", "base"])
+def test_nothing_in_view_draws_the_sky(level, gl, mode):
+    """Issue 22: a view of only sky (an empty draw) in every light-map mode draws the sky, no GL error."""
+    from piste.render.ssx_pass import level_renderer, render_level_rgba
+
+    r = level_renderer(level, SIZE, ctx=gl)
+    try:
+        img = render_level_rgba(level, _sky_camera(level), lightmap_mode=mode, renderer=r)
+        seen = render_level_rgba(level, _camera(level), lightmap_mode=mode, renderer=r)  # and it still draws after
+    finally:
+        r.release()
+    assert img.shape == (SIZE[1], SIZE[0], 4)
+    if mode in ("modulate", "ps2"):
+        rgb = img[..., :3].astype(int)
+        assert (rgb[..., 2] > rgb[..., 0]).mean() > 0.99  # blue sky everywhere
+        assert not np.array_equal(seen[..., :3], img[..., :3])
+    else:
+        assert (img[..., 3] == 0).all()  # transparent background, nothing drawn
+
+
+def test_window_view_pressing_m_at_the_sky(level, gl):
+    """`piste ssx view`: the window's view draws the sky in both modes (M toggles) without a crash."""
+    from piste.render.ssx_pass import LevelView, level_renderer
+    from piste.render.window import ViewOptions
+
+    view = LevelView(level_renderer(level, SIZE, ctx=gl))
+    try:
+        for mode in ("modulate", "ps2", "modulate", "ps2"):
+            frame = view.draw(_sky_camera(level), 0.0, ViewOptions(lightmap_mode=mode))
+            assert frame.terrain is not None
+    finally:
+        view.release()
