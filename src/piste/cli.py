@@ -27,8 +27,17 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line on stderr, exit status 2: ``piste demo:
+    error: argument --seed: expected an integer in [0, 4294967295], got '-1' (piste demo -h: usage)``
+    (subcommands' parsers are of this class too: add_subparsers takes the parent's class)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} ({self.prog} -h: usage)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="piste", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="piste", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name, (module, help_) in COMMANDS.items():

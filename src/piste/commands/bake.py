@@ -10,13 +10,15 @@ from __future__ import annotations
 
 
 def add_arguments(parser) -> None:
+    from piste.commands import _numbers as N
+
     parser.add_argument("net", nargs="?", help="a .bpt or .npz patch net (default: the default course)")
     parser.add_argument("--lights", metavar="TOML", help="lights file (default: the default course's lights)")
-    parser.add_argument("--res", type=int, default=8, choices=(8, 16), help="texels per patch side (default 8)")
+    parser.add_argument("--res", type=N.integer(1, 64), default=8, choices=(8, 16), help="texels per patch side (default 8)")
     parser.add_argument("--out", metavar="DIR", default="out/lightmap", help="output folder (default out/lightmap)")
-    parser.add_argument("--jobs", type=int, default=0, help="worker processes (default 0 = every core)")
+    parser.add_argument("--jobs", type=N.JOBS, default=0, help="worker processes (default 0 = every core)")
     parser.add_argument("--no-shadows", action="store_true", help="skip shadow rays (unshadowed lighting)")
-    parser.add_argument("--chunk-size", type=int, default=64, help="patches per chunk (unit of resuming)")
+    parser.add_argument("--chunk-size", type=N.integer(1, 1 << 20), default=64, help="patches per chunk (unit of resuming)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--format", choices=("piste", "ssx-tricky"), default="piste",
                         help="piste: an atlas in --out; ssx-tricky: NET is a .pbd, writes NAME_L.ssh beside it the "

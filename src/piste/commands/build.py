@@ -10,17 +10,19 @@ from __future__ import annotations
 
 
 def add_arguments(parser) -> None:
+    from piste.commands import _numbers as N
+
     parser.add_argument("scene", help="scene description (.toml)")
     parser.add_argument("--out", metavar="BUNDLE", help="bundle to write (default: SCENE with suffix .piste)")
     parser.add_argument("--cache", metavar="DIR", help="step cache folder (default: .piste-cache beside the scene)")
     parser.add_argument("--no-cache", action="store_true", help="recompute every step, store nothing")
-    parser.add_argument("--jobs", type=int, default=1, help="light-map bake worker processes (default 1; 0 = every core)")
+    parser.add_argument("--jobs", type=N.JOBS, default=1, help="light-map bake worker processes (default 1; 0 = every core)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.add_argument("--dask", metavar="local", help="large worlds: build the tiles as Dask tasks on a LocalCluster "
                         "on 127.0.0.1 (implies a tiled build: terrain.tiles, default SCENE.tiles)")
     parser.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="large worlds: build the tiles on the Dask "
                         "scheduler at this address (the tiles folder must be on storage every worker sees)")
-    parser.add_argument("--workers", type=int, default=None, help="--dask local: worker processes (default: cores)")
+    parser.add_argument("--workers", type=N.WORKERS, default=None, help="--dask local: worker processes (default: cores)")
 
 
 def run(args) -> int:

@@ -11,22 +11,13 @@ the objects placed along it; built once into the piste cache folder, then loaded
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 
+from piste.commands import _numbers as N
 
-def _size(text: str) -> int:
-    v = int(text)
-    if not 16 <= v <= 8192:
-        raise argparse.ArgumentTypeError(f"size must be between 16 and 8192 pixels, got {v}")
-    return v
-
-
-def _positive(text: str) -> int:
-    v = int(text)
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
-    return v
+#: argparse types (kept under these names for the commands that import them from here)
+_size = N.SIZE
+_positive = N.FRAMES
 
 
 def add_arguments(parser) -> None:
@@ -35,9 +26,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--out", default="out/demo.png", help="PNG of the first frame (default: out/demo.png)")
     parser.add_argument("--frames", type=_positive, default=1, help="frames to render along the track (default: 1)")
     parser.add_argument("--video", metavar="MP4", help="also write the frames as an H.264 MP4 (e.g. out/demo.mp4)")
-    parser.add_argument("--fps", type=_positive, default=30, help="video frame rate (default: 30)")
-    parser.add_argument("--start", type=float, default=0.12, help="camera start along the track, 0..1 (default: 0.12)")
-    parser.add_argument("--end", type=float, default=0.45, help="camera end along the track, 0..1 (default: 0.45)")
+    parser.add_argument("--fps", type=N.FPS, default=30, help="video frame rate (default: 30)")
+    parser.add_argument("--start", type=N.FRACTION, default=0.12, help="camera start along the track, 0..1 (default: 0.12)")
+    parser.add_argument("--end", type=N.FRACTION, default=0.45, help="camera end along the track, 0..1 (default: 0.45)")
     parser.add_argument("--lod", choices=("on", "off"), default="on",
                         help="per-edge LOD (off: every patch 8x8, for comparison)")
     parser.add_argument("--lightmap", choices=("modulate", "ps2"), default="modulate",
@@ -49,9 +40,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--debug", choices=("lod", "wire", "base", "lightmap"),
                         help="debug view: lod = patches coloured by tessellation (4x4 green, 6x6 yellow, 8x8 red, "
                              "glue blue) with wireframe; wire = wireframe over the lit terrain; base / lightmap = one texture")
-    parser.add_argument("--seed", type=int, default=0, help="course seed (default: 0)")
-    parser.add_argument("--fov", type=float, default=60.0, help="vertical field of view in degrees (default: 60)")
-    parser.add_argument("--height", type=float, default=12.0, help="camera height above the track in metres (default: 12)")
+    parser.add_argument("--seed", type=N.SEED, default=0, help="course seed (default: 0)")
+    parser.add_argument("--fov", type=N.FOV, default=60.0, help="vertical field of view in degrees (default: 60)")
+    parser.add_argument("--height", type=N.real(0.0, 100_000.0, lo_open=True), default=12.0,
+                        help="camera height above the track in metres (default: 12)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--scene", choices=("full", "terrain"), default="full",
                         help="full: the completed scene (six riders chased by the camera, objects, projected shadows, "
@@ -60,7 +52,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--objects", choices=("dynamic", "baked", "points"), default="dynamic",
                         help="object lighting (full scene): 1 ambient + 3 directional per object (SSX), "
                              "pre-calculated RGBs, or dynamic point and spot lights")
-    parser.add_argument("--object-lod", type=float, default=None, metavar="PX",
+    parser.add_argument("--object-lod", type=N.real(0.0, 1000.0), default=None, metavar="PX",
                         help="full scene: objects' levels of detail, the simplification error an object may show "
                              "in pixels (0: full meshes; default: the scene's render.object_lod, 0.5)")
     parser.add_argument("--no-shadows", action="store_true", help="full scene without projected rider shadows")

@@ -19,6 +19,8 @@ from piste.errors import ConfigError
 
 
 def add_arguments(p) -> None:
+    from piste.commands import _numbers as N
+
     sub = p.add_subparsers(dest="mpf_command", metavar="ACTION")
     sub.required = True
     a = sub.add_parser("info", help="list the sub-models, bones, palettes, chunks and unknown bytes")
@@ -27,7 +29,7 @@ def add_arguments(p) -> None:
     e = sub.add_parser("encode", help="write a piste rider as an SSX Tricky .mpf")
     e.add_argument("out", help="output .mpf")
     e.add_argument("--model", default="builtin:rider", help="builtin:rider (default) or a skinned .gltf/.glb")
-    e.add_argument("--ratios", type=float, nargs="+", default=[1.0, 0.5, 0.25],
+    e.add_argument("--ratios", type=N.real(0.0, 1.0, lo_open=True), nargs="+", default=[1.0, 0.5, 0.25],
                    help="triangle ratio of each LOD (Body3000, Body1500, Body750; default 1 0.5 0.25)")
     e.add_argument("--report", help="also write the quantisation report as JSON here")
     e.add_argument("--split-head", action="store_true",

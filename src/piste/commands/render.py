@@ -9,6 +9,7 @@ from __future__ import annotations
 
 
 def add_arguments(parser) -> None:
+    from piste.commands import _numbers as N
     from piste.commands.demo import _positive, _size
 
     parser.add_argument("scene", help="a scene (.toml), a bundle (.piste) or a tiled world folder (.tiles: a flight "
@@ -18,11 +19,13 @@ def add_arguments(parser) -> None:
     parser.add_argument("--size", nargs=2, type=_size, metavar=("W", "H"), help="image size (default: the scene's)")
     parser.add_argument("--frames", type=_positive, default=1, help="frames to render (default: 1)")
     parser.add_argument("--video", metavar="MP4", help="also write the frames as an H.264 MP4")
-    parser.add_argument("--fps", type=_positive, default=30, help="frame rate (default: 30)")
+    parser.add_argument("--fps", type=N.FPS, default=30, help="frame rate (default: 30)")
     parser.add_argument("--list", action="store_true", help="list the scene's cameras and exit")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
-    parser.add_argument("--speed", type=float, default=100.0, help="tiled worlds: flight speed in m/s (default 100)")
-    parser.add_argument("--budget", type=float, default=256.0, help="tiled worlds: streaming memory budget in MiB")
+    parser.add_argument("--speed", type=N.real(0.0, 100_000.0, lo_open=True), default=100.0,
+                        help="tiled worlds: flight speed in m/s (default 100)")
+    parser.add_argument("--budget", type=N.real(1.0, float(1 << 20)), default=256.0,
+                        help="tiled worlds: streaming memory budget in MiB")
 
 
 def load_or_build(scene, quiet: bool = True):

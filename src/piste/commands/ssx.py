@@ -19,6 +19,7 @@ ACTIONS = ("info", "render", "view", "bake", "convert", "make", "import")
 
 
 def add_arguments(parser) -> None:
+    from piste.commands import _numbers as N
     from piste.commands.demo import _size
 
     parser.add_argument("action", choices=ACTIONS, help="what to do")
@@ -27,22 +28,22 @@ def add_arguments(parser) -> None:
                                       "level itself, with NAME_L.ssh beside it); convert: the .npz or project folder")
     parser.add_argument("--lightmap", choices=("modulate", "ps2"), default="modulate", help="light-map mode")
     parser.add_argument("--size", nargs=2, type=_size, default=(640, 448), metavar=("W", "H"), help="image size")
-    parser.add_argument("--eye", nargs=3, type=float, metavar=("X", "Y", "Z"), help="camera position (metres)")
-    parser.add_argument("--target", nargs=3, type=float, metavar=("X", "Y", "Z"), help="camera target (metres)")
+    parser.add_argument("--eye", nargs=3, type=N.COORDINATE, metavar=("X", "Y", "Z"), help="camera position (metres)")
+    parser.add_argument("--target", nargs=3, type=N.COORDINATE, metavar=("X", "Y", "Z"), help="camera target (metres)")
     parser.add_argument("--lights", metavar="TOML", help="bake: a lights file (default: the scene's or piste's)")
     parser.add_argument("--scene", metavar="TOML", help="bake: take the lights from this scene file")
     parser.add_argument("--no-shadows", action="store_true", help="bake: no shadow rays")
-    parser.add_argument("--jobs", type=int, default=1, help="bake: worker processes (0 = every core)")
+    parser.add_argument("--jobs", type=N.JOBS, default=1, help="bake: worker processes (0 = every core)")
     parser.add_argument("--to", choices=("npz", "multitool", "gltf"),
                         help="convert: a PatchNet .npz, a Multitool project folder, or glTF (.glb/.gltf: the "
                              "terrain with the level's textures and light map, as `piste export` writes it)")
-    parser.add_argument("--rows", type=int, default=2, help="make: patch rows")
-    parser.add_argument("--cols", type=int, default=3, help="make: patch columns")
+    parser.add_argument("--rows", type=N.integer(1, 256), default=2, help="make: patch rows")
+    parser.add_argument("--cols", type=N.integer(1, 256), default=3, help="make: patch columns")
     parser.add_argument("--name", default="SYNTH", help="make: the level's name")
     parser.add_argument("--from", dest="from_net", metavar="NET",
                         help="make: the patches of a saved PatchNet (.npz), a .bpt, or 'default' (the default "
                              "course) instead of a synthetic slope; placeholder textures and light maps (bake next)")
-    parser.add_argument("--frames", type=int, help="view: quit after N frames")
+    parser.add_argument("--frames", type=N.FRAMES, help="view: quit after N frames")
 
 
 def default_camera(net):

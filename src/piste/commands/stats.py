@@ -4,11 +4,15 @@ from __future__ import annotations
 
 
 def add_arguments(parser) -> None:
+    from piste.commands import _numbers as N
+
     parser.add_argument("net", nargs="?", help="a .bpt or .npz patch net (default: the default course)")
-    parser.add_argument("--eye", nargs=3, type=float, metavar=("X", "Y", "Z"), help="camera position")
-    parser.add_argument("--target", nargs=3, type=float, metavar=("X", "Y", "Z"), help="camera target")
-    parser.add_argument("--near", type=float, default=None, help="edges nearer than this get 8 vertices")
-    parser.add_argument("--far", type=float, default=None, help="edges nearer than this get 6 vertices")
+    parser.add_argument("--eye", nargs=3, type=N.COORDINATE, metavar=("X", "Y", "Z"), help="camera position")
+    parser.add_argument("--target", nargs=3, type=N.COORDINATE, metavar=("X", "Y", "Z"), help="camera target")
+    parser.add_argument("--near", type=N.real(0.0, N.MAX_COORDINATE, lo_open=True), default=None,
+                        help="edges nearer than this get 8 vertices")
+    parser.add_argument("--far", type=N.real(0.0, N.MAX_COORDINATE, lo_open=True), default=None,
+                        help="edges nearer than this get 6 vertices")
     parser.add_argument("--no-cull", action="store_true", help="count every patch, not just the visible ones")
     parser.add_argument("--json", action="store_true", help="print the numbers as JSON")
 

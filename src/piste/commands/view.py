@@ -22,13 +22,14 @@ import sys
 
 
 def add_arguments(parser) -> None:
+    from piste.commands import _numbers as N
     from piste.commands.demo import _positive, _size
     from piste.pipeline.live import add_scene_arguments
 
     parser.add_argument("--size", nargs=2, type=_size, default=(960, 672), metavar=("W", "H"),
                         help="window size (default: 960 672)")
-    parser.add_argument("--seed", type=int, default=0, help="course seed (default: 0)")
-    parser.add_argument("--start", type=float, default=0.1, help="start along the track, 0..1 (default: 0.1)")
+    parser.add_argument("--seed", type=N.SEED, default=0, help="course seed (default: 0)")
+    parser.add_argument("--start", type=N.FRACTION, default=0.1, help="start along the track, 0..1 (default: 0.1)")
     parser.add_argument("--lightmap", choices=("modulate", "ps2"), default="modulate", help="light-map mode (M toggles)")
     parser.add_argument("--lighting", choices=("baked", "placeholder", "none"), default="baked",
                         help="light-map atlas (see `piste demo --help`)")
@@ -40,16 +41,18 @@ def add_arguments(parser) -> None:
     parser.add_argument("--face", choices=("morph", "null_bones", "off"),
                         help="riders' faces: morph targets, their null-bone fit, or the neutral face (default: the "
                              "scene file's [render] face, else morph)")
-    parser.add_argument("--follow", type=int, metavar="N", help="start chasing rider N (F toggles, N next rider)")
+    parser.add_argument("--follow", type=N.integer(0, 10_000), metavar="N",
+                        help="start chasing rider N (F toggles, N next rider)")
     parser.add_argument("--no-overlay", action="store_true", help="start without the statistics overlay (H toggles)")
     parser.add_argument("--frames", type=_positive, help="quit after N frames (for scripted runs)")
-    parser.add_argument("--exit-after", type=float, metavar="S", help="quit after S seconds (for scripted runs)")
+    parser.add_argument("--exit-after", type=N.SECONDS, metavar="S", help="quit after S seconds (for scripted runs)")
     parser.add_argument("--state", metavar="FILE", help="write the camera, frames and riders drawn as JSON on exit")
     parser.add_argument("--benchmark", type=_positive, metavar="N",
                         help="render N frames along a fixed path without input and print fps (needs a display)")
     parser.add_argument("--out", default="out/view.png",
                         help="screenshot on quit with --frames, or the headless fallback's image (default: out/view.png)")
     add_scene_arguments(parser)
+    parser._option_string_actions["--watch-seconds"].type = N.SECONDS  # added by pipeline.live (no argparse types there)
 
 
 def course_preview(args, bundle, ctx=None):
