@@ -6,7 +6,8 @@
                                                 none), with the quantisation report (--report R.json);
                                                 --split-head: OUT_body.mpf + OUT_head.mpf (head bones
                                                 in file id 2, parented onto body bones by file id)
-  piste mpf export RIDER.mpf OUT.glb            the decoded rider (+ shared clips) as glTF
+  piste mpf export RIDER.mpf OUT.glb            the decoded rider (+ shared clips) as glTF;
+                                                --clips BANK.afl: the game's own clips instead
   piste mpf copy RIDER.mpf OUT.mpf              read and write back (byte-identical when unedited)
 """
 
@@ -43,6 +44,11 @@ def add_arguments(p) -> None:
     x.add_argument("out", help="output .glb or .gltf")
     x.add_argument("--texture", action="append",
                    help="an .ssh texture bank (repeatable; default: the .ssh with the model's stem beside it)")
+    x.add_argument("--clips", action="append", metavar="BANK.afl",
+                   help="an SSX Tricky .afl animation bank (repeatable): export its clips (body tracks) instead of "
+                        "piste's shared clips")
+    x.add_argument("--fps", type=float, default=60.0,
+                   help="with --clips: AFL frames a second (default 60, the game's tick; not documented for .afl)")
     c = sub.add_parser("copy", help="read and write back (byte-identical when nothing changed)")
     c.add_argument("file")
     c.add_argument("out")
@@ -142,8 +148,26 @@ def run(args) -> int:
         from piste.pipeline.ssx_rider import load_mpf_rider
 
         model = load_mpf_rider(args.file, texture=args.texture)
+        if args.clips:
+            from piste.formats.ssx.afl import afl_clips, mpf_body_bones, read_afl
+
+            clips, bones = {}, mpf_body_bones(model)
+            for bank in args.clips:
+                afl = read_afl(bank)
+                for n, c in afl_clips(afl, model.skeleton, bones, fps=args.fps).items():
+                    key = n if n not in clips else f"{Path(bank).stem}/{n}"
+                    c.name = key
+                    clips[key] = c
+                for note in afl.notes:
+                    print(f"  note: {bank}: {note}")
+            if not clips:
+                raise ConfigError(f"{', '.join(args.clips)}: no clip with a body track to export")
+            driven = {b for c in clips.values() for b in c.tracks}
+            print(f"{len(clips)} clips from {', '.join(args.clips)}: {len(driven)} of the model's "
+                  f"{model.skeleton.n_bones} bones driven")
+            model.clips = clips
         r = export_gltf(args.out, characters=[CharacterExport(model, name=model.name)])
-        print(f"wrote {r.path} ({r.bytes} bytes)")
+        print(f"wrote {r.path} ({r.bytes} bytes, {r.animations} animations)")
         return 0
     if args.mpf_command == "copy":
         notes = write_mpf(read_mpf(args.file), args.out)
