@@ -20,14 +20,13 @@ ACTIONS = ("info", "render", "view", "bake", "convert", "make", "import")
 
 def add_arguments(parser) -> None:
     from piste.commands import _numbers as N
-    from piste.commands.demo import _size
 
     parser.add_argument("action", choices=ACTIONS, help="what to do")
     parser.add_argument("level", help="LEVEL.pbd (make: the output folder; import: the Multitool project folder)")
     parser.add_argument("--out", help="render: PNG (default out/ssx.png); bake: the .pbd to write (default: the "
                                       "level itself, with NAME_L.ssh beside it); convert: the .npz or project folder")
     parser.add_argument("--lightmap", choices=("modulate", "ps2"), default="modulate", help="light-map mode")
-    parser.add_argument("--size", nargs=2, type=_size, default=(640, 448), metavar=("W", "H"), help="image size")
+    parser.add_argument("--size", nargs=2, type=N.SIZE, default=(640, 448), metavar=("W", "H"), help="image size")
     parser.add_argument("--eye", nargs=3, type=N.COORDINATE, metavar=("X", "Y", "Z"), help="camera position (metres)")
     parser.add_argument("--target", nargs=3, type=N.COORDINATE, metavar=("X", "Y", "Z"), help="camera target (metres)")
     parser.add_argument("--lights", metavar="TOML", help="bake: a lights file (default: the scene's or piste's)")
@@ -238,11 +237,14 @@ def gltf_pbd(level_path, out) -> int:
     from piste.pipeline import load_bundle
     from piste.pipeline.build import build_scene
 
+    from piste.world.scene_file import loads_scene
+
     level = _pbd_path(level_path).resolve()
+    # the scene exists only in memory, as if beside the level (its path relative to that folder)
+    scene = loads_scene(f"name = {json.dumps(level.stem)}\nterrain = {{ ssx_pbd = {json.dumps(level.name)} }}\n",
+                        level.parent / f"{level.stem}.toml")
     with tempfile.TemporaryDirectory() as d:
-        scene = Path(d) / f"{level.stem}.toml"
-        scene.write_text(f"name = {json.dumps(level.stem)}\nterrain = {{ ssx_pbd = {json.dumps(str(level))} }}\n")
-        r = build_scene(scene, use_cache=False)
+        r = build_scene(scene, out=Path(d) / f"{level.stem}.piste", use_cache=False)
         report = export_bundle(load_bundle(r.path), out)
     print(f"wrote {out} ({report.bytes / 1e6:.2f} MB): terrain {report.terrain_triangles:,} triangles with the "
           "level's textures and light map")

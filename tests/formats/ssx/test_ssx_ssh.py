@@ -168,3 +168,79 @@ def test_lightmap_tiles_are_transposed_and_edge_aligned():
     np.testing.assert_array_equal(back, pages)
     with pytest.raises(FormatError, match="patch 2: light-map tile"):
         extract_tiles(pages, rect[:3] + [[0, 0, 0, 0], [0, 0, 0, 0], [0.99, 0, 0, 0]], page[:3])
+
+
+# ----------------------------------------------------------------------------- kept chunks (issue 22 item 6)
+def _hot_spots(points) -> bytes:
+    """A type-124 hot-spot chunk as SSX-Library reads it: type, u24 size, i16 count, count x 8
+    bytes (two i32), 16-aligned."""
+    body = struct.pack("<h", len(points)) + b"".join(struct.pack("<ii", x, y) for x, y in points)
+    n = 4 + len(body)
+    n += -n % 16
+    return (struct.pack("<I", 124 | (n << 8)) + body).ljust(n, b"\0")
+
+
+def _metal_alpha() -> bytes:
+    """A type-105 metal-alpha marker as SSX-Library writes it: size 16, width 0, height 128."""
+    return struct.pack("<I4hI", 105 | (16 << 8), 0, 128, 0, 0, 0)
+
+
+def test_hot_spot_and_metal_alpha_chunks_written_back_unchanged(tmp_path):
+    bank = _bank()
+    hs = _hot_spots([(329, 394), (359, 400), (357, 405)])
+    bank.images[0].extra = [(2, hs)]  # image, palette, hot spots, long name
+    bank.images[1].extra = [(2, _metal_alpha())]  # image, palette, metal alpha
+    data = bank.to_bytes()
+    off0 = struct.unpack_from("<I", data, 20)[0]
+    assert data.find(hs, off0) > 0
+    path = tmp_path / "H.ssh"
+    path.write_bytes(data)
+    back = read_ssh(path)
+    assert back.images[0].extra == [(2, hs)] and back.images[0].long_name == "snow_a"
+    assert back.images[1].extra == [(2, _metal_alpha())]
+    np.testing.assert_array_equal(back.images[0].pixels, bank.images[0].pixels)
+    assert back.to_bytes() == data  # byte for byte
+    # a hot-spot chunk of size 0: its size implied by the count (6 + 8 x count, 16-aligned)
+    z = bytearray(hs)
+    z[1:4] = b"\0\0\0"
+    bank.images[0].extra = [(2, bytes(z))]
+    again = parse_ssh(bank.to_bytes(), "z.ssh")
+    assert again.images[0].extra == [(2, bytes(z))] and again.images[0].long_name == "snow_a"
+    # a count running past the image is refused, naming the file, the image and the field
+    bad = bytearray(data)
+    at = bad.find(hs)
+    struct.pack_into("<h", bad, at + 4, 3000)
+    struct.pack_into("<I", bad, at, 124)  # size 0: implied by the (huge) count
+    with pytest.raises(FormatError, match="hot-spot chunk") as e:
+        parse_ssh(bytes(bad), "bad.ssh")
+    assert "bad.ssh" in str(e.value) and "image 0" in str(e.value) and e.value.field == "chunk"
+
+
+def test_size_zero_chunk_is_not_padded():
+    """A size-0 chunk spans its header and data exactly (SSX-Library): a 3-colour palette (12 bytes)
+    is followed by the long-name chunk at +28, not at the next 16-byte boundary."""
+    pix = np.array([[0, 1], [2, 1]], np.uint8)
+    pal = np.array([[10, 20, 30, 128], [40, 50, 60, 128], [70, 80, 90, 64]], np.uint8)
+    img = struct.pack("<I4hI", 2 | (32 << 8), 2, 2, 0, 0, 0) + pix.tobytes().ljust(16, b"\0")
+    pchunk = struct.pack("<I4hI", 33, 3, 1, 3, 0, 0) + pal.tobytes()  # size 0, 12 data bytes, unpadded
+    name = struct.pack("<I", 112) + b"abc\0"
+    chain = img + pchunk + name
+    head = b"SHPS" + struct.pack("<II", 16 + 8 + len(chain), 1) + b"G278" + b"t000" + struct.pack("<I", 24)
+    bank = parse_ssh(head + chain, "p.ssh")
+    im = bank.images[0]
+    np.testing.assert_array_equal(im.palette, pal)
+    assert im.long_name == "abc"
+    np.testing.assert_array_equal(im.stored_rgba(), pal[pix])
+    # piste writes such a palette with an explicit size (its padding would otherwise be misread)
+    out = bank.to_bytes()
+    off = struct.unpack_from("<I", out, 20)[0]
+    poff = off + 32
+    assert out[poff] == 33 and struct.unpack_from("<I", out, poff)[0] >> 8 == 32
+    back = parse_ssh(out, "q.ssh")
+    np.testing.assert_array_equal(back.images[0].palette, pal)
+    assert back.images[0].long_name == "abc"
+    # a whole 256-colour palette keeps size 0 (as the game writes it)
+    full = _bank().to_bytes()
+    o = struct.unpack_from("<I", full, 20)[0]
+    p = o + 16 + 16 * 8
+    assert full[p] == 33 and struct.unpack_from("<I", full, p)[0] >> 8 == 0

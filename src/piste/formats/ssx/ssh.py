@@ -5,13 +5,19 @@ image count, 4-char creator ``G278``), then per image a 4-char name and a u32 ab
 images are separated by the text ``Buy ERTS``.  An image is a chain of chunks, each with a 16-byte
 header: u8 type, u24 size including the header (0 = the last chunk), i16 width, i16 height, i16 x,
 i16 y, u32 flags (``0x2000`` = swizzled).  Types: 1 4-bit indexed, 2 8-bit indexed, 5 32-bit
-RGBA, 33 palette (RGBA), 112 long name, 130 RefPack-compressed 8-bit.  Alpha is half range
-(``0x80`` = opaque, up to 255 over-bright in light maps).
+RGBA, 33 palette (RGBA), 112 long name, 130 RefPack-compressed 8-bit, 124 hot-spot list (HUD and
+front-end images) and 105 metal-alpha marker: piste does not interpret the last two but keeps each
+as the bytes it was read from, at its place in the image's chunk chain, and writes it back
+unchanged (:attr:`SshImage.extra`).  Alpha is half range (``0x80`` = opaque, up to 255
+over-bright in light maps).
 
 Layout facts checked against OpenSlope's ``Trailmap/specs/210-textures-ssh.md`` (Apache-2.0 prose):
 4-bit pixels hold the left pixel in the **low** nibble; a chunk size of 0 means "implied by the
-dimensions" (an image's chunks run to the next image's offset, or to its ``Buy ERTS``
-terminator); the game's writer reserves the header and directory in 128-byte steps (112 bytes for
+dimensions": the header plus exactly ``width x height x bytes per pixel``, **not padded** to 16
+(as SSX-Library reads it; a type-124 chunk of size 0 spans ``6 + 8 x count`` bytes, 16-aligned);
+an image's chunks run to the next image's offset, or to its ``Buy ERTS`` terminator.  piste
+writes a size-0 chunk only where its data is a multiple of 16 bytes (otherwise an explicit size),
+so every reader finds the next chunk where piste put it.  The game's writer reserves the header and directory in 128-byte steps (112 bytes for
 up to 12 images, +128 per further 16), writes ``Buy ERTS`` before every image but the first
 (which it follows in the directory padding), gives indexed image chunks an explicit size and
 palette, RGBA and long-name chunks size 0, and puts a (usually empty) long-name chunk
@@ -46,7 +52,7 @@ extract_tiles(pages, rect, page) -> (n, 8, 8, 4);  place_tiles(tiles, rect, page
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -75,6 +81,10 @@ RGBA32 = 5
 PALETTE = 33
 LONG_NAME = 112
 REFPACK = 130
+METAL_ALPHA = 105
+HOT_SPOTS = 124
+#: chunk types kept as raw bytes and written back unchanged
+KEPT = (METAL_ALPHA, HOT_SPOTS)
 #: largest image side accepted (hostile sizes are refused before allocating)
 MAX_SIDE = 4096
 _CHUNK = struct.Struct("<I4hI")
@@ -122,6 +132,9 @@ class SshImage:
     x, y, flags : the image chunk's header fields (flags ``0x2000``: stored swizzled)
     long_name : text of a long-name chunk ("" for the game's empty ones), or None for none
     palette_flags : the palette chunk's flags (``0x2000``: stored in the PS2 CLUT order)
+    extra : chunks piste keeps without interpreting (types 124 hot-spot list, 105 metal alpha):
+        ``[(position, raw bytes)]``, ``position`` the chunk's index in the image's chain (image,
+        palette, long name and these), the bytes from its header to the next chunk
     """
 
     name: str
@@ -133,6 +146,7 @@ class SshImage:
     flags: int = 0
     long_name: str | None = None
     palette_flags: int = 0
+    extra: list = field(default_factory=list)
 
     @property
     def width(self) -> int:
@@ -204,6 +218,11 @@ class SshImage:
             raise ValidationError(f"ssh image {self.name!r}: a CLUT-ordered palette needs a multiple of 32 colours")
         if len(self.name.encode("latin-1", "replace")) > 4:
             raise ValidationError(f"ssh image {self.name!r}: names are at most 4 characters")
+        for k, item in enumerate(self.extra):
+            ok = isinstance(item, tuple) and len(item) == 2 and isinstance(item[0], int) and item[0] >= 0
+            if not ok or not isinstance(item[1], (bytes, bytearray)) or len(item[1]) < 4 or item[1][0] not in KEPT:
+                raise ValidationError(f"ssh image {self.name!r}: extra chunk {k} must be (position, bytes of a "
+                                      f"type {' or '.join(map(str, KEPT))} chunk)")
 
 
 @dataclass
@@ -247,32 +266,40 @@ class SshBank:
 
 def _chunk(kind: int, data: bytes, w: int, h: int, x: int = 0, y: int = 0, flags: int = 0,
            explicit: bool = True) -> bytes:
+    """A chunk padded to 16 bytes; size 0 ("implied", which readers do not pad) only where the
+    data needs no padding, an explicit size otherwise."""
     body = data + b"\0" * (-(16 + len(data)) % 16)
-    size = 16 + len(body) if explicit else 0
+    size = 16 + len(body) if explicit or len(body) != len(data) else 0
     return _CHUNK.pack(kind | (size << 8), w, h, x, y, flags) + body
 
 
 def _encode_image(im: SshImage) -> bytes:
     """The game's chunk chain: an indexed image chunk with an explicit size, then its palette
-    (size 0, x = the colour count); an RGBA chunk with size 0; then the long-name chunk."""
-    out = _chunk(im.kind, im._data(), im.width, im.height, im.x, im.y, im.flags, explicit=im.kind in INDEXED)
+    (size 0, x = the colour count); an RGBA chunk with size 0; then the long-name chunk; the
+    kept chunks (:attr:`SshImage.extra`) at their positions in the chain, as read."""
+    chain = [_chunk(im.kind, im._data(), im.width, im.height, im.x, im.y, im.flags, explicit=im.kind in INDEXED)]
     if im.kind in INDEXED:
         pal = np.ascontiguousarray(im.palette, dtype=np.uint8)
         if im.palette_flags & SWIZZLED:
             stored = np.empty_like(pal)
             stored[clut_order(len(pal))] = pal
             pal = stored
-        out += _chunk(PALETTE, pal.tobytes(), len(pal), 1, len(pal), 0, im.palette_flags, explicit=False)
+        chain.append(_chunk(PALETTE, pal.tobytes(), len(pal), 1, len(pal), 0, im.palette_flags, explicit=False))
     if im.long_name is not None:
         text = im.long_name.encode("latin-1", "replace") + b"\0"
         text += b"\0" * (-(4 + len(text)) % 16)
-        out += struct.pack("<I", LONG_NAME) + text
-    return out
+        chain.append(struct.pack("<I", LONG_NAME) + text)
+    for pos, raw in sorted(im.extra, key=lambda e: e[0]):
+        chain.insert(min(pos, len(chain)), bytes(raw))
+    return b"".join(chain)
 
 
 def _implied_size(kind: int, w: int, h: int) -> int:
-    data = {1: (w * h + 1) // 2, 2: w * h, 5: w * h * 4, PALETTE: w * h * 4}.get(kind, 0)
-    return 16 + data + (-(16 + data) % 16)
+    """The length of a size-0 chunk: its header and its data, not padded (SSX-Library)."""
+    if kind == HOT_SPOTS:  # a 6-byte header, then count x 8 bytes, 16-aligned
+        n = 6 + 8 * max(w, 0)
+        return n + (-n % 16)
+    return 16 + {1: (w * h + 1) // 2, 2: w * h, 5: w * h * 4, PALETTE: w * h * 4}.get(kind, max(w, 0) * max(h, 0))
 
 
 def parse_ssh(data: bytes, path=None) -> SshBank:
@@ -304,69 +331,95 @@ def parse_ssh(data: bytes, path=None) -> SshBank:
 
 def _parse_image(data: bytes, off: int, end: int, name: str, where: str, path) -> SshImage:
     """Walk an image's chunks from ``off`` to ``end`` (the next image or its terminator); a chunk
-    size of 0 is implied by the chunk's dimensions."""
+    size of 0 is implied by the chunk's dimensions (not padded); a long-name chunk's text runs to
+    its NUL, the next chunk 16-aligned after it; chunks of the kept types (124, 105) are kept as
+    their bytes at their place in the chain."""
     size = len(data)
     pos = off
     image = None
     palette = None
     palette_flags = 0
     long_name = None
-    for _ in range(64):
+    extra = []
+    for index in range(64):
         if pos + 4 > end:
             break
         word = struct.unpack_from("<I", data, pos)[0]
         kind, csize = word & 0xFF, word >> 8
-        if kind == LONG_NAME:  # its size bytes are unused: NUL-terminated text, the last chunk
-            long_name = data[pos + 4:end].split(b"\0", 1)[0].decode("latin-1")
-            break
-        else:
-            if pos + 16 > size:
-                raise FormatError(path, f"{where}: chunk header at {pos} is truncated", field="chunk")
-            _, w, h, x, y, flags = _CHUNK.unpack_from(data, pos)
-            body = pos + 16
-            if csize == 0:
-                csize = _implied_size(kind, w, h)
-            if kind in INDEXED or kind == RGBA32:
-                if flags & SWIZZLED and kind != 2:
-                    raise FormatError(path, f"{where}: swizzled {'4-bit' if kind == 1 else '32-bit'} images (flag 0x2000) "
-                                            "are not supported yet", field="flags")
-                if not (0 < w <= MAX_SIDE and 0 < h <= MAX_SIDE):
-                    raise FormatError(path, f"{where}: image size {w}x{h} outside 1..{MAX_SIDE}", field="size")
-                nbytes = {1: (w * h + 1) // 2, 2: w * h, 5: w * h * 4}[kind]
-                if body + nbytes > size:
-                    raise FormatError(path, f"{where}: {w}x{h} type-{kind} pixels need {nbytes} bytes from {body}, "
-                                            f"the file has {size}", field="pixels")
-                raw = np.frombuffer(data, np.uint8, count=nbytes, offset=body)
-                if kind == RGBA32:
-                    pix = raw.reshape(h, w, 4).copy()
-                elif kind == 2:
-                    if flags & SWIZZLED:
-                        try:
-                            raw = raw[swizzle8_order(w, h)]
-                        except ValueError as exc:
-                            raise FormatError(path, f"{where}: swizzled image: {exc}", field="flags") from None
-                    pix = raw.reshape(h, w).copy()
-                else:
-                    pix = np.stack([raw & 15, raw >> 4], axis=1).ravel()[: w * h].reshape(h, w).copy()
-                image = (kind, pix, x, y, flags)
-            elif kind == PALETTE:
-                k = w * h
-                if not 0 < k <= 256 or body + 4 * k > size:
-                    raise FormatError(path, f"{where}: palette of {w}x{h} colours is out of range or truncated",
-                                      field="palette")
-                palette = np.frombuffer(data, np.uint8, count=4 * k, offset=body).reshape(k, 4).copy()
-                palette_flags = flags
+        if kind == LONG_NAME:  # its size bytes are unused: NUL-terminated text, then 16-aligned
+            stop = data.find(b"\0", pos + 4, end)
+            stop = end if stop < 0 else stop
+            long_name = data[pos + 4:stop].decode("latin-1")
+            nxt = stop + 1
+            pos = nxt + (-(nxt - off) % 16)
+            continue
+        if kind == HOT_SPOTS:
+            if pos + 6 > end:
+                raise FormatError(path, f"{where}: hot-spot chunk (type 124) at {pos} is truncated", field="chunk")
+            count = struct.unpack_from("<h", data, pos + 4)[0]
+            need = _implied_size(HOT_SPOTS, count, 1)
+            length = csize if csize else need
+            if count < 0 or length < 6 + 8 * count or pos + length > end:
+                raise FormatError(path, f"{where}: hot-spot chunk (type 124) at {pos}: {count} points in {length} "
+                                        f"bytes do not fit the image's {end - pos} bytes left", field="chunk")
+            extra.append((index, data[pos:pos + length]))
+            pos += length
+            continue
+        if pos + 16 > size:
+            raise FormatError(path, f"{where}: chunk header at {pos} is truncated", field="chunk")
+        _, w, h, x, y, flags = _CHUNK.unpack_from(data, pos)
+        body = pos + 16
+        if csize == 0:
+            csize = _implied_size(kind, w, h)
+        if csize < 16:
+            raise FormatError(path, f"{where}: chunk at {pos} declares {csize} bytes, less than its 16-byte header",
+                              field="chunk size")
+        if kind == METAL_ALPHA:
+            if pos + csize > end:
+                raise FormatError(path, f"{where}: metal-alpha chunk (type 105) at {pos} runs {csize} bytes, past "
+                                        f"the image's end at {end}", field="chunk size")
+            extra.append((index, data[pos:pos + csize]))
+        elif kind in INDEXED or kind == RGBA32:
+            if flags & SWIZZLED and kind != 2:
+                raise FormatError(path, f"{where}: swizzled {'4-bit' if kind == 1 else '32-bit'} images (flag 0x2000) "
+                                        "are not supported yet", field="flags")
+            if not (0 < w <= MAX_SIDE and 0 < h <= MAX_SIDE):
+                raise FormatError(path, f"{where}: image size {w}x{h} outside 1..{MAX_SIDE}", field="size")
+            nbytes = {1: (w * h + 1) // 2, 2: w * h, 5: w * h * 4}[kind]
+            if body + nbytes > size:
+                raise FormatError(path, f"{where}: {w}x{h} type-{kind} pixels need {nbytes} bytes from {body}, "
+                                        f"the file has {size}", field="pixels")
+            raw = np.frombuffer(data, np.uint8, count=nbytes, offset=body)
+            if kind == RGBA32:
+                pix = raw.reshape(h, w, 4).copy()
+            elif kind == 2:
                 if flags & SWIZZLED:
-                    if k % 32:
-                        raise FormatError(path, f"{where}: a CLUT-ordered palette of {k} colours (not a multiple "
-                                                "of 32) is not supported yet", field="palette")
-                    palette = palette[clut_order(k)]
-            elif kind == REFPACK:
-                raise FormatError(path, f"{where}: RefPack-compressed images (type 130) are not supported yet",
-                                  field="chunk type")
+                    try:
+                        raw = raw[swizzle8_order(w, h)]
+                    except ValueError as exc:
+                        raise FormatError(path, f"{where}: swizzled image: {exc}", field="flags") from None
+                pix = raw.reshape(h, w).copy()
             else:
-                raise FormatError(path, f"{where}: unknown chunk type {kind} at offset {pos} (known: 1, 2, 5, 33, "
-                                        "112, 130)", field="chunk type")
+                pix = np.stack([raw & 15, raw >> 4], axis=1).ravel()[: w * h].reshape(h, w).copy()
+            image = (kind, pix, x, y, flags)
+        elif kind == PALETTE:
+            k = w * h
+            if not 0 < k <= 256 or body + 4 * k > size:
+                raise FormatError(path, f"{where}: palette of {w}x{h} colours is out of range or truncated",
+                                  field="palette")
+            palette = np.frombuffer(data, np.uint8, count=4 * k, offset=body).reshape(k, 4).copy()
+            palette_flags = flags
+            if flags & SWIZZLED:
+                if k % 32:
+                    raise FormatError(path, f"{where}: a CLUT-ordered palette of {k} colours (not a multiple "
+                                            "of 32) is not supported yet", field="palette")
+                palette = palette[clut_order(k)]
+        elif kind == REFPACK:
+            raise FormatError(path, f"{where}: RefPack-compressed images (type 130) are not supported yet",
+                              field="chunk type")
+        else:
+            raise FormatError(path, f"{where}: unknown chunk type {kind} at offset {pos} (known: 1, 2, 5, 33, "
+                                    "105, 112, 124, 130)", field="chunk type")
         pos += csize
     if image is None:
         raise FormatError(path, f"{where}: no image chunk (type 1, 2 or 5)", field="chunk type")
@@ -377,7 +430,7 @@ def _parse_image(data: bytes, off: int, end: int, name: str, where: str, path) -
         if pix.size and int(pix.max()) >= len(palette):
             raise FormatError(path, f"{where}: pixel index {int(pix.max())} past the {len(palette)}-colour palette",
                               field="pixels")
-    return SshImage(name, kind, pix, palette, x, y, flags, long_name, palette_flags)
+    return SshImage(name, kind, pix, palette, x, y, flags, long_name, palette_flags, extra)
 
 
 def read_ssh(path) -> SshBank:
