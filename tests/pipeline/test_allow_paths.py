@@ -1,5 +1,6 @@
-"""The scene file's ``allow_paths`` key reaches the glTF loader (issue 10 item 4): a model whose
-buffer lies outside its folder is refused by a scene, and loads when the scene names that folder."""
+"""Folders outside a model's own are allowed by the *user* only (issue 24): ``--allow-path DIR`` /
+``PISTE_ALLOW_PATHS`` reach the glTF loader through the scene; a scene's own ``allow_paths`` key is
+an error (a file never authorises itself)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import numpy as np
 import pytest
 
 from piste.errors import ConfigError, FormatError
+from piste.formats import safe_io
 from piste.pipeline.gltf_import import import_gltf
 from piste.pipeline.sources import load_object_mesh
 from piste.world.scene_file import loads_scene
@@ -37,9 +39,16 @@ def layout(tmp_path):
     return tmp_path
 
 
-def _scene(tmp_path, allow=None):
-    text = (f"allow_paths = {json.dumps(allow)}\n" if allow is not None else "") + \
-        '[[gltf]]\nfile = "models/thing.gltf"\n[[objects]]\nmodel = "models/thing.gltf"\nposition = [1.0, 2.0]\n'
+@pytest.fixture(autouse=True)
+def _no_user_allow_paths(monkeypatch):
+    monkeypatch.delenv(safe_io.ALLOW_PATHS_ENV, raising=False)
+    safe_io.set_user_allow_paths(())
+    yield
+    safe_io.set_user_allow_paths(())
+
+
+def _scene(tmp_path):
+    text = '[[gltf]]\nfile = "models/thing.gltf"\n[[objects]]\nmodel = "models/thing.gltf"\nposition = [1.0, 2.0]\n'
     return loads_scene(text, tmp_path / "scene.toml")
 
 
@@ -54,26 +63,39 @@ def test_scene_without_allow_paths_refuses(layout):
     assert (layout / "assets" / "tri.bin").resolve() not in scene.source_files()
 
 
-def test_scene_allow_paths_allows(layout):
-    scene = _scene(layout, ["assets"])
+@pytest.mark.parametrize("how", ["flag", "env"])
+def test_user_allow_paths_allow(layout, monkeypatch, how):
+    if how == "flag":
+        safe_io.set_user_allow_paths([layout / "assets"])
+    else:
+        monkeypatch.setenv(safe_io.ALLOW_PATHS_ENV, str(layout / "assets"))
+    scene = _scene(layout)
     assert scene.allow_paths == ((layout / "assets").resolve(),)
     assert scene.gltf[0].allow_paths == scene.allow_paths
     import_gltf(scene.gltf[0])
-    mesh = load_object_mesh(scene.objects[0].model, allow_paths=scene.allow_paths)
+    mesh = load_object_mesh(scene.objects[0].model)
     assert len(mesh.indices) == 1
     assert (layout / "assets" / "tri.bin").resolve() in scene.source_files()
 
 
-@pytest.mark.parametrize("value, msg", [('"assets"', "expected an array"), ('["nope"]', "is not a folder"),
-                                        ("[1]", "expected an array")])
-def test_bad_allow_paths(layout, value, msg):
-    with pytest.raises(ConfigError, match=msg):
+@pytest.mark.parametrize("value", ['["assets"]', '["/"]', '[]', '"assets"'])
+def test_scene_allow_paths_key_is_an_error(layout, value):
+    """The key that let a scene switch confinement off for itself (allow_paths = ["/"]) is refused
+    by name, whatever it holds, and says what to do instead."""
+    with pytest.raises(ConfigError, match=r"key 'allow_paths'.*--allow-path DIR.*PISTE_ALLOW_PATHS"):
         loads_scene(f"allow_paths = {value}\n", layout / "scene.toml")
 
 
+def test_bad_user_allow_paths(layout, monkeypatch):
+    with pytest.raises(ConfigError, match="--allow-path 'nope': not a folder"):
+        safe_io.set_user_allow_paths(["nope"])
+    monkeypatch.setenv(safe_io.ALLOW_PATHS_ENV, str(layout / "missing"))
+    with pytest.raises(ConfigError, match="PISTE_ALLOW_PATHS .*not a folder"):
+        safe_io.user_allow_paths()
+
 
 def test_build_uses_allow_paths_and_does_not_reuse_a_permitted_step(layout):
-    """`piste build` reads the object's buffer only while the scene allows its folder; the cached
+    """`piste build` reads the object's buffer only while the user allows its folder; the cached
     objects step built with the permission is not reused once the permission is gone."""
     from piste.pipeline.build import build_scene
 
@@ -81,9 +103,10 @@ def test_build_uses_allow_paths_and_does_not_reuse_a_permitted_step(layout):
     np.savez(layout / "h.npz", z=z, dx=np.array(10.0))
     body = ('[terrain]\nsource = "h.npz"\n[lightmap]\nres = 4\n[visibility]\nenabled = false\n'
             '[[objects]]\nmodel = "models/thing.gltf"\nposition = [20.0, 20.0]\n')
-    (layout / "s.toml").write_text('allow_paths = ["assets"]\n' + body)
+    (layout / "s.toml").write_text(body)
+    safe_io.set_user_allow_paths([layout / "assets"])
     r = build_scene(layout / "s.toml", out=layout / "s.piste", cache_dir=layout / "cache")
     assert r.path.exists()
-    (layout / "s.toml").write_text(body)
+    safe_io.set_user_allow_paths(())
     with pytest.raises(FormatError, match="leaves the model's folder"):
         build_scene(layout / "s.toml", out=layout / "s2.piste", cache_dir=layout / "cache")

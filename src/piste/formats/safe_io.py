@@ -1,27 +1,39 @@
-"""Reading files that other files name, safely: confinement, special files, size caps.
+"""Reading files that other files name, safely: one confinement rule, race-free opens, size caps.
 
-A model, scene or bundle is untrusted input.  When it names another file (a glTF ``buffers[].uri``
-or ``images[].uri``, a height field) that file is read only if
+A model, scene, tiled world or Multitool project is untrusted input (a mod downloaded from a
+stranger).  Every reader in piste opens files through this module, and the rule is the same for
+every kind of reference (scene paths, glTF URIs, tiles, Multitool textures, SSX partner files):
 
-- the reference is a relative path that stays inside the referring file's folder after ``..`` and
-  symbolic links are resolved, or lies inside one of the folders the caller explicitly allowed
-  (``allow_paths``: the ``load_gltf(..., allow_paths=[...])`` keyword and the scene file's top-level
-  ``allow_paths = [...]`` key).  Absolute paths and URLs (``file:``, ``http:``) are refused unless
-  they fall inside an allowed folder (URLs never);
-- it is a regular file (``os.stat`` / ``S_ISREG`` before opening: devices such as ``/dev/zero``,
-  named pipes, sockets and folders are refused, and the file is opened ``O_NONBLOCK | O_NOFOLLOW``
-  so nothing can hang or swap in a link between the check and the read);
-- its size, and any length the referring file declares for it, is within a cap checked *before*
-  a byte is read or a buffer allocated.
+- **Confinement**: a reference resolves inside the folder of the file that names it, or inside a
+  folder the *user* allowed: ``--allow-path DIR`` on the command line (:func:`set_user_allow_paths`),
+  the ``PISTE_ALLOW_PATHS`` environment variable, or the ``allow_paths=`` keyword of a library call.
+  A key inside the file being read never widens it (a scene's ``allow_paths`` key is an error).
+  ``..`` out of the folder, absolute paths elsewhere and URLs are refused by name.
+- **No links, no races**: the folder of a file the user named is a *confinement root*
+  (:func:`add_root`); every open below a root walks from it one component at a time with
+  ``openat(dir_fd, part, O_NOFOLLOW | O_DIRECTORY)`` (:func:`open_regular`), so a symbolic link
+  anywhere below the root, file or folder, present or swapped in while the loader runs, is refused.
+  The last component is opened ``O_PATH`` and ``fstat``-ed: folders, devices (``/dev/zero``), named
+  pipes and sockets are refused before any read (a pipe never blocks, a device is never opened);
+  only then is the same inode reopened for reading.  (``openat2(RESOLVE_BENEATH |
+  RESOLVE_NO_SYMLINKS)`` would do the walk in one call; the walk works on every POSIX kernel.)
+- **Sizes**: a file's size, and any length the referring file declares for it, is within a cap
+  checked *before* a byte is read or a buffer allocated.
 
 Data URIs are size-checked from their text before decoding.  Errors are
 :class:`~piste.errors.FormatError` naming the referring file and field.
 
 API
 ---
-resolve_reference(owner, ref, allow_paths=(), field=None) -> Path   confined, symlink-free path
+resolve_reference(owner, ref, allow_paths=(), field=None) -> Path   confined absolute path (not opened)
+open_regular(path, max_bytes, owner=None, field=None) -> int        race-free descriptor of a regular file
+open_file(path, max_bytes, ...) -> BinaryIO                          the same as a file object
 read_regular(path, max_bytes, owner=None, field=None, length=None) -> bytes
-check_regular(path, max_bytes, owner=None, field=None) -> int       size in bytes
+read_reference(owner, ref, max_bytes, allow_paths=(), field=None) -> bytes
+check_regular(path, max_bytes, owner=None, field=None) -> int       size in bytes (opened O_PATH, fstat)
+confined_file(owner, ref, ...) -> Path / confined_folder(owner, ref, ...) -> Path
+set_user_allow_paths(dirs) / user_allow_paths() -> tuple[Path]      --allow-path, PISTE_ALLOW_PATHS
+add_root(folder) -> str / anchor(folder) -> str                     confinement roots
 decode_data_uri(uri, max_bytes, owner=None, field=None) -> bytes
 loads_json(data, path, max_depth=MAX_JSON_DEPTH) -> object         json.loads with bounded nesting
 json_depth(obj) -> int                                              nesting depth (iterative)
@@ -34,20 +46,33 @@ from __future__ import annotations
 
 import base64
 import binascii
+import errno
+import io
 import json
 import os
 import re
 import stat
+import threading
 import urllib.parse
 from pathlib import Path
 
 import numpy as np
 
-from piste.errors import FormatError
+from piste.errors import ConfigError, FormatError
 
 __all__ = [
     "resolve_reference",
     "read_regular",
+    "read_reference",
+    "open_regular",
+    "open_file",
+    "confined_file",
+    "confined_folder",
+    "add_root",
+    "anchor",
+    "set_user_allow_paths",
+    "user_allow_paths",
+    "ALLOW_PATHS_ENV",
     "check_regular",
     "decode_data_uri",
     "loads_json",
@@ -78,41 +103,128 @@ _DRIVE = re.compile(r"^[A-Za-z]:[\\/]")
 
 
 def _err(owner, field, message) -> FormatError:
-    return FormatError(owner, message, field=field)
+    e = FormatError(owner, message, field=field)
+    e.reason = message  # the message without the file and field (callers that name them their own way)
+    return e
 
 
 def _within(target: str, root: str) -> bool:
     return target == root or target.startswith(root.rstrip(os.sep) + os.sep)
 
 
-def resolve_reference(owner, ref: str, allow_paths=(), field: str | None = None) -> Path:
+# ----------------------------------------------------------------------------- folders the user allows
+#: environment variable naming extra folders (``os.pathsep``-separated) references may read
+ALLOW_PATHS_ENV = "PISTE_ALLOW_PATHS"
+_user_allowed: list = []  # real paths set by the command line (--allow-path DIR)
+_lock = threading.Lock()
+
+
+def _folder_list(paths, source: str) -> list:
+    out = []
+    for p in paths:
+        text = os.fspath(p)
+        if not text or "\x00" in text:
+            raise ConfigError(f"{source}: expected a folder, got {text!r}")
+        real = os.path.realpath(os.path.expanduser(text))
+        if not os.path.isdir(real):
+            raise ConfigError(f"{source} {text!r}: not a folder (looked for {real})")
+        out.append(real)
+    return out
+
+
+def set_user_allow_paths(paths, source: str = "--allow-path") -> tuple:
+    """The folders the *user* named on the command line (``--allow-path DIR``, repeatable) that every
+    reference may read besides the referring file's own folder.  Replaces the previous set; returns
+    :func:`user_allow_paths`.  ConfigError (naming ``source``) for a path that is not a folder."""
+    folders = _folder_list(paths or (), source)
+    with _lock:
+        _user_allowed[:] = folders
+    for f in folders:
+        add_root(f)
+    return tuple(Path(f) for f in folders)
+
+
+def user_allow_paths() -> tuple:
+    """Real paths of the folders the user allows: ``--allow-path`` (:func:`set_user_allow_paths`)
+    and the ``PISTE_ALLOW_PATHS`` environment variable.  A key inside a file never adds to them."""
+    env = [p for p in os.environ.get(ALLOW_PATHS_ENV, "").split(os.pathsep) if p]
+    out = list(_user_allowed) + _folder_list(env, ALLOW_PATHS_ENV)
+    for f in out:
+        add_root(f)
+    return tuple(Path(p) for p in dict.fromkeys(out))
+
+
+# ----------------------------------------------------------------------------- confinement roots
+_roots: set = set()  # real folders below which every component is opened with O_NOFOLLOW
+
+
+def add_root(folder) -> str:
+    """Register ``folder`` (a folder the user named, or the folder of a file the user named) as a
+    confinement root: every later open of a path below it walks from it one component at a time
+    with ``O_NOFOLLOW`` (:func:`open_regular`).  Returns its real path."""
+    a = os.path.abspath(os.fspath(folder))
+    under = _root_of(a)
+    real = os.path.normpath(a) if under is not None else os.path.realpath(a)
+    if under is None:
+        with _lock:
+            _roots.add(real)
+    return real
+
+
+def _root_of(abspath: str) -> str | None:
+    """The shortest registered root holding ``abspath`` (the strictest walk), or None."""
+    with _lock:
+        if not _roots:
+            return None
+        best, p = None, abspath
+        while True:
+            if p in _roots:
+                best = p
+            parent = os.path.dirname(p)
+            if parent == p:
+                return best
+            p = parent
+
+
+def anchor(folder) -> str:
+    """The folder references inside a file of ``folder`` resolve against: an absolute, normalised
+    path without links.  Below a registered root it is taken lexically (the open walks it and
+    refuses any link swapped in); otherwise it is the user's own folder, resolved and registered."""
+    a = os.path.normpath(os.path.abspath(os.fspath(folder)))
+    return a if _root_of(a) is not None else add_root(a)
+
+
+def resolve_reference(owner, ref: str, allow_paths=(), field: str | None = None, what: str = "model") -> Path:
     """The file that relative reference ``ref`` (a URI, percent-encoded) inside file ``owner`` names.
 
-    Returns the real path (no ``..``, no symbolic links).  Raises FormatError (naming ``owner`` and
-    ``field``) when ``ref`` is a URL, an absolute path, or resolves outside ``owner``'s folder and
-    every folder of ``allow_paths``.
+    Returns an absolute, normalised path inside ``owner``'s folder or a folder the user allowed
+    (``allow_paths``, ``--allow-path``, ``PISTE_ALLOW_PATHS``).  Raises FormatError (naming
+    ``owner`` and ``field``) when ``ref`` is a URL, an absolute path elsewhere, or leaves those
+    folders.  Nothing is opened: :func:`open_regular` walks the path and refuses links.
     """
     owner = Path(owner)
     if not isinstance(ref, str) or not ref:
         raise _err(owner, field, f"expected a relative file path, got {ref!r}")
-    text = urllib.parse.unquote(ref)
+    text = urllib.parse.unquote(ref) if what == "model" else ref
     if "\x00" in text:
         raise _err(owner, field, "file path contains a NUL character")
-    allowed = [os.path.realpath(a) for a in allow_paths]
+    allowed = [os.path.realpath(a) for a in allow_paths] + [str(p) for p in user_allow_paths()]
+    for a in allowed:
+        add_root(a)
     if _SCHEME.match(text) and not _DRIVE.match(text):
-        raise _err(owner, field, f"{_short(ref)} is a URL: only relative file paths inside the model's folder "
+        raise _err(owner, field, f"{_short(ref)} is a URL: only relative file paths inside the {what}'s folder "
                                  "(or data: URIs) are read")
     absolute = os.path.isabs(text) or text.startswith("\\") or bool(_DRIVE.match(text))
-    base = os.path.realpath(owner.parent)
-    target = os.path.realpath(os.path.join(base, text))
+    base = anchor(owner.parent)
+    target = os.path.normpath(os.path.join(base, text))
     if absolute:
         if not any(_within(target, a) for a in allowed):
-            raise _err(owner, field, f"{_short(ref)} is an absolute path: only paths relative to the model's folder "
-                                     "are read (allow other folders with allow_paths)")
+            raise _err(owner, field, f"{_short(ref)} is an absolute path: only paths relative to the {what}'s folder "
+                                     "are read (allow other folders with --allow-path DIR)")
         return Path(target)
     if not any(_within(target, r) for r in [base] + allowed):
-        raise _err(owner, field, f"{_short(ref)} leaves the model's folder {base} (it resolves to {target}); "
-                                 "allow other folders explicitly with allow_paths")
+        raise _err(owner, field, f"{_short(ref)} leaves the {what}'s folder {base} (it resolves to {target}); "
+                                 "allow other folders explicitly with --allow-path DIR")
     return Path(target)
 
 
@@ -121,29 +233,149 @@ def _short(ref) -> str:
     return s if len(s) <= 120 else s[:100] + "...'"
 
 
-def check_regular(path, max_bytes: int, owner=None, field: str | None = None, what: str = "file") -> int:
-    """Size of ``path`` after checking it is a regular file of at most ``max_bytes`` (stat only,
-    nothing is opened)."""
-    owner = path if owner is None else owner
+# ----------------------------------------------------------------------------- race-free opens
+_O = os.O_RDONLY | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOCTTY", 0)
+_NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
+_NONBLOCK = getattr(os, "O_NONBLOCK", 0)
+_DIRECTORY = getattr(os, "O_DIRECTORY", 0)
+_O_PATH = getattr(os, "O_PATH", 0)
+_HAVE_DIR_FD = os.open in os.supports_dir_fd and bool(_NOFOLLOW) and bool(_DIRECTORY)
+
+
+def _kind(mode: int) -> str:
+    return ("a folder" if stat.S_ISDIR(mode) else "a named pipe" if stat.S_ISFIFO(mode) else
+            "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode) else
+            "a symbolic link" if stat.S_ISLNK(mode) else "not a regular file")
+
+
+def _open_error(owner, field, what, path, e: OSError, part: str | None = None) -> FormatError:
+    if e.errno in (errno.ELOOP, errno.EMLINK) or (e.errno == errno.ENOTDIR and part is not None):
+        where = f" ({part!r} is a symbolic link or not a folder)" if part else ""
+        return _err(owner, field, f"{what} {str(path)!r} is reached through a symbolic link{where}: links are "
+                                  "not followed (a link could point anywhere)")
+    return _err(owner, field, f"cannot read {what} {str(path)!r}: {e.strerror or e}")
+
+
+def _walk(root: str, parts: list, path, owner, field, what) -> int:
+    """An ``O_PATH`` (or read-only, non-blocking) descriptor of ``root/parts...``, each component
+    opened relative to the previous one with ``O_NOFOLLOW`` (folders with ``O_DIRECTORY``)."""
     try:
-        st = os.stat(path)
+        fd = os.open(root, _O | _DIRECTORY)
     except OSError as e:
-        raise _err(owner, field, f"cannot read {what} {str(path)!r}: {e.strerror or e}") from None
-    if not stat.S_ISREG(st.st_mode):
-        raise _err(owner, field, f"{what} {str(path)!r} is not a regular file (a folder, device, pipe or socket)")
-    if st.st_size > max_bytes:
-        raise _err(owner, field, f"{what} {str(path)!r} has {st.st_size} bytes, more than the limit of {max_bytes}")
-    return st.st_size
+        raise _open_error(owner, field, what, path, e) from None
+    try:
+        for i, part in enumerate(parts):
+            last = i == len(parts) - 1
+            flags = (_O_PATH | _NOFOLLOW | getattr(os, "O_CLOEXEC", 0)) if (last and _O_PATH) else \
+                (_O | _NOFOLLOW | _NONBLOCK | (0 if last else _DIRECTORY))
+            try:
+                nfd = os.open(part, flags, dir_fd=fd)
+            except OSError as e:
+                raise _open_error(owner, field, what, path, e, None if last else part) from None
+            os.close(fd)
+            fd = nfd
+        return fd
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def _reopen(pfd: int, st: os.stat_result, parts, root, path, owner, field, what) -> int:
+    """A read-only descriptor of the file ``O_PATH`` descriptor ``pfd`` holds (the same inode)."""
+    try:
+        return os.open(f"/proc/self/fd/{pfd}", _O | _NONBLOCK)
+    except OSError:  # no /proc: open the last component again and check it is the same file
+        fd = _walk(root, parts[:-1], path, owner, field, what) if len(parts) > 1 else os.open(root, _O | _DIRECTORY)
+        try:
+            rfd = os.open(parts[-1], _O | _NOFOLLOW | _NONBLOCK, dir_fd=fd)
+        except OSError as e:
+            raise _open_error(owner, field, what, path, e) from None
+        finally:
+            os.close(fd)
+        st2 = os.fstat(rfd)
+        if (st2.st_dev, st2.st_ino) != (st.st_dev, st.st_ino):
+            os.close(rfd)
+            raise _err(owner, field, f"{what} {str(path)!r} changed while being opened") from None
+        return rfd
+
+
+def open_regular(path, max_bytes: int = 1 << 62, owner=None, field: str | None = None, what: str = "file") -> int:
+    """A read-only descriptor of regular file ``path`` of at most ``max_bytes``, opened race-free.
+
+    Below a confinement root (:func:`add_root`: the folders of the files the user named, the
+    folders the user allowed) the path is walked from the root one component at a time with
+    ``openat(..., O_NOFOLLOW)``: a symbolic link anywhere below the root, swapped in at any moment,
+    is refused.  Elsewhere (a path the user typed) its real path is walked the same way.  The last
+    component is opened ``O_PATH`` (no open of a device or pipe ever happens) and checked with
+    ``fstat``: folders, devices, pipes and sockets are refused before any read.  FormatError names
+    ``owner`` (default ``path``) and ``field``.
+    """
+    owner = path if owner is None else owner
+    text = os.fspath(path)
+    if "\x00" in text:
+        raise _err(owner, field, f"{what} path contains a NUL character")
+    a = os.path.normpath(os.path.abspath(text))
+    root = _root_of(a)
+    if root is None:
+        try:
+            a = os.path.realpath(a)  # the user's own path: its links are the user's
+        except (OSError, ValueError) as e:
+            raise _err(owner, field, f"cannot read {what} {text!r}: {e}") from None
+        root = _root_of(a) or os.sep
+    if not _HAVE_DIR_FD:  # no openat: the last component only
+        try:
+            fd = os.open(a, _O | _NOFOLLOW | _NONBLOCK)
+        except OSError as e:
+            raise _open_error(owner, field, what, path, e) from None
+        parts = None
+    else:
+        parts = [p for p in os.path.relpath(a, root).split(os.sep) if p not in ("", ".")]
+        if not parts:
+            raise _err(owner, field, f"{what} {text!r} is a folder, expected a file")
+        fd = _walk(root, parts, path, owner, field, what)
+    try:
+        st = os.fstat(fd)
+        if stat.S_ISLNK(st.st_mode):
+            raise _err(owner, field, f"{what} {text!r} is a symbolic link: links are not followed (a link could "
+                                     "point anywhere)")
+        if not stat.S_ISREG(st.st_mode):
+            raise _err(owner, field, f"{what} {text!r} is not a regular file ({_kind(st.st_mode)})")
+        if st.st_size > max_bytes:
+            raise _err(owner, field, f"{what} {text!r} has {st.st_size} bytes, more than the limit of {max_bytes}")
+        if parts is not None and _O_PATH:
+            rfd = _reopen(fd, st, parts, root, path, owner, field, what)
+            os.close(fd)
+            fd = rfd
+        return fd
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def open_file(path, max_bytes: int = 1 << 62, owner=None, field: str | None = None, what: str = "file"):
+    """:func:`open_regular` as a binary file object (for ``np.load``, PIL, zipfile, tifffile)."""
+    raw = io.FileIO(open_regular(path, max_bytes, owner, field, what), "rb", closefd=True)
+    raw.name = os.fspath(path)  # readers that report or split the name (tifffile) see the path, not the number
+    return io.BufferedReader(raw)
+
+
+def check_regular(path, max_bytes: int, owner=None, field: str | None = None, what: str = "file") -> int:
+    """Size of ``path`` after checking it is a regular file of at most ``max_bytes``, reached
+    without links (opened ``O_PATH`` and ``fstat``-ed; nothing is read)."""
+    fd = open_regular(path, max_bytes, owner, field, what)
+    try:
+        return os.fstat(fd).st_size
+    finally:
+        os.close(fd)
 
 
 def read_regular(path, max_bytes: int, owner=None, field: str | None = None, length: int | None = None,
                  what: str = "file", length_field: str | None = None) -> bytes:
     """The bytes of regular file ``path`` (all of them, or the first ``length``).
 
-    Refuses (FormatError naming ``owner``/``field``) devices, pipes, sockets and folders before
-    opening, files over ``max_bytes`` and files shorter than ``length``.  Opens with
-    ``O_NOFOLLOW | O_NONBLOCK`` and checks the opened file again (``fstat``), so a swap between the
-    check and the open cannot make it read a device or hang on a pipe.
+    Opened by :func:`open_regular` (no links below a confinement root, devices, pipes, sockets and
+    folders refused before any read); files over ``max_bytes`` and files shorter than ``length``
+    are refused (FormatError naming ``owner``/``field``).
     """
     owner = path if owner is None else owner
     lfield = length_field or field
@@ -152,19 +384,12 @@ def read_regular(path, max_bytes: int, owner=None, field: str | None = None, len
             raise _err(owner, lfield, f"expected a byte length >= 0, got {length!r}")
         if length > max_bytes:
             raise _err(owner, lfield, f"declares {length} bytes, more than the limit of {max_bytes}")
-    size = check_regular(path, max_bytes if length is None else 1 << 62, owner, field, what)
-    want = size if length is None else length
-    if size < want:
-        raise _err(owner, lfield, f"declares {length} bytes but {what} {str(path)!r} has only {size}")
-    flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
+    fd = open_regular(path, max_bytes if length is None else 1 << 62, owner, field, what)
     try:
-        fd = os.open(path, flags)
-    except OSError as e:
-        raise _err(owner, field, f"cannot read {what} {str(path)!r}: {e.strerror or e}") from None
-    try:
-        st = os.fstat(fd)
-        if not stat.S_ISREG(st.st_mode) or st.st_size < want:
-            raise _err(owner, field, f"{what} {str(path)!r} changed while being opened")
+        size = os.fstat(fd).st_size
+        want = size if length is None else length
+        if size < want:
+            raise _err(owner, lfield, f"declares {length} bytes but {what} {str(path)!r} has only {size}")
         chunks, got = [], 0
         while got < want:  # bounded: at most `want` bytes, stops at end of file
             b = os.read(fd, min(want - got, 16 << 20))
@@ -180,6 +405,47 @@ def read_regular(path, max_bytes: int, owner=None, field: str | None = None, len
     if len(data) < want:
         raise _err(owner, field, f"{what} {str(path)!r} ended after {len(data)} of {want} bytes")
     return data
+
+
+def read_reference(owner, ref: str, max_bytes: int, allow_paths=(), field: str | None = None,
+                   length: int | None = None, what: str = "file", length_field: str | None = None) -> bytes:
+    """:func:`resolve_reference` then :func:`read_regular`: the bytes of the file ``ref`` names."""
+    f = resolve_reference(owner, ref, allow_paths, field)
+    return read_regular(f, max_bytes, owner, field, length, what, length_field)
+
+
+def confined_file(owner, ref: str, allow_paths=(), field: str | None = None, what: str = "file",
+                  max_bytes: int = 1 << 62) -> Path:
+    """The path of the regular file that ``ref`` (a plain path, not a URI) inside ``owner`` names,
+    confined to ``owner``'s folder or a folder the user allowed, reached without links, checked
+    (``fstat``) and closed.  Later opens of it (:func:`open_regular`) walk it the same way."""
+    f = resolve_reference(owner, ref, allow_paths, field, what="scene" if what == "file" else what)
+    check_regular(f, max_bytes, owner, field, what)
+    return f
+
+
+def confined_folder(owner, ref: str, allow_paths=(), field: str | None = None) -> Path:
+    """The folder ``ref`` inside ``owner`` names (it need not exist yet: an output folder), confined
+    like :func:`confined_file`; an existing one must be a folder reached without links."""
+    f = resolve_reference(owner, ref, allow_paths, field, what="scene")
+    root = _root_of(str(f))
+    parts = [p for p in os.path.relpath(f, root).split(os.sep) if p not in ("", ".")] if root else []
+    fd = None
+    try:
+        fd = os.open(root, _O | _DIRECTORY) if root else None
+        for part in parts:
+            try:
+                nfd = os.open(part, _O | _NOFOLLOW | _NONBLOCK | _DIRECTORY, dir_fd=fd)
+            except FileNotFoundError:
+                break  # created later, by the build
+            except OSError as e:
+                raise _open_error(owner, field, "folder", f, e, part) from None
+            os.close(fd)
+            fd = nfd
+    finally:
+        if fd is not None:
+            os.close(fd)
+    return f
 
 
 def decode_data_uri(uri: str, max_bytes: int, owner=None, field: str | None = None) -> bytes:

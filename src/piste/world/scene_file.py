@@ -7,8 +7,10 @@ imported from a glTF file an artist lit and framed in Blender), and the pre-proc
 scene file.  Every table and key is optional except where noted::
 
     name = "my run"
-    allow_paths = ["../assets"]   # folders glTF buffer/image URIs may read besides the model's own
-                                  # (default: none; '..', absolute paths and links out are refused)
+    # Every path below (and every URI inside a glTF it names) must stay inside the folder of the
+    # file that names it: '..' out of it, absolute paths and symbolic links are refused.  Only the
+    # user widens that, never the file: `--allow-path DIR` on the command line or the
+    # PISTE_ALLOW_PATHS environment variable (piste.formats.safe_io); an `allow_paths` key is an error.
 
     [terrain]
     source = "default"            # "default" (the seeded course), a .bpt, a saved net (.npz),
@@ -136,7 +138,8 @@ from pathlib import Path
 from piste.errors import ConfigError, PisteError, ValidationError
 from piste.formats.limits import precheck_gltf
 from piste.formats.ssx.mpf_model import mpf_partners
-from piste.formats.safe_io import MAX_TOML_BYTES, check_regular, resolve_reference, toml_depth
+from piste.formats.safe_io import (MAX_TOML_BYTES, check_regular, confined_file, confined_folder, open_file,
+                                   read_regular, resolve_reference, toml_depth, user_allow_paths)
 from piste.lighting.lights import AmbientLight, DirectionalLight, PointLight, SpotLight
 
 __all__ = [
@@ -308,7 +311,7 @@ class GltfSpec:
     scale: float = 1.0
     up: str = "y"
     white: float = 683.0
-    allow_paths: tuple = ()  # folders besides the model's own its URIs may name (scene ``allow_paths``)
+    allow_paths: tuple = ()  # folders the user allowed besides the model's own (--allow-path, PISTE_ALLOW_PATHS)
 
 
 @dataclass
@@ -383,7 +386,7 @@ class SceneFile:
     pack: dict | None = None          # [pack]: {"follow": "track", "start": fraction}
     auto_objects: dict | None = None  # [auto_objects]: {"seed": int, "trees": n, "signs": n, "rocks": n, "rails": n}
     text: str = ""
-    allow_paths: tuple = ()  # absolute folders glTF files may read besides their own (``allow_paths`` key)
+    allow_paths: tuple = ()  # folders the user allowed (--allow-path, PISTE_ALLOW_PATHS) when it was loaded
 
     def source_files(self) -> list:
         """Every file the scene reads (the TOML, terrain, glTF files and their buffers and images),
@@ -507,39 +510,31 @@ def _array(c_parent: _Checker, key: str) -> list:
     return [_Checker(c_parent.path, c_parent.lines, x, (key, i), f"{key}[{i}]") for i, x in enumerate(v)]
 
 
-def _file(c: _Checker, key: str, base: Path, suffixes=None) -> Path:
-    rel = c.get(key, "str", required=True)
-    try:  # a name too long for the file system, a NUL, a loop of links: one clear error
-        p = (base / rel).resolve()
-        exists, regular = p.exists(), p.is_file()
-    except (OSError, ValueError) as exc:
-        raise c.error(key, f"cannot use the path {rel[:80]!r}: {getattr(exc, 'strerror', None) or exc}") from None
-    if not exists:
-        raise c.error(key, f"no such file: {rel!r} (looked for {p})")
-    if not regular:  # a folder, device or pipe: never opened (a pipe would hang the loader)
-        raise c.error(key, f"{rel!r} is not a regular file (looked for {p})")
+def _file(c: _Checker, key: str, base: Path, suffixes=None, value: str | None = None) -> Path:
+    """The regular file scene key ``key`` names, confined to the scene's folder (or a folder the user
+    allowed) and reached without symbolic links (:func:`piste.formats.safe_io.confined_file`)."""
+    rel = c.get(key, "str", required=True) if value is None else value
+    try:
+        p = confined_file(c.path, rel, field=c.name(key))
+    except PisteError as exc:
+        reason = getattr(exc, "reason", str(exc))
+        if "No such file" in reason:
+            reason = f"no such file: {rel[:200]!r} (looked for {str(base / rel)[:300]})"
+        elif reason.startswith("cannot read"):
+            reason = f"cannot use the path {rel[:80]!r}: {reason.rsplit(': ', 1)[-1]}"
+        raise c.error(key, reason) from None
     if suffixes and p.suffix.lower() not in suffixes:
-        raise c.error(key, f"expected a {' / '.join(suffixes)} file, got {rel!r}")
+        raise c.error(key, f"expected a {' / '.join(suffixes)} file, got {rel[:200]!r}")
     return p
 
 
-def _allow_paths(top: _Checker, base: Path) -> tuple:
-    """The top-level ``allow_paths = ["../assets", ...]``: folders (relative to the scene file) that
-    glTF buffer and image URIs may name besides their model's own folder."""
-    v = top.table.get("allow_paths", [])
-    if not isinstance(v, list) or not all(isinstance(x, str) and x for x in v):
-        raise top.error("allow_paths", f"expected an array of folder paths, got {v!r}")
-    out = []
-    for rel in v:
-        try:
-            p = (base / rel).resolve()
-            is_dir = p.is_dir()
-        except (OSError, ValueError) as exc:
-            raise top.error("allow_paths", f"cannot use the path {rel[:80]!r}: {getattr(exc, 'strerror', None) or exc}") from None
-        if not is_dir:
-            raise top.error("allow_paths", f"{rel!r} is not a folder (looked for {p})")
-        out.append(p)
-    return tuple(out)
+def _refuse_allow_paths(top: _Checker) -> None:
+    """A file never widens its own confinement: the old ``allow_paths`` key is an error that says
+    what to do instead (issue 24)."""
+    if "allow_paths" in top.table:
+        raise top.error("allow_paths", "a scene file cannot allow itself to read outside its folder: name the "
+                                       "folders on the command line (--allow-path DIR, repeatable) or in the "
+                                       "PISTE_ALLOW_PATHS environment variable instead")
 
 
 def loads_scene(text: str, path="scene.toml") -> SceneFile:
@@ -563,7 +558,8 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     top.allow({"name", "terrain", "lightmap", "lod", "visibility", "render", "gltf", "riders", "objects", "lights",
                "cameras", "allow_paths", "pack", "auto_objects"})
     scene = SceneFile(path=path, name=top.get("name", "str", path.stem), text=text)
-    scene.allow_paths = _allow_paths(top, base)
+    _refuse_allow_paths(top)
+    scene.allow_paths = user_allow_paths()
 
     # terrain
     t = _table(top, "terrain")
@@ -704,10 +700,9 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
                     raise a.error("model", f"unknown built-in model {model!r}: expected one of {', '.join(allowed)} "
                                            "or a .gltf/.glb file")
             elif model.startswith("ssx:") and kind == "riders":  # an SSX Tricky .mpf (piste.pipeline.ssx_rider)
-                mp = (base / model[4:]).resolve()
-                if mp.suffix.lower() != ".mpf" or not mp.is_file():
-                    raise a.error("model", f"{model!r}: expected ssx:<an existing .mpf file> (looked for {mp})")
-                model = str(mp)
+                if Path(model[4:]).suffix.lower() != ".mpf":
+                    raise a.error("model", f"{model!r}: expected ssx:<an existing .mpf file>")
+                model = str(_file(a, "model", base, (".mpf",), value=model[4:]))
             else:
                 model = str(_file(a, "model", base, (".gltf", ".glb")))
             name = a.get("name", "str", f"{kind[:-1]}{i}")
@@ -807,7 +802,10 @@ def _large_world_keys(t: _Checker, ts: TerrainSpec, base: Path) -> None:
     if ts.vertical_units is not None and ts.vertical_units not in ("metre", "meter", "foot", "us_survey_foot"):
         raise t.error("vertical_units", f"expected metre, foot or us_survey_foot, got {ts.vertical_units!r}")
     if "tiles" in t.table:
-        ts.tiles = (base / t.get("tiles", "str")).resolve()
+        try:  # an output folder (built later) or a world to read: confined like every path
+            ts.tiles = confined_folder(t.path, t.get("tiles", "str"), field=t.name("tiles"))
+        except PisteError as exc:
+            raise t.error("tiles", getattr(exc, "reason", str(exc))) from None
     ts.tile_patches = t.get("tile_patches", "int", 64)
     if not 2 <= ts.tile_patches <= 1024:
         raise t.error("tile_patches", f"expected 2 .. 1024 patches a tile side, got {ts.tile_patches}")
@@ -820,7 +818,7 @@ def _tiff_is_geotiff(path: Path) -> bool:
     except ImportError:
         return False
     try:
-        with tifffile.TiffFile(path) as tf:
+        with open_file(path) as fh, tifffile.TiffFile(fh) as tf:
             tags = tf.pages[0].tags
             return 33550 in tags or 34264 in tags
     except Exception:
@@ -831,7 +829,7 @@ def _npz_is_net(path: Path) -> bool:
     import numpy as np
 
     try:
-        with np.load(path, allow_pickle=False) as data:
+        with open_file(path) as fh, np.load(fh, allow_pickle=False) as data:
             return "control_points" in data.files
     except Exception:
         return False
@@ -840,20 +838,19 @@ def _npz_is_net(path: Path) -> bool:
 def load_scene(path) -> SceneFile:
     """Read and validate the scene file at ``path`` (see the module docstring)."""
     path = Path(path)
+    try:  # regular files only, opened without blocking (a pipe or device is refused, never read)
+        data = read_regular(path, MAX_TOML_BYTES, what="scene file")
+    except PisteError as exc:
+        reason = getattr(exc, "reason", str(exc))
+        if "No such file" in reason:
+            reason = "no such file"
+        elif "folder" in reason:
+            reason = "is a folder, expected a scene .toml file"
+        elif "regular file" in reason:
+            reason = "not a regular file, expected a scene .toml file"
+        raise SceneError(path, reason) from None
     try:
-        special = path.exists() and not path.is_dir() and not path.is_file()
-    except OSError as exc:
-        raise SceneError(path, f"cannot read: {exc.strerror or exc}") from None
-    if special:  # a device or pipe would hang the read
-        raise SceneError(path, "not a regular file, expected a scene .toml file")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise SceneError(path, "no such file") from None
-    except IsADirectoryError:
-        raise SceneError(path, "is a folder, expected a scene .toml file") from None
+        text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise SceneError(path, f"not UTF-8 text ({exc.reason})") from None
-    except OSError as exc:
-        raise SceneError(path, f"cannot read: {exc.strerror or exc}") from None
     return loads_scene(text, path)
