@@ -68,6 +68,41 @@ def test_layout_facts():
     assert (w14, w114) == (14, 114) and nv == c.n_vertices <= 55
     qwc = int.from_bytes(b[o:o + 3], "little")
     assert qwc == (64 + 16 * strips) // 16 - 1
+    # the retail layout: GIF tag 0x412 (ST, RGBAQ, XYZ2), PRIM 0x5C, 3 registers
+    gif = np.frombuffer(b, "<u8", 2, o + 32)
+    assert int(gif[1]) == 0x412 and (int(gif[0]) >> 47) & 0x7FF == 0x5C and int(gif[0]) >> 60 == 3
+    assert int(gif[0]) & 0x7FFF == c.n_vertices
+    # after the strips a DMA CNT quadword whose qwc covers the UV, normal and position sections
+    q = o + 64 + 16 * int(strips)
+    tag = int(np.frombuffer(b, "<u4", 1, q)[0])
+    v = c.n_vertices
+    sections = 3 * 3 + (-(-8 * v // 16)) + (-(-6 * v // 16)) + (-(-12 * v // 16))
+    assert tag >> 28 == 1 and tag & 0xFFFF == sections
+    assert np.frombuffer(b, "<u4", 4, q + 16).tolist() == [0, 0x30000000, 0, 0]  # NOP, STROW, row
+    assert np.frombuffer(b, "<u4", 4, q + 32).tolist() == [0x1000, 0x1000, 0x20000000, 0x50505050]
+    assert np.frombuffer(b, "<i2", 4 * v, q + 64).reshape(v, 4).tolist() == c.uv.tolist()
+    # shadow chunks: PRIM 0x44 with one register (XYZ2)
+    sc = f.models[0].groups[2].links[0].meshes[0].chunks[0]
+    gif = np.frombuffer(b, "<u8", 2, base + sc.offset + 32)
+    assert int(gif[1]) == 0x4 and (int(gif[0]) >> 47) & 0x7FF == 0x44 and int(gif[0]) >> 60 == 1
+    # each group's last mesh ends with the end packets A (32 bytes) and B (48 bytes)
+    m = f.models[0].groups[0].links[0].meshes[-1]
+    assert m.end is not None and len(m.end) == 80
+    assert np.frombuffer(m.end, "<u4").tolist() == [0x60000001, 0, 0, 0, 0, 0x01000101, 0, 0, 0x60000001, 0, 0, 0,
+                                                    0, 0, 0, 0x01000101, 0, 0x10000000, 0, 0x14000000]
+
+
+def test_old_layout_without_the_cnt_quadword_is_refused_clearly():
+    f = small_mpf()
+    b = bytearray(mpf_bytes(f))
+    g = parse_mpf(bytes(b))
+    c = g.models[0].groups[0].links[0].meshes[0].chunks[0]
+    base = 176 + int(np.frombuffer(bytes(b), DIR_DTYPE, 1, 12)[0]["offset"])
+    q = base + c.offset + 64 + 16 * len(c.strip_lengths)
+    b[q:q + 4] = (0x10000000 | 2).to_bytes(4, "little")  # a section's own tag, as piste wrote before
+    with pytest.raises(FormatError, match="DMA CNT quadword") as e:
+        parse_mpf(bytes(b), "old.mpf")
+    assert e.value.field.endswith("dma_cnt") and "old.mpf" in str(e.value)
 
 
 def test_round_trip_byte_identical_and_rebuild(tmp_path):
@@ -140,17 +175,16 @@ def test_gap_inside_a_blob_is_reported_and_kept():
     f = small_mpf()
     b = bytearray(mpf_bytes(f))
     g = parse_mpf(bytes(b))
-    sub = g.models[0]
-    # the 16-aligned padding after the palettes is a gap of zero bytes; put a marker there
+    # the padding between the last mesh header and the 16-aligned mesh data is a gap of zero bytes
     e = np.frombuffer(bytes(b), DIR_DTYPE, 2, 12)
     base = 176 + int(e[0]["offset"])
     mesh_data = int(e[0]["sections"][3])
-    last_pal = sub._offsets["palettes"][-1] + 4 * len(sub.palettes[-1])
-    if mesh_data - last_pal >= 2:
-        b[base + last_pal:base + last_pal + 2] = b"\xab\xcd"
-        h = parse_mpf(bytes(b))
-        assert any(w == "Body3000 blob" for w, *_ in h.unknown)
-        assert mpf_bytes(h) == bytes(b)
+    last = max(m.offset for lk in g.models[0].links for m in lk.meshes) + 12
+    assert 2 <= mesh_data - last < 16 and not any(b[base + last:base + mesh_data])
+    b[base + last:base + last + 2] = b"\xab\xcd"
+    h = parse_mpf(bytes(b))
+    assert any(w == "Body3000 blob" and o == last for w, o, *_ in h.unknown)
+    assert mpf_bytes(h) == bytes(b)
 
 
 def test_strip_triangles_keep_winding():
@@ -166,7 +200,7 @@ def test_pack_chunks_limit_and_winding():
     uv[:, 2], uv[:, 3] = 14, 114
     nrm = np.zeros((n, 3), "<i2")
     chunks = pack_chunks([np.arange(n)], uv, nrm, pos)
-    assert all(c.n_vertices <= 55 for c in chunks)
+    assert all(c.n_vertices <= 55 for c in chunks)  # the encoder's packing (retail allows 59)
     got = {tuple(np.round(pos_t, 5).ravel()) for c in chunks for pos_t in c.positions[c.triangles()]}
     s = np.arange(n)
     want = {tuple(np.round(pos[t], 5).ravel()) for t in strip_triangles([n])}
@@ -191,9 +225,17 @@ def test_game_limits():
     c = f.models[0].links[0].meshes[0].chunks[0]
     c.strip_lengths = np.array([60], "<u4")
     c.positions = np.zeros((60, 3), "<f4")
+    sc = f.models[0].groups[2].links[0].meshes[0].chunks[0]
+    sc.strip_lengths = np.array([166], "<u4")
+    sc.positions = np.zeros((166, 3), "<f4")
     problems = [p for _, p in game_limits(f)]
     assert any("40, 60" in p for p in problems) and any("30 palettes" in p for p in problems)
-    assert any("60 vertices" in p for p in problems)
+    assert any("chunk of 60 vertices" in p and "at most 59" in p for p in problems)
+    assert any("shadow chunk of 166 vertices" in p and "at most 165" in p for p in problems)
+    h = small_mpf()  # 59 and 165 are retail sizes: allowed
+    h.models[0].links[0].meshes[0].chunks[0].strip_lengths = np.array([59], "<u4")
+    h.models[0].links[0].meshes[0].chunks[0].positions = np.zeros((59, 3), "<f4")
+    assert game_limits(h) == []
     g = small_mpf()
     g.models[0].name, g.models[1].name = "ZZZZZZZZZZZZZZZA", "ZZZZZZZZZZZZZZZB"
     assert any("15 characters" in p for _, p in game_limits(g))

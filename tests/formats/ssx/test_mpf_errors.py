@@ -132,7 +132,7 @@ def test_nan_position(golden):
     _, c, o = _first_chunk(golden)
     s = len(c.strip_lengths)
     v = c.n_vertices
-    p = o + 64 + 16 * s  # uv section header
+    p = o + 64 + 16 * s + 16  # uv section header (after the DMA CNT quadword)
     p = -(-(p + 48 + 8 * v) // 16) * 16 + 48  # normals data
     p = -(-(p + 6 * v) // 16) * 16 + 48  # positions data
     b = bytearray(golden)
@@ -164,7 +164,7 @@ def test_not_a_chunk(golden):
 def test_slot_outside_the_reference_list(golden):
     _, c, o = _first_chunk(golden)
     b = bytearray(golden)
-    uv = o + 64 + 16 * len(c.strip_lengths) + 48
+    uv = o + 64 + 16 * len(c.strip_lengths) + 16 + 48  # strips, DMA CNT quadword, section header
     b[uv + 4:uv + 6] = np.array([14 + 4 * 200], "<i2").tobytes()
     _fail(b, "weight slot 200 is outside", "chunk0.uv")
 

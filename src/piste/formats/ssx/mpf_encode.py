@@ -32,7 +32,7 @@ from piste.character.skinning import BlendedMesh, skin_exact
 from piste.character.strips import stripify
 from piste.errors import ConfigError, ValidationError
 from piste.formats.ssx.mpf import (
-    BONE_DTYPE, GROUP_MORPH, GROUP_RENDER, GROUP_SHADOW, MATERIAL_DTYPE, MAX_CHUNK_VERTICES, MAX_GROUP_MATRICES,
+    BONE_DTYPE, GROUP_MORPH, GROUP_RENDER, GROUP_SHADOW, MATERIAL_DTYPE, ENCODER_CHUNK_VERTICES, MAX_GROUP_MATRICES,
     MORPH_SCALE, NORMAL_SCALE, PALETTE_ENTRY_DTYPE, SLOT_NORMAL_BASE, SLOT_TRANSFORM_BASE, UV_SCALE, Group, Link,
     Mesh, MorphKey, MpfFile, SubModel, pack_chunks,
 )
@@ -188,10 +188,10 @@ def _encode_lod(name, mesh, pal, file_id, step, morph_keys, report, shadow: bool
             uv_l[:, 3] = np.where(s >= 0, SLOT_NORMAL_BASE + 3 * s, 0)
             strips = stripify(tris[ids[members]], join=None)
             if shadow:  # positions + a per-vertex transform address, no UV or normal section
-                chunks, index = pack_chunks(strips, None, None, pos, MAX_CHUNK_VERTICES,
+                chunks, index = pack_chunks(strips, None, None, pos, ENCODER_CHUNK_VERTICES,
                                             shadow_slots=uv_l[:, 2].astype("<u4"), return_index=True)
             else:
-                chunks, index = pack_chunks(strips, uv_l, nrm_i, pos, MAX_CHUNK_VERTICES, return_index=True)
+                chunks, index = pack_chunks(strips, uv_l, nrm_i, pos, ENCODER_CHUNK_VERTICES, return_index=True)
             if gtype == GROUP_MORPH:
                 meshes = [Mesh([c], morphs=[MorphKey(deltas=di[k][ix].astype("i1")) for k in range(morph_keys)])
                           for c, ix in zip(chunks, index)]

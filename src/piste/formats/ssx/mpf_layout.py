@@ -8,14 +8,22 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
-    "FORMAT_TRICKY_PS2", "MAX_CHUNK_VERTICES", "MAX_GROUP_MATRICES", "UV_SCALE", "NORMAL_SCALE", "MORPH_SCALE",
+    "FORMAT_TRICKY_PS2", "MAX_CHUNK_VERTICES", "MAX_SHADOW_CHUNK_VERTICES", "ENCODER_CHUNK_VERTICES",
+    "LOD_TRIANGLE_BUDGETS", "MAX_GROUP_MATRICES", "UV_SCALE", "NORMAL_SCALE", "MORPH_SCALE",
     "SLOT_TRANSFORM_BASE", "SLOT_NORMAL_BASE", "GROUP_RENDER", "GROUP_SHADOW", "GROUP_MORPH", "PALETTE_CONST",
     "MAX_VERTICES_READ", "MAX_FILE_BYTES", "DIR_DTYPE", "BONE_DTYPE", "MATERIAL_DTYPE", "IK_DTYPE", "GROUP_DTYPE",
     "LINK_DTYPE", "MESH_DTYPE", "REF_DTYPE", "PALHDR_DTYPE", "PALETTE_ENTRY_DTYPE", "strip_triangles",
 ]
 
 FORMAT_TRICKY_PS2 = 8
-MAX_CHUNK_VERTICES = 55
+#: most vertices in a render/morph chunk of a retail model (moby_body.mpf: 59, board.mpf: 57)
+MAX_CHUNK_VERTICES = 59
+#: most vertices in a shadow chunk (group type 17) of a retail model (moby_body.mpf's BodyShdw750: 165)
+MAX_SHADOW_CHUNK_VERTICES = 165
+#: what piste's encoder packs a chunk to (below the retail maximum, leaving the VU memory headroom)
+ENCODER_CHUNK_VERTICES = 55
+#: the talk's triangle budget of each LOD tier (sub-model name suffix): ~3,000 / 1,500 / 750
+LOD_TRIANGLE_BUDGETS = {"3000": 3000, "1500": 1500, "750": 750}
 MAX_GROUP_MATRICES = 25
 UV_SCALE = 4096.0
 NORMAL_SCALE = 32768.0
@@ -24,7 +32,7 @@ SLOT_TRANSFORM_BASE = 14
 SLOT_NORMAL_BASE = 114
 GROUP_RENDER, GROUP_SHADOW, GROUP_MORPH = 1, 17, 256
 PALETTE_CONST = 36
-MAX_VERTICES_READ = 4096  # per chunk; the game's limit is 55, a hostile count is refused
+MAX_VERTICES_READ = 4096  # per chunk; retail holds <= 165, a hostile count is refused
 MAX_FILE_BYTES = 64 << 20
 
 DIR_DTYPE = np.dtype([("name", "S16"), ("offset", "<u4"), ("size", "<u4"), ("sections", "<u4", (7,)),
