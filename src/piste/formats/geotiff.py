@@ -32,6 +32,7 @@ import numpy as np
 
 from piste.errors import ConfigError, FormatError
 from piste.formats.atomic import atomic_path
+from piste.formats.safe_io import open_file
 
 __all__ = ["DemRaster", "read_geotiff", "write_geotiff", "MAX_SAMPLES", "UNIT_METRES"]
 
@@ -189,11 +190,13 @@ def read_geotiff(path, fill="nearest", vertical_units: str | None = None) -> Dem
     path = Path(path)
     if not path.is_file():
         raise FormatError(path, "no such file")
+    fh = open_file(path, what="GeoTIFF")  # regular files only, race-free, no links (piste.formats.safe_io)
     try:
-        tf = tifffile.TiffFile(path)
+        tf = tifffile.TiffFile(fh)
     except Exception as exc:
+        fh.close()
         raise FormatError(path, f"not a readable TIFF ({exc})") from None
-    with tf:
+    with fh, tf:
         if not tf.pages:
             raise FormatError(path, "not a readable TIFF (no image in the file)")
         page = tf.pages[0]

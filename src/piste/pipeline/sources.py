@@ -30,7 +30,7 @@ from piste.errors import ConfigError, FormatError, PisteError
 from piste.formats.geotiff import read_geotiff
 from piste.formats.gltf import load_gltf
 from piste.formats.limits import MAX_HEIGHTFIELD_SAMPLES
-from piste.formats.safe_io import check_regular
+from piste.formats.safe_io import open_file
 from piste.pipeline.gltf_import import axis_matrix
 from piste.pipeline.ssx_level import load_level
 from piste.pipeline.ssx_rider import load_mpf_rider
@@ -59,9 +59,8 @@ def load_heightfield(spec) -> tuple[np.ndarray, tuple]:
     else:
         from PIL import Image
 
-        check_regular(path, MAX_HEIGHTFIELD_FILE_BYTES, what="height field")
-        try:
-            with Image.open(path) as im:
+        try:  # regular files only, opened race-free without links (piste.formats.safe_io)
+            with open_file(path, MAX_HEIGHTFIELD_FILE_BYTES, what="height field") as fh, Image.open(fh) as im:
                 w, h = im.size  # from the header: checked before a pixel is decoded
                 if w * h > MAX_HEIGHTFIELD_SAMPLES:
                     raise FormatError(path, f"height field of {w} x {h} samples is more than the limit of "
@@ -119,14 +118,16 @@ def _spacing_value(path, name: str, a: np.ndarray, index: int) -> float:
 def _npz_heightfield(path, spec) -> tuple:
     """``(z, spacing)`` from an ``.npz``: every member's shape and type checked from its header
     before it is read, the height array capped at MAX_HEIGHTFIELD_SAMPLES."""
-    check_regular(path, MAX_HEIGHTFIELD_FILE_BYTES, what="height field")
+    fh = open_file(path, MAX_HEIGHTFIELD_FILE_BYTES, what="height field")  # race-free, no links
     try:
-        data = np.load(path, allow_pickle=False)
+        data = np.load(fh, allow_pickle=False)
     except Exception as exc:
+        fh.close()
         raise FormatError(path, f"not a readable .npz ({type(exc).__name__}: {exc})") from None
     if not hasattr(data, "files"):
+        fh.close()
         raise FormatError(path, "not an .npz archive (a single .npy array)")
-    with data:
+    with fh, data:
         names = list(data.files)
         if spec.key is not None:
             key = spec.key
