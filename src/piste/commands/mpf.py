@@ -54,11 +54,11 @@ def add_arguments(p) -> None:
     c.add_argument("out")
 
 
-def _info(f) -> dict:
+def _info(f, *partners) -> dict:
     from piste.formats.ssx.mpf import game_limits, tag_differences
 
     out = {"file": f.path, "format_id": f.format_id, "sub_models": [], "unknown": [list(u) for u in f.unknown],
-           "game_limits": [list(x) for x in game_limits(f)],
+           "partners": [p.path for p in partners], "game_limits": [list(x) for x in game_limits(f, *partners)],
            "tag_differences": [list(x) for x in tag_differences(f)]}
     for s in f.models:
         chunks = [c for lk in s.links for m in lk.meshes for c in m.chunks]
@@ -76,7 +76,10 @@ def run(args) -> int:
     from piste.formats.ssx.mpf import read_mpf, write_mpf
 
     if args.mpf_command == "info":
-        info = _info(read_mpf(args.file))
+        from piste.formats.ssx.mpf_model import mpf_partners
+
+        head, _ = mpf_partners(args.file)  # a _body.mpf's LOD budgets count its _head.mpf's triangles too
+        info = _info(read_mpf(args.file), *([read_mpf(head)] if head is not None else []))
         if args.json:
             print(json.dumps(info, indent=1))
             return 0
@@ -92,8 +95,11 @@ def run(args) -> int:
                   f"({nb} bytes; kept as read unless the blob is laid out anew)")
         for w, problem in info["game_limits"]:
             print(f"  over the game's limits: {w}: {problem}")
+        if info["partners"]:
+            print(f"  LOD triangle budgets counted with {', '.join(info['partners'])}")
         if not info["game_limits"]:
-            print("  within the game's limits (<= 55 vertices a chunk, <= 25 palettes a link, 25 % weight steps)")
+            print("  within the game's limits (<= 59 vertices a chunk, <= 165 a shadow chunk, <= 25 palettes a link, "
+                  "25 % weight steps, ~3,000 / 1,500 / 750 triangles a LOD)")
         return 0
     if args.mpf_command == "encode":
         from piste.formats.ssx.mpf_encode import model_to_mpf
