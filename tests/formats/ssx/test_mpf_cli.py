@@ -30,7 +30,7 @@ def test_mpf_cli_end_to_end(tmp_path, capsys):
 
 def test_mpf_cli_bad_file(tmp_path, capsys):
     (tmp_path / "bad.mpf").write_bytes(b"\x0d\0\0\0" + bytes(12))
-    assert main(["mpf", "info", str(tmp_path / "bad.mpf")]) == 2
+    assert main(["mpf", "info", str(tmp_path / "bad.mpf")]) == 1
     err = capsys.readouterr().err
     assert "bad.mpf" in err and "format id 13" in err and len(err.strip().splitlines()) == 1
 
@@ -46,3 +46,34 @@ def test_bench_mpf_runs(capsys):
     assert mod.main(["--quick", "--rounds", "1"]) == 0
     out = capsys.readouterr().out
     assert "3084 / 1542 / 770 triangles in 3 LODs" in out and "read + convert median" in out
+
+
+def test_mpf_info_flags_a_lod_over_the_talks_triangle_budget(tmp_path, capsys):
+    """A Body3000 of 3,398 triangles (a long strip) is over the ~3,000-triangle LOD budget (10 %
+    slack); 3,298 triangles is not; the text never says 'within' a limit it breaks."""
+    import numpy as np
+
+    from piste.formats.ssx.mpf import (
+        BONE_DTYPE, PALETTE_ENTRY_DTYPE, Group, Link, Mesh, MpfFile, SubModel, pack_chunks, write_mpf,
+    )
+
+    def model(n):
+        rng = np.random.default_rng(0)
+        pos = rng.normal(size=(n, 3)).astype("<f4") * 50
+        uv = np.zeros((n, 4), "<i2")
+        uv[:, 2], uv[:, 3] = 14, 114
+        nrm = np.zeros((n, 3), "<i2")
+        bones = np.zeros(1, BONE_DTYPE)
+        bones["parent_file"], bones["parent_bone"] = -1, -1
+        sub = SubModel(name="Body3000", bones=bones, palettes=[np.array([(100, 0, 0)], PALETTE_ENTRY_DTYPE)],
+                       groups=[Group(1, 0, [Link([Mesh(pack_chunks([np.arange(n)], uv, nrm, pos))], np.array([0], "<u4"))])])
+        return MpfFile([sub])
+
+    write_mpf(model(3400), tmp_path / "big.mpf")
+    write_mpf(model(3300), tmp_path / "ok.mpf")
+    capsys.readouterr()
+    assert main(["mpf", "info", str(tmp_path / "big.mpf")]) == 0
+    out = capsys.readouterr().out
+    assert "within the game's limits" not in out and "3,398 triangles" in out and "~3,000-triangle budget" in out
+    assert main(["mpf", "info", str(tmp_path / "ok.mpf")]) == 0
+    assert "within the game's limits" in capsys.readouterr().out

@@ -46,6 +46,30 @@ def test_euler_round_trip():
     assert np.allclose(euler_to_matrix([0.3, 0.2, 0.1]), euler_to_matrix([0, 0, 0.1]) @ euler_to_matrix([0, 0.2, 0]) @ x)
 
 
+def test_bone_rotation_negates_the_angles():
+    """A bone record's (x, y, z) is Rz(-z) Ry(-y) Rx(-x) (SSX-Library, OpenSlope; the retail
+    skeleton fits its mesh this way), and the encoder's bone_euler inverts it."""
+    from piste.formats.ssx.mpf_model import bone_euler, bone_rotation
+
+    def rx(a):
+        c, s = np.cos(a), np.sin(a)
+        return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+    def ry(a):
+        c, s = np.cos(a), np.sin(a)
+        return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+    def rz(a):
+        c, s = np.cos(a), np.sin(a)
+        return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+    x, y, z = 0.3, -0.5, 1.1
+    assert np.allclose(bone_rotation([x, y, z]), rz(-z) @ ry(-y) @ rx(-x), atol=1e-12)
+    assert not np.allclose(bone_rotation([x, y, z]), rz(z) @ ry(y) @ rx(x), atol=1e-3)
+    e = np.random.default_rng(1).uniform(-1.4, 1.4, (50, 3))
+    assert np.allclose(bone_euler(bone_rotation(e)), e, atol=1e-9)
+
+
 def test_encoder_obeys_the_game_limits(encoded):
     f, report, b = encoded
     assert f.names == ["Body3000", "Body1500", "Body750", "BodyShdw750"]

@@ -36,7 +36,7 @@ from piste.formats.ssx.mpf import (
     MORPH_SCALE, NORMAL_SCALE, PALETTE_ENTRY_DTYPE, SLOT_NORMAL_BASE, SLOT_TRANSFORM_BASE, UV_SCALE, Group, Link,
     Mesh, MorphKey, MpfFile, SubModel, pack_chunks,
 )
-from piste.formats.ssx.mpf_model import CM, SSX_TO_PISTE, matrix_to_euler
+from piste.formats.ssx.mpf_model import CM, SSX_TO_PISTE, bone_euler
 from piste.formats.ssx.ssh import SshBank, SshImage, half_bright
 from piste.transforms import invert_affine
 
@@ -96,7 +96,7 @@ def _bone_records(sk: Skeleton, file_id: int, report: dict) -> np.ndarray:
     report["bone_scale_dropped"] = float(np.abs(s - 1.0).max()) if len(s) else 0.0
     a = SSX_TO_PISTE.T  # piste -> SSX
     t = (local[:, :3, 3] @ a.T) / CM
-    e = matrix_to_euler(a @ rot @ a.T)
+    e = bone_euler(a @ rot @ a.T)
     b = np.zeros(sk.n_bones, BONE_DTYPE)
     names, renamed = [], {}
     for i, n in enumerate(sk.names):

@@ -22,8 +22,13 @@ Frames and units (piste's assumptions where the facts are silent)
 * The file is centimetres, Z up (SSX's world convention; the board deck lies along X); piste's
   models are metres, +Y up. ``p_piste = A p_ssx / 100`` with ``A`` mapping SSX ``(x, y, z)`` to
   piste ``(x, z, -y)``; rotations are conjugated by ``A``.
-* A bone's bind rotation triple ``(rx, ry, rz)`` is read as ``R = Rz(rz) Ry(ry) Rx(rx)`` (x first).
-  The facts say only "Euler XYZ, radians": this is piste's reading, and the encoder writes the same.
+* A bone's bind rotation triple ``(rx, ry, rz)`` is ``R = Rz(-rz) Ry(-ry) Rx(-rx)``: the angles
+  negated (:func:`bone_rotation`; SSX-Library ``glftHandler.cs`` builds ``Euler.ToQuaternion(-x,
+  -y, -z)``, OpenSlope ``tools/analysis/afl_pose.py`` "signs negated"). On the retail
+  ``moby_body.mpf`` + ``moby_head.mpf`` rider the 1,659 top-LOD vertices weighted 100 % to one
+  bone sit a median 8.5 cm from their bone's segments this way, 42 cm with the angles unnegated
+  (``tests/formats/ssx/test_mpf_errors.py::test_real_files`` measures it). The encoder writes
+  the same convention (:func:`bone_euler`).
 * Bone records written by the encoder: channel flags 3 (animated translation + rotation) for
   roots, 2 (rotation) for the others; mirror partner by ``_l``/``_r`` (``l_``/``r_``, ``Left``/
   ``Right``) name swap; mirror rotation offset ``(0, 0, pi)`` on roots, 0 elsewhere; mirror scales
@@ -42,7 +47,7 @@ mpf_to_model(*files, name=None) -> SsxModel
 mpf_partners(path, texture=None) -> (head .mpf or None, [texture .ssh banks])
 MpfFile.to_model(*other_files)  (the same, from the byte module)
 SsxModel: Model + ``lods``, ``notes``
-euler_to_matrix / matrix_to_euler, SSX_TO_PISTE
+euler_to_matrix / matrix_to_euler (Rz Ry Rx), bone_rotation / bone_euler (a bone record's convention), SSX_TO_PISTE
 """
 
 from __future__ import annotations
@@ -62,7 +67,8 @@ from piste.formats.ssx.mpf_layout import (
 )
 from piste.transforms import compose_trs, invert_affine, matrix_to_quat
 
-__all__ = ["SsxModel", "mpf_to_model", "mpf_partners", "euler_to_matrix", "matrix_to_euler", "SSX_TO_PISTE", "LOD_TIERS", "CM"]
+__all__ = ["SsxModel", "mpf_to_model", "mpf_partners", "euler_to_matrix", "matrix_to_euler", "bone_rotation", "bone_euler",
+           "SSX_TO_PISTE", "LOD_TIERS", "CM"]
 
 #: SSX (x, y, z) -> piste (x, z, -y)
 SSX_TO_PISTE = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -118,6 +124,17 @@ def matrix_to_euler(m) -> np.ndarray:
     return np.stack([x, y, z], -1)
 
 
+def bone_rotation(e) -> np.ndarray:
+    """A bone record's bind rotation: ``(..., 3)`` radians -> ``(..., 3, 3)``
+    ``Rz(-z) @ Ry(-y) @ Rx(-x)`` (the angles negated: module docstring)."""
+    return euler_to_matrix(-np.asarray(e, np.float64))
+
+
+def bone_euler(m) -> np.ndarray:
+    """Inverse of :func:`bone_rotation`: ``(..., 3, 3)`` -> ``(..., 3)`` radians as a bone record holds them."""
+    return -matrix_to_euler(m)
+
+
 # ------------------------------------------------------------------------------- mpf -> model
 def _tier(name: str) -> str | None:
     if "shdw" in name.lower():
@@ -156,7 +173,7 @@ def _skeleton(files: list, notes: list):
         return None, base, None
     a = SSX_TO_PISTE
     t = (np.asarray(t, np.float64) @ a.T) * CM
-    rm = a @ euler_to_matrix(np.asarray(r, np.float64)) @ a.T
+    rm = a @ bone_rotation(np.asarray(r, np.float64)) @ a.T
     q = matrix_to_quat(rm)
     n = len(names)
     local = compose_trs(t, q, np.ones((n, 3)))
