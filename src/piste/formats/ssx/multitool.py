@@ -29,7 +29,7 @@ import numpy as np
 
 from piste.errors import FormatError
 from piste.formats.atomic import write_bytes_atomic
-from piste.formats.safe_io import loads_json, read_regular
+from piste.formats.safe_io import anchor, loads_json, open_file, read_regular
 from piste.formats.ssx.pbd import Pbd, parse_pbd, records_from_arrays
 from piste.formats.ssx.ssh import PAGE_SIZE, SshBank, SshImage, half_bright, lightmap_bank
 from piste.formats.ssx.synth import pbd_bytes
@@ -135,9 +135,11 @@ def _read_png(path: Path, folder: Path) -> np.ndarray:
     from PIL import Image
 
     try:
-        if path.resolve().parent != (folder).resolve():
+        if path.parent != folder:
             raise FormatError(path, "image path leaves the project's folder")
-        with Image.open(path) as im:
+        # opened without following links (a linked Textures/ is refused) and fstat-ed before a read
+        # (a FIFO at Textures/0000.png is refused, never opened for reading): piste.formats.safe_io
+        with open_file(path, 64 << 20, what="image") as fh, Image.open(fh) as im:
             if im.width * im.height > 4096 * 4096:
                 raise FormatError(path, f"image of {im.width}x{im.height} is too large")
             return np.asarray(im.convert("RGBA"))
@@ -151,7 +153,10 @@ def read_project(folder) -> Project:
     """Read a Multitool project folder (or its ``Patches.json``)."""
     folder = Path(folder)
     jpath = folder if folder.suffix.lower() == ".json" else folder / "Patches.json"
-    folder = jpath.parent
+    # the user's folder, as a confinement root (piste.formats.safe_io): every file below it is opened
+    # without following links (a linked Textures/ is refused) and fstat-ed first (a FIFO never blocks)
+    folder = Path(anchor(jpath.parent))
+    jpath = folder / jpath.name
     if not jpath.exists():
         raise FormatError(jpath, "no such file")
     doc = loads_json(read_regular(jpath, MAX_JSON_BYTES), jpath)
