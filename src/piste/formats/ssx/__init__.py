@@ -7,6 +7,7 @@ pbd        read_pbd / write_pbd / Pbd (per-patch arrays, byte-identical round tr
 ssh        read_ssh / write_ssh / SshBank / SshImage; light-map pages and tiles
 lightmap   the game's Cs / As texels against 8x8-reduced base textures (pure numpy)
 synth      make_level: synthetic levels (the tests' golden files)
+afl        read_afl / write_afl / encode_afl / afl_clips: rider animation banks (.afl) as piste clips
 """
 
 from piste.formats.ssx.pbd import (
@@ -32,3 +33,8 @@ from piste.formats.ssx.mpf_model import SsxModel, mpf_to_model  # noqa: E402
 from piste.formats.ssx.mpf_encode import model_to_mpf  # noqa: E402
 __all__ += ["MpfFile", "SubModel", "read_mpf", "parse_mpf", "write_mpf", "mpf_bytes",  # SSX Tricky models (.mpf)
             "SsxModel", "mpf_to_model", "model_to_mpf"]
+from piste.formats.ssx.afl import (  # noqa: E402
+    AflClipData, AflFile, afl_bytes, afl_clips, encode_afl, mpf_body_bones, parse_afl, read_afl, write_afl,
+)
+__all__ += ["AflFile", "AflClipData", "read_afl", "parse_afl", "write_afl", "afl_bytes",  # rider animation banks (.afl)
+            "encode_afl", "afl_clips", "mpf_body_bones"]

@@ -198,8 +198,9 @@ class Segment:
             return np.full(u.shape, float(self.params[0]))
         if self.kind <= 3:
             v = np.full(u.shape, float(self.params[0]))
-            for c in self.params[1:]:
-                v = u * v + float(c)
+            with np.errstate(over="ignore", invalid="ignore"):  # a huge polynomial: refused by afl_clips
+                for c in self.params[1:]:
+                    v = u * v + float(c)
             return v
         vals = self.values()
         n = vals.shape[0]
@@ -609,10 +610,11 @@ def afl_clips(afl: AflFile, skeleton: Skeleton, bones=None, fps: float = DEFAULT
             continue
         f = max(c.frames, 1)
         ch = afl.sample(c)[[k for k, _ in c.tracks].index(BODY_TRACK)]
-        if not np.isfinite(ch).all():
-            j = int(np.flatnonzero(~np.isfinite(ch).all(0))[0])
-            raise FormatError(afl.path, f"clip {c.name}: channel {j} evaluates to a non-finite value",
-                              field=f"headers[{c.header}]")
+        ok = np.abs(ch) <= np.finfo(np.float32).max  # the game evaluates in float32: beyond it is inf
+        if not ok.all():
+            j = int(np.flatnonzero(~ok.all(0))[0])
+            raise FormatError(afl.path, f"clip {c.name}: channel {j} evaluates to a non-finite value (past the float32 "
+                                        f"range)", field=f"headers[{c.header}]")
         times = np.arange(f) / float(fps)
         tracks = {}
         if idx:
