@@ -232,3 +232,45 @@ def test_the_checker_sees_a_cycle_and_a_layer_breach(tmp_path, monkeypatch):
         assert "piste.formats.a (line 1): from piste.world.b import x" in str(exc)
     else:
         raise AssertionError("the layer check missed formats -> world")
+
+
+#: imports between command modules still to remove, each with who removes it (issue 25 item 2)
+COMMAND_IMPORTS_LEFT = {
+    ("piste.commands.bake", "piste.commands.ssx"),  # bake_pbd: moves to the pipeline with `piste ssx` subcommands
+    ("piste.commands.ssx", "piste.commands.export"),  # export_bundle: moves with glTF into one subpackage
+}
+
+
+def command_imports(imports) -> list[Import]:
+    """Imports of one ``piste.commands`` module by another: commands only parse and call the
+    pipeline/runtime (shared parsing helpers are private modules, ``piste.commands._numbers``)."""
+    out = []
+    for imp in imports:
+        if not imp.module.startswith("piste.commands.") or not imp.target.startswith("piste.commands."):
+            continue
+        if imp.target.rpartition(".")[2].startswith("_") or imp.target == imp.module:
+            continue
+        out.append(imp)
+    return out
+
+
+def test_commands_do_not_import_each_other():
+    _, imports, _ = import_graph()
+    bad = [f"{imp.where()}  -- move the shared work into the pipeline" for imp in command_imports(imports)
+           if (imp.module, imp.target) not in COMMAND_IMPORTS_LEFT]
+    assert not bad, "a command imports another command:\n  " + "\n  ".join(bad)
+
+
+def test_the_command_check_sees_one_command_importing_another(tmp_path, monkeypatch):
+    pkg = tmp_path / "piste"
+    (pkg / "commands").mkdir(parents=True)
+    for p in (pkg, pkg / "commands"):
+        (p / "__init__.py").write_text("")
+    (pkg / "commands" / "_numbers.py").write_text("SIZE = int\n")
+    (pkg / "commands" / "demo.py").write_text("def f():\n    from piste.commands import _numbers\n")
+    (pkg / "commands" / "view.py").write_text("def add_arguments(p):\n    from piste.commands.demo import f\n")
+    monkeypatch.setitem(globals(), "SRC", tmp_path)
+    monkeypatch.setitem(globals(), "ROOT", pkg)
+    _, imports, _ = import_graph()
+    assert [i.where() for i in command_imports(imports)] == [
+        "piste.commands.view (line 2): from piste.commands.demo import f"]

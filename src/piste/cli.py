@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import os
 import sys
 
 from piste.errors import MissingExtraError, PisteError, describe_os_error
@@ -44,7 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
         p = sub.add_parser(name, help=help_, description=help_)
         p.set_defaults(_module=module)
         importlib.import_module(module).add_arguments(p)
-        if name in ("demo", "render", "view"):
+        if name in ("demo", "render", "view"):  # the commands pass it to the runtime (lod_morph=)
             p.add_argument("--lod-morph", choices=("on", "off"), default=None,
                            help="geomorph terrain vertices between LOD levels (default: on, or the scene file's "
                                 "[lod] morph); off: the talk's exact behaviour")
@@ -54,9 +53,6 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    morph_env = os.environ.get("PISTE_LOD_MORPH")
-    if getattr(args, "lod_morph", None):  # read by piste.terrain.resident.morph_setting
-        os.environ["PISTE_LOD_MORPH"] = args.lod_morph
     try:
         return int(importlib.import_module(args._module).run(args) or 0)
     except MissingExtraError as exc:
@@ -72,11 +68,6 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
-    finally:
-        if morph_env is None:
-            os.environ.pop("PISTE_LOD_MORPH", None)
-        else:
-            os.environ["PISTE_LOD_MORPH"] = morph_env
 
 
 if __name__ == "__main__":  # pragma: no cover

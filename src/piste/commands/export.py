@@ -43,7 +43,9 @@ INFINITE_RANGE_MATCH = 10.0
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("scene", help="a scene (.toml) or a bundle (.piste)")
+    from piste.commands import _numbers as N
+
+    parser.add_argument("scene", help="a scene (.toml), a bundle (.piste) or an SSX level (.pbd)")
     parser.add_argument("out", help="output .glb (one file) or .gltf (JSON + .bin)")
     parser.add_argument("--level", default="4",
                         help="terrain tessellation: 4, 6 or 8 vertices per edge, or camera:NAME for the per-edge LOD "
@@ -52,6 +54,8 @@ def add_arguments(parser) -> None:
                         help="objects as EXT_mesh_gpu_instancing nodes (ext, default) or one plain node per instance")
     parser.add_argument("--no-base-texture", action="store_true", help="leave out the terrain's snow texture")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.add_argument("--riders", type=N.integer(0, 64), default=0, metavar="N",
+                        help="stand N default riders on the terrain of a source without riders of its own (an SSX level)")
 
 
 def piste_lights_to_gltf(lights, white: float = WHITE_LUX):
@@ -193,9 +197,9 @@ def export_bundle(bundle, path, level=4, instancing: str = "ext", with_base_text
 
 
 def run(args) -> int:
-    from piste.pipeline.open_scene import load_or_build
+    from piste.pipeline.open_scene import open_source
 
-    b = load_or_build(args.scene, args.quiet)
+    b = open_source(args.scene, quiet=args.quiet, riders=args.riders)
     r = export_bundle(b, args.out, level=args.level, instancing=args.instancing,
                       with_base_texture=not args.no_base_texture)
     print(f"wrote {', '.join(str(f) for f in r.files)} ({r.bytes / 1e6:.2f} MB): terrain {r.terrain_triangles:,} triangles, "

@@ -1,8 +1,12 @@
-"""``piste render SCENE --camera NAME --out image.png``: render a scene from one of its cameras.
+"""``piste render SOURCE --camera NAME --out image.png``: render any source from one of its cameras.
 
-``SCENE`` is a ``.toml`` scene (built first, with the cache) or a built ``.piste`` bundle.  With
-``--frames N`` time advances ``1/fps`` a frame (riders animate, track cameras fly) and ``--video``
-writes an H.264 MP4.
+``SOURCE`` is a ``.toml`` scene (built first, with the cache), a built ``.piste`` bundle, an SSX
+Tricky level (``.pbd`` with its ``.ssh`` / ``_L.ssh``) or a tiled world (``.tiles``, streamed):
+each opened by :func:`piste.pipeline.open_scene.open_source` and drawn by the one runtime
+(:class:`piste.pipeline.preview.ScenePreview`; tiled worlds by :mod:`piste.render.streaming`).
+``--eye X Y Z --target X Y Z`` gives a camera of your own for any source.  With ``--frames N`` time
+advances ``1/fps`` a frame (riders animate, track cameras fly) and ``--video`` writes an H.264 MP4.
+This module only parses.
 """
 
 from __future__ import annotations
@@ -10,14 +14,13 @@ from __future__ import annotations
 
 def add_arguments(parser) -> None:
     from piste.commands import _numbers as N
-    from piste.commands.demo import _positive, _size
 
-    parser.add_argument("scene", help="a scene (.toml), a bundle (.piste) or a tiled world folder (.tiles: a flight "
-                        "across it at --speed, tiles streamed)")
+    parser.add_argument("scene", help="a scene (.toml), a bundle (.piste), an SSX level (.pbd) or a tiled world folder "
+                        "(.tiles: a flight across it at --speed, tiles streamed)")
     parser.add_argument("--camera", help="scene camera to render from (default: the first; see --list)")
     parser.add_argument("--out", default="out/render.png", help="PNG of the first frame (default: out/render.png)")
-    parser.add_argument("--size", nargs=2, type=_size, metavar=("W", "H"), help="image size (default: the scene's)")
-    parser.add_argument("--frames", type=_positive, default=1, help="frames to render (default: 1)")
+    parser.add_argument("--size", nargs=2, type=N.SIZE, metavar=("W", "H"), help="image size (default: the scene's)")
+    parser.add_argument("--frames", type=N.FRAMES, default=1, help="frames to render (default: 1)")
     parser.add_argument("--video", metavar="MP4", help="also write the frames as an H.264 MP4")
     parser.add_argument("--fps", type=N.FPS, default=30, help="frame rate (default: 30)")
     parser.add_argument("--list", action="store_true", help="list the scene's cameras and exit")
@@ -26,40 +29,76 @@ def add_arguments(parser) -> None:
                         help="tiled worlds: flight speed in m/s (default 100)")
     parser.add_argument("--budget", type=N.real(1.0, float(1 << 20)), default=256.0,
                         help="tiled worlds: streaming memory budget in MiB")
+    parser.add_argument("--eye", nargs=3, type=N.COORDINATE, metavar=("X", "Y", "Z"),
+                        help="a camera of your own: its position in metres (with --target; any source)")
+    parser.add_argument("--target", nargs=3, type=N.COORDINATE, metavar=("X", "Y", "Z"),
+                        help="the point --eye looks at (metres)")
+    parser.add_argument("--fov", type=N.FOV, default=50.0, help="--eye's vertical field of view in degrees (default 50)")
+    parser.add_argument("--riders", type=N.integer(0, 64), default=0, metavar="N",
+                        help="stand N default riders on the terrain of a source without riders of its own (an SSX "
+                             "level); drawn with their shadows by the same runtime as a scene's")
 
 
-def load_or_build(scene, quiet: bool = True):
-    """A loaded bundle for ``scene`` (see :func:`piste.pipeline.open_scene.load_or_build`)."""
-    from piste.pipeline.open_scene import load_or_build as _load_or_build
+def _camera(args):
+    """The camera of ``--eye``/``--target`` (None without them)."""
+    import numpy as np
 
-    return _load_or_build(scene, quiet, warm=True)  # the renderer draws it next: resident blocks at load
+    from piste.errors import ConfigError
+    from piste.world.camera import Camera
+
+    if args.eye is None and args.target is None:
+        return None
+    if args.eye is None or args.target is None:
+        raise ConfigError("--eye and --target go together")
+    d = float(np.linalg.norm(np.subtract(args.eye, args.target)))
+    if d == 0.0:
+        raise ConfigError("--eye and --target must differ")
+    return Camera(np.array(args.eye, dtype=np.float64), np.array(args.target, dtype=np.float64), fov_y=args.fov,
+                  near=0.1, far=max(d * 20.0, 1000.0))
+
+
+def _morph(args):
+    return None if getattr(args, "lod_morph", None) is None else args.lod_morph == "on"
 
 
 def run(args) -> int:
     import sys
-
-    if str(args.scene).lower().endswith(".pbd"):  # an SSX Tricky level: piste.commands.ssx
-        from piste.commands.ssx import render_pbd
-
-        print(f"wrote {render_pbd(args.scene, args.out, args.size or (640, 448))}")
-        return 0
     from pathlib import Path
 
     from piste.errors import ConfigError
     from piste.formats.atomic import check_writable_folder
-    from piste.pipeline.preview import render_frames
+    from piste.pipeline.open_scene import open_source, source_kind
+    from piste.pipeline.preview import camera_at, render_frames
 
-    if args.scene.rstrip("/").endswith(".tiles"):  # a tiled world: stream it (piste.render.streaming)
-        from piste.render.streaming import render_flight_cli
+    kind = source_kind(args.scene)
+    cam = _camera(args)
+    if cam is not None and args.camera:
+        raise ConfigError("--camera names a scene camera; --eye/--target give one: use one or the other")
+    size = tuple(args.size) if args.size else None
+    if kind == "tiles":  # a tiled world: its tiles streamed (piste.render.streaming)
+        import numpy as np
 
-        return render_flight_cli(args)
-    b = load_or_build(args.scene, args.quiet)
+        from piste.render.streaming import render_flight
+
+        size = size or (640, 448)
+        if args.video and (size[0] % 2 or size[1] % 2):
+            raise ConfigError(f"--size {size[0]} {size[1]}: H.264 video needs an even width and height")
+        r = render_flight(args.scene, out=args.out, size=size, frames=args.frames, fps=args.fps, speed=args.speed,
+                          budget_mb=args.budget, video=args.video, camera=cam,
+                          progress=not args.quiet and sys.stderr.isatty() and args.frames > 1)
+        ms = np.array(r["ms"])
+        how = f"flying at {args.speed:g} m/s" if cam is None else "from --eye"
+        print(f"wrote {args.out}" + (f" and {args.video}" if args.video else "") +
+              f": {r['frames']} frame(s) {how}, median {np.median(ms):.1f} ms "
+              f"(max {ms.max():.1f}), resident {r['resident_mb']:.1f} MiB of {args.budget:g}, "
+              f"last frame {r['near']} near + {r['far']} far tiles")
+        return 0
+    b = open_source(args.scene, quiet=args.quiet, warm=True, riders=args.riders)
     if args.list:
         for c in b.manifest.get("cameras", []):
             extra = f" track {c['track'][0]:.2f}..{c['track'][1]:.2f}" if c.get("track") else ""
             print(f"{c['name']:<20} from {c.get('source', 'scene'):<16} eye {[round(x, 2) for x in c['eye']]}{extra}")
         return 0
-    size = tuple(args.size) if args.size else None
     if args.video:
         w, h = size or tuple(b.manifest.get("render", {}).get("size", (640, 448)))
         if w % 2 or h % 2:
@@ -68,14 +107,14 @@ def run(args) -> int:
         if out:
             check_writable_folder(Path(out).parent)
     if b.visibility is not None:  # cameras above the visibility band draw without the sets: say so
-        from piste.pipeline.preview import camera_at
         from piste.pipeline.visibility import band_warnings
 
-        cams = [camera_at(b, args.camera, i, args.frames) for i in range(args.frames)]
+        cams = [cam or camera_at(b, args.camera, i, args.frames) for i in range(args.frames)]
         for msg in band_warnings(b.net, b.visibility, cams, [f"{args.camera or 'camera'} frame {i}" for i in range(len(cams))])[:1]:
             print(f"warning: {msg}", file=sys.stderr)
-    stats = render_frames(b, args.camera, args.frames, size=size, fps=args.fps, video=args.video, first_png=args.out,
-                          progress=not args.quiet and sys.stderr.isatty() and args.frames > 1)
+    stats = render_frames(b, cam or args.camera, args.frames, size=size, fps=args.fps, video=args.video,
+                          first_png=args.out, progress=not args.quiet and sys.stderr.isatty() and args.frames > 1,
+                          lod_morph=_morph(args))
     if stats and "frustum_patches" in stats[0]:
         fr = sum(s["frustum_patches"] for s in stats) / len(stats)
         dr = sum(s["drawn_patches"] for s in stats) / len(stats)

@@ -23,10 +23,8 @@ import sys
 
 def add_arguments(parser) -> None:
     from piste.commands import _numbers as N
-    from piste.commands.demo import _positive, _size
-    from piste.pipeline.live import add_scene_arguments
 
-    parser.add_argument("--size", nargs=2, type=_size, default=(960, 672), metavar=("W", "H"),
+    parser.add_argument("--size", nargs=2, type=N.SIZE, default=(960, 672), metavar=("W", "H"),
                         help="window size (default: 960 672)")
     parser.add_argument("--seed", type=N.SEED, default=0, help="course seed (default: 0)")
     parser.add_argument("--start", type=N.FRACTION, default=0.1, help="start along the track, 0..1 (default: 0.1)")
@@ -44,15 +42,24 @@ def add_arguments(parser) -> None:
     parser.add_argument("--follow", type=N.integer(0, 10_000), metavar="N",
                         help="start chasing rider N (F toggles, N next rider)")
     parser.add_argument("--no-overlay", action="store_true", help="start without the statistics overlay (H toggles)")
-    parser.add_argument("--frames", type=_positive, help="quit after N frames (for scripted runs)")
+    parser.add_argument("--frames", type=N.FRAMES, help="quit after N frames (for scripted runs)")
     parser.add_argument("--exit-after", type=N.SECONDS, metavar="S", help="quit after S seconds (for scripted runs)")
     parser.add_argument("--state", metavar="FILE", help="write the camera, frames and riders drawn as JSON on exit")
-    parser.add_argument("--benchmark", type=_positive, metavar="N",
+    parser.add_argument("--benchmark", type=N.FRAMES, metavar="N",
                         help="render N frames along a fixed path without input and print fps (needs a display)")
     parser.add_argument("--out", default="out/view.png",
                         help="screenshot on quit with --frames, or the headless fallback's image (default: out/view.png)")
-    add_scene_arguments(parser)
-    parser._option_string_actions["--watch-seconds"].type = N.SECONDS  # added by pipeline.live (no argparse types there)
+    parser.add_argument("scene", nargs="?", help="a scene (.toml) or bundle (.piste) to preview live (rebuilt and "
+                                                 "reloaded when its files change), an SSX level (.pbd) or a tiled "
+                                                 "world (.tiles)")
+    parser.add_argument("--headless", action="store_true",
+                        help="with SCENE: no window; render a frame to --out (a folder) at start and per change")
+    parser.add_argument("--camera", help="with SCENE: the scene camera (default: the first)")
+    parser.add_argument("--watch-seconds", type=N.SECONDS, help="with SCENE: stop watching after this many seconds")
+    parser.add_argument("--riders", type=N.integer(0, 64), default=0, metavar="N",
+                        help="with an SSX level: stand N default riders on its terrain")
+    parser.add_argument("--budget", type=N.real(1.0, float(1 << 20)), default=256.0,
+                        help="tiled worlds: streaming memory budget in MiB")
 
 
 def course_preview(args, bundle, ctx=None):
@@ -69,23 +76,104 @@ def course_preview(args, bundle, ctx=None):
     start = min(max(float(args.start), 0.0), max(length - PACK_TRACK_AHEAD, 0.0) / length)  # the pack: 120 m ahead
     return ScenePreview(bundle, size=tuple(args.size), ctx=ctx, lightmap=lightmap, object_lighting="dynamic",
                         lightmap_mode=args.lightmap, terrain_only=args.terrain_only, start=start,
-                        casts=rider_casts(args.rider_model), face=args.face)
+                        casts=rider_casts(args.rider_model), face=args.face, lod_morph=_morph(args))
+
+
+def _morph(args):
+    return None if getattr(args, "lod_morph", None) is None else args.lod_morph == "on"
+
+
+def _view_scene(args) -> int:
+    """``piste view SCENE``: a scene file or bundle, previewed live (:mod:`piste.pipeline.live`)."""
+    from pathlib import Path
+
+    from piste.pipeline.live import LiveScene, run_headless, run_window
+    from piste.pipeline.preview import camera_at
+    from piste.render.window import HELP, ViewOptions, has_display, print_benchmark
+
+    size = tuple(args.size) if getattr(args, "size", None) else None
+    kw = {"face": args.face, "lod_morph": _morph(args)}
+    if args.headless or not has_display():
+        live = LiveScene(args.scene, size=size, camera=args.camera, **kw)
+        try:
+            out = Path(args.out)
+            if out.suffix.lower() == ".png":  # view's own default is a PNG path: use a folder beside it
+                out = out.with_suffix("")
+            if not args.headless:
+                print("piste view: no display, so previewing headless into " + str(out), file=sys.stderr)
+            files = run_headless(live, out, frames=args.frames, seconds=args.watch_seconds)
+            print(f"{len(files)} frame(s) in {out}")
+            return 0
+        finally:
+            live.release()
+    path = Path(args.scene)
+
+    def factory(ctx):
+        return LiveScene(path, size=size, camera=args.camera, ctx=ctx, **kw)
+
+    def start_camera(view):
+        return camera_at(view.live.bundle, args.camera)
+
+    size = size or (640, 448)
+    opts = ViewOptions(lightmap_mode=args.lightmap, debug=args.debug, follow=args.follow,
+                       overlay=not args.no_overlay)
+    seconds = args.exit_after if args.exit_after is not None else args.watch_seconds
+    if args.benchmark:
+        st = run_window(factory, start_camera, size=size, opts=opts, benchmark=args.benchmark)
+        print_benchmark(st, f"{path.name}, " + ("chasing rider 0" if st.get("follow_used") else "scene camera"), size)
+        return 0
+    print(f"piste view: {HELP}", file=sys.stderr)
+    st = run_window(factory, start_camera, size=size, caption=f"piste view {path.name}", opts=opts, frames=args.frames,
+                    exit_after=seconds, screenshot=args.out if (args.frames or seconds) else None, state=args.state)
+    print(f"{st['frames']} frames")
+    return 0
+
+
+def _view_source(args) -> int:
+    """``piste view LEVEL.pbd`` (any source that is not watched): opened by
+    :func:`piste.pipeline.open_scene.open_source` and drawn by the runtime in the window (or one
+    frame off-screen to ``--out`` without a display)."""
+    from piste.pipeline.live import PreviewView
+    from piste.pipeline.open_scene import open_source
+    from piste.pipeline.preview import ScenePreview, camera_at
+    from piste.render import save_png
+    from piste.render.window import ViewOptions, has_display, run_window
+
+    bundle = open_source(args.scene, warm=True, riders=args.riders)
+    size = tuple(args.size)
+    kw = {"lightmap_mode": args.lightmap, "face": args.face, "lod_morph": _morph(args)}
+    cam = camera_at(bundle, args.camera)
+    if not has_display():
+        print("piste view: no display (DISPLAY / WAYLAND_DISPLAY unset), so no window; rendering one frame "
+              f"off-screen to {args.out} instead (run under a desktop or `xvfb-run piste view`)", file=sys.stderr)
+        p = ScenePreview(bundle, size=size, **kw)
+        try:
+            image = p.render(cam, 0.0, debug=args.debug)
+        finally:
+            p.release()
+        print(f"wrote {save_png(args.out, image)}")
+        return 0
+    opts = ViewOptions(lightmap_mode=args.lightmap, debug=args.debug, follow=args.follow, overlay=not args.no_overlay)
+    st = run_window(lambda ctx: PreviewView(ScenePreview(bundle, size=size, ctx=ctx, **kw)), cam, size=size,
+                    caption=f"piste view {bundle.name}", opts=opts, frames=args.frames, exit_after=args.exit_after,
+                    screenshot=args.out if (args.frames or args.exit_after) else None, state=args.state)
+    print(f"{st['frames']} frames")
+    return 0
 
 
 def run(args) -> int:
-    if str(getattr(args, "scene", None) or "").lower().endswith(".pbd"):  # an SSX Tricky level
-        from piste.commands.ssx import view_pbd
+    if args.scene:
+        from piste.pipeline.open_scene import source_kind
 
-        args.level = args.scene
-        return view_pbd(args)
-    if str(getattr(args, "scene", None) or "").rstrip("/").endswith(".tiles"):  # a tiled world: streamed
-        from piste.render.streaming import view_tiles
+        kind = source_kind(args.scene)
+        if kind == "tiles":  # a tiled world: its tiles streamed
+            from piste.render.streaming import view_tiles
 
-        return view_tiles(args)
-    if getattr(args, "scene", None):
-        from piste.pipeline.live import run_view
-
-        return run_view(args)
+            return view_tiles(args.scene, size=tuple(args.size), budget_mb=args.budget, out=args.out,
+                              frames=args.frames, exit_after=args.exit_after, state=args.state, benchmark=args.benchmark)
+        if kind in ("scene", "bundle"):  # watched and rebuilt live
+            return _view_scene(args)
+        return _view_source(args)
     from piste.extras import require
     from piste.pipeline.bundle_objects import load_bundle
     from piste.pipeline.default_scene import build_default_scene

@@ -20,7 +20,8 @@ run_headless(live, out_dir, frames=None, seconds=None, interval=0.1, log=print) 
 PreviewView(preview)           the fly-through window's view of a ScenePreview (piste.render.window)
 LiveView(live)                 the same for a LiveScene, reloaded in place
 run_window(live_factory, camera, size, **window_kw) -> state dict
-add_scene_arguments(parser), run_view(args)    the ``piste view SCENE`` hook (see commands/view.py)
+
+``piste view SCENE`` (:mod:`piste.commands.view`) parses its flags and calls these with parameters.
 """
 
 from __future__ import annotations
@@ -30,7 +31,6 @@ import time
 from pathlib import Path
 
 from piste.errors import PisteError
-from piste.extras import require
 from piste.pipeline.build import build_scene
 from piste.pipeline.bundle_objects import load_bundle
 from piste.pipeline.preview import BundleScene, ScenePreview, camera_at
@@ -38,10 +38,10 @@ from piste.render import window
 from piste.render.context import save_png
 from piste.render.frame import DEFAULT_FOG_DENSITY
 from piste.render.sky_pass import HORIZON
-from piste.render.window import HELP, SceneView, ViewFrame, ViewOptions, _wrap_screen, has_display, print_benchmark, riders_in_view
+from piste.render.window import SceneView, ViewFrame, _wrap_screen
 from piste.world.scene_file import load_scene
 
-__all__ = ["LiveScene", "PreviewView", "LiveView", "run_headless", "run_window", "add_scene_arguments", "run_view"]
+__all__ = ["LiveScene", "PreviewView", "LiveView", "run_headless", "run_window"]
 
 
 def _stamp(paths) -> dict:
@@ -255,53 +255,3 @@ def run_window(live_factory, camera=None, size=(640, 448), caption="piste view",
 
     return window.run_window(make, camera, size=size, caption=caption,
                              poll=lambda: holder["view"].poll() if "view" in holder else None, **kw)
-
-
-# ----------------------------------------------------------------------------- the CLI hook
-def add_scene_arguments(parser) -> None:
-    """``piste view [SCENE] [--headless] [--camera NAME] [--watch-seconds S]`` (added to view's own)."""
-    parser.add_argument("scene", nargs="?", help="a scene (.toml) or bundle (.piste) to preview live: rebuilt and "
-                                                 "reloaded when its files change")
-    parser.add_argument("--headless", action="store_true",
-                        help="with SCENE: no window; render a frame to --out (a folder) at start and per change")
-    parser.add_argument("--camera", help="with SCENE: the scene camera (default: the first)")
-    parser.add_argument("--watch-seconds", type=float, help="with SCENE: stop watching after this many seconds")
-
-
-def run_view(args) -> int:
-    """``piste view SCENE``: the live preview (see the module docstring)."""
-    size = tuple(args.size) if getattr(args, "size", None) else None
-    if args.headless or not has_display():
-        live = LiveScene(args.scene, size=size, camera=args.camera, face=getattr(args, "face", None))
-        try:
-            out = Path(args.out)
-            if out.suffix.lower() == ".png":  # view's own default is a PNG path: use a folder beside it
-                out = out.with_suffix("")
-            if not args.headless:
-                print("piste view: no display, so previewing headless into " + str(out), file=sys.stderr)
-            files = run_headless(live, out, frames=args.frames, seconds=args.watch_seconds)
-            print(f"{len(files)} frame(s) in {out}")
-            return 0
-        finally:
-            live.release()
-    path = Path(args.scene)
-
-    def factory(ctx):
-        return LiveScene(path, size=size, camera=args.camera, ctx=ctx, face=getattr(args, "face", None))
-
-    def start_camera(view):
-        return camera_at(view.live.bundle, args.camera)
-
-    size = size or (640, 448)
-    opts = ViewOptions(lightmap_mode=args.lightmap, debug=args.debug, follow=args.follow,
-                       overlay=not args.no_overlay)
-    seconds = args.exit_after if args.exit_after is not None else args.watch_seconds
-    if args.benchmark:
-        st = run_window(factory, start_camera, size=size, opts=opts, benchmark=args.benchmark)
-        print_benchmark(st, f"{path.name}, " + ("chasing rider 0" if st.get("follow_used") else "scene camera"), size)
-        return 0
-    print(f"piste view: {HELP}", file=sys.stderr)
-    st = run_window(factory, start_camera, size=size, caption=f"piste view {path.name}", opts=opts, frames=args.frames,
-                    exit_after=seconds, screenshot=args.out if (args.frames or seconds) else None, state=args.state)
-    print(f"{st['frames']} frames")
-    return 0

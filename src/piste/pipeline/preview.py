@@ -51,7 +51,7 @@ from piste.render.sky_pass import HORIZON
 from piste.render.ssx_pass import SsxTerrainRenderer
 from piste.render.video import VideoWriter
 from piste.terrain.resident import resident_fits, resident_terrain
-from piste.world.camera import track_camera
+from piste.world.camera import Camera, track_camera, warn_if_no_terrain
 from piste.world.course import TRACK_HALF_WIDTH
 from piste.world.object_lod import DEFAULT_LOD_PIXELS
 from piste.world.objects import place_objects
@@ -283,6 +283,8 @@ class ScenePreview:
         default: the scene file's ``render.fog``, else "auto"
     object_lod : the objects' LOD error allowed on screen in pixels (0: full meshes); default: the
         scene file's ``render.object_lod``, else 0.5
+    lod_morph : geomorph the terrain between LOD levels (the CLI's ``--lod-morph``); default: the
+        scene file's ``[lod] morph``, else on
 
     After :meth:`render`, ``stats`` holds the frame's counts and ``frame`` the renderer's own
     result (a :class:`piste.render.Frame` for terrain-only scenes, else a
@@ -292,7 +294,8 @@ class ScenePreview:
     def __init__(self, bundle, size=None, ctx=None, visibility: bool = True, scene=None, lightmap="bundle",
                  object_lighting: str = "baked", shadows: bool = True, specular: bool = True,
                  lightmap_mode: str | None = None, start: float | None = None, casts=(),
-                 terrain_only: bool = False, face: str | None = None, fog=None, object_lod: float | None = None):
+                 terrain_only: bool = False, face: str | None = None, fog=None, object_lod: float | None = None,
+                 lod_morph: bool | None = None):
         if not (isinstance(lightmap, str) and lightmap in ("bundle", "placeholder")) and lightmap is not None:
             raise ConfigError(f"lightmap must be 'bundle', 'placeholder' or None, got {lightmap!r}")
         self.ctx = ctx if ctx is not None else create_context()
@@ -302,7 +305,7 @@ class ScenePreview:
         self.options = {"scene": scene, "lightmap": lightmap, "object_lighting": object_lighting,
                         "shadows": bool(shadows), "specular": bool(specular), "lightmap_mode": lightmap_mode,
                         "start": start, "casts": list(casts), "terrain_only": bool(terrain_only), "face": face,
-                        "fog": fog, "object_lod": object_lod}
+                        "fog": fog, "object_lod": object_lod, "lod_morph": lod_morph}
         self.stats: dict = {}
         self.frame = None
         # numba's background import (~0.8 s, mostly holding the GIL) waits until the first frame is
@@ -319,7 +322,8 @@ class ScenePreview:
         man = bundle.manifest
         opt = self.options
         lod = man.get("lod", {})
-        kw = {"lod_near": lod.get("near"), "lod_far": lod.get("far"), "lod_morph": lod.get("morph", True)}
+        morph = opt["lod_morph"] if opt["lod_morph"] is not None else lod.get("morph", True)
+        kw = {"lod_near": lod.get("near"), "lod_far": lod.get("far"), "lod_morph": bool(morph)}
         if bundle.centerline is not None:
             kw.update(track=bundle.centerline, track_half_width=TRACK_HALF_WIDTH)
         if "terrain/base_texture" in bundle.arrays:  # an SSX level's own textures (pipeline.ssx_level)
@@ -399,6 +403,10 @@ class ScenePreview:
         if camera is None and not self.follow:
             camera = camera_at(self.bundle)
         cam = replace(camera, aspect=w / h) if camera is not None else None
+        if cam is not None and getattr(self.bundle, "net", None) is not None:  # a blank frame says why, once
+            if self.__dict__.get("_bounds_of") is not self.bundle.net:
+                self._bounds_of, self._bounds = self.bundle.net, self.bundle.net.bounds
+            warn_if_no_terrain(cam, *self._bounds, seen=self.__dict__.setdefault("_no_terrain_seen", set()))
         if self.renderer is not None:
             img = self.renderer.render(t, camera=cam, lod=lod, lightmap_mode=self.lightmap_mode, debug=debug,
                                        read=read, fog=self.fog)
@@ -467,13 +475,14 @@ def render_image(bundle, camera: str | None = None, size=None, t: float = 0.0, c
         p.release()
 
 
-def render_frames(bundle, camera: str | None = None, frames: int = 1, size=None, fps: int = 30, video=None,
-                  first_png=None, ctx=None, progress: bool = False) -> list:
+def render_frames(bundle, camera=None, frames: int = 1, size=None, fps: int = 30, video=None,
+                  first_png=None, ctx=None, progress: bool = False, **preview_kw) -> list:
     """Render ``frames`` frames (time ``i / fps``; track cameras fly), writing the first to
-    ``first_png`` and all to the MP4 ``video`` when given.  Returns each frame's stats.  A ``[pack]``
-    scene (riders following the track) with no ``camera`` named is seen by the chase camera, as in
-    ``piste demo``."""
-    p = ScenePreview(bundle, size=size, ctx=ctx)
+    ``first_png`` and all to the MP4 ``video`` when given.  Returns each frame's stats.  ``camera``:
+    a scene camera's name, a :class:`piste.world.camera.Camera` (stays put) or None (the first
+    scene camera; a ``[pack]`` scene, riders following the track, is seen by the chase camera, as in
+    ``piste demo``).  ``preview_kw``: :class:`ScenePreview` options (``lod_morph``, ...)."""
+    p = ScenePreview(bundle, size=size, ctx=ctx, **preview_kw)
     writer = None
     out = []
     try:
@@ -486,7 +495,8 @@ def render_frames(bundle, camera: str | None = None, frames: int = 1, size=None,
             it = tqdm(it, desc="rendering", unit="frame", leave=False)
         for i in it:
             chase = camera is None and p.follow
-            img = p.render(None if chase else camera_at(bundle, camera, i, frames), i / float(fps))
+            cam = camera if isinstance(camera, Camera) else (None if chase else camera_at(bundle, camera, i, frames))
+            img = p.render(cam, i / float(fps))
             if i == 0 and first_png is not None:
                 save_png(first_png, img)
             if writer is not None:

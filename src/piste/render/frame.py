@@ -117,8 +117,8 @@ class TerrainRenderer:
     lod_near, lod_far : per-edge LOD distance thresholds (default: the terrain core's)
     track : (k, 3) centre line of a groomed track to mark on the snow (projected texture), or None
     track_half_width : metres from the centre line to the track's dye lines
-    lod_morph : geomorph between LOD levels (False: the talk's exact positions, which pop); None:
-        on unless the CLI's ``--lod-morph off`` says otherwise (:func:`piste.terrain.resident.morph_setting`)
+    lod_morph : geomorph between LOD levels (False: the talk's exact positions, which pop); None: on
+        (the runtime passes the CLI's ``--lod-morph`` or the scene file's ``[lod] morph``)
     resident : keep every patch's vertices on the GPU and send only index lists (False: tessellate
         on the CPU every frame, the talk's way; same triangles).  Nets too big for
         :data:`piste.terrain.resident.RESIDENT_BUDGET` (~46k patches) take the CPU path.

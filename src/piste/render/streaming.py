@@ -49,7 +49,7 @@ from piste.terrain.tiles import TileGrid, TileStore
 from piste.world.camera import Camera
 
 __all__ = ["TileCache", "StreamingRenderer", "TileMesh", "near_mesh", "far_mesh", "mesh_bytes", "fly_path",
-           "render_flight", "render_flight_cli", "StreamingView", "view_tiles"]
+           "render_flight", "StreamingView", "view_tiles"]
 
 SKY = (0.80, 0.86, 0.93)
 #: corner strides of the far levels (every tile keeps all of them: 1 + 1/4 + 1/16 + 1/64 of the grid)
@@ -495,14 +495,21 @@ def fly_path(index: dict, frames: int, fps: float = 30.0, speed: float = 100.0, 
 
 
 def render_flight(root, out=None, size=(640, 448), frames: int = 1, fps: float = 30.0, speed: float = 100.0,
-                  budget_mb: float = 256.0, video=None, wait: bool = True, progress: bool = False) -> dict:
+                  budget_mb: float = 256.0, video=None, wait: bool = True, progress: bool = False,
+                  camera=None) -> dict:
     """``piste render WORLD.tiles``: fly across a tiled world; PNG of the first frame, optional MP4.
+    ``camera``: a :class:`~piste.world.camera.Camera` that stays put for every frame instead of the
+    flight (:func:`fly_path`).
 
     Returns ``{"frames", "ms" (per frame), "resident_mb" (max), "near", "far"}``.
     """
     import contextlib
 
     root = Path(root)
+    if not root.is_dir():
+        raise ConfigError(f"{root}: no such tiled world (build one: piste build SCENE with terrain.tiles)")
+    if speed <= 0 or budget_mb <= 0:
+        raise ConfigError(f"speed and budget must be > 0, got {speed} and {budget_mb}")
     r = StreamingRenderer(root, size=size, budget_bytes=int(budget_mb * 2**20))
     times, resident = [], []
     try:
@@ -510,7 +517,7 @@ def render_flight(root, out=None, size=(640, 448), frames: int = 1, fps: float =
             writer = None
             if video is not None:
                 writer = stack.enter_context(VideoWriter(video, fps=int(fps)))
-            cams = fly_path(r.cache.index, frames, fps, speed)
+            cams = fly_path(r.cache.index, frames, fps, speed) if camera is None else (camera for _ in range(frames))
             if progress:
                 from tqdm import tqdm
 
@@ -528,28 +535,6 @@ def render_flight(root, out=None, size=(640, 448), frames: int = 1, fps: float =
         r.close()
     return {"frames": frames, "ms": times, "resident_mb": max(resident) / 2**20, "near": stats.get("near", 0),
             "far": stats.get("far", 0)}
-
-
-def render_flight_cli(args) -> int:
-    """``piste render WORLD.tiles [--frames N --fps F --speed V --budget MiB --video X.mp4]``."""
-    import sys
-
-    if not Path(args.scene).is_dir():
-        raise ConfigError(f"{args.scene}: no such tiled world (build one: piste build SCENE with terrain.tiles)")
-    if args.speed <= 0 or args.budget <= 0:
-        raise ConfigError(f"--speed and --budget must be > 0, got {args.speed} and {args.budget}")
-    size = tuple(args.size) if args.size else (640, 448)
-    if args.video and (size[0] % 2 or size[1] % 2):
-        raise ConfigError(f"--size {size[0]} {size[1]}: H.264 video needs an even width and height")
-    r = render_flight(args.scene, out=args.out, size=size, frames=args.frames, fps=args.fps, speed=args.speed,
-                      budget_mb=args.budget, video=args.video,
-                      progress=not args.quiet and sys.stderr.isatty() and args.frames > 1)
-    ms = np.array(r["ms"])
-    print(f"wrote {args.out}" + (f" and {args.video}" if args.video else "") +
-          f": {r['frames']} frame(s) flying at {args.speed:g} m/s, median {np.median(ms):.1f} ms "
-          f"(max {ms.max():.1f}), resident {r['resident_mb']:.1f} MiB of {args.budget:g}, "
-          f"last frame {r['near']} near + {r['far']} far tiles")
-    return 0
 
 
 # ----------------------------------------------------------------------------- piste view WORLD.tiles
@@ -594,24 +579,28 @@ class StreamingView:
         self.renderer.close()
 
 
-def view_tiles(args) -> int:
+def view_tiles(root, size=(960, 672), budget_mb: float = 256.0, out="out/view.png", frames: int | None = None,
+               exit_after: float | None = None, state=None, benchmark: int | None = None, camera=None) -> int:
     """``piste view WORLD.tiles``: fly through a tiled world in a window (tiles streamed); without a
-    display, one frame off-screen to ``--out``."""
+    display, one frame off-screen to ``out``.  ``camera``: where to start (default: the start of
+    :func:`fly_path`)."""
     import sys
 
-    root = Path(args.scene)
+    root = Path(root)
     if not root.is_dir():
         raise ConfigError(f"{root}: no such tiled world (build one: piste build SCENE with terrain.tiles)")
-    budget = int(float(getattr(args, "budget", None) or 256.0) * 2**20)
-    w, h = (int(x) for x in args.size)
+    budget = int(float(budget_mb or 256.0) * 2**20)
+    w, h = (int(x) for x in size)
     index = TileStore(root).read_index()
-    path = list(fly_path(index, max(int(args.benchmark or 1), 1)))
+    path = list(fly_path(index, max(int(benchmark or 1), 1)))
+    if camera is not None:
+        path[0] = camera
     if not has_display():
         print("piste view: no display, so no window; rendering one frame of the tiled world off-screen to "
-              f"{args.out} instead (run under a desktop or `xvfb-run piste view`)", file=sys.stderr)
+              f"{out} instead (run under a desktop or `xvfb-run piste view`)", file=sys.stderr)
         r = StreamingRenderer(root, size=(w, h), budget_bytes=budget)
         try:
-            save_png(args.out, r.render(path[0], wait=True))
+            save_png(out, r.render(path[0], wait=True))
         finally:
             r.close()
         return 0
@@ -619,13 +608,12 @@ def view_tiles(args) -> int:
     def make(ctx):
         return StreamingView(StreamingRenderer(root, size=(w, h), budget_bytes=budget, ctx=ctx))
 
-    if args.benchmark:
-        st = run_window(make, path[0], size=(w, h), opts=ViewOptions(), benchmark=args.benchmark,
+    if benchmark:
+        st = run_window(make, path[0], size=(w, h), opts=ViewOptions(), benchmark=benchmark,
                         benchmark_camera=lambda i: path[min(max(i - 5, 0), len(path) - 1)])
         print_benchmark(st, "tiled world, flying at 100 m/s", (w, h))
         return 0
     st = run_window(make, path[0], size=(w, h), caption=f"piste view {root.name}", opts=ViewOptions(),
-                    frames=args.frames, exit_after=args.exit_after, screenshot=args.out if args.frames else None,
-                    state=args.state)
+                    frames=frames, exit_after=exit_after, screenshot=out if frames else None, state=state)
     print(f"piste view: {st.get('frames', 0)} frames")
     return 0

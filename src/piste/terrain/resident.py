@@ -42,7 +42,6 @@ ResidentMesh.to_mesh()                   the same frame as a classic TerrainMesh
 
 from __future__ import annotations
 
-import os
 import threading
 from dataclasses import dataclass
 from pathlib import Path
@@ -479,14 +478,8 @@ def resident_fits(net: PatchNet, levels=LEVELS, budget: int = RESIDENT_BUDGET) -
 
 
 def morph_setting(explicit: bool | None = None) -> bool:
-    """Whether to geomorph: ``PISTE_LOD_MORPH=on|off`` in the environment if set (the CLI's
-    ``--lod-morph`` sets it for the command's run, so it wins over a scene file's ``[lod] morph``),
-    else ``explicit`` (the scene file's key or a caller's choice), else on."""
-    env = os.environ.get("PISTE_LOD_MORPH", "").strip().lower()
-    if env in ("on", "off"):
-        return env == "on"
-    if env:
-        raise ConfigError(f"PISTE_LOD_MORPH must be 'on' or 'off', got {env!r}")
+    """Whether to geomorph: ``explicit`` (the CLI's ``--lod-morph``, passed down as a parameter,
+    else the scene file's ``[lod] morph``, else a caller's choice), or on when None."""
     return True if explicit is None else bool(explicit)
 
 
