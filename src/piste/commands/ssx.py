@@ -123,6 +123,7 @@ def bake_pbd(level_path, out=None, lights_path=None, scene_path=None, shadows=Tr
 
 
 def run(args) -> int:
+    import sys
     from pathlib import Path
 
     from piste.errors import ConfigError
@@ -149,12 +150,19 @@ def run(args) -> int:
         if not args.out or not str(args.out).lower().endswith(".pbd"):
             raise ConfigError("import needs --out NEW.pbd")
         out = Path(args.out)
-        pbd, textures, lightmaps = read_project(args.level).to_level()
+        project = read_project(args.level)
+        pbd, textures, lightmaps = project.to_level()
+        for note in project.notes:
+            print(f"piste ssx import: note: {note}", file=sys.stderr)
         write_pbd(pbd, out)
-        write_ssh(textures, out.with_name(f"{out.stem}.ssh"))
-        write_ssh(lightmaps, out.with_name(f"{out.stem}_L.ssh"))
-        print(f"wrote {out} ({len(pbd)} patches), {out.stem}.ssh ({len(textures)} textures), "
-              f"{out.stem}_L.ssh ({len(lightmaps)} pages)")
+        wrote = [f"{out} ({len(pbd)} patches)"]
+        if textures is not None:
+            write_ssh(textures, out.with_name(f"{out.stem}.ssh"))
+            wrote.append(f"{out.stem}.ssh ({len(textures)} textures)")
+        if lightmaps is not None:
+            write_ssh(lightmaps, out.with_name(f"{out.stem}_L.ssh"))
+            wrote.append(f"{out.stem}_L.ssh ({len(lightmaps)} pages)")
+        print("wrote " + ", ".join(wrote))
         return 0
     if args.action == "info":
         from piste.pipeline.ssx_level import load_level

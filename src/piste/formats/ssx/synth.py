@@ -3,9 +3,13 @@ the fact sheet (the tests' golden files; no retail data).
 
 A synthetic level is a hilly slope of ``rows x cols`` patches (or any PatchNet), its shared
 boundaries perturbed by a fraction of a game unit (the game's seams are near-equal, not equal),
-the sections piste does not interpret filled with deterministic plausible bytes, a few 8-bit and
-4-bit indexed textures, and light-map pages lit by a fixed sun with ``Cs``/``As`` computed the
-game's way against each patch's base texture reduced to 8x8.
+a few 8-bit and 4-bit indexed textures, and light-map pages lit by a fixed sun with ``Cs``/``As``
+computed the game's way against each patch's base texture reduced to 8x8.
+
+Nothing is invented: every section :func:`pbd_bytes` writes is either given by the caller (the
+bytes of a source level) or the **minimal default**, an empty section (count 0, length 0) at its
+16-byte aligned place after the patches; the patch records' compiler residue is 0.  The same
+input gives the same bytes.
 
 API
 ---
@@ -13,7 +17,7 @@ make_level(net=None, rows=2, cols=3, seed=0, jitter=0.02, ...) -> SynthLevel
 SynthLevel.write(folder, name="SYNTH") -> Path of NAME.pbd (NAME.ssh and NAME_L.ssh beside it)
 synthetic_net(rows, cols, seed, patch_size=12.0) -> PatchNet (metres)
 synthetic_textures(count) -> SshBank
-pbd_bytes(records, counts=None, sections=None, platform=1, seed=0) -> bytes
+pbd_bytes(records, textures=1, platform=1, sections=None) -> bytes
 """
 
 from __future__ import annotations
@@ -35,32 +39,25 @@ from piste.terrain.net import PatchNet
 
 __all__ = ["make_level", "SynthLevel", "synthetic_net", "synthetic_textures", "pbd_bytes", "synthetic_pages"]
 
-#: the opaque sections of a synthetic level: (offset name, count name or None, count, bytes per item)
+#: the sections after the patches, in file order: (offset name, count name or None)
 _SECTIONS = (
-    ("player_starts", "player_starts", 0, 16),
-    ("instances", "instances", 3, 112),
-    ("particle_instances", "particle_instances", 0, 96),
-    ("materials", "materials", 2, 32),
-    ("material_blocks", "material_blocks", 1, 16),
-    ("lights", "lights", 2, 112),
-    ("splines", "splines", 1, 48),
-    ("spline_segments", "spline_segments", 2, 112),
-    ("flipbooks", "flipbooks", 0, 16),
-    ("model_pointers", None, 1, 16),
-    ("models", "models", 1, 64),
-    ("particle_model_pointers", None, 0, 16),
-    ("particle_models", "particle_models", 0, 64),
-    ("camera_pointers", None, 0, 16),
-    ("cameras", "cameras", 0, 64),
-    ("hash", None, 1, 32),
-    ("mesh_data", None, 1, 256),
+    ("player_starts", "player_starts"), ("instances", "instances"), ("particle_instances", "particle_instances"),
+    ("materials", "materials"), ("material_blocks", "material_blocks"), ("lights", "lights"),
+    ("splines", "splines"), ("spline_segments", "spline_segments"), ("flipbooks", "flipbooks"),
+    ("model_pointers", None), ("models", "models"), ("particle_model_pointers", None),
+    ("particle_models", "particle_models"), ("camera_pointers", None), ("cameras", "cameras"), ("hash", None),
+    ("mesh_data", None),
 )
 
 
-def pbd_bytes(records: np.ndarray, textures: int = 1, platform: int = 1, seed: int = 0, sections: dict | None = None) -> bytes:
-    """A whole ``.pbd``: the header, the patches at 0x90, then every other section (16-byte
-    aligned) as deterministic plausible bytes (or ``sections[name]`` bytes where given)."""
-    rng = np.random.default_rng(seed + 1000)
+def pbd_bytes(records: np.ndarray, textures: int = 1, platform: int = 1, sections: dict | None = None) -> bytes:
+    """A whole ``.pbd``: the header, the patches at 0x90, then every other section 16-byte aligned.
+
+    ``sections`` maps an offset name (:data:`~piste.formats.ssx.pbd.OFFSET_NAMES`) to ``(count,
+    bytes)`` (``count`` None for the pointer tables, hash and mesh data, which have no count).
+    A section not given is the minimal default: empty, count 0 (player starts: offset 0, as the
+    game leaves them).  No byte is made up.
+    """
     counts = dict.fromkeys(COUNT_NAMES, 0)
     offsets = dict.fromkeys(OFFSET_NAMES, 0)
     counts["patches"] = len(records)
@@ -70,16 +67,14 @@ def pbd_bytes(records: np.ndarray, textures: int = 1, platform: int = 1, seed: i
     offsets["patches"] = pos
     body += records.tobytes()
     pos += records.nbytes
-    for name, cname, count, item in _SECTIONS:
+    for name, cname in _SECTIONS:
         pad = -pos % 16
         body += b"\0" * pad
         pos += pad
-        blob = sections.get(name) if sections else None
-        if blob is None:
-            blob = rng.integers(0, 256, count * item, dtype=np.uint8).tobytes()
+        count, blob = (sections or {}).get(name, (0, b""))
         if cname is not None:
-            counts[cname] = count
-        offsets[name] = pos if name != "player_starts" else 0  # the game leaves player starts unused
+            counts[cname] = int(count or 0)
+        offsets[name] = pos if name != "player_starts" or blob else 0  # the game leaves player starts unused
         body += blob
         pos += len(blob)
     head = VERSION + bytes([platform]) + struct.pack("<15I", *counts.values()) + struct.pack("<18I", *offsets.values())
@@ -190,8 +185,7 @@ def make_level(net=None, rows: int = 2, cols: int = 3, seed: int = 0, jitter: fl
     # UVs inset like the game's tiles
     inset = np.float32(0.008)
     rec["uv"][:, :, :2] = np.array([(0, 0), (1, 0), (0, 1), (1, 1)], np.float32) * (1 - 2 * inset) + inset
-    rec["residue"] = rng.integers(0, 2**32, (n, 2), dtype=np.uint64).astype(np.uint32)
-    data = pbd_bytes(rec, n_textures, platform, seed)
+    data = pbd_bytes(rec, n_textures, platform)
     pbd = parse_pbd(data)
     textures = synthetic_textures(n_textures, seed=seed)
     pages = synthetic_pages(pbd, textures, seed=seed)
