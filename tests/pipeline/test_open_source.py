@@ -1,0 +1,95 @@
+"""Every source opens as the one runtime scene (pipeline.open_scene.open_source) and is drawn by
+ScenePreview/SceneRenderer: an SSX level written by piste's own encoder, with and without riders."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from piste.errors import ConfigError
+from piste.formats.ssx import make_level
+from piste.pipeline.open_scene import SOURCES, open_source, source_kind
+from piste.pipeline.preview import ScenePreview
+from piste.pipeline.ssx_level import load_level
+from piste.pipeline.ssx_source import level_camera
+from piste.render.scene_renderer import SceneRenderer
+from piste.render.ssx_pass import SsxTerrainRenderer, render_level
+
+SIZE = (128, 96)
+
+
+@pytest.fixture(scope="module")
+def level(tmp_path_factory):
+    d = tmp_path_factory.mktemp("ssx")
+    return make_level(rows=2, cols=3, seed=2).write(d, "LV")
+
+
+def test_source_kinds():
+    assert [source_kind(p) for p in ("a.piste", "b.TOML", "c.pbd", "w.tiles/", "w.tiles")] == \
+        ["bundle", "scene", "ssx", "tiles", "tiles"]
+    assert {s.kind for s in SOURCES} == {"bundle", "scene", "ssx", "tiles"}
+    with pytest.raises(ConfigError, match=r"x\.obj.*expected one of"):
+        source_kind("x.obj")
+
+
+@pytest.mark.parametrize("mode", ["modulate", "ps2"])
+def test_ssx_level_through_the_runtime_is_the_level_renderers_picture(level, gl, mode):
+    b = open_source(level)
+    assert b.manifest["source"] == "ssx" and len(b.net) == 6 and not b.manifest["riders"]
+    p = ScenePreview(b, size=SIZE, ctx=gl, lightmap_mode=mode)
+    try:
+        assert isinstance(p.terrain, SsxTerrainRenderer) and p.renderer is None
+        img = p.render()
+    finally:
+        p.release()
+    lv = load_level(level)
+    ref = render_level(lv, level_camera(lv.net), size=SIZE, lightmap_mode=mode, ctx=gl)
+    assert np.array_equal(img, ref)
+
+
+def test_ssx_level_with_riders_draws_them_with_shadows(level, gl):
+    bare = open_source(level)
+    b = open_source(level, riders=3)
+    assert [r["character"] for r in b.manifest["riders"]] == ["rider"] * 3
+    assert b.arrays["riders/matrix"].shape == (3, 4, 4)
+    z = b.arrays["riders/matrix"][:, 2, 3]
+    from piste.terrain.query import height_at
+
+    hz, hit, _, _ = height_at(b.net, b.arrays["riders/matrix"][:, :2, 3])
+    assert hit.all() and np.allclose(z, hz)  # standing on the surface
+    p = ScenePreview(b, size=SIZE, ctx=gl, lightmap_mode="ps2")
+    try:
+        assert isinstance(p.renderer, SceneRenderer) and isinstance(p.renderer.terrain, SsxTerrainRenderer)
+        img = p.render().astype(int)
+        assert p.stats["riders"] == 3 and p.stats["shadow_patches"] > 0
+    finally:
+        p.release()
+    t = ScenePreview(bare, size=SIZE, ctx=gl, lightmap_mode="ps2")
+    try:
+        terrain = t.render().astype(int)
+    finally:
+        t.release()
+    d = np.abs(img - terrain).max(-1)
+    assert (d > 30).sum() >= 20  # the riders are drawn
+    assert np.median(d) == 0  # the rest is the level's own picture
+    with pytest.raises(ConfigError, match="riders"):
+        open_source(level, riders=100)
+
+
+def test_cli_renders_a_level_with_riders(level, gl, tmp_path, capsys):
+    from PIL import Image
+
+    from piste.cli import main
+
+    a, b = tmp_path / "a.png", tmp_path / "b.png"
+    assert main(["render", str(level), "--size", *map(str, SIZE), "--out", str(a)]) == 0
+    assert main(["render", str(level), "--size", *map(str, SIZE), "--out", str(b), "--riders", "2"]) == 0
+    ia, ib = (np.asarray(Image.open(x)).astype(int) for x in (a, b))
+    assert (np.abs(ia - ib).max(-1) > 30).sum() >= 10
+    lo, hi = open_source(level).net.bounds
+    c = (np.asarray(lo) + np.asarray(hi)) / 2
+    assert main(["render", str(level), "--size", *map(str, SIZE), "--out", str(a), "--eye", str(c[0]), str(c[1] - 30),
+                 "20", "--target", *map(str, c)]) == 0
+    assert np.asarray(Image.open(a)).std() > 5
+    assert main(["render", str(level), "--eye", "0", "0", "1", "--out", str(a)]) != 0
+    assert "--eye and --target go together" in capsys.readouterr().err
