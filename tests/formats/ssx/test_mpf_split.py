@@ -69,9 +69,18 @@ def test_pair_decodes_to_the_same_posed_rider(pair):
     for n in one.skeleton.names:
         assert np.abs(w1[one.skeleton.get(n)] - w2[two.skeleton.get(n)]).max() < 1e-6
     for clip, t in (("grab", 0.6), ("spin", 0.3)):
-        p1, _ = skin(one.lods[0].mesh, one.skeleton.skin_matrices(rider.clips[clip].sample(t, skeleton=one.skeleton)))
-        p2, _ = skin(two.lods[0].mesh, two.skeleton.skin_matrices(two.clips[clip].sample(t, skeleton=two.skeleton)))
-        assert cKDTree(p1).query(p2)[0].max() < 1e-5 and cKDTree(p2).query(p1)[0].max() < 1e-5
+        for k in range(3):  # every LOD: the head file's lower LODs name the right bones too
+            p1, _ = skin(one.lods[k].mesh, one.skeleton.skin_matrices(rider.clips[clip].sample(t, skeleton=one.skeleton)))
+            p2, _ = skin(two.lods[k].mesh, two.skeleton.skin_matrices(two.clips[clip].sample(t, skeleton=two.skeleton)))
+            assert cKDTree(p1).query(p2)[0].max() < 1e-5 and cKDTree(p2).query(p1)[0].max() < 1e-5, (clip, k)
+
+
+def test_shadow_sub_model_skins_like_the_last_lod():
+    """The shadow sub-model's weight palettes are the last LOD's (a variable clash once gave it
+    the posed vertex positions as bone references: garbage palettes, or an OverflowError on Fox)."""
+    f, _ = model_to_mpf(default_rider(0))
+    last, shadow = f["Body750"], f["BodyShdw750"]
+    assert [p.tolist() for p in shadow.palettes] == [p.tolist() for p in last.palettes]
 
 
 def test_split_refuses_a_bad_head_bone():

@@ -293,9 +293,9 @@ def model_to_mpf(model, ratios=(1.0, 0.5, 0.25), names=("Body3000", "Body1500", 
         a = SSX_TO_PISTE.T
         back = ((m.positions.astype(np.float64) @ a.T / CM).astype(np.float32).astype(np.float64) / 100.0) @ a
         berr = max(berr, float(np.abs(back - m.positions).max(initial=0.0)))
-        ref, _ = skin_exact(m, skin_m)
+        exact, _ = skin_exact(m, skin_m)
         got, _ = BlendedMesh(pal, back.astype(np.float32), m.normals).apply(skin_m)
-        perr = max(perr, float(np.linalg.norm(got - ref, axis=1).max(initial=0.0)))
+        perr = max(perr, float(np.linalg.norm(got - exact, axis=1).max(initial=0.0)))
         chunks = [c for lk in sub.links for me in lk.meshes for c in me.chunks]
         if _split is not None and head_subs and head_subs[-1].name == hname:
             chunks += [c for lk in head_subs[-1].links for me in lk.meshes for c in me.chunks]
