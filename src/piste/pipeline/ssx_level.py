@@ -241,8 +241,9 @@ def bake_level(level: SsxLevel, lights: Lights, shadows: bool = True, jobs: int 
 
 def write_baked(level: SsxLevel, baked: BakedPages, out_pbd=None) -> tuple[Path, Path]:
     """Write the baked pages as ``NAME_L.ssh`` beside ``out_pbd`` (default: the level's own .pbd,
-    rewritten) and the .pbd with every patch's light-map rect and page updated (a new name also
-    gets a copy of the textures as ``NAME.ssh``); each atomic."""
+    rewritten) and the .pbd with every patch's light-map rect and page updated, every other byte
+    as read (a new name also gets a byte-for-byte copy of the level's ``.ssh`` as ``NAME.ssh``);
+    each atomic.  The same level and lights give the same bytes."""
     out = Path(out_pbd) if out_pbd is not None else level.path
     if out.suffix.lower() != ".pbd":
         raise ConfigError(f"{out}: the output level must be a .pbd")
@@ -250,8 +251,14 @@ def write_baked(level: SsxLevel, baked: BakedPages, out_pbd=None) -> tuple[Path,
     level.pbd.lightmap_page = baked.lightmap_page.astype(np.int16)
     lpath = out.with_name(f"{out.stem}_L.ssh")
     write_ssh(lightmap_bank(baked.pages), lpath)
-    if level.textures is not None and out.resolve() != level.path.resolve():
-        write_ssh(level.textures, out.with_name(f"{out.stem}.ssh"))  # the new level's own textures
+    src = level.info.get("textures_file")
+    if src and out.resolve() != level.path.resolve():  # the new level's own textures: the source's bytes
+        from piste.formats.atomic import write_bytes_atomic
+        from piste.formats.safe_io import read_regular
+        from piste.formats.ssx.ssh import MAX_FILE_BYTES
+
+        write_bytes_atomic(out.with_name(f"{out.stem}.ssh"),
+                           read_regular(level.path.with_name(src), MAX_FILE_BYTES, what="texture bank"))
     write_pbd(level.pbd, out)
     return out, lpath
 

@@ -104,3 +104,24 @@ def test_bake_with_the_lights_of_a_scene_file(tmp_path):
     tiles = extract_tiles(pages, read_pbd(path).lightmap_rect, read_pbd(path).lightmap_page)
     # a red ambient light alone: As = the red channel of CL = round(0.9 * 128) everywhere
     assert (tiles[..., 3] == round(0.9 * 128)).all()
+
+
+def test_bake_writes_only_the_source_and_the_bake_twice_the_same(tmp_path):
+    """Issue 22: `piste ssx bake` twice gives identical bytes; the new level is the source with its
+    light-map rects and pages updated (every other byte as read), its .ssh the source's bytes."""
+    from piste.cli import main
+    from piste.formats.ssx.pbd import PATCH_SIZE
+
+    src = make_level(rows=2, cols=2, seed=3).write(tmp_path, "SRC")
+    for k in ("a", "b"):
+        (tmp_path / k).mkdir()
+        assert main(["ssx", "bake", str(src), "--out", str(tmp_path / k / "NEW.pbd"), "--jobs", "1"]) == 0
+    for f in ("NEW.pbd", "NEW.ssh", "NEW_L.ssh"):
+        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes(), f
+    assert (tmp_path / "a" / "NEW.ssh").read_bytes() == (tmp_path / "SRC.ssh").read_bytes()
+    old, new = read_pbd(src), read_pbd(tmp_path / "a" / "NEW.pbd")
+    po, n = old.patch_offset, len(old)
+    assert new.raw[:po] == old.raw[:po] and new.raw[po + n * PATCH_SIZE:] == old.raw[po + n * PATCH_SIZE:]
+    keep = [f for f in old.records.dtype.names if f not in ("lightmap_rect", "lightmap_page")]
+    for f in keep:
+        np.testing.assert_array_equal(new.records[f], old.records[f])
