@@ -58,7 +58,7 @@ from piste.pipeline.visibility import (Visibility, camera_eyes, compute_visibili
                                        scene_eye_heights)
 from piste.render.shadow_pass import sun_visibility
 from piste.terrain.net import PatchNet
-from piste.world.camera import Camera, track_camera
+from piste.world.camera import Camera, camera_planes, track_camera
 from piste.world.course import track_centerline
 from piste.world.objects import ObjectSet, bake_vertex_colors, compress_mesh, normal_matrix, object_texture
 from piste.world.scene import sun_light
@@ -126,14 +126,17 @@ def scene_lights(scene, gltf_cache: dict | None = None):
 def scene_cameras(scene, net, centerline, gltf_cache: dict | None = None) -> list:
     """The scene's cameras as manifest dicts (``name``, eye, target, ..., optional ``track``)."""
     out = []
+    lo, hi = net.bounds if net is not None else (None, None)  # planes not given follow the terrain's size
     for c in scene.cameras:
         if c.track is not None:
-            cam = track_camera(centerline, c.track[0], height=c.height, fov_y=c.fov, near=c.near, far=c.far)
-            d = camera_to_dict(cam)
+            cam = track_camera(centerline, c.track[0], height=c.height, fov_y=c.fov)
+            near, far = camera_planes(cam.eye, lo, hi, c.near, c.far)
+            d = camera_to_dict(replace(cam, near=near, far=far))
             d.update(track=[float(x) for x in c.track], height=float(c.height))
         else:
+            near, far = camera_planes(np.array(c.eye), lo, hi, c.near, c.far)
             d = camera_to_dict(Camera(np.array(c.eye), np.array(c.target), up=np.array(c.up), fov_y=c.fov,
-                                      near=c.near, far=c.far))
+                                      near=near, far=far))
         d["name"] = c.name
         d["source"] = "scene"
         out.append(d)

@@ -109,9 +109,9 @@ scene file.  Every table and key is optional except where noted::
     name = "start"
     eye = [200.0, 50.0, 300.0]
     target = [200.0, 150.0, 260.0]
-    fov = 60.0                    # vertical, degrees
-    near = 0.5
-    far = 4000.0
+    fov = 60.0                    # vertical, degrees, in (0, 180)
+    near = 0.5                    # metres, >= 1e-4; far / near <= 1e7
+    far = 4000.0                  # default: 4 km, or what reaches the whole terrain if that is farther
     # or a camera flying down the default course's track (from fraction a to b over --frames):
     # track = [0.1, 0.4]
     # height = 9.0
@@ -165,6 +165,13 @@ HEIGHTFIELD_IMAGES = (".png", ".tif", ".tiff", ".pgm")
 MAX_TOML_DEPTH = 32
 #: [lod] preset -> (near, far) metres: piste's own, and SSX Tricky's 3000 / 15000 game units
 LOD_PRESETS = {"piste": (60.0, 180.0), "ssx_tricky": (30.0, 150.0)}
+#: largest |coordinate| in metres a scene may give (eyes, targets, positions, offsets): 100,000 km
+MAX_SCENE_COORDINATE = 1e8
+#: seeds are unsigned 32-bit (numpy's generators refuse negative ones with a raw ValueError)
+MAX_SEED = 2**32 - 1
+#: a camera's near plane, its far plane (metres) and their largest ratio (1e-300 / 1e300 made the
+#: projection singular: a LinAlgError deep in the renderer)
+MIN_NEAR, MAX_FAR, MAX_FAR_NEAR_RATIO = 1e-4, 1e8, 1e7
 
 
 class SceneError(ConfigError):
@@ -323,8 +330,8 @@ class CameraSpec:
     target: tuple | None = None
     up: tuple = (0.0, 0.0, 1.0)
     fov: float = 60.0
-    near: float = 0.5
-    far: float = 4000.0
+    near: float | None = None  # None: 0.5 m (more for a far plane beyond 50 km: far / near <= 1e5)
+    far: float | None = None   # None: 4 km or what reaches the whole terrain (piste.world.camera.far_for_extent)
     track: tuple | None = None
     height: float = 9.0
 
@@ -496,6 +503,14 @@ def _convert(c: _Checker, key, v, kind):
     raise AssertionError(kind)
 
 
+def _bounded(c: _Checker, key: str, v, lo: float, hi: float, what: str = "a number"):
+    """``v`` (a number, a tuple of numbers or None) after checking ``lo <= x <= hi`` for each."""
+    vals = () if v is None else v if isinstance(v, tuple) else (v,)
+    if not all(lo <= x <= hi for x in vals):
+        raise c.error(key, f"expected {what} in [{lo:g}, {hi:g}], got {list(v) if isinstance(v, tuple) else v!r}")
+    return v
+
+
 def _table(c_parent: _Checker, key: str) -> _Checker:
     v = c_parent.table.get(key, {})
     if not isinstance(v, dict):
@@ -576,6 +591,11 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
             raise t.error("spacing", f"expected spacing > 0, got {sp!r}")
     if ts.samples_per_patch < 3:
         raise t.error("samples_per_patch", f"expected at least 3, got {ts.samples_per_patch}")
+    _bounded(t, "samples_per_patch", ts.samples_per_patch, 3, 256, "samples a patch side")
+    _bounded(t, "seed", ts.seed, 0, MAX_SEED, "a seed")
+    _bounded(t, "spacing", ts.spacing, 1e-3, 1e5, "metres between samples")
+    _bounded(t, "height_scale", ts.height_scale, -1e6, 1e6, "a scale")
+    _bounded(t, "height_offset", ts.height_offset, -MAX_SCENE_COORDINATE, MAX_SCENE_COORDINATE, "metres")
     _large_world_keys(t, ts, base)
     if "ssx_pbd" in t.table:  # an SSX Tricky level, its .ssh / _L.ssh beside it (piste.pipeline.ssx_level)
         if source != "default":
@@ -620,12 +640,16 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
                         lo.get("morph", "bool", True))
     if not 0 <= scene.lod.near <= scene.lod.far:
         raise lo.error("far", f"expected 0 <= near <= far, got near={scene.lod.near}, far={scene.lod.far}")
+    _bounded(lo, "far", scene.lod.far, 0.0, MAX_FAR, "metres")
+    _bounded(lo, "character", scene.lod.character, 0.0, 1e5, "metres")
     if not all(0 < r <= 1 for r in scene.lod.ratios):
         raise lo.error("ratios", f"expected ratios in (0, 1], got {list(scene.lod.ratios)}")
     vi = _table(top, "visibility")
     vi.allow({"enabled", "cell", "eye_heights", "method"})
     scene.visibility = VisibilitySpec(vi.get("enabled", "bool", True), vi.get("cell", "pos", 50.0),
                                       vi.get("eye_heights", "floats", (1.7, 9.0)), vi.get("method", "str", "auto"))
+    _bounded(vi, "cell", scene.visibility.cell, 1.0, 1e5, "metres")
+    _bounded(vi, "eye_heights", scene.visibility.eye_heights, -1e4, 1e4, "metres")
     if scene.visibility.method not in ("auto", "horizon", "rays"):
         raise vi.error("method", f"expected \"auto\", \"horizon\" or \"rays\", got {scene.visibility.method!r}")
     re_ = _table(top, "render")
@@ -641,7 +665,7 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
         fog = re_.get("fog", "float") if not isinstance(fog, str) else None
         if fog is None or fog < 0:
             raise re_.error("fog", f"expected a density per metre >= 0 or \"auto\", got {re_.table['fog']!r}")
-    scene.render.fog = fog
+    scene.render.fog = _bounded(re_, "fog", fog if fog != "auto" else None, 0.0, 10.0, "a density per metre") or fog
     scene.render.face = re_.get("face", "str", "morph")
     if scene.render.face not in ("morph", "null_bones", "off"):
         raise re_.error("face", f"expected \"morph\", \"null_bones\" or \"off\", got {scene.render.face!r}")
@@ -665,7 +689,7 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     ao = _table(top, "auto_objects")
     if "auto_objects" in top.table:
         ao.allow({"seed", *AUTO_OBJECT_COUNTS})
-        auto = {"seed": ao.get("seed", "int", 0)}
+        auto = {"seed": _bounded(ao, "seed", ao.get("seed", "int", 0), 0, MAX_SEED, "a seed")}
         for k, d in AUTO_OBJECT_COUNTS.items():
             auto[k] = ao.get(k, "int", d)
             if not 0 <= auto[k] <= 10_000:
@@ -683,6 +707,9 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
                         scene.allow_paths)
         if spec.up not in ("y", "z"):
             raise g.error("up", f"expected \"y\" or \"z\", got {spec.up!r}")
+        _bounded(g, "offset", spec.offset, -MAX_SCENE_COORDINATE, MAX_SCENE_COORDINATE, "metres")
+        _bounded(g, "scale", spec.scale, 1e-6, 1e6, "a scale")
+        _bounded(g, "white", spec.white, 1e-6, 1e9, "lumens")
         scene.gltf.append(spec)
 
     # riders and objects
@@ -704,6 +731,11 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
             else:
                 model = str(_file(a, "model", base, (".gltf", ".glb")))
             name = a.get("name", "str", f"{kind[:-1]}{i}")
+            _bounded(a, "position", a.get("position", "vec23", required=True), -MAX_SCENE_COORDINATE,
+                     MAX_SCENE_COORDINATE, "metres")
+            _bounded(a, "heading", a.get("heading", "float", 0.0), -1e6, 1e6, "degrees")
+            _bounded(a, "phase", a.get("phase", "float", 0.0), -1e6, 1e6, "seconds")
+            _bounded(a, "scale", a.get("scale", "pos", 1.0), 1e-6, 1e6, "a scale")
             if name in names:
                 raise a.error("name", f"duplicate name {name!r}")
             names.add(name)
@@ -732,8 +764,8 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     for i, c in enumerate(_array(top, "cameras")):
         c.allow({"name", "eye", "target", "up", "fov", "near", "far", "track", "height"})
         cs = CameraSpec(c.get("name", "str", f"camera{i}"), c.get("eye", "vec3"), c.get("target", "vec3"),
-                        c.get("up", "vec3", (0.0, 0.0, 1.0)), c.get("fov", "float", 60.0), c.get("near", "pos", 0.5),
-                        c.get("far", "pos", 4000.0), c.get("track", "vec2"), c.get("height", "float", 9.0))
+                        c.get("up", "vec3", (0.0, 0.0, 1.0)), c.get("fov", "float", 60.0), c.get("near", "pos"),
+                        c.get("far", "pos"), c.get("track", "vec2"), c.get("height", "float", 9.0))
         if cs.name in cam_names:
             raise c.error("name", f"duplicate camera name {cs.name!r}")
         cam_names.add(cs.name)
@@ -745,8 +777,17 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
             raise c.error("track", "track cameras need the default course (terrain.source = \"default\")")
         if not 0 < cs.fov < 180:
             raise c.error("fov", f"expected 0 < fov < 180 degrees, got {cs.fov}")
-        if not cs.near < cs.far:
-            raise c.error("far", f"expected near < far, got near={cs.near}, far={cs.far}")
+        for k in ("eye", "target"):
+            _bounded(c, k, getattr(cs, k), -MAX_SCENE_COORDINATE, MAX_SCENE_COORDINATE, "metres")
+        _bounded(c, "height", cs.height, 0.0, 1e5, "metres above the track")
+        _bounded(c, "near", cs.near, MIN_NEAR, MAX_FAR / 10, "metres")
+        _bounded(c, "far", cs.far, MIN_NEAR, MAX_FAR, "metres")
+        if cs.near is not None and cs.far is not None:
+            if not cs.near < cs.far:
+                raise c.error("far", f"expected near < far, got near={cs.near}, far={cs.far}")
+            if cs.far / cs.near > MAX_FAR_NEAR_RATIO:
+                raise c.error("far", f"expected far / near <= {MAX_FAR_NEAR_RATIO:g} (depth precision), got "
+                                     f"near={cs.near}, far={cs.far} (ratio {cs.far / cs.near:.3g})")
         if cs.eye is not None and cs.target is not None and cs.eye == cs.target:
             raise c.error("target", "eye and target are the same point")
         scene.cameras.append(cs)
