@@ -19,8 +19,9 @@ from piste.cli import main
 from piste.errors import ConfigError, FormatError
 from piste.formats.gltf import load_gltf
 from piste.formats.ssx.afl import (
-    BODY_BONES, AflClipData, Curve, afl_bytes, afl_clips, afl_hash, clip_channels, constant, curve_bytes, encode_afl,
-    group, mpf_body_bones, parse_afl, polynomial, read_afl, sampled, write_afl, body_track,
+    BODY_BONES, DEFAULT_FPS, AflClipData, Curve, afl_bytes, afl_clips, afl_hash, afl_rotation, body_track,
+    clip_channels, constant, curve_bytes, encode_afl, group, mpf_body_bones, parse_afl, polynomial, read_afl, sampled,
+    write_afl,
 )
 from piste.formats.ssx.mpf import mpf_bytes, parse_mpf, write_mpf
 from piste.formats.ssx.mpf_encode import model_to_mpf
@@ -139,6 +140,18 @@ def test_encoder_round_trip_byte_identical_and_pads_kept():
     raw2 = _hand_bank([(afl_hash("a"), 2, [(0, 0)])], _desc(0, 0) + _p3(1.0), [0] * 60, b"\x11" * 5, b"\x22\x33")
     assert afl_bytes(parse_afl(raw2)) == raw2
     assert parse_afl(raw2).pads == (b"\x11" * 5, b"\x22\x33")
+
+
+def test_encoder_header_as_retail_files_hold_it():
+    f = encode_afl([AflClipData("bxRL_CROUCHCYCLE", 9, [(0, [Curve([constant(0.0)])] * 60)])])
+    raw = afl_bytes(f)
+    console, unknown, n, ptr_off, data_off = struct.unpack_from("<BBHII", raw)
+    assert (console, unknown, n, ptr_off, data_off) == (76, 17, 2, 12 + 72, 12 + 72 + 240)
+    key, first, kind, related, *fields, tail = struct.unpack_from("<IIBB11HI", raw, 12)
+    assert (key, kind, related, fields[0]) == (afl_hash("bxRL_CROUCHCYCLE"), 255, 1, 9)
+    assert fields[1:] == [0xFFFF] * 10 and tail == 0  # no events
+    assert struct.unpack_from("<IIBB", raw, 48) == (0, 0, 0, 0)
+    assert parse_afl(raw).clips[0].name == "bxRL_CROUCHCYCLE"  # a known name resolves from its hash
 
 
 def test_write_and_read_file(tmp_path):
@@ -272,12 +285,12 @@ def test_afl_clip_poses_the_mpf_rider_as_the_facts_say(rider):
     rest = model.skeleton.rest_pose()
     moved = 0
     for frame in (0, 17, 45, ch.shape[0] - 1):
-        pose = got.sample(frame / 60.0, model.skeleton)
+        pose = got.sample(frame / DEFAULT_FPS, model.skeleton)
         world = model.skeleton.world_matrices(pose)[:, :3, 3]
         ref = _reference_joints(mpf.models[0].bones[:BODY_BONES], ch[frame])
         np.testing.assert_allclose((world[driven] @ a) / 0.01, ref, atol=0.05)  # cm
         # the source clip's joints agree (16-bit quantisation), the undriven bones keep their rest pose
-        src = r.skeleton.world_matrices(clip.sample(frame / 60.0, r.skeleton))[:, :3, 3]
+        src = r.skeleton.world_matrices(clip.sample(frame / DEFAULT_FPS, r.skeleton))[:, :3, 3]
         np.testing.assert_allclose(world[driven], src[driven], atol=1e-3)
         undriven = [j for j in range(model.skeleton.n_bones) if j not in driven]
         assert undriven and np.array_equal(pose.rotation[undriven], rest.rotation[undriven])
@@ -327,6 +340,29 @@ def test_bind_angles_as_a_clip_give_the_bind_pose(rider):
     np.testing.assert_allclose(world, model.skeleton.bind_pose_world(), atol=1e-3)
 
 
+def test_board_track_drives_the_board_bone(rider):
+    _, _, model = rider
+    sk = model.skeleton
+    F = 6
+    e = np.zeros((F, BODY_BONES, 3))
+    e[:, 0, 2] = np.linspace(0, 0.5, F)  # the root turns: the board's local transform must undo it
+    root = np.tile([3.0, 4.0, 95.0], (F, 1))
+    bp = np.stack([np.linspace(0, 20, F), np.zeros(F), np.full(F, 2.0)], 1)
+    be = np.stack([np.zeros(F), np.linspace(0, 0.3, F), np.linspace(0, -0.4, F)], 1)
+    board = [Curve([sampled(bp[:, i], 32)]) for i in range(3)] + [Curve([sampled(be[:, i], 32)]) for i in range(3)]
+    afl = encode_afl([AflClipData("c", F, [(0, body_track(root, e)), (1, board)])])
+    bones = [None if n == "board" else n for n in mpf_body_bones(model)]  # the body track leaves "board" alone
+    clip = afl_clips(afl, sk, bones)["c"]
+    assert set(clip.tracks["board"]) == {"translation", "rotation"}
+    a = SSX_TO_PISTE
+    for frame in range(F):
+        w = sk.world_matrices(clip.sample(frame / DEFAULT_FPS, sk))[sk.get("board")]
+        np.testing.assert_allclose(w[:3, 3], a @ bp[frame] * 0.01, atol=1e-6)
+        np.testing.assert_allclose(w[:3, :3], a @ afl_rotation(be[frame]) @ a.T, atol=1e-6)
+    # when the body track drives "board" (piste's encoder puts it among the first 19 bones) the board track does not
+    assert set(afl_clips(afl, sk, mpf_body_bones(model))["c"].tracks["board"]) == {"rotation"}
+
+
 # ------------------------------------------------------------------------------ CLI and glTF
 def test_cli_export_with_afl_clips_validates(tmp_path, rider, capsys):
     _, mpf, model = rider
@@ -347,7 +383,7 @@ def test_cli_export_with_afl_clips_validates(tmp_path, rider, capsys):
     assert_valid(tmp_path / "R.glb")
     m = load_gltf(tmp_path / "R.glb")
     assert set(m.clips) == {"frR_TURNHS", "frC_ANTIC"}
-    assert m.clips["frR_TURNHS"].duration == pytest.approx((F - 1) / 60.0, abs=1e-4)
+    assert m.clips["frR_TURNHS"].duration == pytest.approx((F - 1) / DEFAULT_FPS, abs=1e-4)
 
 
 def test_cli_bad_afl_is_one_line(tmp_path, rider, capsys):

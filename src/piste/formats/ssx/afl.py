@@ -5,25 +5,31 @@ Facts (public; read for facts only, no code copied): OpenSlope's Apache-2.0 offl
 ``Trailmap/tools/analysis/afl_pose.py`` (the curve format "recovered from the PAL ELF") and its
 notes ``Trailmap/tools/README.md`` / ``Trailmap/research/rider-telemetry.md`` (a 60-channel body
 pose: root translation + 57 local Euler channels of a 19-bone body; "negate local XYZ, then compose
-Rz·Ry·Rx, matching the MPF/glTF path and recovered AFL poses"). SSX-Library and SSX-Research hold
-nothing on ``.afl``. No retail ``.afl`` is public: every byte layout below is checked only against
-files piste's own encoder writes from these facts.
+Rz·Ry·Rx, matching the MPF/glTF path and recovered AFL poses"), and the notes
+``notes/animation-format.md`` of the public repository ``ed-slopper/SSX-TRICKY-RUST-REWRITE`` (no
+licence file: facts only), whose author decoded 1,519 clips of 446 retail files (header bytes 76,
+17; track kind 1 = the board; event frames in the clip record; 30 fps "looks right"). SSX-Library
+and SSX-Research hold nothing on ``.afl``. No retail ``.afl`` is public: every byte layout below is
+checked only against files written from these facts (by hand in the tests, and by the encoder).
 
 Layout (little-endian)
 ----------------------
-* Header, 12 bytes: u8 console, u8 unknown, u16 header count, u32 curve-pointer table offset, u32
-  curve data offset (both absolute).
+* Header, 12 bytes: u8 console, u8 unknown (retail: 76, 17), u16 header count, u32 curve-pointer
+  table offset, u32 curve data offset (both absolute).
 * Header table at 12: ``count`` records of 36 bytes (:data:`HEADER_DTYPE`): u32 key, u32 index of
   the first curve pointer, u8 kind, u8 related-record count, 11 u16 fields, u32 tail.
   A **named clip** is a record of kind 255 whose key is the engine's string hash of the clip name
-  (:func:`afl_hash`) and whose first field is its frame count; the ``related`` records right after
-  it are its **tracks**. A track record of kind ``k`` uses :data:`TRACK_CHANNELS` ``[k]``
+  (:func:`afl_hash`) and whose first field is its frame count (the other ten: event frames, 65535 =
+  none; not interpreted); the ``related`` records right after it are its **tracks**. A track record of kind ``k`` uses :data:`TRACK_CHANNELS` ``[k]``
   consecutive curve pointers from its pointer index, one curve a channel.
 * Track kind 0 is the **body**: 60 channels, the root translation (3, cm, the ``.mpf``'s axes) then
   3 Euler angles (radians) for each of the body's 19 bones in ``.mpf`` bone order. The angles are
   the bone's whole local rotation (not an offset from the bind pose), composed
   ``Rz(-z)·Ry(-y)·Rx(-x)`` (signs negated, the ``.mpf`` bind convention); a root (parentless) bone
-  sits at the root translation, the others keep their bind translation.
+  sits at the root translation, the others keep their bind translation. Track kind 1 is the
+  **board**: its position (3, cm) and Euler triple (3, same convention) in the same space (the
+  board at the origin along +Y, +X toe side, +Z up). Kinds 4-15 (3 to 23 channels) are cut-scene
+  tracks (faces, props, cameras).
 * Curve pointers: u32 each, relative to the curve data offset.
 * A curve starts with a u16 descriptor, kind = low 4 bits, count = high 12 bits:
   kind 0 a constant (one packed float; 5 bytes); kinds 1-3 a polynomial of that degree in the
@@ -45,24 +51,28 @@ piste's assumptions (what the facts leave open)
 -----------------------------------------------
 * The pointer table lies after the header table and before the curve data, which runs to the end
   of the file; bytes between them are kept as read (:attr:`AflFile.pads`).
-* Frame rate: **60 frames a second** (the game's fixed 60 Hz tick; ``fps=``). World-prop clips are
-  stated in 30 fps frames (OpenSlope ``120-objects.md``); the rider bank's rate is not documented.
-* Only body tracks become bone tracks. Other track kinds (kind 1, six channels, most likely the
-  board) are decoded (:meth:`AflFile.sample`) but not mapped to bones.
-* Clip names: the file holds only hashes; names resolve from ``names=`` and :data:`KNOWN_CLIP_NAMES`
-  (the ride clips OpenSlope names); the others are called ``clip_XXXXXXXX`` (the hex hash).
-* The encoder writes console 0, unknown 0, track records with key 0 and zero fields, clip records
-  with pointer index 0, no padding, and each distinct curve once (shared by pointer).
+* Frame rate: **30 frames a second** (``fps=``): world-prop clips are stated in measured 30 fps
+  frames (OpenSlope ``120-objects.md``) and the rewrite's author plays rider clips at 30 ("looks
+  right, not confirmed in code"); the game ticks at 60 Hz.
+* Body tracks drive the ``.mpf`` body bones; a board track drives the skeleton's bone named
+  ``board`` (when there is one the body track does not drive), as a local transform under its
+  parent's animated pose. Cut-scene tracks are decoded (:meth:`AflFile.sample`), not mapped.
+* Clip names: the file holds only hashes (the game's name table is in its executable); names
+  resolve from ``names=`` and :data:`KNOWN_CLIP_NAMES` (the ride clips OpenSlope names, for the
+  three board sets ``bx`` / ``fr`` / ``ex``, and ``bxT_NOSEGRAB``); the others are called
+  ``clip_XXXXXXXX`` (the hex hash).
+* The encoder writes header bytes 76, 17, clip records with pointer index 0 and no events (65535),
+  track records with key 0 and zero fields, no padding, and each distinct curve once.
 
 API
 ---
 read_afl(path, names=()) -> AflFile / parse_afl(data, path, names=()) -> AflFile
 afl_bytes(afl) -> bytes / write_afl(afl, path)          atomic; byte-identical for an unedited file
-encode_afl(clips, console=0, unknown=0) -> AflFile       clips: AflClipData (name, frames, tracks)
-afl_clips(afl, skeleton, bones=None, fps=60) -> {name: Clip}   body tracks as bone tracks
+encode_afl(clips, console=76, unknown=17) -> AflFile       clips: AflClipData (name, frames, tracks)
+afl_clips(afl, skeleton, bones=None, fps=30, board_bone="board") -> {name: Clip}
 mpf_body_bones(model) -> list[str | None]                the body bones' names in .mpf file order
 body_track(root_cm (F, 3), euler (F, b, 3)) -> list[Curve]    60 curves (constant or 16-bit)
-clip_channels(clip, skeleton, bones, fps=60) -> (root_cm (F, 3), euler (F, 19, 3))   piste -> AFL values
+clip_channels(clip, skeleton, bones, fps=30) -> (root_cm (F, 3), euler (F, 19, 3))   piste -> AFL values
 Curve, Segment, constant(), polynomial(), sampled(), group(); curve_bytes(curve) -> bytes
 afl_hash(name) -> int; afl_rotation(euler (..., 3)) -> (..., 3, 3)
 """
@@ -81,11 +91,12 @@ from piste.errors import ConfigError, FormatError, ValidationError
 from piste.formats.atomic import write_bytes_atomic
 from piste.formats.safe_io import read_regular
 from piste.formats.ssx.mpf_model import CM, SSX_TO_PISTE
-from piste.transforms import matrix_to_quat, quat_to_matrix
+from piste.character.skeleton import world_from_local
+from piste.transforms import compose_trs, decompose_trs, invert_affine, matrix_to_quat, quat_to_matrix
 
 __all__ = [
     "AflFile", "AflClip", "AflClipData", "Curve", "Segment", "HEADER_DTYPE", "TRACK_CHANNELS", "KIND_CLIP",
-    "BODY_TRACK", "BODY_BONES", "KNOWN_CLIP_NAMES", "DEFAULT_FPS", "read_afl", "parse_afl", "afl_bytes", "write_afl",
+    "BODY_TRACK", "BOARD_TRACK", "BODY_BONES", "KNOWN_CLIP_NAMES", "DEFAULT_FPS", "read_afl", "parse_afl", "afl_bytes", "write_afl",
     "encode_afl", "afl_clips", "mpf_body_bones", "body_track", "clip_channels", "constant", "polynomial", "sampled",
     "group", "curve_bytes", "afl_hash", "afl_rotation", "MAX_FILE_BYTES", "MAX_BAKED_VALUES",
 ]
@@ -97,11 +108,13 @@ assert HEADER_DTYPE.itemsize == 36
 TRACK_CHANNELS = {0: 60, 1: 6, 4: 12, 5: 6, 6: 6, 7: 6, 8: 12, 9: 12, 10: 23, 11: 6, 12: 3, 13: 12, 14: 6, 15: 3}
 KIND_CLIP = 255
 BODY_TRACK = 0
+BOARD_TRACK = 1
 BODY_BONES = 19  # (60 - 3) / 3
 #: the ride clips named in OpenSlope's afl_pose.py (the bank holds only their hashes)
-KNOWN_CLIP_NAMES = ("frRL_BASECYCLEFAST", "frRL_CROUCHCYCLE", "frR_TURNHS", "frR_TURNTS", "frRC_TURNHS",
-                    "frRC_TURNTS", "frC_ANTIC")
-DEFAULT_FPS = 60.0
+KNOWN_CLIP_NAMES = tuple(p + n for p in ("fr", "bx", "ex") for n in (
+    "RL_BASECYCLEFAST", "RL_CROUCHCYCLE", "R_TURNHS", "R_TURNTS", "RC_TURNHS", "RC_TURNTS", "C_ANTIC")) + (
+    "bxT_NOSEGRAB",)
+DEFAULT_FPS = 30.0
 MAX_FILE_BYTES = 64 << 20
 #: most channel values baked over all clips of one conversion (frames x channels): 16 M float64
 MAX_BAKED_VALUES = 1 << 24
@@ -520,7 +533,7 @@ class AflClipData:
     tracks: list
 
 
-def encode_afl(clips, console: int = 0, unknown: int = 0) -> AflFile:
+def encode_afl(clips, console: int = 76, unknown: int = 17) -> AflFile:
     """A bank of ``clips`` (:class:`AflClipData`) in the layout :func:`parse_afl` reads (each
     distinct curve stored once); returned as parsed from its own bytes."""
     headers, pointers, blobs, where = [], [], [], {}
@@ -530,6 +543,7 @@ def encode_afl(clips, console: int = 0, unknown: int = 0) -> AflFile:
             raise ValidationError(f"clip {c.name!r}: frames must fit in 16 bits")
         h = np.zeros((), HEADER_DTYPE)
         h["key"], h["kind"], h["related"] = afl_hash(c.name), KIND_CLIP, len(c.tracks)
+        h["fields"][:] = 0xFFFF  # no events
         h["fields"][0] = int(c.frames)
         headers.append(h)
         for kind, curves in c.tracks:
@@ -581,7 +595,26 @@ def mpf_body_bones(model) -> list:
     return list(sk.names)
 
 
-def afl_clips(afl: AflFile, skeleton: Skeleton, bones=None, fps: float = DEFAULT_FPS, clips=None) -> dict:
+def _continuous(q) -> np.ndarray:
+    """Quaternions ``(F, ..., 4)`` with each track's sign flipped to stay on one hemisphere (slerp)."""
+    q = np.array(q, np.float64)
+    dots = np.einsum("t...i,t...i->t...", q[1:], q[:-1])
+    flip = np.cumprod(np.where(dots < 0, -1.0, 1.0), axis=0)
+    q[1:] *= flip[..., None]
+    return q
+
+
+def _checked(afl: AflFile, c: AflClip, ch: np.ndarray, what: str) -> np.ndarray:
+    ok = np.abs(ch) <= np.finfo(np.float32).max  # the game evaluates in float32: beyond it is inf
+    if not ok.all():
+        j = int(np.flatnonzero(~ok.all(0))[0])
+        raise FormatError(afl.path, f"clip {c.name}: {what} channel {j} evaluates to a non-finite value (past the "
+                                    f"float32 range)", field=f"headers[{c.header}]")
+    return ch
+
+
+def afl_clips(afl: AflFile, skeleton: Skeleton, bones=None, fps: float = DEFAULT_FPS, clips=None,
+              board_bone: str | None = "board") -> dict:
     """The bank's clips as piste :class:`Clip` objects for ``skeleton`` (an ``.mpf`` rider's).
 
     ``bones``: the skeleton's names of the bones the body track drives, in ``.mpf`` file order
@@ -589,48 +622,62 @@ def afl_clips(afl: AflFile, skeleton: Skeleton, bones=None, fps: float = DEFAULT
     the 19 the track holds are not driven (they keep their rest pose). Each clip is baked at every
     frame (``times = frame / fps``, LINEAR): a rotation track per driven bone (the AFL Euler
     triple, ``Rz(-z) Ry(-y) Rx(-x)``, in piste's axes), a translation track on the driven roots
-    (the root channels, cm -> m). Clips without a body track are skipped (``afl.notes``).
-    ``clips``: names to convert (default: all).
+    (the root channels, cm -> m); a clip's board track drives ``board_bone`` when the skeleton
+    has it and the body track does not drive it (translation + rotation, relative to its parent's
+    animated pose). Clips without a body track are skipped (``afl.notes``). ``clips``: names to
+    convert (default: all).
     """
     if not (isinstance(fps, (int, float)) and np.isfinite(fps) and fps > 0):
         raise ConfigError(f"fps must be a finite number > 0, got {fps!r}")
     names = list(skeleton.names[:BODY_BONES]) if bones is None else list(bones)[:BODY_BONES]
     idx = [(i, skeleton.get(n)) for i, n in enumerate(names) if n is not None and skeleton.get(n) is not None]
+    file_i = np.array([i for i, _ in idx], np.int64)
+    sk_i = np.array([j for _, j in idx], np.int64)
+    jb = skeleton.get(board_bone) if board_bone else None
+    if jb in set(sk_i.tolist()):
+        jb = None
     chosen = afl.clips if clips is None else [afl.clip(n) for n in clips]
-    total = sum(max(c.frames, 1) * (3 + 3 * BODY_BONES) for c in chosen if c.body is not None)
+    total = sum(max(c.frames, 1) * (3 + 3 * BODY_BONES + 6) for c in chosen if c.body is not None)
     if total > MAX_BAKED_VALUES:
         raise FormatError(afl.path, f"the clips' frame counts ask for {total} channel values, more than the limit of "
                                     f"{MAX_BAKED_VALUES}", field="frames")
     a = SSX_TO_PISTE
+    roots = sk_i[skeleton.parents[sk_i] < 0]
     out = {}
     for c in chosen:
-        body = c.body
-        if body is None:
+        kinds = [k for k, offs in c.tracks if offs is not None]
+        if BODY_TRACK not in kinds:
             afl.notes.append(f"clip {c.name}: no body track; not converted")
             continue
         f = max(c.frames, 1)
-        ch = afl.sample(c)[[k for k, _ in c.tracks].index(BODY_TRACK)]
-        ok = np.abs(ch) <= np.finfo(np.float32).max  # the game evaluates in float32: beyond it is inf
-        if not ok.all():
-            j = int(np.flatnonzero(~ok.all(0))[0])
-            raise FormatError(afl.path, f"clip {c.name}: channel {j} evaluates to a non-finite value (past the float32 "
-                                        f"range)", field=f"headers[{c.header}]")
+        samples = [x for x in afl.sample(c) if x is not None]
+        ch = _checked(afl, c, samples[kinds.index(BODY_TRACK)], "body")
         times = np.arange(f) / float(fps)
+        e = ch[:, 3:].reshape(f, BODY_BONES, 3)[:, file_i]                 # (F, k, 3)
+        q = _continuous(matrix_to_quat(a @ afl_rotation(e) @ a.T))          # (F, k, 4) piste axes
+        root = (ch[:, :3] @ a.T) * CM                                        # (F, 3) m
         tracks = {}
-        if idx:
-            file_i = np.array([i for i, _ in idx])
-            e = ch[:, 3:].reshape(f, BODY_BONES, 3)[:, file_i]           # (F, k, 3)
-            rm = a @ afl_rotation(e) @ a.T                                 # (F, k, 3, 3) piste axes
-            q = matrix_to_quat(rm)
-            dots = np.einsum("tki,tki->tk", q[1:], q[:-1])                 # keep each track on one hemisphere
-            flip = np.cumprod(np.where(dots < 0, -1.0, 1.0), axis=0)
-            q[1:] *= flip[..., None]
-            root = (ch[:, :3] @ a.T) * CM
-            for k, (_, j) in enumerate(idx):
-                bt = {"rotation": Track(times, q[:, k])}
-                if skeleton.parents[j] < 0:
-                    bt["translation"] = Track(times, root)
-                tracks[skeleton.names[j]] = bt
+        for k, j in enumerate(sk_i):
+            bt = {"rotation": Track(times, q[:, k])}
+            if skeleton.parents[j] < 0:
+                bt["translation"] = Track(times, root)
+            tracks[skeleton.names[j]] = bt
+        if jb is not None and BOARD_TRACK in kinds:
+            bch = _checked(afl, c, samples[kinds.index(BOARD_TRACK)], "board")
+            world = compose_trs((bch[:, :3] @ a.T) * CM, matrix_to_quat(a @ afl_rotation(bch[:, 3:]) @ a.T),
+                                np.ones((f, 3)))                             # (F, 4, 4) board in model space
+            parent = int(skeleton.parents[jb])
+            if parent >= 0:  # under its parent as this clip poses it
+                rest = skeleton.rest_pose()
+                t = np.repeat(rest.translation[None], f, 0)
+                r = np.repeat(rest.rotation[None], f, 0)
+                r[:, sk_i] = q
+                t[:, roots] = root[:, None]
+                pw = world_from_local(compose_trs(t, r, np.repeat(rest.scale[None], f, 0)), skeleton.parents,
+                                      skeleton.levels)[:, parent]
+                world = invert_affine(pw) @ world
+            bt_t, bt_r, _ = decompose_trs(world)
+            tracks[skeleton.names[jb]] = {"translation": Track(times, bt_t), "rotation": Track(times, _continuous(bt_r))}
         out[c.name] = Clip(c.name, float(times[-1]), tracks, skeleton=skeleton)
     return out
 
