@@ -47,7 +47,7 @@ def add_arguments(p) -> None:
     x.add_argument("--clips", action="append", metavar="BANK.afl",
                    help="an SSX Tricky .afl animation bank (repeatable): export its clips (body tracks) instead of "
                         "piste's shared clips")
-    x.add_argument("--fps", type=float, default=30.0,
+    x.add_argument("--fps", type=N.real(1.0, 240.0), default=30.0,
                    help="with --clips: AFL frames a second (default 30; the public notes' assumption, not confirmed)")
     c = sub.add_parser("copy", help="read and write back (byte-identical when nothing changed)")
     c.add_argument("file")
