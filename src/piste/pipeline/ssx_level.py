@@ -143,15 +143,17 @@ def _render_tiles(tiles, n: int):
     return atlas, rects
 
 
-def level_light(pbd: Pbd, pages, reduced, path=None):
+def level_light(pbd: Pbd, pages, reduced, pages_path=None):
     """``(light (h, w, 3) float32, source (h, w, 4) uint8, rects (n, 4))`` render atlases of a
-    level's stored light-map pages (or unlit, ``Cs = 0, As = 128``, when ``pages`` is None)."""
+    level's stored light-map pages (or unlit, ``Cs = 0, As = 128``, when ``pages`` is None).  A
+    patch's tile outside the pages is refused naming the ``.pbd`` (``pbd.path``) and the bank
+    (``pages_path``)."""
     n = len(pbd)
     if pages is None:
         tiles = np.zeros((n, 8, 8, 4), np.uint8)
         tiles[..., 3] = 128
     else:
-        tiles = extract_tiles(pages, pbd.lightmap_rect, pbd.lightmap_page, path)
+        tiles = extract_tiles(pages, pbd.lightmap_rect, pbd.lightmap_page, pbd.path, pages_path)
     cd = base_tiles(reduced, pbd.texture_index, pbd.uv)
     cl = light_from_source(cd, tiles[..., :3], tiles[..., 3])
     light, rects = _render_tiles(cl, n)
@@ -268,8 +270,11 @@ def level_key(path) -> str:
     """Content hash of ``path`` and the ``.ssh`` / ``_L.ssh`` beside it (a build-cache key part)."""
     path = Path(path)
     parts = []
-    for p in (path, *level_files(path)):
-        parts += ["-"] if p is None else [p.name, p.read_bytes()]
+    from piste.formats.safe_io import read_regular
+    from piste.formats.ssx.pbd import MAX_FILE_BYTES
+
+    for p in (path, *level_files(path)):  # regular files only (a pipe or device is refused, never read)
+        parts += ["-"] if p is None else [p.name, read_regular(p, MAX_FILE_BYTES, what="level file")]
     return content_key("ssx-level/2", *parts)
 
 

@@ -468,29 +468,36 @@ def lightmap_bank(pages) -> SshBank:
     return SshBank([SshImage(f"{i:04d}", RGBA32, pages[i].copy(), long_name="") for i in range(len(pages))])
 
 
-def tile_origins(rect, page, n_pages: int | None = None, path=None) -> np.ndarray:
+def tile_origins(rect, page, n_pages: int | None = None, path=None, pages_path=None) -> np.ndarray:
     """Texel origins ``(n, 2)`` int (x, y) of each patch's tile in its page from the stored rects
-    ``(n, 4)`` (x, y, w, h in 0..1); checks tiles are 8x8 inside the page and pages exist."""
+    ``(n, 4)`` (x, y, w, h in 0..1); checks tiles are 8x8 inside the page and pages exist.  A
+    refusal names ``path``, the file holding the rects and pages (the ``.pbd``), and ``pages_path``,
+    the bank whose page count they were checked against (the ``_L.ssh``)."""
     rect = np.asarray(rect, dtype=np.float64)
     page = np.asarray(page)
     x0 = np.rint(rect[:, 0] * PAGE_SIZE).astype(np.int64)
     y0 = np.rint(rect[:, 1] * PAGE_SIZE).astype(np.int64)
-    bad = (x0 < 0) | (y0 < 0) | (x0 + TILE > PAGE_SIZE) | (y0 + TILE > PAGE_SIZE) | (page < 0)
+    bad_rect = (x0 < 0) | (y0 < 0) | (x0 + TILE > PAGE_SIZE) | (y0 + TILE > PAGE_SIZE)
+    bad_page = page < 0
     if n_pages is not None:
-        bad |= page >= n_pages
+        bad_page |= page >= n_pages
+    bad = bad_rect | bad_page
     if bad.any():
         k = int(np.argmax(bad))
-        raise FormatError(path, f"patch {k}: light-map tile {rect[k].tolist()} on page {int(page[k])} lies outside "
-                                f"the {n_pages if n_pages is not None else '?'} 128x128 page(s)", field="lightmap_rect")
+        where = f" of {Path(pages_path).name}" if pages_path is not None else ""
+        what = (f"light-map page {int(page[k])} is not one of the {n_pages} page(s){where}" if bad_page[k] else
+                f"light-map tile {rect[k].tolist()} lies outside its 128x128 page")
+        raise FormatError(path, f"patch {k}: {what}", field="lightmap_page" if bad_page[k] else "lightmap_rect")
     return np.stack([x0, y0], axis=1)
 
 
-def extract_tiles(pages, rect, page, path=None) -> np.ndarray:
+def extract_tiles(pages, rect, page, path=None, pages_path=None) -> np.ndarray:
     """Each patch's 8x8 light-map tile in piste's orientation: ``(n, 8, 8, C)`` with
     ``[k, j, i]`` the texel at ``u = (i + 0.5) / 8``, ``v = (j + 0.5) / 8`` (the page holds it
-    transposed: page row = ``u``, column = ``v``)."""
+    transposed: page row = ``u``, column = ``v``).  ``path``: the file of ``rect`` and ``page``
+    (the ``.pbd``), ``pages_path``: the file of ``pages`` (the ``_L.ssh``), for error messages."""
     pages = np.asarray(pages)
-    o = tile_origins(rect, page, len(pages), path)
+    o = tile_origins(rect, page, len(pages), path, pages_path)
     r = np.arange(TILE)
     page = np.asarray(page, dtype=np.int64)
     # page[y0 + i, x0 + j] -> tile[j, i]
