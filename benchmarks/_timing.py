@@ -1,6 +1,8 @@
 """Shared timing for the benchmarks: every contender (piste and its peers) is timed the same way,
-interleaved in one process (round 1: A, B, C; round 2: A, B, C; ...) so load from other processes
-hits them alike, and reported as the median with the range (min-max) over the rounds.
+interleaved in one process (round 1: A, B, C; round 2: B, C, A; ...: the order rotated) so load from
+other processes hits them alike, and reported as the median with the range (min-max) over the rounds.
+A contender may bring an untimed set-up per call (``(setup, call)``), so a peer's input is handed over
+through its own API outside the timed region when only piste's compiled call is timed.
 
 ``record(...)`` appends a summary row (goal / piste / peer / ratio) to the JSON-lines file named by
 ``PISTE_BENCH_OUT`` when set (``benchmarks/summary.py`` collects them into one table).
@@ -15,19 +17,40 @@ import time
 import numpy as np
 
 
-def interleaved(fns: dict, rounds: int, warmup: int = 1, inner: int = 1) -> dict:
-    """Seconds per call of each ``fns[name]()`` over ``rounds`` interleaved rounds: ``{name: (rounds,)
-    array}``.  Each round times ``inner`` back-to-back calls (for calls too short to time alone)."""
+def interleaved(fns: dict, rounds: int, warmup: int = 1, inner: int = 1, rotate: bool = True) -> dict:
+    """Seconds per call of each contender over ``rounds`` interleaved rounds: ``{name: (rounds,) array}``.
+
+    ``fns[name]`` is a callable (all of it timed) or a ``(setup, call)`` pair: ``setup()`` runs
+    before every timed ``call()`` and is not timed (e.g. handing a peer this round's input through its
+    own API, so only its compiled call is timed, as piste's is).  Each round times ``inner`` calls
+    (for calls too short to time alone); with ``rotate`` round ``r`` starts at contender ``r mod k``
+    (A B C, B C A, C A B, ...) so no contender always runs right after the same other one."""
+    pairs = {k: (f if isinstance(f, tuple) else (None, f)) for k, f in fns.items()}
+    names = list(pairs)
     for _ in range(warmup):
-        for fn in fns.values():
+        for setup, fn in pairs.values():
+            if setup is not None:
+                setup()
             fn()
-    out = {k: [] for k in fns}
-    for _ in range(rounds):
-        for name, fn in fns.items():
-            t0 = time.perf_counter()
-            for _ in range(inner):
-                fn()
-            out[name].append((time.perf_counter() - t0) / inner)
+    out = {k: [] for k in names}
+    clock = time.perf_counter
+    for r in range(rounds):
+        k0 = r % len(names) if rotate and names else 0
+        for name in names[k0:] + names[:k0]:
+            setup, fn = pairs[name]
+            if setup is None:
+                t0 = clock()
+                for _ in range(inner):
+                    fn()
+                dt = clock() - t0
+            else:
+                dt = 0.0
+                for _ in range(inner):
+                    setup()
+                    t0 = clock()
+                    fn()
+                    dt += clock() - t0
+            out[name].append(dt / inner)
     return {k: np.asarray(v) for k, v in out.items()}
 
 
