@@ -19,11 +19,11 @@ from piste.cli import main
 from piste.errors import ConfigError, FormatError
 from piste.formats.gltf import load_gltf
 from piste.formats.ssx.afl import (
-    BODY_BONES, DEFAULT_FPS, AflClipData, Curve, afl_bytes, afl_clips, afl_hash, afl_rotation, body_track,
+    BODY_BONE_NAMES, BODY_BONES, DEFAULT_FPS, AflClipData, Curve, afl_bytes, afl_clips, afl_hash, afl_rotation, body_track,
     clip_channels, constant, curve_bytes, encode_afl, group, mpf_body_bones, parse_afl, polynomial, read_afl, sampled,
     write_afl,
 )
-from piste.formats.ssx.mpf import mpf_bytes, parse_mpf, write_mpf
+from piste.formats.ssx.mpf import mpf_bytes, parse_mpf, read_mpf, write_mpf
 from piste.formats.ssx.mpf_encode import model_to_mpf
 from piste.formats.ssx.mpf_model import SSX_TO_PISTE
 
@@ -416,3 +416,27 @@ def test_real_afl_files_read_and_write_back():
         clips = afl_clips(f, sk)
         assert all(np.isfinite(tr.values).all() for c in clips.values() for bt in c.tracks.values()
                    for tr in bt.values())
+
+
+@pytest.mark.skipif(not os.environ.get("PISTE_SSX_TRICKY_DIR"),
+                    reason="set PISTE_SSX_TRICKY_DIR to a folder holding your own SSX Tricky .mpf rider files")
+def test_real_body_models_take_a_body_track():
+    """The user's own retail body models: their 19 body bones are the documented body-track order, and a
+    body track holding each bone's bind angles (written from the spec, not game data) poses them at bind."""
+    root = Path(os.environ["PISTE_SSX_TRICKY_DIR"])
+    bodies = []
+    for path in sorted(p for p in root.rglob("*") if p.suffix.lower() == ".mpf" and p.is_file()):
+        f = read_mpf(path)
+        if any(s.bone_names == list(BODY_BONE_NAMES) for s in f.models):
+            bodies.append(f)
+    if not bodies:
+        pytest.skip(f"no .mpf body model (19 bones hips .. r_foot) under PISTE_SSX_TRICKY_DIR={root}")
+    for f in bodies:
+        model = f.to_model()
+        assert mpf_body_bones(model) == list(BODY_BONE_NAMES)
+        s = next(s for s in f.models if s.bone_names == list(BODY_BONE_NAMES))
+        ch = np.concatenate([s.bones["translation"][0], s.bones["rotation"].reshape(-1)]).astype(np.float64)
+        afl = encode_afl([AflClipData("bind", 2, [(0, [Curve([constant(v)]) for v in ch])])])
+        clip = afl_clips(afl, model.skeleton)["bind"]  # default bones: the documented order
+        world = model.skeleton.world_matrices(clip.sample(0.0, model.skeleton))
+        np.testing.assert_allclose(world, model.skeleton.bind_pose_world(), atol=1e-3, err_msg=f.path)

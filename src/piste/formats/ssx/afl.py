@@ -96,7 +96,7 @@ from piste.transforms import compose_trs, decompose_trs, invert_affine, matrix_t
 
 __all__ = [
     "AflFile", "AflClip", "AflClipData", "Curve", "Segment", "HEADER_DTYPE", "TRACK_CHANNELS", "KIND_CLIP",
-    "BODY_TRACK", "BOARD_TRACK", "BODY_BONES", "KNOWN_CLIP_NAMES", "DEFAULT_FPS", "read_afl", "parse_afl", "afl_bytes", "write_afl",
+    "BODY_TRACK", "BOARD_TRACK", "BODY_BONES", "BODY_BONE_NAMES", "KNOWN_CLIP_NAMES", "DEFAULT_FPS", "read_afl", "parse_afl", "afl_bytes", "write_afl",
     "encode_afl", "afl_clips", "mpf_body_bones", "body_track", "clip_channels", "constant", "polynomial", "sampled",
     "group", "curve_bytes", "afl_hash", "afl_rotation", "MAX_FILE_BYTES", "MAX_BAKED_VALUES",
 ]
@@ -110,6 +110,11 @@ KIND_CLIP = 255
 BODY_TRACK = 0
 BOARD_TRACK = 1
 BODY_BONES = 19  # (60 - 3) / 3
+#: the retail body's 19 bones in .mpf order, the order of the body track's Euler triples (the
+#: rewrite's notes; the bone table of the public retail ``moby_body.mpf`` holds exactly these)
+BODY_BONE_NAMES = ("hips", "lower_back", "upper_back", "neck", "head", "l_clav", "l_bicep", "l_forearm", "l_hand",
+                   "r_clav", "r_bicep", "r_forearm", "r_hand", "l_thigh", "l_calf", "l_foot", "r_thigh", "r_calf",
+                   "r_foot")
 #: the ride clips named in OpenSlope's afl_pose.py (the bank holds only their hashes)
 KNOWN_CLIP_NAMES = tuple(p + n for p in ("fr", "bx", "ex") for n in (
     "RL_BASECYCLEFAST", "RL_CROUCHCYCLE", "R_TURNHS", "R_TURNTS", "RC_TURNHS", "RC_TURNTS", "C_ANTIC")) + (
@@ -474,6 +479,7 @@ def parse_afl(data: bytes, path="<bytes>", names=()) -> AflFile:
     lookup = {afl_hash(s): s for s in (*KNOWN_CLIP_NAMES, *names) if s.isascii()}
     r = _Reader(data, path, data_off)
     kinds = headers["kind"]
+    seen: set = set()
     for i in np.flatnonzero(kinds == KIND_CLIP):
         h = headers[i]
         rel = int(h["related"])
@@ -482,6 +488,9 @@ def parse_afl(data: bytes, path="<bytes>", names=()) -> AflFile:
                                     f"{n - 1}", field=f"headers[{i}].related")
         key = int(h["key"])
         name = lookup.get(key, f"clip_{key:08x}")
+        if name in seen:  # two records with one hash: keep both, named apart by record index
+            name = f"{name}@{i}"
+        seen.add(name)
         tracks = []
         for j in range(i + 1, i + 1 + rel):
             kind = int(kinds[j])
@@ -595,6 +604,12 @@ def mpf_body_bones(model) -> list:
     return list(sk.names)
 
 
+def _default_bones(skeleton: Skeleton) -> list:
+    if all(skeleton.get(n) is not None for n in BODY_BONE_NAMES):
+        return list(BODY_BONE_NAMES)
+    return list(skeleton.names[:BODY_BONES])
+
+
 def _continuous(q) -> np.ndarray:
     """Quaternions ``(F, ..., 4)`` with each track's sign flipped to stay on one hemisphere (slerp)."""
     q = np.array(q, np.float64)
@@ -618,7 +633,8 @@ def afl_clips(afl: AflFile, skeleton: Skeleton, bones=None, fps: float = DEFAULT
     """The bank's clips as piste :class:`Clip` objects for ``skeleton`` (an ``.mpf`` rider's).
 
     ``bones``: the skeleton's names of the bones the body track drives, in ``.mpf`` file order
-    (:func:`mpf_body_bones`; default: the skeleton's first 19 bones); None entries and bones past
+    (:func:`mpf_body_bones`; default: :data:`BODY_BONE_NAMES` when the skeleton has them all, else
+    its first 19 bones); None entries and bones past
     the 19 the track holds are not driven (they keep their rest pose). Each clip is baked at every
     frame (``times = frame / fps``, LINEAR): a rotation track per driven bone (the AFL Euler
     triple, ``Rz(-z) Ry(-y) Rx(-x)``, in piste's axes), a translation track on the driven roots
@@ -629,7 +645,7 @@ def afl_clips(afl: AflFile, skeleton: Skeleton, bones=None, fps: float = DEFAULT
     """
     if not (isinstance(fps, (int, float)) and np.isfinite(fps) and fps > 0):
         raise ConfigError(f"fps must be a finite number > 0, got {fps!r}")
-    names = list(skeleton.names[:BODY_BONES]) if bones is None else list(bones)[:BODY_BONES]
+    names = _default_bones(skeleton) if bones is None else list(bones)[:BODY_BONES]
     idx = [(i, skeleton.get(n)) for i, n in enumerate(names) if n is not None and skeleton.get(n) is not None]
     file_i = np.array([i for i, _ in idx], np.int64)
     sk_i = np.array([j for _, j in idx], np.int64)
@@ -685,11 +701,11 @@ def afl_clips(afl: AflFile, skeleton: Skeleton, bones=None, fps: float = DEFAULT
 def clip_channels(clip: Clip, skeleton: Skeleton, bones=None, fps: float = DEFAULT_FPS):
     """A piste clip as AFL body values (the inverse of :func:`afl_clips`): ``root_cm (F, 3)`` (the
     first driven root's translation, cm, ``.mpf`` axes) and ``euler (F, 19, 3)`` (radians, the
-    negated ``Rz Ry Rx`` convention) of ``bones`` (default: the skeleton's first 19), sampled at
+    negated ``Rz Ry Rx`` convention) of ``bones`` (default as :func:`afl_clips`), sampled at
     ``F = round(duration * fps) + 1`` frames; bones that are None or missing get zeros."""
     if not (isinstance(fps, (int, float)) and np.isfinite(fps) and fps > 0):
         raise ConfigError(f"fps must be a finite number > 0, got {fps!r}")
-    names = list(skeleton.names[:BODY_BONES]) if bones is None else list(bones)[:BODY_BONES]
+    names = _default_bones(skeleton) if bones is None else list(bones)[:BODY_BONES]
     f = round(clip.duration * fps) + 1
     if f > 0xFFFF:
         raise ValidationError(f"clip {clip.name!r}: {f} frames at {fps} fps do not fit the 16-bit frame count")
