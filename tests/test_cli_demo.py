@@ -80,7 +80,7 @@ def test_demo_is_the_built_default_scene_through_the_render_runtime(gl_context, 
 
 
 def test_demo_rejects_bad_arguments(tmp_path, capsys):
-    assert main(["demo", "--size", "97", "64", "--video", str(tmp_path / "a.mp4"), "--out", str(tmp_path / "a.png")]) == 2
+    assert main(["demo", "--size", "97", "64", "--video", str(tmp_path / "a.mp4"), "--out", str(tmp_path / "a.png")]) == 1
     assert "even width and height" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["demo", "--lightmap", "multiply"])

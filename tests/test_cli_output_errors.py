@@ -30,18 +30,18 @@ def _one_line_error(capsys, command, fragment):
 
 def test_build_unwritable_output(tmp_path, blocker, capsys):
     (tmp_path / "s.toml").write_text('[lightmap]\nres = 4\n[visibility]\nenabled = false\n')
-    assert main(["build", str(tmp_path / "s.toml"), "--out", str(blocker / "sub" / "s.piste"), "--quiet"]) == 2
+    assert main(["build", str(tmp_path / "s.toml"), "--out", str(blocker / "sub" / "s.piste"), "--quiet"]) == 1
     _one_line_error(capsys, "build", str(blocker / "sub"))
 
 
 def test_build_unwritable_cache(tmp_path, blocker, capsys):
     (tmp_path / "s.toml").write_text('[lightmap]\nres = 4\n[visibility]\nenabled = false\n')
-    assert main(["build", str(tmp_path / "s.toml"), "--cache", str(blocker / "cache"), "--quiet"]) == 2
+    assert main(["build", str(tmp_path / "s.toml"), "--cache", str(blocker / "cache"), "--quiet"]) == 1
     _one_line_error(capsys, "build", str(blocker / "cache"))
 
 
 def test_bake_unwritable_output(blocker, capsys):
-    assert main(["bake", "--out", str(blocker / "lm"), "--quiet", "--jobs", "1"]) == 2
+    assert main(["bake", "--out", str(blocker / "lm"), "--quiet", "--jobs", "1"]) == 1
     _one_line_error(capsys, "bake", str(blocker / "lm"))
 
 
@@ -51,7 +51,7 @@ def test_render_unwritable_output(tmp_path, blocker, capsys, gl_context):
     bundle = tmp_path / "s.piste"
     assert main(["build", str(tmp_path / "s.toml"), "--out", str(bundle), "--quiet"]) == 0
     capsys.readouterr()
-    assert main(["render", str(bundle), "--out", str(blocker / "x" / "r.png"), "--quiet", "--size", "32", "24"]) == 2
+    assert main(["render", str(bundle), "--out", str(blocker / "x" / "r.png"), "--quiet", "--size", "32", "24"]) == 1
     _one_line_error(capsys, "render", str(blocker / "x"))
 
 
@@ -62,5 +62,5 @@ def test_any_oserror_at_the_command_boundary_is_one_line(monkeypatch, capsys):
         raise OSError(errno.ENOSPC, "No space left on device", "/some/out/file.bin")
 
     monkeypatch.setattr(stats, "run", full)
-    assert main(["stats"]) == 2
+    assert main(["stats"]) == 1
     _one_line_error(capsys, "stats", "/some/out/file.bin: no space left on the device (disk full)")

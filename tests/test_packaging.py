@@ -30,9 +30,22 @@ def test_core_dependencies_are_only_what_the_numpy_cores_need():
     assert "imageio-ffmpeg" in _req_names(extras["video"])
     assert (ROOT / "LICENSE").read_text().startswith("MIT License")
     assert PYPROJECT["project"]["license"] == "MIT" and PYPROJECT["project"]["license-files"] == ["LICENSE"]
+
+
+def test_the_version_is_written_once_and_the_package_is_typed():
+    """pyproject.toml reads the version from ``piste.__version__`` (no second copy to drift); the
+    installed metadata says the same; ``py.typed`` ships as package data; classifiers are there."""
+    import importlib.metadata
+
     import piste
 
-    assert piste.__version__ == PYPROJECT["project"]["version"]
+    project = PYPROJECT["project"]
+    assert "version" not in project and "version" in project["dynamic"]
+    assert PYPROJECT["tool"]["setuptools"]["dynamic"]["version"] == {"attr": "piste.__version__"}
+    assert importlib.metadata.version("piste") == piste.__version__
+    assert (ROOT / "src" / "piste" / "py.typed").exists()
+    assert "py.typed" in PYPROJECT["tool"]["setuptools"]["package-data"]["piste"]
+    assert "Typing :: Typed" in project["classifiers"]
 
 
 def test_every_dependency_is_pinned_in_the_constraints_file():
@@ -75,7 +88,7 @@ def test_missing_extra_is_one_line_naming_it(tmp_path, blocked, argv, extra):
     )
     env = dict(os.environ, PISTE_CACHE_DIR=str(tmp_path / "cache"))
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env)
-    assert r.returncode == 2, r.stderr
+    assert r.returncode == 1, r.stderr
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert lines == [f"piste {argv[0]} needs the '{extra}' extra ({blocked} is not installed): pip install 'piste[{extra}]'"]
 
@@ -115,7 +128,7 @@ def test_wheel_installs_in_a_clean_venv_and_runs_from_any_folder(tmp_path):
     assert r.stdout.strip() == "core ok", r.stderr
     r = subprocess.run([str(piste), "demo", "--size", "64", "48", "--no-progress"], capture_output=True, text=True,
                        cwd=work, env=env)
-    assert r.returncode == 2 and "pip install 'piste[gl]'" in r.stderr, r.stderr
+    assert r.returncode == 1 and "pip install 'piste[gl]'" in r.stderr, r.stderr
     r = subprocess.run([*pip, f"{wheel}[gl]"], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr[-2000:]
     r = subprocess.run([str(piste), "demo", "--size", "64", "48", "--no-progress", "--lighting", "placeholder"],

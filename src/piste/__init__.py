@@ -10,8 +10,14 @@ formats     file formats (.bpt, glTF, bundles)
 render      OpenGL (moderngl) renderer, headless through EGL
 """
 
+import logging
+
 from piste.errors import ConfigError, FormatError, PisteError, RenderError, ValidationError
 
+#: the one place the version is written (pyproject.toml reads it: ``[tool.setuptools.dynamic]``)
 __version__ = "0.2.0"
+
+# the library reports through the ``piste`` logger and prints nothing itself; `piste -v/-q` sets its level
+logging.getLogger("piste").addHandler(logging.NullHandler())
 
 __all__ = ["PisteError", "FormatError", "ValidationError", "ConfigError", "RenderError", "__version__"]

@@ -21,12 +21,13 @@ set-up and first frame.
 from __future__ import annotations
 
 import importlib.util
-import os
 import threading
+
+from piste.extras import environ
 
 __all__ = ["HAVE_NUMBA", "KERNEL_MODULES", "lazy_njit", "warm_up", "warm_up_async", "WarmUpHold"]
 
-HAVE_NUMBA = not os.environ.get("PISTE_NO_NUMBA") and importlib.util.find_spec("numba") is not None
+HAVE_NUMBA = not environ("PISTE_NO_NUMBA") and importlib.util.find_spec("numba") is not None
 _KERNELS: list = []
 _LOCK = threading.Lock()  # compilation
 _START = threading.Lock()  # starting the warm-up thread

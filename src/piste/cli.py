@@ -2,15 +2,24 @@
 
 Each subcommand lives in ``piste.commands.<name>`` with two functions, ``add_arguments(parser)`` and
 ``run(args) -> int``; modules are imported lazily so that ``piste stats`` never loads OpenGL.
+
+Exit status: 0 done, 1 a runtime error (a :class:`piste.errors.PisteError`, a missing extra, an
+unwritable path: one line on stderr), 2 a usage error (argparse), 130 interrupted.  ``-v``/``-q``
+set the level of the ``piste`` logger (INFO by default: what the library reports as it works).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import sys
 
+from piste import __version__
 from piste.errors import MissingExtraError, PisteError, describe_os_error
+
+#: exit status of a runtime error (a usage error is argparse's 2)
+EXIT_ERROR = 1
 
 #: subcommand -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -37,6 +46,11 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="piste", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"piste {__version__}")
+    parser.add_argument("-v", "--verbose", action="count", default=0,
+                        help="say more: the library's debug messages")
+    parser.add_argument("-q", "--quiet", dest="quiet_log", action="count", default=0,
+                        help="only warnings and errors (-qq: errors only)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name, (module, help_) in COMMANDS.items():
@@ -50,24 +64,48 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def log_level(verbose: int, quiet: int) -> int:
+    """The ``piste`` logger's level for ``-v``/``-q`` counts: INFO by default, DEBUG with ``-v``,
+    WARNING with ``-q``, ERROR with ``-qq``."""
+    steps = (logging.DEBUG, logging.INFO, logging.WARNING, logging.ERROR)
+    return steps[max(0, min(len(steps) - 1, 1 - verbose + quiet))]
+
+
+def _log_to_stderr(level: int) -> tuple[logging.Handler, int]:
+    """Messages of the ``piste`` logger go to stderr as ``piste: message``; returns the handler and
+    the logger's previous level (restored when :func:`main` returns, so that calling ``main`` twice
+    does not print twice)."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("piste: %(message)s"))
+    logger = logging.getLogger("piste")
+    previous = logger.level
+    logger.addHandler(handler)
+    logger.setLevel(level)
+    return handler, previous
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    handler, previous_level = _log_to_stderr(log_level(args.verbose, args.quiet_log))
     try:
         return int(importlib.import_module(args._module).run(args) or 0)
     except MissingExtraError as exc:
         print(f"piste {args.command} needs the '{exc.extra}' extra ({exc.module} is not installed): "
               f"pip install 'piste[{exc.extra}]'", file=sys.stderr)
-        return 2
+        return EXIT_ERROR
     except PisteError as exc:
         print(f"piste {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_ERROR
     except OSError as exc:  # unwritable or full output / cache, a vanished input: one line naming the path
         print(f"piste {args.command}: error: {describe_os_error(exc)}", file=sys.stderr)
-        return 2
+        return EXIT_ERROR
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    finally:
+        logging.getLogger("piste").removeHandler(handler)
+        logging.getLogger("piste").setLevel(previous_level)
 
 
 if __name__ == "__main__":  # pragma: no cover

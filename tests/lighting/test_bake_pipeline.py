@@ -131,10 +131,10 @@ def test_cli_errors(tmp_path, capsys):
     (tmp_path / "bad.toml").write_text("[[point]]\nposition = [0, 0]\n")
     net = hill_net(1, 1)
     net.save(tmp_path / "net.npz")
-    assert main(["bake", str(tmp_path / "net.npz"), "--lights", str(tmp_path / "bad.toml"), "--out", str(tmp_path / "o")]) == 2
+    assert main(["bake", str(tmp_path / "net.npz"), "--lights", str(tmp_path / "bad.toml"), "--out", str(tmp_path / "o")]) == 1
     err = capsys.readouterr().err
     assert "bad.toml, line 2" in err and "position" in err
-    assert main(["bake", str(tmp_path / "bad.toml"), "--out", str(tmp_path / "o")]) == 2
+    assert main(["bake", str(tmp_path / "bad.toml"), "--out", str(tmp_path / "o")]) == 1
     assert "expected a .bpt or .npz" in capsys.readouterr().err
 
 

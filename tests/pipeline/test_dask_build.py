@@ -116,7 +116,7 @@ def test_cli_build_tiled_scene_with_dask_local(tmp_path, capsys):
         assert main(["build", str(tmp_path / "w.toml"), "--quiet", "--scheduler", cluster.scheduler_address,
                      "--out", str(tmp_path / "s.tiles")]) == 0
     assert _files(tmp_path / "s.tiles") == local
-    assert main(["build", str(tmp_path / "w.toml"), "--quiet", "--dask", "remote"]) == 2
+    assert main(["build", str(tmp_path / "w.toml"), "--quiet", "--dask", "remote"]) == 1
     assert "--dask takes 'local'" in capsys.readouterr().err
     with pytest.raises(ConfigError, match="tcp://HOST"):
         from piste.pipeline.dask_build import dask_client
@@ -168,11 +168,11 @@ def test_tiled_scene_errors(tmp_path, capsys):
     from piste.cli import main
 
     (tmp_path / "d.toml").write_text('[terrain]\ntiles = "d.tiles"\n')
-    assert main(["build", str(tmp_path / "d.toml"), "--quiet"]) == 2
+    assert main(["build", str(tmp_path / "d.toml"), "--quiet"]) == 1
     assert "needs a height-field terrain" in capsys.readouterr().err
     np.savez(tmp_path / "h.npz", z=np.zeros((13, 13)), dx=1.0)
     (tmp_path / "t.toml").write_text('[terrain]\nsource = "h.npz"\ntiles = "t.tiles"\ntile_patches = 1\n')
-    assert main(["build", str(tmp_path / "t.toml"), "--quiet"]) == 2
+    assert main(["build", str(tmp_path / "t.toml"), "--quiet"]) == 1
     err = capsys.readouterr().err
     assert "terrain.tile_patches" in err and "line 4" in err
     with pytest.raises(ConfigError, match="exactly one of"):

@@ -27,11 +27,11 @@ def test_render_a_toml_directly_and_errors(small_scene, gl, tmp_path, capsys):
     png = tmp_path / "b.png"
     assert main(["render", str(scene), "--out", str(png), "--size", "48", "32", "--quiet"]) == 0
     assert png.exists()
-    assert main(["render", str(scene.with_suffix(".piste")), "--camera", "nope", "--out", str(png)]) == 2
+    assert main(["render", str(scene.with_suffix(".piste")), "--camera", "nope", "--out", str(png)]) == 1
     assert "no camera 'nope'" in capsys.readouterr().err
-    assert main(["render", str(tmp_path / "x.obj")]) == 2
+    assert main(["render", str(tmp_path / "x.obj")]) == 1
     scene.write_text(scene.read_text() + "\nunknown_key = 1\n")
-    assert main(["build", str(scene), "--quiet"]) == 2
+    assert main(["build", str(scene), "--quiet"]) == 1
     err = capsys.readouterr().err
     assert "unknown_key" in err and "line" in err
 

@@ -129,7 +129,7 @@ def test_far_stand_ins_while_loading_and_cli(world, gl, tmp_path, capsys):
                  "--quiet"]) == 0
     text = capsys.readouterr().out
     assert out.stat().st_size > 100 and "4 frame(s) flying at 100 m/s" in text
-    assert main(["render", str(tmp_path / "none.tiles")]) == 2
+    assert main(["render", str(tmp_path / "none.tiles")]) == 1
     assert "no such tiled world" in capsys.readouterr().err
 
 

@@ -172,3 +172,22 @@ def test_errors_name_the_field():
         fit_heightfield(np.zeros((9, 13)), 1.0, edge="wrap")
     with pytest.raises(PisteError, match="smooth"):
         fit_heightfield(np.zeros((9, 13)), 1.0, smooth="c3")
+
+
+def test_progress_goes_to_the_piste_logger_not_stdout(caplog, capsys):
+    """``progress=True`` reports the fit's stages at INFO on ``piste.terrain.*`` (the CLI shows them;
+    ``piste -q`` hides them); without it they are DEBUG; nothing is printed."""
+    import logging
+
+    z = np.random.default_rng(0).normal(size=(13, 13))
+    with caplog.at_level(logging.DEBUG, logger="piste"):
+        PatchNet.from_heightfield(z, 1.0, progress=True)
+    info = [r for r in caplog.records if r.levelno == logging.INFO]
+    assert info and all(r.name.startswith("piste.terrain.") for r in info)
+    assert any("PatchNet of" in r.getMessage() for r in info)
+    caplog.clear()
+    with caplog.at_level(logging.DEBUG, logger="piste"):
+        PatchNet.from_heightfield(z, 1.0)
+    assert caplog.records and all(r.levelno == logging.DEBUG for r in caplog.records)
+    out = capsys.readouterr()
+    assert out.out == "" and out.err == ""

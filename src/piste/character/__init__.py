@@ -70,4 +70,8 @@ __all__ = [
     "simplify_mesh",
     "LOD",
     "default_rider",
+    "RetargetWarning",
+    "bone_roles",
+    "builtin_bone_map",
+    "retarget_clip",
 ]

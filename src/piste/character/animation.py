@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from piste.character.pose import Pose
 from piste.errors import ConfigError
 from piste.transforms import quat_conjugate, quat_multiply, quat_normalize, quat_slerp
 

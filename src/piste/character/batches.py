@@ -181,13 +181,14 @@ def make_batches(indices, vertex_matrices, budget="ps2", lookahead: int = 64, or
         mats: dict = {}
         chosen = []
 
-        def fits(t):
+        # (this batch's state bound as defaults: a closure over loop variables would see later batches')
+        def fits(t, verts=verts, mats=mats):
             new_v = [int(x) for x in set(tris[t].tolist()) if int(x) not in verts]
             new_m = [m for m in tri_mats[t] if m not in mats]
             return (len(verts) + len(new_v) <= b.max_vertices and len(mats) + len(new_m) <= b.max_matrices,
                     new_v, new_m)
 
-        def add(t, new_v, new_m):
+        def add(t, new_v, new_m, verts=verts, mats=mats, chosen=chosen):
             for x in tris[t].tolist():
                 if x not in verts:
                     verts[x] = len(verts)

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from piste.character.model import Clip, Model, Pose, Skeleton, SkinnedMesh, Track
+from piste.character.model import Clip, Model, Skeleton, SkinnedMesh, Track
 from piste.character.morph import vertex_normals
 from piste.transforms import matrix_to_quat, quat_multiply, quat_conjugate, quat_normalize, quat_rotate
 
@@ -310,7 +310,7 @@ def _build_parts(rng_scale, J):
 
     for s, sx in (("l", 1.0), ("r", -1.0)):
         # arm: from inside the shoulder to the wrist, puffy sleeve with a cuff
-        sh, el, wr, hd = J[f"upperarm_{s}"], J[f"lowerarm_{s}"], J[f"hand_{s}"], None
+        sh, el, wr = J[f"upperarm_{s}"], J[f"lowerarm_{s}"], J[f"hand_{s}"]
         d = _normalize(wr - sh)
         start = sh - d * 0.07
         ts = np.array([0.0, 0.05, 0.09, 0.14, 0.20, 0.26, 0.31, 0.35, 0.40, 0.46, 0.52, 0.565, 0.59])

@@ -21,7 +21,6 @@ VertexLights, choose_lights, vertex_light   per-vertex 1 ambient + 3 directional
 
 from piste.lighting.baker import (
     bake_lightmap,
-    lightmap_cache_dir,
     load_lightmap,
     load_or_bake_default_lightmap,
     write_lightmap,
@@ -79,7 +78,6 @@ __all__ = [
     "bake_lightmap",
     "write_lightmap",
     "load_lightmap",
-    "lightmap_cache_dir",
     "load_or_bake_default_lightmap",
     "ps2_source",
     "ps2_blend",

@@ -14,25 +14,29 @@
 * **Atomic**: :func:`write_lightmap` writes each file to a temporary name and renames it.
 
 :func:`load_or_bake_default_lightmap` is the renderer's entry point: the default course's light
-map for the default lights, baked once and cached on disk.
+map for the default lights, baked once and cached on disk (in the folder its caller names: piste's
+cache root is :func:`piste.pipeline.cache.cache_root`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import io
 import json
 import os
 import shutil
+import stat
 import zipfile
 from pathlib import Path
 
 import numpy as np
 
 from piste.errors import FormatError, OutputError, ValidationError
+from piste.extras import child_environment
 from piste.formats.atomic import atomic_path, write_bytes_atomic
 from piste.formats.safe_io import check_regular, loads_json, read_regular
-from piste.lighting.lightmap import (LightMap, assemble_atlas, atlas_layout, encode_half_bright, inputs_key,
+from piste.lighting.lightmap import (LightMap, assemble_atlas, atlas_layout, inputs_key,
                                     sample_points, weld_seam_light)
 from piste.lighting.lights import Lights, default_lights, light_terms, shade
 from piste.lighting.shadows import shadow_visibility
@@ -41,9 +45,11 @@ from piste.workers import die_with_parent, kill_pool
 __all__ = [
     "BAKE_VERSION",
     "bake_lightmap",
+    "partial_usage",
+    "clean_partials",
+    "kept_chunks_error",
     "write_lightmap",
     "load_lightmap",
-    "lightmap_cache_dir",
     "load_or_bake_default_lightmap",
 ]
 
@@ -195,19 +201,11 @@ def bake_lightmap(
             import multiprocessing as mp  # (with the pool: ~15 ms of imports a renderer never needs)
             from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
-            saved = {k_: os.environ.get(k_) for k_ in _WORKER_ENV}
-            os.environ.update(_WORKER_ENV)  # inherited by the spawned workers
-            try:
+            with child_environment(_WORKER_ENV):  # inherited by the spawned workers
                 # workers are SIGKILLed by the kernel if this process dies (piste.workers)
                 pool = ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn"), initializer=die_with_parent,
                                            initargs=(os.getpid(), _init_worker, state))
                 pending = {pool.submit(_bake_chunk, c) for c in todo}
-            finally:
-                for k_, v_ in saved.items():
-                    if v_ is None:
-                        os.environ.pop(k_, None)
-                    else:
-                        os.environ[k_] = v_
             with pool:
                 try:
                     while pending:
@@ -217,12 +215,22 @@ def bake_lightmap(
                 except BaseException:  # an error, Ctrl-C, a full disk: stop the workers now
                     kill_pool(pool)
                     raise
-    except OutputError as exc:
-        # a full disk: the finished chunks are what filled it; keeping them for a resume would
-        # leave the disk full, so they go (an unwritable folder keeps nothing anyway)
-        if part is not None and getattr(exc.__cause__ or exc.__context__, "errno", None) in _DISK_FULL:
+    except (OutputError, OSError) as exc:
+        if part is None:
+            raise
+        cause = exc if isinstance(exc, OSError) else (exc.__cause__ or exc.__context__)
+        if getattr(cause, "errno", None) in _DISK_FULL:
+            # a full disk: the finished chunks are what filled it; keeping them for a resume would
+            # leave the disk full, so they go, and the message says so
+            chunks, size = partial_usage(part)
             shutil.rmtree(part, ignore_errors=True)
-        raise
+            raise OutputError(getattr(exc, "path", None) or exc.filename,
+                              f"{_reason(exc)}; removed this bake's {chunks} finished chunks ({_bytes(size)}) "
+                              f"from {part} to free the space") from exc
+        err = kept_chunks_error(exc, part)
+        if err is exc:
+            raise
+        raise err from exc
     finally:
         if bar is not None:
             bar.close()
@@ -254,6 +262,78 @@ def bake_lightmap(
     lm.resumed_chunks = resumed  # type: ignore[attr-defined]
     lm.stats = dict(stats)  # type: ignore[attr-defined]
     return lm
+
+
+def _bytes(n: int) -> str:
+    return f"{n / 1e6:.1f} MB, {n:,} bytes" if n >= 1e5 else f"{n:,} bytes"
+
+
+def _reason(exc: BaseException) -> str:
+    if isinstance(exc, OutputError):
+        return str(exc)
+    if isinstance(exc, OSError):
+        from piste.errors import describe_os_error
+
+        return describe_os_error(exc)
+    return str(exc) or type(exc).__name__
+
+
+def partial_usage(partial_dir) -> tuple[int, int]:
+    """``(chunks, bytes)`` kept under ``partial_dir`` (a bake's ``.partial`` folder, every input's
+    sub-folder): finished chunks (``chunk_NNNNN.npy``) and the bytes of every file there.  Links
+    are not followed; a missing folder holds ``(0, 0)``."""
+    chunks = size = 0
+    root = Path(partial_dir)
+    if root.is_symlink() or not root.is_dir():
+        return 0, 0
+    for dirpath, dirnames, filenames in os.walk(root):  # os.walk does not follow links to folders
+        for name in filenames:
+            try:
+                st = os.lstat(os.path.join(dirpath, name))
+            except OSError:
+                continue
+            if stat.S_ISREG(st.st_mode):
+                size += st.st_size
+                chunks += name.startswith("chunk_") and name.endswith(".npy")
+    return chunks, size
+
+
+def clean_partials(partial_dir) -> tuple[int, int]:
+    """Remove the resumable chunks under ``partial_dir`` (see :func:`partial_usage`); returns the
+    ``(chunks, bytes)`` removed.  Only the baker's own files go (``chunk_*.npy`` / ``.json`` and
+    their temporary files, then the emptied folders); anything else there is left, and a link
+    (``partial_dir`` itself or inside it) is never followed."""
+    root = Path(partial_dir)
+    chunks, size = partial_usage(root)
+    if chunks == 0 and size == 0:
+        return 0, 0
+    removed_chunks = removed = 0
+    for dirpath, _dirnames, filenames in os.walk(root, topdown=False):
+        for name in filenames:
+            f = os.path.join(dirpath, name)
+            try:
+                st = os.lstat(f)
+            except OSError:
+                continue
+            if stat.S_ISREG(st.st_mode) and name.startswith(("chunk_", ".chunk_")):
+                os.unlink(f)
+                removed += st.st_size
+                removed_chunks += name.startswith("chunk_") and name.endswith(".npy")
+        with contextlib.suppress(OSError):  # not empty (someone else's files): kept
+            os.rmdir(dirpath)
+    return removed_chunks, removed
+
+
+def kept_chunks_error(exc: BaseException, partial_dir) -> BaseException:
+    """The error to raise for ``exc`` that stopped a bake (or the write after it) while finished
+    chunks are kept under ``partial_dir``: an :class:`OutputError` naming the chunks' folder, their
+    count and size, and how to resume or remove them; ``exc`` itself when nothing is kept."""
+    chunks, size = partial_usage(partial_dir)
+    if not chunks:
+        return exc
+    return OutputError(partial_dir, f"the bake stopped ({_reason(exc)}); its {chunks} finished chunks "
+                                    f"({_bytes(size)}) are kept here: the same command resumes from them, and "
+                                    "deleting this folder (`piste bake --clean` for piste bake's --out) frees them")
 
 
 def _remove_stale_partials(partial_dir: Path, key: str) -> None:
@@ -407,27 +487,22 @@ def load_lightmap(out_dir, verify: bool = True) -> LightMap:
         raise FormatError(npath, f"unreadable light map ({type(exc).__name__}: {exc})") from None
 
 
-def lightmap_cache_dir() -> Path:
-    """Where cached bakes live: ``$PISTE_CACHE_DIR`` or ``~/.cache/piste``, then ``lightmaps/``."""
-    base = os.environ.get("PISTE_CACHE_DIR") or os.path.join(os.path.expanduser("~"), ".cache", "piste")
-    return Path(base) / "lightmaps"
-
-
 def load_or_bake_default_lightmap(
-    net, lights: Lights | None = None, res: int = 8, shadows: bool = True, cache_dir=None, jobs: int = 0,
-    progress: bool = False,
+    net, lights: Lights | None = None, res: int = 8, shadows: bool = True, *, cache_dir: str | os.PathLike,
+    jobs: int = 0, progress: bool = False,
 ) -> LightMap:
     """The light map of ``net`` (e.g. :func:`piste.world.course.default_course`) under ``lights`` (default:
     :func:`~piste.lighting.lights.default_lights`), from the disk cache or baked and cached.
 
-    The cache entry is ``cache_dir/<inputs hash>/`` (default :func:`lightmap_cache_dir`), so any
+    The cache entry is ``cache_dir/<inputs hash>/`` (piste's own: ``cache_root() / "lightmaps"``,
+    :func:`piste.pipeline.cache.cache_root`), so any
     change to the net, the lights or ``res`` bakes anew.  Set the result on the net with
     ``lm.apply(net)`` (``lightmap_rect``) and upload ``lm.atlas`` (float) or ``lm.to_uint8()``
     (half-bright) as the light-map texture.
     """
     if lights is None:
         lights = default_lights()
-    cache = Path(cache_dir) if cache_dir is not None else lightmap_cache_dir()
+    cache = Path(cache_dir)
     key = inputs_key(net, lights, res, 1, shadows, 64, BAKE_VERSION)
     entry = cache / key
     if (entry / "manifest.json").exists():

@@ -13,6 +13,7 @@ Hasher                          incremental SHA-256 over bytes, str, JSON, array
 content_key(*parts) -> str      hex key of the parts
 Cache(root)                     ``get(step, key)``, ``put(step, key, arrays, meta)``, ``path(step, key)``
 npz_bytes(arrays) -> bytes      deterministic .npz bytes
+cache_root() -> Path            piste's own cache folder (built default scenes, baked light maps)
 """
 
 from __future__ import annotations
@@ -24,11 +25,26 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
+from piste.extras import environ
 from piste.formats.atomic import write_bytes_atomic
 
-__all__ = ["Hasher", "content_key", "Cache", "npz_bytes", "read_npz_bytes"]
+__all__ = ["Hasher", "content_key", "Cache", "npz_bytes", "read_npz_bytes", "cache_root"]
 
 _EPOCH = (1980, 1, 1, 0, 0, 0)
+
+
+def cache_root() -> Path:
+    """piste's cache folder, the one place it is decided: ``$PISTE_CACHE_DIR``, else
+    ``$XDG_CACHE_HOME/piste`` (the XDG base directories), else ``~/.cache/piste``.  Built default
+    scenes live in ``scenes/``, baked light maps in ``lightmaps/``.  (A scene's own step cache is
+    beside the scene: :func:`piste.pipeline.build.default_cache_dir`.)"""
+    own = environ("PISTE_CACHE_DIR")
+    if own:
+        return Path(own).expanduser()
+    xdg = environ("XDG_CACHE_HOME")
+    if xdg and Path(xdg).is_absolute():  # the spec: a relative path is invalid and ignored
+        return Path(xdg) / "piste"
+    return Path.home() / ".cache" / "piste"
 
 
 class Hasher:

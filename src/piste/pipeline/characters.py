@@ -200,7 +200,7 @@ def lods_from_arrays(arrays: dict, prefix: str, meta: dict, model=None) -> list:
     """The LODs as built (meshes and palettes), :class:`piste.character.LOD` items."""
     out = []
     for i, info in enumerate(meta["lods"]):
-        g = lambda k: arrays[f"{prefix}lod{i}/{k}"]  # noqa: E731
+        g = lambda k, i=i: arrays[f"{prefix}lod{i}/{k}"]  # noqa: E731
         mesh = SkinnedMesh(name=f"{meta['name']}/{info['name']}", positions=g("positions"), indices=g("indices"),
                            normals=g("normals"), uv=g("uv"), joints=g("joints"), weights=g("weights"),
                            texture=arrays[prefix + "texture"], skinned=True, group=meta["name"],

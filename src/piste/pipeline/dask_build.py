@@ -21,7 +21,7 @@ on the others (or let dask-jobqueue / dask-kubernetes do it: piste only needs th
 
 from __future__ import annotations
 
-import sys
+import logging
 import time
 
 from piste.errors import ConfigError
@@ -29,6 +29,8 @@ from piste.pipeline.tiled_build import (TiledResult, TiledSpec, build_tiles, fit
                                         write_index)
 
 __all__ = ["dask_client", "close_client", "build_tiles_dask", "build_scene_tiles"]
+
+log = logging.getLogger(__name__)
 
 
 def _distributed():
@@ -97,7 +99,7 @@ def build_tiles_dask(spec: TiledSpec, client, progress: bool = False) -> TiledRe
 
         bar = tqdm(total=len(futures), desc="tiles (dask)", unit="task", leave=False)
         if client.dashboard_link:
-            print(f"Dask dashboard: {client.dashboard_link}", file=sys.stderr, flush=True)
+            log.info("Dask dashboard: %s", client.dashboard_link)
     results = {}
     try:
         for fut in distributed.as_completed(futures):

@@ -5,8 +5,8 @@ baked light map (8 x 8 texels a patch, terrain shadows), with a camera flying do
 six riders of the default pack following the track (``[pack] follow = "track"``, the camera chasing
 the first) and the course's trees, signs, rocks and rails placed along it (``[auto_objects]``, the
 course's seed).  It
-is an ordinary scene file, written into the piste cache folder (``$PISTE_CACHE_DIR`` or
-``~/.cache/piste``, then ``scenes/``) and built by :func:`piste.pipeline.build_scene` with the
+is an ordinary scene file, written into the piste cache folder
+(:func:`piste.pipeline.cache.cache_root`, then ``scenes/``) and built by :func:`piste.pipeline.build_scene` with the
 step cache beside it, so the first ``piste demo`` bakes the light map and every later one loads
 the bundle.  The runtime (:func:`piste.pipeline.preview.track_scene`) makes the pack and the
 objects from those keys.
@@ -16,18 +16,17 @@ API
 DEFAULT_SCENE_TOML                      the scene file (``{seed}`` filled in)
 default_scene_path(seed, root=None)     where the scene file lives (written when missing or changed)
 build_default_scene(seed=0, root=None, progress=False) -> BuildResult
-cache_root() -> Path                    ``$PISTE_CACHE_DIR`` or ``~/.cache/piste``
 """
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 from piste.formats.atomic import write_bytes_atomic
 from piste.pipeline.build import BuildResult, build_scene
+from piste.pipeline.cache import cache_root
 
-__all__ = ["DEFAULT_SCENE_TOML", "cache_root", "default_scene_path", "build_default_scene"]
+__all__ = ["DEFAULT_SCENE_TOML", "default_scene_path", "build_default_scene"]
 
 #: the built-in default scene
 DEFAULT_SCENE_TOML = """\
@@ -73,13 +72,8 @@ fov = 60.0
 """
 
 
-def cache_root() -> Path:
-    """``$PISTE_CACHE_DIR`` or ``~/.cache/piste`` (where baked light maps and built scenes live)."""
-    return Path(os.environ.get("PISTE_CACHE_DIR") or Path.home() / ".cache" / "piste")
-
-
 def default_scene_path(seed: int = 0, root=None) -> Path:
-    """The default scene file of ``seed`` under ``root`` (default: :func:`cache_root` / ``scenes``),
+    """The default scene file of ``seed`` under ``root`` (default: :func:`piste.pipeline.cache.cache_root` / ``scenes``),
     written (atomically) when missing or different."""
     folder = Path(root) if root is not None else cache_root() / "scenes"
     path = folder / f"default-seed{int(seed)}.toml"

@@ -214,9 +214,9 @@ class CharacterPass:
         normals (k, v, 3))`` per LOD ``l`` (world space; see :class:`piste.world.scene.SceneFrame`)."""
         if len(skinned) != len(self.lods):
             raise RenderError(f"character pass: {len(skinned)} LOD groups for {len(self.lods)} LODs")
-        for l, (idx, pos, nrm) in enumerate(skinned):
-            self.lods[l].write(pos, nrm)
-            self.riders[l] = np.asarray(idx)
+        for level, (idx, pos, nrm) in enumerate(skinned):
+            self.lods[level].write(pos, nrm)
+            self.riders[level] = np.asarray(idx)
 
     def draw(self, vp, eye, lights, sun=None, fog=None, specular: bool = True, light_only: bool = False,
              base: bool = True) -> None:

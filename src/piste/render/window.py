@@ -27,7 +27,7 @@ frames along a fixed path without input and returns the frame times.
 from __future__ import annotations
 
 import json
-import os
+import logging
 import sys
 import time
 from dataclasses import dataclass, field
@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from piste.errors import RenderError
+from piste.extras import environ
 from piste.formats.atomic import atomic_path
 from piste.render.context import Offscreen, save_png
 from piste.render.overlay import OverlayPass, StatsHistory, overlay_image
@@ -50,7 +51,7 @@ HELP = ("W/S/A/D fly, Q/E down/up, Shift fast, arrows or mouse drag look, F foll
 def has_display() -> bool:
     """Whether a window can be opened (an X11 or Wayland display on Linux; always on macOS/Windows)."""
     if sys.platform.startswith("linux"):
-        return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+        return bool(environ("DISPLAY") or environ("WAYLAND_DISPLAY"))
     return True
 
 
@@ -197,7 +198,7 @@ def run_window(make_view, camera, size=(640, 448), caption: str = "piste view", 
         raise RenderError("`piste view` needs pyglet: pip install 'piste[gl]' (or use `piste demo` for images)") from None
     import moderngl
 
-    log = log or (lambda msg: print(msg, file=sys.stderr))
+    log = log or logging.getLogger(__name__).info
     opts = opts or ViewOptions()
     w, h = int(size[0]), int(size[1])
     try:

@@ -42,7 +42,7 @@ Measured on matplotlib's ``jacksboro_fault_dem.npz`` (344 x 403 samples, ~75 x 9
 
 from __future__ import annotations
 
-import sys
+import logging
 import time
 
 from dataclasses import dataclass
@@ -51,6 +51,8 @@ import numpy as np
 
 from piste.errors import ValidationError
 from piste.terrain.bezier import bernstein
+
+log = logging.getLogger(__name__)
 
 __all__ = ["FittedGrid", "fit_control_points", "bezier_basis_matrix", "c1_to_bezier", "bspline_to_bezier"]
 
@@ -217,8 +219,8 @@ def fit_control_points(
     t0 = time.perf_counter()
 
     def stage(msg):
-        if progress:
-            print(f"fit_heightfield: {msg} ({time.perf_counter() - t0:.2f} s)", file=sys.stderr)
+        log.log(logging.INFO if progress else logging.DEBUG, "fit_heightfield: %s (%.2f s)", msg,
+                time.perf_counter() - t0)
 
     z = _check_field(z)
     dx, dy = _pair(spacing, "spacing")

@@ -19,7 +19,7 @@ edges are exactly equal in both patches (the basis of bit-identical, crack-free 
 
 from __future__ import annotations
 
-import sys
+import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,6 +31,8 @@ from piste.formats.bpt import read_bpt
 from piste.terrain.bezier import evaluate
 from piste.terrain.heightfield import fit_control_points
 from piste.terrain.lod import edge_levels
+
+log = logging.getLogger(__name__)
 
 #: control-point indices (i, j) of each side, in the side's own direction: (4 sides, 4 points, 2)
 SIDE_INDEX = np.array(
@@ -384,8 +386,8 @@ class PatchNet:
         grid = fit_control_points(z, spacing, **kwargs)
         net = cls(grid.control_points, uv=grid.uv, tol=grid.tol, name=name)
         net.grid_shape = grid.grid_shape  # patches per column and per row: patch py * Px + px
-        if kwargs.get("progress"):
-            print(f"fit_heightfield: PatchNet of {len(net)} patches", file=sys.stderr)
+        log.log(logging.INFO if kwargs.get("progress") else logging.DEBUG, "fit_heightfield: PatchNet of %d patches",
+                len(net))
         return net
 
     def save(self, path) -> None:

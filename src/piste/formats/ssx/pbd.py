@@ -37,10 +37,10 @@ import numpy as np
 from piste.errors import FormatError, ValidationError
 from piste.formats.atomic import write_bytes_atomic
 from piste.formats.safe_io import read_regular
+from piste.terrain.net import PatchNet
 
 #: the largest file the reader accepts (bytes)
 MAX_FILE_BYTES = 512 << 20  # a big retail level is a few tens of MB
-from piste.terrain.net import PatchNet
 
 __all__ = [
     "Pbd", "read_pbd", "parse_pbd", "write_pbd", "PATCH_DTYPE", "PATCH_SIZE", "HEADER_SIZE", "VERSION",
