@@ -93,3 +93,78 @@ def test_cli_renders_a_level_with_riders(level, gl, tmp_path, capsys):
     assert np.asarray(Image.open(a)).std() > 5
     assert main(["render", str(level), "--eye", "0", "0", "1", "--out", str(a)]) != 0
     assert "--eye and --target go together" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def world(tmp_path_factory):
+    """16 x 16 patches (320 m square) in 2 x 2 tiles of 8 x 8 patches, 3 x 3 light-map texels."""
+    from piste.pipeline.tiled_build import build_tiles, synthetic_spec
+
+    root = tmp_path_factory.mktemp("tiles") / "w.tiles"
+    build_tiles(synthetic_spec(root, 16, tile_patches=8, res=3, spacing=20.0, shadows=False))
+    return root
+
+
+def _near(bundle):
+    """A camera 12 m behind the riders' middle, looking at them."""
+    from piste.world.camera import Camera
+
+    m = bundle.arrays["riders/matrix"][:, :3, 3].mean(0)
+    return Camera(m + np.array([0.0, -12.0, 5.0]), m, fov_y=50.0, near=0.1, far=5000.0)
+
+
+def test_tiled_world_through_the_runtime(world, gl):
+    from piste.render.streaming import StreamingRenderer, StreamingTerrain
+
+    b = open_source(world, budget_mb=8)
+    assert b.manifest["terrain"]["source"] == "tiles" and len(b.net) == 64 and list(b.cameras) == ["flight", "centre"]
+    p = ScenePreview(b, size=SIZE, ctx=gl)
+    try:
+        assert isinstance(p.terrain, StreamingTerrain) and p.renderer is None
+        img = p.render()
+        assert p.stats["near_tiles"] + p.stats["far_tiles"] > 0
+    finally:
+        p.release()
+    r = StreamingRenderer(world, size=SIZE, budget_bytes=8 << 20, ctx=gl)
+    try:
+        ref = r.render(b.cameras["flight"], wait=True)
+    finally:
+        r.close()
+    assert np.array_equal(img, ref)  # the tiles' own picture
+    withr = open_source(world, budget_mb=8, riders=3)
+    cam = _near(withr)
+    p = ScenePreview(withr, size=SIZE, ctx=gl)
+    try:
+        assert isinstance(p.renderer, SceneRenderer) and isinstance(p.renderer.terrain, StreamingTerrain)
+        img = p.render(cam).astype(int)
+        assert p.stats["riders"] == 3 and p.stats["shadow_patches"] > 0
+    finally:
+        p.release()
+    p = ScenePreview(b, size=SIZE, ctx=gl)
+    try:
+        bare = p.render(cam).astype(int)
+    finally:
+        p.release()
+    d = np.abs(img - bare).max(-1)
+    assert (d > 30).sum() >= 50 and np.median(d) == 0  # riders (and shadows) over the same tiles
+
+
+def test_cli_renders_a_tiled_world_from_any_camera_with_riders(world, gl, tmp_path, capsys):
+    from PIL import Image
+
+    from piste.cli import main
+
+    b = open_source(world, riders=2)
+    cam = _near(b)
+    eye, tgt = (list(map(str, v)) for v in (cam.eye, cam.target))
+    a, r = tmp_path / "a.png", tmp_path / "r.png"
+    base = ["render", str(world), "--size", *map(str, SIZE), "--budget", "8", "--quiet"]
+    assert main(base + ["--out", str(a), "--eye", *eye, "--target", *tgt]) == 0
+    assert "1 frame(s) from the camera" in capsys.readouterr().out
+    assert main(base + ["--out", str(r), "--eye", *eye, "--target", *tgt, "--riders", "2"]) == 0
+    ia, ir = (np.asarray(Image.open(x)).astype(int) for x in (a, r))
+    assert (np.abs(ia - ir).max(-1) > 30).sum() >= 30
+    assert main(base + ["--out", str(a), "--camera", "centre", "--frames", "2"]) == 0
+    assert "2 frame(s) from centre" in capsys.readouterr().out
+    assert main(base + ["--list"]) == 0
+    assert "flight" in capsys.readouterr().out

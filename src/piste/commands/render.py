@@ -75,25 +75,7 @@ def run(args) -> int:
     if cam is not None and args.camera:
         raise ConfigError("--camera names a scene camera; --eye/--target give one: use one or the other")
     size = tuple(args.size) if args.size else None
-    if kind == "tiles":  # a tiled world: its tiles streamed (piste.render.streaming)
-        import numpy as np
-
-        from piste.render.streaming import render_flight
-
-        size = size or (640, 448)
-        if args.video and (size[0] % 2 or size[1] % 2):
-            raise ConfigError(f"--size {size[0]} {size[1]}: H.264 video needs an even width and height")
-        r = render_flight(args.scene, out=args.out, size=size, frames=args.frames, fps=args.fps, speed=args.speed,
-                          budget_mb=args.budget, video=args.video, camera=cam,
-                          progress=not args.quiet and sys.stderr.isatty() and args.frames > 1)
-        ms = np.array(r["ms"])
-        how = f"flying at {args.speed:g} m/s" if cam is None else "from --eye"
-        print(f"wrote {args.out}" + (f" and {args.video}" if args.video else "") +
-              f": {r['frames']} frame(s) {how}, median {np.median(ms):.1f} ms "
-              f"(max {ms.max():.1f}), resident {r['resident_mb']:.1f} MiB of {args.budget:g}, "
-              f"last frame {r['near']} near + {r['far']} far tiles")
-        return 0
-    b = open_source(args.scene, quiet=args.quiet, warm=True, riders=args.riders)
+    b = open_source(args.scene, quiet=args.quiet, warm=True, riders=args.riders, budget_mb=args.budget)
     if args.list:
         for c in b.manifest.get("cameras", []):
             extra = f" track {c['track'][0]:.2f}..{c['track'][1]:.2f}" if c.get("track") else ""
@@ -106,15 +88,30 @@ def run(args) -> int:
     for out in (args.out, args.video):  # unwritable outputs are reported before rendering
         if out:
             check_writable_folder(Path(out).parent)
+    flight = kind == "tiles" and cam is None and not args.camera  # a tiled world: fly across it at --speed
+    if flight:
+        from piste.pipeline.tiles_source import flight_cameras
+
+        cam = flight_cameras(b, args.frames, args.fps, args.speed)
     if b.visibility is not None:  # cameras above the visibility band draw without the sets: say so
         from piste.pipeline.visibility import band_warnings
 
-        cams = [cam or camera_at(b, args.camera, i, args.frames) for i in range(args.frames)]
+        cams = [cam if cam is not None else camera_at(b, args.camera, i, args.frames) for i in range(args.frames)]
         for msg in band_warnings(b.net, b.visibility, cams, [f"{args.camera or 'camera'} frame {i}" for i in range(len(cams))])[:1]:
             print(f"warning: {msg}", file=sys.stderr)
-    stats = render_frames(b, cam or args.camera, args.frames, size=size, fps=args.fps, video=args.video,
+    stats = render_frames(b, cam if cam is not None else args.camera, args.frames, size=size, fps=args.fps, video=args.video,
                           first_png=args.out, progress=not args.quiet and sys.stderr.isatty() and args.frames > 1,
                           lod_morph=_morph(args))
+    if kind == "tiles":
+        import numpy as np
+
+        ms = np.array([st["ms"] for st in stats])
+        how = f"flying at {args.speed:g} m/s" if flight else f"from {args.camera or 'the camera'}"
+        print(f"wrote {args.out}" + (f" and {args.video}" if args.video else "") +
+              f": {len(stats)} frame(s) {how}, median {np.median(ms):.1f} ms (max {ms.max():.1f}), resident "
+              f"{max(st['resident_bytes'] for st in stats) / 2**20:.1f} MiB of {args.budget:g}, last frame "
+              f"{stats[-1]['near_tiles']} near + {stats[-1]['far_tiles']} far tiles")
+        return 0
     if stats and "frustum_patches" in stats[0]:
         fr = sum(s["frustum_patches"] for s in stats) / len(stats)
         dr = sum(s["drawn_patches"] for s in stats) / len(stats)

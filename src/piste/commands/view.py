@@ -129,17 +129,18 @@ def _view_scene(args) -> int:
     return 0
 
 
-def _view_source(args) -> int:
-    """``piste view LEVEL.pbd`` (any source that is not watched): opened by
+def _view_source(args, kind: str) -> int:
+    """``piste view LEVEL.pbd`` or ``WORLD.tiles`` (a source that is not watched): opened by
     :func:`piste.pipeline.open_scene.open_source` and drawn by the runtime in the window (or one
-    frame off-screen to ``--out`` without a display)."""
+    frame off-screen to ``--out`` without a display).  A tiled world starts at its flight
+    (``--benchmark``: along it at 100 m/s); in the window its tiles load while far stand-ins show."""
     from piste.pipeline.live import PreviewView
     from piste.pipeline.open_scene import open_source
     from piste.pipeline.preview import ScenePreview, camera_at
     from piste.render import save_png
-    from piste.render.window import ViewOptions, has_display, run_window
+    from piste.render.window import ViewOptions, has_display, print_benchmark, run_window
 
-    bundle = open_source(args.scene, warm=True, riders=args.riders)
+    bundle = open_source(args.scene, warm=True, riders=args.riders, budget_mb=args.budget)
     size = tuple(args.size)
     kw = {"lightmap_mode": args.lightmap, "face": args.face, "lod_morph": _morph(args)}
     cam = camera_at(bundle, args.camera)
@@ -154,7 +155,21 @@ def _view_source(args) -> int:
         print(f"wrote {save_png(args.out, image)}")
         return 0
     opts = ViewOptions(lightmap_mode=args.lightmap, debug=args.debug, follow=args.follow, overlay=not args.no_overlay)
-    st = run_window(lambda ctx: PreviewView(ScenePreview(bundle, size=size, ctx=ctx, **kw)), cam, size=size,
+
+    def make(ctx):
+        return PreviewView(ScenePreview(bundle, size=size, ctx=ctx, stream_wait=False, **kw))
+
+    if args.benchmark:
+        path = None
+        if kind == "tiles":
+            from piste.pipeline.tiles_source import flight_cameras
+
+            flight = flight_cameras(bundle, args.benchmark + 5)
+            path = lambda i: flight[min(max(i - 5, 0), len(flight) - 1)]  # noqa: E731
+        st = run_window(make, cam, size=size, opts=opts, benchmark=args.benchmark, benchmark_camera=path)
+        print_benchmark(st, f"{bundle.name}" + (", flying at 100 m/s" if kind == "tiles" else ""), size)
+        return 0
+    st = run_window(make, cam, size=size,
                     caption=f"piste view {bundle.name}", opts=opts, frames=args.frames, exit_after=args.exit_after,
                     screenshot=args.out if (args.frames or args.exit_after) else None, state=args.state)
     print(f"{st['frames']} frames")
@@ -166,14 +181,9 @@ def run(args) -> int:
         from piste.pipeline.open_scene import source_kind
 
         kind = source_kind(args.scene)
-        if kind == "tiles":  # a tiled world: its tiles streamed
-            from piste.render.streaming import view_tiles
-
-            return view_tiles(args.scene, size=tuple(args.size), budget_mb=args.budget, out=args.out,
-                              frames=args.frames, exit_after=args.exit_after, state=args.state, benchmark=args.benchmark)
         if kind in ("scene", "bundle"):  # watched and rebuilt live
             return _view_scene(args)
-        return _view_source(args)
+        return _view_source(args, kind)
     from piste.extras import require
     from piste.pipeline.bundle_objects import load_bundle
     from piste.pipeline.default_scene import build_default_scene

@@ -11,19 +11,19 @@ source                    adapter
 ``NAME.piste``            a built bundle (:func:`piste.pipeline.bundle_objects.load_bundle`)
 ``NAME.toml``             a scene file, built first with the step cache beside it
 ``NAME.pbd``              an SSX Tricky level with its ``.ssh`` / ``_L.ssh`` (:mod:`piste.pipeline.ssx_source`)
-``NAME.tiles/``           a tiled world: streamed by its own terrain renderer (:func:`source_kind`
-                          says ``"tiles"``; see :mod:`piste.render.streaming`)
+``NAME.tiles/``           a tiled world, its tiles streamed as the terrain (:mod:`piste.pipeline.tiles_source`)
 ========================  ====================================================================
 
-A new source is one new module with an ``open_<kind>(path, quiet, warm) -> Bundle`` function and
-one :class:`Source` row in :data:`SOURCES`.
+A new source is one new module with an ``open_<kind>(path, quiet, warm, **options) -> Bundle``
+function and one :class:`Source` row in :data:`SOURCES`.  How a source's terrain is drawn is the
+runtime's choice by the manifest's ``terrain.source`` (:func:`piste.pipeline.preview.terrain_renderer`).
 
 API
 ---
 SOURCES                                       the registry, in matching order
 source_kind(path) -> str                      "bundle", "scene", "ssx", "tiles" (ConfigError otherwise)
-open_source(path, quiet=True, warm=False, riders=0) -> Bundle
-load_or_build(scene, quiet=True, warm=False) -> Bundle     (= open_source: every kind but tiles)
+open_source(path, quiet=True, warm=False, riders=0, **options) -> Bundle   (tiles: ``budget_mb``)
+load_or_build(scene, quiet=True, warm=False) -> Bundle     (= open_source)
 load_net(path=None) -> PatchNet         a .bpt / .npz patch net, or the default course (``piste bake``, ``piste ssx``)
 """
 
@@ -39,6 +39,7 @@ from piste.pipeline.build import build_scene
 from piste.pipeline.bundle_objects import Bundle, load_bundle
 from piste.pipeline.runtime_riders import add_standing_riders
 from piste.pipeline.ssx_source import open_ssx_level
+from piste.pipeline.tiles_source import open_tiles
 from piste.terrain.net import PatchNet
 from piste.world.course import default_course
 
@@ -66,20 +67,16 @@ def _open_scene_file(path: Path, quiet: bool, warm: bool) -> Bundle:
     return load_bundle(r.path, warm=warm)
 
 
-def _open_tiles(path: Path, quiet: bool, warm: bool) -> Bundle:
-    raise ConfigError(f"{path}: a tiled world is streamed by piste.render.streaming (piste render|view WORLD.tiles); "
-                      "it has no single patch net to open as a scene")
-
-
 @dataclass(frozen=True)
 class Source:
-    """One kind of source: ``kind``, ``suffix`` (lower case, with the dot; a folder for tiles) and
-    ``open(path, quiet, warm) -> Bundle``."""
+    """One kind of source: ``kind``, ``suffix`` (lower case, with the dot; a folder for tiles),
+    ``open(path, quiet, warm, **options) -> Bundle`` and the ``options`` it takes."""
 
     kind: str
     suffix: str
-    open: Callable[[Path, bool, bool], Bundle]
+    open: Callable[..., Bundle]
     folder: bool = False
+    options: tuple = ()
 
 
 #: every source the runtime opens, in matching order
@@ -87,7 +84,7 @@ SOURCES: list[Source] = [
     Source("bundle", ".piste", _open_bundle),
     Source("scene", ".toml", _open_scene_file),
     Source("ssx", ".pbd", open_ssx_level),
-    Source("tiles", ".tiles", _open_tiles, folder=True),
+    Source("tiles", ".tiles", open_tiles, folder=True, options=("budget_mb",)),
 ]
 
 
@@ -105,14 +102,15 @@ def source_kind(path) -> str:
     return _source(path).kind
 
 
-def open_source(path, quiet: bool = True, warm: bool = False, riders: int = 0) -> Bundle:
-    """The runtime scene of ``path`` (any kind in :data:`SOURCES` but tiles).  ``warm``: start the
-    terrain's resident vertex blocks at load (see :func:`load_bundle`).  ``riders``: add that many
-    default riders standing on the terrain when the source has none of its own
-    (:func:`piste.pipeline.runtime_riders.add_standing_riders`)."""
+def open_source(path, quiet: bool = True, warm: bool = False, riders: int = 0, **options) -> Bundle:
+    """The runtime scene of ``path`` (any kind in :data:`SOURCES`).  ``warm``: start the terrain's
+    resident vertex blocks at load (see :func:`load_bundle`).  ``riders``: add that many default
+    riders standing on the terrain when the source has none of its own
+    (:func:`piste.pipeline.runtime_riders.add_standing_riders`).  ``options``: the source's own
+    (a tiled world's ``budget_mb``); options another kind takes are ignored."""
     src = _source(path)
     p = Path(str(path).rstrip("/\\")) if src.folder else Path(path)
-    bundle = src.open(p, quiet, warm)
+    bundle = src.open(p, quiet, warm, **{k: v for k, v in options.items() if k in src.options and v is not None})
     if riders and not bundle.manifest.get("riders") and not bundle.manifest.get("pack"):
         bundle = add_standing_riders(bundle, int(riders))
     return bundle

@@ -32,6 +32,7 @@ render_frames(bundle, camera, frames, size, fps, video=None, first_png=None) -> 
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -49,6 +50,7 @@ from piste.render.object_pass import ObjectPass
 from piste.render.scene_renderer import SceneRenderer
 from piste.render.sky_pass import HORIZON
 from piste.render.ssx_pass import SsxTerrainRenderer
+from piste.render.streaming import StreamingTerrain
 from piste.render.video import VideoWriter
 from piste.terrain.resident import resident_fits, resident_terrain
 from piste.world.camera import Camera, track_camera, warn_if_no_terrain
@@ -235,6 +237,22 @@ def track_scene(bundle, start: float | None = None, casts=()):
     return scene
 
 
+def terrain_renderer(bundle, size, ctx, atlas, lightmap="bundle", stream_wait: bool = True, kw=None):
+    """The terrain renderer a source's manifest asks for (``terrain.source``), or None for the
+    default :class:`~piste.render.frame.TerrainRenderer`: a tiled world streams its tiles
+    (:class:`~piste.render.streaming.StreamingTerrain`; the bundle's net is the local terrain), an
+    SSX level with its stored light-map texels blends them in ``ps2`` mode
+    (:class:`~piste.render.ssx_pass.SsxTerrainRenderer`), riders and all."""
+    kw = dict(kw or {})
+    t = bundle.manifest.get("terrain") or {}
+    if t.get("source") == "tiles":
+        return StreamingTerrain(t["root"], bundle.net, size=size, ctx=ctx,
+                                budget_bytes=int(float(t.get("budget_mb", 256.0)) * 2**20), wait=stream_wait)
+    if "lightmap/source" in bundle.arrays and lightmap == "bundle":  # an SSX level: ps2 mode
+        return SsxTerrainRenderer(bundle.net, bundle.arrays["lightmap/source"], size=size, ctx=ctx, lightmap=atlas, **kw)
+    return None
+
+
 def camera_at(bundle, name: str | None = None, i: int = 0, n: int = 1):
     """The scene camera ``name`` (default: the first) at frame ``i`` of ``n``: a track camera flies
     from its first to its second fraction of the track; other cameras stay put."""
@@ -285,6 +303,8 @@ class ScenePreview:
         scene file's ``render.object_lod``, else 0.5
     lod_morph : geomorph the terrain between LOD levels (the CLI's ``--lod-morph``); default: the
         scene file's ``[lod] morph``, else on
+    stream_wait : a tiled world: every frame waits for the tiles it wants (default; the same picture
+        whatever the loader's timing); False in a window (far stand-ins while tiles load)
 
     After :meth:`render`, ``stats`` holds the frame's counts and ``frame`` the renderer's own
     result (a :class:`piste.render.Frame` for terrain-only scenes, else a
@@ -295,7 +315,7 @@ class ScenePreview:
                  object_lighting: str = "baked", shadows: bool = True, specular: bool = True,
                  lightmap_mode: str | None = None, start: float | None = None, casts=(),
                  terrain_only: bool = False, face: str | None = None, fog=None, object_lod: float | None = None,
-                 lod_morph: bool | None = None):
+                 lod_morph: bool | None = None, stream_wait: bool = True):
         if not (isinstance(lightmap, str) and lightmap in ("bundle", "placeholder")) and lightmap is not None:
             raise ConfigError(f"lightmap must be 'bundle', 'placeholder' or None, got {lightmap!r}")
         self.ctx = ctx if ctx is not None else create_context()
@@ -305,7 +325,8 @@ class ScenePreview:
         self.options = {"scene": scene, "lightmap": lightmap, "object_lighting": object_lighting,
                         "shadows": bool(shadows), "specular": bool(specular), "lightmap_mode": lightmap_mode,
                         "start": start, "casts": list(casts), "terrain_only": bool(terrain_only), "face": face,
-                        "fog": fog, "object_lod": object_lod, "lod_morph": lod_morph}
+                        "fog": fog, "object_lod": object_lod, "lod_morph": lod_morph,
+                        "stream_wait": bool(stream_wait)}
         self.stats: dict = {}
         self.frame = None
         # numba's background import (~0.8 s, mostly holding the GIL) waits until the first frame is
@@ -316,7 +337,8 @@ class ScenePreview:
 
     def _setup(self, bundle) -> None:
         self.bundle = bundle
-        if resident_fits(bundle.net):  # the terrain's resident vertex blocks, built (in the background)
+        streamed = (bundle.manifest.get("terrain") or {}).get("source") == "tiles"
+        if not streamed and resident_fits(bundle.net):  # the terrain's resident vertex blocks, built (in the background)
             resident_terrain(bundle.net, wait=False)  # while the scene and passes set up: a fresh
             # process's first frame waited ~0.2 s for them when they started with the terrain pass
         man = bundle.manifest
@@ -354,16 +376,13 @@ class ScenePreview:
                 self.scene = track_scene(bundle, opt["start"], opt["casts"])
             else:
                 self.scene = BundleScene(bundle)
-            ssx = None
-            if "lightmap/source" in bundle.arrays and opt["lightmap"] == "bundle":  # an SSX level: ps2 mode
-                ssx = SsxTerrainRenderer(bundle.net, bundle.arrays["lightmap/source"], size=self.size, ctx=self.ctx,
-                                         lightmap=atlas, **kw)  # blends its stored Cs/As, riders and all
+            terrain = terrain_renderer(bundle, self.size, self.ctx, atlas, opt["lightmap"], opt["stream_wait"], kw)
             sun = getattr(self.scene, "sun", None)  # the build's sun visibility when it is this scene's
             sunlight = bundle.sun_visibility(sun.direction) \
                 if sun is not None and opt["shadows"] and self.scene.net is bundle.net else None
             self.renderer = SceneRenderer(self.scene, size=self.size, ctx=self.ctx, lightmap=atlas,
                                           object_lighting=mode, shadows=opt["shadows"], specular=opt["specular"],
-                                          face=None if face == "off" else face, terrain=ssx, sunlight=sunlight,
+                                          face=None if face == "off" else face, terrain=terrain, sunlight=sunlight,
                                           object_lod=float(olod), **kw)
             self.terrain = self.renderer.terrain
             self.objects = None
@@ -372,10 +391,8 @@ class ScenePreview:
         else:
             self.scene = None
             self.renderer = None
-            if "lightmap/source" in bundle.arrays and opt["lightmap"] == "bundle":  # an SSX level: ps2 mode
-                self.terrain = SsxTerrainRenderer(bundle.net, bundle.arrays["lightmap/source"], size=self.size,
-                                                  ctx=self.ctx, lightmap=atlas, **kw)  # blends its stored Cs/As
-            else:
+            self.terrain = terrain_renderer(bundle, self.size, self.ctx, atlas, opt["lightmap"], opt["stream_wait"], kw)
+            if self.terrain is None:
                 self.terrain = TerrainRenderer(bundle.net, size=self.size, ctx=self.ctx, lightmap=atlas, **kw)
             objs = None if opt["terrain_only"] else (auto_objects(bundle) or bundle.objects())
             self.objects = None
@@ -479,7 +496,8 @@ def render_frames(bundle, camera=None, frames: int = 1, size=None, fps: int = 30
                   first_png=None, ctx=None, progress: bool = False, **preview_kw) -> list:
     """Render ``frames`` frames (time ``i / fps``; track cameras fly), writing the first to
     ``first_png`` and all to the MP4 ``video`` when given.  Returns each frame's stats.  ``camera``:
-    a scene camera's name, a :class:`piste.world.camera.Camera` (stays put) or None (the first
+    a scene camera's name, a :class:`piste.world.camera.Camera` (stays put), a list of cameras (one
+    a frame: a tiled world's flight) or None (the first
     scene camera; a ``[pack]`` scene, riders following the track, is seen by the chase camera, as in
     ``piste demo``).  ``preview_kw``: :class:`ScenePreview` options (``lod_morph``, ...)."""
     p = ScenePreview(bundle, size=size, ctx=ctx, **preview_kw)
@@ -495,13 +513,18 @@ def render_frames(bundle, camera=None, frames: int = 1, size=None, fps: int = 30
             it = tqdm(it, desc="rendering", unit="frame", leave=False)
         for i in it:
             chase = camera is None and p.follow
-            cam = camera if isinstance(camera, Camera) else (None if chase else camera_at(bundle, camera, i, frames))
+            if isinstance(camera, (list, tuple)):
+                cam = camera[i]
+            else:
+                cam = camera if isinstance(camera, Camera) else (None if chase else camera_at(bundle, camera, i, frames))
+            t0 = time.perf_counter()
             img = p.render(cam, i / float(fps))
+            ms = (time.perf_counter() - t0) * 1e3
             if i == 0 and first_png is not None:
                 save_png(first_png, img)
             if writer is not None:
                 writer.append(img)
-            out.append(dict(p.stats))
+            out.append(dict(p.stats, ms=ms))
         if writer is not None:
             writer.close()
             writer = None

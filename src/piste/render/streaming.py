@@ -27,11 +27,15 @@ near meshes, the renderer uploads finished ones and releases evicted ones.  ``re
 
 :class:`StreamingRenderer` draws a frame: far tiles not covered by a resident near tile, near
 tiles, frustum-culled per tile, fogged to the sky colour at the view distance.
-:func:`fly_path` is a straight flight across the world (``piste render WORLD.tiles``).
+:class:`StreamingTerrain` is the same renderer as the runtime's terrain (the interface of
+:class:`piste.render.frame.TerrainRenderer`): ``piste render|view WORLD.tiles`` draw through
+:class:`piste.pipeline.preview.ScenePreview` with riders, objects and shadows like any scene
+(:mod:`piste.pipeline.tiles_source`).  :func:`fly_path` is a straight flight across the world.
 """
 
 from __future__ import annotations
 
+import logging
 import queue
 import threading
 import time
@@ -42,14 +46,18 @@ import numpy as np
 
 from piste.errors import ConfigError, FormatError
 from piste.render.context import Offscreen, create_context, save_png
+from piste.render.frame import Frame
 from piste.render.video import VideoWriter
-from piste.render.window import ViewFrame, ViewOptions, has_display, print_benchmark, run_window
 from piste.terrain.bezier import evaluate, grid_params
-from piste.terrain.tiles import TileGrid, TileStore
+from piste.terrain.cull import patch_tree
+from piste.terrain.tessellate import tessellate
+from piste.terrain.tiles import TileError, TileGrid, TileStore, tile_entries
 from piste.world.camera import Camera
 
-__all__ = ["TileCache", "StreamingRenderer", "TileMesh", "near_mesh", "far_mesh", "mesh_bytes", "fly_path",
-           "render_flight", "StreamingView", "view_tiles"]
+__all__ = ["TileCache", "StreamingRenderer", "StreamingTerrain", "TileMesh", "near_mesh", "far_mesh", "mesh_bytes", "fly_path",
+           "render_flight"]
+
+_log = logging.getLogger(__name__)
 
 SKY = (0.80, 0.86, 0.93)
 #: corner strides of the far levels (every tile keeps all of them: 1 + 1/4 + 1/16 + 1/64 of the grid)
@@ -197,9 +205,13 @@ class TileCache:
     def __init__(self, root, budget_bytes: int = 256 << 20, near_radius: float | None = None,
                  view_distance: float | None = None):
         self.store = TileStore(root)
-        self.index = self.store.read_index()
+        self.index = self.store.read_index()  # schema-checked (piste.terrain.tiles.check_index)
         self.grid = self.store.grid()
         g = self.grid
+        if "res" not in self.index:
+            raise FormatError(self.store.index_path, "expected res (light-map texels a patch side): not a built "
+                                                     "tiled world", field="res")
+        entries = tile_entries(self.index, g, self.store.index_path)  # keys, patches, finite bounds checked
         self.budget = int(budget_bytes)
         s = g.samples_per_patch
         tile_size = g.tile_patches * s * max(g.spacing)
@@ -209,15 +221,13 @@ class TileCache:
         self._lock = threading.Lock()
         self.near: dict = {}
         self.far: dict = {}
-        self.bounds: dict = {}
-        self.patches: dict = {}
-        for key, t in self.index["tiles"].items():
-            ty, tx = (int(v) for v in key.split(","))
-            self.bounds[(ty, tx)] = np.asarray(t["bounds"], dtype=np.float64)
-            self.patches[(ty, tx)] = int(t["patches"])
+        self.bounds: dict = {t: e["bounds"] for t, e in entries.items()}
+        self.patches: dict = {t: e["patches"] for t, e in entries.items()}
+        #: tiles that could not be read: ``{(ty, tx): TileError}`` (not drawn; the others are)
+        self.bad: dict = {}
+        self._wanted: set = set()
         # the bytes of a tile's near mesh, estimated exactly from its patch count
-        self._near_estimate = {t: self._near_bytes(int(self.index["tiles"][f"{t[0]},{t[1]}"]["patches"]), t)
-                               for t in self.bounds}
+        self._near_estimate = {t: self._near_bytes(self.patches[t], t) for t in self.bounds}
         #: the tiles in a fixed order, their boxes ``(n, 3)`` (skirts included below)
         self.tiles = sorted(self.bounds)
         self.lo = np.array([self.bounds[t][0] for t in self.tiles])
@@ -226,9 +236,17 @@ class TileCache:
         self._far_bytes = 0
         self.far_lod_distance = 0.5 * tile_size
         for t in sorted(self.bounds):
-            lit = self._read("lit", t, ("far_positions", "far_colors"))
+            try:
+                lit = self._read("lit", t, ("far_positions", "far_colors"))
+            except TileError as exc:  # drawn as a hole; the other tiles are drawn
+                self._bad_tile(t, exc)
+                continue
             self.far[t] = {k: far_mesh(lit, self._depth(t), k) for k in FAR_STRIDES}
             self._far_bytes += sum(m.nbytes for m in self.far[t].values())
+        if self.bad:  # only tiles with a far stand-in are drawn
+            keep = [i for i, t in enumerate(self.tiles) if t not in self.bad]
+            self.tiles = [self.tiles[i] for i in keep]
+            self.lo, self.hi = self.lo[keep].reshape(-1, 3), self.hi[keep].reshape(-1, 3)
         if self._far_bytes > self.budget:
             raise ConfigError(f"streaming budget {self.budget / 2**20:.1f} MiB is below the far field's "
                               f"{self._far_bytes / 2**20:.1f} MiB: raise it")
@@ -257,13 +275,32 @@ class TileCache:
             return self._far_bytes + sum(m.nbytes for m in self.near.values())
 
     # ---------------------------------------------------------------- loading
-    def _read(self, product: str, t, names=None) -> dict:
-        p = self.store.path(product, *t)
-        try:
-            with np.load(p, allow_pickle=False) as data:
-                return {k: data[k] for k in (names or data.files) if k != "key"}
-        except Exception as exc:
-            raise FormatError(p, f"tile {t}: cannot read its {product!r} data ({exc})") from None
+    def _expect(self, t) -> dict:
+        """The shapes and dtype kinds a tile's members must have (from the grid and ``res``)."""
+        py0, py1, px0, px1 = self.grid.patch_range(*t)
+        ny, nx, r = py1 - py0, px1 - px0, self.res
+        return {"control_points": ((ny * nx, 4, 4, 3), "fiu"), "texels": ((ny * nx, r, r, 3), "u"),
+                "far_positions": ((ny + 1, nx + 1, 3), "fiu"), "far_colors": ((ny + 1, nx + 1, 3), "u")}
+
+    def _read(self, product: str, t, names) -> dict:
+        """Members ``names`` of tile ``t``'s ``product`` file, every header checked before a byte is
+        allocated and every file opened below the world's folder without following links
+        (:meth:`piste.terrain.tiles.TileStore.read`): a bad tile is a TileError naming it."""
+        a = self.store.read(product, *t, names=names, expect=self._expect(t))
+        for k in ("texels", "far_colors"):  # uint8 colours (a wider unsigned type would wrap)
+            if k in a and a[k].dtype != np.uint8:
+                raise TileError(self.store.path(product, *t), t, f"expected uint8 colours, got {a[k].dtype}", field=k)
+        return a
+
+    def _bad_tile(self, t, exc: TileError) -> None:
+        """Remember a tile that cannot be read; the first one is a warning, the rest debug lines."""
+        with self._lock:
+            first = not self.bad
+            self.bad[t] = exc
+            self._wanted.discard(t)
+        (_log.warning if first else _log.debug)(
+            "%s (the tile is not drawn; the other tiles are%s)", exc,
+            "" if not first else ": further bad tiles are logged at debug level")
 
     def _run(self) -> None:
         while not self._stop:
@@ -284,6 +321,8 @@ class TileCache:
                         if t in self._wanted:  # still wanted and still fits: the budget was reserved
                             self.near[t] = mesh
                             self.loaded_count += 1
+            except TileError as exc:  # a bad tile: warned, left out; the others are drawn
+                self._bad_tile(t, exc)
             except Exception as exc:  # reported by wait_idle / the renderer
                 self.errors.append(exc)
             finally:
@@ -312,6 +351,7 @@ class TileCache:
         order = [(float(dist[i]), self.tiles[i]) for i in close[np.argsort(dist[close], kind="stable")]]
         room = self.budget - self._far_bytes
         want = []
+        order = [(d, t) for d, t in order if t not in self.bad]
         for d, t in order:
             if d > self.near_radius:
                 break
@@ -430,15 +470,25 @@ class StreamingRenderer:
         otherwise tiles still loading show their far stand-ins.  ``read=False`` leaves the image in
         the target (a window's screen) and returns None.
         """
-        import moderngl
-
         t0 = time.perf_counter()
         cam = camera.with_aspect(*self.size)
-        self.cache.update(cam.eye)
+        self.update(cam, wait)
+        return self.draw(cam, read, t0)
+
+    def update(self, camera, wait: bool = False) -> None:
+        """Page tiles for ``camera`` (nearest first under the budget); ``wait``: until loaded."""
+        self.cache.update(camera.eye)
         if wait:
             self.cache.wait_idle()
         elif self.cache.errors:
             raise self.cache.errors[0]
+
+    def draw(self, cam, read: bool = True, t0: float | None = None) -> np.ndarray | None:
+        """Draw the resident tiles for ``cam`` (its aspect the target's) into :attr:`fbo`, cleared
+        to the sky; the image ``(H, W, 3) uint8`` with ``read``, else None (more passes follow)."""
+        import moderngl
+
+        t0 = time.perf_counter() if t0 is None else t0
         vp = cam.view_projection()
         planes = cam.frustum_planes()
         self.fbo.use()
@@ -473,6 +523,112 @@ class StreamingRenderer:
         self.prog.release()
         self.fbo.release()
         self.cache.close()
+
+
+class StreamingTerrain:
+    """A tiled world as the runtime's terrain: the interface of
+    :class:`piste.render.frame.TerrainRenderer` that :class:`piste.render.scene_renderer.SceneRenderer`
+    and :class:`piste.pipeline.preview.ScenePreview` draw with (``prepare``, ``draw``, ``render``,
+    ``target``, ``ctx``, ``size``, ``levels``, ``set_visibility``, ``cull_stats``), so riders, objects
+    and projected shadows are drawn over the streamed tiles by the same passes as on the course.
+
+    Parameters
+    ----------
+    root : the tiled world folder
+    net : the local :class:`~piste.terrain.net.PatchNet` the scene stands on (a tile and its
+        neighbours: riders, objects, shadows); the shadow receivers are its patches tessellated at
+        the tiles' light-map grid (the near meshes' vertices)
+    size, ctx, budget_bytes, near_radius : see :class:`StreamingRenderer`
+    wait : every frame waits for the tiles it wants (offline frames: the same picture whatever the
+        loader's timing); False in a window (far stand-ins while tiles load)
+    """
+
+    ssx_source = None
+
+    def __init__(self, root, net, size=(640, 448), ctx=None, budget_bytes: int = 256 << 20,
+                 near_radius: float | None = None, wait: bool = True):
+        self.streaming = StreamingRenderer(root, size=size, budget_bytes=budget_bytes, near_radius=near_radius,
+                                           ctx=ctx)
+        self.ctx = self.streaming.ctx
+        self.net = net
+        self.wait = bool(wait)
+        self.fog_density = 0.0  # the tiles fog in their own shader, to the sky at the far plane
+        self.visibility = None
+        self.cull_stats: dict = {}
+        self.level = max(int(self.streaming.cache.res), 2)
+
+    @property
+    def target(self):
+        return self.streaming.fbo
+
+    @target.setter
+    def target(self, value) -> None:  # a window wraps its screen (render.window._wrap_screen)
+        self.streaming.fbo = value
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return self.streaming.size
+
+    def start_resident(self) -> None:
+        """(Nothing to build: tiles load as the camera moves.)"""
+
+    def set_visibility(self, visibility=None) -> None:
+        """Tiled worlds have no pre-computed visibility (kept for the interface; not applied)."""
+        self.visibility = visibility
+
+    def levels(self, camera, lod: bool = True) -> int:
+        return self.level
+
+    def prepare(self, camera, lod: bool = True, levels=None, timings: dict | None = None):
+        """Page the tiles for ``camera`` and return the local net's patches in view, tessellated at
+        the tiles' grid (a :class:`~piste.terrain.TerrainMesh`: the shadow receivers' triangles)."""
+        t0 = time.perf_counter()
+        cam = camera.with_aspect(*self.size)
+        self.streaming.update(cam, wait=self.wait)
+        pids = patch_tree(self.net).cull(cam.frustum_planes())
+        self.cull_stats = {"frustum_patches": int(len(pids)), "drawn_patches": int(len(pids))}
+        t1 = time.perf_counter()
+        mesh = tessellate(self.net, self.level, patches=pids)
+        if timings is not None:
+            timings.update(lod=0.0, cull=(t1 - t0) * 1e3, tessellate=(time.perf_counter() - t1) * 1e3)
+        return mesh
+
+    def draw(self, camera, mesh=None, lightmap_mode: str = "modulate", debug: str | None = None, fog=None,
+             sky: bool = True, clear=None, read: bool = True, timings: dict | None = None, resolve: bool = True,
+             sync: bool = True):
+        """Draw the streamed tiles (the light-map and debug modes are the tiles' own: texels baked
+        into their vertices); a :class:`piste.render.frame.Frame`."""
+        cam = camera.with_aspect(*self.size)
+        t0 = time.perf_counter()
+        self.streaming.draw(cam, read=False, t0=t0)
+        if sync or read:
+            self.ctx.finish()
+        t1 = time.perf_counter()
+        image = self.streaming.fbo.read() if read else None
+        st = self.streaming.stats
+        self.cull_stats.update(near_tiles=st["near"], far_tiles=st["far"], resident_bytes=st["resident_bytes"])
+        t = {"lod": 0.0, "cull": 0.0, "tessellate": 0.0, **(timings or {})}
+        t.update(upload=0.0, draw=(t1 - t0) * 1e3, readback=(time.perf_counter() - t1) * 1e3)
+        t["cpu"] = t["lod"] + t["cull"] + t["tessellate"]
+        t["gpu"] = t["draw"] + t["readback"]
+        t["total"] = t["cpu"] + t["gpu"]
+        total = sum(self.streaming.cache.patches.values())
+        kinds = {4: st["far_patches"], 6: 0, 8: st["near_patches"], 0: 0, -1: 0}
+        return Frame(image, st["near_patches"] + st["far_patches"], total, kinds, st["triangles"],
+                     0, t)
+
+    def render(self, camera, lod: bool = True, lightmap_mode: str = "modulate", debug: str | None = None,
+               fog=None, read: bool = True, **_ignored):
+        """One frame of the tiles alone (:meth:`prepare` + :meth:`draw`)."""
+        cam = camera.with_aspect(*self.size)
+        self.streaming.update(cam, wait=self.wait)
+        frame = self.draw(cam, read=read)
+        if frame.image is not None:
+            frame.image = frame.image.copy()
+        return frame
+
+    def release(self) -> None:
+        self.streaming.close()
 
 
 def fly_path(index: dict, frames: int, fps: float = 30.0, speed: float = 100.0, height: float = 120.0,
@@ -535,85 +691,3 @@ def render_flight(root, out=None, size=(640, 448), frames: int = 1, fps: float =
         r.close()
     return {"frames": frames, "ms": times, "resident_mb": max(resident) / 2**20, "near": stats.get("near", 0),
             "far": stats.get("far", 0)}
-
-
-# ----------------------------------------------------------------------------- piste view WORLD.tiles
-@dataclass
-class _StreamFrame:
-    """What the window's statistics overlay reads of a frame (near patches counted as 8x8, far as 4x4)."""
-
-    patches: int
-    patches_total: int
-    triangles: int
-    kind_counts: dict
-    timings: dict
-
-
-class StreamingView:
-    """A :mod:`piste.render.window` view of a tiled world (fly with the usual keys)."""
-
-    riders = 0
-    has_visibility = False
-
-    def __init__(self, renderer: StreamingRenderer):
-        self.renderer = renderer
-        self.terrain = self  # the window reads ``view.terrain.target`` for screenshots
-
-    @property
-    def target(self):
-        return self.renderer.fbo
-
-    def attach(self, ctx) -> None:
-        self.renderer.fbo.release()
-        self.renderer.fbo = Offscreen.wrap(ctx, ctx.screen)
-
-    def draw(self, camera, t: float, opts):
-        self.renderer.render(camera, read=False)
-        st = self.renderer.stats
-        total = sum(self.renderer.cache.patches.values())
-        kinds = {4: st["far_patches"], 6: 0, 8: st["near_patches"], 0: 0, -1: 0}
-        frame = _StreamFrame(st["near_patches"] + st["far_patches"], total, st["triangles"], kinds, {})
-        return ViewFrame(camera, frame, {"resident_mb": st["resident_bytes"] / 2**20})
-
-    def release(self) -> None:
-        self.renderer.close()
-
-
-def view_tiles(root, size=(960, 672), budget_mb: float = 256.0, out="out/view.png", frames: int | None = None,
-               exit_after: float | None = None, state=None, benchmark: int | None = None, camera=None) -> int:
-    """``piste view WORLD.tiles``: fly through a tiled world in a window (tiles streamed); without a
-    display, one frame off-screen to ``out``.  ``camera``: where to start (default: the start of
-    :func:`fly_path`)."""
-    import sys
-
-    root = Path(root)
-    if not root.is_dir():
-        raise ConfigError(f"{root}: no such tiled world (build one: piste build SCENE with terrain.tiles)")
-    budget = int(float(budget_mb or 256.0) * 2**20)
-    w, h = (int(x) for x in size)
-    index = TileStore(root).read_index()
-    path = list(fly_path(index, max(int(benchmark or 1), 1)))
-    if camera is not None:
-        path[0] = camera
-    if not has_display():
-        print("piste view: no display, so no window; rendering one frame of the tiled world off-screen to "
-              f"{out} instead (run under a desktop or `xvfb-run piste view`)", file=sys.stderr)
-        r = StreamingRenderer(root, size=(w, h), budget_bytes=budget)
-        try:
-            save_png(out, r.render(path[0], wait=True))
-        finally:
-            r.close()
-        return 0
-
-    def make(ctx):
-        return StreamingView(StreamingRenderer(root, size=(w, h), budget_bytes=budget, ctx=ctx))
-
-    if benchmark:
-        st = run_window(make, path[0], size=(w, h), opts=ViewOptions(), benchmark=benchmark,
-                        benchmark_camera=lambda i: path[min(max(i - 5, 0), len(path) - 1)])
-        print_benchmark(st, "tiled world, flying at 100 m/s", (w, h))
-        return 0
-    st = run_window(make, path[0], size=(w, h), caption=f"piste view {root.name}", opts=ViewOptions(),
-                    frames=frames, exit_after=exit_after, screenshot=out if frames else None, state=state)
-    print(f"piste view: {st.get('frames', 0)} frames")
-    return 0

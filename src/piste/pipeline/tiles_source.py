@@ -1,0 +1,86 @@
+"""A tiled world (``WORLD.tiles/``, ``piste build`` with ``terrain.tiles``) as the runtime's scene.
+
+:func:`open_tiles` returns a :class:`~piste.pipeline.bundle_objects.Bundle` like any other source:
+its ``net`` is the *local* terrain (the tile under the world's centre, from the build's fitted
+patches: where default riders stand, objects sit and shadows fall), its manifest names the world
+(``terrain.source = "tiles"``, ``terrain.root``, ``terrain.budget_mb``), so that
+:class:`piste.pipeline.preview.ScenePreview` draws the whole world with
+:class:`piste.render.streaming.StreamingTerrain` (tiles paged in and out under the budget) and the
+riders, objects and shadows with the same passes as the course.
+
+Cameras: ``flight`` (the first camera of :func:`piste.render.streaming.fly_path`, ``piste render
+WORLD.tiles``' flight start) and ``centre`` (looking at the local tile from the south, above).
+
+API
+---
+open_tiles(path, quiet=True, warm=False, budget_mb=256.0) -> Bundle
+flight_cameras(bundle, frames, fps=30, speed=100) -> list[Camera]    the flight across the world
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from piste.errors import ConfigError
+from piste.formats.bundle import camera_to_dict
+from piste.lighting.lightmap import LightMap
+from piste.lighting.lights import default_lights
+from piste.pipeline.bundle_objects import Bundle, camera_from_dict
+from piste.render.streaming import fly_path
+from piste.terrain.tiles import TileStore, tile_net
+from piste.world.camera import Camera
+
+__all__ = ["open_tiles", "flight_cameras"]
+
+
+def _centre_camera(net) -> Camera:
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in net.bounds)
+    c = (lo + hi) / 2.0
+    ext = float(np.linalg.norm(hi[:2] - lo[:2]))
+    eye = c + np.array([0.0, -0.45, 0.35]) * ext
+    return Camera(eye, c, fov_y=50.0, near=1.0, far=max(8.0 * ext, 3000.0))
+
+
+def open_tiles(path, quiet: bool = True, warm: bool = False, budget_mb: float = 256.0) -> Bundle:
+    """The runtime scene of a tiled world (see the module docstring)."""
+    root = Path(path)
+    if not root.is_dir():
+        raise ConfigError(f"{root}: no such tiled world (build one: piste build SCENE with terrain.tiles)")
+    if not budget_mb > 0:
+        raise ConfigError(f"budget must be > 0 MiB, got {budget_mb}")
+    store = TileStore(root)
+    index = store.read_index()
+    grid = store.grid()
+    b = np.array([t["bounds"] for t in index["tiles"].values()], dtype=np.float64)
+    lo, hi = b[:, 0].min(0), b[:, 1].max(0)
+    ty, tx = grid.tile_of(*((lo[:2] + hi[:2]) / 2.0))
+    net = tile_net(store, ty, tx)
+    cams = {"flight": next(fly_path(index, 1)), "centre": _centre_camera(net)}
+    manifest = {
+        "name": root.stem,
+        "source": "tiles",
+        "terrain": {"name": root.stem, "source": "tiles", "root": str(root), "budget_mb": float(budget_mb),
+                    "local_tile": [ty, tx]},
+        "render": {"size": [640, 448]},
+        "lights": default_lights().to_dict(),
+        "cameras": [{"name": k, "source": "tiled world", **camera_to_dict(c)} for k, c in cams.items()],
+        "riders": [],
+        "characters": {},
+    }
+    rects = np.asarray(net.lightmap_rect, np.float32)
+    atlas = np.ones((1, 1, 3), np.float32)
+    arrays = {"lightmap/atlas": atlas, "lightmap/rects": rects}
+    lightmap = LightMap(atlas=atlas, rects=rects, res=1, gutter=0, manifest={})
+    cameras = {d["name"]: camera_from_dict(d) for d in manifest["cameras"]}
+    return Bundle(root, manifest, arrays, net, lightmap, default_lights(), cameras)
+
+
+def flight_cameras(bundle: Bundle, frames: int, fps: float = 30.0, speed: float = 100.0) -> list:
+    """The cameras of a straight flight across the tiled world of ``bundle`` at ``speed`` m/s
+    (:func:`piste.render.streaming.fly_path`), one per frame."""
+    if not speed > 0:
+        raise ConfigError(f"speed must be > 0 m/s, got {speed}")
+    index = TileStore(bundle.manifest["terrain"]["root"]).read_index()
+    return list(fly_path(index, int(frames), fps, speed))
