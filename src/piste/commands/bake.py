@@ -3,7 +3,8 @@
 Writes ``lightmap.png`` (half-bright 8-bit RGB, 128 = 1.0), ``lightmap.npz`` (float32 atlas,
 ``rects`` = each patch's ``lightmap_rect``) and ``manifest.json`` into ``--out``, each atomically.
 Finished chunks are kept in ``OUT/.partial/`` until the bake completes, so an interrupted bake
-started again resumes where it stopped and ends with the same bytes.
+started again resumes where it stopped and ends with the same bytes.  A bake that fails says where
+its chunks are and how much they hold; ``piste bake --clean [--out DIR]`` removes them.
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--no-shadows", action="store_true", help="skip shadow rays (unshadowed lighting)")
     parser.add_argument("--chunk-size", type=N.integer(1, 1 << 20), default=64, help="patches per chunk (unit of resuming)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--clean", action="store_true",
+                        help="remove the resumable chunks a stopped or failed bake left in OUT/.partial, then exit")
     parser.add_argument("--format", choices=("piste", "ssx-tricky"), default="piste",
                         help="piste: an atlas in --out; ssx-tricky: NET is a .pbd, writes NAME_L.ssh beside it the "
                              "game's way and updates the patches' light-map tiles (see `piste ssx --help`)")
@@ -37,18 +40,32 @@ def run(args) -> int:
     import shutil
     import sys
     import time
+    from pathlib import Path
 
-    from piste.errors import ConfigError
+    from piste.errors import ConfigError, PisteError
     from piste.formats.atomic import check_writable_folder
     from piste.lighting import bake_lightmap, default_lights, load_lights, write_lightmap
+    from piste.lighting.baker import clean_partials, kept_chunks_error
 
+    if args.clean:
+        partial = Path(args.out) / ".partial"
+        chunks, size = clean_partials(partial)
+        print(f"removed {chunks} resumable chunks ({size:,} bytes) from {partial}" if size
+              else f"no resumable chunks in {partial}")
+        return 0
     if args.format == "ssx-tricky" or str(args.net or "").lower().endswith(".pbd"):
-        from piste.commands.ssx import bake_pbd
+        from piste.pipeline.build import scene_lights
+        from piste.pipeline.ssx_level import bake_file
+        from piste.world.scene_file import load_scene
 
         if args.net is None:
             raise ConfigError("--format ssx-tricky needs a level: piste bake LEVEL.pbd --format ssx-tricky")
         out = args.out if str(args.out).lower().endswith(".pbd") else None
-        return bake_pbd(args.net, out, args.lights, args.scene, not args.no_shadows, args.jobs, args.quiet)
+        lights = load_lights(args.lights) if args.lights else scene_lights(load_scene(args.scene)) if args.scene else None
+        report = bake_file(args.net, lights, out, not args.no_shadows, args.jobs)
+        if not args.quiet:
+            print(report.summary())
+        return 0
     if args.jobs < 0:
         raise ConfigError(f"--jobs must be >= 0, got {args.jobs}")
     if args.chunk_size < 1:
@@ -68,7 +85,13 @@ def run(args) -> int:
         partial_dir=partial,
         progress=not args.quiet and sys.stderr.isatty(),
     )
-    paths = write_lightmap(lm, out)
+    try:
+        paths = write_lightmap(lm, out)
+    except (PisteError, OSError) as exc:  # a full disk: say where the finished bake's chunks are
+        err = kept_chunks_error(exc, partial)
+        if err is exc:
+            raise
+        raise err from exc
     shutil.rmtree(partial / lm.manifest["key"], ignore_errors=True)
     try:
         partial.rmdir()

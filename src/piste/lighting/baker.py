@@ -224,9 +224,8 @@ def bake_lightmap(
             # leave the disk full, so they go, and the message says so
             chunks, size = partial_usage(part)
             shutil.rmtree(part, ignore_errors=True)
-            raise OutputError(getattr(exc, "path", None) or exc.filename,
-                              f"{_reason(exc)}; removed this bake's {chunks} finished chunks ({_bytes(size)}) "
-                              f"from {part} to free the space") from exc
+            raise OutputError(part, f"the bake stopped ({_reason(exc)}); its {chunks} finished chunks "
+                                    f"({_bytes(size)}) were removed from here to free the space") from exc
         err = kept_chunks_error(exc, part)
         if err is exc:
             raise
