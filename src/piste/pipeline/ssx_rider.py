@@ -14,7 +14,8 @@ each with its own weight palettes) when the scene asks for three levels.
 
 API
 ---
-load_mpf_rider(path) -> piste.formats.ssx.SsxModel (with clips)
+load_mpf_rider(path) -> piste.formats.ssx.SsxModel (with clips; lifted to stand on its origin)
+stand_on_origin(model) -> lift in metres (a hips-centred retail rider stood on the ground)
 shared_clips(model) -> dict of the default rider's clips, and how many bones they drive
 """
 
@@ -33,7 +34,7 @@ from piste.formats.ssx.ssh import read_ssh
 from piste.pipeline.object_atlas import pack_object_atlas
 from piste.world.riders import merged_mesh
 
-__all__ = ["load_mpf_rider", "shared_clips", "apply_texture_banks", "material_images"]
+__all__ = ["load_mpf_rider", "shared_clips", "apply_texture_banks", "material_images", "stand_on_origin"]
 
 
 def material_images(model, banks, where=()) -> list:
@@ -119,14 +120,41 @@ def shared_clips(model) -> tuple:
     if animated <= names:
         return dict(src.clips), len(animated)
     bone_map = builtin_bone_map(src.skeleton, sk)
-    clips = {n: retarget_clip(c, sk, bone_map, source=src.skeleton, warn=False) for n, c in src.clips.items()}
+    clips = {n: retarget_clip(c, sk, bone_map, source=src.skeleton, warn=False, mode="relative") for n, c in src.clips.items()}
     driven = {b for c in clips.values() for b in c.tracks}
     by_role = [f"{k} -> {v}" for k, v in bone_map.items() if k != v and k in animated]
     notes = getattr(model, "notes", None)
     if driven and notes is not None:
+        shown = f" ({', '.join(by_role[:4])}{', ...' if len(by_role) > 4 else ''})" if by_role else ""
         notes.append(f"shared clips retargeted by the built-in bone map: {len(driven)} of the model's {sk.n_bones} "
-                     f"bones driven, {len(by_role)} matched by role ({', '.join(by_role[:4])}, ...)")
+                     f"bones driven, {len(by_role)} matched by role{shown}; the others keep their rest pose")
     return clips, len(driven)
+
+
+def stand_on_origin(model, tolerance: float = 0.05) -> float:
+    """Lift a decoded ``.mpf`` rider so its lowest bind-pose vertex is at height 0, in place;
+    returns the lift in metres (0 when the model already stands within ``tolerance`` of it).
+
+    The game's rider models are centred on the hips (the retail ``moby`` body reaches 0.98 m
+    below its origin: the game places the hips over the board), while a piste scene stands a
+    rider's origin on the ground. The meshes (the top LOD's and every LOD's), the root bones' rest
+    translations and the inverse bind matrices move together, so skinning is unchanged."""
+    meshes = list({id(m): m for m in list(model.meshes) + [lod.mesh for lod in model.lods]}.values())
+    low = min((float(m.positions[:, 1].min()) for m in meshes if m.n_vertices), default=0.0)
+    if low >= -tolerance:
+        return 0.0
+    h = -low
+    up = np.array([0.0, h, 0.0], np.float32)
+    for m in meshes:
+        m.positions = (m.positions + up).astype(np.float32)
+    sk = model.skeleton
+    roots = sk.parents < 0
+    sk.rest_translation[roots] += up
+    down = np.eye(4)
+    down[1, 3] = -h
+    sk.inverse_bind = sk.inverse_bind @ down
+    model.notes.append(f"lifted {h:.2f} m so the rider stands on its origin (the file's origin is at the hips)")
+    return h
 
 
 def load_mpf_rider(path, texture=None) -> object:
@@ -140,6 +168,7 @@ def load_mpf_rider(path, texture=None) -> object:
     model = mpf_to_model(*files, name=path.stem)
     if not model.meshes:
         raise ConfigError(f"{path}: no render sub-models to draw")
+    stand_on_origin(model)
     if banks:
         apply_texture_banks(model, [read_ssh(b) for b in banks], [str(b) for b in banks])
     model.clips, driven = shared_clips(model)

@@ -84,3 +84,30 @@ def test_notes_say_the_clips_were_retargeted(riders):
     plain, retail = riders
     assert any("retargeted by the built-in bone map" in n and "pelvis -> hips" in n for n in retail.notes)
     assert not any("retargeted" in n for n in plain.notes)
+
+
+def test_a_hips_centred_rider_is_stood_on_its_origin(riders, tmp_path):
+    """Retail riders are centred on the hips (moby's body reaches 0.98 m below its origin): the
+    loaded rider is lifted so its feet are at height 0, and it poses exactly as the same rider
+    encoded feet-down."""
+    plain = riders[0]
+    src = default_rider(0)
+    sk = src.skeleton
+    h = 0.97
+    down = np.array([0.0, -h, 0.0])
+    up4 = np.eye(4)
+    up4[1, 3] = h
+    rest_t = sk.rest_translation.copy()
+    rest_t[sk.parents < 0] += down
+    hs = Skeleton(sk.names, sk.parents, rest_t, sk.rest_rotation, sk.rest_scale, sk.inverse_bind @ up4)
+    meshes = [replace(m, positions=(m.positions + down).astype(np.float32)) for m in src.meshes]
+    write_mpf(model_to_mpf(replace(src, skeleton=hs, meshes=meshes, clips={}))[0], tmp_path / "HIPS.mpf")
+    m = load_mpf_rider(tmp_path / "HIPS.mpf")
+    assert abs(float(m.lods[0].mesh.positions[:, 1].min())) < 1e-4
+    assert any("lifted 0.97 m" in n for n in m.notes) and not any("lifted" in n for n in plain.notes)
+    for clip, t in (("ride", 0.3), ("grab", 0.7)):
+        got, _ = skin(m.meshes[0], m.skeleton.skin_matrices(m.clips[clip].sample(t, skeleton=m.skeleton)))
+        want, _ = skin(plain.meshes[0], plain.skeleton.skin_matrices(plain.clips[clip].sample(t, skeleton=plain.skeleton)))
+        from scipy.spatial import cKDTree  # the encoder may order the shifted vertices differently
+
+        assert cKDTree(want).query(got)[0].max() < 1e-4 and cKDTree(got).query(want)[0].max() < 1e-4, clip

@@ -130,3 +130,50 @@ def test_mpf_rider_renders_animated(tmp_path, golden_mpf, gl, piste_cache):
     assert covered.mean() > 0.008, "the .mpf rider is not in the picture"
     moved = np.abs(a - c).max(2) > 8
     assert moved.mean() > 0.005, "the rider does not move between t=0.05 and t=0.55 of 'spin'"
+
+
+def test_partial_retarget_keeps_unmatched_bones_at_rest(tmp_path, piste_cache):
+    """``model = "ssx:monster.mpf"``, ``clip = "grab"``: a rider whose arms and legs the shared
+    clips cannot name (renamed ``tentacle...``) plays the clip on the bones they do name; every
+    other bone keeps its rest pose in the built clip tables, every LOD's palettes name bones of
+    the skeleton, and no posed LOD reaches out past its rest size (the issue's 20 m spike)."""
+    from dataclasses import replace
+
+    from piste.character import default_rider
+    from piste.character.skinning import skin_exact
+    from piste.pipeline.build import build_scene
+    from piste.pipeline.bundle_objects import load_bundle
+    from piste.pipeline.ssx_rider import load_mpf_rider
+    from piste.world.scene_file import load_scene
+
+    r = default_rider(0)
+    sk = r.skeleton
+    limb = ("clavicle", "arm", "hand", "shin", "foot", "toe")
+    names = [("tentacle_" + n) if any(k in n for k in limb) else n for n in sk.names]
+    monster = replace(r, skeleton=type(sk)(names, sk.parents, sk.rest_translation, sk.rest_rotation, sk.rest_scale,
+                                           sk.inverse_bind, sk.node_index, sk.is_joint), clips={})
+    f, _ = model_to_mpf(monster)
+    write_mpf(f, tmp_path / "monster.mpf")
+    driven = set(load_mpf_rider(tmp_path / "monster.mpf").clips["grab"].tracks)
+    assert driven and not any(n.startswith("tentacle_") for n in driven)
+    p = _scene(tmp_path, tmp_path / "monster.mpf", model="ssx:monster.mpf", clip="grab")
+    b = load_bundle(build_scene(load_scene(p)).path)
+    m = b.rider_model()
+    bsk = m.skeleton
+    clip = m.clips["grab"]
+    rest = bsk.rest_pose()
+    lods = b.rider_lods()
+    for lod in lods:
+        assert lod.palette.bones.max() < bsk.n_bones
+    size = [np.ptp(lod.mesh.positions, axis=0).max() for lod in lods]
+    undriven = [j for j, n in enumerate(bsk.names) if n not in driven]
+    assert len(undriven) >= 12
+    for t in np.linspace(0.0, clip.duration, 7):
+        pose = clip.sample(float(t), skeleton=bsk)
+        np.testing.assert_allclose(pose.translation[undriven], rest.translation[undriven], atol=1e-5)
+        np.testing.assert_allclose(np.abs((pose.rotation[undriven] * rest.rotation[undriven]).sum(1)), 1.0, atol=1e-5)
+        np.testing.assert_allclose(pose.scale[undriven], rest.scale[undriven], atol=1e-5)
+        mats = bsk.skin_matrices(pose)
+        for lod, s in zip(lods, size):
+            q, _ = skin_exact(lod.mesh, mats)
+            assert np.isfinite(q).all() and np.ptp(q, axis=0).max() < 1.3 * s, (t, lod.name)

@@ -197,8 +197,10 @@ def _skeleton(files: list, notes: list):
     return sk, base, order
 
 
-def _palette_tables(sub, base: dict, new_index: np.ndarray):
-    """The sub-model's palettes as ``bones (p, k) int64`` (skeleton indices), ``percent (p, k)``."""
+def _palette_tables(sub, base: dict, new_index: np.ndarray, counts: dict | None = None):
+    """The sub-model's palettes as ``bones (p, k) int64`` (skeleton indices), ``percent (p, k)``.
+    ``counts``: bones per file id; a palette naming a bone past its file's list is refused (it
+    would skin with another file's bone, or none)."""
     k = max([len(p) for p in sub.palettes] + [1])
     bones = np.zeros((len(sub.palettes), k), np.int64)
     pct = np.zeros((len(sub.palettes), k), np.int64)
@@ -208,6 +210,9 @@ def _palette_tables(sub, base: dict, new_index: np.ndarray):
             if f not in base:
                 raise ValidationError(f"{sub.name}: palette {i} names bone {int(e['bone'])} of file id {f}, which "
                                       f"is not among the files given (pass the matching body/head file too)")
+            if counts is not None and not 0 <= int(e["bone"]) < counts[f]:
+                raise ValidationError(f"{sub.name}: palette {i} names bone {int(e['bone'])} of file id {f}, which has "
+                                      f"{counts[f]} bones")
             bones[i, j] = new_index[base[f] + int(e["bone"])]
             pct[i, j] = int(e["weight"])
     return bones, pct
@@ -336,6 +341,11 @@ def mpf_to_model(*files, name: str | None = None, weld: bool = True) -> SsxModel
         raise ConfigError("mpf_to_model needs at least one MpfFile")
     notes: list = []
     sk, base, order = _skeleton(list(files), notes)
+    counts = {}
+    for f in files:
+        for s in f.models:
+            if len(s.bones):
+                counts.setdefault(s.file_id, len(s.bones))
     if sk is None:
         raise ValidationError("the .mpf files hold no bones: not a rider model")
     new_index = np.empty(len(order), np.int64)
@@ -356,7 +366,7 @@ def mpf_to_model(*files, name: str | None = None, weld: bool = True) -> SsxModel
         meshes, pidx_all, off, vmats = [], [], 0, []
         bones_all, pct_all = [], []
         for s in subs:
-            pb, pp = _palette_tables(s, base, new_index)
+            pb, pp = _palette_tables(s, base, new_index, counts)
             arrays = _decode_sub(s, pb, pp, weld)
             if arrays is None:
                 continue
