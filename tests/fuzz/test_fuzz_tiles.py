@@ -16,7 +16,7 @@ import zipfile
 
 import numpy as np
 import pytest
-from fuzzlib import byte_mutations, check, doc_mutations, dump_json, fuzz_settings
+from fuzzlib import COUNTS, byte_mutations, check, doc_mutations, dump_json, fuzz_settings
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -205,3 +205,184 @@ def test_tile_member_claiming_a_huge_shape_is_refused_before_allocating(tiled_wo
         zf.writestr("uv.npy", npy)
     (d / "fit" / "t_0000_0000.npz").write_bytes(buf.getvalue())
     assert check(lambda p: TileStore(d).read("fit", 0, 0), d / "fit" / "t_0000_0000.npz", "tiles regressions") == "refused"
+
+
+# ------------------------------------------------------------------------------ streaming (piste render W.tiles)
+# A built world (index.json with res, tiles and bounds; fit/ and lit/ tiles) read the way
+# `piste render W.tiles` reads it, less the OpenGL: TileCache (index schema, far field of every
+# tile), the flight's cameras, near tiles loaded by the loader thread, the draw list.  A bad tile is
+# a TileError naming it, logged; the other tiles are still drawn.
+@pytest.fixture(scope="session")
+def built_world(tmp_path_factory):
+    from piste.pipeline.tiled_build import build_tiles, synthetic_spec
+
+    root = tmp_path_factory.mktemp("built") / "world.tiles"
+    build_tiles(synthetic_spec(root, 8, tile_patches=4, res=3, spacing=20.0, shadows=False))
+    return root
+
+
+def _stream(index_path):
+    """What `piste render W.tiles` does before OpenGL draws: TileCache, fly_path, near loads, draw list."""
+    from piste.render.streaming import TileCache, fly_path
+
+    cache = TileCache(index_path.parent, budget_bytes=64 << 20)
+    try:
+        cams = list(fly_path(cache.index, 3, speed=400.0))
+        for cam in cams:
+            cache.update(cam.eye)
+            cache.wait_idle(timeout=5)
+        cache.draw_list(cams[0].eye)
+    finally:
+        cache.close()
+    if cache.bad:  # counted: a case whose bad tiles were left out while the rest was drawn
+        c = COUNTS.setdefault("tiles stream: tile left out", {"cases": 0, "loaded": 0, "refused": 0})
+        c["cases"] += 1
+        c["refused"] += 1
+        for e in cache.bad.values():
+            assert "world.tiles" in str(e) and e.tile is not None, str(e)
+
+
+def test_built_world_streams(built_world):
+    assert check(_stream, built_world / "index.json", "tiles stream seeds") == "loaded"
+
+
+@given(data=st.data())
+@fuzz_settings(25)
+def test_stream_index_structure(built_world, tmp_path_factory, data):
+    """A built index.json's fields replaced (bounds, res, patches, tile keys, grid), removed, nested."""
+    d = _copy(built_world, tmp_path_factory)
+    doc = json.loads((built_world / "index.json").read_text())
+    (d / "index.json").write_bytes(dump_json(data.draw(doc_mutations(doc))))
+    check(_stream, d / "index.json", "tiles stream index structural", names="world.tiles")
+
+
+@given(data=st.data())
+@fuzz_settings(10)
+def test_stream_index_bytes(built_world, tmp_path_factory, data):
+    d = _copy(built_world, tmp_path_factory)
+    (d / "index.json").write_bytes(data.draw(byte_mutations((built_world / "index.json").read_bytes())))
+    check(_stream, d / "index.json", "tiles stream index byte-wise", names="world.tiles")
+
+
+@given(data=st.data())
+@fuzz_settings(15)
+def test_stream_tile_bytes(built_world, tmp_path_factory, data):
+    d = _copy(built_world, tmp_path_factory)
+    product = data.draw(st.sampled_from(["fit", "lit"]))
+    name = data.draw(st.sampled_from(sorted(p.name for p in (d / product).iterdir())))
+    tile = d / product / name
+    raw = tile.read_bytes()
+    if data.draw(st.booleans()):  # stored: the mutations reach the .npy headers
+        with np.load(tile) as f:
+            raw = _stored_npz({k: f[k] for k in f.files})
+    tile.write_bytes(data.draw(byte_mutations(raw)))
+    check(_stream, d / "index.json", "tiles stream npz byte-wise", names="world.tiles")
+
+
+LIT_ARRAYS = st.sampled_from([
+    np.zeros((0,)), np.zeros((16, 3, 3, 3), np.uint8), np.zeros((16, 3, 3, 3), np.uint16), np.zeros((16, 4, 4, 3), np.uint8),
+    np.zeros((5, 5, 3)), np.full((5, 5, 3), np.nan), np.full((5, 5, 3), 1e308), np.zeros((5, 5, 3), np.uint8),
+    np.zeros((5, 5)), np.array(["a"]), np.zeros((10**6, 3), np.uint8), np.zeros((5, 5, 3), np.complex64),
+    np.zeros((16, 4, 4, 3)), np.zeros((3,)),
+])
+
+
+@given(data=st.data())
+@fuzz_settings(20)
+def test_stream_tile_members(built_world, tmp_path_factory, data):
+    """Members of a fit or lit tile replaced, removed or added (shapes, dtypes, non-finite values)."""
+    d = _copy(built_world, tmp_path_factory)
+    product = data.draw(st.sampled_from(["fit", "lit"]))
+    name = data.draw(st.sampled_from(sorted(p.name for p in (d / product).iterdir())))
+    tile = d / product / name
+    with np.load(tile) as f:
+        arrays = {k: f[k] for k in f.files}
+    for _ in range(data.draw(st.integers(1, 3))):
+        key = data.draw(st.sampled_from(sorted(arrays) + ["texels", "far_positions", "far_colors", "control_points"]))
+        if data.draw(st.booleans()) and key in arrays:
+            del arrays[key]
+        else:
+            arrays[key] = data.draw(LIT_ARRAYS)
+    tile.write_bytes(_stored_npz(arrays))
+    check(_stream, d / "index.json", "tiles stream npz members", names="world.tiles")
+
+
+@pytest.mark.parametrize("kind", ["link-out", "link-in", "folder-link", "fifo", "dev-zero", "folder", "missing"])
+def test_hostile_tile_files_are_bad_tiles_and_the_rest_draws(built_world, tmp_path_factory, kind, caplog):
+    """Findings (issue 24): symlinked tile files and folders were followed out of the world, a FIFO
+    tile blocked the loader, a /dev/zero tile was 'pickled arrays'.  Now each is a TileError naming
+    the tile, logged once, and the other tiles are still drawn; nothing blocks (time cap)."""
+    import logging
+    import os
+
+    from piste.render.streaming import TileCache
+
+    d = _copy(built_world, tmp_path_factory)
+    outside = d.parent / "outside"
+    shutil.copytree(d / "lit", outside)
+    victim = d / "lit" / "t_0000_0001.npz"
+    victim.unlink()
+    if kind == "link-out":
+        victim.symlink_to(outside / "t_0000_0001.npz")
+    elif kind == "link-in":
+        victim.symlink_to("t_0000_0000.npz")
+    elif kind == "folder-link":
+        shutil.rmtree(d / "lit")
+        (d / "lit").symlink_to(outside, target_is_directory=True)
+    elif kind == "fifo":
+        os.mkfifo(victim)
+    elif kind == "dev-zero":
+        victim.symlink_to("/dev/zero")
+    elif kind == "folder":
+        victim.mkdir()
+
+    def load(p):
+        with caplog.at_level(logging.DEBUG, logger="piste"):
+            cache = TileCache(p.parent, budget_bytes=64 << 20)
+        cache.close()
+        return cache
+
+    assert check(load, d / "index.json", "tiles hostile files") == "loaded"
+    caplog.clear()
+    cache = load(d / "index.json")
+    bad = {(0, 1)} if kind != "folder-link" else {(0, 0), (0, 1), (1, 0), (1, 1)}
+    assert set(cache.bad) == bad and set(cache.tiles) == {(0, 0), (0, 1), (1, 0), (1, 1)} - bad
+    e = cache.bad[(0, 1)]
+    assert e.tile == (0, 1) and "t_0000_0001.npz" in str(e)
+    want = {"link-out": "symbolic link", "link-in": "symbolic link", "folder-link": "symbolic link",
+            "fifo": "a named pipe", "dev-zero": "symbolic link", "folder": "a folder", "missing": "no 'lit' output"}
+    assert want[kind] in str(e), str(e)
+    warnings = [r for r in caplog.records if r.levelno >= logging.WARNING]  # warned once, however many
+    assert len(warnings) == 1 and "tile (" in warnings[0].getMessage() and "the other tiles are" in \
+        warnings[0].getMessage()
+    assert len([r for r in caplog.records if "tile (" in r.getMessage()]) == len(bad)
+
+
+@pytest.mark.parametrize("field,value,match", [
+    (("tiles", "0,0", "bounds"), -0.0, r"tiles\.\"0,0\"\.bounds"),  # was a raw IndexError in piste render
+    (("tiles", "0,0", "bounds"), [[0, 0, float("nan")], [1, 1, 1]], r"tiles\.\"0,0\"\.bounds"),
+    (("tiles", "0,0", "bounds"), [[0, 0, 5], [1, 1, 1]], r"lo <= hi"),
+    (("tiles", "0,0", "patches"), 10**12, r"tiles\.\"0,0\"\.patches"),
+    (("tiles",), {}, "'tiles'"),
+    (("tiles",), {"../../etc/passwd": {}}, "tile key"),
+    (("tiles",), {"9,9": {}}, "no tile \\(9, 9\\)"),
+    (("res",), 10**9, "'res'"),
+    (("res",), None, "'res'"),
+    (("extra",), 1, "unknown key 'extra'"),
+])
+def test_hostile_index_fields_name_the_field(built_world, tmp_path_factory, field, value, match):
+    from piste.render.streaming import TileCache
+
+    d = _copy(built_world, tmp_path_factory)
+    doc = json.loads((d / "index.json").read_text())
+    target = doc
+    for k in field[:-1]:
+        target = target[k]
+    if value is None:
+        del target[field[-1]]
+    else:
+        target[field[-1]] = value
+    (d / "index.json").write_text(json.dumps(doc))
+    with pytest.raises(FormatError, match=match) as e:
+        TileCache(d, budget_bytes=64 << 20).close()
+    assert "index.json" in str(e.value)

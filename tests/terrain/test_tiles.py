@@ -10,7 +10,7 @@ import pytest
 from piste.errors import FormatError, ValidationError
 from piste.terrain.fit import fit_error, fit_heightfield
 from piste.terrain.net import PatchNet
-from piste.terrain.tiles import TileGrid, TileStore, fit_edge, fit_tile, neighbourhood_net
+from piste.terrain.tiles import TileError, TileGrid, TileStore, fit_edge, fit_tile, neighbourhood_net
 
 
 def _field(h, w, seed=0):
@@ -118,8 +118,9 @@ def test_store_is_deterministic_verified_and_names_the_tile(tmp_path):
     assert a.verify("fit", 1, 0, "k10") is None
     with pytest.raises(FormatError, match="tile \\(1, 0\\)"):
         a.read("fit", 1, 0)
-    with pytest.raises(FormatError, match="tile \\(0, 1\\) was built from other inputs"):
+    with pytest.raises(TileError, match="tile \\(0, 1\\): was built from other inputs") as e:
         a.read("fit", 0, 1, key="nope")
+    assert e.value.tile == (0, 1) and e.value.field == "key" and "t_0000_0001.npz" in str(e.value)
     assert not list((tmp_path / "a" / "fit").glob(".*tmp"))  # atomic writes leave no temporaries
     # the neighbourhood of tile (0, 0) welds into one net: 8 x 8 patches, the centre's 16 first
     net, centre = neighbourhood_net(b, g, 0, 0)

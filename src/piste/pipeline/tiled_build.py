@@ -46,6 +46,7 @@ from piste.pipeline.sources import load_heightfield
 from piste.pipeline.visibility import compute_visibility
 from piste.terrain.net import PatchNet
 from piste.terrain.tiles import TILE_FIT_VERSION, TILES_FORMAT, TileGrid, TileStore, fit_tile, neighbourhood_net
+from piste.terrain.tiles import TileError as TileFileError
 
 __all__ = ["TiledSpec", "TiledResult", "ArraySource", "FileSource", "SyntheticSource", "TileError", "fit_task",
            "lit_task",
@@ -56,13 +57,16 @@ __all__ = ["TiledSpec", "TiledResult", "ArraySource", "FileSource", "SyntheticSo
 TILE_BAKE_VERSION = "piste.tile-bake/1"
 
 
-class TileError(PisteError):
-    """A tile task failed: names the tile and the step."""
+class TileError(TileFileError):
+    """A tile task failed: names the tile and the step (a :class:`piste.terrain.tiles.TileError`,
+    so one ``except`` catches a bad tile whether a build or a reader found it)."""
 
     def __init__(self, step: str, ty: int, tx: int, cause):
         self.step, self.tile, self.cause = step, (ty, tx), str(cause)
         what = cause if isinstance(cause, str) else f"{type(cause).__name__}: {cause}"
-        super().__init__(f"tile ({ty}, {tx}) failed in step {step!r}: {what}")
+        self.path, self.line, self.field = getattr(cause, "path", None), None, getattr(cause, "field", None)
+        self.reason = what
+        PisteError.__init__(self, f"tile ({ty}, {tx}) failed in step {step!r}: {what}")
 
     def __reduce__(self):  # travels back from Dask workers intact
         msg = str(self).split(": ", 1)[1] if ": " in str(self) else str(self)

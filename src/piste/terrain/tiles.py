@@ -33,6 +33,18 @@ A :class:`TileStore` is a folder: ``index.json`` (the grid, written atomically) 
 tile and product (``fit/t_0003_0012.npz``, ...), each written atomically and byte-deterministic
 (fixed zip timestamps), carrying the key of its inputs so that a resumed build can check
 (:meth:`TileStore.verify`) and skip it.  Nothing here ever holds more than a tile's neighbourhood.
+
+Reading a world from a stranger
+-------------------------------
+A tiled world is validated like a bundle.  ``index.json`` is checked against a schema
+(:func:`check_index`: known keys only, their types, a grid of at most :data:`MAX_TILES` tiles, tile
+keys ``"ty,tx"`` inside the grid, finite bounds with ``lo <= hi``, patch counts that match the
+grid); tile files are never named by the index (``<product>/t_YYYY_XXXX.npz`` is made from the
+tile's numbers, a plain file name) and are opened through :mod:`piste.formats.safe_io` below the
+world's folder (no symbolic link followed, FIFOs and devices refused before a read).  Every
+``.npy`` header in a tile is read and checked (dtype, shape, the member's size, the shape the
+grid expects) before its array is allocated.  A bad tile is a :class:`TileError` naming the
+tile's file, the tile and the member (field).
 """
 
 from __future__ import annotations
@@ -46,14 +58,17 @@ from pathlib import Path
 
 import numpy as np
 
+import math
+import re
+
 from piste.errors import FormatError, ValidationError
 from piste.formats.atomic import write_bytes_atomic
-from piste.formats.safe_io import loads_json, read_regular
+from piste.formats.safe_io import anchor, loads_json, open_file, read_regular
 from piste.terrain.bezier import bernstein
 from piste.terrain.net import PatchNet
 
-__all__ = ["TileGrid", "TileStore", "fit_tile", "fit_edge", "tile_net", "neighbourhood_net", "npz_bytes",
-           "TILES_FORMAT", "TILE_FIT_VERSION"]
+__all__ = ["TileGrid", "TileStore", "TileError", "check_index", "tile_entries", "fit_tile", "fit_edge", "tile_net",
+           "neighbourhood_net", "npz_bytes", "TILES_FORMAT", "TILE_FIT_VERSION"]
 
 TILES_FORMAT = "piste.TiledNet/1"
 #: bumped whenever :func:`fit_tile`'s output for the same input changes
@@ -65,7 +80,26 @@ MAX_TILES = 1_000_000
 MAX_INDEX_BYTES = 1 << 30
 #: largest array in a tile file (inflated)
 MAX_TILE_MEMBER_BYTES = 1 << 30
+#: largest tile file (compressed) and most members in one
+MAX_TILE_FILE_BYTES = 1 << 31
+MAX_TILE_MEMBERS = 64
+#: largest |coordinate| in an index's bounds, metres (the Earth's circumference is 4e7)
+MAX_BOUND = 1e12
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)
+
+
+class TileError(FormatError):
+    """A tile of a tiled world is bad (missing, torn, of the wrong shape, not finite, reached
+    through a link): names the tile's file, the tile ``(ty, tx)`` and the member (``field``)."""
+
+    def __init__(self, path, tile, message: str, field: str | None = None):
+        self.tile = tuple(int(v) for v in tile) if tile is not None else None
+        self.reason = message
+        where = f"tile ({self.tile[0]}, {self.tile[1]}): " if self.tile is not None else ""
+        super().__init__(path, where + message, field=field)
+
+    def __reduce__(self):  # travels between processes intact
+        return (TileError, (self.path, self.tile, self.reason, self.field))
 
 
 # ----------------------------------------------------------------------------- the grid
@@ -273,6 +307,97 @@ def fit_tile(grid: TileGrid, ty: int, tx: int, window) -> dict:
     return {"control_points": cp, "uv": tile_uv(grid, cp)}
 
 
+# ----------------------------------------------------------------------------- the index schema
+#: index.json's keys and what each holds (piste.pipeline.tiled_build.write_index writes them all;
+#: a world written by TileStore alone may hold only format and grid)
+INDEX_KEYS = {"format": "a format name", "name": "a name", "grid": "the tile grid", "patches": "a patch count",
+              "res": "light-map texels a patch side", "shadows": "true or false", "cell": "metres",
+              "lights": "lights TOML text", "source": "the source's key", "tiles": "an object of tiles"}
+TILE_KEYS = {"fit", "lit", "patches", "bounds"}
+_TILE_KEY = re.compile(r"^(\d{1,7}),(\d{1,7})$")
+_SHA = re.compile(r"^[0-9a-f]{64}$")
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_num(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def check_index(index, path) -> dict:
+    """``index`` (parsed ``index.json``) after checking every key it holds against the schema
+    (:data:`INDEX_KEYS`): known keys only, of the right type and range.  The grid and the tiles
+    are checked against each other by :meth:`TileStore.grid` and :func:`tile_entries`.
+    FormatError naming ``path`` and the field."""
+
+    def bad(field, message):
+        return FormatError(path, message, field=field)
+
+    if not isinstance(index, dict):
+        raise bad(None, f"expected an object with format {TILES_FORMAT!r}, got {type(index).__name__}")
+    if index.get("format") != TILES_FORMAT:
+        raise bad("format", f"expected format {TILES_FORMAT!r}, got {str(index.get('format'))[:60]!r}")
+    for k in index:
+        if k not in INDEX_KEYS:
+            raise bad(k[:60], f"unknown key {k[:60]!r}: expected one of {', '.join(sorted(INDEX_KEYS))}")
+    checks = {"name": lambda v: isinstance(v, str) and len(v) <= 4096, "grid": lambda v: isinstance(v, dict),
+              "patches": lambda v: _is_int(v) and 0 <= v <= 10**12, "res": lambda v: _is_int(v) and 2 <= v <= 64,
+              "shadows": lambda v: isinstance(v, bool), "cell": lambda v: _is_num(v) and 0 <= v <= 1e9,
+              "lights": lambda v: isinstance(v, str) and len(v) <= 1 << 20,
+              "source": lambda v: isinstance(v, str) and len(v) <= 4096, "tiles": lambda v: isinstance(v, dict)}
+    for k, ok in checks.items():
+        if k in index and not ok(index[k]):
+            raise bad(k, f"expected {INDEX_KEYS[k]}" + (" (2..64)" if k == "res" else "") +
+                      f", got {str(index[k])[:60]!r}")
+    return index
+
+
+def tile_entries(index: dict, grid: TileGrid, path) -> dict:
+    """The tiles ``index["tiles"]`` lists, checked: ``{(ty, tx): {"bounds": (2, 3) float64,
+    "patches": int}}``.  Keys must be ``"ty,tx"`` of a tile of ``grid``, entries hold only
+    :data:`TILE_KEYS`, ``patches`` equals the tile's patch count, ``bounds`` is
+    ``[[x0, y0, z0], [x1, y1, z1]]`` of finite numbers with ``lo <= hi``.  FormatError naming
+    ``path`` and the field (``tiles."0,0".bounds``)."""
+    tiles = index.get("tiles")
+    if not isinstance(tiles, dict) or not tiles:
+        raise FormatError(path, "expected an object of tiles {\"ty,tx\": {...}}, got "
+                                f"{str(tiles)[:60]!r}", field="tiles")
+    out = {}
+    for key, t in tiles.items():
+        m = _TILE_KEY.match(key)
+        field = f'tiles."{key[:40]}"'
+        if not m:
+            raise FormatError(path, f"expected a tile key \"ty,tx\" (two whole numbers), got {key[:40]!r}",
+                              field=field)
+        ty, tx = int(m.group(1)), int(m.group(2))
+        if not (ty < grid.shape[0] and tx < grid.shape[1]):
+            raise FormatError(path, f"no tile ({ty}, {tx}) in a grid of {grid.shape[0]} x {grid.shape[1]}", field=field)
+        if not isinstance(t, dict):
+            raise FormatError(path, f"expected an object, got {str(t)[:60]!r}", field=field)
+        for k in t:
+            if k not in TILE_KEYS:
+                raise FormatError(path, f"unknown key {k[:40]!r}: expected {', '.join(sorted(TILE_KEYS))}",
+                                  field=f"{field}.{k[:40]}")
+        for k in ("fit", "lit"):
+            if k in t and not (isinstance(t[k], str) and _SHA.match(t[k])):
+                raise FormatError(path, f"expected a sha256 (64 hex digits), got {str(t[k])[:60]!r}", field=f"{field}.{k}")
+        py0, py1, px0, px1 = grid.patch_range(ty, tx)
+        n = (py1 - py0) * (px1 - px0)
+        if t.get("patches") != n or not _is_int(t.get("patches")):
+            raise FormatError(path, f"expected {n} patches (the grid's), got {str(t.get('patches'))[:60]!r}",
+                              field=f"{field}.patches")
+        b = t.get("bounds")
+        ok = (isinstance(b, list) and len(b) == 2 and all(isinstance(r, list) and len(r) == 3 and
+                                                          all(_is_num(v) and abs(v) <= MAX_BOUND for v in r) for r in b))
+        if not ok or not all(lo <= hi for lo, hi in zip(b[0], b[1])):
+            raise FormatError(path, "expected [[x0, y0, z0], [x1, y1, z1]]: finite numbers (|v| <= 1e12) with "
+                                    f"lo <= hi, got {str(b)[:80]}", field=f"{field}.bounds")
+        out[(ty, tx)] = {"bounds": np.asarray(b, dtype=np.float64), "patches": n}
+    return out
+
+
 # ----------------------------------------------------------------------------- storage
 def npz_bytes(arrays: dict) -> bytes:
     """A deterministic ``.npz`` (deflated, fixed timestamps, keys in the given order)."""
@@ -297,7 +422,9 @@ class TileStore:
     """
 
     def __init__(self, root):
-        self.root = Path(root)
+        # the folder the user named, as a confinement root: tiles are opened below it without
+        # following links (piste.formats.safe_io)
+        self.root = Path(anchor(root))
 
     # -- index
     @property
@@ -312,12 +439,16 @@ class TileStore:
         if not self.index_path.exists():
             raise FormatError(self.index_path, "no such file: not a tiled world (run piste build first)")
         index = loads_json(read_regular(self.index_path, MAX_INDEX_BYTES), self.index_path)
-        if not isinstance(index, dict) or index.get("format") != TILES_FORMAT:
-            raise FormatError(self.index_path, f"expected format {TILES_FORMAT!r}", field="format")
+        check_index(index, self.index_path)
+        if index.get("tiles"):  # a built world: its tiles against its grid (keys, patch counts, bounds)
+            tile_entries(index, self._grid_of(index), self.index_path)
         return index
 
     def grid(self) -> TileGrid:
-        index = self.read_index()
+        """The world's :class:`TileGrid` (FormatError naming ``index.json`` and the field)."""
+        return self._grid_of(self.read_index())
+
+    def _grid_of(self, index: dict) -> TileGrid:
         d = index.get("grid")
         if not isinstance(d, dict):
             raise FormatError(self.index_path, f"expected an object, got {type(d).__name__}", field="grid")
@@ -343,25 +474,14 @@ class TileStore:
 
     def read_fit(self, grid: TileGrid, ty: int, tx: int) -> dict:
         """A fitted tile's arrays, checked against the grid: ``{"control_points": (n, 4, 4, 3)
-        float64, "uv": (n, 4, 2) float32}`` with ``n`` the tile's patches (FormatError naming the
+        float64, "uv": (n, 4, 2) float32}`` with ``n`` the tile's patches (TileError naming the
         tile and member when missing, of another shape, or not finite)."""
-        a = self.read("fit", ty, tx)
         py0, py1, px0, px1 = grid.patch_range(ty, tx)
         n = (py1 - py0) * (px1 - px0)
-        p = self.path("fit", ty, tx)
-        out = {}
-        for name, shape, dtype in (("control_points", (n, 4, 4, 3), np.float64), ("uv", (n, 4, 2), np.float32)):
-            if name not in a:
-                raise FormatError(p, f"tile ({ty}, {tx}) has no {name}", field=name)
-            v = a[name]
-            if v.shape != shape or v.dtype.kind not in "fiu":
-                raise FormatError(p, f"tile ({ty}, {tx}): expected {shape} numbers, got {v.shape} {v.dtype}",
-                                  field=name)
-            v = v.astype(dtype)
-            if not np.isfinite(v).all():
-                raise FormatError(p, f"tile ({ty}, {tx}) holds non-finite values", field=name)
-            out[name] = v
-        return out
+        a = self.read("fit", ty, tx, names=("control_points", "uv"),
+                      expect={"control_points": ((n, 4, 4, 3), "fiu"), "uv": ((n, 4, 2), "fiu")})
+        return {"control_points": a["control_points"].astype(np.float64, copy=False),
+                "uv": a["uv"].astype(np.float32, copy=False)}
 
     # -- tiles
     def path(self, product: str, ty: int, tx: int) -> Path:
@@ -375,21 +495,17 @@ class TileStore:
         write_bytes_atomic(p, data)
         return hashlib.sha256(data).hexdigest()
 
-    def read(self, product: str, ty: int, tx: int, key: str | None = None) -> dict:
-        """The arrays of one tile (``FormatError`` naming the tile when missing, torn or stale)."""
+    def read(self, product: str, ty: int, tx: int, key: str | None = None, names=None, expect=None) -> dict:
+        """The arrays of one tile (all of them, or ``names``), each ``.npy`` header checked before
+        its array is allocated (:func:`_read_npz`; ``expect``: ``{name: (shape, dtype kinds)}``).
+        TileError naming the tile when missing, torn, stale, of the wrong shape or not finite."""
         p = self.path(product, ty, tx)
-        try:
-            arrays = _read_npz(p)
-        except FormatError:
-            raise
-        except FileNotFoundError:
-            raise FormatError(p, f"tile ({ty}, {tx}) has no {product!r} output yet") from None
-        except Exception as exc:
-            raise FormatError(p, f"tile ({ty}, {tx}): not a readable tile ({exc})") from None
+        want = None if names is None else tuple(names) + (("key",) if key is not None else ())
+        arrays = _read_npz(p, (ty, tx), want, expect, product)
         got = str(arrays.pop("key", ""))
         if key is not None and got != key:
-            raise FormatError(p, f"tile ({ty}, {tx}) was built from other inputs (key {got[:12]}, "
-                                 f"expected {key[:12]})", field="key")
+            raise TileError(p, (ty, tx), f"was built from other inputs (key {got[:12]}, expected {key[:12]})",
+                            field="key")
         return arrays
 
     def verify(self, product: str, ty: int, tx: int, key: str) -> str | None:
@@ -398,7 +514,7 @@ class TileStore:
         if not p.is_file():
             return None
         try:
-            data = p.read_bytes()
+            data = read_regular(p, MAX_TILE_FILE_BYTES, what="tile file")
             with zipfile.ZipFile(io.BytesIO(data)) as zf:
                 if zf.testzip() is not None:
                     return None
@@ -409,27 +525,86 @@ class TileStore:
         return hashlib.sha256(data).hexdigest() if got == key else None
 
 
-def _read_npz(p: Path) -> dict:
-    """The arrays of ``.npz`` file ``p``, each member's size checked before it is inflated and its
-    ``.npy`` header's shape checked against the member's size before anything is allocated."""
+def _header(p, tile, name: str, fh, info):
+    """``(shape, fortran_order, dtype)`` of a member's ``.npy`` header, read from the stream (a
+    few hundred bytes) and checked against the member's declared size before anything else."""
+    try:
+        version = np.lib.format.read_magic(fh)
+        read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, fortran, dtype = read(fh, max_header_size=10_000)
+    except Exception as exc:
+        raise TileError(p, tile, f"member {name!r} has an unreadable .npy header ({type(exc).__name__}: "
+                                 f"{str(exc)[:100]})", field=name) from None
+    if dtype.hasobject or dtype.fields is not None or dtype.kind not in "biufU" or dtype.itemsize == 0:
+        raise TileError(p, tile, f"member {name!r} holds {dtype}, expected numbers", field=name)
+    need = math.prod(shape) * dtype.itemsize  # Python ints: no overflow
+    if need + fh.tell() != info.file_size:
+        raise TileError(p, tile, f"member {name!r}: an array of shape {tuple(shape)} {dtype} needs {need:,} bytes, "
+                                 f"the member holds {max(info.file_size - fh.tell(), 0):,}", field=name)
+    return tuple(shape), fortran, dtype
+
+
+def _read_npz(p: Path, tile=None, names=None, expect=None, product: str = "tile") -> dict:
+    """The arrays of tile file ``p`` (or only ``names``), opened through :mod:`piste.formats.safe_io`.
+
+    Before a member's array is allocated: the member count, each member's declared size, its
+    ``.npy`` header (numbers only; the shape times the item size equals the member's size) and,
+    for members in ``expect`` (``{name: (shape, "fiu")}``), the shape and dtype kind; arrays of a
+    float kind in ``expect`` must be finite.  Every failure is a TileError naming ``p``, the tile
+    and the member."""
+    tile = tile if tile is not None else (0, 0)
+    try:
+        fh = open_file(p, MAX_TILE_FILE_BYTES, what="tile file")
+    except FormatError as exc:
+        reason = getattr(exc, "reason", str(exc))
+        if "No such file" in reason:
+            reason = f"has no {product!r} output (no file {p.name})"
+        raise TileError(p, tile, reason) from None
     out = {}
-    with zipfile.ZipFile(p) as zf:
-        for info in zf.infolist():
-            name = info.filename[:-4] if info.filename.endswith(".npy") else info.filename
-            if info.file_size > MAX_TILE_MEMBER_BYTES:
-                raise FormatError(p, f"member of {info.file_size:,} bytes: more than {MAX_TILE_MEMBER_BYTES:,}",
-                                  field=name)
-            data = zf.read(info)
-            fh = io.BytesIO(data)
-            version = np.lib.format.read_magic(fh)
-            read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-            shape, _, dtype = read(fh)
-            need = int(np.prod(shape, dtype=object)) * dtype.itemsize
-            if need > len(data):
-                raise FormatError(p, f"array of shape {tuple(shape)} {dtype} needs {need:,} bytes, the member holds "
-                                     f"{len(data):,}", field=name)
-            fh.seek(0)
-            out[name] = np.lib.format.read_array(fh, allow_pickle=False)
+    with fh:
+        try:
+            zf = zipfile.ZipFile(fh)
+        except Exception as exc:
+            raise TileError(p, tile, f"not a readable tile (.npz: {type(exc).__name__}: {str(exc)[:100]})") from None
+        with zf:
+            infos = zf.infolist()
+            if len(infos) > MAX_TILE_MEMBERS:
+                raise TileError(p, tile, f"{len(infos)} members: more than {MAX_TILE_MEMBERS}")
+            members = {}
+            for info in infos:
+                name = info.filename[:-4] if info.filename.endswith(".npy") else info.filename
+                if name in members:
+                    raise TileError(p, tile, f"member {name[:60]!r} appears twice", field=name[:60])
+                members[name] = info
+            for name in (names if names is not None else list(members)):
+                if name not in members:
+                    raise TileError(p, tile, f"has no {name}", field=name)
+                info = members[name]
+                if info.file_size > MAX_TILE_MEMBER_BYTES:
+                    raise TileError(p, tile, f"member of {info.file_size:,} bytes: more than "
+                                             f"{MAX_TILE_MEMBER_BYTES:,}", field=name)
+                try:
+                    with zf.open(info) as m:
+                        shape, fortran, dtype = _header(p, tile, name, m, info)
+                        if expect and name in expect:
+                            want_shape, kinds = expect[name]
+                            if shape != tuple(want_shape) or dtype.kind not in kinds:
+                                raise TileError(p, tile, f"expected {tuple(want_shape)} numbers, got {shape} {dtype}",
+                                                field=name)
+                        arr = np.empty(shape, dtype, order="F" if fortran else "C")  # checked: at most the member
+                        view = memoryview(arr.reshape(-1, order="A")).cast("B") if arr.size else memoryview(b"")
+                        got = m.readinto(view) if arr.size else 0
+                        if got != arr.nbytes:
+                            raise TileError(p, tile, f"member {name!r} ended after {got} of {arr.nbytes} bytes",
+                                            field=name)
+                except TileError:
+                    raise
+                except Exception as exc:  # a bad CRC, a torn deflate stream
+                    raise TileError(p, tile, f"member {name!r} is unreadable ({type(exc).__name__}: "
+                                             f"{str(exc)[:100]})", field=name) from None
+                if expect and name in expect and dtype.kind == "f" and not np.isfinite(arr).all():
+                    raise TileError(p, tile, "holds non-finite values", field=name)
+                out[name] = arr
     return out
 
 
