@@ -15,7 +15,7 @@ def add_arguments(parser) -> None:
 
     parser.add_argument("net", nargs="?", help="a .bpt or .npz patch net (default: the default course)")
     parser.add_argument("--lights", metavar="TOML", help="lights file (default: the default course's lights)")
-    parser.add_argument("--res", type=N.integer(1, 64), default=8, choices=(8, 16), help="texels per patch side (default 8)")
+    parser.add_argument("--res", type=N.integer(8, 16), default=8, choices=(8, 16), help="texels per patch side (default 8)")
     parser.add_argument("--out", metavar="DIR", default="out/lightmap", help="output folder (default out/lightmap)")
     parser.add_argument("--jobs", type=N.JOBS, default=0, help="worker processes (default 0 = every core)")
     parser.add_argument("--no-shadows", action="store_true", help="skip shadow rays (unshadowed lighting)")

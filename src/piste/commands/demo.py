@@ -47,7 +47,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--objects", choices=("dynamic", "baked", "points"), default="dynamic",
                         help="object lighting (full scene): 1 ambient + 3 directional per object (SSX), "
                              "pre-calculated RGBs, or dynamic point and spot lights")
-    parser.add_argument("--object-lod", type=N.real(0.0, 1000.0), default=None, metavar="PX",
+    parser.add_argument("--object-lod", type=N.real(0.0, 64.0), default=None, metavar="PX",
                         help="full scene: objects' levels of detail, the simplification error an object may show "
                              "in pixels (0: full meshes; default: the scene's render.object_lod, 0.5)")
     parser.add_argument("--no-shadows", action="store_true", help="full scene without projected rider shadows")
