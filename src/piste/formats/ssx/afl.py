@@ -125,6 +125,7 @@ MAX_FILE_BYTES = 64 << 20
 MAX_BAKED_VALUES = 1 << 24
 _HEAD = struct.Struct("<BBHII")
 _SAMPLED = (4, 6, 7)
+_F32_MAX = float(np.finfo(np.float32).max)
 
 
 # ----------------------------------------------------------------------------------- small facts
@@ -142,9 +143,8 @@ def afl_hash(name: str) -> int:
 
 def _unpack3(raw: bytes) -> np.ndarray:
     """Packed floats ``(n,) float32`` from ``3 n`` bytes (each the top 3 bytes of a float32, low byte 0x80)."""
-    b = np.frombuffer(raw, np.uint8).reshape(-1, 3).astype(np.uint32)
-    bits = (b[:, 0] << 8) | (b[:, 1] << 16) | (b[:, 2] << 24) | np.uint32(0x80)
-    return bits.view(np.float32)
+    n = len(raw) // 3  # 1 to 4 a segment: struct beats numpy's per-call overhead here
+    return np.array(struct.unpack(f"<{n}f", b"".join(b"\x80" + raw[i:i + 3] for i in range(0, 3 * n, 3))), np.float32)
 
 
 def _pack3(values) -> bytes:
@@ -191,6 +191,18 @@ def _rotation_euler(m) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------------- curves
+def _sampled_eval(v: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Sampled curves ``v (n, k)`` (n samples each) at local frames ``u (m,)`` -> ``(m, k)``: the
+    nearest sample ``s = round(u)``, plus the signed residual ``u - s`` times the step to sample
+    ``s + 1`` (indices clamped)."""
+    n = v.shape[0]
+    s = np.rint(u)
+    r = (u - s)[:, None]
+    si = np.clip(s, 0, n - 1).astype(np.int64)
+    fi = np.minimum(si + 1, n - 1)
+    return v[si] + r * (v[fi] - v[si])
+
+
 @dataclass
 class Segment:
     """One curve segment: ``kind`` (0 constant, 1-3 polynomial, 4 f32 samples, 6/7 8/16-bit samples),
@@ -220,13 +232,7 @@ class Segment:
                 for c in self.params[1:]:
                     v = u * v + float(c)
             return v
-        vals = self.values()
-        n = vals.shape[0]
-        s = np.rint(u)
-        r = u - s
-        si = np.clip(s, 0, n - 1).astype(np.int64)
-        fi = np.minimum(si + 1, n - 1)
-        return vals[si] + r * (vals[fi] - vals[si])
+        return _sampled_eval(self.values()[:, None], u)[:, 0]
 
     def to_bytes(self) -> bytes:
         head = struct.pack("<H", (self.count << 4) | self.kind)
@@ -439,19 +445,32 @@ class AflFile:
         c = self.clip(clip) if isinstance(clip, str) else clip
         f = np.arange(max(c.frames, 1), dtype=np.float64) if frames is None else np.atleast_1d(
             np.asarray(frames, np.float64))
-        out = []
-        for _, offs in c.tracks:
-            if offs is None:
-                out.append(None)
-                continue
-            vals = np.empty((f.shape[0], len(offs)))
-            cache: dict = {}
-            for j, o in enumerate(offs):  # curves shared by several channels are evaluated once
-                if o not in cache:
-                    cache[o] = self.curves[o].evaluate(f)
-                vals[:, j] = cache[o]
-            out.append(vals)
-        return out
+        return [None if offs is None else self.evaluate(offs, f) for _, offs in c.tracks]
+
+    def evaluate(self, offsets, frames) -> np.ndarray:
+        """Values ``(m, c) float64`` of the curves at data offsets ``offsets (c,)`` at ``frames (m,)``:
+        each distinct curve once; the single-segment constants, and the single-segment sampled curves
+        of one sample count, in one vectorised gather each; the others curve by curve."""
+        f = np.atleast_1d(np.asarray(frames, np.float64))
+        uniq, inv = np.unique(np.asarray(offsets, np.int64), return_inverse=True)
+        res = np.empty((f.shape[0], uniq.shape[0]))
+        batches: dict = {}
+        for u, o in enumerate(uniq.tolist()):
+            cv = self.curves[o]
+            s0 = None if cv.grouped else cv.segments[0]
+            if s0 is not None and s0.kind == 0:
+                batches.setdefault(0, []).append((u, s0))
+            elif s0 is not None and s0.kind in _SAMPLED:
+                batches.setdefault(s0.count, []).append((u, s0))  # count >= 1 (parse refuses 0)
+            else:
+                res[:, u] = cv.evaluate(f)
+        for n, items in batches.items():
+            cols = [u for u, _ in items]
+            if n == 0:
+                res[:, cols] = np.array([float(sg.params[0]) for _, sg in items])[None]
+            else:
+                res[:, cols] = _sampled_eval(np.stack([sg.values() for _, sg in items], axis=1), f)
+        return res[:, inv.reshape(-1)]
 
 
 def parse_afl(data: bytes, path="<bytes>", names=()) -> AflFile:
@@ -604,6 +623,16 @@ def mpf_body_bones(model) -> list:
     return list(sk.names)
 
 
+_AXES = np.argmax(np.abs(SSX_TO_PISTE), axis=1)          # SSX_TO_PISTE is a signed permutation
+_SIGNS = SSX_TO_PISTE[np.arange(3), _AXES]
+
+
+def _to_piste(rm) -> np.ndarray:
+    """``A @ rm @ A.T`` for rotation matrices ``rm (..., 3, 3)`` in SSX axes (A = SSX_TO_PISTE), by
+    indexing (A permutes and signs the axes) instead of two batched matmuls."""
+    return rm[..., _AXES[:, None], _AXES[None, :]] * (_SIGNS[:, None] * _SIGNS[None, :])
+
+
 def _default_bones(skeleton: Skeleton) -> list:
     if all(skeleton.get(n) is not None for n in BODY_BONE_NAMES):
         return list(BODY_BONE_NAMES)
@@ -620,7 +649,7 @@ def _continuous(q) -> np.ndarray:
 
 
 def _checked(afl: AflFile, c: AflClip, ch: np.ndarray, what: str) -> np.ndarray:
-    ok = np.abs(ch) <= np.finfo(np.float32).max  # the game evaluates in float32: beyond it is inf
+    ok = np.abs(ch) <= _F32_MAX  # the game evaluates in float32: beyond it is inf
     if not ok.all():
         j = int(np.flatnonzero(~ok.all(0))[0])
         raise FormatError(afl.path, f"clip {c.name}: {what} channel {j} evaluates to a non-finite value (past the "
@@ -659,28 +688,40 @@ def afl_clips(afl: AflFile, skeleton: Skeleton, bones=None, fps: float = DEFAULT
                                     f"{MAX_BAKED_VALUES}", field="frames")
     a = SSX_TO_PISTE
     roots = sk_i[skeleton.parents[sk_i] < 0]
-    out = {}
+    work = []  # (clip, frames, body channels (F, 60), board channels (F, 6) or None)
     for c in chosen:
         kinds = [k for k, offs in c.tracks if offs is not None]
         if BODY_TRACK not in kinds:
             afl.notes.append(f"clip {c.name}: no body track; not converted")
             continue
         f = max(c.frames, 1)
-        samples = [x for x in afl.sample(c) if x is not None]
-        ch = _checked(afl, c, samples[kinds.index(BODY_TRACK)], "body")
+        frames = np.arange(f, dtype=np.float64)
+        ch = _checked(afl, c, afl.evaluate(c.body, frames), "body")
+        board = None
+        if jb is not None and BOARD_TRACK in kinds:
+            offs = next(o for k, o in c.tracks if k == BOARD_TRACK and o is not None)
+            board = _checked(afl, c, afl.evaluate(offs, frames), "board")
+        work.append((c, f, ch, board))
+    if not work:
+        return {}
+    # every clip's frames at once: rotations (sum F, k) in one batch
+    allch = np.concatenate([w[2] for w in work])
+    q_all = matrix_to_quat(_to_piste(afl_rotation(allch[:, 3:].reshape(-1, BODY_BONES, 3)[:, file_i])))
+    root_all = (allch[:, :3] @ a.T) * CM
+    cuts = np.cumsum([0] + [w[1] for w in work])
+    out = {}
+    for (c, f, _, board), lo, hi in zip(work, cuts[:-1], cuts[1:]):
         times = np.arange(f) / float(fps)
-        e = ch[:, 3:].reshape(f, BODY_BONES, 3)[:, file_i]                 # (F, k, 3)
-        q = _continuous(matrix_to_quat(a @ afl_rotation(e) @ a.T))          # (F, k, 4) piste axes
-        root = (ch[:, :3] @ a.T) * CM                                        # (F, 3) m
+        q = _continuous(q_all[lo:hi])                                        # (F, k, 4) piste axes
+        root = root_all[lo:hi]                                               # (F, 3) m
         tracks = {}
-        for k, j in enumerate(sk_i):
+        for k, j in enumerate(sk_i.tolist()):
             bt = {"rotation": Track(times, q[:, k])}
             if skeleton.parents[j] < 0:
                 bt["translation"] = Track(times, root)
             tracks[skeleton.names[j]] = bt
-        if jb is not None and BOARD_TRACK in kinds:
-            bch = _checked(afl, c, samples[kinds.index(BOARD_TRACK)], "board")
-            world = compose_trs((bch[:, :3] @ a.T) * CM, matrix_to_quat(a @ afl_rotation(bch[:, 3:]) @ a.T),
+        if board is not None:
+            world = compose_trs((board[:, :3] @ a.T) * CM, matrix_to_quat(_to_piste(afl_rotation(board[:, 3:]))),
                                 np.ones((f, 3)))                             # (F, 4, 4) board in model space
             parent = int(skeleton.parents[jb])
             if parent >= 0:  # under its parent as this clip poses it
