@@ -236,7 +236,6 @@ def test_the_checker_sees_a_cycle_and_a_layer_breach(tmp_path, monkeypatch):
 
 #: imports between command modules still to remove, each with who removes it (issue 25 item 2)
 COMMAND_IMPORTS_LEFT = {
-    ("piste.commands.bake", "piste.commands.ssx"),  # bake_pbd: moves to the pipeline with `piste ssx` subcommands
     ("piste.commands.ssx", "piste.commands.export"),  # export_bundle: moves with glTF into one subpackage
 }
 

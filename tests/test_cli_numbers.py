@@ -62,7 +62,7 @@ def numeric_flags() -> list[tuple[tuple[str, ...], argparse.Action]]:
 
 
 FLAGS = numeric_flags()
-IDS = [f"{prefix[0]}{'-' + prefix[1] if prefix[0] == 'mpf' else ''}:{a.option_strings[-1]}" for prefix, a in FLAGS]
+IDS = [f"{prefix[0]}{'-' + prefix[1] if prefix[0] in ('mpf', 'ssx') else ''}:{a.option_strings[-1]}" for prefix, a in FLAGS]
 HOSTILE = ["nan", "NaN", "inf", "-inf", "+inf", "infinity", "-1", "-0", "0", "0.0", "1e300", "-1e300", "1e-300",
            "-1e-300", "99999999999999999999", "1" + "0" * 400, "1e309", "0x10", "", " ", "1_000", "12abc", "1.5",
            "-10", "100000", "4294967296", "9e18"]
@@ -153,7 +153,8 @@ def test_the_issues_cases_exit_2_with_one_line(argv, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     flag = [a for a in argv if a.startswith("--")][-1].split("=")[0]
-    assert err.count("\n") == 1 and err.startswith(f"piste {argv[0]}: error: argument {flag}: ")
+    prog = " ".join(argv[:2]) if argv[0] in ("ssx", "mpf") else argv[0]  # subcommands: `piste ssx make: error: ...`
+    assert err.count("\n") == 1 and err.startswith(f"piste {prog}: error: argument {flag}: ")
     assert "expected" in err or "invalid choice" in err
 
 

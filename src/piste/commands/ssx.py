@@ -1,7 +1,7 @@
-"""``piste ssx``: SSX Tricky levels (``.pbd`` with ``.ssh`` / ``_L.ssh`` beside it).
+"""``piste ssx``: SSX Tricky levels (``.pbd`` with ``.ssh`` / ``_L.ssh`` beside it), as subcommands.
 
     piste ssx info LEVEL.pbd                       counts, bounds, textures, light-map pages
-    piste ssx render LEVEL.pbd --out x.png [--lightmap modulate|ps2]
+    piste ssx render LEVEL.pbd [--out x.png] [--lightmap modulate|ps2] [--eye X Y Z --target X Y Z]
     piste ssx view LEVEL.pbd                       a window (or one off-screen frame without a display)
     piste ssx bake LEVEL.pbd [--lights L.toml | --scene S.toml] [--out NEW.pbd]
     piste ssx convert LEVEL.pbd --to npz|multitool|gltf --out PATH
@@ -10,39 +10,62 @@
     piste ssx import PROJECT_DIR --out NEW.pbd     a Multitool project as a level (+ .ssh, _L.ssh)
 
 ``piste render LEVEL.pbd``, ``piste view LEVEL.pbd`` and ``piste bake LEVEL.pbd --format ssx-tricky``
-run the same code.
+open the same levels.  The command only parses: the work is in :mod:`piste.pipeline.ssx_level`,
+:mod:`piste.formats.ssx` and :mod:`piste.render.ssx_pass`.
 """
 
 from __future__ import annotations
 
-ACTIONS = ("info", "render", "view", "bake", "convert", "make", "import")
-
-
 def add_arguments(parser) -> None:
     from piste.commands import _numbers as N
 
-    parser.add_argument("action", choices=ACTIONS, help="what to do")
-    parser.add_argument("level", help="LEVEL.pbd (make: the output folder; import: the Multitool project folder)")
-    parser.add_argument("--out", help="render: PNG (default out/ssx.png); bake: the .pbd to write (default: the "
-                                      "level itself, with NAME_L.ssh beside it); convert: the .npz or project folder")
-    parser.add_argument("--lightmap", choices=("modulate", "ps2"), default="modulate", help="light-map mode")
-    parser.add_argument("--size", nargs=2, type=N.SIZE, default=(640, 448), metavar=("W", "H"), help="image size")
-    parser.add_argument("--eye", nargs=3, type=N.COORDINATE, metavar=("X", "Y", "Z"), help="camera position (metres)")
-    parser.add_argument("--target", nargs=3, type=N.COORDINATE, metavar=("X", "Y", "Z"), help="camera target (metres)")
-    parser.add_argument("--lights", metavar="TOML", help="bake: a lights file (default: the scene's or piste's)")
-    parser.add_argument("--scene", metavar="TOML", help="bake: take the lights from this scene file")
-    parser.add_argument("--no-shadows", action="store_true", help="bake: no shadow rays")
-    parser.add_argument("--jobs", type=N.JOBS, default=1, help="bake: worker processes (0 = every core)")
-    parser.add_argument("--to", choices=("npz", "multitool", "gltf"),
-                        help="convert: a PatchNet .npz, a Multitool project folder, or glTF (.glb/.gltf: the "
-                             "terrain with the level's textures and light map, as `piste export` writes it)")
-    parser.add_argument("--rows", type=N.integer(1, 256), default=2, help="make: patch rows")
-    parser.add_argument("--cols", type=N.integer(1, 256), default=3, help="make: patch columns")
-    parser.add_argument("--name", default="SYNTH", help="make: the level's name")
-    parser.add_argument("--from", dest="from_net", metavar="NET",
-                        help="make: the patches of a saved PatchNet (.npz), a .bpt, or 'default' (the default "
-                             "course) instead of a synthetic slope; placeholder textures and light maps (bake next)")
-    parser.add_argument("--frames", type=N.FRAMES, help="view: quit after N frames")
+    sub = parser.add_subparsers(dest="ssx_command", metavar="ACTION")
+    sub.required = True
+
+    def level(p, help="an SSX Tricky level (.pbd; its .ssh and _L.ssh beside it)"):
+        p.add_argument("level", metavar="LEVEL.pbd", help=help)
+
+    def look(p, default_out):
+        p.add_argument("--out", default=default_out, help=f"PNG to write (default {default_out})")
+        p.add_argument("--lightmap", choices=("modulate", "ps2"), default="modulate",
+                       help="light-map mode: modulate (base x light) or ps2 (the stored Cs/As blended as the GS does)")
+        p.add_argument("--size", nargs=2, type=N.SIZE, default=(640, 448), metavar=("W", "H"), help="image size")
+
+    level(sub.add_parser("info", help="counts, bounds, textures and light-map pages"))
+    r = sub.add_parser("render", help="render one frame to a PNG")
+    level(r)
+    look(r, "out/ssx.png")
+    r.add_argument("--eye", nargs=3, type=N.COORDINATE, metavar=("X", "Y", "Z"), help="camera position (metres)")
+    r.add_argument("--target", nargs=3, type=N.COORDINATE, metavar=("X", "Y", "Z"), help="camera target (metres)")
+    v = sub.add_parser("view", help="the level in a window (M toggles the light-map mode)")
+    level(v)
+    look(v, "out/ssx_view.png")
+    v.add_argument("--frames", type=N.FRAMES, help="quit after N frames (and save the last to --out)")
+    b = sub.add_parser("bake", help="bake NAME_L.ssh the game's way and update the patches' light-map tiles")
+    level(b)
+    b.add_argument("--out", help="the .pbd to write (default: the level itself, with NAME_L.ssh beside it)")
+    b.add_argument("--lights", metavar="TOML", help="a lights file (default: the scene's or piste's)")
+    b.add_argument("--scene", metavar="TOML", help="take the lights from this scene file")
+    b.add_argument("--no-shadows", action="store_true", help="no shadow rays")
+    b.add_argument("--jobs", type=N.JOBS, default=1, help="worker processes (0 = every core)")
+    b.add_argument("--quiet", action="store_true", help="print nothing")
+    c = sub.add_parser("convert", help="the level as a PatchNet .npz, a Multitool project or glTF")
+    level(c)
+    c.add_argument("--to", choices=("npz", "multitool", "gltf"), required=True,
+                   help="npz: the welded PatchNet (metres); multitool: a Multitool project folder; gltf (.glb/.gltf): "
+                        "the terrain with the level's textures and light map, as `piste export` writes it")
+    c.add_argument("--out", required=True, help="the .npz, project folder or .glb/.gltf to write")
+    m = sub.add_parser("make", help="a level from piste's own encoder (a synthetic slope or any piste patch net)")
+    m.add_argument("level", metavar="DIR", help="the folder to write NAME.pbd, NAME.ssh and NAME_L.ssh into")
+    m.add_argument("--rows", type=N.integer(1, 256), default=2, help="patch rows")
+    m.add_argument("--cols", type=N.integer(1, 256), default=3, help="patch columns")
+    m.add_argument("--name", default="SYNTH", help="the level's name")
+    m.add_argument("--from", dest="from_net", metavar="NET",
+                   help="the patches of a saved PatchNet (.npz), a .bpt, or 'default' (the default course) instead "
+                        "of a synthetic slope; placeholder textures and light maps (bake next)")
+    i = sub.add_parser("import", help="a Multitool project as a level (.pbd, and .ssh / _L.ssh when it has them)")
+    i.add_argument("level", metavar="PROJECT_DIR", help="the Multitool project folder (or its Patches.json)")
+    i.add_argument("--out", required=True, help="the new level's .pbd")
 
 
 def default_camera(net):
@@ -71,68 +94,28 @@ def _camera(args, net):
     return Camera(np.array(args.eye), np.array(args.target), fov_y=50.0, near=0.1, far=max(d * 20.0, 1000.0))
 
 
-def _pbd_path(p):
-    from pathlib import Path
-
-    from piste.errors import ConfigError
-
-    path = Path(p)
-    if path.suffix.lower() != ".pbd":
-        raise ConfigError(f"{p}: expected an SSX Tricky level (.pbd)")
-    return path
-
-
-def render_pbd(level_path, out, size=(640, 448), lightmap_mode="modulate", camera=None) -> str:
-    """Render ``level_path`` to ``out`` (PNG); returns the path written."""
-    from piste.pipeline.ssx_level import load_level
+def render_pbd(level, out, size=(640, 448), lightmap_mode="modulate", camera=None) -> str:
+    """Render ``level`` (a loaded :class:`~piste.pipeline.ssx_level.SsxLevel` or a ``.pbd`` path) to
+    ``out`` (PNG); returns the path written."""
+    from piste.pipeline.ssx_level import SsxLevel, level_path, load_level
     from piste.render.context import save_png
     from piste.render.ssx_pass import render_level
 
-    level = load_level(_pbd_path(level_path))
+    if not isinstance(level, SsxLevel):
+        level = load_level(level_path(level))
     cam = camera if camera is not None else default_camera(level.net)
     img = render_level(level, cam, size=tuple(size), lightmap_mode=lightmap_mode)
     return str(save_png(out, img))
-
-
-def bake_pbd(level_path, out=None, lights_path=None, scene_path=None, shadows=True, jobs=1, quiet=False) -> int:
-    """``piste ssx bake``: bake ``NAME_L.ssh`` the game's way and update the patches' light-map tiles."""
-    import time
-
-    from piste.lighting.lights import default_lights, load_lights
-    from piste.pipeline.ssx_level import bake_level, load_level, write_baked
-
-    t0 = time.perf_counter()
-    level = load_level(_pbd_path(level_path))
-    if lights_path:
-        lights = load_lights(lights_path)
-    elif scene_path:
-        from piste.pipeline.build import scene_lights
-        from piste.world.scene_file import load_scene
-
-        lights = scene_lights(load_scene(scene_path))
-    else:
-        lights = default_lights()
-    baked = bake_level(level, lights, shadows=shadows, jobs=jobs)
-    pbd, lssh = write_baked(level, baked, out)
-    st = baked.stats
-    if not quiet:
-        print(f"baked {len(level.pbd)} patches into {len(baked.pages)} light-map page(s) "
-              f"({st.get('rays', 0):,} shadow rays, {st.get('rays_occluded', 0):,} occluded) in "
-              f"{time.perf_counter() - t0:.2f} s: {lssh}, {pbd}")
-    return 0
 
 
 def run(args) -> int:
     import sys
     from pathlib import Path
 
-    from piste.errors import ConfigError
-
-    if args.action == "make":
+    cmd = args.ssx_command
+    if cmd == "make":
         from piste.formats.ssx.synth import make_level
 
-        if args.rows < 1 or args.cols < 1:
-            raise ConfigError("--rows and --cols must be >= 1")
         net = None
         if args.from_net:
             from piste.pipeline.open_scene import load_net as _load_net
@@ -142,13 +125,14 @@ def run(args) -> int:
                           n_textures=1 if net is not None else 3).write(Path(args.level), args.name)
         print(f"wrote {path} and {path.stem}.ssh, {path.stem}_L.ssh beside it")
         return 0
-    if args.action == "import":
+    if cmd == "import":
+        from piste.errors import ConfigError
         from piste.formats.ssx.multitool import read_project
         from piste.formats.ssx.pbd import write_pbd
         from piste.formats.ssx.ssh import write_ssh
 
-        if not args.out or not str(args.out).lower().endswith(".pbd"):
-            raise ConfigError("import needs --out NEW.pbd")
+        if not str(args.out).lower().endswith(".pbd"):
+            raise ConfigError(f"--out {args.out}: expected the new level's .pbd")
         out = Path(args.out)
         project = read_project(args.level)
         pbd, textures, lightmaps = project.to_level()
@@ -164,10 +148,21 @@ def run(args) -> int:
             wrote.append(f"{out.stem}_L.ssh ({len(lightmaps)} pages)")
         print("wrote " + ", ".join(wrote))
         return 0
-    if args.action == "info":
-        from piste.pipeline.ssx_level import load_level
+    if cmd == "bake":
+        from piste.lighting.lights import load_lights
+        from piste.pipeline.build import scene_lights
+        from piste.pipeline.ssx_level import bake_file
+        from piste.world.scene_file import load_scene
 
-        level = load_level(_pbd_path(args.level))
+        lights = load_lights(args.lights) if args.lights else scene_lights(load_scene(args.scene)) if args.scene else None
+        report = bake_file(args.level, lights, args.out, not args.no_shadows, args.jobs)
+        if not args.quiet:
+            print(report.summary())
+        return 0
+    from piste.pipeline.ssx_level import level_path, load_level
+
+    if cmd == "info":
+        level = load_level(level_path(args.level))
         p = level.pbd
         lo, hi = level.net.bounds
         print(f"{level.path.name}: platform {p.platform}, {len(p)} patches "
@@ -177,34 +172,24 @@ def run(args) -> int:
               f"{level.info['lightmap_pages']} ({level.info['lightmaps_file']})")
         print("counts: " + ", ".join(f"{k} {v}" for k, v in p.counts.items() if v))
         return 0
-    if args.action == "render":
-        out = args.out or "out/ssx.png"
-        from piste.pipeline.ssx_level import load_level
-
-        level_net = load_level(_pbd_path(args.level)).net
-        print(f"wrote {render_pbd(args.level, out, args.size, args.lightmap, _camera(args, level_net))}")
+    if cmd == "render":
+        level = load_level(level_path(args.level))
+        print(f"wrote {render_pbd(level, args.out, args.size, args.lightmap, _camera(args, level.net))}")
         return 0
-    if args.action == "view":
+    if cmd == "view":
         return view_pbd(args)
-    if args.action == "bake":
-        return bake_pbd(args.level, args.out, args.lights, args.scene, not args.no_shadows, args.jobs)
-    if args.action == "convert":
-        if args.to is None or args.out is None:
-            raise ConfigError("convert needs --to npz|multitool|gltf and --out PATH")
-        if args.to == "gltf":
-            return gltf_pbd(args.level, args.out)
-        from piste.pipeline.ssx_level import load_level
+    # convert
+    if args.to == "gltf":
+        return gltf_pbd(args.level, args.out)
+    level = load_level(level_path(args.level))
+    if args.to == "npz":
+        level.pbd.to_net().save(args.out)
+    else:
+        from piste.formats.ssx.multitool import write_project
 
-        level = load_level(_pbd_path(args.level))
-        if args.to == "npz":
-            level.pbd.to_net().save(args.out)
-        else:
-            from piste.formats.ssx.multitool import write_project
-
-            write_project(args.out, level.pbd, level.textures, level.lightmaps)
-        print(f"wrote {args.out}")
-        return 0
-    raise ConfigError(f"unknown action {args.action!r}")
+        write_project(args.out, level.pbd, level.textures, level.lightmaps)
+    print(f"wrote {args.out}")
+    return 0
 
 
 def view_pbd(args) -> int:
@@ -219,11 +204,11 @@ def view_pbd(args) -> int:
               f"off-screen to {out} instead (run under a desktop or `xvfb-run piste view`)", file=sys.stderr)
         print(f"wrote {render_pbd(args.level, out, args.size, args.lightmap)}")
         return 0
-    from piste.pipeline.ssx_level import load_level
+    from piste.pipeline.ssx_level import level_path, load_level
     from piste.render.ssx_pass import LevelView, level_renderer
     from piste.render.window import ViewOptions, run_window
 
-    level = load_level(_pbd_path(args.level))
+    level = load_level(level_path(args.level))
 
     def make_view(ctx):
         return LevelView(level_renderer(level, tuple(args.size), ctx=ctx))
@@ -244,10 +229,10 @@ def gltf_pbd(level_path, out) -> int:
     from piste.commands.export import export_bundle
     from piste.pipeline import load_bundle
     from piste.pipeline.build import build_scene
-
+    from piste.pipeline.ssx_level import level_path as _level_path
     from piste.world.scene_file import loads_scene
 
-    level = _pbd_path(level_path).resolve()
+    level = _level_path(level_path).resolve()
     # the scene exists only in memory, as if beside the level (its path relative to that folder)
     scene = loads_scene(f"name = {json.dumps(level.stem)}\nterrain = {{ ssx_pbd = {json.dumps(level.name)} }}\n",
                         level.parent / f"{level.stem}.toml")

@@ -24,6 +24,7 @@ load_level(path, cell=64) -> SsxLevel
 level_files(path) -> (ssh or None, light-map ssh or None)
 bake_level(level, lights, shadows=True, jobs=1) -> BakedPages
 write_baked(level, baked, out_pbd=None) -> (pbd path, _L.ssh path)
+bake_file(path, lights=None, out=None, shadows=True, jobs=1) -> BakeReport
 level_key(path) -> str                        content hash of the .pbd and its banks (build cache key)
 bundle_arrays(path) -> {atlas, rects, source, base_texture}   what ``piste build`` stores for an SSX terrain
 SSX_TRICKY_LOD = {"near": 30.0, "far": 150.0}     the ssx_tricky preset's switch distances (m)
@@ -41,18 +42,22 @@ import numpy as np
 from piste.errors import ConfigError
 from piste.pipeline.cache import content_key
 from piste.formats.ssx.lightmap import base_tiles, light_from_source, reduce_texture, tile_params
+from piste.formats.atomic import write_bytes_atomic
+from piste.formats.safe_io import read_regular
+from piste.formats.ssx.pbd import MAX_FILE_BYTES as MAX_PBD_BYTES
 from piste.formats.ssx.pbd import NET_TO_UV, Pbd, default_lightmap_tiles, read_pbd, write_pbd
+from piste.formats.ssx.ssh import MAX_FILE_BYTES as MAX_SSH_BYTES
 from piste.formats.ssx.ssh import (
     SshBank, extract_tiles, lightmap_bank, lightmap_pages, place_tiles, read_ssh, write_ssh,
 )
 from piste.lighting.lightmap import assemble_atlas, atlas_layout, encode_half_bright
-from piste.lighting.lights import Lights, light_terms, shade
+from piste.lighting.lights import Lights, default_lights, light_terms, shade
 from piste.lighting.ps2 import ps2_source
 from piste.lighting.shadows import shadow_visibility
 from piste.terrain.bezier import evaluate
 
 __all__ = ["SsxLevel", "load_level", "level_files", "bake_level", "BakedPages", "write_baked", "SSX_TRICKY_LOD",
-           "texture_atlas", "level_key", "bundle_arrays"]
+           "texture_atlas", "level_key", "bundle_arrays", "bake_file", "BakeReport", "level_path"]
 
 #: the ``ssx_tricky`` preset: the game's LOD switch distances (3000 / 15000 units) in metres
 SSX_TRICKY_LOD = {"near": 30.0, "far": 150.0}
@@ -255,14 +260,47 @@ def write_baked(level: SsxLevel, baked: BakedPages, out_pbd=None) -> tuple[Path,
     write_ssh(lightmap_bank(baked.pages), lpath)
     src = level.info.get("textures_file")
     if src and out.resolve() != level.path.resolve():  # the new level's own textures: the source's bytes
-        from piste.formats.atomic import write_bytes_atomic
-        from piste.formats.safe_io import read_regular
-        from piste.formats.ssx.ssh import MAX_FILE_BYTES
-
         write_bytes_atomic(out.with_name(f"{out.stem}.ssh"),
-                           read_regular(level.path.with_name(src), MAX_FILE_BYTES, what="texture bank"))
+                           read_regular(level.path.with_name(src), MAX_SSH_BYTES, what="texture bank"))
     write_pbd(level.pbd, out)
     return out, lpath
+
+
+@dataclass
+class BakeReport:
+    """What :func:`bake_file` wrote: the ``.pbd`` and ``_L.ssh`` paths, counts and the time taken."""
+
+    pbd: Path
+    lightmaps: Path
+    patches: int
+    pages: int
+    rays: int
+    rays_occluded: int
+    seconds: float
+
+    def summary(self) -> str:
+        return (f"baked {self.patches} patches into {self.pages} light-map page(s) ({self.rays:,} shadow rays, "
+                f"{self.rays_occluded:,} occluded) in {self.seconds:.2f} s: {self.lightmaps}, {self.pbd}")
+
+
+def level_path(path) -> Path:
+    """``path`` as an SSX level path (ConfigError unless it names a ``.pbd``)."""
+    p = Path(path)
+    if p.suffix.lower() != ".pbd":
+        raise ConfigError(f"{path}: expected an SSX Tricky level (.pbd)")
+    return p
+
+
+def bake_file(path, lights: Lights | None = None, out=None, shadows: bool = True, jobs: int = 1) -> BakeReport:
+    """``piste ssx bake`` / ``piste bake LEVEL.pbd --format ssx-tricky``: bake ``NAME_L.ssh`` the
+    game's way with ``lights`` (default: piste's) and write it with the level (:func:`write_baked`)."""
+    t0 = time.perf_counter()
+    level = load_level(level_path(path))
+    baked = bake_level(level, lights if lights is not None else default_lights(), shadows=shadows, jobs=jobs)
+    pbd, lssh = write_baked(level, baked, out)
+    st = baked.stats
+    return BakeReport(pbd, lssh, len(level.pbd), len(baked.pages), int(st.get("rays", 0)),
+                      int(st.get("rays_occluded", 0)), time.perf_counter() - t0)
 
 
 # ----------------------------------------------------------------------------- scene builds
@@ -270,11 +308,8 @@ def level_key(path) -> str:
     """Content hash of ``path`` and the ``.ssh`` / ``_L.ssh`` beside it (a build-cache key part)."""
     path = Path(path)
     parts = []
-    from piste.formats.safe_io import read_regular
-    from piste.formats.ssx.pbd import MAX_FILE_BYTES
-
     for p in (path, *level_files(path)):  # regular files only (a pipe or device is refused, never read)
-        parts += ["-"] if p is None else [p.name, read_regular(p, MAX_FILE_BYTES, what="level file")]
+        parts += ["-"] if p is None else [p.name, read_regular(p, MAX_PBD_BYTES, what="level file")]
     return content_key("ssx-level/2", *parts)
 
 

@@ -93,3 +93,37 @@ def test_view_window_under_xvfb(tmp_path, gl_context):
     # the rock texture's dark brown shows below the overlay
     lower = img[70:]
     assert ((lower[..., 0] < 140) & (lower[..., 2] < lower[..., 0]) & (lower[..., 0] > 30)).mean() > 0.03
+
+
+def test_ssx_subcommands(tmp_path, capsys, gl):
+    """`piste ssx` has subcommands like `piste mpf` (issue 25): each takes only its own flags; the
+    issue's sky view renders in both light-map modes; `ssx make` twice gives identical bytes."""
+    import argparse
+
+    from piste.cli import build_parser
+
+    def subcommands(p):
+        return next(a for a in p._actions if isinstance(a, argparse._SubParsersAction)).choices
+
+    names = subcommands(subcommands(build_parser())["ssx"])
+    assert set(names) == {"info", "render", "view", "bake", "convert", "make", "import"}
+    for k in ("a", "b"):
+        assert main(["ssx", "make", str(tmp_path / k), "--rows", "1", "--cols", "2", "--name", "L"]) == 0
+    for f in ("L.pbd", "L.ssh", "L_L.ssh"):
+        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes()
+    lv = str(tmp_path / "a" / "L.pbd")
+    for mode in ("ps2", "modulate"):  # looking at the sky: nothing to draw but the sky
+        out = tmp_path / f"sky_{mode}.png"
+        assert main(["ssx", "render", lv, "--lightmap", mode, "--eye", "350", "200", "100", "--target", "350", "200",
+                     "500", "--out", str(out), "--size", "64", "48"]) == 0
+        from PIL import Image
+
+        img = np.asarray(Image.open(out).convert("RGB")).astype(int)
+        assert (img[..., 2] > img[..., 0]).all()  # blue sky everywhere
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as e:  # a flag of another subcommand is a usage error
+        main(["ssx", "info", lv, "--rows", "3"])
+    assert e.value.code == 2 and "unrecognized arguments: --rows" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        main(["ssx", "convert", lv, "--out", str(tmp_path / "x.npz")])  # --to is required
+    assert e.value.code == 2 and "--to" in capsys.readouterr().err
