@@ -17,7 +17,7 @@ import pytest
 from PIL import Image
 
 from piste.errors import FormatError
-from piste.formats.ssx import make_level, parse_pbd, read_pbd, read_ssh
+from piste.formats.ssx import make_level, parse_pbd, read_pbd
 from piste.formats.ssx.multitool import brighten, darken, export_texture, read_project, write_project
 from piste.formats.ssx.pbd import PATCH_SIZE
 from piste.formats.ssx.ssh import SshBank, SshImage, lightmap_bank, lightmap_pages
