@@ -1,17 +1,15 @@
 """Bad .mpf input: FormatError naming the file, the sub-model/chunk and the field; never a numpy
-or struct traceback; hypothesis round trips and corruptions; the optional real-file test."""
+or struct traceback; hypothesis round trips and corruptions (the optional real-file tests are in
+test_mpf_real_files.py)."""
 
 from __future__ import annotations
-
-import os
-from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from piste.errors import FormatError, PisteError, ValidationError
+from piste.errors import FormatError, ValidationError
 from piste.formats.ssx.mpf import (
     BONE_DTYPE, DIR_DTYPE, PALETTE_ENTRY_DTYPE, Group, Link, Mesh, MorphKey, MpfFile, SubModel, mpf_bytes,
     pack_chunks, parse_mpf, read_mpf,
@@ -277,37 +275,7 @@ def test_hypothesis_corruption_gives_format_errors(golden, data):
     assert mpf_bytes(f) == bytes(b)
 
 
-# ------------------------------------------------------------------------------------ real files
-def _real_files():
-    d = os.environ.get("PISTE_SSX_TRICKY_DIR")
-    if not d:
-        return []
-    return sorted(p for p in Path(d).rglob("*") if p.suffix.lower() == ".mpf")
-
-
-@pytest.mark.skipif(not os.environ.get("PISTE_SSX_TRICKY_DIR"),
-                    reason="set PISTE_SSX_TRICKY_DIR to a folder holding your own SSX Tricky .mpf files")
-def test_real_files_round_trip_and_convert():
-    from piste.formats.ssx.mpf_model import mpf_to_model
-
-    files = _real_files()
-    if not files:
-        pytest.skip(f"no .mpf files under PISTE_SSX_TRICKY_DIR={os.environ['PISTE_SSX_TRICKY_DIR']}")
-    models = 0
-    for p in files:
-        if p.read_bytes()[:4] == b"xDFP":  # the music graph shares the extension
-            continue
-        f = read_mpf(p)
-        assert mpf_bytes(f) == p.read_bytes(), p
-        if any(len(s.bones) for s in f.models):
-            try:
-                m = mpf_to_model(f)
-            except PisteError as e:  # a head file alone names bones of its body file
-                assert "file id" in str(e), (p, e)
-                continue
-            assert m.skeleton.n_bones > 0 and m.n_triangles > 0
-            models += 1
-    assert models > 0
+# real files: tests/formats/ssx/test_mpf_real_files.py (PISTE_SSX_TRICKY_DIR)
 
 
 @st.composite
