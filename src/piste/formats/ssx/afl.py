@@ -68,6 +68,7 @@ API
 ---
 read_afl(path, names=()) -> AflFile / parse_afl(data, path, names=()) -> AflFile
 afl_bytes(afl) -> bytes / write_afl(afl, path)          atomic; byte-identical for an unedited file
+AflFile.sample(clip, frames=None) -> [(m, c) per track]; AflFile.evaluate(offsets, frames) -> (m, c)
 encode_afl(clips, console=76, unknown=17) -> AflFile       clips: AflClipData (name, frames, tracks)
 afl_clips(afl, skeleton, bones=None, fps=30, board_bone="board") -> {name: Clip}
 mpf_body_bones(model) -> list[str | None]                the body bones' names in .mpf file order
@@ -87,16 +88,17 @@ import numpy as np
 
 from piste.character.animation import sample_poses
 from piste.character.model import Clip, Skeleton, Track
+from piste.character.skeleton import world_from_local
 from piste.errors import ConfigError, FormatError, ValidationError
 from piste.formats.atomic import write_bytes_atomic
 from piste.formats.safe_io import read_regular
 from piste.formats.ssx.mpf_model import CM, SSX_TO_PISTE
-from piste.character.skeleton import world_from_local
 from piste.transforms import compose_trs, decompose_trs, invert_affine, matrix_to_quat, quat_to_matrix
 
 __all__ = [
     "AflFile", "AflClip", "AflClipData", "Curve", "Segment", "HEADER_DTYPE", "TRACK_CHANNELS", "KIND_CLIP",
-    "BODY_TRACK", "BOARD_TRACK", "BODY_BONES", "BODY_BONE_NAMES", "KNOWN_CLIP_NAMES", "DEFAULT_FPS", "read_afl", "parse_afl", "afl_bytes", "write_afl",
+    "BODY_TRACK", "BOARD_TRACK", "BODY_BONES", "BODY_BONE_NAMES", "KNOWN_CLIP_NAMES", "DEFAULT_FPS", "read_afl",
+    "parse_afl", "afl_bytes", "write_afl",
     "encode_afl", "afl_clips", "mpf_body_bones", "body_track", "clip_channels", "constant", "polynomial", "sampled",
     "group", "curve_bytes", "afl_hash", "afl_rotation", "MAX_FILE_BYTES", "MAX_BAKED_VALUES",
 ]
