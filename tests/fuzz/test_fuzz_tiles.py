@@ -386,3 +386,72 @@ def test_hostile_index_fields_name_the_field(built_world, tmp_path_factory, fiel
     with pytest.raises(FormatError, match=match) as e:
         TileCache(d, budget_bytes=64 << 20).close()
     assert "index.json" in str(e.value)
+
+
+# ------------------------------------------------------------------------------ piste render W.tiles, end to end
+def _mutate_world(d, data) -> None:
+    """One mutation of a built world: its index (structural or byte-wise), a tile (byte-wise or
+    member by member), or a tile file swapped for a link, a FIFO, /dev/zero or a folder."""
+    import os
+
+    how = data.draw(st.sampled_from(["index-doc", "index-bytes", "tile-bytes", "tile-members", "tile-file"]))
+    if how.startswith("index"):
+        raw = (d / "index.json").read_bytes()
+        mutated = dump_json(data.draw(doc_mutations(json.loads(raw)))) if how == "index-doc" else \
+            data.draw(byte_mutations(raw))
+        (d / "index.json").write_bytes(mutated)
+        return
+    product = data.draw(st.sampled_from(["fit", "lit"]))
+    tile = d / product / data.draw(st.sampled_from(sorted(p.name for p in (d / product).iterdir())))
+    if how == "tile-bytes":
+        tile.write_bytes(data.draw(byte_mutations(tile.read_bytes())))
+    elif how == "tile-members":
+        with np.load(tile) as f:
+            arrays = {k: f[k] for k in f.files}
+        key = data.draw(st.sampled_from(sorted(arrays)))
+        if data.draw(st.booleans()):
+            del arrays[key]
+        else:
+            arrays[key] = data.draw(LIT_ARRAYS)
+        tile.write_bytes(_stored_npz(arrays))
+    else:
+        kind = data.draw(st.sampled_from(["link-out", "fifo", "dev-zero", "folder"]))
+        tile.unlink()
+        if kind == "link-out":
+            tile.symlink_to(d.parent)
+        elif kind == "fifo":
+            os.mkfifo(tile)
+        elif kind == "dev-zero":
+            tile.symlink_to("/dev/zero")
+        else:
+            tile.mkdir()
+
+
+def _render_cli(world, out) -> None:
+    """``piste render WORLD.tiles``: exit 0, or exit 1 with one line naming a file of the world
+    (raised here as a PisteError for the oracle); a raw exception escapes (a failure)."""
+    import contextlib
+
+    from piste.cli import main
+    from piste.errors import PisteError
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        rc = main(["render", str(world), "--out", str(out), "--size", "64", "48", "--quiet"])
+    lines = [ln for ln in err.getvalue().splitlines() if not ln.startswith("piste: ")]  # warnings: 'piste: ...'
+    assert "Traceback" not in err.getvalue(), err.getvalue()
+    if rc == 0:
+        return
+    assert rc == 1 and len(lines) == 1 and lines[0].startswith("piste render: error: "), (rc, err.getvalue())
+    raise PisteError(lines[0])
+
+
+@given(data=st.data())
+@fuzz_settings(6)
+def test_render_tiles_cli(built_world, tmp_path_factory, gl_context, data):
+    """`piste render W.tiles` on a mutated world: a frame (bad tiles left out, warned) or one line
+    naming a file of the world; never a raw traceback, a hang or a memory blow-up (the caps)."""
+    d = _copy(built_world, tmp_path_factory)
+    _mutate_world(d, data)
+    check(lambda p: _render_cli(p.parent, p.parent.parent / "o.png"), d / "index.json", "tiles piste render",
+          names="world.tiles")

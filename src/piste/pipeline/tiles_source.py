@@ -29,7 +29,7 @@ from piste.lighting.lightmap import LightMap
 from piste.lighting.lights import default_lights
 from piste.pipeline.bundle_objects import Bundle, camera_from_dict
 from piste.render.streaming import fly_path
-from piste.terrain.tiles import TileStore, tile_net
+from piste.terrain.tiles import TileError, TileStore, tile_entries, tile_net
 from piste.world.camera import Camera
 
 __all__ = ["open_tiles", "flight_cameras"]
@@ -53,10 +53,19 @@ def open_tiles(path, quiet: bool = True, warm: bool = False, budget_mb: float = 
     store = TileStore(root)
     index = store.read_index()
     grid = store.grid()
-    b = np.array([t["bounds"] for t in index["tiles"].values()], dtype=np.float64)
+    entries = tile_entries(index, grid, store.index_path)  # at least one tile, finite bounds (issue 24)
+    b = np.array([e["bounds"] for e in entries.values()], dtype=np.float64)
     lo, hi = b[:, 0].min(0), b[:, 1].max(0)
-    ty, tx = grid.tile_of(*((lo[:2] + hi[:2]) / 2.0))
-    net = tile_net(store, ty, tx)
+    centre = np.array(grid.tile_of(*((lo[:2] + hi[:2]) / 2.0)))
+    net = first = None
+    for ty, tx in sorted(entries, key=lambda t: (float(np.abs(np.array(t) - centre).sum()), t)):  # a bad tile:
+        try:  # the nearest good one stands in (the streamed view leaves the bad one out)
+            net = tile_net(store, ty, tx)
+            break
+        except TileError as exc:
+            first = first or exc
+    if net is None:
+        raise first
     cams = {"flight": next(fly_path(index, 1)), "centre": _centre_camera(net)}
     manifest = {
         "name": root.stem,
