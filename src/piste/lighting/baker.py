@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from piste.errors import FormatError, OutputError, ValidationError
+from piste.errors import FormatError, OutputError, ValidationError, describe_os_error
 from piste.extras import child_environment
 from piste.formats.atomic import atomic_path, write_bytes_atomic
 from piste.formats.safe_io import check_regular, loads_json, read_regular
@@ -271,8 +271,6 @@ def _reason(exc: BaseException) -> str:
     if isinstance(exc, OutputError):
         return str(exc)
     if isinstance(exc, OSError):
-        from piste.errors import describe_os_error
-
         return describe_os_error(exc)
     return str(exc) or type(exc).__name__
 
