@@ -315,6 +315,7 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
         models = list(dict.fromkeys(r.model for r in scene.riders))
         ratios = tuple(scene.lod.ratios)
         cid_of = {}
+        clips_of: dict = {}
         steps_done = []
         for k, model in enumerate(models):
             msrc = model if model.startswith("builtin:") else _file_key(model)
@@ -322,15 +323,20 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
             clip_srcs = sorted({(r.clips_from, json.dumps(r.bone_map, sort_keys=True)) for r in own if r.clips_from})
             tex = next((r.texture for r in own if getattr(r, "texture", None)), None)  # an .mpf's .ssh bank
             partners = mpf_partners(model, tex) if model.lower().endswith(".mpf") else (None, [])
-            ch_key = content_key(BUILD_VERSION, "characters", CHARACTERS_VERSION, msrc, ratios,
+            ch_key = content_key(BUILD_VERSION, "characters", CHARACTERS_VERSION, "clip-sources/1", msrc, ratios,
                                  [(_file_key(f), b) for f, b in clip_srcs],
                                  [_file_key(f) for f in [partners[0]] + partners[1] if f is not None],
                                  *_allow_key(scene))
 
             def make_characters(model=model, clip_srcs=clip_srcs, tex=tex):
                 m = load_mpf_rider(model, texture=tex) if tex else load_rider_model(model, allow_paths=scene.allow_paths)
-                m = add_rider_clips(m, [(f, json.loads(b)) for f, b in clip_srcs], allow_paths=scene.allow_paths)
-                return character_arrays(m, ratios=ratios)
+                own_clips, sources = sorted(m.clips), []  # which clips each rider may default to
+                for f, b in clip_srcs:
+                    before = set(m.clips)
+                    m = add_rider_clips(m, [(f, json.loads(b))], allow_paths=scene.allow_paths)
+                    sources.append(sorted(set(m.clips) - before))  # in clip_srcs' order
+                a, meta = character_arrays(m, ratios=ratios)
+                return a, dict(meta, own_clips=own_clips, clip_sources=sources)
 
             ca, cmeta = step("characters", ch_key, make_characters)
             steps_done.append(result.steps["characters"])
@@ -339,6 +345,7 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
             for name, v in ca.items():
                 arrays[f"characters/{cid}/{name}"] = v
             cmeta = dict(cmeta)
+            clips_of[cid] = (cmeta.pop("own_clips", None), cmeta.pop("clip_sources", None), clip_srcs)  # not in the manifest
             cmeta["model"] = model if model.startswith("builtin:") else Path(model).name
             manifest["characters"][cid] = cmeta
         result.steps["characters"] = {"cached": all(d["cached"] for d in steps_done),
@@ -348,7 +355,7 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
         for r in scene.riders:
             cid = cid_of[r.model]
             cmeta = manifest["characters"][cid]
-            clip = r.clip or next(iter(sorted(cmeta["clips"])), None)
+            clip = r.clip or _default_clip(r, cmeta, *clips_of[cid])
             if clip is not None and clip not in cmeta["clips"]:
                 raise ConfigError(f"{scene.path}, line {r.line}: rider {r.name!r}: no clip {clip!r} in its model; "
                                   f"clips: {', '.join(sorted(cmeta['clips']))}")
@@ -510,6 +517,21 @@ def _objects_arrays(net, objects, sources, lights, allow_paths=()):
                              "triangles": cm.n_triangles, "bytes": int(cm.nbytes),
                              "bytes_float": int(cm.uncompressed_nbytes(cm.n_vertices, cm.n_triangles))}
     return a, meta
+
+
+def _default_clip(rider, cmeta: dict, own_clips, sources, clip_srcs):
+    """The clip a rider without ``clip`` plays: the first of its own clips, i.e. of its
+    ``clips_from`` file's when it has one, else of its model's own (not the clips another rider of
+    the same model brought with its ``clips_from``); the first of all with a character step cached
+    before these were recorded.  ``sources[i]``: the clips ``clip_srcs[i]`` added."""
+    if rider.clips_from and sources is not None:
+        key = (rider.clips_from, json.dumps(rider.bone_map, sort_keys=True))
+        i = next((i for i, src in enumerate(clip_srcs) if tuple(src) == key), None)
+        if i is not None and i < len(sources) and sources[i]:
+            return sources[i][0]
+    elif own_clips:
+        return own_clips[0]
+    return next(iter(sorted(cmeta["clips"])), None)
 
 
 def _visibility_report(net, vis, cameras, centerline) -> dict:

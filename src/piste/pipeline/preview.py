@@ -25,6 +25,7 @@ ScenePreview(bundle, size=None, ctx=None, visibility=True)   ``.render(camera, t
                                                               ``.stats`` of the last frame, ``.reload(bundle)``
 track_scene(bundle, start=None, casts=()) -> Scene            the [pack] riders + [auto_objects] of a bundle
 rider_casts(["FILE[:N]", ...]) -> [(model, pack rows)]        other rider models beside the pack
+cast_model(model) -> Model                                    a glTF rider as drawn (materials kept)
 camera_at(bundle, name, i, n) -> Camera                       a scene camera at frame i of n (track cameras fly)
 render_image(bundle, camera=None, size=None, t=0.0) -> image
 render_frames(bundle, camera, frames, size, fps, video=None, first_png=None) -> list of stats
@@ -43,7 +44,7 @@ from piste.character import BlendedMesh
 from piste.errors import ConfigError, FormatError
 from piste.formats.gltf import load_gltf
 from piste.pipeline.bundle_objects import camera_from_dict
-from piste.pipeline.characters import lods_from_arrays, model_from_arrays
+from piste.pipeline.characters import lods_from_arrays, merged_mesh, model_from_arrays
 from piste.render.context import create_context, save_png
 from piste.render.frame import DEFAULT_FOG_DENSITY, TerrainRenderer
 from piste.render.object_pass import ObjectPass
@@ -60,7 +61,7 @@ from piste.world.objects import place_objects
 from piste.world.riders import ClipTable, RiderState, pack_for, rider_model
 from piste.world.scene import LOD_DISTANCES, Scene, sun_light
 
-__all__ = ["PlacedRiders", "BundleScene", "clip_table", "rider_casts", "track_scene", "ScenePreview", "camera_at", "render_image", "render_frames"]
+__all__ = ["PlacedRiders", "BundleScene", "clip_table", "cast_model", "rider_casts", "track_scene", "ScenePreview", "camera_at", "render_image", "render_frames"]
 
 
 class PlacedRiders:
@@ -196,6 +197,15 @@ def auto_objects(bundle):
                          track_half_width=TRACK_HALF_WIDTH, **kw)
 
 
+def cast_model(model):
+    """A glTF rider model as the runtime draws it, the way a scene build makes it: its skinned
+    primitives merged into one mesh whose packed texture keeps each primitive's own base colour and
+    material (:func:`piste.pipeline.characters.merged_mesh`; merged by
+    :func:`piste.world.riders.rider_model` alone, a model of base-colour factors such as BrainStem or
+    RobotExpressive was drawn white), then checked and given its RGBA texture by ``rider_model``."""
+    return rider_model(replace(model, meshes=[merged_mesh(model)]))
+
+
 def rider_casts(specs) -> list:
     """``FILE[:N]`` specs (``--rider-model``) -> ``[(rider model, pack rows)]``: N riders (default 2)
     of each skinned glTF model, placed between the default pack's riders (``track_scene(casts=)``)."""
@@ -205,7 +215,7 @@ def rider_casts(specs) -> list:
             else (str(spec), "", "2")
         if not Path(path).is_file():
             raise ConfigError(f"--rider-model {spec}: no such file {path}")
-        m = rider_model(load_gltf(path))
+        m = cast_model(load_gltf(path))
         out.append((m, pack_for(m, int(n), ahead=4.0 + 2.0 * k, across=0.0, spacing=9.0)))
     return out
 
