@@ -197,8 +197,12 @@ def export_bundle(bundle, path, level=4, instancing: str = "ext", with_base_text
 
 
 def run(args) -> int:
-    from piste.pipeline.open_scene import open_source
+    from piste.errors import ConfigError
+    from piste.pipeline.open_scene import open_source, source_kind
 
+    if source_kind(args.scene) == "tiles":
+        raise ConfigError(f"{args.scene}: a tiled world is streamed tile by tile; export a scene, a bundle or an "
+                          "SSX level (a whole world in one glTF file is not supported)")
     b = open_source(args.scene, quiet=args.quiet, riders=args.riders)
     r = export_bundle(b, args.out, level=args.level, instancing=args.instancing,
                       with_base_texture=not args.no_base_texture)

@@ -7,7 +7,9 @@ cached, the one ``piste demo`` draws) through the runtime
 projected shadows, specular, the light map and the sky (``--terrain-only`` for the terrain alone); the camera flies free from
 ``--start`` along the track, or chases a rider (``--follow N``; F toggles).  With SCENE (a
 ``.toml`` or ``.piste``): the scene's bundle, rebuilt and reloaded when its files change (see
-:mod:`piste.pipeline.live`).  Keys: see :data:`piste.render.window.HELP`.
+:mod:`piste.pipeline.live`).  An SSX level (``.pbd``) or a tiled world (``.tiles``) is opened by
+:func:`piste.pipeline.open_scene.open_source` and drawn by the same runtime (``--riders N`` stands
+default riders on it).  Keys: see :data:`piste.render.window.HELP`.  This module only parses.
 
 Scripted runs: ``--frames N`` / ``--exit-after S`` quit by themselves, ``--state FILE`` writes the
 camera, frames and riders drawn as JSON on exit, ``--benchmark N`` renders N frames along a fixed
