@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import logging
 import time
+import weakref
 
 from piste.errors import ConfigError
 from piste.pipeline.tiled_build import (TiledResult, TiledSpec, build_tiles, fit_task, lit_task, spec_from_scene,
@@ -31,6 +32,8 @@ from piste.pipeline.tiled_build import (TiledResult, TiledSpec, build_tiles, fit
 __all__ = ["dask_client", "close_client", "build_tiles_dask", "build_scene_tiles"]
 
 log = logging.getLogger(__name__)
+#: client -> the LocalCluster dask_client started for it (closed with it by close_client)
+_CLUSTERS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def _distributed():
@@ -57,7 +60,7 @@ def dask_client(dask: str | None = None, scheduler: str | None = None, workers: 
                                            dashboard_address="127.0.0.1:0",
                                            silence_logs=40)
         client = distributed.Client(cluster)
-        client._piste_cluster = cluster
+        _CLUSTERS[client] = cluster
         return client
     if not scheduler.startswith(("tcp://", "tls://", "inproc://", "ucx://")):
         raise ConfigError(f"--scheduler takes an address like tcp://HOST:8786, got {scheduler!r}")
@@ -68,7 +71,8 @@ def dask_client(dask: str | None = None, scheduler: str | None = None, workers: 
 
 
 def close_client(client) -> None:
-    cluster = getattr(client, "_piste_cluster", None)
+    """Close ``client`` and the local cluster :func:`dask_client` started for it, if any."""
+    cluster = _CLUSTERS.pop(client, None)
     client.close()
     if cluster is not None:
         cluster.close()
