@@ -1,9 +1,14 @@
 """Fuzz the SSX Tricky formats (synthetic files from piste.formats.ssx.synth, no retail data):
-.pbd levels (read and turned into a patch net), .ssh texture and light-map banks, and .mpf models
-(piste's encoder's output, read and decoded).  Byte-wise mutants; each case loads or raises a
-PisteError naming the file, under a time and a memory cap (see fuzzlib)."""
+.pbd levels (read and turned into a patch net), .ssh texture and light-map banks (one with kept
+hot-spot and metal-alpha chunks, read and written back), whole levels (one of the three files
+mutated, the level loaded: the refusal must name the mutated file first), and .mpf models (piste's
+encoder's output, read and decoded).  Byte-wise mutants; each case loads or raises a PisteError
+naming the file, under a time and a memory cap (see fuzzlib)."""
 
 from __future__ import annotations
+
+import shutil
+import struct
 
 import pytest
 from fuzzlib import byte_mutations, check, fuzz_settings
@@ -38,22 +43,71 @@ def _mpf(path):
     ssx.mpf_to_model(ssx.read_mpf(path))
 
 
-LOADERS = {"pbd": _pbd, "ssh": ssx.read_ssh, "lightmap": ssx.read_ssh}
+def _ssh_round_trip(path):
+    bank = ssx.read_ssh(path)
+    ssx.parse_ssh(bank.to_bytes(), path)
+
+
+LOADERS = {"pbd": _pbd, "ssh": ssx.read_ssh, "lightmap": ssx.read_ssh, "kept": _ssh_round_trip}
+
+
+@pytest.fixture(scope="module")
+def kept(tmp_path_factory, level):
+    """The level's texture bank with a hot-spot list (124) and a metal-alpha marker (105) added."""
+    bank = ssx.read_ssh(level["ssh"])
+    body = struct.pack("<h", 2) + struct.pack("<4i", 10, 20, 30, 40)
+    n = 4 + len(body) + (-(4 + len(body)) % 16)
+    bank.images[0].extra = [(2, (struct.pack("<I", 124 | (n << 8)) + body).ljust(n, b"\0"))]
+    bank.images[1].extra = [(2, struct.pack("<I4hI", 105 | (16 << 8), 0, 128, 0, 0, 0))]
+    path = tmp_path_factory.mktemp("kept") / "KEPT.ssh"
+    path.write_bytes(bank.to_bytes())
+    return path
+
+
+@pytest.fixture(scope="module")
+def files(level, kept):
+    return {**level, "kept": kept}
 
 
 @pytest.mark.parametrize("kind", sorted(LOADERS))
-def test_seeds_load(level, kind):
-    assert check(LOADERS[kind], level[kind], "ssx seeds") == "loaded"
+def test_seeds_load(files, kind):
+    assert check(LOADERS[kind], files[kind], "ssx seeds") == "loaded"
 
 
 @pytest.mark.parametrize("kind", sorted(LOADERS))
 @given(data=st.data())
 @fuzz_settings(20)
-def test_ssx_level_bytes(level, kind, tmp_path_factory, data):
-    seed = level[kind]
+def test_ssx_level_bytes(files, kind, tmp_path_factory, data):
+    seed = files[kind]
     target = tmp_path_factory.mktemp("m") / ("MUTANT" + seed.suffix)
     target.write_bytes(data.draw(byte_mutations(seed.read_bytes())))
     check(LOADERS[kind], target, f"ssx {kind} byte-wise")
+
+
+def _level_naming_the_mutant(mutant):
+    """Load the level the mutated file belongs to; a refusal must begin with the mutated file's
+    path (the file at fault), not another file of the level."""
+    from piste.errors import PisteError
+    from piste.pipeline.ssx_level import load_level
+
+    try:
+        load_level(mutant.parent / "SYNTH.pbd")
+    except PisteError as exc:
+        if not str(exc).startswith(str(mutant)):
+            raise AssertionError(f"mutating {mutant.name} was blamed on another file: {exc}") from None
+        raise
+
+
+@pytest.mark.parametrize("kind", ["pbd", "ssh", "lightmap"])
+@given(data=st.data())
+@fuzz_settings(20)
+def test_whole_level_names_the_mutated_file(level, kind, tmp_path_factory, data):
+    d = tmp_path_factory.mktemp("lv")
+    for f in level.values():
+        shutil.copy(f, d / f.name)
+    target = d / level[kind].name
+    target.write_bytes(data.draw(byte_mutations(level[kind].read_bytes())))
+    check(_level_naming_the_mutant, target, f"ssx level, {kind} mutated")
 
 
 def test_mpf_seed_loads(mpf_file):
