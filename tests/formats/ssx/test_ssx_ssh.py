@@ -231,14 +231,19 @@ def test_size_zero_chunk_is_not_padded():
     np.testing.assert_array_equal(im.palette, pal)
     assert im.long_name == "abc"
     np.testing.assert_array_equal(im.stored_rgba(), pal[pix])
-    # piste writes such a palette with an explicit size (its padding would otherwise be misread)
+    # unedited, the bank writes back the bytes it was read from, whatever their layout
+    assert bank.to_bytes() == head + chain and not bank.edited()
+    # piste's own layout writes such a palette with an explicit size (its padding would otherwise be misread)
+    bank.images[0].pixels[0, 0] = 2
+    assert bank.edited()
     out = bank.to_bytes()
+    assert out == bank.encode() != head + chain
     off = struct.unpack_from("<I", out, 20)[0]
     poff = off + 32
     assert out[poff] == 33 and struct.unpack_from("<I", out, poff)[0] >> 8 == 32
     back = parse_ssh(out, "q.ssh")
     np.testing.assert_array_equal(back.images[0].palette, pal)
-    assert back.images[0].long_name == "abc"
+    assert back.images[0].long_name == "abc" and back.images[0].pixels[0, 0] == 2
     # a whole 256-colour palette keeps size 0 (as the game writes it)
     full = _bank().to_bytes()
     o = struct.unpack_from("<I", full, 20)[0]

@@ -45,6 +45,7 @@ orientation ``[patch, j (v), i (u)]``.
 API
 ---
 SshImage, SshBank, read_ssh(path), parse_ssh(data, path), write_ssh(bank, path)
+SshBank.to_bytes() (the bytes read while unedited) / .encode() (piste's layout of the game's writer)
 lightmap_pages(bank) -> (P, 128, 128, 4) uint8;  lightmap_bank(pages) -> SshBank
 extract_tiles(pages, rect, page) -> (n, 8, 8, 4);  place_tiles(tiles, rect, page, n_pages) -> pages
 """
@@ -225,12 +226,23 @@ class SshImage:
                                       f"type {' or '.join(map(str, KEPT))} chunk)")
 
 
+def _state(im: SshImage) -> tuple:
+    """Everything :meth:`SshBank.encode` writes of an image (to tell an edited image)."""
+    pix = np.asarray(im.pixels)
+    pal = None if im.palette is None else np.asarray(im.palette)
+    return (im.name, im.kind, pix.dtype.str, pix.shape, pix.tobytes(), None if pal is None else (pal.shape, pal.tobytes()),
+            im.x, im.y, im.flags, im.long_name, im.palette_flags, tuple((int(p), bytes(b)) for p, b in im.extra))
+
+
 @dataclass
 class SshBank:
-    """A texture bank: ``images`` in directory order, ``creator`` (4 bytes, ``G278``)."""
+    """A texture bank: ``images`` in directory order, ``creator`` (4 bytes, ``G278``).  A bank read
+    from bytes remembers them: :meth:`to_bytes` gives those bytes back while no image was changed
+    (whatever layout the writer of the file used), else :meth:`encode`'s layout."""
 
     images: list
     creator: bytes = CREATOR
+    read_from: tuple | None = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.images)
@@ -238,7 +250,21 @@ class SshBank:
     def __getitem__(self, i) -> SshImage:
         return self.images[i]
 
+    def edited(self) -> bool:
+        """Whether the bank differs from the bytes it was read from (True for a bank made in memory)."""
+        if self.read_from is None:
+            return True
+        data, creator, states = self.read_from
+        return (creator != self.creator or len(states) != len(self.images)
+                or any(_state(im) != st for im, st in zip(self.images, states)))
+
     def to_bytes(self) -> bytes:
+        """The bank's bytes: as read when nothing changed (:meth:`edited`), else :meth:`encode`."""
+        if not self.edited():
+            return self.read_from[0]
+        return self.encode()
+
+    def encode(self) -> bytes:
         """Encode the bank (canonical layout: each image 16-byte aligned after ``Buy ERTS``)."""
         for im in self.images:
             im.validate()
@@ -326,7 +352,7 @@ def parse_ssh(data: bytes, path=None) -> SshBank:
         end = next(e for e in starts if e > off) if off < size else size
         term = data.find(SEPARATOR, off, end)
         images.append(_parse_image(data, off, term if term >= 0 else end, name, where, path))
-    return SshBank(images, creator)
+    return SshBank(images, creator, (data, creator, [_state(im) for im in images]))
 
 
 def _parse_image(data: bytes, off: int, end: int, name: str, where: str, path) -> SshImage:
