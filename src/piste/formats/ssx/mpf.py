@@ -110,6 +110,7 @@ tag_differences(mpf) -> list                       chunks whose kept tag bytes d
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -153,6 +154,7 @@ _UNPACK_V4_32, _UNPACK_V3_32, _UNPACK_V4_16, _UNPACK_V3_16, _UNPACK_V3_8 = 0x6C,
 _MASK = 0x10
 _FLG = 0x8000  # UNPACK address relative to TOPS
 _DMA_CNT, _DMA_RET = 1, 6
+_U4, _U1 = struct.Struct("<4I"), struct.Struct("<I")
 _GIF_RENDER = (0x5C, 3, 0x412)  # PRIM, NREG, REGS: strip | Gouraud | textured | blended; ST, RGBAQ, XYZ2
 _GIF_SHADOW = (0x44, 1, 0x4)    # strip | blended; XYZ2
 #: the end packets after a mesh (module docstring): A after a mesh, B after a group's last mesh
@@ -472,30 +474,38 @@ class _Reader:
 
 def _read_chunk(r: _Reader, off: int, where: str) -> tuple:
     """Parse one chunk at blob offset ``off``; returns ``(Chunk, next offset)``. The chunk's
-    whole span (tags included) is claimed at once; its tag bytes stay in the sub-model's source."""
-    r.need(off, 64, f"{where}.strip_table")
-    b0 = r.base + off
-    hdr = np.frombuffer(r.buf, "<u4", 4, b0 + 48)
-    n_strips, n_vert = int(hdr[0]), int(hdr[3])
+    whole span (tags included) is claimed at once; its tag bytes stay in the sub-model's source.
+    (Scalars are read with ``struct`` and error texts built only on failure: a rider has hundreds
+    of chunks and this runs for each.)"""
+    if off < 0 or off + 64 > r.size:
+        r.need(off, 64, f"{where}.strip_table")
+    base = r.base
+    b0 = base + off
+    n_strips, w1, w2, n_vert = _U4.unpack_from(r.data, b0 + 48)
     if n_strips > MAX_VERTICES_READ:
         raise r.err(f"{where}.strip_count", f"{where}: strip count {n_strips} is more than {MAX_VERTICES_READ}")
     if n_vert > MAX_VERTICES_READ:
         raise r.err(f"{where}.vertex_count", f"{where}: vertex count {n_vert} is more than {MAX_VERTICES_READ}")
-    r.need(off + 64, 16 * n_strips, f"{where}.strips")
+    cnt = off + 64 + 16 * n_strips  # the DMA CNT quadword covering the attribute sections
+    if cnt + 16 > r.size:
+        r.need(off + 64, 16 * n_strips + 16, f"{where}.strips")
     strips = np.frombuffer(r.buf, "<u4", 4 * n_strips, b0 + 64).reshape(n_strips, 4)
     lengths = strips[:, 0]
-    if int(lengths.sum()) != n_vert:
-        raise r.err(f"{where}.strip_lengths", f"{where}: strip lengths sum to {int(lengths.sum())} but the "
+    total = int(lengths.sum())
+    if total != n_vert:
+        raise r.err(f"{where}.strip_lengths", f"{where}: strip lengths sum to {total} but the "
                                                f"strip table declares {n_vert} vertices")
-    shadow = int(hdr[2]) == 0
-    cnt = off + 64 + 16 * n_strips  # the DMA CNT quadword covering the attribute sections
+    shadow = w2 == 0
     p = cnt + 16
-    at = []
-    for item in ((16,) if shadow else (8, 6, 12)):  # 48-byte section header, data, 16-alignment
-        at.append(p + 48)
-        p = _align(p + 48 + item * n_vert)
-    r.need(cnt, 16, f"{where}.dma_cnt")
-    tag = int(np.frombuffer(r.buf, "<u4", 1, r.base + cnt)[0])
+    if shadow:
+        at0 = p + 48
+        p = _align(at0 + 16 * n_vert)
+    else:
+        at0 = p + 48
+        at1 = _align(at0 + 8 * n_vert) + 48
+        at2 = _align(at1 + 6 * n_vert) + 48
+        p = _align(at2 + 12 * n_vert)
+    tag = _U1.unpack_from(r.data, base + cnt)[0]
     want = (p - cnt - 16) // 16
     if (tag >> 28) & 7 != _DMA_CNT or tag & 0xFFFF != want:
         raise r.err(f"{where}.dma_cnt", f"{where}: expected the 16-byte DMA CNT quadword after the strip table "
@@ -503,26 +513,25 @@ def _read_chunk(r: _Reader, off: int, where: str) -> tuple:
                                         f" sections) at blob offset {cnt}, found tag 0x{tag:08X} (a file written "
                                         f"without it, e.g. by piste before 2026-11-26, must be re-encoded)")
     end = p + 32  # the chunk's trailer (DMA tag + VIF codes)
-    names = ("positions",) if shadow else ("uv", "normals", "positions")
-    r.need(off, end - off, f"{where}.{names[-1]}")
+    if end > r.size:
+        r.need(off, end - off, f"{where}.{'positions' if shadow else 'uv'}")
     r.claimed.append((off, end - off))
-    base = r.base
     uv = normals = slots = None
     if not shadow:
-        uv = np.frombuffer(r.buf, "<i2", 4 * n_vert, base + at[0]).reshape(n_vert, 4)
-        normals = np.frombuffer(r.buf, "<i2", 3 * n_vert, base + at[1]).reshape(n_vert, 3)
-        pos = np.frombuffer(r.buf, "<f4", 3 * n_vert, base + at[2]).reshape(n_vert, 3)
+        uv = np.frombuffer(r.buf, "<i2", 4 * n_vert, base + at0).reshape(n_vert, 4)
+        normals = np.frombuffer(r.buf, "<i2", 3 * n_vert, base + at1).reshape(n_vert, 3)
+        pos = np.frombuffer(r.buf, "<f4", 3 * n_vert, base + at2).reshape(n_vert, 3)
     else:
-        both = np.frombuffer(r.buf, "<u4", 4 * n_vert, base + at[0]).reshape(n_vert, 4)
+        both = np.frombuffer(r.buf, "<u4", 4 * n_vert, base + at0).reshape(n_vert, 4)
         pos = both[:, :3].copy().view("<f4")
         slots = both[:, 3].copy()
     if not np.isfinite(pos).all():
         raise r.err(f"{where}.positions", f"{where}: positions contain NaN or infinity")
-    trailer = np.frombuffer(r.buf, "<u4", 8, base + p)
-    program = int(trailer[5]) & 0xFFFF if int(trailer[5]) >> 24 == _MSCAL >> 24 else 0
+    call = _U1.unpack_from(r.data, base + p + 20)[0]
+    program = call & 0xFFFF if call >> 24 == _MSCAL >> 24 else 0
     ch = Chunk(strip_lengths=lengths, positions=pos, uv=uv, normals=normals, shadow_slots=slots,
-               table_words=hdr[1:3], raw={"strip_tail": strips[:, 1:], "span": (off, end)}, offset=off,
-               program=program)
+               table_words=np.array([w1, w2], "<u4"), raw={"strip_tail": strips[:, 1:], "span": (off, end)},
+               offset=off, program=program)
     return ch, end
 
 
@@ -555,9 +564,20 @@ def _read_end(r: _Reader, p: int, where: str) -> bytes | None:
 
 
 def _read_morphs(r: _Reader, off: int, count: int, size: int, where: str) -> tuple:
-    """``count`` morph keys from blob offset ``off``: ``(keys, offset after the last)``."""
+    """``count`` morph keys from blob offset ``off``: ``(keys, offset after the last)``. Keys of
+    one packet size (the mesh header's; retail: always) are read as one block."""
     keys = []
     p = off
+    if count and size != _NONE and size >= 48 and off >= 0 and off + count * size <= r.size:
+        block = np.frombuffer(r.buf, np.uint8, count * size, r.base + off).reshape(count, size)
+        nums = block[:, 30]
+        num = int(nums[0])
+        if np.all(nums == num) and 32 + _align(3 * num) + 16 <= size:
+            r.claimed.append((off, count * size))
+            deltas = block[:, 32:32 + 3 * num].view(np.int8).reshape(count, num, 3)
+            keys = [MorphKey(deltas=deltas[k], raw={"head": block[k, :32], "tail": block[k, 32 + 3 * num:]},
+                             offset=off + k * size) for k in range(count)]
+            return keys, off + count * size
     for k in range(count):
         head = r.raw(p, 32, f"{where}.morph{k}.head")
         num = head[30]
