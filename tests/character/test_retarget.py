@@ -196,3 +196,31 @@ def test_scene_file_clips_from_with_bone_map(tmp_path):
         d3.mkdir()
         with pytest.raises(SceneError, match=match):
             load_scene(_scene(d3, extra))
+
+
+@pytest.mark.parametrize("mode", [None, "relative", "scaled"])
+def test_partial_retarget_leaves_unmatched_bones_at_rest(mode):
+    """A clip retargeted onto a rig that shares only some bones (the rest renamed, a 'monster'):
+    every target bone without a mapped track samples exactly its rest pose, at every time and in
+    every mode, and the driven bones move."""
+    src = default_rider(0)
+    limbs = ("clavicle", "arm", "hand", "shin", "foot", "toe")
+    monster = _renamed(src, {n: "tentacle_" + n for n in src.skeleton.names if any(k in n for k in limbs)})
+    sk = monster.skeleton
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RetargetWarning)
+        clip = retarget_clip(src.clips["grab"], sk, "builtin", source=src.skeleton, warn=False, mode=mode)
+        rest = sk.rest_pose()
+        undriven = [j for j, n in enumerate(sk.names) if n not in clip.tracks]
+        driven = [j for j, n in enumerate(sk.names) if n in clip.tracks]
+        assert len(undriven) >= 12 and driven and all(sk.names[j].startswith("tentacle_") for j in undriven
+                                                      if "tentacle_" in sk.names[j])
+        moved = 0.0
+        for t in np.linspace(0.0, clip.duration, 9):
+            pose = clip.sample(float(t), skeleton=sk)
+            np.testing.assert_array_equal(pose.translation[undriven], rest.translation[undriven])
+            np.testing.assert_array_equal(pose.rotation[undriven], rest.rotation[undriven])
+            np.testing.assert_array_equal(pose.scale[undriven], rest.scale[undriven])
+            assert np.isfinite(pose.translation).all() and np.isfinite(pose.rotation).all()
+            moved = max(moved, float(np.abs(pose.rotation[driven] - rest.rotation[driven]).max()))
+    assert moved > 0.05
