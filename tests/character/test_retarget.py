@@ -213,8 +213,7 @@ def test_partial_retarget_leaves_unmatched_bones_at_rest(mode):
         rest = sk.rest_pose()
         undriven = [j for j, n in enumerate(sk.names) if n not in clip.tracks]
         driven = [j for j, n in enumerate(sk.names) if n in clip.tracks]
-        assert len(undriven) >= 12 and driven and all(sk.names[j].startswith("tentacle_") for j in undriven
-                                                      if "tentacle_" in sk.names[j])
+        assert len(undriven) >= 12 and driven and not any(sk.names[j].startswith("tentacle_") for j in driven)
         moved = 0.0
         for t in np.linspace(0.0, clip.duration, 9):
             pose = clip.sample(float(t), skeleton=sk)
