@@ -168,3 +168,35 @@ def test_cli_renders_a_tiled_world_from_any_camera_with_riders(world, gl, tmp_pa
     assert "2 frame(s) from centre" in capsys.readouterr().out
     assert main(base + ["--list"]) == 0
     assert "flight" in capsys.readouterr().out
+
+
+def test_objects_on_sources_without_their_own(level, world, gl):
+    """``--add-objects N``: the course's objects on an SSX level and a tiled world, stored as a build
+    stores them (bundle.objects() reads them back, colours baked) and drawn by the object pass."""
+    b = open_source(level, objects=20)
+    objs = b.objects()
+    assert len(objs.kind) == 20 and set(objs.kinds) == {"tree", "sign", "rock", "rail"}
+    assert set(b.vertex_colors()) == set(objs.kinds)
+    from piste.terrain.query import height_at
+
+    _, hit, _, _ = height_at(b.net, objs.matrix[:, :2, 3])
+    assert hit.all()
+    bare = open_source(level)
+    imgs = []
+    for bb in (bare, b):
+        p = ScenePreview(bb, size=SIZE, ctx=gl)
+        try:
+            imgs.append(p.render().astype(int))
+            drawn = p.stats.get("objects_drawn", 0)
+        finally:
+            p.release()
+    assert drawn > 0 and (np.abs(imgs[0] - imgs[1]).max(-1) > 30).sum() >= 50
+    w = open_source(world, budget_mb=8, riders=2, objects=30)
+    p = ScenePreview(w, size=SIZE, ctx=gl)
+    try:
+        p.render(_near(w))
+        assert p.stats["riders"] == 2 and len(w.objects().kind) == 30
+    finally:
+        p.release()
+    with pytest.raises(ConfigError, match="objects"):
+        open_source(level, objects=10**6)

@@ -56,6 +56,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.add_argument("--riders", type=N.integer(0, 64), default=0, metavar="N",
                         help="stand N default riders on the terrain of a source without riders of its own (an SSX level)")
+    parser.add_argument("--add-objects", type=N.integer(0, 10_000), default=0, metavar="N",
+                        help="place N of the course's objects (trees, rocks, signs, rails) on the terrain of a source "
+                             "without objects of its own (an SSX level, a tiled world)")
 
 
 def piste_lights_to_gltf(lights, white: float = WHITE_LUX):
@@ -203,7 +206,7 @@ def run(args) -> int:
     if source_kind(args.scene) == "tiles":
         raise ConfigError(f"{args.scene}: a tiled world is streamed tile by tile; export a scene, a bundle or an "
                           "SSX level (a whole world in one glTF file is not supported)")
-    b = open_source(args.scene, quiet=args.quiet, riders=args.riders)
+    b = open_source(args.scene, quiet=args.quiet, riders=args.riders, objects=args.add_objects)
     r = export_bundle(b, args.out, level=args.level, instancing=args.instancing,
                       with_base_texture=not args.no_base_texture)
     print(f"wrote {', '.join(str(f) for f in r.files)} ({r.bytes / 1e6:.2f} MB): terrain {r.terrain_triangles:,} triangles, "

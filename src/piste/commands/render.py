@@ -37,6 +37,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--riders", type=N.integer(0, 64), default=0, metavar="N",
                         help="stand N default riders on the terrain of a source without riders of its own (an SSX "
                              "level); drawn with their shadows by the same runtime as a scene's")
+    parser.add_argument("--add-objects", type=N.integer(0, 10_000), default=0, metavar="N",
+                        help="place N of the course's objects (trees, rocks, signs, rails) on the terrain of a source "
+                             "without objects of its own (an SSX level, a tiled world)")
 
 
 def _camera(args):
@@ -75,7 +78,8 @@ def run(args) -> int:
     if cam is not None and args.camera:
         raise ConfigError("--camera names a scene camera; --eye/--target give one: use one or the other")
     size = tuple(args.size) if args.size else None
-    b = open_source(args.scene, quiet=args.quiet, warm=True, riders=args.riders, budget_mb=args.budget)
+    b = open_source(args.scene, quiet=args.quiet, warm=True, riders=args.riders, objects=args.add_objects,
+                    budget_mb=args.budget)
     if args.list:
         for c in b.manifest.get("cameras", []):
             extra = f" track {c['track'][0]:.2f}..{c['track'][1]:.2f}" if c.get("track") else ""

@@ -59,7 +59,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--camera", help="with SCENE: the scene camera (default: the first)")
     parser.add_argument("--watch-seconds", type=N.SECONDS, help="with SCENE: stop watching after this many seconds")
     parser.add_argument("--riders", type=N.integer(0, 64), default=0, metavar="N",
-                        help="with an SSX level: stand N default riders on its terrain")
+                        help="with an SSX level or a tiled world: stand N default riders on its terrain")
+    parser.add_argument("--add-objects", type=N.integer(0, 10_000), default=0, metavar="N",
+                        help="place N of the course's objects (trees, rocks, signs, rails) on the terrain of a source "
+                             "without objects of its own (an SSX level, a tiled world)")
     parser.add_argument("--budget", type=N.real(1.0, float(1 << 20)), default=256.0,
                         help="tiled worlds: streaming memory budget in MiB")
 
@@ -142,7 +145,7 @@ def _view_source(args, kind: str) -> int:
     from piste.render import save_png
     from piste.render.window import ViewOptions, has_display, print_benchmark, run_window
 
-    bundle = open_source(args.scene, warm=True, riders=args.riders, budget_mb=args.budget)
+    bundle = open_source(args.scene, warm=True, riders=args.riders, objects=args.add_objects, budget_mb=args.budget)
     size = tuple(args.size)
     kw = {"lightmap_mode": args.lightmap, "face": args.face, "lod_morph": _morph(args)}
     cam = camera_at(bundle, args.camera)

@@ -22,7 +22,7 @@ API
 ---
 SOURCES                                       the registry, in matching order
 source_kind(path) -> str                      "bundle", "scene", "ssx", "tiles" (ConfigError otherwise)
-open_source(path, quiet=True, warm=False, riders=0, **options) -> Bundle   (tiles: ``budget_mb``)
+open_source(path, quiet=True, warm=False, riders=0, objects=0, **options) -> Bundle   (tiles: ``budget_mb``)
 load_or_build(scene, quiet=True, warm=False) -> Bundle     (= open_source)
 load_net(path=None) -> PatchNet         a .bpt / .npz patch net, or the default course (``piste bake``, ``piste ssx``)
 """
@@ -37,7 +37,7 @@ from pathlib import Path
 from piste.errors import ConfigError
 from piste.pipeline.build import build_scene
 from piste.pipeline.bundle_objects import Bundle, load_bundle
-from piste.pipeline.runtime_riders import add_standing_riders
+from piste.pipeline.furnish import add_objects, add_standing_riders
 from piste.pipeline.ssx_source import open_ssx_level
 from piste.pipeline.tiles_source import open_tiles
 from piste.terrain.net import PatchNet
@@ -102,17 +102,20 @@ def source_kind(path) -> str:
     return _source(path).kind
 
 
-def open_source(path, quiet: bool = True, warm: bool = False, riders: int = 0, **options) -> Bundle:
+def open_source(path, quiet: bool = True, warm: bool = False, riders: int = 0, objects: int = 0,
+                **options) -> Bundle:
     """The runtime scene of ``path`` (any kind in :data:`SOURCES`).  ``warm``: start the terrain's
     resident vertex blocks at load (see :func:`load_bundle`).  ``riders``: add that many default
-    riders standing on the terrain when the source has none of its own
-    (:func:`piste.pipeline.runtime_riders.add_standing_riders`).  ``options``: the source's own
+    riders standing on the terrain when the source has none of its own, ``objects`` that many of
+    the course's objects (:mod:`piste.pipeline.furnish`).  ``options``: the source's own
     (a tiled world's ``budget_mb``); options another kind takes are ignored."""
     src = _source(path)
     p = Path(str(path).rstrip("/\\")) if src.folder else Path(path)
     bundle = src.open(p, quiet, warm, **{k: v for k, v in options.items() if k in src.options and v is not None})
     if riders and not bundle.manifest.get("riders") and not bundle.manifest.get("pack"):
         bundle = add_standing_riders(bundle, int(riders))
+    if objects and bundle.objects() is None and not bundle.manifest.get("auto_objects"):
+        bundle = add_objects(bundle, int(objects))
     return bundle
 
 

@@ -7,7 +7,7 @@ runtime scene a built ``.piste`` is, with the members a scene build of ``[terrai
 (``terrain/base_texture``, ``lightmap/source`` for ``ps2`` mode) so that
 :class:`piste.pipeline.preview.ScenePreview` draws it with
 :class:`piste.render.ssx_pass.SsxTerrainRenderer`, riders and objects included when the scene has
-them (:func:`piste.pipeline.runtime_riders.add_standing_riders`).
+them (:func:`piste.pipeline.furnish.add_standing_riders`).
 
 The scene's settings are those ``piste ssx render`` always used: the ``ssx_tricky`` LOD preset
 (30 / 150 m), no fog, 640 x 448, ``modulate`` light maps, one camera ``level`` looking at the whole
