@@ -2,7 +2,8 @@
 own write_project from a synthetic level (no retail data) in a session fixture, then Patches.json
 mutated byte-wise and structurally (fields of the wrong type, huge values, hostile TexturePath
 names: ``..``, absolute paths, devices), its PNGs mutated byte-wise, and files swapped for links
-leaving the folder.  Read with read_project and turned into a level (Project.to_level).  Each case
+leaving the folder; piste's record of the source level (PisteLevel.pbd / .json) mutated byte-wise.
+Read with read_project and turned into a level (Project.to_level).  Each case
 loads or raises a PisteError naming the project's file, under a time and a memory cap (fuzzlib)."""
 
 from __future__ import annotations
@@ -91,6 +92,17 @@ def test_images_bytes(project, tmp_path_factory, data):
     rel = data.draw(st.sampled_from(images))
     (d / rel).write_bytes(data.draw(byte_mutations((d / rel).read_bytes())))
     check(_load, d / "Patches.json", "multitool png byte-wise", names="proj")
+
+
+@given(data=st.data())
+@fuzz_settings(20)
+def test_record_bytes(project, tmp_path_factory, data):
+    """piste's record of the source level (PisteLevel.pbd / PisteLevel.json) mutated byte-wise: the
+    project loads or the refusal names the record."""
+    d = _copy(project, tmp_path_factory)
+    rel = data.draw(st.sampled_from(["PisteLevel.pbd", "PisteLevel.json"]))
+    (d / rel).write_bytes(data.draw(byte_mutations((project / rel).read_bytes())))
+    check(lambda _: _load(d), d / rel, "multitool record byte-wise", names="PisteLevel")
 
 
 @pytest.mark.parametrize("target", ["/etc/hostname", "/dev/zero", "../Patches.json", "missing.png"])
