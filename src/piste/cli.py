@@ -32,6 +32,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "export": ("piste.commands.export", "export a scene (.toml or .piste) to glTF (.glb/.gltf): terrain, riders, objects, lights"),
     "ssx": ("piste.commands.ssx", "SSX Tricky levels (.pbd): info, render, view, bake light maps, convert, make"),
     "mpf": ("piste.commands.mpf", "SSX Tricky rider models (.mpf): info, encode a piste rider, export to glTF, copy"),
+    "blender-addon": ("piste.commands.blender_addon", "write the Blender add-on (author scenes, live preview, SSX import) as a zip"),
 }
 
 

@@ -1,0 +1,62 @@
+"""``piste blender-addon --out piste_addon.zip``: write the Blender add-on as an installable zip.
+
+The zip holds the folder ``piste_addon/`` (Blender: Edit > Preferences > Add-ons > Install...,
+then enable "piste").  The add-on's sources ship in the wheel as package data
+(``piste/data/blender_addon``); in a source checkout they are read from ``blender/piste_addon``.
+The same sources give the same bytes (fixed time stamps, sorted names).
+"""
+
+from __future__ import annotations
+
+import io
+import zipfile
+from pathlib import Path
+
+#: the folder name inside the zip (the add-on's module name in Blender)
+ADDON_NAME = "piste_addon"
+_REPO_SOURCES = Path(__file__).resolve().parents[3] / "blender" / ADDON_NAME
+_PACKAGE_SOURCES = Path(__file__).resolve().parents[1] / "data" / "blender_addon"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--out", required=True, metavar="F.zip", help="the add-on zip to write")
+
+
+def addon_sources() -> Path:
+    """The add-on's source folder: the installed package data, else the checkout's ``blender/``."""
+    for folder in (_PACKAGE_SOURCES, _REPO_SOURCES):
+        if (folder / "__init__.py").is_file():
+            return folder
+    from piste.errors import ConfigError
+
+    raise ConfigError(f"the Blender add-on's sources are missing (looked in {_PACKAGE_SOURCES} and {_REPO_SOURCES}): "
+                      "reinstall piste")
+
+
+def addon_zip_bytes(sources: Path | None = None) -> bytes:
+    """The zip of the add-on's ``*.py`` files under ``piste_addon/`` (deterministic)."""
+    sources = sources or addon_sources()
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+        for p in sorted(sources.glob("*.py")):
+            info = zipfile.ZipInfo(f"{ADDON_NAME}/{p.name}", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = 0o644 << 16
+            zf.writestr(info, p.read_bytes())
+    return buf.getvalue()
+
+
+def run(args) -> int:
+    import sys
+
+    from piste.errors import ConfigError
+    from piste.formats.atomic import write_bytes_atomic
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".zip":
+        raise ConfigError(f"--out {args.out!r}: expected a .zip file name (Blender installs add-ons from a zip)")
+    data = addon_zip_bytes()
+    write_bytes_atomic(out, data)
+    print(f"wrote {out} ({len(data)} bytes): Blender > Edit > Preferences > Add-ons > Install..., then enable "
+          "'piste' (set 'piste executable' in its preferences)", file=sys.stderr)
+    return 0
