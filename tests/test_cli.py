@@ -68,3 +68,14 @@ def test_library_messages_reach_stderr_through_the_logger_and_quiet_silences_the
     assert main(["-q", "stats"]) == 0
     assert capsys.readouterr().err == ""
     assert logging.getLogger("piste").level == logging.NOTSET
+
+
+@pytest.mark.parametrize("command", ["stats", "bake"])
+def test_one_load_net_for_every_command(tmp_path, capsys, command):
+    """``piste stats`` and ``piste bake`` open a net through the one pipeline.open_scene.load_net:
+    the same one-line error for a file that is not a .bpt or .npz net."""
+    bad = tmp_path / "net.obj"
+    bad.write_text("v 0 0 0\n")
+    assert main([command, str(bad)] + (["--out", str(tmp_path / "lm")] if command == "bake" else [])) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"piste {command}: error: {bad}: expected a .bpt or .npz patch net"]

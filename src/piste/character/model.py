@@ -160,15 +160,6 @@ class Skeleton:
         bind-space vertex -> posed world."""
         return self.world_matrices(pose) @ self.inverse_bind
 
-    def bone_lengths(self) -> np.ndarray:
-        """Length of each bone's rest translation ``(b,) float64`` (distance to its parent)."""
-        return np.linalg.norm(self.rest_translation, axis=1)
-
-    def subset_matching(self, other: "Skeleton") -> np.ndarray:
-        """For each bone of ``self`` the index of the bone of ``other`` with the same name, or -1:
-        ``(b,) int64``."""
-        return np.array([other._index.get(n, -1) for n in self.names], dtype=np.int64)
-
 
 @dataclass
 class Track:

@@ -19,6 +19,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--out", metavar="DIR", default="out/lightmap", help="output folder (default out/lightmap)")
     parser.add_argument("--jobs", type=N.JOBS, default=0, help="worker processes (default 0 = every core)")
     parser.add_argument("--no-shadows", action="store_true", help="skip shadow rays (unshadowed lighting)")
+    parser.add_argument("--bounces", type=N.integer(0, 16), default=0, metavar="N",
+                        help="diffuse inter-reflections with sky light (the ambient lights become a sky the terrain "
+                             "occludes); 0 = direct light only, as before (default 0)")
+    parser.add_argument("--sun-radius", type=N.real(0.0, 10.0), default=0.0, metavar="DEG",
+                        help="angular radius of the sun in degrees for soft shadows (the real sun: 0.27); "
+                             "default 0 = a hard sun, the light maps as before")
     parser.add_argument("--chunk-size", type=N.integer(1, 1 << 20), default=64, help="patches per chunk (unit of resuming)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--clean", action="store_true",
@@ -27,13 +33,6 @@ def add_arguments(parser) -> None:
                         help="piste: an atlas in --out; ssx-tricky: NET is a .pbd, writes NAME_L.ssh beside it the "
                              "game's way and updates the patches' light-map tiles (see `piste ssx --help`)")
     parser.add_argument("--scene", metavar="TOML", help="ssx-tricky: take the lights from this scene file")
-
-
-def _load_net(path):
-    """See :func:`piste.pipeline.open_scene.load_net`."""
-    from piste.pipeline.open_scene import load_net
-
-    return load_net(path)
 
 
 def run(args) -> int:
@@ -46,6 +45,7 @@ def run(args) -> int:
     from piste.formats.atomic import check_writable_folder
     from piste.lighting import bake_lightmap, default_lights, load_lights, write_lightmap
     from piste.lighting.baker import clean_partials, kept_chunks_error
+    from piste.pipeline.open_scene import load_net
 
     if args.clean:
         partial = Path(args.out) / ".partial"
@@ -60,6 +60,8 @@ def run(args) -> int:
 
         if args.net is None:
             raise ConfigError("--format ssx-tricky needs a level: piste bake LEVEL.pbd --format ssx-tricky")
+        if args.bounces or args.sun_radius:
+            raise ConfigError("--bounces and --sun-radius are for piste light maps, not --format ssx-tricky")
         out = args.out if str(args.out).lower().endswith(".pbd") else None
         lights = load_lights(args.lights) if args.lights else scene_lights(load_scene(args.scene)) if args.scene else None
         report = bake_file(args.net, lights, out, not args.no_shadows, args.jobs)
@@ -71,7 +73,7 @@ def run(args) -> int:
     if args.chunk_size < 1:
         raise ConfigError(f"--chunk-size must be >= 1, got {args.chunk_size}")
     out = check_writable_folder(args.out)  # before the bake, not after it
-    net = _load_net(args.net)
+    net = load_net(args.net)
     lights = load_lights(args.lights) if args.lights else default_lights()
     partial = out / ".partial"
     t0 = time.perf_counter()
@@ -84,6 +86,8 @@ def run(args) -> int:
         chunk_size=args.chunk_size,
         partial_dir=partial,
         progress=not args.quiet and sys.stderr.isatty(),
+        bounces=args.bounces,
+        sun_radius=args.sun_radius,
     )
     try:
         paths = write_lightmap(lm, out)
@@ -106,5 +110,11 @@ def run(args) -> int:
         f"{st.get('rays', 0):,} shadow rays, {st.get('rays_occluded', 0):,} occluded) in {dt:.2f} s "
         f"({m['samples'] / max(dt, 1e-9):,.0f} samples/s)" + (f", {resumed} chunks resumed" if resumed else "")
     )
+    if "gi" in m:
+        gi = m["gi"]
+        print(", ".join(([f"{gi['bounces']} bounces ({st.get('gather_rays', 0):,} gather rays, "
+                          f"{st.get('gather_escaped', 0):,} to the sky)"] if "bounces" in gi else [])
+                        + ([f"sun radius {gi['sun_radius']:g} deg ({gi['sun_rays']} rays per sample)"]
+                           if "sun_radius" in gi else [])))
     print(f"atlas {m['atlas_size'][0]}x{m['atlas_size'][1]}: {paths['png']}, {paths['npz']}, {paths['manifest']}")
     return 0

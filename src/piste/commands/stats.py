@@ -17,25 +17,6 @@ def add_arguments(parser) -> None:
     parser.add_argument("--json", action="store_true", help="print the numbers as JSON")
 
 
-def load_net(path):
-    """A net from ``path`` (.bpt / .npz), or the default course when ``path`` is None."""
-    from pathlib import Path
-
-    from piste.errors import FormatError
-    from piste.terrain import PatchNet
-
-    if path is None:
-        from piste.world.course import default_course
-
-        return default_course()
-    suffix = Path(path).suffix.lower()
-    if suffix == ".bpt":
-        return PatchNet.from_bpt(path)
-    if suffix == ".npz":
-        return PatchNet.load(path)
-    raise FormatError(path, f"unknown patch net format {suffix!r}: expected .bpt or .npz")
-
-
 def default_camera(net, is_course: bool):
     """Eye and target: a rider's view down the track on the default course, else an oblique view."""
     import numpy as np
@@ -55,6 +36,7 @@ def default_camera(net, is_course: bool):
 def run(args) -> int:
     import json
 
+    from piste.pipeline.open_scene import load_net
     from piste.terrain import format_stats, stats
     from piste.terrain.lod import DEFAULT_FAR, DEFAULT_NEAR
 

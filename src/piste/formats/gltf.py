@@ -34,9 +34,7 @@ What is imported
 
 from __future__ import annotations
 
-import base64
 import io
-import urllib.parse
 from pathlib import Path
 
 import numpy as np
@@ -52,13 +50,6 @@ __all__ = ["load_gltf"]
 _COMP = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _FLOAT = 5126
-
-
-def _decode_data_uri(uri: str) -> bytes:
-    head, _, data = uri.partition(",")
-    if head.endswith(";base64"):
-        return base64.b64decode(data)
-    return urllib.parse.unquote_to_bytes(data)
 
 
 class _Reader:

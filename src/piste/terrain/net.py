@@ -27,6 +27,7 @@ import numpy as np
 
 from piste.errors import FormatError, ValidationError
 from piste.formats.atomic import atomic_path
+from piste.graph import connected_parts
 from piste.formats.bpt import read_bpt
 from piste.terrain.bezier import evaluate
 from piste.terrain.heightfield import fit_control_points
@@ -67,7 +68,8 @@ def weld_points(points: np.ndarray, tol: float) -> np.ndarray:
     numpy only (no scipy on the runtime path: importing it cost a fresh process 0.5 s before its
     first frame): exact duplicates first, then candidate pairs of the distinct points along a
     generic direction (a sliding window over the sorted projections: points within ``tol`` in 3-D
-    are within ``tol`` along any direction), checked in 3-D, joined by label propagation.  Dense
+    are within ``tol`` along any direction), checked in 3-D, joined by
+    :func:`piste.graph.connected_parts`.  Dense
     clusters (a window over 64 points wide) fall back to scipy's k-d tree.  The same clusters as
     ``cKDTree.query_pairs(tol)`` + connected components.
 
@@ -104,19 +106,7 @@ def weld_points(points: np.ndarray, tol: float) -> np.ndarray:
             b_list.append(b[near])
             k += 1
         if a_list:
-            a = np.concatenate(a_list)
-            b = np.concatenate(b_list)
-            while True:  # label propagation: every pair takes its smaller label, then pointer jumping
-                lo = np.minimum(labels[a], labels[b])
-                new = labels.copy()
-                np.minimum.at(new, a, lo)
-                np.minimum.at(new, b, lo)
-                new = new[new]
-                while not np.array_equal(new, new[new]):
-                    new = new[new]
-                if np.array_equal(new, labels):
-                    break
-                labels = new
+            _, labels = connected_parts(u, np.stack([np.concatenate(a_list), np.concatenate(b_list)], axis=1))
     comp = labels[inv]
     _, first = np.unique(comp, return_index=True)
     order = np.argsort(first)

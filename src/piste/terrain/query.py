@@ -310,20 +310,6 @@ class RayHits:
         return len(self.hit)
 
 
-def _morton3(x: np.ndarray) -> np.ndarray:
-    """30-bit Morton codes of points in [0, 1]^3, ``(m,)`` uint64."""
-    q = np.clip((x * 1023.0).astype(np.uint64), 0, 1023)
-
-    def spread(a):
-        a = (a | (a << np.uint64(16))) & np.uint64(0x030000FF)
-        a = (a | (a << np.uint64(8))) & np.uint64(0x0300F00F)
-        a = (a | (a << np.uint64(4))) & np.uint64(0x030C30C3)
-        a = (a | (a << np.uint64(2))) & np.uint64(0x09249249)
-        return a
-
-    return (spread(q[:, 0]) << np.uint64(2)) | (spread(q[:, 1]) << np.uint64(1)) | spread(q[:, 2])
-
-
 class PatchBVH:
     """Bounding-volume hierarchy over exact Bézier sub-patches of a net (for :func:`ray_intersect`).
 

@@ -33,6 +33,7 @@ import numpy as np
 
 from piste.character import BlendedMesh, default_rider, make_batches, make_lods
 from piste.errors import ConfigError
+from piste.graph import connected_parts
 from piste.lighting.lights import DirectionalLight, default_lights
 from piste.lighting.vertex import choose_lights_many
 from piste.world.course import TRACK_HALF_WIDTH, default_course, track_centerline
@@ -53,33 +54,6 @@ def sun_light(lights):
     if not d:
         return None
     return max(d, key=lambda x: abs(x.intensity) * float(np.abs(np.asarray(x.color)).sum()))
-
-
-def connected_parts(n_vertices: int, edges) -> tuple[int, np.ndarray]:
-    """Connected components of a graph: ``(count, label (n_vertices,) int64)``, labels ``0..count-1``
-    in the order of each part's smallest vertex.  Edges ``(e, 2)``.  numpy only (min-label hooking
-    with pointer jumping; scipy.sparse's import alone cost a fresh process ~0.2 s)."""
-    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
-    lab = np.arange(int(n_vertices), dtype=np.int64)
-    if len(e) == 0 or n_vertices == 0:
-        return int(n_vertices), lab
-    a, b = e[:, 0], e[:, 1]
-    while True:
-        la, lb = lab[a], lab[b]
-        lo = np.minimum(la, lb)
-        new = lab.copy()
-        np.minimum.at(new, la, lo)  # hook each root under the smaller label its edges see
-        np.minimum.at(new, lb, lo)
-        while True:  # pointer jumping: every vertex straight to its root
-            nxt = new[new]
-            if np.array_equal(nxt, new):
-                break
-            new = nxt
-        if np.array_equal(new, lab):
-            break
-        lab = new
-    roots, label = np.unique(lab, return_inverse=True)
-    return len(roots), label.reshape(-1).astype(np.int64)
 
 
 def orient_outward(mesh):
