@@ -549,8 +549,8 @@ def _read_npz(p: Path, tile=None, names=None, expect=None, product: str = "tile"
 
     Before a member's array is allocated: the member count, each member's declared size, its
     ``.npy`` header (numbers only; the shape times the item size equals the member's size) and,
-    for members in ``expect`` (``{name: (shape, "fiu")}``), the shape and dtype kind; arrays of a
-    float kind in ``expect`` must be finite.  Every failure is a TileError naming ``p``, the tile
+    for members in ``expect`` (``{name: (shape, "fiu")}``), the shape and dtype kind; arrays in
+    ``expect`` must be finite and within +-:data:`MAX_BOUND`.  Every failure is a TileError naming ``p``, the tile
     and the member."""
     tile = tile if tile is not None else (0, 0)
     try:
@@ -602,8 +602,11 @@ def _read_npz(p: Path, tile=None, names=None, expect=None, product: str = "tile"
                 except Exception as exc:  # a bad CRC, a torn deflate stream
                     raise TileError(p, tile, f"member {name!r} is unreadable ({type(exc).__name__}: "
                                              f"{str(exc)[:100]})", field=name) from None
-                if expect and name in expect and dtype.kind == "f" and not np.isfinite(arr).all():
-                    raise TileError(p, tile, "holds non-finite values", field=name)
+                if expect and name in expect and dtype.kind in "fiu" and arr.size:
+                    if dtype.kind == "f" and not np.isfinite(arr).all():
+                        raise TileError(p, tile, "holds non-finite values", field=name)
+                    if dtype.itemsize > 1 and float(np.abs(arr).max()) > MAX_BOUND:  # would overflow float32 meshes
+                        raise TileError(p, tile, f"holds values beyond +-{MAX_BOUND:g}", field=name)
                 out[name] = arr
     return out
 
