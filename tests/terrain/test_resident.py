@@ -201,3 +201,37 @@ def test_uniform_grids_bit_identical_to_the_vertex_cache(make):
         g = flat[off[n]:off[n] + N * n * n * VERTEX_FLOATS].reshape(N, n * n, VERTEX_FLOATS)
         assert np.array_equal(got[n][0].view(np.uint32), np.ascontiguousarray(g[..., 0:3]).view(np.uint32))
         assert np.array_equal(got[n][1].view(np.uint32), np.ascontiguousarray(g[..., 8:12]).view(np.uint32))
+
+
+@pytest.mark.parametrize("make", [lambda: grid_net(6, 7, seed=5), lambda: PatchNet.from_bpt(TEAPOT)])
+def test_blocks_built_in_chunks_share_every_edge_bit(make):
+    """The blocks are built BUILD_CHUNK patches at a time (bounded memory for big nets).  Any chunking
+    gives the one-step build's bits at every corner and edge vertex, positions and morph targets (both
+    patches of an edge in different chunks: crack-free), the same UVs and slots everywhere; a patch's
+    own inner grid is one BLAS product per chunk, whose last bit may depend on the chunk's size."""
+    net = make()
+    whole = ResidentTerrain(net)
+    whole.build_chunk = len(net)
+    ref = whole.vertices.reshape(len(net), whole.block, -1)
+    shared = np.zeros(whole.block, bool)
+    for n, o in whole.level_offset.items():
+        shared[o:o + 4 + 4 * (n - 2)] = True
+    size = float(np.ptp(ref[..., 0:3].reshape(-1, 3), axis=0).max())
+    for chunk in (1, 5, 13):
+        r = ResidentTerrain(net)
+        r.build_chunk = chunk
+        got = r.vertices.reshape(len(net), r.block, -1)
+        assert np.array_equal(got[:, shared].view(np.uint32), ref[:, shared].view(np.uint32)), chunk
+        assert np.array_equal(got[..., 6:].view(np.uint32), ref[..., 6:].view(np.uint32)), chunk
+        assert np.abs(got[..., 0:6] - ref[..., 0:6]).max() <= 1e-6 * size, chunk
+
+
+def test_budget_counts_the_blocks_only():
+    """resident_fits counts the blocks (N x 116 x 44 bytes at levels 4/6/8), not the vertex cache they
+    are no longer built from: a 160k-patch net fits the default budget (817 MB of 1 GiB)."""
+    from piste.terrain import resident as R
+
+    net = grid_net(3, 3, seed=1)
+    need = len(net) * 116 * 44
+    assert R.resident_fits(net, budget=need) and not R.resident_fits(net, budget=need - 1)
+    assert 160_000 * 116 * R.RESIDENT_FLOATS * 4 <= R.RESIDENT_BUDGET

@@ -46,12 +46,13 @@ def ragged_arange(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
 
 # ------------------------------------------------------------------------------ frame indices
 def _frame_indices_py(key, base, tmpl, tstart, tcount, out_start, out):
+    # unsigned offsets: numba then emits no negative-index wrap-around and LLVM vectorises the copy + add
     for i in range(key.shape[0]):
         k = key[i]
-        s = tstart[k]
-        o = out_start[i]
+        s = np.uint64(tstart[k])
+        o = np.uint64(out_start[i])
         b = base[i]
-        for j in range(tcount[k]):
+        for j in range(np.uint64(tcount[k])):
             out[o + j] = tmpl[s + j] + b
 
 

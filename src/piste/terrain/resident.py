@@ -55,16 +55,18 @@ from piste.terrain.cull import patch_tree
 from piste.terrain.lod import DEFAULT_FAR, DEFAULT_NEAR, LEVELS
 from piste.terrain.net import SIDE_CORNERS, PatchNet
 from piste.terrain.bezier import blend_tables, eval_edges, params
-from piste.terrain.tessellate import (MAX_LEVEL, VERTEX_FLOATS, _bilinear_weights, _cache, _glue_sources, get_shape,
+from piste.terrain.tessellate import (MAX_LEVEL, _bilinear_weights, _cache, _glue_sources, _Snapshot, get_shape,
                                       tessellate)
 
-__all__ = ["ResidentTerrain", "ResidentMesh", "RESIDENT_FLOATS", "MORPH_BAND", "RESIDENT_BUDGET", "resident_terrain",
-           "resident_fits", "morph_setting", "uniform_grids"]
+__all__ = ["ResidentTerrain", "ResidentMesh", "RESIDENT_FLOATS", "MORPH_BAND", "RESIDENT_BUDGET", "BUILD_CHUNK",
+           "resident_terrain", "resident_fits", "morph_setting", "uniform_grids", "edge_points"]
 
 #: floats per resident vertex: position 3, morph target 3, uv 2, light-map uv 2, morph slot 1
 RESIDENT_FLOATS = 11
 #: fraction of each level's distance band over which its vertices morph towards the coarser level
 MORPH_BAND = 0.3
+#: patches per step of the blocks' build (bounds its temporary memory; the result does not depend on it)
+BUILD_CHUNK = 8192
 
 
 def _full_index(n: int) -> np.ndarray:
@@ -88,7 +90,15 @@ def _side_seq(n: int, s: int) -> np.ndarray:
     return np.concatenate([[a], 4 + s * (n - 2) + np.arange(n - 2), [b]]).astype(np.int64)
 
 
-def uniform_grids(net: PatchNet, levels) -> dict:
+def edge_points(net: PatchNet, n: int) -> np.ndarray:
+    """Every edge's inner points at level ``n`` in its canonical direction, ``(e (n-2), 3)`` float32
+    relative to the net's origin (the vertex cache's arithmetic; empty for ``n <= 2``)."""
+    if n <= 2:
+        return np.zeros((0, 3), np.float32)
+    return eval_edges(_cache(net).edge_cp[np.arange(net.n_edges)], n).reshape(-1, 3)
+
+
+def uniform_grids(net: PatchNet, levels, patches=None, edges: dict | None = None) -> dict:
     """Every patch's uniform grid at each level: ``{n: (positions (N, n^2, 3) float32, uvs (N, n^2, 4)
     float32: uv then light-map uv)}`` in the :func:`piste.terrain.get_shape` layout.
 
@@ -96,24 +106,30 @@ def uniform_grids(net: PatchNet, levels) -> dict:
     same blend-table arithmetic on the same arrays: corners, each edge once in its canonical
     direction, inner grids by one product per level) without its normals, parameters and projected
     UVs, which the resident blocks do not hold (about half the cache's build time).
+
+    ``patches``: only these patches (``(k,)`` ids or a slice; the result has ``k`` rows), e.g. a
+    chunk of a big net; ``edges``: ``{n: edge_points(net, n)}`` computed once for all chunks (every
+    edge evaluated once, so both patches of an edge get its bits whatever chunks they fall in).
     """
     cache = _cache(net)
-    N = len(net)
-    r = net.lightmap_rect
+    ids = np.arange(len(net))[patches] if patches is not None else np.arange(len(net))
+    N = len(ids)
+    r = net.lightmap_rect[ids]
     lm_corners = np.stack([r[:, [0, 2, 2, 0]], r[:, [1, 1, 3, 3]]], axis=1)  # (N, 2, 4)
-    corner_attr = np.concatenate([net.uv.transpose(0, 2, 1), lm_corners], axis=1)  # (N, 4, 4)
-    flat = cache.packed[np.arange(N)].reshape(N * 3, 16)
+    corner_attr = np.concatenate([net.uv[ids].transpose(0, 2, 1), lm_corners], axis=1)  # (N, 4, 4)
+    flat = cache.packed[ids].reshape(N * 3, 16)
+    side_edge, side_flip = net.side_edge[ids], net.side_flip[ids]
     out = {}
     for n in (int(x) for x in levels):
         sh = get_shape((n,) * 4)
         nv = sh.n_verts
         pos = np.empty((N, nv, 3), dtype=np.float32)
-        pos[:, :4] = cache.corners
+        pos[:, :4] = cache.corners[ids]
         if n > 2:
-            edge = eval_edges(cache.edge_cp[np.arange(net.n_edges)], n).reshape(-1, 3)  # (e (n-2), 3)
+            edge = edges[n] if edges is not None and n in edges else edge_points(net, n)  # (e (n-2), 3)
             kk = np.arange(n - 2)
             for s in range(4):
-                rows = (net.side_edge[:, s] * (n - 2))[:, None] + np.where(net.side_flip[:, s][:, None], kk[::-1], kk)
+                rows = (side_edge[:, s] * (n - 2))[:, None] + np.where(side_flip[:, s][:, None], kk[::-1], kk)
                 o = 4 + int(sh.side_off[s])
                 pos[:, o:o + n - 2] = edge.take(rows, axis=0)
             ti = params(n)[1:-1]
@@ -219,8 +235,11 @@ class ResidentTerrain:
             self.level_offset[n] = o
             o += n * n
         self.block = o
-        self._snapshot = (net.uv.copy(), net.lightmap_rect.copy())
+        # compared every frame (resident_terrain): one compiled pass over the raw bytes (0.14 ms for a
+        # 160k-patch net's UVs and rects, where np.array_equal took 0.2-0.7 ms)
+        self._snapshot = (_Snapshot(net.uv), _Snapshot(net.lightmap_rect))
         self._vertices = None  # built on first use (a frame's LOD and index list do not need them)
+        self.build_chunk = BUILD_CHUNK
         self._build_templates()
         self.edge_mid = np.ascontiguousarray(net.edge_midpoints())
         self.side_edge = np.ascontiguousarray(net.side_edge, dtype=np.int64)
@@ -237,52 +256,61 @@ class ResidentTerrain:
         return self._vertices
 
     def _build_vertices(self) -> None:
+        """The blocks, :data:`BUILD_CHUNK` patches at a time: peak memory is the blocks plus one
+        chunk's grids and float64 morph arithmetic (the whole net at once took ~4x the blocks),
+        and every step is per patch, so the bits do not depend on the chunking."""
         net = self.net
         N, B = len(net), self.block
-        both = uniform_grids(net, self.levels)  # positions and UVs only (no normals)
-        grids = {n: both[n][0] for n in self.levels}
         out = np.empty((N, B, RESIDENT_FLOATS), dtype=np.float32)
-        pids = np.arange(N)
+        edges = {n: edge_points(net, n) for n in self.levels}  # each edge once, shared by the chunks
+        chunk = max(int(self.build_chunk), 1)
+        for c0 in range(0, N, chunk):
+            sl = slice(c0, min(c0 + chunk, N))
+            self._build_chunk(out[sl], sl, edges)
+        self._vertices = out.reshape(N * B, RESIDENT_FLOATS)
+
+    def _build_chunk(self, out: np.ndarray, sl: slice, edges: dict) -> None:
+        """Blocks ``out (k, B, 11)`` of the patches ``sl``."""
+        net = self.net
+        both = uniform_grids(net, self.levels, sl, edges)  # positions and UVs only (no normals)
+        grids = {n: both[n][0] for n in self.levels}
+        pids = np.arange(len(net))[sl]
+        side_edge, side_flip = net.side_edge[sl], net.side_flip[sl]
         for li, n in enumerate(self.levels):
             g = grids[n]
             blk = out[:, self.level_offset[n]:self.level_offset[n] + n * n]
             blk[..., 0:3] = g
             blk[..., 6:10] = both[n][1]
             # morph slots: corners 0 (target = position), sides their edge, inner n_edges + p
-            slot = np.zeros((N, n * n), dtype=np.int64)
+            slot = np.zeros((len(pids), n * n), dtype=np.int64)
             for s in range(4):
-                slot[:, 4 + s * (n - 2):4 + (s + 1) * (n - 2)] = net.side_edge[:, s:s + 1]
+                slot[:, 4 + s * (n - 2):4 + (s + 1) * (n - 2)] = side_edge[:, s:s + 1]
             slot[:, 4 + 4 * (n - 2):] = net.n_edges + pids[:, None]
             blk[..., 10] = slot
             if li == 0:
                 blk[..., 3:6] = g[..., 0:3]
                 continue
             c = self.levels[li - 1]
-            blk[..., 3:6] = self._targets(grids[c], c, g, n)
-        self._vertices = out.reshape(N * B, RESIDENT_FLOATS)
+            blk[..., 3:6] = self._targets(grids[c], c, g, n, side_flip)
 
-    def _targets(self, gc: np.ndarray, c: int, g: np.ndarray, n: int) -> np.ndarray:
-        """Morph targets ``(N, n^2, 3) float32`` of the level-``n`` grids towards the level-``c`` ones."""
-        net = self.net
-        N = len(net)
+    def _targets(self, gc: np.ndarray, c: int, g: np.ndarray, n: int, side_flip: np.ndarray) -> np.ndarray:
+        """Morph targets ``(k, n^2, 3) float32`` of the level-``n`` grids ``g`` towards the level-``c``
+        ones ``gc`` (``k`` patches, ``side_flip (k, 4)`` theirs)."""
+        N = len(g)
         tgt = np.empty((N, n * n, 3), dtype=np.float32)
         pc = gc[..., 0:3]
         tgt[:, :4] = g[:, :4, 0:3]  # corners stay
-        # edges: the coarse edge polyline in each edge's canonical direction, once per edge
-        canon = np.empty((net.n_edges, c, 3), dtype=np.float32)
-        for s in range(4):
-            seq = pc[:, _side_seq(c, s)]  # (N, c, 3) in side direction
-            flip = net.side_flip[:, s]
-            seq = np.where(flip[:, None, None], seq[:, ::-1], seq)
-            canon[net.side_edge[:, s]] = seq
+        # edges: the coarse edge polyline in the edge's canonical direction (the same bits in both
+        # patches of an edge: its vertices are the canonical ones), interpolated, then back to the side
         t = np.arange(1, n - 1, dtype=np.float64) / (n - 1) * (c - 1)
         j = np.minimum(np.floor(t).astype(np.int64), c - 2)
         a = (t - j)[None, :, None]
-        edge_t = (canon[:, j].astype(np.float64) * (1.0 - a) + canon[:, j + 1].astype(np.float64) * a).astype(np.float32)
         for s in range(4):
-            e = edge_t[net.side_edge[:, s]]  # (N, n-2, 3) canonical direction
-            flip = net.side_flip[:, s]
-            tgt[:, 4 + s * (n - 2):4 + (s + 1) * (n - 2)] = np.where(flip[:, None, None], e[:, ::-1], e)
+            seq = pc[:, _side_seq(c, s)]  # (k, c, 3) in side direction
+            flip = side_flip[:, s][:, None, None]
+            canon = np.where(flip, seq[:, ::-1], seq)
+            e = (canon[:, j].astype(np.float64) * (1.0 - a) + canon[:, j + 1].astype(np.float64) * a).astype(np.float32)
+            tgt[:, 4 + s * (n - 2):4 + (s + 1) * (n - 2)] = np.where(flip, e[:, ::-1], e)
         # inner: the coarse uniform grid's triangle (cells split along (i, j)-(i+1, j+1))
         full_c = _full_index(c)
         P = pc[:, full_c.ravel()].reshape(N, c, c, 3).astype(np.float64)  # [p, j, i]
@@ -307,11 +335,14 @@ class ResidentTerrain:
         self.tmpl, self.tmpl_start, self.tmpl_count = t["tmpl"], t["tmpl_start"], t["tmpl_count"]
         self.shape_kind, self.shape_verts = t["shape_kind"], t["shape_verts"]
         self.level_array = np.array(self.levels, dtype=np.int16)
+        keys = np.arange(81)
+        #: (81, 4) int16: the vertices per side of each shape key ((l0 * 3 + l1) * 3 + l2) * 3 + l3
+        self.key_levels = self.level_array[np.stack([(keys // 3 ** (3 - s)) % 3 for s in range(4)], axis=1)]
 
     def stale(self) -> bool:
         """True when the net's corner UVs or light-map rects changed since the blocks were built."""
         s = self._snapshot
-        return not (np.array_equal(s[0], self.net.uv) and np.array_equal(s[1], self.net.lightmap_rect))
+        return not (s[0].same(self.net.uv) and s[1].same(self.net.lightmap_rect))
 
     @property
     def nbytes(self) -> int:
@@ -384,14 +415,13 @@ class ResidentTerrain:
         return self._mesh(pids, key, morph, use_numba)
 
     def _mesh(self, pids: np.ndarray, key: np.ndarray, morph: bool, use_numba=None) -> ResidentMesh:
-        li = np.stack([(key // 3 ** (3 - s)) % 3 for s in range(4)], axis=1) if len(key) else np.zeros((0, 4), np.int64)
         base = pids * self.block
         flat, start = frame_indices(key, base, self.tmpl, self.tmpl_start, self.tmpl_count, use_numba=use_numba)
         return ResidentMesh(
             resident=self,
             indices=flat.reshape(-1, 3),
             patch_ids=pids,
-            patch_levels=self.level_array[li],
+            patch_levels=self.key_levels[key],
             patch_kind=self.shape_kind[key],
             tri_start=start // 3,
             vertex_first=base,
@@ -465,16 +495,19 @@ def write_templates(path=TEMPLATES_FILE, levels=LEVELS) -> Path:
     return path
 
 
-#: memory the resident blocks (and the per-level vertex cache they are built from) may take
-RESIDENT_BUDGET = 512 * 2**20
+#: memory the resident blocks may take (44 bytes a vertex, 116 vertices a patch: ~210k patches, e.g. a
+#: 160k-patch world's 817 MB); bigger nets are drawn on the CPU path (or tiled, :mod:`piste.terrain.tiles`)
+RESIDENT_BUDGET = 1 << 30
 
 
 def resident_fits(net: PatchNet, levels=LEVELS, budget: int = RESIDENT_BUDGET) -> bool:
-    """Whether ``net``'s resident blocks (44 bytes a vertex) plus the vertex cache they come from
-    (56 bytes) stay within ``budget`` bytes (``N x 116 x 100``: about 46k patches for 512 MB).
+    """Whether ``net``'s resident blocks (``N x 116 x 44`` bytes for levels 4/6/8) stay within
+    ``budget`` bytes.  They are built from the control points (:func:`uniform_grids`), not from the
+    vertex cache, and :data:`BUILD_CHUNK` patches at a time, so the blocks are what the budget counts
+    (it used to add the cache's 56 bytes a vertex, which sent nets above ~46k patches to the CPU path).
     Bigger nets are drawn on the CPU path, visible patches evaluated per frame."""
     block = sum(int(n) * int(n) for n in levels)
-    return len(net) * block * (RESIDENT_FLOATS + VERTEX_FLOATS) * 4 <= budget
+    return len(net) * block * RESIDENT_FLOATS * 4 <= budget
 
 
 def morph_setting(explicit: bool | None = None) -> bool:
