@@ -200,3 +200,25 @@ def test_objects_on_sources_without_their_own(level, world, gl):
         p.release()
     with pytest.raises(ConfigError, match="objects"):
         open_source(level, objects=10**6)
+
+
+def test_cli_view_takes_the_same_source_flags(level, world, gl, tmp_path, monkeypatch):
+    """``piste view`` (no display: one frame off-screen) of a level and a tiled world with riders,
+    objects and a camera of one's own, as ``piste render`` takes them."""
+    from PIL import Image
+
+    from piste.cli import main
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    cam = _near(open_source(world, riders=2))
+    eye, tgt = (list(map(str, v)) for v in (cam.eye, cam.target))
+    out = {}
+    for name, extra in (("bare", []), ("furnished", ["--riders", "2", "--add-objects", "10"])):
+        out[name] = tmp_path / f"{name}.png"
+        assert main(["view", str(world), "--size", *map(str, SIZE), "--budget", "8", "--eye", *eye, "--target", *tgt,
+                     "--out", str(out[name]), *extra]) == 0
+    a, b = (np.asarray(Image.open(out[k])).astype(int) for k in ("bare", "furnished"))
+    assert (np.abs(a - b).max(-1) > 30).sum() >= 30
+    assert main(["view", str(level), "--size", *map(str, SIZE), "--riders", "1", "--out", str(tmp_path / "l.png")]) == 0
+    assert np.asarray(Image.open(tmp_path / "l.png")).std() > 5

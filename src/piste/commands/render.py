@@ -42,24 +42,6 @@ def add_arguments(parser) -> None:
                              "without objects of its own (an SSX level, a tiled world)")
 
 
-def _camera(args):
-    """The camera of ``--eye``/``--target`` (None without them)."""
-    import numpy as np
-
-    from piste.errors import ConfigError
-    from piste.world.camera import Camera
-
-    if args.eye is None and args.target is None:
-        return None
-    if args.eye is None or args.target is None:
-        raise ConfigError("--eye and --target go together")
-    d = float(np.linalg.norm(np.subtract(args.eye, args.target)))
-    if d == 0.0:
-        raise ConfigError("--eye and --target must differ")
-    return Camera(np.array(args.eye, dtype=np.float64), np.array(args.target, dtype=np.float64), fov_y=args.fov,
-                  near=0.1, far=max(d * 20.0, 1000.0))
-
-
 def _morph(args):
     return None if getattr(args, "lod_morph", None) is None else args.lod_morph == "on"
 
@@ -70,11 +52,11 @@ def run(args) -> int:
 
     from piste.errors import ConfigError
     from piste.formats.atomic import check_writable_folder
-    from piste.pipeline.open_scene import open_source, source_kind
+    from piste.pipeline.open_scene import eye_camera, open_source, source_kind
     from piste.pipeline.preview import camera_at, render_frames
 
     kind = source_kind(args.scene)
-    cam = _camera(args)
+    cam = eye_camera(args.eye, args.target, args.fov)
     if cam is not None and args.camera:
         raise ConfigError("--camera names a scene camera; --eye/--target give one: use one or the other")
     size = tuple(args.size) if args.size else None

@@ -58,6 +58,10 @@ def add_arguments(parser) -> None:
                         help="with SCENE: no window; render a frame to --out (a folder) at start and per change")
     parser.add_argument("--camera", help="with SCENE: the scene camera (default: the first)")
     parser.add_argument("--watch-seconds", type=N.SECONDS, help="with SCENE: stop watching after this many seconds")
+    parser.add_argument("--eye", nargs=3, type=N.COORDINATE, metavar=("X", "Y", "Z"),
+                        help="with an SSX level or a tiled world: start at this position in metres (with --target)")
+    parser.add_argument("--target", nargs=3, type=N.COORDINATE, metavar=("X", "Y", "Z"),
+                        help="the point --eye looks at (metres)")
     parser.add_argument("--riders", type=N.integer(0, 64), default=0, metavar="N",
                         help="with an SSX level or a tiled world: stand N default riders on its terrain")
     parser.add_argument("--add-objects", type=N.integer(0, 10_000), default=0, metavar="N",
@@ -140,7 +144,7 @@ def _view_source(args, kind: str) -> int:
     frame off-screen to ``--out`` without a display).  A tiled world starts at its flight
     (``--benchmark``: along it at 100 m/s); in the window its tiles load while far stand-ins show."""
     from piste.pipeline.live import PreviewView
-    from piste.pipeline.open_scene import open_source
+    from piste.pipeline.open_scene import eye_camera, open_source
     from piste.pipeline.preview import ScenePreview, camera_at
     from piste.render import save_png
     from piste.render.window import ViewOptions, has_display, print_benchmark, run_window
@@ -148,7 +152,7 @@ def _view_source(args, kind: str) -> int:
     bundle = open_source(args.scene, warm=True, riders=args.riders, objects=args.add_objects, budget_mb=args.budget)
     size = tuple(args.size)
     kw = {"lightmap_mode": args.lightmap, "face": args.face, "lod_morph": _morph(args)}
-    cam = camera_at(bundle, args.camera)
+    cam = eye_camera(args.eye, args.target) or camera_at(bundle, args.camera)
     if not has_display():
         print("piste view: no display (DISPLAY / WAYLAND_DISPLAY unset), so no window; rendering one frame "
               f"off-screen to {args.out} instead (run under a desktop or `xvfb-run piste view`)", file=sys.stderr)

@@ -24,6 +24,7 @@ SOURCES                                       the registry, in matching order
 source_kind(path) -> str                      "bundle", "scene", "ssx", "tiles" (ConfigError otherwise)
 open_source(path, quiet=True, warm=False, riders=0, objects=0, **options) -> Bundle   (tiles: ``budget_mb``)
 load_or_build(scene, quiet=True, warm=False) -> Bundle     (= open_source)
+eye_camera(eye, target, fov_y=50) -> Camera | None            ``--eye``/``--target`` (render, view)
 load_net(path=None) -> PatchNet         a .bpt / .npz patch net, or the default course (``piste bake``, ``piste ssx``)
 """
 
@@ -34,6 +35,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from piste.errors import ConfigError
 from piste.pipeline.build import build_scene
 from piste.pipeline.bundle_objects import Bundle, load_bundle
@@ -41,9 +44,10 @@ from piste.pipeline.furnish import add_objects, add_standing_riders
 from piste.pipeline.ssx_source import open_ssx_level
 from piste.pipeline.tiles_source import open_tiles
 from piste.terrain.net import PatchNet
+from piste.world.camera import Camera
 from piste.world.course import default_course
 
-__all__ = ["Source", "SOURCES", "source_kind", "open_source", "load_or_build", "load_net"]
+__all__ = ["Source", "SOURCES", "source_kind", "open_source", "load_or_build", "load_net", "eye_camera"]
 
 
 def load_net(path=None) -> PatchNet:
@@ -117,6 +121,20 @@ def open_source(path, quiet: bool = True, warm: bool = False, riders: int = 0, o
     if objects and bundle.objects() is None and not bundle.manifest.get("auto_objects"):
         bundle = add_objects(bundle, int(objects))
     return bundle
+
+
+def eye_camera(eye, target, fov_y: float = 50.0) -> Camera | None:
+    """A camera of one's own at ``eye (3,)`` looking at ``target (3,)`` (metres; ``fov_y`` degrees;
+    the far plane 20 times their distance, at least 1 km), None when both are None."""
+    if eye is None and target is None:
+        return None
+    if eye is None or target is None:
+        raise ConfigError("--eye and --target go together")
+    e, t = (np.asarray(v, dtype=np.float64).reshape(3) for v in (eye, target))
+    d = float(np.linalg.norm(e - t))
+    if not d > 0.0:
+        raise ConfigError("--eye and --target must differ")
+    return Camera(e, t, fov_y=float(fov_y), near=0.1, far=max(d * 20.0, 1000.0))
 
 
 def load_or_build(scene, quiet: bool = True, warm: bool = False) -> Bundle:
