@@ -198,7 +198,7 @@ def test_scene_file_clips_from_with_bone_map(tmp_path):
             load_scene(_scene(d3, extra))
 
 
-@pytest.mark.parametrize("mode", [None, "relative", "scaled"])
+@pytest.mark.parametrize("mode", [None, "relative", "scaled", "world"])
 def test_partial_retarget_leaves_unmatched_bones_at_rest(mode):
     """A clip retargeted onto a rig that shares only some bones (the rest renamed, a 'monster'):
     every target bone without a mapped track samples exactly its rest pose, at every time and in
@@ -223,3 +223,43 @@ def test_partial_retarget_leaves_unmatched_bones_at_rest(mode):
             assert np.isfinite(pose.translation).all() and np.isfinite(pose.rotation).all()
             moved = max(moved, float(np.abs(pose.rotation[driven] - rest.rotation[driven]).max()))
     assert moved > 0.05
+
+
+def test_world_mode_follows_the_source_on_a_rig_with_other_bone_frames():
+    """The same joints with every bone's local frame turned (as an SSX Tricky rig's are against
+    the default rider's): ``mode="world"`` moves every joint exactly as the source moves it, at
+    every key; the local-delta ``relative`` rule does not."""
+    from piste.character.model import Skeleton
+    from piste.transforms import compose_trs, matrix_to_quat, quat_multiply, quat_conjugate, quat_rotate
+
+    src = default_rider(0)
+    sk = src.skeleton
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(sk.n_bones, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)  # each bone's frame turn
+    par = sk.parents
+    qp = np.where(par[:, None] >= 0, q[np.maximum(par, 0)], [0.0, 0.0, 0.0, 1.0])
+    rot = quat_multiply(quat_conjugate(qp), quat_multiply(sk.rest_rotation, q))
+    trans = quat_rotate(quat_conjugate(qp), sk.rest_translation)
+    world = np.zeros((sk.n_bones, 4, 4))
+    local = compose_trs(trans, rot, np.ones((sk.n_bones, 3)))
+    for j, p in enumerate(par):
+        world[j] = local[j] if p < 0 else world[p] @ local[j]
+    other = Skeleton(sk.names, par, trans, rot, np.ones((sk.n_bones, 3)), np.linalg.inv(world))
+    assert not np.allclose(matrix_to_quat(world[:, :3, :3])[2], sk.rest_rotation[2])
+
+    def joints(skel, pose):
+        return (skel.skin_matrices(pose) @ np.linalg.inv(skel.inverse_bind))[:, :3, 3]
+
+    np.testing.assert_allclose(joints(other, None), joints(sk, None), atol=1e-9)
+    for name in ("ride", "spin"):
+        c = src.clips[name]
+        w = retarget_clip(c, other, "builtin", source=sk, warn=False, mode="world")
+        r = retarget_clip(c, other, "builtin", source=sk, warn=False, mode="relative")
+        keys = np.unique(np.concatenate([tr.times for bt in c.tracks.values() for tr in bt.values()]))
+        worst_rel = 0.0
+        for t in keys:
+            want = joints(sk, c.sample(float(t), skeleton=sk))
+            np.testing.assert_allclose(joints(other, w.sample(float(t), skeleton=other)), want, atol=1e-6)
+            worst_rel = max(worst_rel, float(np.abs(joints(other, r.sample(float(t), skeleton=other)) - want).max()))
+        assert worst_rel > 0.05, name

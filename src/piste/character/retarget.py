@@ -28,6 +28,8 @@ bone_roles(skeleton) -> {bone name: role}
 builtin_bone_map(source, target) -> {source bone: target bone}
 resolve_bone_map(bone_map, source, target) -> dict    ("builtin", a dict, or None = same names)
 retarget_clip(clip, target, bone_map="builtin", source=None, warn=True, mode=None) -> Clip
+    mode "world": each mapped bone turns in world space as its source bone does (rigs whose bone
+    frames differ, e.g. an SSX Tricky rig vs the default rider), baked at the clip's key times
 add_clips(model, source_model, bone_map="builtin", clips=None, mode="relative") -> Model
 coverage(clip, target) -> (driven, unmatched)         target joint names
 check_coverage(clip, target, min_fraction=0.5)        warn when fewer than half are driven
@@ -41,8 +43,9 @@ from dataclasses import replace
 
 import numpy as np
 
+from piste.character.animation import sample_poses
 from piste.errors import ConfigError
-from piste.transforms import quat_conjugate, quat_multiply
+from piste.transforms import quat_conjugate, quat_multiply, quat_normalize, quat_rotate
 
 __all__ = ["RetargetWarning", "ROLES", "bone_roles", "builtin_bone_map", "resolve_bone_map", "retarget_clip", "add_clips",
            "coverage", "check_coverage"]
@@ -312,11 +315,16 @@ def retarget_clip(clip, target, bone_map="builtin", source=None, warn: bool = Tr
     :meth:`Clip.sample` compare the right rest bones); play it with ``clip.sample(t, target)``.
     With ``mode="relative"`` or ``"scaled"`` that rule is baked into the keys (exactly: both are
     affine in the key values, so LINEAR, STEP and CUBICSPLINE tangents transform alike) and the
-    clip belongs to ``target`` (``clip.skeleton is target``).  Warns (:class:`RetargetWarning`)
+    clip belongs to ``target`` (``clip.skeleton is target``). ``mode="world"``: every mapped
+    target bone turns in world space by its source bone's world rotation from rest (so rigs whose
+    bones carry different local frames move alike) and a tracked translation moves the joint by
+    the source joint's world displacement (scaled by the rest-length ratio); unmapped bones keep
+    their local rest pose; baked as LINEAR keys at every key time of the clip (plus a 60 Hz grid
+    when a track is not LINEAR); scale tracks are not carried.  Warns (:class:`RetargetWarning`)
     when it drives fewer than half of the target's joints.
     """
-    if mode not in (None, "relative", "scaled"):
-        raise ConfigError(f"retarget mode must be 'relative', 'scaled' or None, got {mode!r}")
+    if mode not in (None, "relative", "scaled", "world"):
+        raise ConfigError(f"retarget mode must be 'relative', 'scaled', 'world' or None, got {mode!r}")
     src = source if source is not None else clip.skeleton
     if src is None:
         raise ConfigError(f"clip {clip.name!r} has no skeleton: pass source=")
@@ -336,10 +344,74 @@ def retarget_clip(clip, target, bone_map="builtin", source=None, warn: bool = Tr
     renamed = type(src)(names, src.parents, src.rest_translation, src.rest_rotation, src.rest_scale, src.inverse_bind,
                         src.node_index, src.is_joint)
     out = replace(clip, name=name or clip.name, tracks=tracks, skeleton=renamed)
-    if mode is not None:
+    if mode == "world":
+        out = replace(out, tracks=_bake_world(clip, src, renamed, target, set(m.values())), skeleton=target)
+    elif mode is not None:
         out = replace(out, tracks=_bake(out.tracks, renamed, target, mode), skeleton=target)
     if warn:
         check_coverage(out, target)
+    return out
+
+
+def _world(parents, t, r):
+    """World rotations ``(m, b, 4)`` and positions ``(m, b, 3)`` from local ``t (m, b, 3)``,
+    ``r (m, b, 4)`` (parents first; scale ignored)."""
+    wr, wp = np.empty_like(r), np.empty_like(t)
+    for j, p in enumerate(parents):
+        if p < 0:
+            wr[:, j], wp[:, j] = r[:, j], t[:, j]
+        else:
+            wr[:, j] = quat_multiply(wr[:, p], r[:, j])
+            wp[:, j] = wp[:, p] + quat_rotate(wr[:, p], t[:, j])
+    return wr, wp
+
+
+def _bake_world(clip, src, renamed, dst, mapped: set) -> dict:
+    """LINEAR tracks for ``dst`` with the ``world`` rule (:func:`retarget_clip`): ``clip`` is the
+    source clip on its skeleton ``src`` (all its tracks, mapped or not, move the source's joints),
+    ``renamed`` is ``src`` with the mapped bones named for ``dst``."""
+    tracks = [tr for bt in clip.tracks.values() for tr in bt.values()]
+    if not tracks:
+        return {}
+    track = type(tracks[0])  # piste.character.model.Track (not imported: model imports this module)
+    times = np.unique(np.concatenate([tr.times for tr in tracks]))
+    if any(tr.interpolation != "LINEAR" for tr in tracks):
+        times = np.unique(np.concatenate([times, np.arange(times[0], times[-1], 1.0 / 60.0)]))
+    m = len(times)
+    st, sr, _ = sample_poses(clip, times, src)
+    rs_t, rs_r = src.rest_translation[None], src.rest_rotation[None]
+    ws_r, ws_p = _world(src.parents, st, sr)
+    ws_r0, ws_p0 = _world(src.parents, rs_t, rs_r)
+    wt_r0, wt_p0 = _world(dst.parents, dst.rest_translation[None], dst.rest_rotation[None])
+    moves = {renamed.names[src.get(b)] for b, bt in clip.tracks.items() if "translation" in bt and src.get(b) is not None}
+    wr = np.empty((m, dst.n_bones, 4))
+    wp = np.empty((m, dst.n_bones, 3))
+    out = {}
+    for j, (name, p) in enumerate(zip(dst.names, dst.parents)):
+        i = renamed.get(name) if name in mapped else None
+        lt = np.broadcast_to(dst.rest_translation[j], (m, 3)).copy()
+        if i is None:  # unmapped: its local rest pose under the posed parent
+            lr = np.broadcast_to(dst.rest_rotation[j], (m, 4))
+            wr[:, j] = lr if p < 0 else quat_multiply(wr[:, p], lr)
+        else:
+            delta = quat_multiply(ws_r[:, i], quat_conjugate(np.broadcast_to(ws_r0[0, i], (m, 4))))
+            wr[:, j] = quat_normalize(quat_multiply(delta, np.broadcast_to(wt_r0[0, j], (m, 4))))
+            lr = wr[:, j] if p < 0 else quat_normalize(quat_multiply(quat_conjugate(wr[:, p]), wr[:, j]))
+            if name in moves:  # the joint moves by the source joint's world displacement, scaled
+                ls = float(np.linalg.norm(src.rest_translation[i]))
+                k = float(np.linalg.norm(dst.rest_translation[j])) / ls if ls > 1e-12 else 1.0
+                want = wt_p0[0, j] + k * (ws_p[:, i] - ws_p0[0, i])
+                lt = want if p < 0 else quat_rotate(quat_conjugate(wr[:, p]), want - wp[:, p])
+        wp[:, j] = lt if p < 0 else wp[:, p] + quat_rotate(wr[:, p], lt)
+        if i is not None:
+            lr = np.array(lr)
+            for k2 in range(1, m):  # neighbouring keys in one hemisphere (LINEAR blends them)
+                if float(lr[k2] @ lr[k2 - 1]) < 0:
+                    lr[k2] = -lr[k2]
+            bt = {"rotation": track(times.copy(), lr, "LINEAR")}
+            if name in moves:
+                bt["translation"] = track(times.copy(), np.asarray(lt), "LINEAR")
+            out[name] = bt
     return out
 
 

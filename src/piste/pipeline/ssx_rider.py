@@ -112,7 +112,11 @@ def shared_clips(model) -> tuple:
     When every bone the clips animate has its name in ``model`` they play as they are; otherwise
     (a retail rider's ``hips``, ``l_thigh``, ``r_calf``, ...) they are retargeted through the
     built-in bone map (:func:`piste.character.retarget.builtin_bone_map`: roles from the names,
-    or from the hierarchy), and ``model.notes`` says how many bones that mapped."""
+    or from the hierarchy) with the ``world`` rule baked in (each mapped bone turns in world space
+    as its source bone does: an SSX rig's bones carry other local frames than the default rider's,
+    and the local-delta rules lay the retail ``moby`` rider on its back or bend its limbs 20-130
+    degrees off); bones the map leaves out keep their rest pose; ``model.notes`` says how many
+    bones that mapped."""
     src = default_rider(0)
     sk = model.skeleton
     names = set(sk.names)
@@ -120,7 +124,8 @@ def shared_clips(model) -> tuple:
     if animated <= names:
         return dict(src.clips), len(animated)
     bone_map = builtin_bone_map(src.skeleton, sk)
-    clips = {n: retarget_clip(c, sk, bone_map, source=src.skeleton, warn=False, mode="relative") for n, c in src.clips.items()}
+    clips = {n: retarget_clip(c, sk, bone_map, source=src.skeleton, warn=False, mode="world")
+             for n, c in src.clips.items()}
     driven = {b for c in clips.values() for b in c.tracks}
     by_role = [f"{k} -> {v}" for k, v in bone_map.items() if k != v and k in animated]
     notes = getattr(model, "notes", None)
