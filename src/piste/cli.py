@@ -30,7 +30,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "build": ("piste.commands.build", "pre-process a scene (.toml) into one .piste bundle (cached, byte-identical)"),
     "render": ("piste.commands.render", "render a scene (.toml or .piste) from one of its cameras (PNG, MP4)"),
     "export": ("piste.commands.export", "export a scene (.toml or .piste) to glTF (.glb/.gltf): terrain, riders, objects, lights"),
-    "ssx": ("piste.commands.ssx", "SSX Tricky levels (.pbd): info, render, view, bake light maps, convert, make"),
+    "ssx": ("piste.commands.ssx", "SSX Tricky levels (.pbd): info, render, view, bake light maps, convert, make, import"),
     "mpf": ("piste.commands.mpf", "SSX Tricky rider models (.mpf): info, encode a piste rider, export to glTF, copy"),
     "blender-addon": ("piste.commands.blender_addon", "write the Blender add-on (author scenes, live preview, SSX import) as a zip"),
 }
