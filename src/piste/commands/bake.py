@@ -19,6 +19,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--out", metavar="DIR", default="out/lightmap", help="output folder (default out/lightmap)")
     parser.add_argument("--jobs", type=N.JOBS, default=0, help="worker processes (default 0 = every core)")
     parser.add_argument("--no-shadows", action="store_true", help="skip shadow rays (unshadowed lighting)")
+    parser.add_argument("--bounces", type=N.integer(0, 16), default=0, metavar="N",
+                        help="diffuse inter-reflections with sky light (the ambient lights become a sky the terrain "
+                             "occludes); 0 = direct light only, as before (default 0)")
+    parser.add_argument("--sun-radius", type=N.real(0.0, 10.0), default=0.0, metavar="DEG",
+                        help="angular radius of the sun in degrees for soft shadows (the real sun: 0.27); "
+                             "default 0 = a hard sun, the light maps as before")
     parser.add_argument("--chunk-size", type=N.integer(1, 1 << 20), default=64, help="patches per chunk (unit of resuming)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--clean", action="store_true",
@@ -54,6 +60,8 @@ def run(args) -> int:
 
         if args.net is None:
             raise ConfigError("--format ssx-tricky needs a level: piste bake LEVEL.pbd --format ssx-tricky")
+        if args.bounces or args.sun_radius:
+            raise ConfigError("--bounces and --sun-radius are for piste light maps, not --format ssx-tricky")
         out = args.out if str(args.out).lower().endswith(".pbd") else None
         lights = load_lights(args.lights) if args.lights else scene_lights(load_scene(args.scene)) if args.scene else None
         report = bake_file(args.net, lights, out, not args.no_shadows, args.jobs)
@@ -78,6 +86,8 @@ def run(args) -> int:
         chunk_size=args.chunk_size,
         partial_dir=partial,
         progress=not args.quiet and sys.stderr.isatty(),
+        bounces=args.bounces,
+        sun_radius=args.sun_radius,
     )
     try:
         paths = write_lightmap(lm, out)
@@ -100,5 +110,11 @@ def run(args) -> int:
         f"{st.get('rays', 0):,} shadow rays, {st.get('rays_occluded', 0):,} occluded) in {dt:.2f} s "
         f"({m['samples'] / max(dt, 1e-9):,.0f} samples/s)" + (f", {resumed} chunks resumed" if resumed else "")
     )
+    if "gi" in m:
+        gi = m["gi"]
+        print(", ".join(([f"{gi['bounces']} bounces ({st.get('gather_rays', 0):,} gather rays, "
+                          f"{st.get('gather_escaped', 0):,} to the sky)"] if "bounces" in gi else [])
+                        + ([f"sun radius {gi['sun_radius']:g} deg ({gi['sun_rays']} rays per sample)"]
+                           if "sun_radius" in gi else [])))
     print(f"atlas {m['atlas_size'][0]}x{m['atlas_size'][1]}: {paths['png']}, {paths['npz']}, {paths['manifest']}")
     return 0

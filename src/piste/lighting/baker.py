@@ -13,6 +13,11 @@
   and ends with the same bytes.  The folder is removed after a successful bake.
 * **Atomic**: :func:`write_lightmap` writes each file to a temporary name and renames it.
 
+Beyond the game (:mod:`piste.lighting.gi`): ``bounces >= 1`` adds sky light and diffuse
+inter-reflection (each chunk also casts its samples' gather rays and keeps where they hit; the
+bounces then gather texels over the whole map), ``sun_radius > 0`` makes directional lights area
+suns (soft shadows).  Both default to off: the same bytes as before.
+
 :func:`load_or_bake_default_lightmap` is the renderer's entry point: the default course's light
 map for the default lights, baked once and cached on disk (in the folder its caller names: piste's
 cache root is :func:`piste.pipeline.cache.cache_root`).
@@ -38,7 +43,10 @@ from piste.formats.atomic import atomic_path, write_bytes_atomic
 from piste.formats.safe_io import check_regular, loads_json, read_regular
 from piste.lighting.lightmap import (LightMap, assemble_atlas, atlas_layout, inputs_key,
                                     sample_points, weld_seam_light)
+from piste.lighting.gi import (DEFAULT_ALBEDO, DEFAULT_GATHER_RAYS, GatherHits, bounce_light, check_bounces,
+                               check_sun_radius, direct_light, gather_hits)
 from piste.lighting.lights import Lights, default_lights, light_terms, shade
+from piste.lighting.sampling import strata_side
 from piste.lighting.shadows import shadow_visibility
 from piste.workers import die_with_parent, kill_pool
 
@@ -74,7 +82,11 @@ def _init_worker(state: dict) -> None:
 
 
 def _bake_chunk(chunk: int) -> tuple[int, np.ndarray, dict]:
-    """Lighting of the patches of one chunk: ``(chunk, (c, res, res, 3) float32, stats)``."""
+    """Lighting of the patches of one chunk: ``(chunk, (c, res, res, 3) float32, stats)``.
+
+    With bounces: ``(c, res, res, 3 + 3 rays)`` float32: the direct light ``D`` (unclamped, no
+    ambient), then each gather ray's hit patch (-1 sky, -2 a back face; exact in float32 below 2**24
+    patches), ``u`` and ``v``."""
     s = _STATE
     lo = chunk * s["chunk_size"]
     hi = min(lo + s["chunk_size"], len(s["positions"]))
@@ -84,11 +96,18 @@ def _bake_chunk(chunk: int) -> tuple[int, np.ndarray, dict]:
     lights = s["lights"]
     stats: dict = {}
     shadow = None
+    ids = np.arange(lo * res * res, hi * res * res)
     if s["shadows"] and any(light.shadows for light in lights.direct):
         terms = light_terms(lights, pos, nrm)
-        shadow = shadow_visibility(s["net"], lights, pos, nrm, terms, stats=stats)
-    colors = shade(lights, pos, nrm, shadow)
-    return chunk, colors.reshape(hi - lo, res, res, 3), stats
+        shadow = shadow_visibility(s["net"], lights, pos, nrm, terms, stats=stats, sun_radius=s["sun_radius"],
+                                   sun_rays=s["sun_rays"], ids=ids, seed=s["seed"])
+    if not s["bounces"]:
+        colors = shade(lights, pos, nrm, shadow)
+        return chunk, colors.reshape(hi - lo, res, res, 3), stats
+    rays = s["gather_rays"]
+    h = gather_hits(s["net"], pos, nrm, ids, rays, s["seed"], stats=stats)
+    out = np.concatenate([direct_light(lights, pos, nrm, shadow), h.patch, h.u, h.v], axis=1).astype(np.float32)
+    return chunk, out.reshape(hi - lo, res, res, 3 + 3 * rays), stats
 
 
 # --------------------------------------------------------------------------- the bake
@@ -103,6 +122,13 @@ def bake_lightmap(
     partial_dir=None,
     progress: bool = False,
     on_chunk=None,
+    bounces: int = 0,
+    sun_radius: float = 0.0,
+    *,
+    gather_rays: int = DEFAULT_GATHER_RAYS,
+    albedo: float = DEFAULT_ALBEDO,
+    sun_rays: int = 16,
+    seed: int = 0,
 ) -> LightMap:
     """Bake a light-map atlas for ``net`` under ``lights``.
 
@@ -120,6 +146,13 @@ def bake_lightmap(
     progress : show a tqdm progress bar
     on_chunk : optional ``callable(chunk_index, chunks_done, chunks_total)`` called after each
         chunk is stored (tests use it to interrupt a bake)
+    bounces : diffuse inter-reflections with sky light (:mod:`piste.lighting.gi`); 0 = the direct
+        lighting equation with its ambient term, as before
+    sun_radius : angular radius of the directional lights in degrees (soft shadows; 0 = a hard sun,
+        as before; the real sun: :data:`piste.lighting.gi.REAL_SUN_RADIUS`)
+    gather_rays, albedo : with bounces: rays per sample (a square number) and the terrain's albedo
+    sun_rays : with ``sun_radius``: shadow rays per sample to the sun's disc (a square number)
+    seed : the rays' jitter
 
     Returns
     -------
@@ -128,12 +161,28 @@ def bake_lightmap(
     res, gutter, chunk_size = int(res), int(gutter), int(chunk_size)
     if chunk_size < 1:
         raise ValidationError(f"bake: chunk_size must be >= 1, got {chunk_size}")
+    bounces, sun_radius = check_bounces(bounces), check_sun_radius(sun_radius)
+    gi: dict = {}
+    if bounces:
+        strata_side(gather_rays, "bake: gather_rays")
+        if len(net) >= 1 << 24:
+            raise ValidationError(f"bake: bounces need fewer than 2**24 patches, the net has {len(net)}")
+        a = np.asarray(albedo, dtype=np.float64)
+        if a.shape not in ((), (3,)) or not (np.isfinite(a).all() and (a >= 0).all() and (a <= 1).all()):
+            raise ValidationError(f"bake: albedo must be a number (or 3) in [0, 1], got {albedo!r}")
+        gi.update(bounces=bounces, gather_rays=int(gather_rays), albedo=a.tolist(), sky="ambient lights")
+    if sun_radius > 0.0:
+        strata_side(sun_rays, "bake: sun_rays")
+        gi.update(sun_radius=sun_radius, sun_rays=int(sun_rays))
+    if gi:
+        gi["seed"] = int(seed)
     layout = atlas_layout(len(net), res, gutter)
-    key = inputs_key(net, lights, res, gutter, shadows, chunk_size, BAKE_VERSION)
+    key = inputs_key(net, lights, res, gutter, shadows, chunk_size, BAKE_VERSION, gi)
+    width = 3 + 3 * int(gather_rays) if bounces else 3
     positions, normals = sample_points(net, res)
     n = len(net)
     n_chunks = (n + chunk_size - 1) // chunk_size
-    tiles = np.zeros((n, res, res, 3), dtype=np.float32)
+    tiles = np.zeros((n, res, res, width), dtype=np.float32)
     done = np.zeros(n_chunks, dtype=bool)
     stats: dict = {}
     part = None
@@ -151,7 +200,7 @@ def bake_lightmap(
                 except Exception:  # a corrupt leftover: redo that chunk
                     continue
                 lo, hi = c * chunk_size, min((c + 1) * chunk_size, n)
-                if arr.shape == (hi - lo, res, res, 3) and arr.dtype == np.float32:
+                if arr.shape == (hi - lo, res, res, width) and arr.dtype == np.float32:
                     tiles[lo:hi] = arr
                     done[c] = True
                     for k_, v_ in st.items():
@@ -159,7 +208,8 @@ def bake_lightmap(
     resumed = int(done.sum())
     state = dict(
         net=net, lights=lights, res=res, chunk_size=chunk_size, positions=positions, normals=normals,
-        shadows=bool(shadows),
+        shadows=bool(shadows), bounces=bounces, sun_radius=sun_radius, sun_rays=int(sun_rays),
+        gather_rays=int(gather_rays), seed=int(seed),
     )
     todo = [int(c) for c in np.nonzero(~done)[0]]
     if jobs is None or jobs <= 0:
@@ -234,6 +284,15 @@ def bake_lightmap(
         if bar is not None:
             bar.close()
 
+    if bounces:
+        rays = int(gather_rays)
+        flat = tiles.reshape(n * res * res, width)
+        hits = GatherHits(flat[:, 3 : 3 + rays].astype(np.int32), flat[:, 3 + rays : 3 + 2 * rays],
+                          flat[:, 3 + 2 * rays :])
+        direct = tiles[..., :3].astype(np.float64)
+        del flat
+        tiles = bounce_light(direct, hits, lights.ambient_color(), bounces, albedo,
+                             weld=lambda t: weld_seam_light(net, t)).astype(np.float32)
     tiles = weld_seam_light(net, tiles)  # both tiles of every seam hold the same light, folds included
     atlas = assemble_atlas(tiles, layout)
     manifest = {
@@ -256,6 +315,8 @@ def bake_lightmap(
         "samples": int(n * res * res),
         "lights": _json_safe(lights.to_dict()),
     }
+    if gi:  # only when asked for: a default bake's manifest is byte-identical to before
+        manifest["gi"] = gi
     manifest["stats"] = {k_: int(v_) for k_, v_ in sorted(stats.items())}
     lm = LightMap(atlas=atlas, rects=layout.rects(), res=res, gutter=gutter, manifest=manifest)
     lm.resumed_chunks = resumed  # type: ignore[attr-defined]

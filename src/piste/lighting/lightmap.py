@@ -416,8 +416,10 @@ class LightMap:
         return target
 
 
-def inputs_key(net, lights, res: int, gutter: int, shadows: bool, chunk_size: int, version: str) -> str:
-    """SHA-256 over everything that determines a bake's output (hex)."""
+def inputs_key(net, lights, res: int, gutter: int, shadows: bool, chunk_size: int, version: str,
+               extra: dict | None = None) -> str:
+    """SHA-256 over everything that determines a bake's output (hex).  ``extra``: further settings
+    (bounces, the area sun), hashed only when given, so the keys of plain bakes do not change."""
     h = hashlib.sha256()
     h.update(version.encode())
     cp = np.ascontiguousarray(net.control_points, dtype="<f8")
@@ -425,4 +427,6 @@ def inputs_key(net, lights, res: int, gutter: int, shadows: bool, chunk_size: in
     h.update(cp.tobytes())
     h.update(json.dumps(lights.to_dict(), sort_keys=True).encode())
     h.update(json.dumps([int(res), int(gutter), bool(shadows), int(chunk_size)]).encode())
+    if extra:
+        h.update(json.dumps(extra, sort_keys=True).encode())
     return h.hexdigest()

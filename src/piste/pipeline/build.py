@@ -259,15 +259,18 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
 
     # -------------------------------------------------------------- light map
     lm_spec = scene.lightmap
+    # bounces / sun radius join the key only when set: the keys of existing builds stay as they are
+    lm_gi = [lm_spec.bounces, lm_spec.sun_radius] if (lm_spec.bounces or lm_spec.sun_radius) else []
     lm_key = content_key(BUILD_VERSION, "lightmap", BAKE_VERSION, terrain_key, manifest["lights"], lm_spec.res,
-                         lm_spec.gutter, lm_spec.shadows)
+                         lm_spec.gutter, lm_spec.shadows, *lm_gi)
 
     def make_lightmap():
         if ts.kind == "ssx_pbd":  # an SSX level brings its own light maps and textures (pipeline.ssx_level)
             return bundle_arrays(ts.path), {"stats": {}}
         partial = cache.root / "bake-partial" if cache.root is not None else None
         lm = bake_lightmap(net, lights, res=lm_spec.res, gutter=lm_spec.gutter, shadows=lm_spec.shadows, jobs=jobs,
-                           partial_dir=partial, progress=progress)
+                           partial_dir=partial, progress=progress, bounces=lm_spec.bounces,
+                           sun_radius=lm_spec.sun_radius)
         if partial is not None:
             import shutil
 
@@ -284,6 +287,7 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
         arrays["lightmap/source"] = la["source"]
     net.lightmap_rect = la["rects"].copy()
     manifest["lightmap"] = {"res": lm_spec.res, "gutter": lm_spec.gutter, "shadows": lm_spec.shadows,
+                            **({"bounces": lm_spec.bounces, "sun_radius": lm_spec.sun_radius} if lm_gi else {}),
                             "atlas_size": [int(la["atlas"].shape[1]), int(la["atlas"].shape[0])],
                             "encoding": "float32 linear light, 1.0 = full", "stats": lmeta.get("stats", {})}
 

@@ -36,6 +36,8 @@ scene file.  Every table and key is optional except where noted::
     res = 8                       # texels per patch side
     shadows = true                # terrain self-shadowing in the bake
     gutter = 1
+    bounces = 0                   # diffuse inter-reflections + sky light (piste.lighting.gi); 0 = direct only
+    sun_radius = 0.0              # degrees: an area sun's soft shadows (the real sun: 0.27); 0 = hard
 
     [lod]
     preset = "piste"              # near/far defaults: "piste" (60 / 180) or "ssx_tricky" (30 / 150 m,
@@ -341,6 +343,8 @@ class LightmapSpec:
     res: int = 8
     shadows: bool = True
     gutter: int = 1
+    bounces: int = 0
+    sun_radius: float = 0.0
 
 
 @dataclass
@@ -624,8 +628,13 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
 
     # settings
     lm = _table(top, "lightmap")
-    lm.allow({"res", "shadows", "gutter"})
-    scene.lightmap = LightmapSpec(lm.get("res", "int", 8), lm.get("shadows", "bool", True), lm.get("gutter", "int", 1))
+    lm.allow({"res", "shadows", "gutter", "bounces", "sun_radius"})
+    scene.lightmap = LightmapSpec(lm.get("res", "int", 8), lm.get("shadows", "bool", True), lm.get("gutter", "int", 1),
+                                  lm.get("bounces", "int", 0), lm.get("sun_radius", "float", 0.0))
+    if not 0 <= scene.lightmap.bounces <= 16:
+        raise lm.error("bounces", f"expected 0 <= bounces <= 16, got {scene.lightmap.bounces}")
+    if not 0.0 <= scene.lightmap.sun_radius <= 10.0:
+        raise lm.error("sun_radius", f"expected 0 <= sun_radius <= 10 degrees, got {scene.lightmap.sun_radius}")
     if not 2 <= scene.lightmap.res <= 64:
         raise lm.error("res", f"expected 2 <= res <= 64 texels, got {scene.lightmap.res}")
     if not 0 <= scene.lightmap.gutter <= 4:

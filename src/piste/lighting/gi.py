@@ -1,0 +1,307 @@
+"""Global illumination for the light-map bake: diffuse inter-reflection, sky light, an area sun.
+
+Beyond the game (the talk's closing "Better lighting (Global illumination?); Soft shadows").
+
+The light-map value ``L(p)`` is what the terrain's texture colour is multiplied by, so a surface of
+albedo ``rho`` under light-map value ``L`` sends radiance ``rho L`` (in light-map units: a white
+surface under an unoccluded uniform sky of radiance ``S`` has ``L = S``).  With ``bounces = N >= 1``
+the baker computes, at every sample point ``p`` with normal ``n``::
+
+    L0(p) = max(0, D(p) + G0(p))                         sky light, no inter-reflection
+    Lk(p) = max(0, D(p) + G0(p) + rho H[L(k-1)](p))      k = 1 .. N
+
+* ``D(p)``: the direct lights with their shadows (the lighting equation of
+  :mod:`piste.lighting.lights` without its ambient term, not clamped);
+* ``G0(p) = S * (fraction of the cosine-weighted hemisphere that escapes to the sky)``: the ambient
+  lights become a uniform sky of radiance ``S = sum I_a c_a`` that the terrain occludes;
+* ``H[L](p)``: the cosine-weighted mean over the hemisphere of ``L`` at the surface each direction
+  first hits (0 where it escapes or hits a surface's back).
+
+Both integrals are estimated with the same ``rays`` (``s x s`` strata of the cosine-weighted
+hemisphere, one jittered direction per stratum) from each sample, hit-tested against the exact
+surface (:func:`piste.terrain.query.ray_intersect`); ``L(k-1)`` at a hit is the previous bounce's
+light map bilinearly interpolated at the hit's patch parameters.  The rays are cast once; each bounce
+is then a gather of texels.  Jitter comes from a counter-based hash of ``(seed, sample, ray)``, so a
+sample's rays do not depend on batching, chunking or the number of workers: the bake stays
+deterministic.
+
+``bounces = 0`` is the lighting equation as before (ambient light everywhere, unoccluded).
+
+:func:`path_traced_reference` is the slow, exact way to the same quantity: independent Monte Carlo
+paths of up to ``N + 1`` diffuse segments with the direct lights evaluated (shadow rays) at every
+vertex on the exact surface, no light-map interpolation and no strata.
+
+The area sun (:func:`soft_sun_directions`): a directional light with ``sun_radius`` degrees is a
+disc of that angular radius; the shadow ray of each sample goes to ``sun_rays`` points on it
+(``s x s`` strata of the disc, jittered per sample), visibility = the unoccluded fraction.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from piste.errors import ValidationError
+from piste.lighting.lights import AmbientLight, DirectionalLight, Lights, light_terms
+from piste.lighting.sampling import cosine_directions, disc_directions, frame, hash_uniform, strata_side
+from piste.lighting.shadows import ray_offset, shadow_visibility
+from piste.terrain.net import PatchNet
+from piste.terrain.query import ray_intersect
+
+__all__ = [
+    "DEFAULT_GATHER_RAYS",
+    "DEFAULT_ALBEDO",
+    "REAL_SUN_RADIUS",
+    "GatherHits",
+    "hash_uniform",
+    "strata_side",
+    "cosine_directions",
+    "disc_directions",
+    "direct_light",
+    "gather_hits",
+    "tile_lookup",
+    "bounce_light",
+    "path_traced_reference",
+    "valley_scene",
+    "reference_error",
+]
+
+#: gather rays per sample (8 x 8 strata)
+DEFAULT_GATHER_RAYS = 64
+#: the terrain's diffuse albedo for inter-reflection (fresh-ish snow)
+DEFAULT_ALBEDO = 0.8
+#: the real sun's angular radius, degrees
+REAL_SUN_RADIUS = 0.27
+#: most bounces accepted
+MAX_BOUNCES = 16
+
+def direct_light(lights: Lights, positions, normals, shadow=None) -> np.ndarray:
+    """The direct lights' part of the lighting equation (no ambient term, not clamped).
+
+    positions, normals (k, 3); shadow None or (k, m) visibility -> (k, 3) float64."""
+    terms = light_terms(lights, positions, normals)
+    if shadow is not None:
+        terms = terms * np.asarray(shadow, dtype=np.float64)
+    out = np.zeros((len(terms), 3))
+    for col, light in enumerate(lights.direct):
+        out += terms[:, col, None] * (light.intensity * np.asarray(light.color))[None, :]
+    return out
+
+
+@dataclass
+class GatherHits:
+    """Where each gather ray of ``k`` samples went: ``patch (k, rays) int32`` (-1 escaped to the
+    sky, -2 hit a surface's back), ``u, v (k, rays) float32`` patch parameters of the hit."""
+
+    patch: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+
+    @property
+    def escaped(self) -> np.ndarray:
+        """Fraction of each sample's rays that reached the sky, ``(k,)`` float64."""
+        return (self.patch == -1).mean(axis=1)
+
+
+def gather_hits(net, positions, normals, ids, rays: int = DEFAULT_GATHER_RAYS, seed: int = 0,
+                batch: int = 4096, stats: dict | None = None) -> GatherHits:
+    """Cast every sample's cosine-weighted gather rays against the exact surface.
+
+    positions, normals : (k, 3) float64; ids : (k,) global sample indices (jitter counters).
+    ``stats`` (optional dict) gets ``gather_rays`` and ``gather_escaped`` added."""
+    pos = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    ids = np.asarray(ids)
+    k = len(pos)
+    patch = np.empty((k, rays), dtype=np.int32)
+    u = np.empty((k, rays), dtype=np.float32)
+    v = np.empty((k, rays), dtype=np.float32)
+    eps = ray_offset(net)
+    step = max(1, int(batch) // max(rays, 1) * 16)
+    for lo in range(0, k, step):
+        hi = min(lo + step, k)
+        d = cosine_directions(nrm[lo:hi], ids[lo:hi], rays, seed).reshape(-1, 3)
+        o = np.repeat(pos[lo:hi] + eps * nrm[lo:hi], rays, axis=0)
+        h = ray_intersect(net, o, d, t_min=eps)
+        p = np.where(h.hit, h.patch, -1)
+        back = h.hit & ((h.normal * d).sum(1) > 0.0)
+        p = np.where(back, -2, p)
+        patch[lo:hi] = p.reshape(hi - lo, rays)
+        u[lo:hi] = np.nan_to_num(h.u).reshape(hi - lo, rays)
+        v[lo:hi] = np.nan_to_num(h.v).reshape(hi - lo, rays)
+    if stats is not None:
+        stats["gather_rays"] = stats.get("gather_rays", 0) + int(patch.size)
+        stats["gather_escaped"] = stats.get("gather_escaped", 0) + int((patch == -1).sum())
+    return GatherHits(patch, u, v)
+
+
+def tile_lookup(tiles, patch, u, v) -> np.ndarray:
+    """Bilinear light of ``tiles (n, res, res, C)`` at patch parameters: ``patch, u, v (...)`` ->
+    ``(..., C)`` float64 (texel ``[p, j, i]`` sits at ``(i / (res-1), j / (res-1))``).  Entries with
+    ``patch < 0`` give 0."""
+    t = np.asarray(tiles)
+    res = t.shape[1]
+    p = np.asarray(patch)
+    ok = p >= 0
+    pp = np.where(ok, p, 0)
+    x = np.clip(np.asarray(u, dtype=np.float64), 0.0, 1.0) * (res - 1)
+    y = np.clip(np.asarray(v, dtype=np.float64), 0.0, 1.0) * (res - 1)
+    i0 = np.minimum(np.floor(x).astype(np.int64), res - 2)
+    j0 = np.minimum(np.floor(y).astype(np.int64), res - 2)
+    fx, fy = (x - i0)[..., None], (y - j0)[..., None]
+    out = ((t[pp, j0, i0] * (1 - fx) + t[pp, j0, i0 + 1] * fx) * (1 - fy)
+           + (t[pp, j0 + 1, i0] * (1 - fx) + t[pp, j0 + 1, i0 + 1] * fx) * fy)
+    return np.where(ok[..., None], out, 0.0)
+
+
+def bounce_light(direct, hits: GatherHits, sky, bounces: int, albedo=DEFAULT_ALBEDO, batch: int = 8192,
+                 weld=None) -> np.ndarray:
+    """Iterate the bounces (module docstring) over whole tiles.
+
+    Parameters
+    ----------
+    direct : (n, res, res, 3) float64 ``D`` (unclamped)
+    hits : gather hits of the ``n * res * res`` samples, in tile order
+    sky : (3,) sky radiance ``S``
+    bounces : N >= 1
+    albedo : scalar or (3,) diffuse albedo
+    weld : optional ``callable(tiles) -> tiles`` applied to each bounce's light before it is gathered
+        (the baker passes :func:`~piste.lighting.lightmap.weld_seam_light`: the bounce sees the
+        light the renderer shows, seams welded)
+
+    Returns
+    -------
+    (n, res, res, 3) float64 ``L_N`` (>= 0).
+    """
+    D = np.asarray(direct, dtype=np.float64)
+    shape = D.shape
+    flat_d = D.reshape(-1, 3)
+    rho = np.broadcast_to(np.asarray(albedo, dtype=np.float64), (3,))
+    base = flat_d + hits.escaped[:, None] * np.asarray(sky, dtype=np.float64)[None, :]
+    L = np.maximum(base, 0.0)
+    k, rays = hits.patch.shape
+    for _ in range(int(bounces)):
+        prev = L.reshape(shape) if weld is None else weld(L.reshape(shape))
+        gathered = np.empty_like(base)
+        for lo in range(0, k, batch):
+            hi = min(lo + batch, k)
+            vals = tile_lookup(prev, hits.patch[lo:hi], hits.u[lo:hi], hits.v[lo:hi])  # (b, rays, 3)
+            gathered[lo:hi] = vals.sum(axis=1) / rays
+        L = np.maximum(base + rho[None, :] * gathered, 0.0)
+    return L.reshape(shape)
+
+
+def path_traced_reference(net, lights: Lights, positions, normals, bounces: int, paths: int = 1024,
+                          albedo=DEFAULT_ALBEDO, seed: int = 0, batch: int = 1 << 16) -> np.ndarray:
+    """Monte Carlo path-traced light-map values at points: the reference for :func:`bounce_light`.
+
+    Independent (not stratified) cosine-weighted paths of up to ``bounces + 1`` segments from each
+    point; at every surface vertex the direct lights are evaluated with exact shadow rays from its
+    exact position and normal, escapes collect the sky ``S`` (the ambient colour).  Estimates
+    ``L_N`` without the clamps (the test scenes have no negative lights).
+
+    positions, normals : (k, 3) float64 -> (k, 3) float64.  Cost: ``k * paths * (2 .. 2N + 2)`` rays.
+    """
+    pos = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    rho = np.broadcast_to(np.asarray(albedo, dtype=np.float64), (3,))
+    sky = lights.ambient_color()
+    eps = ray_offset(net)
+    rng = np.random.default_rng(seed)
+
+    def direct(p, n):
+        terms = light_terms(lights, p, n)
+        vis = shadow_visibility(net, lights, p, n, terms)
+        return direct_light(lights, p, n, vis)
+
+    out = direct(pos, nrm)
+    acc = np.zeros_like(out)
+    k = len(pos)
+    per = max(1, batch // paths)
+    for lo in range(0, k, per):
+        hi = min(lo + per, k)
+        m = (hi - lo) * paths
+        owner = np.repeat(np.arange(lo, hi), paths)
+        p = np.repeat(pos[lo:hi], paths, axis=0)
+        n = np.repeat(nrm[lo:hi], paths, axis=0)
+        thr = np.ones((m, 3))
+        alive = np.arange(m)
+        for depth in range(int(bounces) + 1):
+            if len(alive) == 0:
+                break
+            u1, u2 = rng.random(len(alive)), rng.random(len(alive))
+            r, phi = np.sqrt(u1), 2.0 * np.pi * u2
+            t, b = frame(n)
+            d = (r * np.cos(phi))[:, None] * t + (r * np.sin(phi))[:, None] * b + np.sqrt(np.maximum(1 - u1, 1e-12))[:, None] * n
+            h = ray_intersect(net, p + eps * n, d, t_min=eps)
+            esc = ~h.hit
+            np.add.at(acc, owner[alive[esc]], thr[esc] * sky[None, :])
+            front = h.hit & ((h.normal * d).sum(1) < 0.0)
+            if depth == int(bounces):
+                break
+            keep = np.nonzero(front)[0]
+            alive, thr = alive[keep], thr[keep] * rho[None, :]
+            p, n = h.position[keep], h.normal[keep]
+            np.add.at(acc, owner[alive], thr * direct(p, n))
+    return out + acc / paths
+
+
+def check_bounces(bounces) -> int:
+    """``bounces`` as an int in [0, MAX_BOUNCES], else a ValidationError."""
+    if isinstance(bounces, bool) or not isinstance(bounces, (int, np.integer)) or not 0 <= int(bounces) <= MAX_BOUNCES:
+        raise ValidationError(f"bake: bounces must be an integer in [0, {MAX_BOUNCES}], got {bounces!r}")
+    return int(bounces)
+
+
+def check_sun_radius(radius) -> float:
+    """``radius`` degrees as a float in [0, 10], else a ValidationError."""
+    try:
+        r = float(radius)
+    except (TypeError, ValueError):
+        r = math.nan
+    if isinstance(radius, (bool, str)) or not (0.0 <= r <= 10.0):
+        raise ValidationError(f"bake: sun_radius must be a number of degrees in [0, 10], got {radius!r}")
+    return r
+
+
+def _flat_patches(p00, du, dv, nu: int, nv: int) -> np.ndarray:
+    """``nu x nv`` flat bicubic patches spanning the parallelogram ``p00 + a du + b dv``:
+    control points ``(nu * nv, 4, 4, 3)``; normal ``du x dv``."""
+    s = np.linspace(0.0, 1.0, 3 * nu + 1)
+    t = np.linspace(0.0, 1.0, 3 * nv + 1)
+    tt, ss = np.meshgrid(t, s, indexing="ij")
+    g = (np.asarray(p00, dtype=np.float64)[None, None] + ss[..., None] * np.asarray(du, dtype=np.float64)
+         + tt[..., None] * np.asarray(dv, dtype=np.float64))
+    return PatchNet.from_control_grid(g).control_points
+
+
+def valley_scene(width: float = 12.0, length: float = 24.0, height: float = 10.0) -> tuple[PatchNet, Lights]:
+    """The test scene of the bounce bake: a flat valley floor (``2 x 3`` patches, z = 0, x in
+    ``[0, width]``) between two vertical walls (``2 x 3`` patches each) facing each other: the wall
+    at x = 0 faces +x and the sun (sunlit), the wall at x = ``width`` faces -x, away from the sun
+    (lit only by the sky and by what the valley reflects).  Its lights: a blue sky ambient and a sun
+    travelling towards -x (it shadows the floor near the shaded wall's foot).  Patches 0-5 are the
+    floor, 6-11 the sunlit wall, 12-17 the shaded wall."""
+    W, D, H = float(width), float(length), float(height)
+    net = PatchNet(np.concatenate([
+        _flat_patches((0, 0, 0), (W, 0, 0), (0, D, 0), 2, 3),
+        _flat_patches((0, 0, H), (0, 0, -H), (0, D, 0), 2, 3),
+        _flat_patches((W, 0, 0), (0, 0, H), (0, D, 0), 2, 3),
+    ]), name="valley")
+    lights = Lights((AmbientLight((0.45, 0.55, 0.75), 0.4, name="sky"),
+                     DirectionalLight((-0.6, 0.2, -0.77), (1.0, 0.92, 0.8), 1.0, name="sun")), name="valley")
+    return net, lights
+
+
+#: luminance weights (Rec. 709) for the relative errors
+_LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+
+def reference_error(values, reference) -> np.ndarray:
+    """Relative error of luminance, ``|Y(values) - Y(reference)| / Y(reference)``: ``(k, 3)`` each
+    -> ``(k,)`` float64 (reference luminance must be > 0)."""
+    y = np.asarray(values, dtype=np.float64) @ _LUMA
+    yr = np.asarray(reference, dtype=np.float64) @ _LUMA
+    return np.abs(y - yr) / yr
