@@ -77,3 +77,19 @@ def test_mpf_info_flags_a_lod_over_the_talks_triangle_budget(tmp_path, capsys):
     assert "within the game's limits" not in out and "3,398 triangles" in out and "~3,000-triangle budget" in out
     assert main(["mpf", "info", str(tmp_path / "ok.mpf")]) == 0
     assert "within the game's limits" in capsys.readouterr().out
+
+
+def test_bench_ssx_mpf_part_runs(capsys, monkeypatch):
+    """benchmarks/bench_ssx.py --mpf-only: piste's read + to_model and the benchmark's per-record
+    struct reader agree on the encoder's rider pair (the comparison runs before any timing)."""
+    import importlib.util
+    from pathlib import Path
+
+    monkeypatch.delenv("PISTE_SSX_TRICKY_DIR", raising=False)
+    path = Path(__file__).resolve().parents[3] / "benchmarks" / "bench_ssx.py"
+    spec = importlib.util.spec_from_file_location("bench_ssx", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert mod.main(["--mpf-only", "--rounds", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "rider_body.mpf + rider_head.mpf" in out and "outputs equal the peer's" in out and "peer/piste" in out
