@@ -42,6 +42,14 @@ def add_arguments(parser) -> None:
                              "without objects of its own (an SSX level, a tiled world)")
 
 
+def load_or_build(scene, quiet: bool = True):
+    """The runtime scene of ``scene`` with its terrain warming (the old name, for scripts and tests:
+    :func:`piste.pipeline.open_scene.open_source`)."""
+    from piste.pipeline.open_scene import open_source
+
+    return open_source(scene, quiet=quiet, warm=True)
+
+
 def _morph(args):
     return None if getattr(args, "lod_morph", None) is None else args.lod_morph == "on"
 
