@@ -58,6 +58,7 @@ def build_parser() -> argparse.ArgumentParser:
         p = sub.add_parser(name, help=help_, description=help_)
         p.set_defaults(_module=module)
         importlib.import_module(module).add_arguments(p)
+        importlib.import_module("piste.commands._paths").add_allow_path(p)  # --allow-path DIR (issue 24)
         if name in ("demo", "render", "view"):  # the commands pass it to the runtime (lod_morph=)
             p.add_argument("--lod-morph", choices=("on", "off"), default=None,
                            help="geomorph terrain vertices between LOD levels (default: on, or the scene file's "
@@ -90,6 +91,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     handler, previous_level = _log_to_stderr(log_level(args.verbose, args.quiet_log))
     try:
+        importlib.import_module("piste.commands._paths").apply(args)  # the folders the user allows
         return int(importlib.import_module(args._module).run(args) or 0)
     except MissingExtraError as exc:
         print(f"piste {args.command} needs the '{exc.extra}' extra ({exc.module} is not installed): "

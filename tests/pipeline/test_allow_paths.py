@@ -110,3 +110,31 @@ def test_build_uses_allow_paths_and_does_not_reuse_a_permitted_step(layout):
     safe_io.set_user_allow_paths(())
     with pytest.raises(FormatError, match="leaves the model's folder"):
         build_scene(layout / "s.toml", out=layout / "s2.piste", cache_dir=layout / "cache")
+
+
+def test_cli_allow_path_flag(layout, capsys):
+    """`piste build SCENE --allow-path DIR`: the only way (with PISTE_ALLOW_PATHS) to let the model
+    read ../assets; without it the build stops with one line naming the model and field; a folder
+    that does not exist is a usage error; every subcommand takes the flag."""
+    from piste.cli import COMMANDS, build_parser, main
+
+    z = np.add.outer(np.linspace(0, 4, 9), np.linspace(0, 2, 9))
+    np.savez(layout / "h.npz", z=z, dx=np.array(10.0))
+    (layout / "s.toml").write_text('[terrain]\nsource = "h.npz"\n[lightmap]\nres = 4\n[visibility]\nenabled = false\n'
+                                   '[[objects]]\nmodel = "models/thing.gltf"\nposition = [20.0, 20.0]\n')
+    args = ["build", str(layout / "s.toml"), "--out", str(layout / "s.piste"), "--cache", str(layout / "c"), "--quiet"]
+    assert main(args) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "thing.gltf" in err and "buffers[0].uri" in err and "--allow-path" in err
+    assert main(args + ["--allow-path", str(layout / "assets")]) == 0
+    assert (layout / "s.piste").exists()
+    assert safe_io.user_allow_paths() == ((layout / "assets").resolve(),)
+    assert main(args) == 1  # the next run without the flag: nothing allowed
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as e:
+        main(args + ["--allow-path", str(layout / "nope")])
+    assert e.value.code == 2 and "--allow-path" in capsys.readouterr().err
+    parser = build_parser()
+    for name in COMMANDS:
+        sub = parser._subparsers._group_actions[0].choices[name]
+        assert any("--allow-path" in a.option_strings for a in sub._actions), name
