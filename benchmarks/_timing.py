@@ -16,6 +16,8 @@ import time
 
 import numpy as np
 
+_clock = time.perf_counter  # (tests substitute a fake clock)
+
 
 def interleaved(fns: dict, rounds: int, warmup: int = 1, inner: int = 1, rotate: bool = True) -> dict:
     """Seconds per call of each contender over ``rounds`` interleaved rounds: ``{name: (rounds,) array}``.
@@ -33,7 +35,7 @@ def interleaved(fns: dict, rounds: int, warmup: int = 1, inner: int = 1, rotate:
                 setup()
             fn()
     out = {k: [] for k in names}
-    clock = time.perf_counter
+    clock = _clock
     for r in range(rounds):
         k0 = r % len(names) if rotate and names else 0
         for name in names[k0:] + names[:k0]:

@@ -33,6 +33,9 @@ import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).parent))
+from _timing import record  # noqa: E402
+
 
 def _child(argv) -> None:
     """``--_child MODE ROOT SIDE RES SHADOWS WORKERS``: one build in a fresh process; prints JSON."""
@@ -95,7 +98,7 @@ def _med(xs) -> str:
     return f"{m:8.2f} s [{xs[0]:.2f}..{xs[-1]:.2f}]"
 
 
-def main() -> None:
+def main(argv=None) -> None:
     if len(sys.argv) > 1 and sys.argv[1] == "--_child":
         _child(sys.argv[2:])
         return
@@ -111,13 +114,15 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=60, help="streaming frames (default 60; 0 = none)")
     ap.add_argument("--repeats", type=int, default=1, help="builds of each kind and size (default 1)")
     ap.add_argument("--keep", metavar="DIR", help="build into DIR and keep the worlds")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     sizes = [10_000] if args.quick else list(args.sizes)
     if args.million and 1_000_000 not in sizes:
         sizes.append(1_000_000)
     res = 2 if args.quick else args.res
     frames = 10 if args.quick else args.frames
     shadows = not args.no_shadows
+    # printed with every figure: the build's settings, as the command line that reproduces them
+    flags = f"--res {res}{'' if shadows else ' --no-shadows'}{' (--quick)' if args.quick else ''}"
     tmp = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="bench_large_"))
     print(f"bench_large: sizes {sizes}, light maps {res}x{res}, shadows {shadows}, Dask workers "
           f"{0 if args.no_dask else args.workers}, {os.cpu_count()} cores (timings on a shared machine are noisy)")
@@ -140,7 +145,10 @@ def main() -> None:
                     "bake_sps": r0["samples"] / max(r0["bake_task_seconds"], 1e-9)}
             print(f"\n{r0['patches']:>9,} patches ({r0['tiles']} tiles):")
             print(f"  local   build {_med(line['local_s'])}  peak RSS {line['local_rss_mb']:7.0f} MB  "
-                  f"bake {line['bake_sps']:,.0f} samples/s (1 process)")
+                  f"bake {line['bake_sps']:,.0f} samples/s (1 process)  [{flags}]")
+            med = sorted(line["local_s"])[len(loc) // 2]
+            record("large", f"{r0['patches']:,}-patch world built from scratch, local [{flags}]", "",
+                   f"{med:.1f} s", f"peak RSS {line['local_rss_mb']:.0f} MB", "")
             if runs["dask"]:
                 dk = runs["dask"]
                 line["dask_s"] = [r["seconds"] for r in dk]
@@ -148,7 +156,7 @@ def main() -> None:
                 ratio = sorted(line["dask_s"])[len(dk) // 2] / sorted(line["local_s"])[len(loc) // 2]
                 print(f"  dask    build {_med(line['dask_s'])}  peak RSS client {max(r['rss_mb'] for r in dk):5.0f} MB"
                       f", worker {max(r['worker_rss_mb'] for r in dk):5.0f} MB  bake {wsps:,.0f} samples/s per worker"
-                      f" (cluster start + worker imports {dk[0]['startup_s']:.1f} s, not counted)")
+                      f" (cluster start + worker imports {dk[0]['startup_s']:.1f} s, not counted)  [{flags}]")
                 print(f"  dask / local time ratio {ratio:.2f} ({args.workers} workers); tiles byte-identical: {same}")
             rows.append(line)
         if len(rows) > 1:
@@ -157,7 +165,7 @@ def main() -> None:
             x = np.log([r["patches"] for r in rows])
             y = np.log([sorted(r["local_s"])[len(r["local_s"]) // 2] for r in rows])
             slope = float(np.polyfit(x, y, 1)[0])
-            print(f"\nscaling exponent (local build time ~ patches^k): k = {slope:.2f}")
+            print(f"\nscaling exponent (local build time ~ patches^k): k = {slope:.2f}  [{flags}]")
         if frames > 0:
             _streaming(tmp, rows, frames)
     finally:
