@@ -237,9 +237,7 @@ def test_the_checker_sees_a_cycle_and_a_layer_breach(tmp_path, monkeypatch):
 
 
 #: imports between command modules still to remove, each with who removes it (issue 25 item 2)
-COMMAND_IMPORTS_LEFT = {
-    ("piste.commands.ssx", "piste.commands.export"),  # export_bundle: moves with glTF into one subpackage
-}
+COMMAND_IMPORTS_LEFT: set = set()
 
 
 def command_imports(imports) -> list[Import]:

@@ -226,7 +226,7 @@ def gltf_pbd(level_path, out) -> int:
     import tempfile
     from pathlib import Path
 
-    from piste.commands.export import export_bundle
+    from piste.pipeline.bundle_gltf import export_bundle
     from piste.pipeline import load_bundle
     from piste.pipeline.build import build_scene
     from piste.pipeline.ssx_level import level_path as _level_path
