@@ -17,17 +17,15 @@ bl_info = {
     "category": "Import-Export",
 }
 
-if "bpy" in locals():  # F8 / script reload
-    import importlib
-
-    for _m in (props, exporter, preview, importer, ui):  # noqa: F821
-        importlib.reload(_m)
-else:
+try:
     import bpy
+except ImportError:  # outside Blender: the pure-Python modules (scene_toml, runner, ssx_patches) still import
+    bpy = None
 
+if bpy is not None:
     from . import exporter, importer, preview, props, ui
 
-_MODULES = (exporter, preview, importer, ui)
+    _MODULES = (exporter, preview, importer, ui)
 
 
 def register():

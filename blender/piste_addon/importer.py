@@ -25,6 +25,16 @@ def _work_dir(context, src: Path) -> Path:
     return base / "imports" / src.stem
 
 
+def _numpy_compat() -> None:
+    """Debian 12's Blender 3.4 glTF importer uses ``np.bool``, which numpy 1.24 removed."""
+    try:
+        import numpy
+    except ImportError:
+        return
+    if not hasattr(numpy, "bool"):
+        numpy.bool = bool
+
+
 def import_file(context, path) -> list:
     """Import ``path``; returns the new objects."""
     src = Path(path).resolve()
@@ -40,6 +50,7 @@ def import_file(context, path) -> list:
     else:
         raise ValueError(f"{src}: expected a .piste bundle, a scene .toml, an SSX level .pbd or an SSX rider .mpf")
     before = set(bpy.data.objects)
+    _numpy_compat()
     bpy.ops.import_scene.gltf(filepath=str(glb))
     new = [o for o in bpy.data.objects if o not in before]
     for o in new:

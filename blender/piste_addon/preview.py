@@ -136,7 +136,9 @@ def start(context, headless: bool | None = None, frames: int | None = None, seco
     if headless is None:
         headless = bpy.app.background or not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
                                               or os.name == "nt")
-    args = ["view", str(path)]
+    r = context.scene.render
+    size = (max(16, r.resolution_x * r.resolution_percentage // 100), max(16, r.resolution_y * r.resolution_percentage // 100))
+    args = ["view", str(path), "--size", str(size[0]), str(size[1])]
     cam = context.scene.piste.preview_camera or context.scene.camera
     if cam is not None and cam.piste.role == "AUTO":
         args += ["--camera", cam.name]

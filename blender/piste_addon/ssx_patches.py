@@ -67,10 +67,10 @@ def _bilinear(corners, t: float, s: float) -> tuple:
     return (w[0] * u00 + w[1] * u10 + w[2] * u01 + w[3] * u11, w[0] * v00 + w[1] * v10 + w[2] * v01 + w[3] * v11)
 
 
-def apply_cage(patches, verts, corner_uvs=None, tol: float = 1e-4) -> int:
+def apply_cage(patches, verts, corner_uvs=None, tol: float = 0.02) -> int:
     """Put the cage's vertex positions (metres, ``16 n`` of them) and, when given, its corner UVs
     (``n`` lists of 4 ``(u, v)``) into ``patches``; points within ``tol`` game units of the stored
-    ones are kept as stored (unchanged patches keep their exact floats).  Returns how many patches
+    ones are kept as stored (Blender holds float32 metres: unchanged patches keep their exact floats).  Returns how many patches
     changed."""
     if len(verts) != 16 * len(patches):
         raise ValueError(f"the cage has {len(verts)} vertices, expected 16 per patch = {16 * len(patches)} "
