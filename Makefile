@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 APT_PKGS := libegl1 libgl1 libgl1-mesa-dri
 EXTRAS ?= gl,video,gltf,dask,docs,dev
 
-.PHONY: demo test test-latest setup system test-tools venv bench docs clean lock
+.PHONY: demo test test-latest setup system test-tools venv bench docs clean lock blender-addon
 
 demo: setup
 	$(BIN)/piste demo
@@ -59,6 +59,11 @@ lock:
 # The documentation site (Sphinx + sphinx-gallery): docs/_build/html/index.html.
 docs: setup
 	$(BIN)/python -m sphinx -q -b html docs docs/_build/html
+
+# The Blender add-on as an installable zip (out/piste_addon.zip) and the copy the wheel ships.
+blender-addon: setup
+	$(BIN)/piste blender-addon --out out/piste_addon.zip
+	$(BIN)/piste blender-addon --out src/piste/data/blender_addon.zip
 
 clean:
 	rm -rf $(VENV) .venv-latest out

@@ -290,3 +290,25 @@ def test_write_back_edited_level(imported):
     touched = {i // 16 for i in wb["moved"]} | {0}
     same = [k for k in range(len(old)) if k not in touched]
     assert np.array_equal(np.asarray(old.control_points)[same], np.asarray(new.control_points)[same])
+
+
+def _zip_contents(data: bytes) -> dict:
+    import io
+
+    with zipfile.ZipFile(io.BytesIO(data)) as zf:
+        return {n: zf.read(n) for n in zf.namelist()}
+
+
+def test_the_packaged_zip_matches_the_sources(tmp_path, monkeypatch):
+    """The wheel's copy (src/piste/data/blender_addon.zip, package data) holds the add-on as it is in
+    blender/ (refresh it with `make blender-addon`), and an install without the sources writes it."""
+    from piste.commands import blender_addon
+
+    packaged = blender_addon.PACKAGED_ZIP.read_bytes()
+    assert _zip_contents(packaged) == _zip_contents(blender_addon.addon_zip_bytes()), \
+        "src/piste/data/blender_addon.zip is stale: run `make blender-addon`"
+    monkeypatch.setattr(blender_addon, "_REPO_SOURCES", tmp_path / "no_checkout")
+    assert main(["blender-addon", "--out", str(tmp_path / "w.zip")]) == 0
+    assert (tmp_path / "w.zip").read_bytes() == packaged
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert "data/blender_addon.zip" in pyproject["tool"]["setuptools"]["package-data"]["piste"]

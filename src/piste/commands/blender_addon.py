@@ -1,9 +1,10 @@
 """``piste blender-addon --out piste_addon.zip``: write the Blender add-on as an installable zip.
 
 The zip holds the folder ``piste_addon/`` (Blender: Edit > Preferences > Add-ons > Install...,
-then enable "piste").  The add-on's sources ship in the wheel as package data
-(``piste/data/blender_addon``); in a source checkout they are read from ``blender/piste_addon``.
-The same sources give the same bytes (fixed time stamps, sorted names).
+then enable "piste").  In a source checkout it is made from ``blender/piste_addon``; an installed
+wheel carries it as package data (``piste/data/blender_addon.zip``, refreshed by ``make
+blender-addon``; tests/blender/test_addon.py checks it matches the sources).  The same sources give
+the same zip (fixed time stamps, sorted names).
 """
 
 from __future__ import annotations
@@ -15,27 +16,29 @@ from pathlib import Path
 #: the folder name inside the zip (the add-on's module name in Blender)
 ADDON_NAME = "piste_addon"
 _REPO_SOURCES = Path(__file__).resolve().parents[3] / "blender" / ADDON_NAME
-_PACKAGE_SOURCES = Path(__file__).resolve().parents[1] / "data" / "blender_addon"
+PACKAGED_ZIP = Path(__file__).resolve().parents[1] / "data" / "blender_addon.zip"
 
 
 def add_arguments(parser) -> None:
     parser.add_argument("--out", required=True, metavar="F.zip", help="the add-on zip to write")
 
 
-def addon_sources() -> Path:
-    """The add-on's source folder: the installed package data, else the checkout's ``blender/``."""
-    for folder in (_PACKAGE_SOURCES, _REPO_SOURCES):
-        if (folder / "__init__.py").is_file():
-            return folder
-    from piste.errors import ConfigError
-
-    raise ConfigError(f"the Blender add-on's sources are missing (looked in {_PACKAGE_SOURCES} and {_REPO_SOURCES}): "
-                      "reinstall piste")
+def addon_sources() -> Path | None:
+    """The checkout's ``blender/piste_addon`` folder, or None in an installed wheel."""
+    return _REPO_SOURCES if (_REPO_SOURCES / "__init__.py").is_file() else None
 
 
 def addon_zip_bytes(sources: Path | None = None) -> bytes:
-    """The zip of the add-on's ``*.py`` files under ``piste_addon/`` (deterministic)."""
+    """The zip of the add-on's ``*.py`` files under ``piste_addon/`` (deterministic), or the
+    packaged zip when there are no sources (an installed wheel)."""
     sources = sources or addon_sources()
+    if sources is None:
+        from piste.errors import ConfigError
+
+        if not PACKAGED_ZIP.is_file():
+            raise ConfigError(f"the Blender add-on is missing: neither {_REPO_SOURCES} nor {PACKAGED_ZIP}: "
+                              "reinstall piste")
+        return PACKAGED_ZIP.read_bytes()
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
         for p in sorted(sources.glob("*.py")):
