@@ -245,3 +245,26 @@ def test_multitool_linked_textures_folder_not_followed(tmp_path):
     os.symlink(other / "Textures", folder / "Textures")
     with pytest.raises(FormatError, match="symbolic link"):
         read_project(folder)
+
+
+# ------------------------------------------------------------------------------ SSX partner files
+def test_ssx_level_partner_files_are_not_followed_through_links(tmp_path):
+    """A level named by the user: its folder is a confinement root, so LEVEL.ssh beside it (found
+    by name, not by a path in the file) is refused when it is a link out, and read when it is a file."""
+    from piste.formats.ssx import make_level
+    from piste.formats.ssx.pbd import write_pbd
+    from piste.formats.ssx.ssh import write_ssh
+    from piste.pipeline.ssx_level import load_level
+
+    lvl = make_level(rows=2, cols=2, seed=3)
+    (tmp_path / "lv").mkdir()
+    (tmp_path / "out").mkdir()
+    write_pbd(lvl.pbd, tmp_path / "lv" / "level.pbd")
+    write_ssh(lvl.textures, tmp_path / "out" / "level.ssh")
+    os.symlink(tmp_path / "out" / "level.ssh", tmp_path / "lv" / "level.ssh")
+    with pytest.raises(FormatError, match="symbolic link") as e:
+        load_level(tmp_path / "lv" / "level.pbd")
+    assert "level.ssh" in str(e.value)
+    os.unlink(tmp_path / "lv" / "level.ssh")
+    write_ssh(lvl.textures, tmp_path / "lv" / "level.ssh")
+    assert load_level(tmp_path / "lv" / "level.pbd").net is not None

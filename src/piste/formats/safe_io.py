@@ -305,7 +305,8 @@ def open_regular(path, max_bytes: int = 1 << 62, owner=None, field: str | None =
     Below a confinement root (:func:`add_root`: the folders of the files the user named, the
     folders the user allowed) the path is walked from the root one component at a time with
     ``openat(..., O_NOFOLLOW)``: a symbolic link anywhere below the root, swapped in at any moment,
-    is refused.  Elsewhere (a path the user typed) its real path is walked the same way.  The last
+    is refused.  Elsewhere (a path the user typed) the real path is taken and its folder becomes a
+    root (so the files beside it that it names are confined the same way).  The last
     component is opened ``O_PATH`` (no open of a device or pipe ever happens) and checked with
     ``fstat``: folders, devices, pipes and sockets are refused before any read.  FormatError names
     ``owner`` (default ``path``) and ``field``.
@@ -321,7 +322,9 @@ def open_regular(path, max_bytes: int = 1 << 62, owner=None, field: str | None =
             a = os.path.realpath(a)  # the user's own path: its links are the user's
         except (OSError, ValueError) as e:
             raise _err(owner, field, f"cannot read {what} {text!r}: {e}") from None
-        root = _root_of(a) or os.sep
+        # the folder of a file the user named is a confinement root: the files beside it that it
+        # names (an SSX level's .ssh / _L.ssh, an .mpf's _head.mpf) are opened without links
+        root = _root_of(a) or add_root(os.path.dirname(a))
     if not _HAVE_DIR_FD:  # no openat: the last component only
         try:
             fd = os.open(a, _O | _NOFOLLOW | _NONBLOCK)
