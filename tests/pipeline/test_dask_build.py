@@ -191,3 +191,24 @@ def test_tiled_scene_notes_what_it_leaves_out(tmp_path, capsys):
     assert main(["build", str(tmp_path / "t.toml"), "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "16 patches in 2 x 2 tiles" in out and "1 riders and objects are not placed" in out
+
+
+def test_build_bytes_do_not_depend_on_blas_threads(tmp_path):
+    """Tiles of 30 x 30 patches are large enough for OpenBLAS to thread their products: unpinned,
+    a build in a 2-thread process differed from a single-threaded Dask worker's in the last bits of
+    ~1 % of the control points (issue 26 item 7).  The tasks pin BLAS to one thread."""
+    distributed = pytest.importorskip("distributed")
+    from threadpoolctl import threadpool_limits
+
+    from piste.pipeline.dask_build import build_tiles_dask
+
+    local = synthetic_spec(tmp_path / "local", 60, tile_patches=30, res=2, shadows=True)
+    with threadpool_limits(limits=2):  # as a 2-core machine's OpenBLAS runs by default
+        build_tiles(local)
+    spec = synthetic_spec(tmp_path / "dask", 60, tile_patches=30, res=2, shadows=True)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, protocol="tcp://",
+                                  host="127.0.0.1", dashboard_address="127.0.0.1:0") as cluster, \
+            distributed.Client(cluster) as client:
+        r = build_tiles_dask(spec, client)
+    assert r.built == 8
+    assert _files(tmp_path / "dask") == _files(tmp_path / "local")

@@ -191,3 +191,34 @@ def test_progress_goes_to_the_piste_logger_not_stdout(caplog, capsys):
     assert caplog.records and all(r.levelno == logging.DEBUG for r in caplog.records)
     out = capsys.readouterr()
     assert out.out == "" and out.err == ""
+
+
+def test_single_threaded_pins_blas_until_the_last_caller_leaves():
+    import threading
+
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from piste.terrain.heightfield import single_threaded
+
+    def threads():
+        return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
+
+    with threadpool_limits(limits=2):
+        assert threads() == {2}
+        inside, release = threading.Event(), threading.Event()
+
+        def task():
+            with single_threaded():
+                inside.set()
+                release.wait(10)
+
+        worker = threading.Thread(target=task)
+        worker.start()
+        inside.wait(10)
+        with single_threaded():
+            with single_threaded():  # re-entrant
+                assert threads() == {1}
+        assert threads() == {1}  # the other task is still inside: its pool stays pinned
+        release.set()
+        worker.join(10)
+        assert threads() == {2}  # the last one out restores the limit

@@ -43,8 +43,9 @@ Measured on matplotlib's ``jacksboro_fault_dem.npz`` (344 x 403 samples, ~75 x 9
 from __future__ import annotations
 
 import logging
+import threading
 import time
-
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,7 +55,40 @@ from piste.terrain.bezier import bernstein
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FittedGrid", "fit_control_points", "bezier_basis_matrix", "c1_to_bezier", "bspline_to_bezier"]
+__all__ = ["FittedGrid", "fit_control_points", "bezier_basis_matrix", "c1_to_bezier", "bspline_to_bezier",
+           "single_threaded"]
+
+_PIN_LOCK = threading.Lock()
+_PIN_STATE: dict = {"depth": 0, "limiter": None}
+
+
+@contextmanager
+def single_threaded():
+    """Run the enclosed numeric work with every BLAS / OpenMP pool of this process at one thread.
+
+    A multi-threaded OpenBLAS splits a matrix product or a factorisation into blocks whose partial
+    sums are added in an order that depends on the thread count, so the same fit can differ in its
+    last bits (~1e-14) between a multi-threaded process and a single-threaded Dask worker.  Pinned,
+    every process computes the same bits whatever its core count or worker layout.
+
+    Re-entrant and safe across threads of one process (a Dask worker with several threads): the
+    pools are pinned by the first caller in and restored by the last one out, so no task ever runs
+    while another task's exit has raised the limit again.  Needs ``threadpoolctl`` (a dependency).
+    """
+    with _PIN_LOCK:
+        if _PIN_STATE["depth"] == 0:
+            from threadpoolctl import threadpool_limits
+
+            _PIN_STATE["limiter"] = threadpool_limits(limits=1)
+        _PIN_STATE["depth"] += 1
+    try:
+        yield
+    finally:
+        with _PIN_LOCK:
+            _PIN_STATE["depth"] -= 1
+            if _PIN_STATE["depth"] == 0:
+                limiter, _PIN_STATE["limiter"] = _PIN_STATE["limiter"], None
+                limiter.restore_original_limits()
 
 
 def _pair(value, what: str) -> tuple[float, float]:
