@@ -414,6 +414,7 @@ def scene_section(args, floor_ms: list) -> dict:
 # ---------------------------------------------------------------------------------------- scaling
 def scaling_section(args) -> None:
     from piste.render import TerrainRenderer
+    from piste.render.context import create_context
     from piste.render.scene_renderer import SceneRenderer
     from piste.character import default_rider
     from piste.world.camera import Camera
@@ -431,6 +432,7 @@ def scaling_section(args) -> None:
     rows = []
     sizes = (2560, 10_000) if args.quick else (2560, 10_000, 40_000)
     setups = []
+    ctx = create_context()  # one GL context for every renderer (frames interleaved between them)
     for n in sizes:
         net = default_course() if n == 2560 else grid_of(n)
         lo, hi = net.patch_bounds
@@ -443,7 +445,7 @@ def scaling_section(args) -> None:
             y0, z = float(lo[:, 1].min()), float(hi[:, 2].max())
             cams = [Camera([xm + dx, y0 - 20.0, z + 30.0], [xm + dx, y0 + 400.0, z - 20.0], far=FAR)
                     for dx in np.linspace(-50, 50, frames)]
-        r = TerrainRenderer(net, size=tuple(args.size), lightmap=None)
+        r = TerrainRenderer(net, size=tuple(args.size), lightmap=None, ctx=ctx)
         r.resident_wait = True
         r.render(cams[0])  # warm-up (and the resident blocks built)
         setups.append((n, r, cams, []))
@@ -469,7 +471,7 @@ def scaling_section(args) -> None:
     setups = []
     for k in ((6, 24) if args.quick else (6, 24, 96)):
         scene = Scene.default(0, model=model, pack=pack_for(model, k, spacing=max(2.0, 48.0 / k)))
-        r = SceneRenderer(scene, size=tuple(args.size))
+        r = SceneRenderer(scene, size=tuple(args.size), ctx=ctx)
         r.terrain.resident_wait = True
         r.render(0.0)  # warm-up
         setups.append((k, r, []))
@@ -487,6 +489,7 @@ def scaling_section(args) -> None:
     kc = fit_exponent(ks, [r_[1] for r_ in rrows])
     print(f"fitted exponent: CPU side n^{kc:.2f} (target <= 1), frame n^{fit_exponent(ks, [r_[4] for r_ in rrows]):.2f}")
     record("frame", "riders: CPU side scaling exponent", "<= 1 (linear)", f"n^{kc:.2f}", "", "", kc <= 1.05)
+    ctx.release()
 
 
 def main(argv=None) -> int:
