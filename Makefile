@@ -14,7 +14,9 @@ demo: setup
 test: setup test-tools
 	$(BIN)/python -m pytest -q
 
-# Every benchmark (peers from the bench extra, side by side), then one table: goal / piste / peer / ratio.
+# Every benchmark (peers from the bench extra, side by side), then one table: goal / piste / peer / ratio,
+# written to benchmarks/RESULTS.md (the README quotes it).  Headless machines: the window benchmark runs
+# under xvfb-run when Xvfb is installed, else it reports itself skipped (exit 0 either way).
 # BENCH_ARGS=--full for the long runs (default: each benchmark's --quick).
 bench: setup
 	$(BIN)/pip install -q -c constraints.txt -e '.[bench]'
