@@ -268,3 +268,36 @@ def test_ssx_level_partner_files_are_not_followed_through_links(tmp_path):
     os.unlink(tmp_path / "lv" / "level.ssh")
     write_ssh(lvl.textures, tmp_path / "lv" / "level.ssh")
     assert load_level(tmp_path / "lv" / "level.pbd").net is not None
+
+
+@needs_fifo
+@pytest.mark.parametrize("reader", ["bundle", "net", "gltf", "scene"])
+def test_top_level_files_named_by_the_user_refuse_fifos(tmp_path, reader):
+    """The files a user names directly (a bundle, a saved net, a model, a scene) go through the same
+    opener: a named pipe is refused at once (it used to block zipfile / np.load / open)."""
+    from piste.formats.bundle import read_bundle
+    from piste.formats.gltf import load_gltf
+    from piste.terrain.net import PatchNet
+    from piste.world.scene_file import load_scene
+
+    fn, name = {"bundle": (read_bundle, "x.piste"), "net": (PatchNet.load, "x.npz"),
+                "gltf": (load_gltf, "x.gltf"), "scene": (load_scene, "x.toml")}[reader]
+    os.mkfifo(tmp_path / name)
+    result = {}
+
+    def go():
+        try:
+            fn(tmp_path / name)
+        except Exception as e:  # reported below
+            result["e"] = e
+
+    t = threading.Thread(target=go, daemon=True)
+    t.start()
+    t.join(10)
+    if t.is_alive():
+        os.close(os.open(tmp_path / name, os.O_WRONLY | os.O_NONBLOCK))
+        pytest.fail(f"{reader}: blocked on a named pipe")
+    from piste.errors import PisteError
+
+    assert isinstance(result["e"], PisteError) and name in str(result["e"]), result["e"]
+    assert "pipe" in str(result["e"]) or "not a regular file" in str(result["e"])

@@ -31,6 +31,7 @@ load_bundle(path)                     deprecated here: use :func:`piste.pipeline
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import json
@@ -45,7 +46,7 @@ import numpy as np
 from piste.errors import FormatError
 from piste.formats.atomic import atomic_path
 from piste.formats.bundle_schema import MAX_MEMBER_BYTES, check_manifest
-from piste.formats.safe_io import loads_json
+from piste.formats.safe_io import loads_json, open_file
 
 __all__ = ["BUNDLE_FORMAT", "REQUIRED_MEMBERS", "write_bundle", "read_bundle", "read_manifest", "BundleData",
            "camera_to_dict", "load_bundle"]
@@ -92,15 +93,26 @@ def write_bundle(path, manifest: dict, arrays: dict, compresslevel: int = 1) -> 
     return path
 
 
-def _open(path: Path) -> zipfile.ZipFile:
+@contextlib.contextmanager
+def _open(path: Path):
+    """The bundle as a ZipFile, opened through :func:`piste.formats.safe_io.open_file` (regular
+    files only: a pipe or device is refused before a read, a link below a confinement root too)."""
     try:
-        return zipfile.ZipFile(path)
-    except FileNotFoundError:
-        raise FormatError(path, "no such file") from None
-    except IsADirectoryError:
-        raise FormatError(path, "is a folder, expected a .piste bundle") from None
-    except (zipfile.BadZipFile, OSError) as exc:
-        raise FormatError(path, f"not a piste bundle (not a zip archive: {exc})") from None
+        fh = open_file(path, what="bundle")
+    except FormatError as exc:
+        reason = getattr(exc, "reason", str(exc))
+        if "No such file" in reason:
+            raise FormatError(path, "no such file") from None
+        if "(a folder)" in reason:
+            raise FormatError(path, "is a folder, expected a .piste bundle") from None
+        raise
+    with fh:
+        try:
+            zf = zipfile.ZipFile(fh)
+        except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
+            raise FormatError(path, f"not a piste bundle (not a zip archive: {exc})") from None
+        with zf:
+            yield zf
 
 
 def _manifest(path: Path, zf: zipfile.ZipFile) -> dict:

@@ -355,9 +355,9 @@ def load_gltf(path, allow_paths=()) -> "Model":  # noqa: F821 - forward referenc
     See the module docstring for what is imported and how.
     """
     path = Path(path)
-    if not path.is_file():
+    if not path.exists() and not path.is_symlink():
         raise FormatError(path, "no such file")
-    doc = limits.precheck_gltf(path)  # file size, GLB chunks, JSON nesting and array counts
+    doc = limits.precheck_gltf(path)  # read through safe_io: a pipe, device, folder or link refused by name  # file size, GLB chunks, JSON nesting and array counts
     g = gltf_ext.read_document(path, doc)  # pygltflib's reading API over that JSON (its own parse was 70-95 % of the time)
     r = _Reader(path, g, allow_paths)
     gltf_ext.check_required(r)  # every extensionsRequired entry is read or refused by name

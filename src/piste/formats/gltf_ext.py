@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from piste.errors import FormatError
+from piste.formats import safe_io
 
 __all__ = ["SUPPORTED", "check_required", "vertex_comps", "apply_uv_transform", "prepare_primitive", "MaterialInfo", "material_info",
            "texture_transform_matrix", "QUANTIZED_COMPS"]
@@ -356,7 +357,7 @@ def read_document(path, doc: dict) -> Document:
 
     _check_shapes(path, doc)
     blob = None
-    with open(path, "rb") as f:
+    with safe_io.open_file(path, safe_io.MAX_MODEL_BYTES, what="model file") as f:  # the file precheck_gltf read
         head = f.read(20)
         if head[:4] == b"glTF" and len(head) == 20:
             _, _, length = struct.unpack_from("<4sII", head, 0)

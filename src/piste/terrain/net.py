@@ -29,6 +29,7 @@ from piste.errors import FormatError, ValidationError
 from piste.formats.atomic import atomic_path
 from piste.graph import connected_parts
 from piste.formats.bpt import read_bpt
+from piste.formats.safe_io import open_file
 from piste.terrain.bezier import evaluate
 from piste.terrain.heightfield import fit_control_points
 from piste.terrain.lod import edge_levels
@@ -398,13 +399,21 @@ class PatchNet:
     def load(cls, path) -> "PatchNet":
         """Read a net written by :meth:`save`."""
         path = Path(path)
+        try:  # regular files only, no links below a confinement root (piste.formats.safe_io)
+            fh = open_file(path, what="patch net")
+        except FormatError as exc:
+            if "No such file" in getattr(exc, "reason", ""):
+                raise FormatError(path, "no such file") from None
+            raise
         try:
-            data = np.load(path, allow_pickle=False)
-        except FileNotFoundError:
-            raise FormatError(path, "no such file") from None
+            data = np.load(fh, allow_pickle=False)
         except Exception as exc:  # zipfile/pickle errors: not an npz
+            fh.close()
             raise FormatError(path, f"not a piste .npz patch net ({exc})") from None
-        with data:
+        if not hasattr(data, "files"):
+            fh.close()
+            raise FormatError(path, "not a piste .npz patch net (a single .npy array)")
+        with fh, data:
             for key in ("control_points", "uv", "lightmap_rect", "tol"):
                 if key not in data.files:
                     raise FormatError(path, "missing array", field=key)
