@@ -293,3 +293,23 @@ def test_weld_groups_bit_identical_rows():
     first, inv = _weld(key)
     assert np.array_equal(key[first][inv], key)
     assert len(first) == len(np.unique(key, axis=0))
+
+
+def test_rigid_chunks_call_the_retail_rigid_program(encoded):
+    """Render chunks whose vertices each follow one bone call MSCAL 10 in their trailer (as every
+    such retail chunk does), the others MSCAL 0; read back from the bytes."""
+    from piste.formats.ssx.mpf import mpf_bytes, parse_mpf
+
+    f = parse_mpf(mpf_bytes(encoded[0]))
+    seen = set()
+    for s in f.models:
+        for g in s.groups:
+            if g.type != 1:
+                continue
+            for lk in g.links:
+                for m in lk.meshes:
+                    for c in m.chunks:
+                        single = all(len(s.palettes[int(lk.refs[k])]) == 1 for k in np.unique(c.slots))
+                        assert c.program == (10 if single else 0)
+                        seen.add(c.program)
+    assert seen == {0, 10}

@@ -45,6 +45,10 @@ __all__ = ["model_to_mpf", "model_to_mpf_pair", "texture_bank", "MATERIAL_ID", "
 #: the file id of a rider's head file (OpenSlope spec 240: 0 body, 1 board, 2 head)
 HEAD_FILE_ID = 2
 
+#: the VU program a chunk whose vertices each follow one bone calls (MSCAL 10: all 48 such retail chunks
+#: are single-bone; the other 97 retail render chunks call 0, 80 of them blending 2-3 bones)
+RIGID_PROGRAM = 10
+
 #: the main texture id of the one material the encoder writes (an image of that name in the bank)
 MATERIAL_ID = "suit"
 
@@ -192,6 +196,9 @@ def _encode_lod(name, mesh, pal, file_id, step, morph_keys, report, shadow: bool
                                             shadow_slots=uv_l[:, 2].astype("<u4"), return_index=True)
             else:
                 chunks, index = pack_chunks(strips, uv_l, nrm_i, pos, ENCODER_CHUNK_VERTICES, return_index=True)
+                one = np.array([len(palettes[e]) == 1 for e in entries])
+                for c in chunks:  # retail: every MSCAL 10 chunk skins each vertex with a single bone
+                    c.program = RIGID_PROGRAM if one[np.unique(c.slots)].all() else 0
             if gtype == GROUP_MORPH:
                 meshes = [Mesh([c], morphs=[MorphKey(deltas=di[k][ix].astype("i1")) for k in range(morph_keys)])
                           for c, ix in zip(chunks, index)]
