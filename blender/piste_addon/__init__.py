@@ -13,7 +13,6 @@ bl_info = {
     "blender": (3, 4, 0),
     "location": "View3D > Sidebar > piste; File > Import > piste / SSX Tricky",
     "description": "Author piste scenes, preview them in piste's in-game renderer, import SSX Tricky levels",
-    "doc_url": "https://github.com/piste/piste/blob/main/docs/blender.rst",
     "category": "Import-Export",
 }
 

@@ -106,11 +106,13 @@ def _heightfield(context, obj, out: Path) -> tuple:
     rows = max(1, int((y1 - y0) / step + 1e-6) // spp) * spp + 1
     tree = BVHTree.FromPolygons(verts, polys)
     top, down = z1 + 1.0, Vector((0.0, 0.0, -1.0))
+    eps = 1e-5 * step  # rays exactly on the mesh's outer edges can miss: nudged inside
     z = []
     for i in range(rows):
         row = []
         for j in range(cols):
-            hit = tree.ray_cast(Vector((min(x0 + j * step, x1), min(y0 + i * step, y1), top)), down)
+            x, y = min(max(x0 + j * step, x0 + eps), x1 - eps), min(max(y0 + i * step, y0 + eps), y1 - eps)
+            hit = tree.ray_cast(Vector((x, y, top)), down)
             row.append(hit[0].z if hit[0] is not None else None)
         z.append(row)
     for row in z:  # misses (holes, a ragged edge): the nearest hit in the row, else the lowest point

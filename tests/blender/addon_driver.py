@@ -18,7 +18,7 @@ import time
 import traceback
 
 import bpy
-from mathutils import Vector
+from mathutils import Matrix, Vector
 
 cfg = json.loads(open(sys.argv[sys.argv.index("--") + 1]).read())
 result = {"steps": [], "errors": []}
@@ -48,9 +48,12 @@ def build_scene():
     sc.collection.objects.link(terrain)
     terrain.piste.role = "TERRAIN"
     for r in cfg["riders"]:
-        o = bpy.data.objects.new(r["name"], None)
-        sc.collection.objects.link(o)
-        o.location = (x0 + r["position"][0], y0 + r["position"][1], 0.0)
+        bpy.ops.mesh.primitive_cone_add(radius1=0.6, depth=1.8)  # a stand-in the artist sees
+        o = bpy.context.active_object
+        o.name = r["name"]
+        o.data.transform(Matrix.Translation((0.0, 0.0, 0.9)))
+        o.color = (1.0, 0.45, 0.1, 1.0)
+        o.location = (x0 + r["position"][0], y0 + r["position"][1], height(*r["position"]))  # on the snow
         o.rotation_euler.z = math.radians(r["heading"])
         o.piste.role, o.piste.model, o.piste.clip, o.piste.phase = "RIDER", "builtin:rider", r["clip"], r["phase"]
     c = cfg["camera"]
@@ -175,6 +178,9 @@ def step_screenshot():
     sc.display.shading.light = "STUDIO"
     sc.display.shading.color_type = "OBJECT"
     bpy.data.objects["Terrain"].color = (0.85, 0.9, 1.0, 1.0)
+    if sc.world is None:
+        sc.world = bpy.data.worlds.new("World")
+    sc.world.color = (0.45, 0.55, 0.75)
     sc.render.filepath = cfg["screenshot"]
     bpy.ops.render.render(write_still=True)
     result["screenshot"] = cfg["screenshot"]
