@@ -30,11 +30,12 @@ from pathlib import Path
 
 import numpy as np
 
-from piste.errors import ConfigError, FormatError
+from piste.errors import ConfigError, FormatError, PisteError
 from piste.formats.atomic import atomic_path
 from piste.formats.safe_io import open_file
 
-__all__ = ["DemRaster", "read_geotiff", "write_geotiff", "MAX_SAMPLES", "UNIT_METRES"]
+__all__ = ["DemRaster", "GeoTiffWindows", "open_geotiff_windows", "read_geotiff", "write_geotiff",
+           "write_geotiff_tiled", "MAX_SAMPLES", "UNIT_METRES"]
 
 #: refuse rasters of more samples than this (a hostile header could claim anything)
 MAX_SAMPLES = 1_500_000_000
@@ -173,6 +174,103 @@ def _georeference(path: Path, page, shape) -> tuple[tuple, tuple, bool, float]:
     return (sx, sy), (x0, y0), geographic, sz
 
 
+@dataclass(frozen=True)
+class _Header:
+    """What the checks of a GeoTIFF's first page found (everything but the samples)."""
+
+    shape: tuple  # (H, W) samples, file rows north-up
+    dtype: np.dtype
+    scale: tuple  # (sx, sy) in the file's units (sy > 0: north-up rows)
+    corner: tuple  # (x0, y0) of file pixel (0, 0)'s centre, file units
+    geographic: bool
+    keys: dict
+    nodata: float | None
+    vcode: int  # vertical unit (EPSG code)
+
+
+def _open_tiff(path: Path):
+    """``(fh, TiffFile)`` of ``path``, opened through the confinement (:mod:`piste.formats.safe_io`)."""
+    tifffile = _tifffile()
+    if not path.is_file():
+        raise FormatError(path, "no such file")
+    fh = open_file(path, what="GeoTIFF")  # regular files only, race-free, no links (piste.formats.safe_io)
+    try:
+        tf = tifffile.TiffFile(fh)
+    except Exception as exc:
+        fh.close()
+        raise FormatError(path, f"not a readable TIFF ({exc})") from None
+    return fh, tf
+
+
+def _header(path: Path, tf, size: int, vertical_units: str | None):
+    """(first page, :class:`_Header`): every check made before a sample is decoded."""
+    if not tf.pages:
+        raise FormatError(path, "not a readable TIFF (no image in the file)")
+    page = tf.pages[0]
+    try:
+        shape = tuple(int(s) for s in page.shape)
+        itemsize = np.dtype(page.dtype).itemsize
+        compressed = int(page.compression) != 1
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise FormatError(path, f"not a readable TIFF image header ({exc})", field="ImageWidth") from None
+    need = int(np.prod(shape, dtype=object)) * itemsize
+    if need > size * (MAX_EXPANSION if compressed else 1):
+        raise FormatError(path, f"an image of shape {shape} needs {need:,} bytes of samples, more than a "
+                                f"{'compressed ' if compressed else ''}file of {size:,} bytes can hold",
+                          field="StripByteCounts")
+    if len(shape) == 3 and 1 in (shape[0], shape[-1]):
+        shape = tuple(s for s in shape if s != 1) if shape.count(1) < 2 else shape[:2]
+    if len(shape) != 2:
+        raise FormatError(path, f"expected one band of heights, got an image of shape {tuple(page.shape)}",
+                          field="SamplesPerPixel")
+    if shape[0] * shape[1] > MAX_SAMPLES or min(shape) < 2:
+        raise FormatError(path, f"raster of {shape[0]} x {shape[1]} samples: expected 2 .. "
+                                f"{MAX_SAMPLES:,} samples", field="ImageLength")
+    (sx, sy), (x0, y0), geographic, _sz = _georeference(path, page, shape)
+    keys = _geokeys(path, page)
+    nodata = _nodata(path, page)
+    if vertical_units is not None:
+        if vertical_units not in _UNIT_NAMES:
+            raise ConfigError(f"vertical_units must be one of {', '.join(sorted(_UNIT_NAMES))}, got {vertical_units!r}")
+        vcode = _UNIT_NAMES[vertical_units]
+    else:
+        vcode = keys.get(_KEY_VERTICAL_UNITS, 9001)
+        if vcode == 32767:  # user-defined: no information, take metres
+            vcode = 9001
+        if vcode not in UNIT_METRES:
+            raise FormatError(path, f"vertical unit code {vcode} is not a known linear unit (metre 9001, foot 9002, "
+                                    "US survey foot 9003): give vertical_units", field="VerticalUnitsGeoKey")
+    return page, _Header(shape, np.dtype(page.dtype), (sx, sy), (x0, y0), geographic, keys, nodata, vcode)
+
+
+def _place(hd: _Header) -> tuple[tuple, tuple]:
+    """((dx, dy) metres, (x, y) metres of piste sample ``z[0, 0]``) of a header."""
+    (sx, sy), (x0, y0), shape = hd.scale, hd.corner, hd.shape
+    if hd.geographic:
+        lat = np.radians(y0 - 0.5 * (shape[0] - 1) * sy)
+        mx, my = 111_320.0 * np.cos(lat), 110_574.0
+        sx, sy, x0, y0 = sx * mx, sy * my, x0 * mx, y0 * my
+    else:
+        f = UNIT_METRES.get(hd.keys.get(_KEY_LINEAR_UNITS, 9001), 1.0)
+        sx, sy, x0, y0 = sx * f, sy * f, x0 * f, y0 * f
+    if sy > 0:  # north-up rows (row 0 at the top, y decreasing) -> row r at y0' + r * dy
+        y0 = y0 - (shape[0] - 1) * sy
+    return (float(sx), float(abs(sy))), (float(x0), float(y0))
+
+
+def _to_metres(hd: _Header, raw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """File samples (file rows) -> (heights in metres, missing mask), rows in piste order; the same
+    element-wise steps for a whole raster and for a window, so a window has the whole raster's bits."""
+    z = np.asarray(raw, dtype=np.float64)
+    mask = ~np.isfinite(z)
+    if hd.nodata is not None:
+        mask |= z == hd.nodata
+    z = z * UNIT_METRES[hd.vcode]
+    if hd.scale[1] > 0:
+        z, mask = z[::-1], mask[::-1]
+    return np.ascontiguousarray(z), np.ascontiguousarray(mask)
+
+
 def read_geotiff(path, fill="nearest", vertical_units: str | None = None) -> DemRaster:
     """Read a one-band GeoTIFF DEM (see the module docstring).
 
@@ -186,83 +284,164 @@ def read_geotiff(path, fill="nearest", vertical_units: str | None = None) -> Dem
     FormatError : not a TIFF, several bands, no georeferencing, a hostile size, missing samples
         with ``fill="error"``, an unknown vertical unit code.
     """
-    tifffile = _tifffile()
     path = Path(path)
-    if not path.is_file():
-        raise FormatError(path, "no such file")
-    fh = open_file(path, what="GeoTIFF")  # regular files only, race-free, no links (piste.formats.safe_io)
-    try:
-        tf = tifffile.TiffFile(fh)
-    except Exception as exc:
-        fh.close()
-        raise FormatError(path, f"not a readable TIFF ({exc})") from None
+    fh, tf = _open_tiff(path)
     with fh, tf:
-        if not tf.pages:
-            raise FormatError(path, "not a readable TIFF (no image in the file)")
-        page = tf.pages[0]
+        page, hd = _header(path, tf, path.stat().st_size, vertical_units)
         try:
-            shape = tuple(int(s) for s in page.shape)
-            itemsize = np.dtype(page.dtype).itemsize
-            compressed = int(page.compression) != 1
-        except (TypeError, ValueError, OverflowError) as exc:
-            raise FormatError(path, f"not a readable TIFF image header ({exc})", field="ImageWidth") from None
-        need, size = int(np.prod(shape, dtype=object)) * itemsize, path.stat().st_size
-        if need > size * (MAX_EXPANSION if compressed else 1):
-            raise FormatError(path, f"an image of shape {shape} needs {need:,} bytes of samples, more than a "
-                                    f"{'compressed ' if compressed else ''}file of {size:,} bytes can hold",
-                              field="StripByteCounts")
-        if len(shape) == 3 and 1 in (shape[0], shape[-1]):
-            shape = tuple(s for s in shape if s != 1) if shape.count(1) < 2 else shape[:2]
-        if len(shape) != 2:
-            raise FormatError(path, f"expected one band of heights, got an image of shape {tuple(page.shape)}",
-                              field="SamplesPerPixel")
-        if shape[0] * shape[1] > MAX_SAMPLES or min(shape) < 2:
-            raise FormatError(path, f"raster of {shape[0]} x {shape[1]} samples: expected 2 .. "
-                                    f"{MAX_SAMPLES:,} samples", field="ImageLength")
-        (sx, sy), (x0, y0), geographic, sz = _georeference(path, page, shape)
-        keys = _geokeys(path, page)
-        nodata = _nodata(path, page)
-        try:
-            z = np.asarray(page.asarray(), dtype=np.float64).reshape(shape)
+            raw = np.asarray(page.asarray()).reshape(hd.shape)
         except Exception as exc:
             raise FormatError(path, f"could not decode the raster ({exc})") from None
-    # vertical units
-    if vertical_units is not None:
-        if vertical_units not in _UNIT_NAMES:
-            raise ConfigError(f"vertical_units must be one of {', '.join(sorted(_UNIT_NAMES))}, got {vertical_units!r}")
-        vcode = _UNIT_NAMES[vertical_units]
-    else:
-        vcode = keys.get(_KEY_VERTICAL_UNITS, 9001)
-        if vcode == 32767:  # user-defined: no information, take metres
-            vcode = 9001
-        if vcode not in UNIT_METRES:
-            raise FormatError(path, f"vertical unit code {vcode} is not a known linear unit (metre 9001, foot 9002, "
-                                    "US survey foot 9003): give vertical_units", field="VerticalUnitsGeoKey")
-    vname = {9001: "metre", 9002: "foot", 9003: "us_survey_foot", 9036: "kilometre"}[vcode]
-    mask = ~np.isfinite(z)
-    if nodata is not None:
-        mask |= z == nodata
+    vname = {9001: "metre", 9002: "foot", 9003: "us_survey_foot", 9036: "kilometre"}[hd.vcode]
+    z, mask = _to_metres(hd, raw)
+    del raw
     if mask.all():
         raise FormatError(path, "every sample is nodata", field="GDAL_NODATA")
-    z = z * UNIT_METRES[vcode]
-    # horizontal units
-    if geographic:
-        lat = np.radians(y0 - 0.5 * (shape[0] - 1) * sy)
-        mx, my = 111_320.0 * np.cos(lat), 110_574.0
-        sx, sy, x0, y0 = sx * mx, sy * my, x0 * mx, y0 * my
-    else:
-        lu = keys.get(_KEY_LINEAR_UNITS, 9001)
-        f = UNIT_METRES.get(lu, 1.0)
-        sx, sy, x0, y0 = sx * f, sy * f, x0 * f, y0 * f
-    # north-up rows (row 0 at the top, y decreasing) -> row r at y0' + r * dy
-    if sy > 0:
-        z, mask = z[::-1], mask[::-1]
-        y0 = y0 - (shape[0] - 1) * sy
-    z = np.ascontiguousarray(z)
-    mask = np.ascontiguousarray(mask)
+    spacing, origin = _place(hd)
     if mask.any():
         z = _fill(path, z, mask, fill)
-    return DemRaster(z, (float(sx), float(abs(sy))), (float(x0), float(y0)), mask, vname, geographic, path)
+    return DemRaster(z, spacing, origin, mask, vname, hd.geographic, path)
+
+
+class GeoTiffWindows:
+    """Windows of a GeoTIFF DEM read without reading the whole raster (:func:`open_geotiff_windows`).
+
+    The header is checked once, as :func:`read_geotiff` checks it; each :meth:`read` opens the file
+    again through the confinement (:mod:`piste.formats.safe_io`), re-checks the header, and decodes
+    only the tiles or strips that meet the window: a window of ``h x w`` samples allocates about
+    ``h x w`` float64 plus one decoded tile (tiled files) or one strip row of strips (striped
+    files; a file of one strip decodes it whole).  Windows carry the whole raster's bits: the same
+    element-wise steps as :func:`read_geotiff` (unit factor, rows flipped to piste's south-up order).
+
+    Attributes
+    ----------
+    path, shape : (H, W) samples;  spacing : (dx, dy) metres;  origin : (x, y) of sample ``[0, 0]``
+    vertical_units, geographic : as :class:`DemRaster`
+    """
+
+    def __init__(self, path, vertical_units: str | None = None):
+        self.path = Path(path)
+        fh, tf = _open_tiff(self.path)
+        with fh, tf:
+            self._size = self.path.stat().st_size
+            _page, self._hd = _header(self.path, tf, self._size, vertical_units)
+        self._vertical_units = vertical_units
+        self.shape = tuple(self._hd.shape)
+        self.spacing, self.origin = _place(self._hd)
+        self.vertical_units = {9001: "metre", 9002: "foot", 9003: "us_survey_foot", 9036: "kilometre"}[self._hd.vcode]
+        self.geographic = self._hd.geographic
+
+    def read(self, rows: slice, cols: slice) -> tuple[np.ndarray, np.ndarray]:
+        """Samples ``z[rows, cols]`` in piste layout (row 0 the south edge), ``(h, w)`` float64 metres,
+        and their missing mask ``(h, w)`` bool (nodata or non-finite, not filled: see
+        :meth:`filled`).  ``rows``/``cols``: slices with step 1, clipped to the raster."""
+        h, w = self.shape
+        r0, r1, _ = rows.indices(h)
+        c0, c1, _ = cols.indices(w)
+        if rows.step not in (None, 1) or cols.step not in (None, 1) or r1 <= r0 or c1 <= c0:
+            raise ValueError(f"{self.path}: window rows {rows}, columns {cols} of a {h} x {w} raster: expected "
+                             "non-empty slices with step 1")
+        fr0, fr1 = (h - r1, h - r0) if self._hd.scale[1] > 0 else (r0, r1)  # file rows (north-up)
+        fh, tf = _open_tiff(self.path)
+        with fh, tf:
+            page, hd = _header(self.path, tf, self._size, self._vertical_units)
+            if _header_key(hd) != _header_key(self._hd) or fh.seek(0, 2) != self._size:
+                raise FormatError(self.path, "the file changed while its windows were being read")
+            raw = _read_window(self.path, tf, page, hd, fr0, fr1, c0, c1, self._size)
+        return _to_metres(hd, raw)
+
+    def filled(self, rows: slice, cols: slice, fill) -> np.ndarray:
+        """:meth:`read` with missing samples set to ``fill`` (a number), or a FormatError naming the
+        first one (``fill="error"``).  ``fill="nearest"`` needs the whole raster (the nearest
+        valid sample may lie outside the window): use :func:`read_geotiff` for such a file."""
+        z, mask = self.read(rows, cols)
+        if not mask.any():
+            return z
+        if isinstance(fill, str) and fill == "nearest":
+            raise ConfigError(f"{self.path}: a window holds missing samples and fill='nearest' needs the whole "
+                              "raster: read it with read_geotiff or give fill a number")
+        if isinstance(fill, str) and fill == "error":
+            r, c = (int(v) for v in np.argwhere(mask)[0])
+            r += rows.indices(self.shape[0])[0]
+            c += cols.indices(self.shape[1])[0]
+            raise FormatError(self.path, f"sample(s) have no data, first in this window at row {r}, column {c} "
+                                         "(rows counted from the south edge): fill them or set fill",
+                              field="GDAL_NODATA")
+        return _fill(self.path, z, mask, fill)
+
+
+def _header_key(hd: _Header) -> tuple:
+    """A comparable digest of a header (a NaN nodata equals itself here)."""
+    return (hd.shape, str(hd.dtype), hd.scale, hd.corner, hd.geographic, sorted(hd.keys.items()), repr(hd.nodata),
+            hd.vcode)
+
+
+def open_geotiff_windows(path, vertical_units: str | None = None) -> GeoTiffWindows:
+    """A :class:`GeoTiffWindows` of ``path``: its header checked (the same FormatErrors as
+    :func:`read_geotiff`), no sample read yet."""
+    return GeoTiffWindows(path, vertical_units)
+
+
+def _segment_table(path: Path, page, hd: _Header, size: int):
+    """``(tile rows, tile columns, tiles across, offsets, bytecounts)`` of a one-band page whose
+    segments can be addressed one by one, or None (decode the page whole)."""
+    h, w = hd.shape
+    try:
+        if int(page.samplesperpixel) != 1 or int(getattr(page, "imagedepth", 1)) != 1:
+            return None
+        offsets = np.asarray(page.dataoffsets, dtype=np.int64)
+        counts = np.asarray(page.databytecounts, dtype=np.int64)
+        if page.is_tiled:
+            th, tw = int(page.tilelength), int(page.tilewidth)
+            what = "TileOffsets"
+        else:
+            th, tw = min(int(page.rowsperstrip), h), w
+            what = "StripOffsets"
+    except (TypeError, ValueError, OverflowError, AttributeError):
+        return None
+    if th < 1 or tw < 1:
+        raise FormatError(path, f"expected positive tile or strip sizes, got {th} x {tw}", field=what)
+    across = -(-w // tw)
+    want = -(-h // th) * across
+    if len(offsets) != want or len(counts) != want:
+        raise FormatError(path, f"{len(offsets)} segment offsets and {len(counts)} byte counts for an image of "
+                                f"{want} segments of {th} x {tw} samples", field=what)
+    if (offsets < 0).any() or (counts < 0).any() or (offsets + counts > size).any():
+        raise FormatError(path, f"a segment lies past the end of the file of {size:,} bytes", field=what)
+    return th, tw, across, offsets, counts
+
+
+def _read_window(path: Path, tf, page, hd: _Header, r0: int, r1: int, c0: int, c1: int, size: int) -> np.ndarray:
+    """File rows ``r0:r1``, columns ``c0:c1`` of the page, ``(r1 - r0, c1 - c0)`` of its dtype,
+    decoding only the segments that meet them (the whole page where they cannot be addressed)."""
+    table = _segment_table(path, page, hd, size)
+    try:
+        if table is None:
+            return np.asarray(page.asarray()).reshape(hd.shape)[r0:r1, c0:c1].copy()
+        th, tw, across, offsets, counts = table
+        out = np.zeros((r1 - r0, c1 - c0), dtype=hd.dtype)  # empty segments read as 0, as page.asarray does
+        fh = tf.filehandle
+        for ty in range(r0 // th, (r1 - 1) // th + 1):
+            for tx in range(c0 // tw, (c1 - 1) // tw + 1):
+                k = ty * across + tx
+                if counts[k] == 0:
+                    continue
+                fh.seek(int(offsets[k]))
+                data = fh.read(int(counts[k]))
+                seg, _pos, _shape = page.decode(data, k, _fullsize=bool(page.is_tiled))
+                if seg is None:
+                    continue
+                seg = np.asarray(seg).reshape(seg.shape[-3], seg.shape[-2])  # (rows, cols) of this segment
+                y0, x0 = ty * th, tx * tw
+                ya, yb = max(r0, y0), min(r1, y0 + seg.shape[0])
+                xa, xb = max(c0, x0), min(c1, x0 + seg.shape[1])
+                if yb > ya and xb > xa:
+                    out[ya - r0:yb - r0, xa - c0:xb - c0] = seg[ya - y0:yb - y0, xa - x0:xb - x0]
+        return out
+    except PisteError:
+        raise
+    except Exception as exc:
+        raise FormatError(path, f"could not decode the raster ({exc})") from None
 
 
 def _fill(path: Path, z: np.ndarray, mask: np.ndarray, fill) -> np.ndarray:
@@ -283,7 +462,8 @@ def _fill(path: Path, z: np.ndarray, mask: np.ndarray, fill) -> np.ndarray:
 
 
 def write_geotiff(path, z, spacing, origin=(0.0, 0.0), nodata: float | None = None,
-                  vertical_units: str = "metre", epsg: int | None = None) -> Path:
+                  vertical_units: str = "metre", epsg: int | None = None, tile: tuple | None = None,
+                  rowsperstrip: int | None = None, compression: str | None = None) -> Path:
     """Write a north-up float32 GeoTIFF DEM (PixelIsArea), atomically.
 
     Parameters
@@ -294,11 +474,58 @@ def write_geotiff(path, z, spacing, origin=(0.0, 0.0), nodata: float | None = No
     nodata : GDAL_NODATA value (samples equal to it are missing)
     vertical_units : "metre", "foot" or "us_survey_foot" (heights are written as given, in that unit)
     epsg : ProjectedCSTypeGeoKey (optional; e.g. 32633)
+    tile : (rows, cols) of each tile (multiples of 16) for a tiled file; default: strips
+    rowsperstrip : rows of each strip (striped files); compression : e.g. ``"zlib"`` (default none)
     """
     tifffile = _tifffile()
     z = np.asarray(z, dtype=np.float32)
-    dx, dy = (float(spacing), float(spacing)) if np.ndim(spacing) == 0 else (float(spacing[0]), float(spacing[1]))
     h, w = z.shape
+    extratags = _extratags(h, spacing, origin, nodata, vertical_units, epsg)
+    layout = {"tile": tuple(tile)} if tile is not None else {"rowsperstrip": rowsperstrip} if rowsperstrip else {}
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        tifffile.imwrite(tmp, np.ascontiguousarray(z[::-1]), extratags=extratags, photometric="minisblack",
+                         compression=compression, **layout)
+    return path
+
+
+def write_geotiff_tiled(path, shape: tuple, window_fn, spacing, origin=(0.0, 0.0), tile: tuple = (256, 256),
+                        dtype="float32", compression: str | None = None) -> Path:
+    """Write a tiled north-up GeoTIFF DEM of ``shape = (H, W)`` samples tile by tile, atomically,
+    never holding more than one row of tiles: for DEMs larger than memory (benchmarks, tests).
+
+    ``window_fn(rows: slice, cols: slice)`` returns the heights of that window in piste layout
+    (row ``r`` at ``y = origin[1] + r * dy``), ``(len(rows), len(cols))``; ``dtype`` ``"float32"``
+    or ``"uint16"`` (heights rounded and clipped to 0 .. 65535).
+    """
+    tifffile = _tifffile()
+    h, w = (int(v) for v in shape)
+    th, tw = (int(v) for v in tile)
+    dt = np.dtype(dtype)
+
+    def tiles():
+        for fr in range(0, h, th):  # file rows, north-up: file row f is piste row h - 1 - f
+            band = window_fn(slice(h - min(fr + th, h), h - fr), slice(0, w))[::-1]
+            if dt.kind in "ui":
+                band = np.clip(np.rint(band), np.iinfo(dt).min, np.iinfo(dt).max)
+            band = band.astype(dt)
+            for fc in range(0, w, tw):
+                out = np.zeros((th, tw), dt)
+                piece = band[:, fc:fc + tw]
+                out[:piece.shape[0], :piece.shape[1]] = piece
+                yield out
+
+    extratags = _extratags(h, spacing, origin, None, "metre", None)
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        tifffile.imwrite(tmp, tiles(), shape=(h, w), dtype=dt, tile=(th, tw), extratags=extratags,
+                         photometric="minisblack", compression=compression, bigtiff=h * w * dt.itemsize > 2**31)
+    return path
+
+
+def _extratags(h: int, spacing, origin, nodata, vertical_units: str, epsg) -> list:
+    """The GeoTIFF tags of a north-up PixelIsArea raster of ``h`` rows in metres."""
+    dx, dy = (float(spacing), float(spacing)) if np.ndim(spacing) == 0 else (float(spacing[0]), float(spacing[1]))
     # corner of the north-west pixel
     x_nw = float(origin[0]) - 0.5 * dx
     y_nw = float(origin[1]) + (h - 1) * dy + 0.5 * dy
@@ -315,7 +542,4 @@ def write_geotiff(path, z, spacing, origin=(0.0, 0.0), nodata: float | None = No
     ]
     if nodata is not None:
         extratags.append((_TAG_NODATA, "s", 0, f"{nodata:g}", False))
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        tifffile.imwrite(tmp, np.ascontiguousarray(z[::-1]), extratags=extratags, photometric="minisblack")
-    return path
+    return extratags

@@ -26,8 +26,9 @@ check) is skipped, so a killed build resumes where it stopped.  ``index.json`` i
 
 Height sources
 --------------
-:class:`ArraySource` (an array in memory), :class:`FileSource` (a scene's height field: GeoTIFF,
-PNG or .npz, read once per process) and :class:`SyntheticSource` (a seeded fractal range computed
+:class:`ArraySource` (an array in memory), :class:`FileSource` (a scene's height field: a GeoTIFF
+read window by window, decoding only the tiles/strips under each tile; PNG or .npz read once per
+process) and :class:`SyntheticSource` (a seeded fractal range computed
 from global sample indices with + - * only, so any window of it has the same bits; no file at all).
 """
 
@@ -40,7 +41,9 @@ from pathlib import Path
 
 import numpy as np
 
-from piste.errors import ConfigError, PisteError, ValidationError
+from piste.errors import ConfigError, FormatError, PisteError, ValidationError
+from piste.formats.geotiff import open_geotiff_windows
+from piste.formats.safe_io import open_file
 from piste.lighting.lightmap import encode_half_bright, sample_points
 from piste.lighting.lights import default_lights, dumps_lights, light_terms, loads_lights, shade
 from piste.lighting.shadows import shadow_visibility
@@ -99,21 +102,42 @@ class ArraySource:
 
 
 _FILE_CACHE: dict = {}
+_WINDOWS_CACHE: dict = {}
 
 
 @dataclass(frozen=True)
 class FileSource:
     """A scene's height field (a :class:`~piste.world.scene_file.TerrainSpec` of kind geotiff,
-    heightfield): read whole once per process (kept as float32 when that loses nothing: a
-    10,000 x 10,000 DEM holds 400 MB a process), windows cut from it."""
+    heightfield).
+
+    A GeoTIFF is read window by window (:class:`~piste.formats.geotiff.GeoTiffWindows`: only the
+    tiles or strips under a tile's samples are decoded, so a task's memory does not grow with the
+    DEM: a 20,000 x 20,000 DEM is fitted tile by tile), with the bits a whole read would give.
+    The whole field is read once per process (kept as float32 when that loses nothing: a
+    10,000 x 10,000 DEM holds 400 MB a process) for a PNG or .npz height field, and for a GeoTIFF
+    window that holds missing samples when the fill is ``"nearest"`` (the nearest valid sample may
+    lie in another tile; a numeric fill stays windowed)."""
 
     spec: object = field(repr=False)
 
-    def _load(self):
+    def _stat_key(self) -> tuple:
         p = Path(self.spec.path)
         st = p.stat()
-        k = (str(p), st.st_mtime_ns, st.st_size, self.spec.height_scale, self.spec.height_offset,
-             str(self.spec.nodata), self.spec.vertical_units, self.spec.key, self.spec.spacing)
+        return (str(p), st.st_mtime_ns, st.st_size, self.spec.vertical_units)
+
+    def _windows(self):
+        """The GeoTIFF's :class:`~piste.formats.geotiff.GeoTiffWindows` (header only), None for other files."""
+        if self.spec.kind != "geotiff":
+            return None
+        k = self._stat_key()
+        if k not in _WINDOWS_CACHE:
+            _WINDOWS_CACHE.clear()
+            _WINDOWS_CACHE[k] = open_geotiff_windows(self.spec.path, vertical_units=self.spec.vertical_units)
+        return _WINDOWS_CACHE[k]
+
+    def _load(self):
+        k = self._stat_key() + (self.spec.height_scale, self.spec.height_offset, str(self.spec.nodata),
+                                self.spec.key, self.spec.spacing)
         if k not in _FILE_CACHE:
             _FILE_CACHE.clear()  # one DEM at a time per process
             z, spacing = load_heightfield(self.spec)
@@ -125,19 +149,38 @@ class FileSource:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return tuple(self._load()[0].shape)
+        w = self._windows()
+        return tuple(w.shape) if w is not None else tuple(self._load()[0].shape)
 
     @property
     def spacing(self) -> tuple:
-        return tuple(self._load()[1])
+        w = self._windows()
+        if w is None:
+            return tuple(self._load()[1])
+        return tuple(float(v) for v in (self.spec.spacing or w.spacing))  # as load_heightfield chooses
 
     def window(self, rows: slice, cols: slice) -> np.ndarray:
+        """Heights ``(len(rows), len(cols))`` float64 metres (scale and offset applied)."""
+        w = self._windows()
+        if w is not None:
+            z, mask = w.read(rows, cols)
+            fill = self.spec.nodata
+            if mask.any() and not isinstance(fill, str):  # a numeric fill needs no other window
+                z[mask] = float(fill)
+                mask = mask & False
+            if not mask.any():
+                out = z * self.spec.height_scale + self.spec.height_offset  # load_heightfield's arithmetic
+                if not np.isfinite(out).all():
+                    raise FormatError(w.path, f"height field has {int(np.count_nonzero(~np.isfinite(out)))} "
+                                              "non-finite samples after height_scale and height_offset")
+                return out
         return np.asarray(self._load()[0][rows, cols], dtype=np.float64)
 
     def source_key(self) -> str:
         import hashlib
 
-        h = hashlib.sha256(Path(self.spec.path).read_bytes()).hexdigest()
+        with open_file(Path(self.spec.path), what="height field") as fh:  # streamed: the DEM may not fit in memory
+            h = hashlib.file_digest(fh, "sha256").hexdigest()
         s = self.spec
         return content_key("file", h, s.kind, s.height_scale, s.height_offset, str(s.nodata), s.vertical_units, s.key,
                            s.spacing)
