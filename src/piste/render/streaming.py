@@ -601,10 +601,10 @@ class StreamingTerrain:
         cam = camera.with_aspect(*self.size)
         t0 = time.perf_counter()
         self.streaming.draw(cam, read=False, t0=t0)
-        if sync or read:
+        if sync and not read:
             self.ctx.finish()
         t1 = time.perf_counter()
-        image = self.streaming.fbo.read() if read else None
+        image = self.streaming.fbo.read() if read else None  # (a fresh array; waits for the GL)
         st = self.streaming.stats
         self.cull_stats.update(near_tiles=st["near"], far_tiles=st["far"], resident_bytes=st["resident_bytes"])
         t = {"lod": 0.0, "cull": 0.0, "tessellate": 0.0, **(timings or {})}
@@ -622,10 +622,7 @@ class StreamingTerrain:
         """One frame of the tiles alone (:meth:`prepare` + :meth:`draw`)."""
         cam = camera.with_aspect(*self.size)
         self.streaming.update(cam, wait=self.wait)
-        frame = self.draw(cam, read=read)
-        if frame.image is not None:
-            frame.image = frame.image.copy()
-        return frame
+        return self.draw(cam, read=read)
 
     def release(self) -> None:
         self.streaming.close()
