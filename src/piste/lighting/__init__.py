@@ -12,7 +12,8 @@ with_lightmap_layout        a net whose ``lightmap_rect`` points at a layout's t
 sample_points               a net's light-map sample points and seam-consistent normals
 sample_atlas                point / bilinear atlas sampling (numpy, like the GPU)
 LightMap                    a baked atlas (+ rects, manifest); ``.sample``, ``.apply(net)``
-bake_lightmap               the baker (shadows, chunks, process pool, resumable)
+bake_lightmap               the baker (shadows, chunks, process pool, resumable; ``bounces`` for sky
+                            light and inter-reflection, ``sun_radius`` for an area sun: piste.lighting.gi)
 write_lightmap, load_lightmap   the on-disk form (PNG half-bright, .npz float, manifest.json)
 load_or_bake_default_lightmap   cached bake of the default course for the renderer
 ps2_source, ps2_blend, modulate, ps2_error_report   the PS2 light-map blend trick
