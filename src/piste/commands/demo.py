@@ -57,26 +57,6 @@ def add_arguments(parser) -> None:
                              "(repeatable: any number of different rider models)")
 
 
-def lightmap_for(net, lighting: str):
-    """The atlas for ``--lighting``: returns ``(net, atlas or "placeholder" or None, what was used)``."""
-    if lighting == "none":
-        return net, None, "none"
-    if lighting == "placeholder":
-        return net, "placeholder", "placeholder"
-    import sys
-
-    from piste.lighting.baker import load_or_bake_default_lightmap
-    from piste.pipeline.cache import cache_root
-
-    try:
-        lm = load_or_bake_default_lightmap(net, cache_dir=cache_root() / "lightmaps")
-    except Exception as exc:  # the demo must still render: say so and fall back
-        print(f"warning: no baked light map ({type(exc).__name__}: {exc}); using the placeholder lighting",
-              file=sys.stderr)
-        return net, "placeholder", "placeholder (bake failed)"
-    return lm.apply(net), lm.atlas, "baked"
-
-
 def demo_bundle(args):
     """The built (cached) default scene of ``args.seed`` and what ``--lighting`` draws with it:
     ``(bundle, lightmap for ScenePreview, lighting as printed)``."""
