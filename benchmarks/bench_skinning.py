@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -51,24 +50,6 @@ def lbs_float32(mesh, mats):
     n = np.einsum("vij,vj->vi", a[:, :, :3], mesh.normals)
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     return p, n
-
-
-def timeit(fn, min_time=0.25, blocks=15):
-    """Seconds per call: the best block average over ``blocks`` blocks of ``min_time / blocks``
-    seconds each (the minimum filters out other processes on a shared 2-core machine)."""
-    fn()
-    best = np.inf
-    for _ in range(blocks):
-        n = 0
-        t0 = time.perf_counter()
-        while True:
-            fn()
-            n += 1
-            dt = time.perf_counter() - t0
-            if dt >= min_time / blocks:
-                break
-        best = min(best, dt / n)
-    return best
 
 
 def cases(quick: bool):
@@ -265,8 +246,9 @@ def main(argv=None) -> int:
     _jit.warm_up()  # compile / load the numba kernels before timing (else the first frames run numpy)
     six_riders_vs_panda(args.rounds or (15 if args.quick else 40))
     print()
-    min_time = 0.1 if args.quick else 0.25
-    print("skinning throughput, M vertices/s (positions + normals), ratio to the exact numpy reference")
+    tp_rounds = 7 if args.quick else 21
+    print(f"skinning throughput, M vertices/s (positions + normals; medians of {tp_rounds} interleaved rounds, the "
+          f"schemes in the same rounds, order rotated), ratio to the exact numpy reference")
     hdr = (f"{'case':14s} {'verts':>7s} | {'exact':>6s} {'lbs32':>6s} {'post':>6s} {'bl.25':>6s} {'bl.1':>6s} "
            f"{'bl.25nn':>7s} | {'x lbs32':>7s} {'x post':>6s} {'x bl.25':>7s} {'x bl.1':>6s} | "
            f"{'pal.25':>6s} {'pal.1':>5s} {'ps2 batches':>11s} {'KB/frame':>8s}")
@@ -285,16 +267,9 @@ def main(argv=None) -> int:
                 for (meshes, _), m in zip(instances, mats):
                     for i, me in enumerate(meshes):
                         fn(i, me, m)
-            return verts / timeit(frame, min_time) / 1e6
+            return frame
 
-        if len(instances) > 1:  # one call for all instances (same mesh, different poses)
-            stack = np.stack(mats)
-            many = [BlendedMesh.build(me, 0.25, 3) for me in meshes0]
-            dt = timeit(lambda: [bm.apply_many(stack) for bm in many], min_time)
-            many_rate = verts / dt / 1e6
-        else:
-            many_rate = None
-        r = {
+        fns = {
             "exact": run(lambda i, me, m: skin_exact(me, m)),
             "lbs32": run(lambda i, me, m: lbs_float32(me, m)),
             "post": run(lambda i, me, m: post[i].apply(m)),
@@ -302,6 +277,13 @@ def main(argv=None) -> int:
             "bl10": run(lambda i, me, m: bl10[i].apply(m)),
             "bl25nn": run(lambda i, me, m: bl25[i].apply(m, normalize=False)),
         }
+        if len(instances) > 1:  # one call for all instances (same mesh, different poses)
+            stack = np.stack(mats)
+            many = [BlendedMesh.build(me, 0.25, 3) for me in meshes0]
+            fns["many"] = lambda: [bm.apply_many(stack) for bm in many]
+        t = interleaved(fns, tp_rounds, warmup=1)  # every scheme in the same rounds, the order rotated
+        r = {k: verts / stat(ts)[0] / 1e6 for k, ts in t.items()}
+        many_rate = r.pop("many", None)
         pal25 = sum(palette(me, 0.25, 3).size for me in meshes0)
         pal10 = sum(palette(me, 0.1, 3).size for me in meshes0)
         nb, kb = 0, 0.0
