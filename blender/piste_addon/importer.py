@@ -46,7 +46,7 @@ def import_file(context, path) -> list:
     if suffix == ".mpf":
         run_piste(exe, ["mpf", "export", src, glb])
     elif suffix in (".piste", ".toml", ".pbd"):
-        run_piste(exe, ["export", "--quiet", src, glb])
+        run_piste(exe, ["export", "--quiet", "--instancing", "nodes", src, glb])  # one object per instance
     else:
         raise ValueError(f"{src}: expected a .piste bundle, a scene .toml, an SSX level .pbd or an SSX rider .mpf")
     before = set(bpy.data.objects)

@@ -76,6 +76,7 @@ def reexport(context=None) -> Path:
     state.exporting = True
     try:
         path = exporter.export_scene(context)
+        context.view_layer.update()  # the export's own selection / transform round trips: seen while guarded
     finally:
         state.exporting = False
         state.dirty_since = None

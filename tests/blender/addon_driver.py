@@ -56,6 +56,16 @@ def build_scene():
         o.location = (x0 + r["position"][0], y0 + r["position"][1], height(*r["position"]))  # on the snow
         o.rotation_euler.z = math.radians(r["heading"])
         o.piste.role, o.piste.model, o.piste.clip, o.piste.phase = "RIDER", "builtin:rider", r["clip"], r["phase"]
+    hut = bpy.data.meshes.new("Hut")  # one mesh, two objects using it: instances of one model
+    hut.from_pydata([(x, y, z) for z in (0.0, 3.0) for y in (-2.0, 2.0) for x in (-2.0, 2.0)], [],
+                    [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)])
+    for ob in cfg["objects"]:
+        o = bpy.data.objects.new(ob["name"], hut if ob["model"] == "mesh" else None)
+        sc.collection.objects.link(o)
+        o.location = (x0 + ob["position"][0], y0 + ob["position"][1], height(*ob["position"]))
+        o.rotation_euler.z = math.radians(ob["heading"])
+        o.scale = (ob["scale"],) * 3
+        o.piste.role, o.piste.model = "OBJECT", "MESH" if ob["model"] == "mesh" else ob["model"]
     c = cfg["camera"]
     cam = bpy.data.objects.new(c["name"], bpy.data.cameras.new(c["name"]))
     sc.collection.objects.link(cam)
@@ -142,6 +152,8 @@ def step_import():
                                      for s in o.material_slots if s.material}),
                 "images": len(set(bpy.data.images) - images)}
         meshes = [o for o in new if o.type == "MESH"]
+        info["placed"] = {o.name: [list(o.matrix_world.translation), math.degrees(o.matrix_world.to_euler().z),
+                                   o.data.name] for o in meshes}
         if meshes:
             pts = [o.matrix_world @ Vector(b) for o in meshes for b in o.bound_box]
             info["bounds"] = [[min(p[i] for p in pts) for i in range(3)], [max(p[i] for p in pts) for i in range(3)]]

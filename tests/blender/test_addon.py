@@ -44,6 +44,9 @@ CONFIG = {
                {"type": "ambient", "name": "Sky", "color": [0.45, 0.55, 0.75], "intensity": 0.35},
                {"type": "point", "name": "Shadow", "position": [50.0, 45.0, 30.0], "color": [1.0, 1.0, 1.0],
                 "intensity": -0.6, "range": 30.0}],
+    "objects": [{"name": "hut1", "model": "mesh", "position": [44.0, 52.0], "heading": 30.0, "scale": 1.5},
+                {"name": "hut2", "model": "mesh", "position": [60.0, 56.0], "heading": -45.0, "scale": 1.0},
+                {"name": "tree", "model": "builtin:tree", "position": [40.0, 45.0], "heading": 0.0, "scale": 1.2}],
     "frames": 2, "move_light": "Sun", "edit_dz": 2.0, "edit_du": 0.25,
 }
 
@@ -170,13 +173,16 @@ def authored(tmp_path_factory):
     return work, _run_blender(exe, cfg, work, "run1")
 
 
-def _hand_written(work: Path) -> Path:
-    """The same scene as the Blender one, written by hand (inline lights and camera, an .npz field)."""
+def _hand_written(work: Path, hut: Path) -> Path:
+    """The same scene as the Blender one, written by hand (inline lights and camera, an .npz field;
+    the huts' model is the one Export wrote, copied)."""
     n, step = CONFIG["grid"], CONFIG["spacing"]
     x = np.arange(n) * step
     z = height(x[None, :], x[:, None])
     folder = work / "hand"
     folder.mkdir()
+    shutil.copy(hut, folder / "hut.glb")
+    model = "hut.glb"
     np.savez(folder / "field.npz", z=z, dx=np.array([step]), dy=np.array([step]))
     c = CONFIG["camera"]
     lights = [dict(L, intensity=-0.6) if L["type"] == "point" else L for L in CONFIG["lights"]]
@@ -184,6 +190,7 @@ def _hand_written(work: Path) -> Path:
              "lightmap": {"res": 8, "shadows": True}, "lod": {"preset": "ssx_tricky"},
              "visibility": {"cell": 40.0}, "render": {"size": [320, 224], "fog": 0.0},
              "riders": [{k: r[k] for k in ("name", "position", "heading", "clip", "phase")} for r in CONFIG["riders"]],
+             "objects": [dict(o, model=model if o["model"] == "mesh" else o["model"]) for o in CONFIG["objects"]],
              "lights": [{k: v for k, v in L.items()} for L in lights],
              "cameras": [{"name": c["name"], "eye": c["eye"], "target": c["target"], "fov": c["fov"],
                           "near": c["near"], "far": c["far"]}]}
@@ -213,9 +220,11 @@ def test_export_builds_and_renders_like_the_hand_written_scene(authored):
     x = np.arange(n) * step
     assert np.abs(field["z"] - height(x[None, :], x[:, None])).max() < 1e-3
     out = _piste("build", "--quiet", toml)
-    assert "2 riders" in out and "3 lights" in out and "Overview" in out
+    assert "2 riders" in out and "3 objects" in out and "3 lights" in out and "Overview" in out
+    assert [o["model"] for o in doc["objects"]] == ["assets/Hut.glb", "assets/Hut.glb", "builtin:tree"]
+    assert doc["objects"][0]["heading"] == pytest.approx(30.0) and doc["objects"][0]["scale"] == pytest.approx(1.5)
     _piste("render", toml.with_suffix(".piste"), "--camera", "Overview", "--out", work / "exported.png")
-    hand = _hand_written(work)
+    hand = _hand_written(work, toml.parent / "assets" / "Hut.glb")
     _piste("render", hand, "--camera", "Overview", "--out", work / "hand.png")
     a, b = _image(work / "exported.png"), _image(work / "hand.png")
     assert a.shape == b.shape == (224, 320, 3)
@@ -271,8 +280,13 @@ def test_import_bundle_level_and_rider(imported):
     work, level, res = imported
     imp = res["imports"]
     b = imp["bundle"]
-    assert b["meshes"] == ["lead:rider", "second:rider", "terrain"] and b["armatures"] == 2
-    assert "terrain material" in b["materials"] and b["images"] >= 1
+    assert b["meshes"] == ["gltf_Hut0", "gltf_Hut1", "lead:rider", "second:rider", "terrain", "tree2"]
+    assert b["armatures"] == 2 and {"terrain material", "objects"} <= set(b["materials"]) and b["images"] >= 1
+    for name, o in (("gltf_Hut0", CONFIG["objects"][0]), ("gltf_Hut1", CONFIG["objects"][1])):
+        (x, y, z), heading, mesh = b["placed"][name]  # where the artist put them (piste's shifted coordinates)
+        assert [x, y] == pytest.approx(o["position"], abs=1e-3) and heading == pytest.approx(o["heading"], abs=1e-3)
+        assert z == pytest.approx(float(height(*o["position"])), abs=0.05)
+    assert b["placed"]["gltf_Hut0"][2] == b["placed"]["gltf_Hut1"][2]  # instances of one mesh again
     assert b["bounds"][0][:2] == pytest.approx([0.0, 0.0], abs=1e-3)  # piste's coordinates (the shifted course)
     assert b["bounds"][1][:2] == pytest.approx([100.0, 100.0], abs=1e-3)
     lv = imp["level"]
