@@ -8,6 +8,7 @@ between a sunlit wall and a shaded one facing it, 18 patches):
   :func:`piste.lighting.gi.path_traced_reference` (independent Monte Carlo paths of up to N + 1
   segments, shadow rays at every vertex, ``--paths`` per point) at sample points off the valley's
   folds; ``--bounces 0`` (today's light) is the first line, for scale.
+* ``--bounces 2 --tracer embree``: the gather rays through Embree on a tessellation (``bench`` extra).
 * ``--sun-radius DEG``: the penumbra error, mean ``|V - V_ref|`` of the sun's visibility (16 rays)
   over the points the reference shows in penumbra (``0.02 < V_ref < 0.98``), against the area light
   traced with 32 x 32 rays per point (other jitter); the hard sun's error on the same points beside
@@ -73,6 +74,12 @@ def bake_gi(args) -> None:
           f"{args.points} points off the folds x {args.paths} paths, N = 1, 2, 3 in {t_ref:.1f} s")
     configs = {"plain": dict(), "b1": dict(bounces=1), "b2": dict(bounces=2), "b3": dict(bounces=3),
                "b2r16": dict(bounces=2, gather_rays=16), "b2r256": dict(bounces=2, gather_rays=256)}
+    try:
+        import embreex  # noqa: F401
+
+        configs["b2em"] = dict(bounces=2, tracer="embree")
+    except ImportError:
+        print("  (--tracer embree skipped: embreex is not installed; pip install 'piste[bench]')")
     out = {}
 
     def runner(name):
@@ -84,10 +91,12 @@ def bake_gi(args) -> None:
     c = cost(times, "plain")
     rows = [("plain", "--bounces 0 (today's light)", 2), ("b1", "--bounces 1", 1), ("b2", "--bounces 2", 2),
             ("b3", "--bounces 3", 3), ("b2r16", "--bounces 2, 16 gather rays (4x4)", 2),
-            ("b2r256", "--bounces 2, 256 gather rays (16x16)", 2)]
+            ("b2r256", "--bounces 2, 256 gather rays (16x16)", 2), ("b2em", "--bounces 2 --tracer embree", 2)]
     for name, flags, n in rows:
+        if name not in out:
+            continue
         e = reference_error(out[name].tiles().reshape(-1, 3)[pick], refs[n])
-        flags = flags + (", 64 gather rays (8x8)" if name in ("b1", "b2", "b3") else "")
+        flags = flags + (", 64 gather rays (8x8)" if name in ("b1", "b2", "b3", "b2em") else "")
         err = f"vs path-traced N={n}: mean {e.mean() * 100:5.2f} %, p95 {np.percentile(e, 95) * 100:5.1f} %"
         print(line(flags, err, c[name][0], None if name == "plain" else c[name][1]))
         if name == "b2":

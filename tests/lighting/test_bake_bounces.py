@@ -148,7 +148,7 @@ def test_gather_helpers():
 @pytest.mark.parametrize("kw", [dict(bounces=-1), dict(bounces=17), dict(bounces=1.5), dict(bounces=True),
                                 dict(bounces=1, gather_rays=10), dict(bounces=1, albedo=1.5),
                                 dict(sun_radius=float("nan")), dict(sun_radius=-1), dict(sun_radius=20),
-                                dict(sun_radius=1, sun_rays=3)])
+                                dict(sun_radius=1, sun_rays=3), dict(bounces=1, tracer="optix")])
 def test_bad_settings_are_refused(kw):
     net = hill_net(1, 1)
     with pytest.raises(ValidationError):
@@ -188,3 +188,18 @@ def test_cli_and_scene_keys(tmp_path, capsys):
         with pytest.raises(SceneError) as exc:
             loads_scene(head + bad + "\n", tmp_path / "s.toml")
         assert key in str(exc.value) and "s.toml" in str(exc.value)
+
+
+def test_embree_tracer_agrees_with_the_exact_one(valley):
+    pytest.importorskip("embreex")
+    net, lights, pos, nrm, pick = valley
+    exact = bake_lightmap(net, lights, res=RES, bounces=2, gather_rays=16)
+    em = bake_lightmap(net, lights, res=RES, bounces=2, gather_rays=16, tracer="embree")
+    assert em.manifest["gi"]["tracer"] == "embree" and "tracer" not in exact.manifest["gi"]
+    assert em.manifest["key"] != exact.manifest["key"]
+    # the rays leaving the valley's folds meet the other face at once: traced again exactly
+    assert em.stats["gather_exact_again"] > 0
+    assert em.stats["gather_rays"] == exact.stats["gather_rays"]
+    assert abs(em.stats["gather_escaped"] - exact.stats["gather_escaped"]) <= 1e-3 * exact.stats["gather_rays"]
+    d = np.abs(em.atlas - exact.atlas)
+    assert d.mean() < 1e-3 and d.max() < 0.02

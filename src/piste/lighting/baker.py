@@ -37,14 +37,14 @@ from pathlib import Path
 
 import numpy as np
 
-from piste.errors import FormatError, OutputError, ValidationError, describe_os_error
+from piste.errors import FormatError, MissingExtraError, OutputError, ValidationError, describe_os_error
 from piste.extras import child_environment
 from piste.formats.atomic import atomic_path, write_bytes_atomic
 from piste.formats.safe_io import check_regular, loads_json, read_regular
 from piste.lighting.lightmap import (LightMap, assemble_atlas, atlas_layout, inputs_key,
                                     sample_points, weld_seam_light)
-from piste.lighting.gi import (DEFAULT_ALBEDO, DEFAULT_GATHER_RAYS, GatherHits, bounce_light, check_bounces,
-                               check_sun_radius, direct_light, gather_hits)
+from piste.lighting.gi import (DEFAULT_ALBEDO, DEFAULT_GATHER_RAYS, TRACERS, EmbreeGather, GatherHits, bounce_light,
+                               check_bounces, check_sun_radius, direct_light, gather_hits)
 from piste.lighting.lights import Lights, default_lights, light_terms, shade
 from piste.lighting.sampling import strata_side
 from piste.lighting.shadows import shadow_visibility
@@ -105,7 +105,12 @@ def _bake_chunk(chunk: int) -> tuple[int, np.ndarray, dict]:
         colors = shade(lights, pos, nrm, shadow)
         return chunk, colors.reshape(hi - lo, res, res, 3), stats
     rays = s["gather_rays"]
-    h = gather_hits(s["net"], pos, nrm, ids, rays, s["seed"], stats=stats)
+    tracer = None
+    if s["tracer"] == "embree":
+        if "embree" not in s:  # once per process (the tessellation and Embree's BVH)
+            s["embree"] = EmbreeGather(s["net"])
+        tracer = s["embree"]
+    h = gather_hits(s["net"], pos, nrm, ids, rays, s["seed"], stats=stats, tracer=tracer)
     out = np.concatenate([direct_light(lights, pos, nrm, shadow), h.patch, h.u, h.v], axis=1).astype(np.float32)
     return chunk, out.reshape(hi - lo, res, res, 3 + 3 * rays), stats
 
@@ -129,6 +134,7 @@ def bake_lightmap(
     albedo: float = DEFAULT_ALBEDO,
     sun_rays: int = 16,
     seed: int = 0,
+    tracer: str = "exact",
 ) -> LightMap:
     """Bake a light-map atlas for ``net`` under ``lights``.
 
@@ -153,6 +159,8 @@ def bake_lightmap(
     gather_rays, albedo : with bounces: rays per sample (a square number) and the terrain's albedo
     sun_rays : with ``sun_radius``: shadow rays per sample to the sun's disc (a square number)
     seed : the rays' jitter
+    tracer : the gather rays' tracer, ``"exact"`` (the patches) or ``"embree"`` (a tessellation through
+        Embree, the ``bench`` extra; near hits again exactly): see :mod:`piste.lighting.gi`
 
     Returns
     -------
@@ -170,7 +178,12 @@ def bake_lightmap(
         a = np.asarray(albedo, dtype=np.float64)
         if a.shape not in ((), (3,)) or not (np.isfinite(a).all() and (a >= 0).all() and (a <= 1).all()):
             raise ValidationError(f"bake: albedo must be a number (or 3) in [0, 1], got {albedo!r}")
+        if tracer not in TRACERS:
+            raise ValidationError(f"bake: tracer must be one of {', '.join(TRACERS)}, got {tracer!r}")
         gi.update(bounces=bounces, gather_rays=int(gather_rays), albedo=a.tolist(), sky="ambient lights")
+        if tracer != "exact":
+            gi["tracer"] = tracer
+            _check_tracer(tracer)
     if sun_radius > 0.0:
         strata_side(sun_rays, "bake: sun_rays")
         gi.update(sun_radius=sun_radius, sun_rays=int(sun_rays))
@@ -209,7 +222,7 @@ def bake_lightmap(
     state = dict(
         net=net, lights=lights, res=res, chunk_size=chunk_size, positions=positions, normals=normals,
         shadows=bool(shadows), bounces=bounces, sun_radius=sun_radius, sun_rays=int(sun_rays),
-        gather_rays=int(gather_rays), seed=int(seed),
+        gather_rays=int(gather_rays), seed=int(seed), tracer=tracer,
     )
     todo = [int(c) for c in np.nonzero(~done)[0]]
     if jobs is None or jobs <= 0:
@@ -322,6 +335,15 @@ def bake_lightmap(
     lm.resumed_chunks = resumed  # type: ignore[attr-defined]
     lm.stats = dict(stats)  # type: ignore[attr-defined]
     return lm
+
+
+def _check_tracer(tracer: str) -> None:
+    """A clear MissingExtraError before any work when the tracer's package is missing."""
+    if tracer == "embree":
+        try:
+            import embreex  # noqa: F401
+        except ImportError:
+            raise MissingExtraError("bench", "piste bake's Embree tracer", "embreex") from None
 
 
 def _bytes(n: int) -> str:

@@ -27,6 +27,13 @@ deterministic.
 
 ``bounces = 0`` is the lighting equation as before (ambient light everywhere, unoccluded).
 
+Tracers: ``"exact"`` (the default) hit-tests the exact bicubic patches; ``"embree"`` (Intel Embree
+through ``embreex``, the ``bench`` extra) the net tessellated at 16 vertices a side, a hit's patch
+parameters interpolated from its triangle's corners, and every hit nearer than 32 chord errors is
+traced again the exact way (a ray leaving a concave surface can hit the chords above its own
+origin).  The two give slightly different light maps (each deterministic), so the tracer is part
+of a bake's inputs (its key and manifest), never chosen by what happens to be installed.
+
 :func:`path_traced_reference` is the slow, exact way to the same quantity: independent Monte Carlo
 paths of up to ``N + 1`` diffuse segments with the direct lights evaluated (shadow rays) at every
 vertex on the exact surface, no light-map interpolation and no strata.
@@ -43,18 +50,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from piste.errors import ValidationError
+from piste.errors import MissingExtraError, ValidationError
 from piste.lighting.lights import AmbientLight, DirectionalLight, Lights, light_terms
 from piste.lighting.sampling import cosine_directions, disc_directions, frame, hash_uniform, strata_side
 from piste.lighting.shadows import ray_offset, shadow_visibility
 from piste.terrain.net import PatchNet
 from piste.terrain.query import ray_intersect
+from piste.terrain.tessellate import tessellate
 
 __all__ = [
     "DEFAULT_GATHER_RAYS",
     "DEFAULT_ALBEDO",
     "REAL_SUN_RADIUS",
     "GatherHits",
+    "TRACERS",
+    "EmbreeGather",
     "hash_uniform",
     "strata_side",
     "cosine_directions",
@@ -90,6 +100,65 @@ def direct_light(lights: Lights, positions, normals, shadow=None) -> np.ndarray:
     return out
 
 
+#: the gather rays' tracers (see the module docstring)
+TRACERS = ("exact", "embree")
+
+
+class EmbreeGather:
+    """Closest hits of rays on ``net`` tessellated at ``level`` vertices a side, through Embree.
+
+    ``hits(origins (k, 3), directions (k, 3))`` -> ``patch (k,) int64`` (-1: no hit), ``u, v (k,)``
+    float64 patch parameters, ``t (k,)`` float64, ``front (k,) bool`` (the ray meets the patch's
+    normal side).  :attr:`near`: 32 times the tessellation's largest chord error (the baker traces
+    hits nearer than this again on the exact surface)."""
+
+    def __init__(self, net, level: int = 16):
+        try:
+            from embreex.mesh_construction import TriangleMesh
+            from embreex.rtcore_scene import EmbreeScene
+        except ImportError:
+            raise MissingExtraError("bench", "the bake's Embree tracer", "embreex") from None
+        m = tessellate(net, int(level), cache=False)
+        self.tris = np.asarray(m.indices, dtype=np.int64)
+        self.param = np.asarray(m.param, dtype=np.float64)
+        self.vpatch = np.asarray(m.patch_ids, dtype=np.int64)[np.asarray(m.vertex_patch, dtype=np.int64)]
+        pos = np.asarray(m.positions, dtype=np.float64)
+        # chord error: the exact surface at each triangle's parameter centroid vs the triangle's centroid
+        cpar = self.param[self.tris].mean(axis=1)
+        tp = self.vpatch[self.tris[:, 0]]
+        exact = _eval_at(net, tp, cpar[:, 0], cpar[:, 1])
+        chord = float(np.linalg.norm(exact - pos[self.tris].mean(axis=1), axis=1).max()) if len(tp) else 0.0
+        self.near = 32.0 * chord
+        self.scene = EmbreeScene()
+        TriangleMesh(self.scene, np.ascontiguousarray(pos, dtype=np.float32), np.ascontiguousarray(self.tris, dtype=np.int32))
+
+    def hits(self, origins, directions):
+        o = np.ascontiguousarray(origins, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        r = self.scene.run(o, d, output=1)
+        prim = np.asarray(r["primID"], dtype=np.int64)
+        hit = prim >= 0
+        tri = self.tris[np.where(hit, prim, 0)]
+        bu = np.asarray(r["u"], dtype=np.float64)[:, None]
+        bv = np.asarray(r["v"], dtype=np.float64)[:, None]
+        par = (1.0 - bu - bv) * self.param[tri[:, 0]] + bu * self.param[tri[:, 1]] + bv * self.param[tri[:, 2]]
+        patch = np.where(hit, self.vpatch[tri[:, 0]], -1)
+        front = (np.asarray(r["Ng"], dtype=np.float64) * np.asarray(directions, dtype=np.float64)).sum(1) < 0.0
+        t = np.where(hit, np.asarray(r["tfar"], dtype=np.float64), np.inf)
+        return patch, np.clip(par[:, 0], 0.0, 1.0), np.clip(par[:, 1], 0.0, 1.0), t, front
+
+
+def _eval_at(net, patch, u, v) -> np.ndarray:
+    """Exact surface points of ``patch (k,)`` at ``(u, v) (k,)``: ``(k, 3)`` float64 (cubic Bernstein)."""
+    cp = np.asarray(net.control_points, dtype=np.float64)[patch]  # (k, 4, 4, 3): [i (u), j (v)]
+
+    def bern(t):
+        s = 1.0 - t
+        return np.stack([s * s * s, 3 * s * s * t, 3 * s * t * t, t * t * t], -1)
+
+    return np.einsum("kj,ki,kijc->kc", bern(v), bern(u), cp)
+
+
 @dataclass
 class GatherHits:
     """Where each gather ray of ``k`` samples went: ``patch (k, rays) int32`` (-1 escaped to the
@@ -106,11 +175,13 @@ class GatherHits:
 
 
 def gather_hits(net, positions, normals, ids, rays: int = DEFAULT_GATHER_RAYS, seed: int = 0,
-                batch: int = 4096, stats: dict | None = None) -> GatherHits:
-    """Cast every sample's cosine-weighted gather rays against the exact surface.
+                batch: int = 4096, stats: dict | None = None, tracer: EmbreeGather | None = None) -> GatherHits:
+    """Cast every sample's cosine-weighted gather rays against the exact surface (or through
+    ``tracer``, an :class:`EmbreeGather` of the net, with near hits traced again exactly).
 
     positions, normals : (k, 3) float64; ids : (k,) global sample indices (jitter counters).
-    ``stats`` (optional dict) gets ``gather_rays`` and ``gather_escaped`` added."""
+    ``stats`` (optional dict) gets ``gather_rays`` and ``gather_escaped`` added (and
+    ``gather_exact_again`` with a tracer)."""
     pos = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     ids = np.asarray(ids)
@@ -124,17 +195,31 @@ def gather_hits(net, positions, normals, ids, rays: int = DEFAULT_GATHER_RAYS, s
         hi = min(lo + step, k)
         d = cosine_directions(nrm[lo:hi], ids[lo:hi], rays, seed).reshape(-1, 3)
         o = np.repeat(pos[lo:hi] + eps * nrm[lo:hi], rays, axis=0)
-        h = ray_intersect(net, o, d, t_min=eps)
-        p = np.where(h.hit, h.patch, -1)
-        back = h.hit & ((h.normal * d).sum(1) > 0.0)
-        p = np.where(back, -2, p)
+        if tracer is None:
+            p, hu, hv, front = _exact_hits(net, o, d, eps)
+        else:
+            p, hu, hv, t, front = tracer.hits(o, d)
+            again = np.flatnonzero(t < tracer.near)
+            if len(again):
+                p[again], hu[again], hv[again], front[again] = _exact_hits(net, o[again], d[again], eps)
+            if stats is not None:
+                stats["gather_exact_again"] = stats.get("gather_exact_again", 0) + len(again)
+        p = np.where((p >= 0) & ~front, -2, p)
         patch[lo:hi] = p.reshape(hi - lo, rays)
-        u[lo:hi] = np.nan_to_num(h.u).reshape(hi - lo, rays)
-        v[lo:hi] = np.nan_to_num(h.v).reshape(hi - lo, rays)
+        u[lo:hi] = hu.reshape(hi - lo, rays)
+        v[lo:hi] = hv.reshape(hi - lo, rays)
     if stats is not None:
         stats["gather_rays"] = stats.get("gather_rays", 0) + int(patch.size)
         stats["gather_escaped"] = stats.get("gather_escaped", 0) + int((patch == -1).sum())
     return GatherHits(patch, u, v)
+
+
+def _exact_hits(net, o, d, eps: float):
+    """``patch (k,)`` (-1 none), ``u, v (k,)``, ``front (k,) bool`` of rays on the exact surface."""
+    h = ray_intersect(net, o, d, t_min=eps)
+    p = np.where(h.hit, h.patch, -1)
+    front = ~h.hit | ((h.normal * d).sum(1) < 0.0)
+    return p, np.nan_to_num(h.u), np.nan_to_num(h.v), front
 
 
 def tile_lookup(tiles, patch, u, v) -> np.ndarray:
