@@ -203,3 +203,29 @@ def test_embree_tracer_agrees_with_the_exact_one(valley):
     assert abs(em.stats["gather_escaped"] - exact.stats["gather_escaped"]) <= 1e-3 * exact.stats["gather_rays"]
     d = np.abs(em.atlas - exact.atlas)
     assert d.mean() < 1e-3 and d.max() < 0.02
+
+
+def test_scene_build_bakes_with_the_lightmap_keys(tmp_path):
+    from piste.pipeline.build import build_scene
+    from piste.pipeline.bundle_objects import load_bundle
+
+    y, x = np.mgrid[0:13, 0:13] * 4.0
+    np.savez(tmp_path / "hill.npz", z=20.0 - 0.3 * y + 6.0 * np.sin(x / 9.0), dx=np.float64(4.0))
+    text = ('name = "gi"\n[terrain]\nsource = "hill.npz"\n[lightmap]\nres = 8\n{keys}\n[visibility]\nenabled = false\n'
+            '[[lights]]\ntype = "ambient"\ncolor = [0.5, 0.6, 0.8]\nintensity = 0.4\n'
+            '[[lights]]\ntype = "directional"\ndirection = [0.5, 0.3, -0.5]\nintensity = 1.0\n')
+    scene = tmp_path / "gi.toml"
+    scene.write_text(text.format(keys=""))
+    plain = build_scene(scene)
+    first = plain.path.read_bytes()
+    a = load_bundle(plain.path)
+    assert "bounces" not in a.manifest["lightmap"]
+    scene.write_text(text.format(keys="bounces = 1\nsun_radius = 1.0"))
+    r = build_scene(scene)
+    assert "lightmap" in r.rebuilt and "terrain" in r.cached
+    b = load_bundle(r.path)
+    assert (b.manifest["lightmap"]["bounces"], b.manifest["lightmap"]["sun_radius"]) == (1, 1.0)
+    assert not np.array_equal(a.arrays["lightmap/atlas"], b.arrays["lightmap/atlas"])
+    scene.write_text(text.format(keys=""))
+    again = build_scene(scene)  # back to the plain keys: the first bake, from the cache
+    assert "lightmap" in again.cached and again.path.read_bytes() == first
