@@ -227,7 +227,7 @@ def _inline_light(obj, shift) -> dict:
     light = {"type": "spot" if data.type == "SPOT" else "point", "name": obj.name,
              "position": [round(p.x + shift[0], 6), round(p.y + shift[1], 6), round(p.z, 6)],
              "color": color, "intensity": intensity}
-    rng = ps.piste_range or (data.cutoff_distance if getattr(data, "use_custom_distance", False) else 0.0)
+    rng = ps.piste_range or (getattr(data, "cutoff_distance", 0.0) if getattr(data, "use_custom_distance", False) else 0.0)
     if rng > 0:
         light["range"] = round(rng, 6)
     if data.type == "SPOT":
@@ -263,7 +263,8 @@ def gather(context, out: Path) -> dict:
         terrain = {"source": "default", "seed": s.seed}
     scene["terrain"] = terrain
     scene["lightmap"] = {"res": s.lightmap_res, "shadows": s.lightmap_shadows}
-    lod = {"preset": s.lod_preset} if s.lod_preset != "custom" else {"near": s.lod_near, "far": s.lod_far}
+    lod = {"near": s.lod_near, "far": s.lod_far} if s.lod_preset == "custom" else \
+        {"preset": s.lod_preset} if s.lod_preset != "AUTO" else {}
     lod.update({"character": [round(x, 6) for x in s.lod_character], "morph": s.lod_morph})
     scene["lod"] = lod
     scene["visibility"] = {"enabled": s.visibility_enabled, "cell": round(s.visibility_cell, 6),

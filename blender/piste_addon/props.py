@@ -40,7 +40,8 @@ class PisteSceneSettings(bpy.types.PropertyGroup):
     samples_per_patch: IntProperty(name="Samples per patch", default=4, min=3, max=64)
     smooth: BoolProperty(name="Smooth (C2) fit", default=False)
     seed: IntProperty(name="Seed", default=0, min=0)
-    lod_preset: EnumProperty(name="LOD", default="piste", items=[
+    lod_preset: EnumProperty(name="LOD", default="AUTO", items=[
+        ("AUTO", "Auto", "piste's default: the game's for an SSX level, else piste's"),
         ("piste", "piste", "60 / 180 m"), ("ssx_tricky", "SSX Tricky", "the game's 30 / 150 m (3000 / 15000 units)"),
         ("custom", "Custom", "switch distances given here")])
     lod_near: FloatProperty(name="Near", default=60.0, min=0.0, unit="LENGTH")

@@ -184,6 +184,26 @@ def step_writeback():
     result["writeback"] = {"out": str(out), "changed": changed, "moved": moved, "top": list(top)}
 
 
+def step_level_scene():
+    """A scene on an SSX level (terrain file): the level and its banks copied beside the scene."""
+    clear()
+    sc = bpy.context.scene
+    s = sc.piste
+    s.export_dir, s.scene_name, s.terrain_mode, s.terrain_file = cfg["out"], "on_level", "FILE", cfg["imports"]["level"]
+    s.lod_preset, s.ambient_from_world = "AUTO", True
+    o = bpy.data.objects.new("rider", None)
+    sc.collection.objects.link(o)
+    o.location = (12.0, 10.0, 0.0)
+    o.piste.role, o.piste.model = "RIDER", "builtin:rider"
+    assert bpy.ops.piste.export() == {"FINISHED"}
+    result["level_toml"] = sc["piste_last_export"]
+    s.terrain_file = cfg["out"] + "/missing.pbd"
+    try:
+        result["missing_terrain"] = sorted(bpy.ops.piste.export())
+    except RuntimeError as exc:  # an operator's ERROR report, called from Python
+        result["missing_terrain"] = str(exc)
+
+
 def step_screenshot():
     sc = bpy.context.scene
     sc.render.engine = "BLENDER_WORKBENCH"

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -271,7 +272,7 @@ def imported(authored):
     level = make_level(rows=2, cols=3, seed=3).write(level_dir, "LVL")
     _piste("mpf", "encode", work / "rider.mpf")
     cfg = dict(CONFIG, zip=str(work / "piste_addon.zip"), piste=str(PISTE), out=str(work / "imports_out"),
-               steps=["import", "writeback"], writeback=str(level_dir / "LVL_edited.pbd"),
+               steps=["import", "writeback", "level_scene"], writeback=str(level_dir / "LVL_edited.pbd"),
                imports={"bundle": str(bundle), "level": str(level), "rider": str(work / "rider.mpf")})
     return work, level, _run_blender(_blender(), cfg, work, "run2")
 
@@ -341,3 +342,21 @@ def test_the_packaged_zip_matches_the_sources(tmp_path, monkeypatch):
     assert (tmp_path / "w.zip").read_bytes() == packaged
     pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
     assert "data/blender_addon.zip" in pyproject["tool"]["setuptools"]["package-data"]["piste"]
+
+
+def test_scene_on_an_ssx_level(imported):
+    """Terrain 'File' = an SSX level: the .pbd and its .ssh / _L.ssh are copied beside the scene,
+    piste's own LOD default (the game's) applies, and piste builds it; a missing file cancels Export."""
+    from piste.world.scene_file import load_scene
+
+    work, level, res = imported
+    toml = Path(res["level_toml"])
+    doc = tomllib.loads(toml.read_text())
+    assert doc["terrain"] == {"source": "assets/LVL.pbd"} and "preset" not in doc["lod"]
+    assert {p.name for p in (toml.parent / "assets").iterdir()} >= {"LVL.pbd", "LVL.ssh", "LVL_L.ssh"}
+    sf = load_scene(toml)
+    assert sf.terrain.kind == "ssx_pbd" and (sf.lod.near, sf.lod.far) == (30.0, 150.0)
+    assert [L.name for L in sf.lights] == ["World"]  # the ambient from the World colour
+    out = _piste("build", "--quiet", toml)
+    assert re.search(r"\b6 patches, 1 riders?\b", out), out
+    assert "piste export: " in res["missing_terrain"] and "missing.pbd: no such file" in res["missing_terrain"]
