@@ -102,6 +102,7 @@ def test_ssx_blend_specular_shadow_and_sky_passes_leave_the_depth_buffer(tmp_pat
     p = ScenePreview(b, ctx=gl, shadows=True, specular=True)
     try:
         r = p.renderer
+        r.characters.fold_specular = False  # the talk's separate additive specular pass (folded by default)
         no_write = {r.terrain.ssx_source.prog: "ssx light-map blend", r.terrain.sky.prog: "sky",
                     r.characters.prog_spec: "rider specular", r.shadows.receiver: "shadow receivers"}
         drawn, wrote = _watch(no_write, monkeypatch)

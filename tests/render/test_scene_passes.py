@@ -255,3 +255,50 @@ def test_object_reference_image(gl, reference_image):
         target.release()
     assert op.drawn == 4
     reference_image("scene_objects", img)
+
+
+def test_folded_specular_matches_the_second_pass(gl):
+    """The riders' specular added by the base pass (``fold_specular``, the default) gives the talk's
+    two-pass picture (lit pass, then the additive specular pass over the same depths) within a
+    rounding step, in fog too; and it does add highlights."""
+    from piste.character import default_rider, make_lods
+    from piste.character.skinning import BlendedMesh
+    from piste.render.character_pass import CharacterPass
+    from piste.render.context import Offscreen
+    from piste.world.camera import Camera
+    from piste.world.scene import orient_outward
+
+    model = default_rider(0)
+    lods = make_lods(orient_outward(model.meshes[0])[0])
+    rot = np.eye(4)
+    rot[:3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]
+    skins = []
+    for k, t in enumerate((0.3, 0.7)):  # two riders, the second overlapping the first from behind
+        m = rot @ model.skeleton.skin_matrices(model.clips["ride"].sample(t, loop=True))
+        m[:, :3, 3] += (0.3 * k, 0.8 * k, 0.0)
+        skins.append(m)
+    bm = BlendedMesh(lods[0].palette, lods[0].mesh.positions, lods[0].mesh.normals)
+    pos, nrm = bm.apply_many(np.stack(skins))
+    cp = CharacterPass(gl, lods, model.meshes[0].texture, max_riders=2)
+    target = Offscreen(gl, (96, 128))
+    empty = (np.zeros(0, int), pos[:0], nrm[:0])
+    try:
+        cam = Camera(eye=(1.2, -3.2, 1.4), target=(0, 0, 0.9), fov_y=40, aspect=96 / 128, near=0.1, far=50)
+        vp = cam.view_projection()
+        vl = choose_lights_many(LIGHTS, np.array([[0, 0, 1.0], [0.3, 0.8, 1.0]]))
+        cp.upload([(np.array([0, 1]), pos, nrm), empty, empty])
+        out = {}
+        for fog in (None, (0.8, 0.86, 0.93, 0.08)):
+            for fold, specular in ((True, True), (False, True), (True, False)):
+                cp.fold_specular = fold
+                target.use()
+                target.clear((0.1, 0.1, 0.1, 1))
+                cp.draw(vp, cam.eye, vl, sun=LIGHTS.direct[0], fog=fog, specular=specular)
+                out[fog is not None, fold, specular] = target.read()[..., :3].astype(int)
+    finally:
+        cp.release()
+        target.release()
+    for fogged in (False, True):
+        one, two, plain = out[fogged, True, True], out[fogged, False, True], out[fogged, True, False]
+        assert np.abs(one - two).max() <= 1  # one rounding instead of two
+        assert (one - plain).max() > 25  # the highlights are there

@@ -17,16 +17,24 @@ compiles the base pass with the alpha test (texels below 0.5 discarded: the cuto
 texture's alpha); a material that is not double-sided culls back faces (counter-clockwise fronts,
 glTF's winding); no material (the built-in and SSX riders): no alpha test, no culling.
 
-Specular (``character_specular.frag.glsl``): a second pass over the same triangles (GL_LEQUAL, no
-depth writes) adding Blinn-Phong highlights of the sun scaled by a specular map with additive
-blending ``(ONE, ONE)``.  :func:`specular_map` makes the map for the default rider: goggles
-(lens and strap), board (top sheet and rails) and jacket (a duller sheen).
+Specular: Blinn-Phong highlights of the sun scaled by a specular map, added to the lit texture.
+The talk draws them as a second pass over the same triangles (``character_specular.frag.glsl``:
+GL_LEQUAL, no depth writes, additive blending ``(ONE, ONE)``); by default
+(:attr:`CharacterPass.fold_specular`) the base pass adds them itself (``character.frag.glsl``
+compiled with ``CHARACTER_SPECULAR``): the same sum on the same pixels (the nearest fragment's
+colour plus its highlight, the colour clamped first as the 8-bit frame buffer clamps it), rounded
+once instead of twice, without a second vertex and fragment pass over every rider (measured on
+llvmpipe at 640x448: see the commit that folded it).  ``fold_specular = False`` draws the talk's
+two passes.  :func:`specular_map` makes the map for the default rider: goggles (lens and strap),
+board (top sheet and rails) and jacket (a duller sheen).
 
 API
 ---
-CharacterPass(ctx, lods, texture, spec_map=None, max_riders=6, rider_atlas=True, material=None)
-    ``.upload(skinned)``, ``.draw(vp, eye, lights, sun=None, fog=None, specular=True)``
-specular_map(texture) -> (H, W, 4) uint8      r = strength, g = shininess scale
+::
+
+    CharacterPass(ctx, lods, texture, spec_map=None, max_riders=6, rider_atlas=True, material=None)
+        ``.upload(skinned)``, ``.draw(vp, eye, lights, sun=None, fog=None, specular=True)``
+    specular_map(texture) -> (H, W, 4) uint8      r = strength, g = shininess scale
 """
 
 from __future__ import annotations
@@ -120,6 +128,7 @@ class _LodBuffers:
     and normals."""
 
     def __init__(self, ctx, mesh, n: int, progs: dict):
+        self.ctx = ctx
         self.v = int(mesh.n_vertices)
         self.t = int(mesh.n_triangles)
         self.n = int(n)
@@ -130,10 +139,19 @@ class _LodBuffers:
         self.uv = ctx.buffer(uv.tobytes())
         self.pos = ctx.buffer(reserve=n * self.v * 12, dynamic=True)
         self.nrm = ctx.buffer(reserve=n * self.v * 12, dynamic=True)
-        content = [(self.pos, "3f", "in_pos"), (self.nrm, "3f", "in_nrm"), (self.uv, "2f", "in_uv")]
-        self.vaos = {k: ctx.vertex_array(p, content, self.index, index_element_size=4, skip_errors=True)
-                     for k, p in progs.items()}
+        self.vaos: dict = {}
+        for k, p in progs.items():
+            self.vao(k, p)
         self.count = 0
+
+    def vao(self, which: str, prog):
+        """The vertex array of program ``which`` (made on first use)."""
+        vao = self.vaos.get(which)
+        if vao is None:
+            content = [(self.pos, "3f", "in_pos"), (self.nrm, "3f", "in_nrm"), (self.uv, "2f", "in_uv")]
+            vao = self.vaos[which] = self.ctx.vertex_array(prog, content, self.index, index_element_size=4,
+                                                           skip_errors=True)
+        return vao
 
     def write(self, pos, nrm) -> None:
         k = len(pos)
@@ -164,6 +182,11 @@ class CharacterPass:
     rider_atlas : the texture is the default rider's atlas (jacket colours per rider, its specular
         map); False for other models (one texture for all, no specular unless ``spec_map``)
     material : MaterialInfo or None (alpha mode MASK: alpha test; not double-sided: back faces culled)
+
+    Attributes
+    ----------
+    fold_specular : True (default): the specular highlights added by the base pass (one pass, the
+        same pixels within a rounding step); False: the talk's separate additive second pass
     """
 
     def __init__(self, ctx, lods, texture, spec_map=None, max_riders: int = 6, rider_atlas: bool = True,
@@ -178,6 +201,9 @@ class CharacterPass:
         if self.alpha_test:
             head, _, rest = fs.partition("\n")
             fs = head + "\n#define CHARACTER_ALPHA_TEST 1\n" + rest
+        self._vs, self._fs = vs, fs
+        self.fold_specular = True
+        self._prog_lit = None  # the base pass with the specular added (compiled on first use)
         self.prog = ctx.program(vertex_shader=vs, fragment_shader=fs)
         self.prog_spec = ctx.program(vertex_shader=vs, fragment_shader=load_shader("character_specular.frag.glsl"))
         self.prog["u_tex"].value = 0
@@ -252,22 +278,28 @@ class CharacterPass:
         vp_bytes = np.asarray(vp, dtype=np.float32).T.tobytes()
         fog = (0.0, 0.0, 0.0, 0.0) if fog is None else tuple(float(x) for x in fog)
         eye = tuple(float(x) for x in eye)
-        p = self.prog
+        shiny = specular and sun is not None and not light_only
+        if base and shiny and self.fold_specular:  # one pass: the lit texture plus the highlights
+            p = self._lit_program()
+            self._sun_uniforms(p, sun)
+            self.spec.use(1)
+        else:
+            p = self.prog
         p["u_mvp"].write(vp_bytes)
         p["u_eye"].value = eye
         p["u_fog"].value = fog
         p["u_mode"].value = 1 if light_only else 0
         if base:
-            self._draw_all("base", p, lights)
-        if not specular or sun is None or light_only:
+            self._draw_all("lit" if p is not self.prog else "base", p, lights)
+            if p is not self.prog:
+                return
+        if not shiny:
             return
         q = self.prog_spec
         q["u_mvp"].write(vp_bytes)
         q["u_eye"].value = eye
         q["u_fog"].value = fog
-        q["u_sun_dir"].value = tuple(float(-x) for x in sun.direction)
-        q["u_sun_color"].value = tuple(float(sun.intensity * c) for c in sun.color)
-        q["u_shininess"].value = SHININESS
+        self._sun_uniforms(q, sun)
         self.spec.use(1)
         ctx.enable(moderngl.BLEND)
         ctx.blend_equation = moderngl.FUNC_ADD
@@ -282,14 +314,30 @@ class CharacterPass:
             set_depth_write(ctx, True)
             ctx.depth_func = "<"
 
+    def _lit_program(self):
+        """The base pass compiled with the specular term (``CHARACTER_SPECULAR``)."""
+        if self._prog_lit is None:
+            head, _, rest = self._fs.partition("\n")
+            p = self.ctx.program(vertex_shader=self._vs, fragment_shader=head + "\n#define CHARACTER_SPECULAR 1\n" + rest)
+            p["u_tex"].value = 0
+            p["u_spec"].value = 1
+            self._prog_lit = p
+        return self._prog_lit
+
+    @staticmethod
+    def _sun_uniforms(prog, sun) -> None:
+        prog["u_sun_dir"].value = tuple(float(-x) for x in sun.direction)
+        prog["u_sun_color"].value = tuple(float(sun.intensity * c) for c in sun.color)
+        prog["u_shininess"].value = SHININESS
+
     def _draw_all(self, which, prog, lights) -> None:
         import moderngl
 
         for buf, idx in zip(self.lods, self.riders):
-            vao = buf.vaos[which]
+            vao = buf.vao(which, prog)
             n = 3 * buf.t
             for j, r in enumerate(idx):
-                if which == "base":
+                if which != "spec":
                     self.textures[int(r) % len(self.textures)].use(0)
                 u = lights[int(r)].uniforms()
                 if "u_light_dir" in prog:
@@ -303,3 +351,5 @@ class CharacterPass:
             b.release()
         for obj in self.textures + [self.spec, self.prog, self.prog_spec]:
             obj.release()
+        if self._prog_lit is not None:
+            self._prog_lit.release()
