@@ -10,7 +10,10 @@ formats     file formats (.bpt, glTF, bundles)
 render      OpenGL (moderngl) renderer, headless through EGL
 """
 
+import importlib
 import logging
+import sys
+from collections.abc import Callable
 
 from piste.errors import ConfigError, FormatError, PisteError, RenderError, ValidationError
 
@@ -21,3 +24,29 @@ __version__ = "0.2.0"
 logging.getLogger("piste").addHandler(logging.NullHandler())
 
 __all__ = ["PisteError", "FormatError", "ValidationError", "ConfigError", "RenderError", "__version__"]
+
+
+def _lazy_exports(package: str, exports: dict[str, tuple[str, ...]]) -> tuple[list[str], Callable, Callable]:
+    """``(__all__, __getattr__, __dir__)`` for package ``package`` re-exporting ``exports``
+    (``{submodule (relative, e.g. "build"): (names...)}``) lazily (PEP 562 module ``__getattr__``).
+
+    A name's submodule is imported the first time the name is asked for (``piste.pipeline.build_scene``,
+    ``from piste.render import SceneRenderer``), then the value is stored on the package, so later
+    look-ups cost nothing: a fresh ``piste render BUNDLE`` imports only what a render uses, not the
+    build, the baker, the glTF importer, the SSX readers or Dask.  Each ``__init__`` also imports the
+    same names under ``if TYPE_CHECKING:`` (type checkers, tests/test_architecture.py's import graph);
+    tests/test_lazy_imports.py checks the two lists agree and every name in ``__all__`` resolves."""
+    where = {name: f"{package}.{module}" for module, names in exports.items() for name in names}
+
+    def __getattr__(name: str):
+        module = where.get(name)
+        if module is None:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        value = getattr(importlib.import_module(module), name)
+        setattr(sys.modules[package], name, value)
+        return value
+
+    def __dir__() -> list[str]:
+        return sorted(set(vars(sys.modules[package])) | set(where))
+
+    return list(where), __getattr__, __dir__

@@ -8,9 +8,18 @@ bundle   read_bundle(path) -> BundleData (manifest + arrays), write_bundle: the 
          writes (the scene objects of a bundle: piste.pipeline.load_bundle)
 """
 
-from piste.formats.gltf import load_gltf
-from piste.formats.bundle import BundleData, load_bundle, read_bundle, read_manifest, write_bundle
-from piste.formats.geotiff import DemRaster, read_geotiff, write_geotiff
+from typing import TYPE_CHECKING
 
-__all__ = ["load_gltf", "read_bundle", "read_manifest", "write_bundle", "BundleData", "load_bundle", "DemRaster",
-           "read_geotiff", "write_geotiff"]
+from piste import _lazy_exports
+
+# every name is imported when first asked for (PEP 562; tests/test_lazy_imports.py)
+__all__, __getattr__, __dir__ = _lazy_exports(__name__, {
+    "gltf": ("load_gltf",),
+    "bundle": ("read_bundle", "read_manifest", "write_bundle", "BundleData", "load_bundle"),
+    "geotiff": ("DemRaster", "read_geotiff", "write_geotiff"),
+})
+
+if TYPE_CHECKING:  # the same names, eagerly, for type checkers and the import graph
+    from piste.formats.gltf import load_gltf  # noqa: F401
+    from piste.formats.bundle import BundleData, load_bundle, read_bundle, read_manifest, write_bundle  # noqa: F401
+    from piste.formats.geotiff import DemRaster, read_geotiff, write_geotiff  # noqa: F401

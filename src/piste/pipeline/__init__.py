@@ -26,49 +26,37 @@ The scene file itself is :mod:`piste.world.scene_file` (``load_scene``); the bun
 :mod:`piste.formats.bundle` (``read_bundle``: arrays and metadata only).  Rendering imports OpenGL lazily: building needs none.
 """
 
-from piste.pipeline.bundle_objects import Bundle, camera_from_dict, lights_from_dict, load_bundle
-from piste.pipeline.build import BUILD_VERSION, BuildResult, build_scene, default_cache_dir
-from piste.pipeline.cache import Cache, content_key
-from piste.pipeline.default_scene import build_default_scene
-from piste.pipeline.characters import character_arrays
-from piste.pipeline.gltf_import import axis_matrix, convert_cameras, convert_lights, import_gltf, write_scene_gltf
-from piste.pipeline.live import LiveScene, run_headless
-from piste.pipeline.preview import ScenePreview, camera_at, render_frames, render_image
-from piste.pipeline.sources import load_object_mesh, load_rider_model, load_terrain
-from piste.pipeline.visibility import Visibility, compute_visibility, culling_report
-from piste.pipeline.tiled_build import TiledSpec, TileError, build_tiles, spec_from_scene, synthetic_spec
-from piste.pipeline.dask_build import build_scene_tiles, build_tiles_dask, dask_client
+from typing import TYPE_CHECKING
 
-__all__ = [
-    "TiledSpec", "TileError", "build_tiles", "spec_from_scene", "synthetic_spec", "build_scene_tiles",
-    "build_tiles_dask", "dask_client",
-    "build_scene",
-    "load_bundle",
-    "build_default_scene",
-    "Bundle",
-    "lights_from_dict",
-    "camera_from_dict",
-    "BuildResult",
-    "BUILD_VERSION",
-    "default_cache_dir",
-    "Cache",
-    "content_key",
-    "character_arrays",
-    "import_gltf",
-    "convert_lights",
-    "convert_cameras",
-    "axis_matrix",
-    "write_scene_gltf",
-    "Visibility",
-    "compute_visibility",
-    "culling_report",
-    "load_terrain",
-    "load_rider_model",
-    "load_object_mesh",
-    "ScenePreview",
-    "render_image",
-    "render_frames",
-    "camera_at",
-    "LiveScene",
-    "run_headless",
-]
+from piste import _lazy_exports
+
+# every name is imported when first asked for (PEP 562): `piste render BUNDLE` imports no build, bake,
+# glTF, SSX or Dask module (tests/test_lazy_imports.py)
+__all__, __getattr__, __dir__ = _lazy_exports(__name__, {
+    "tiled_build": ("TiledSpec", "TileError", "build_tiles", "spec_from_scene", "synthetic_spec"),
+    "dask_build": ("build_scene_tiles", "build_tiles_dask", "dask_client"),
+    "build": ("build_scene", "BuildResult", "BUILD_VERSION", "default_cache_dir"),
+    "bundle_objects": ("load_bundle", "Bundle", "lights_from_dict", "camera_from_dict"),
+    "default_scene": ("build_default_scene",),
+    "cache": ("Cache", "content_key"),
+    "characters": ("character_arrays",),
+    "gltf_import": ("import_gltf", "convert_lights", "convert_cameras", "axis_matrix", "write_scene_gltf"),
+    "visibility": ("Visibility", "compute_visibility", "culling_report"),
+    "sources": ("load_terrain", "load_rider_model", "load_object_mesh"),
+    "preview": ("ScenePreview", "render_image", "render_frames", "camera_at"),
+    "live": ("LiveScene", "run_headless"),
+})
+
+if TYPE_CHECKING:  # the same names, eagerly, for type checkers and the import graph
+    from piste.pipeline.bundle_objects import Bundle, camera_from_dict, lights_from_dict, load_bundle  # noqa: F401
+    from piste.pipeline.build import BUILD_VERSION, BuildResult, build_scene, default_cache_dir  # noqa: F401
+    from piste.pipeline.cache import Cache, content_key  # noqa: F401
+    from piste.pipeline.default_scene import build_default_scene  # noqa: F401
+    from piste.pipeline.characters import character_arrays  # noqa: F401
+    from piste.pipeline.gltf_import import axis_matrix, convert_cameras, convert_lights, import_gltf, write_scene_gltf  # noqa: F401
+    from piste.pipeline.live import LiveScene, run_headless  # noqa: F401
+    from piste.pipeline.preview import ScenePreview, camera_at, render_frames, render_image  # noqa: F401
+    from piste.pipeline.sources import load_object_mesh, load_rider_model, load_terrain  # noqa: F401
+    from piste.pipeline.visibility import Visibility, compute_visibility, culling_report  # noqa: F401
+    from piste.pipeline.tiled_build import TiledSpec, TileError, build_tiles, spec_from_scene, synthetic_spec  # noqa: F401
+    from piste.pipeline.dask_build import build_scene_tiles, build_tiles_dask, dask_client  # noqa: F401

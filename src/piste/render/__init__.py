@@ -26,42 +26,29 @@ StreamingRenderer     a tiled world paged in and out by distance under a memory 
 Interactive window: :func:`piste.render.window.run_window` (pyglet, imported lazily).
 """
 
-from piste.render.context import Offscreen, create_context, save_png, set_depth_write
-from piste.render.frame import Frame, TerrainRenderer, cull_boxes, summarize
-from piste.render.scene_renderer import SceneImage, SceneRenderer, summarize_scene
-from piste.render.sky_pass import SkyPass
-from piste.render.terrain_pass import DEBUG_VIEWS, LIGHTMAP_MODES, TerrainPass
-from piste.render.textures import (LOD_COLORS, MipLevels, lightmap_atlas_size, mip_chain, mipmapped_texture,
-                                   placeholder_lightmap, snow_texture, track_field)
-from piste.render.video import VideoWriter
-from piste.render.streaming import StreamingRenderer, TileCache, render_flight
+from typing import TYPE_CHECKING
 
-__all__ = [
-    "create_context",
-    "Offscreen",
-    "save_png",
-    "set_depth_write",
-    "mip_chain",
-    "mipmapped_texture",
-    "MipLevels",
-    "TerrainRenderer",
-    "SceneRenderer",
-    "SceneImage",
-    "summarize_scene",
-    "Frame",
-    "summarize",
-    "cull_boxes",
-    "VideoWriter",
-    "track_field",
-    "TerrainPass",
-    "SkyPass",
-    "LIGHTMAP_MODES",
-    "DEBUG_VIEWS",
-    "snow_texture",
-    "placeholder_lightmap",
-    "lightmap_atlas_size",
-    "LOD_COLORS",
-    "StreamingRenderer",
-    "TileCache",
-    "render_flight",
-]
+from piste import _lazy_exports
+
+# every name is imported when first asked for (PEP 562; tests/test_lazy_imports.py)
+__all__, __getattr__, __dir__ = _lazy_exports(__name__, {
+    "context": ("create_context", "Offscreen", "save_png", "set_depth_write"),
+    "textures": ("mip_chain", "mipmapped_texture", "MipLevels", "track_field", "snow_texture", "placeholder_lightmap",
+                 "lightmap_atlas_size", "LOD_COLORS"),
+    "frame": ("TerrainRenderer", "Frame", "summarize", "cull_boxes"),
+    "scene_renderer": ("SceneRenderer", "SceneImage", "summarize_scene"),
+    "video": ("VideoWriter",),
+    "terrain_pass": ("TerrainPass", "LIGHTMAP_MODES", "DEBUG_VIEWS"),
+    "sky_pass": ("SkyPass",),
+    "streaming": ("StreamingRenderer", "TileCache", "render_flight"),
+})
+
+if TYPE_CHECKING:  # the same names, eagerly, for type checkers and the import graph
+    from piste.render.context import Offscreen, create_context, save_png, set_depth_write  # noqa: F401
+    from piste.render.frame import Frame, TerrainRenderer, cull_boxes, summarize  # noqa: F401
+    from piste.render.scene_renderer import SceneImage, SceneRenderer, summarize_scene  # noqa: F401
+    from piste.render.sky_pass import SkyPass  # noqa: F401
+    from piste.render.terrain_pass import DEBUG_VIEWS, LIGHTMAP_MODES, TerrainPass  # noqa: F401
+    from piste.render.textures import LOD_COLORS, MipLevels, lightmap_atlas_size, mip_chain, mipmapped_texture, placeholder_lightmap, snow_texture, track_field  # noqa: F401
+    from piste.render.video import VideoWriter  # noqa: F401
+    from piste.render.streaming import StreamingRenderer, TileCache, render_flight  # noqa: F401
