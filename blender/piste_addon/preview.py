@@ -31,6 +31,7 @@ class _State:
     last_frame: str | None = None
     exports = 0
     error: str | None = None
+    log: Path | None = None
 
 
 state = _State()
@@ -124,9 +125,19 @@ def tick(force: bool = False) -> float | None:
         state.dirty_since = None
         print(f"piste preview: {exc}")
     if state.proc is not None and state.proc.poll() is not None:
+        if state.proc.returncode not in (0, -15):  # said in the panel: piste's last line (its one-line error)
+            state.error = f"piste view stopped: {_log_tail()}"
         stop()
         return None
     return 0.1
+
+
+def _log_tail() -> str:
+    try:
+        lines = [ln for ln in Path(state.log).read_text(errors="replace").splitlines() if ln.strip()]
+    except (OSError, TypeError):
+        return "see preview.log"
+    return lines[-1] if lines else "no output"
 
 
 def start(context, headless: bool | None = None, frames: int | None = None, seconds: float | None = None):
@@ -153,8 +164,8 @@ def start(context, headless: bool | None = None, frames: int | None = None, seco
         args += ["--frames", str(frames)]
     if seconds is not None:
         args += ["--watch-seconds", str(seconds)]
-    state.last_frame = None
-    state.proc = start_piste(exe, args, path.parent / "preview.log")
+    state.last_frame, state.error, state.log = None, None, path.parent / "preview.log"
+    state.proc = start_piste(exe, args, state.log)
     if _on_depsgraph not in bpy.app.handlers.depsgraph_update_post:
         bpy.app.handlers.depsgraph_update_post.append(_on_depsgraph)
         bpy.app.handlers.save_post.append(_on_save)

@@ -97,6 +97,8 @@ class PISTE_PT_actions(_Panel, bpy.types.Panel):
             col.operator("piste.preview_stop", icon="CANCEL")
         else:
             col.operator("piste.preview", icon="PLAY")
+        if preview.state.error:
+            col.label(text=preview.state.error[:160], icon="ERROR")
         col.prop(context.scene.piste, "preview_camera")
         col.prop(context.scene.piste, "preview_debounce")
         col.separator()

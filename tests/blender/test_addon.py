@@ -142,6 +142,17 @@ def _blender() -> str:
     return exe
 
 
+def test_missing_blender_fails_under_require_tools(monkeypatch):
+    """Without Blender the Blender tests skip, or fail with PISTE_REQUIRE_TOOLS=1 (CI)."""
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    monkeypatch.setenv("PISTE_REQUIRE_TOOLS", "1")
+    with pytest.raises(pytest.fail.Exception, match="PISTE_REQUIRE_TOOLS=1 but blender is not installed"):
+        _blender()
+    monkeypatch.setenv("PISTE_REQUIRE_TOOLS", "0")
+    with pytest.raises(pytest.skip.Exception):
+        _blender()
+
+
 def _run_blender(exe, cfg: dict, work: Path, name: str) -> dict:
     cfg = dict(cfg, result=str(work / f"{name}.json"))
     path = work / f"{name}_config.json"
