@@ -99,8 +99,52 @@ def build_scene():
     return terrain, lights
 
 
+class FakeLayout:
+    """Stands in for a panel's layout (no UI in background mode): every prop must exist, every operator be registered."""
+
+    def __init__(self, seen):
+        self.seen = seen
+
+    def prop(self, data, name, **kw):
+        assert name in data.bl_rna.properties, f"{type(data).__name__} has no property {name!r}"
+        self.seen.append(name)
+
+    def operator(self, idname, **kw):
+        mod, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, mod), name) and getattr(getattr(bpy.ops, mod), name).get_rna_type(), idname
+        self.seen.append(idname)
+
+    def column(self, **kw):
+        return self
+
+    row = box = column
+
+    def label(self, **kw):
+        pass
+
+    def separator(self, **kw):
+        pass
+
+
+def draw_panels():
+    """Draw the three panels for each kind of active object and each terrain mode (what they show)."""
+    from piste_addon import ui
+    seen = []
+    sc = bpy.context.scene
+    for mode in ("OBJECT", "FILE", "DEFAULT"):
+        sc.piste.terrain_mode = mode
+        ui.PISTE_PT_scene.draw(type("P", (), {"layout": FakeLayout(seen)})(), bpy.context)
+    sc.piste.terrain_mode = "OBJECT"
+    for name in ("Terrain", "lead", "hut1", "Sun", "Sky", "Shadow", "Overview"):
+        bpy.context.view_layer.objects.active = bpy.data.objects[name]
+        ui.PISTE_PT_object.draw(type("P", (), {"layout": FakeLayout(seen)})(), bpy.context)
+    ui.PISTE_PT_actions.draw(type("P", (), {"layout": FakeLayout(seen)})(), bpy.context)
+    result["panel_items"] = sorted(set(seen))
+
+
 def step_scene():
     build_scene()
+    draw_panels()
     assert bpy.ops.piste.export() == {"FINISHED"}
     result["toml"] = bpy.context.scene["piste_last_export"]
 

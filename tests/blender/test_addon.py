@@ -255,6 +255,18 @@ def test_export_builds_and_renders_like_the_hand_written_scene(authored):
         both.save(Path(shots) / "blender_and_piste.png", optimize=True)
 
 
+def test_the_panels_show_the_settings(authored):
+    """The sidebar's panels draw (each terrain mode, each object role) with properties that exist and
+    operators that are registered, covering the scene's settings and the objects' roles."""
+    work, res = authored
+    items = set(res["panel_items"])
+    assert {"terrain_object", "terrain_file", "seed", "lod_preset", "lightmap_res", "fog_mode", "visibility_band",
+            "ambient_intensity"} <= items
+    assert {"role", "model", "clip", "phase", "clips_from", "light_kind", "negative", "piste_intensity",
+            "piste_range"} <= items
+    assert {"piste.export", "piste.preview", "piste.import_file", "piste.ssx_write_back"} <= items
+
+
 def test_preview_reloads_on_a_change(authored):
     """The preview exports, starts `piste view --headless`, shows frame 0; moving the sun marks the
     scene dirty, the debounced timer re-exports once, the view writes frame 1 (a different image)
