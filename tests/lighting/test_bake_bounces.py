@@ -197,8 +197,6 @@ def test_embree_tracer_agrees_with_the_exact_one(valley):
     em = bake_lightmap(net, lights, res=RES, bounces=2, gather_rays=16, tracer="embree")
     assert em.manifest["gi"]["tracer"] == "embree" and "tracer" not in exact.manifest["gi"]
     assert em.manifest["key"] != exact.manifest["key"]
-    # the rays leaving the valley's folds meet the other face at once: traced again exactly
-    assert em.stats["gather_exact_again"] > 0
     assert em.stats["gather_rays"] == exact.stats["gather_rays"]
     assert abs(em.stats["gather_escaped"] - exact.stats["gather_escaped"]) <= 1e-3 * exact.stats["gather_rays"]
     d = np.abs(em.atlas - exact.atlas)
@@ -229,3 +227,17 @@ def test_scene_build_bakes_with_the_lightmap_keys(tmp_path):
     scene.write_text(text.format(keys=""))
     again = build_scene(scene)  # back to the plain keys: the first bake, from the cache
     assert "lightmap" in again.cached and again.path.read_bytes() == first
+
+
+def test_embree_tracer_on_a_curved_net():
+    """Chords stray from curved patches: the lifted origins keep Embree's light close to the exact
+    tracer's, far closer than the bounce light itself."""
+    pytest.importorskip("embreex")
+    net = hill_net(3, 3, relief=-15.0)  # a deep bowl
+    lights = Lights((AmbientLight((0.4, 0.5, 0.7), 0.5), DirectionalLight((0.5, 0.2, -0.6))))
+    plain = bake_lightmap(net, lights, res=RES)
+    exact = bake_lightmap(net, lights, res=RES, bounces=1, gather_rays=16)
+    em = bake_lightmap(net, lights, res=RES, bounces=1, gather_rays=16, tracer="embree")
+    gi = np.abs(exact.atlas - plain.atlas).mean()
+    assert gi > 0.02, gi
+    assert np.abs(em.atlas - exact.atlas).mean() < 0.1 * gi

@@ -110,7 +110,7 @@ def _bake_chunk(chunk: int) -> tuple[int, np.ndarray, dict]:
         if "embree" not in s:  # once per process (the tessellation and Embree's BVH)
             s["embree"] = EmbreeGather(s["net"])
         tracer = s["embree"]
-    h = gather_hits(s["net"], pos, nrm, ids, rays, s["seed"], stats=stats, tracer=tracer)
+    h = gather_hits(s["net"], pos, nrm, ids, rays, s["seed"], stats=stats, tracer=tracer, patches=ids // (res * res))
     out = np.concatenate([direct_light(lights, pos, nrm, shadow), h.patch, h.u, h.v], axis=1).astype(np.float32)
     return chunk, out.reshape(hi - lo, res, res, 3 + 3 * rays), stats
 

@@ -29,8 +29,8 @@ deterministic.
 
 Tracers: ``"exact"`` (the default) hit-tests the exact bicubic patches; ``"embree"`` (Intel Embree
 through ``embreex``, the ``bench`` extra) the net tessellated at 16 vertices a side, a hit's patch
-parameters interpolated from its triangle's corners, and every hit nearer than 32 chord errors is
-traced again the exact way (a ray leaving a concave surface can hit the chords above its own
+parameters interpolated from its triangle's corners, each ray's origin lifted off the surface by
+twice its patch's chord error (a ray leaving a concave surface would meet the chords above its
 origin).  The two give slightly different light maps (each deterministic), so the tracer is part
 of a bake's inputs (its key and manifest), never chosen by what happens to be installed.
 
@@ -108,9 +108,9 @@ class EmbreeGather:
     """Closest hits of rays on ``net`` tessellated at ``level`` vertices a side, through Embree.
 
     ``hits(origins (k, 3), directions (k, 3))`` -> ``patch (k,) int64`` (-1: no hit), ``u, v (k,)``
-    float64 patch parameters, ``t (k,)`` float64, ``front (k,) bool`` (the ray meets the patch's
-    normal side).  :attr:`near`: 32 times the tessellation's largest chord error (the baker traces
-    hits nearer than this again on the exact surface)."""
+    float64 patch parameters, ``front (k,) bool`` (the ray meets the patch's normal side).
+    :attr:`patch_chord`: how far each patch's triangles stray from it (callers lift ray origins by
+    twice that: a ray leaving a concave surface would otherwise meet the chords above its origin)."""
 
     def __init__(self, net, level: int = 16):
         try:
@@ -127,8 +127,10 @@ class EmbreeGather:
         cpar = self.param[self.tris].mean(axis=1)
         tp = self.vpatch[self.tris[:, 0]]
         exact = _eval_at(net, tp, cpar[:, 0], cpar[:, 1])
-        chord = float(np.linalg.norm(exact - pos[self.tris].mean(axis=1), axis=1).max()) if len(tp) else 0.0
-        self.near = 32.0 * chord
+        chord = np.linalg.norm(exact - pos[self.tris].mean(axis=1), axis=1)
+        #: (n,) float64: each patch's largest chord error (at its triangles' centroids), model units
+        self.patch_chord = np.zeros(len(net))
+        np.maximum.at(self.patch_chord, tp, chord)
         self.scene = EmbreeScene()
         TriangleMesh(self.scene, np.ascontiguousarray(pos, dtype=np.float32), np.ascontiguousarray(self.tris, dtype=np.int32))
 
@@ -144,8 +146,7 @@ class EmbreeGather:
         par = (1.0 - bu - bv) * self.param[tri[:, 0]] + bu * self.param[tri[:, 1]] + bv * self.param[tri[:, 2]]
         patch = np.where(hit, self.vpatch[tri[:, 0]], -1)
         front = (np.asarray(r["Ng"], dtype=np.float64) * np.asarray(directions, dtype=np.float64)).sum(1) < 0.0
-        t = np.where(hit, np.asarray(r["tfar"], dtype=np.float64), np.inf)
-        return patch, np.clip(par[:, 0], 0.0, 1.0), np.clip(par[:, 1], 0.0, 1.0), t, front
+        return patch, np.clip(par[:, 0], 0.0, 1.0), np.clip(par[:, 1], 0.0, 1.0), front
 
 
 def _eval_at(net, patch, u, v) -> np.ndarray:
@@ -175,13 +176,14 @@ class GatherHits:
 
 
 def gather_hits(net, positions, normals, ids, rays: int = DEFAULT_GATHER_RAYS, seed: int = 0,
-                batch: int = 4096, stats: dict | None = None, tracer: EmbreeGather | None = None) -> GatherHits:
+                batch: int = 4096, stats: dict | None = None, tracer: EmbreeGather | None = None,
+                patches=None) -> GatherHits:
     """Cast every sample's cosine-weighted gather rays against the exact surface (or through
-    ``tracer``, an :class:`EmbreeGather` of the net, with near hits traced again exactly).
+    ``tracer``, an :class:`EmbreeGather` of the net: origins lifted by twice their patch's chord
+    error, ``patches (k,)`` each sample's patch).
 
     positions, normals : (k, 3) float64; ids : (k,) global sample indices (jitter counters).
-    ``stats`` (optional dict) gets ``gather_rays`` and ``gather_escaped`` added (and
-    ``gather_exact_again`` with a tracer)."""
+    ``stats`` (optional dict) gets ``gather_rays`` and ``gather_escaped`` added."""
     pos = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     ids = np.asarray(ids)
@@ -194,16 +196,13 @@ def gather_hits(net, positions, normals, ids, rays: int = DEFAULT_GATHER_RAYS, s
     for lo in range(0, k, step):
         hi = min(lo + step, k)
         d = cosine_directions(nrm[lo:hi], ids[lo:hi], rays, seed).reshape(-1, 3)
-        o = np.repeat(pos[lo:hi] + eps * nrm[lo:hi], rays, axis=0)
         if tracer is None:
+            o = np.repeat(pos[lo:hi] + eps * nrm[lo:hi], rays, axis=0)
             p, hu, hv, front = _exact_hits(net, o, d, eps)
         else:
-            p, hu, hv, t, front = tracer.hits(o, d)
-            again = np.flatnonzero(t < tracer.near)
-            if len(again):
-                p[again], hu[again], hv[again], front[again] = _exact_hits(net, o[again], d[again], eps)
-            if stats is not None:
-                stats["gather_exact_again"] = stats.get("gather_exact_again", 0) + len(again)
+            lift = eps + 2.0 * tracer.patch_chord[np.asarray(patches)[lo:hi]]
+            o = np.repeat(pos[lo:hi] + lift[:, None] * nrm[lo:hi], rays, axis=0) + eps * d  # (Embree has no t_min)
+            p, hu, hv, front = tracer.hits(o, d)
         p = np.where((p >= 0) & ~front, -2, p)
         patch[lo:hi] = p.reshape(hi - lo, rays)
         u[lo:hi] = hu.reshape(hi - lo, rays)
