@@ -71,6 +71,9 @@ def _copy_asset(src, out: Path, siblings=()) -> str:
         for item in doc.get("buffers", []) + doc.get("images", []):
             uri = item.get("uri", "")
             if uri and not uri.startswith("data:"):
+                if Path(uri).is_absolute() or ".." in Path(uri).parts or "%" in uri:
+                    raise ValueError(f"{src}: buffer/image uri {uri!r} is not a plain path beside the file "
+                                     "(piste reads only files inside the model's folder): export it as .glb")
                 dst = assets / uri
                 dst.parent.mkdir(parents=True, exist_ok=True)
                 write_if_changed(dst, (src.parent / uri).read_bytes())
