@@ -48,13 +48,19 @@ from piste.formats.atomic import atomic_path
 from piste.formats.bundle_schema import MAX_MEMBER_BYTES, check_manifest
 from piste.formats.safe_io import loads_json, open_file
 
-__all__ = ["BUNDLE_FORMAT", "REQUIRED_MEMBERS", "write_bundle", "read_bundle", "read_manifest", "BundleData",
+__all__ = ["BUNDLE_FORMAT", "REQUIRED_MEMBERS", "TOPOLOGY_MEMBERS", "write_bundle", "read_bundle", "read_manifest", "BundleData",
            "camera_to_dict", "load_bundle"]
 
 BUNDLE_FORMAT = "piste.bundle/1"
 _EPOCH = (1980, 1, 1, 0, 0, 0)
 #: members every bundle has (the terrain and its light map)
 REQUIRED_MEMBERS = ("terrain/control_points", "terrain/uv", "lightmap/atlas", "lightmap/rects")
+#: the terrain net's topology as the build stores it (``manifest.terrain.topology`` = 1; older bundles
+#: have none and the load computes it): member -> (dtype, ndim, length of the last axis or None).
+#: The same arrays as :data:`piste.terrain.net.TOPOLOGY_ARRAYS` (tests/formats/test_bundle_topology.py)
+TOPOLOGY_MEMBERS = {"terrain/side_edge": ("<i4", 2, 4), "terrain/side_flip": ("|b1", 2, 4),
+                    "terrain/edge_patches": ("<i4", 2, 2), "terrain/edge_sides": ("<i4", 2, 2),
+                    "terrain/edge_degenerate": ("|b1", 1, None), "terrain/corner_ids": ("<i4", 2, 4)}
 
 
 def _npy_bytes(arr: np.ndarray) -> bytes:
@@ -206,7 +212,26 @@ def read_bundle(path, verify: bool = True) -> BundleData:
     for need in REQUIRED_MEMBERS:
         if need not in arrays:
             raise FormatError(path, "required member is missing", field=f"{need}.npy")
+    _check_topology_members(path, man, arrays)
     return BundleData(path, man, arrays)
+
+
+def _check_topology_members(path: Path, man: dict, arrays: dict) -> None:
+    """A bundle whose manifest says it stores the terrain's topology (``terrain.topology``) has every
+    member of :data:`TOPOLOGY_MEMBERS`, each of its dtype and shape (``(n, 4)`` per patch)."""
+    if not (man.get("terrain") or {}).get("topology"):
+        return
+    n = len(arrays["terrain/control_points"])
+    for name, (dtype, ndim, last) in TOPOLOGY_MEMBERS.items():
+        a = arrays.get(name)
+        if a is None:
+            raise FormatError(path, "member missing (the manifest's terrain.topology says the build stored it)",
+                              field=f"{name}.npy")
+        per_patch = last == 4
+        if a.dtype.str != dtype or a.ndim != ndim or (last is not None and a.shape[-1] != last) \
+                or (per_patch and a.shape[0] != n):
+            want = f"({n}, 4)" if per_patch else ("(e, 2)" if last == 2 else "(e,)")
+            raise FormatError(path, f"expected a {want} {dtype} array, got {a.shape} {a.dtype.str}", field=f"{name}.npy")
 
 
 def load_bundle(path, verify: bool = True) -> BundleData:

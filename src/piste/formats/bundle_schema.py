@@ -48,7 +48,7 @@ LIGHT = obj(name=STR, color=arr(NUM, 3), intensity=NUM, direction=arr(NUM, 3), p
 SCHEMA = obj(
     name=STR,
     members=mapping(obj(shape=arr(UINT), dtype=STR, sha256=STR)),
-    terrain=obj(name=STR, tol=NUM_OR_NULL, patches=UINT),
+    terrain=obj(name=STR, tol=NUM_OR_NULL, patches=UINT, topology=POS),
     lightmap=obj(res=POS, gutter=UINT),
     lights=obj(ambient=arr(LIGHT), directional=arr(LIGHT), point=arr(LIGHT), spot=arr(LIGHT)),
     cameras=arr(obj(name=STR, eye=arr(NUM, 3), target=arr(NUM, 3), up=arr(NUM, 3), fov_y=POSNUM, near=POSNUM,

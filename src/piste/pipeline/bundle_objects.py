@@ -31,7 +31,7 @@ from piste.lighting.lights import AmbientLight, DirectionalLight, Lights, PointL
 from piste.lighting.vertex import choose_lights_many
 from piste.pipeline.characters import lods_from_arrays, model_from_arrays
 from piste.pipeline.visibility import Visibility
-from piste.terrain.net import PatchNet
+from piste.terrain.net import TOPOLOGY_ARRAYS, TOPOLOGY_FORMAT, PatchNet
 from piste.terrain.resident import resident_fits, resident_terrain
 from piste.world.camera import Camera
 from piste.world.objects import CompressedMesh, ObjectSet, normal_matrix
@@ -212,11 +212,19 @@ def bundle_from_data(data: BundleData, warm: bool = False) -> Bundle:
     building its GPU-resident vertex blocks in the background (for a renderer about to draw it)."""
     path, man, arrays = data.path, data.manifest, data.arrays
     t = man.get("terrain", {})
+    kw = dict(uv=arrays["terrain/uv"], lightmap_rect=arrays["lightmap/rects"], tol=t.get("tol"),
+              name=t.get("name", "terrain"))
+    topo = None  # the topology the build stored (read_bundle checked its members), else computed here
+    if t.get("topology") == TOPOLOGY_FORMAT:
+        topo = {k: arrays[f"terrain/{k}"] for k in TOPOLOGY_ARRAYS}
     try:
-        net = PatchNet(arrays["terrain/control_points"], uv=arrays["terrain/uv"], lightmap_rect=arrays["lightmap/rects"],
-                       tol=t.get("tol"), name=t.get("name", "terrain"))
+        net = (PatchNet(arrays["terrain/control_points"], **kw) if topo is None else
+               PatchNet.from_topology(arrays["terrain/control_points"], topo, **kw))
     except Exception as exc:
-        raise FormatError(path, f"invalid terrain ({exc})", field="terrain/control_points.npy") from None
+        member = "control_points"
+        if topo is not None and "stored topology " in str(exc):
+            member = str(exc).split("stored topology ", 1)[1].split(":", 1)[0]
+        raise FormatError(path, f"invalid terrain ({exc})", field=f"terrain/{member}.npy") from None
     if warm and resident_fits(net):  # overlaps the rest of the load and the renderer's set-up
         resident_terrain(net, wait=False)
     lm_info = man.get("lightmap", {})

@@ -20,6 +20,7 @@ edges are exactly equal in both patches (the basis of bit-identical, crack-free 
 from __future__ import annotations
 
 import logging
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -53,6 +54,14 @@ SIDE_NAMES = ("v=0", "u=1", "v=1", "u=0")
 #: relative gap (of the edge chord) under which two sides with welded end points are taken as one
 #: shared edge that fails C0, rather than two distinct open edges
 C0_NEAR_MISS = 0.05
+#: the stored form of a net's topology (:meth:`PatchNet.topology`): array name -> (dtype, shape)
+TOPOLOGY_ARRAYS = {"side_edge": ("int32", ("n", 4)), "side_flip": ("bool", ("n", 4)),
+                   "edge_patches": ("int32", ("e", 2)), "edge_sides": ("int32", ("e", 2)),
+                   "edge_degenerate": ("bool", ("e",)), "corner_ids": ("int32", ("n", 4))}
+#: version of that form (a bundle's ``terrain.topology``; another value is recomputed on load)
+TOPOLOGY_FORMAT = 1
+#: the topology :meth:`PatchNet.from_topology` hands to ``__post_init__`` (per thread)
+_STORED_TOPOLOGY = threading.local()
 _BOUNDARY = np.zeros((4, 4), dtype=bool)
 _BOUNDARY[[0, 3], :] = True
 _BOUNDARY[:, [0, 3]] = True
@@ -198,9 +207,99 @@ class PatchNet:
             self.lightmap_rect = default_lightmap_rects(n, 8)
         self.lightmap_rect = np.asarray(self.lightmap_rect, dtype=np.float32).reshape(n, 4)
         self.control_points = cp
-        self._build_topology()
+        stored = getattr(_STORED_TOPOLOGY, "value", None)
+        if stored is not None:  # PatchNet.from_topology: checked, not recomputed
+            self._set_topology(stored)
+        else:
+            self._build_topology()
 
     # ------------------------------------------------------------------ topology
+    def topology(self) -> dict[str, np.ndarray]:
+        """The computed topology as arrays (what a bundle stores so a load need not weld again):
+        ``side_edge (n, 4) int32, side_flip (n, 4) bool, edge_patches (e, 2) int32, edge_sides (e, 2)
+        int32, edge_degenerate (e,) bool, corner_ids (n, 4) int32`` (``edge_cp`` follows from them).
+        :meth:`from_topology` reads them back; format :data:`TOPOLOGY_FORMAT`."""
+        return {k: getattr(self, k) for k in TOPOLOGY_ARRAYS}
+
+    @classmethod
+    def from_topology(cls, control_points, topology: dict, uv=None, lightmap_rect=None, tol=None,
+                      name: str = "net") -> "PatchNet":
+        """A net whose topology is given (:meth:`topology` of the same, already welded, control
+        points) instead of computed: the welding and edge matching (~0.1 s at 2.5k patches) are
+        skipped, the arrays are checked instead (shapes, dtypes, index ranges, every side on exactly
+        one edge, the two sides of every shared edge bit-identical, welded corners equal).  Raises
+        :class:`~piste.errors.ValidationError` naming the array when they do not describe these
+        control points; the result is the same net as ``PatchNet(control_points, ...)``."""
+        _STORED_TOPOLOGY.value = topology
+        try:
+            return cls(control_points, uv=uv, lightmap_rect=lightmap_rect, tol=tol, name=name)
+        finally:
+            _STORED_TOPOLOGY.value = None
+
+    def _set_topology(self, topo: dict) -> None:
+        """Take a stored topology after checking it against the control points (vectorised)."""
+        cp = self.control_points
+        n = len(cp)
+
+        def bad(key, why):
+            return ValidationError(f"{self.name}: stored topology {key}: {why}")
+
+        if not isinstance(topo, dict):
+            raise bad("", f"expected a dict of arrays, got {type(topo).__name__}")
+        a = {}
+        for key, (dtype, shape) in TOPOLOGY_ARRAYS.items():
+            if key not in topo:
+                raise bad(key, "missing")
+            v = np.asarray(topo[key])
+            if v.dtype != np.dtype(dtype) or v.ndim != len(shape):
+                raise bad(key, f"expected {dtype} of {len(shape)} dimensions, got {v.dtype} {v.shape}")
+            a[key] = v
+        e = len(a["edge_patches"])
+        want = {"side_edge": (n, 4), "side_flip": (n, 4), "corner_ids": (n, 4), "edge_patches": (e, 2),
+                "edge_sides": (e, 2), "edge_degenerate": (e,)}
+        for key, shape in want.items():
+            if a[key].shape != shape:
+                raise bad(key, f"expected shape {shape}, got {a[key].shape}")
+        ep, es, se = a["edge_patches"].astype(np.int64), a["edge_sides"].astype(np.int64), a["side_edge"]
+        used = ep >= 0
+        if e == 0 or not used[:, 0].all() or (ep >= n).any() or (ep < -1).any():
+            raise bad("edge_patches", f"expected patch ids in [0, {n}) (the second may be -1)")
+        if ((es < 0) != ~used).any() or (es > 3).any():
+            raise bad("edge_sides", "expected sides 0..3 where edge_patches has a patch, -1 elsewhere")
+        if (se < 0).any() or (se >= e).any():
+            raise bad("side_edge", f"expected edge ids in [0, {e})")
+        slots = (ep * 4 + es)[used]  # every (patch, side) exactly once
+        if len(slots) != 4 * n or (np.bincount(slots, minlength=4 * n) != 1).any():
+            raise bad("edge_patches", "every patch side must lie on exactly one edge")
+        if (se.ravel()[slots] != np.broadcast_to(np.arange(e)[:, None], (e, 2))[used]).any():
+            raise bad("side_edge", "does not match edge_patches / edge_sides")
+        cid = a["corner_ids"].astype(np.int64)
+        if (cid < 0).any() or (cid >= 12 * n).any():
+            raise bad("corner_ids", f"expected point ids in [0, {12 * n})")
+        flip = a["side_flip"]
+        ends = cid[:, SIDE_CORNERS]  # (n, 4, 2) ids at each side's start and end
+        open_side = ends[..., 0] != ends[..., 1]  # the canonical direction runs from the lower id
+        if (flip[open_side] != (ends[..., 0] > ends[..., 1])[open_side]).any():
+            raise bad("side_flip", "does not run each edge from its lower to its higher corner id")
+        pts = cp[:, SIDE_INDEX[..., 0], SIDE_INDEX[..., 1]].reshape(n * 4, 4, 3)  # (4n, 4, 3) in each side's direction
+        canon = np.where(flip.reshape(-1)[:, None, None], pts[:, ::-1], pts)
+        first = canon[ep[:, 0] * 4 + es[:, 0]]  # (e, 4, 3)
+        two = used[:, 1]
+        if (canon[(ep[two, 1] * 4 + es[two, 1])] != first[two]).any():
+            raise bad("edge_patches", "the two sides of a shared edge differ (not the welded control points)")
+        deg = a["edge_degenerate"]
+        if (deg & two).any() or (deg & ~(first == first[:, :1]).all(axis=(1, 2))).any():
+            raise bad("edge_degenerate", "a degenerate edge must have one side and four equal points")
+        cid = cid.ravel()
+        corners = cp[:, CORNER_INDEX[:, 0], CORNER_INDEX[:, 1]].reshape(-1, 3)
+        rep = np.full(int(cid.max()) + 1, -1, dtype=np.int64)
+        rep[cid[::-1]] = np.arange(len(cid))[::-1]  # the first corner of each id
+        if (corners != corners[rep[cid]]).any():
+            raise bad("corner_ids", "corners with one id are not the same point")
+        self.side_edge, self.side_flip, self.corner_ids = se, flip, a["corner_ids"]
+        self.edge_patches, self.edge_sides, self.edge_degenerate = a["edge_patches"], a["edge_sides"], deg
+        self.edge_cp = np.ascontiguousarray(first)
+
     def _build_topology(self) -> None:
         cp = self.control_points
         n = len(cp)
