@@ -26,8 +26,11 @@ extensions = [
     "sphinx.ext.napoleon",
     "sphinx.ext.viewcode",
     "sphinx_gallery.gen_gallery",
+    "myst_parser",  # the user guide (docs/guide/*.md)
     "piste_docs",
 ]
+source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
+myst_heading_anchors = 3
 
 templates_path = []
 exclude_patterns = ["_build", "auto_examples/*.ipynb", "auto_examples/*.py", "auto_examples/*.zip"]
@@ -41,12 +44,17 @@ html_theme_options = {
 }
 
 autosummary_generate = True
-autodoc_default_options = {"members": True, "show-inheritance": True}
+# a package page documents what the package defines, not again what it re-exports from its modules
+# (each object is described once, on its module's page, so cross-references are not ambiguous)
+autodoc_default_options = {"members": True, "show-inheritance": True, "ignore-module-all": True}
 autodoc_typehints = "description"
 autodoc_mock_imports = []
 napoleon_numpy_docstring = True
 napoleon_google_docstring = False
-suppress_warnings = ["autosummary.import_cycle"]
+# config.cache: sphinx-gallery's configuration holds functions (rebuilt every time, no harm);
+# ref.python: numpydoc field names ("vertices : int") that several classes also have as attributes
+# are ambiguous as cross-references (Sphinx links the first; nothing is broken)
+suppress_warnings = ["autosummary.import_cycle", "config.cache", "ref.python"]
 
 # Every example in examples/ is a gallery page; its pictures are the PNGs it writes into
 # $PISTE_EXAMPLE_OUT (collected by piste_docs.example_scraper), and it still runs as a test.

@@ -1,4 +1,7 @@
-"""Fit a Bézier patch net to a real DEM and report how well it fits.
+"""Fit a patch net to a real DEM
+=============================
+
+Fit a Bézier patch net to a real DEM and report how well it fits.
 
 Usage: python examples/01_fit_dem.py [samples_per_patch]
 

@@ -1,4 +1,7 @@
-"""Load a glTF 2.0 character and print its skeleton, clips and morph targets.
+"""Load a glTF character
+=====================
+
+Load a glTF 2.0 character and print its skeleton, clips and morph targets.
 
 Usage: python examples/02_load_gltf.py [path/to/model.glb]
 (default: RobotExpressive from ../shared/data/gltf, or CesiumMan, whichever is found; set

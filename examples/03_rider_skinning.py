@@ -1,4 +1,7 @@
-"""Build the default rider, skin one frame three ways, and show what SSX Tricky's palette costs.
+"""Skin the default rider three ways
+=================================
+
+Build the default rider, skin one frame three ways, and show what SSX Tricky's palette costs.
 
 Usage: python examples/03_rider_skinning.py [clip] [time]
 Prints the palette size and error of the blended scheme per weight step, the post-transform

@@ -1,4 +1,7 @@
-"""Render one frame of the default course three ways: lit (modulate), lit with the PS2's two-pass
+"""Render a frame of the default course
+====================================
+
+Render one frame of the default course three ways: lit (modulate), lit with the PS2's two-pass
 light-map blend, and the LOD view (patches coloured 4x4 green, 6x6 yellow, 8x8 red, glue blue).
 
 Usage: python examples/04_render_frame.py [t]   (t: camera position along the track, 0..1)

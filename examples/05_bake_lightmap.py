@@ -1,4 +1,7 @@
-"""Bake per-patch light maps with terrain shadows, look lighting up from the atlas, and apply the
+"""Bake light maps with terrain shadows
+====================================
+
+Bake per-patch light maps with terrain shadows, look lighting up from the atlas, and apply the
 PS2 blend trick.
 
 Bakes a small net (a ridge on a slope, 36 patches) under a low sun, a sky ambient, a lamp and a

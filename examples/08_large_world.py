@@ -1,4 +1,7 @@
-"""A large world in miniature: a GeoTIFF DEM, a tiled build (locally and on a Dask LocalCluster),
+"""A large world in miniature
+==========================
+
+A large world in miniature: a GeoTIFF DEM, a tiled build (locally and on a Dask LocalCluster),
 and a streamed flight across it.
 
 Writes ``dem.tif`` (a synthetic range, 10 m pixels, georeferenced in UTM metres, with a block of

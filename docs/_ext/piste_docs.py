@@ -81,7 +81,7 @@ def formats_rst() -> str:
             importlib.import_module(module)
         except ImportError:
             continue
-        lines += [title, "-" * len(title), "", f".. automodule:: {module}", "   :no-members:", "",
+        lines += [title, "-" * len(title), "", f".. automodule:: {module}", "   :no-members:", "   :no-index:", "",
                   f"API: :mod:`{module}`.", ""]
     return "\n".join(lines) + "\n"
 

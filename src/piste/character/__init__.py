@@ -2,19 +2,21 @@
 
 Public API
 ----------
-Model, Skeleton, Pose, Track, Clip, SkinnedMesh, Light, Camera   data classes (model.py)
-Skeleton.world_matrices(pose), Clip.sample(t, skeleton=None, loop=False, retarget=None)
-compress_clip(clip, skeleton, max_error, virtual_distance) -> CompressedClip   (compress.py)
-compression_report(model), clip_error(a, b, skeleton, virtual_distance)
-blend_morphs(mesh, weights), morphs_to_null_bones(mesh, n_bones), morph_report  (morph.py)
-skin(mesh, bone_matrices, scheme="exact"|"post_transform"|"blended", step, max_bones),
-PostTransformMesh, BlendedMesh, skinning_report(model, steps)                   (skinning.py)
-palette(mesh, step, max_bones) -> Palette, quantize_weights                     (palette.py)
-make_batches, batch_mesh, check_batches, frame_bytes, Budget, BUDGETS           (batches.py)
-stripify, unstripify, strip_stats                                               (strips.py)
-make_lods, simplify_mesh, LOD                                                   (lod.py)
-default_rider(seed=0) -> Model                                                  (rider.py)
-retarget_clip(clip, skeleton, bone_map="builtin"|{src: dst}), builtin_bone_map, bone_roles (retarget.py)
+::
+
+    Model, Skeleton, Pose, Track, Clip, SkinnedMesh, Light, Camera   data classes (model.py)
+    Skeleton.world_matrices(pose), Clip.sample(t, skeleton=None, loop=False, retarget=None)
+    compress_clip(clip, skeleton, max_error, virtual_distance) -> CompressedClip   (compress.py)
+    compression_report(model), clip_error(a, b, skeleton, virtual_distance)
+    blend_morphs(mesh, weights), morphs_to_null_bones(mesh, n_bones), morph_report  (morph.py)
+    skin(mesh, bone_matrices, scheme="exact"|"post_transform"|"blended", step, max_bones),
+    PostTransformMesh, BlendedMesh, skinning_report(model, steps)                   (skinning.py)
+    palette(mesh, step, max_bones) -> Palette, quantize_weights                     (palette.py)
+    make_batches, batch_mesh, check_batches, frame_bytes, Budget, BUDGETS           (batches.py)
+    stripify, unstripify, strip_stats                                               (strips.py)
+    make_lods, simplify_mesh, LOD                                                   (lod.py)
+    default_rider(seed=0) -> Model                                                  (rider.py)
+    retarget_clip(clip, skeleton, bone_map="builtin"|{src: dst}), builtin_bone_map, bone_roles (retarget.py)
 
 glTF import is :func:`piste.formats.load_gltf` (the format layer builds these data classes; the
 character layer does not import the formats).

@@ -13,12 +13,14 @@ Every triangle ends in exactly one batch and every batch is within budget (check
 
 API
 ---
-- ``Budget(max_matrices, max_vertices, name)``; ``BUDGETS``: ``ps2`` (25, 55), ``gpu256``
-  (256 matrices, 65,536 vertices), ``gpu64`` (64, 65,536)
-- ``make_batches(indices, vertex_matrices, budget="ps2") -> list[Batch]``
-- ``batch_mesh(mesh, budget="ps2", step=0.25, max_bones=3, palette=None) -> list[Batch]``
-- ``check_batches(batches, indices, vertex_matrices, budget)``: raises ValidationError if broken
-- ``frame_bytes(batches, matrix_bytes=48, vertex_bytes=32) -> dict``
+::
+
+    - ``Budget(max_matrices, max_vertices, name)``; ``BUDGETS``: ``ps2`` (25, 55), ``gpu256``
+      (256 matrices, 65,536 vertices), ``gpu64`` (64, 65,536)
+    - ``make_batches(indices, vertex_matrices, budget="ps2") -> list[Batch]``
+    - ``batch_mesh(mesh, budget="ps2", step=0.25, max_bones=3, palette=None) -> list[Batch]``
+    - ``check_batches(batches, indices, vertex_matrices, budget)``: raises ValidationError if broken
+    - ``frame_bytes(batches, matrix_bytes=48, vertex_bytes=32) -> dict``
 """
 
 from __future__ import annotations
@@ -158,8 +160,14 @@ def make_batches(indices, vertex_matrices, budget="ps2", lookahead: int = 64, or
     lookahead : int                  unvisited triangles scanned to fill a batch before closing it
     order : "cache" | "given"        triangle visiting order
 
-    Returns a list of :class:`Batch`. Raises ConfigError if a single triangle needs more than the
-    budget.
+    Returns
+    -------
+    list of :class:`Batch`
+
+    Raises
+    ------
+    ConfigError
+        a single triangle needs more than the budget.
     """
     b = _budget(budget)
     tris = np.asarray(indices, dtype=np.int64).reshape(-1, 3)

@@ -29,10 +29,12 @@ reach). Local budgets start at ``max_error`` and are halved until the object-spa
 
 API
 ---
-compress_clip(clip, skeleton=None, max_error=None, virtual_distance=None, ...) -> CompressedClip
-CompressedClip.decompress() -> Clip, .nbytes, .to_bytes(), .achieved_error
-clip_error(reference, candidate, skeleton, virtual_distance, times=None) -> (max, per-bone (b,))
-compression_report(model_or_clips, ...) -> list[dict]   (bytes before/after, ratio, error)
+::
+
+    compress_clip(clip, skeleton=None, max_error=None, virtual_distance=None, ...) -> CompressedClip
+    CompressedClip.decompress() -> Clip, .nbytes, .to_bytes(), .achieved_error
+    clip_error(reference, candidate, skeleton, virtual_distance, times=None) -> (max, per-bone (b,))
+    compression_report(model_or_clips, ...) -> list[dict]   (bytes before/after, ratio, error)
 """
 
 from __future__ import annotations
@@ -416,7 +418,10 @@ def compress_clip(clip, skeleton=None, max_error: float | None = None, virtual_d
     virtual_distance : float, model units: distance of the virtual points from each bone
     weight_tolerance : float, maximum absolute error of morph weights (unitless)
 
-    Returns a :class:`CompressedClip` whose ``achieved_error`` is the measured maximum error.
+    Returns
+    -------
+    CompressedClip
+        its ``achieved_error`` is the measured maximum error.
     """
     sk = skeleton if skeleton is not None else clip.skeleton
     if sk is None:

@@ -24,15 +24,17 @@ through a **bone map** ``{source bone: target bone}``:
 
 API
 ---
-bone_roles(skeleton) -> {bone name: role}
-builtin_bone_map(source, target) -> {source bone: target bone}
-resolve_bone_map(bone_map, source, target) -> dict    ("builtin", a dict, or None = same names)
-retarget_clip(clip, target, bone_map="builtin", source=None, warn=True, mode=None) -> Clip
-    mode "world": each mapped bone turns in world space as its source bone does (rigs whose bone
-    frames differ, e.g. an SSX Tricky rig vs the default rider), baked at the clip's key times
-add_clips(model, source_model, bone_map="builtin", clips=None, mode="relative") -> Model
-coverage(clip, target) -> (driven, unmatched)         target joint names
-check_coverage(clip, target, min_fraction=0.5)        warn when fewer than half are driven
+::
+
+    bone_roles(skeleton) -> {bone name: role}
+    builtin_bone_map(source, target) -> {source bone: target bone}
+    resolve_bone_map(bone_map, source, target) -> dict    ("builtin", a dict, or None = same names)
+    retarget_clip(clip, target, bone_map="builtin", source=None, warn=True, mode=None) -> Clip
+        mode "world": each mapped bone turns in world space as its source bone does (rigs whose bone
+        frames differ, e.g. an SSX Tricky rig vs the default rider), baked at the clip's key times
+    add_clips(model, source_model, bone_map="builtin", clips=None, mode="relative") -> Model
+    coverage(clip, target) -> (driven, unmatched)         target joint names
+    check_coverage(clip, target, min_fraction=0.5)        warn when fewer than half are driven
 """
 
 from __future__ import annotations

@@ -30,14 +30,16 @@ Positions agree exactly between ``exact`` and ``post_transform`` (up to float32 
 
 API
 ---
-- ``skin(mesh, bone_matrices, scheme="exact", step=0.25, max_bones=3, inverse_bind=None)``
-- ``skin_exact(mesh, bone_matrices)``
-- ``PostTransformMesh.build(mesh, inverse_bind=None)``, ``.apply(bone_matrices)``
-- ``BlendedMesh.build(mesh, step, max_bones)``, ``.apply(bone_matrices)``,
-  ``.apply_many((n, b, 4, 4))`` (several instances in one call), ``.palette_matrices(...)`` and
-  ``.skin_palette((n, p, 3, 4))`` (its two halves: the palette, then every vertex by its entry)
-- ``skinning_report(model, steps) -> list[dict]``: palette sizes and errors per weight step
-- ``SCHEMES``
+::
+
+    - ``skin(mesh, bone_matrices, scheme="exact", step=0.25, max_bones=3, inverse_bind=None)``
+    - ``skin_exact(mesh, bone_matrices)``
+    - ``PostTransformMesh.build(mesh, inverse_bind=None)``, ``.apply(bone_matrices)``
+    - ``BlendedMesh.build(mesh, step, max_bones)``, ``.apply(bone_matrices)``,
+      ``.apply_many((n, b, 4, 4))`` (several instances in one call), ``.palette_matrices(...)`` and
+      ``.skin_palette((n, p, 3, 4))`` (its two halves: the palette, then every vertex by its entry)
+    - ``skinning_report(model, steps) -> list[dict]``: palette sizes and errors per weight step
+    - ``SCHEMES``
 """
 
 from __future__ import annotations
@@ -464,16 +466,25 @@ def skin(mesh, bone_matrices, scheme: str = "exact", step: float = 0.25, max_bon
 
     Parameters
     ----------
-    mesh : SkinnedMesh           ``positions``, ``normals``, ``joints (v,4)``, ``weights (v,4)``
-    bone_matrices : (b, 4, 4)    ``Skeleton.skin_matrices(pose)``
-    scheme : "exact" | "post_transform" | "blended"   (see the module docstring)
-    step, max_bones              weight quantization of ``blended``
-    inverse_bind : (b, 4, 4)     bone spaces of ``post_transform`` (None: identities)
-    normalize : bool             renormalise ``blended`` normals
+    mesh : SkinnedMesh
+        ``positions``, ``normals``, ``joints (v,4)``, ``weights (v,4)``
+    bone_matrices : (b, 4, 4)
+        ``Skeleton.skin_matrices(pose)``
+    scheme : "exact", "post_transform" or "blended"
+        see the module docstring
+    step, max_bones
+        weight quantization of ``blended``
+    inverse_bind : (b, 4, 4)
+        bone spaces of ``post_transform`` (None: identities)
+    normalize : bool
+        renormalise ``blended`` normals
 
-    Returns ``positions (v, 3) float32``, ``normals (v, 3) float32``. The per-mesh precomputation
-    of ``post_transform`` and ``blended`` is cached on the mesh object (by identity); use
-    :class:`PostTransformMesh` / :class:`BlendedMesh` directly to hold it yourself.
+    Returns
+    -------
+    positions (v, 3) float32, normals (v, 3) float32
+        The per-mesh precomputation of ``post_transform`` and ``blended`` is cached on the mesh
+        object (by identity); use :class:`PostTransformMesh` / :class:`BlendedMesh` directly to
+        hold it yourself.
     """
     if scheme == "exact":
         return skin_exact(mesh, bone_matrices)

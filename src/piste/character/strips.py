@@ -10,12 +10,14 @@ parity), and triangles with a repeated index draw nothing and are dropped by dec
 
 API
 ---
-- ``stripify(triangles, join="restart"|"degenerate"|None, method="greedy"|"meshopt") ->
-  (n,) int64`` strip (with ``RESTART`` markers) or, for ``join=None``, a list of strips
-- ``unstripify(strip) -> (t, 3) int64`` triangles (degenerate ones dropped)
-- ``strip_stats(triangles, strip) -> dict``: strips, triangles, indices, vertices sent per
-  triangle for indexed and non-indexed strips
-- ``RESTART``
+::
+
+    - ``stripify(triangles, join="restart"|"degenerate"|None, method="greedy"|"meshopt") ->
+      (n,) int64`` strip (with ``RESTART`` markers) or, for ``join=None``, a list of strips
+    - ``unstripify(strip) -> (t, 3) int64`` triangles (degenerate ones dropped)
+    - ``strip_stats(triangles, strip) -> dict``: strips, triangles, indices, vertices sent per
+      triangle for indexed and non-indexed strips
+    - ``RESTART``
 """
 
 from __future__ import annotations
@@ -170,7 +172,10 @@ def stripify(triangles, join: str | None = "restart", method: str = "greedy"):
         ``optimize_vertex_cache_strip`` + ``meshopt_stripify`` (the triangle order changes; falls
         back to greedy if the bundled library is not reachable, and with ``join=None``)
 
-    Returns ``(n,) int64`` strip indices (or a list of strips for ``join=None``).
+    Returns
+    -------
+    (n,) int64
+        strip indices (or a list of strips for ``join=None``).
     """
     if join not in JOINS:
         raise ConfigError(f"strip join must be one of {JOINS}, got {join!r}")

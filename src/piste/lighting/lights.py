@@ -525,8 +525,9 @@ def shade(lights: Lights, positions, normals, shadow=None) -> np.ndarray:
     lights : Lights
     positions : (k, 3) float, points on the surface
     normals : (k, 3) float, unit normals
-    shadow : None, or (k, m) float visibility in [0, 1] of each direct light (``m =
-        len(lights.direct)``, 1 = lit), or (k,) applied to every direct light
+    shadow : None, or (k, m) float
+        visibility in [0, 1] of each direct light (``m = len(lights.direct)``, 1 = lit), or
+        ``(k,)`` applied to every direct light
 
     Returns
     -------

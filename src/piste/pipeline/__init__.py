@@ -5,22 +5,24 @@ cameras and animation, a fast in-game preview, and "pre-process everything you c
 
 Public API
 ----------
-build_scene(scene, out=None, cache_dir=None, progress=False, jobs=1) -> BuildResult   (build.py)
-    validation, terrain, baked light map, character LODs/palettes/batches/strips, compressed objects
-    with baked vertex colours, per-cell visibility; content-hash cache, byte-identical bundles
-Cache, content_key                      the step cache (cache.py)
-import_gltf, convert_lights, convert_cameras, axis_matrix, write_scene_gltf
-                                        glTF lights (KHR_lights_punctual) and cameras (gltf_import.py)
-Visibility, compute_visibility, culling_report
-                                        per-cell patch/object bitsets (visibility.py)
-character_arrays                        the character step (characters.py)
-load_terrain, load_rider_model, load_object_mesh   reading a scene's sources (sources.py)
-load_bundle, Bundle, lights_from_dict, camera_from_dict   a built bundle as scene objects (bundle_objects.py)
-ScenePreview, render_image, render_frames, camera_at   the runtime: rendering a bundle (preview.py)
-build_default_scene                     the built-in default scene `piste demo` builds (default_scene.py)
-TiledSpec, build_tiles, TileError       large worlds: fit/bake/visibility a tile at a time (tiled_build.py)
-build_tiles_dask, dask_client, build_scene_tiles   the same tasks on a Dask cluster (dask_build.py)
-LiveScene, run_headless                 watch, rebuild, reload: ``piste view SCENE`` (live.py)
+::
+
+    build_scene(scene, out=None, cache_dir=None, progress=False, jobs=1) -> BuildResult   (build.py)
+        validation, terrain, baked light map, character LODs/palettes/batches/strips, compressed objects
+        with baked vertex colours, per-cell visibility; content-hash cache, byte-identical bundles
+    Cache, content_key                      the step cache (cache.py)
+    import_gltf, convert_lights, convert_cameras, axis_matrix, write_scene_gltf
+                                            glTF lights (KHR_lights_punctual) and cameras (gltf_import.py)
+    Visibility, compute_visibility, culling_report
+                                            per-cell patch/object bitsets (visibility.py)
+    character_arrays                        the character step (characters.py)
+    load_terrain, load_rider_model, load_object_mesh   reading a scene's sources (sources.py)
+    load_bundle, Bundle, lights_from_dict, camera_from_dict   a built bundle as scene objects (bundle_objects.py)
+    ScenePreview, render_image, render_frames, camera_at   the runtime: rendering a bundle (preview.py)
+    build_default_scene                     the built-in default scene `piste demo` builds (default_scene.py)
+    TiledSpec, build_tiles, TileError       large worlds: fit/bake/visibility a tile at a time (tiled_build.py)
+    build_tiles_dask, dask_client, build_scene_tiles   the same tasks on a Dask cluster (dask_build.py)
+    LiveScene, run_headless                 watch, rebuild, reload: ``piste view SCENE`` (live.py)
 
 The scene file itself is :mod:`piste.world.scene_file` (``load_scene``); the bundle format is
 :mod:`piste.formats.bundle` (``read_bundle``: arrays and metadata only).  Rendering imports OpenGL lazily: building needs none.

@@ -7,13 +7,15 @@ sets, and, when first asked for, the placed objects and the riders' character mo
 
 API
 ---
-load_bundle(path, verify=True, warm=False) -> Bundle
-Bundle                 ``.net``, ``.lightmap``, ``.lights``, ``.cameras``, ``.visibility``, ``.centerline``,
-                       ``.objects()``, ``.vertex_colors()``, ``.rider_model()``, ``.rider_lods()``,
-                       ``.arrays``, ``.manifest``, ``.camera(name)``
-bundle_from_data(BundleData) -> Bundle
-lights_from_dict(d) -> Lights          ``Lights.to_dict()`` back (infinite ranges may be "inf")
-camera_from_dict(d) -> Camera          :func:`piste.formats.bundle.camera_to_dict` back
+::
+
+    load_bundle(path, verify=True, warm=False) -> Bundle
+    Bundle                 ``.net``, ``.lightmap``, ``.lights``, ``.cameras``, ``.visibility``, ``.centerline``,
+                           ``.objects()``, ``.vertex_colors()``, ``.rider_model()``, ``.rider_lods()``,
+                           ``.arrays``, ``.manifest``, ``.camera(name)``
+    bundle_from_data(BundleData) -> Bundle
+    lights_from_dict(d) -> Lights          ``Lights.to_dict()`` back (infinite ranges may be "inf")
+    camera_from_dict(d) -> Camera          :func:`piste.formats.bundle.camera_to_dict` back
 """
 
 from __future__ import annotations

@@ -9,11 +9,13 @@ entry is treated as missing.
 
 API
 ---
-Hasher                          incremental SHA-256 over bytes, str, JSON, arrays and files
-content_key(*parts) -> str      hex key of the parts
-Cache(root)                     ``get(step, key)``, ``put(step, key, arrays, meta)``, ``path(step, key)``
-npz_bytes(arrays) -> bytes      deterministic .npz bytes
-cache_root() -> Path            piste's own cache folder (built default scenes, baked light maps)
+::
+
+    Hasher                          incremental SHA-256 over bytes, str, JSON, arrays and files
+    content_key(*parts) -> str      hex key of the parts
+    Cache(root)                     ``get(step, key)``, ``put(step, key, arrays, meta)``, ``path(step, key)``
+    npz_bytes(arrays) -> bytes      deterministic .npz bytes
+    cache_root() -> Path            piste's own cache folder (built default scenes, baked light maps)
 """
 
 from __future__ import annotations

@@ -14,12 +14,14 @@ and reloads in place (:func:`run_window`).
 
 API
 ---
-LiveScene(path, bundle=None, cache_dir=None, size=None, camera=None, ctx=None, **preview_kw)
-    ``.poll() -> bool`` (rebuilt and reloaded?), ``.render(t) -> image``, ``.last_error``, ``.last_build``
-run_headless(live, out_dir, frames=None, seconds=None, interval=0.1, log=print) -> list of PNG paths
-PreviewView(preview)           the fly-through window's view of a ScenePreview (piste.render.window)
-LiveView(live)                 the same for a LiveScene, reloaded in place
-run_window(live_factory, camera, size, **window_kw) -> state dict
+::
+
+    LiveScene(path, bundle=None, cache_dir=None, size=None, camera=None, ctx=None, **preview_kw)
+        ``.poll() -> bool`` (rebuilt and reloaded?), ``.render(t) -> image``, ``.last_error``, ``.last_build``
+    run_headless(live, out_dir, frames=None, seconds=None, interval=0.1, log=print) -> list of PNG paths
+    PreviewView(preview)           the fly-through window's view of a ScenePreview (piste.render.window)
+    LiveView(live)                 the same for a LiveScene, reloaded in place
+    run_window(live_factory, camera, size, **window_kw) -> state dict
 
 ``piste view SCENE`` (:mod:`piste.commands.view`) parses its flags and calls these with parameters.
 """

@@ -20,12 +20,14 @@ runtime's choice by the manifest's ``terrain.source`` (:func:`piste.pipeline.pre
 
 API
 ---
-SOURCES                                       the registry, in matching order
-source_kind(path) -> str                      "bundle", "scene", "ssx", "tiles" (ConfigError otherwise)
-open_source(path, quiet=True, warm=False, riders=0, objects=0, **options) -> Bundle   (tiles: ``budget_mb``)
-load_or_build(scene, quiet=True, warm=False) -> Bundle     (= open_source)
-eye_camera(eye, target, fov_y=50) -> Camera | None            ``--eye``/``--target`` (render, view)
-load_net(path=None) -> PatchNet         a .bpt / .npz patch net, or the default course (``piste bake``, ``piste ssx``)
+::
+
+    SOURCES                                       the registry, in matching order
+    source_kind(path) -> str                      "bundle", "scene", "ssx", "tiles" (ConfigError otherwise)
+    open_source(path, quiet=True, warm=False, riders=0, objects=0, **options) -> Bundle   (tiles: ``budget_mb``)
+    load_or_build(scene, quiet=True, warm=False) -> Bundle     (= open_source)
+    eye_camera(eye, target, fov_y=50) -> Camera | None            ``--eye``/``--target`` (render, view)
+    load_net(path=None) -> PatchNet         a .bpt / .npz patch net, or the default course (``piste bake``, ``piste ssx``)
 """
 
 from __future__ import annotations

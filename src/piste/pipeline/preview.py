@@ -21,14 +21,16 @@ A scene without riders is drawn by :class:`piste.render.TerrainRenderer` plus th
 
 API
 ---
-ScenePreview(bundle, size=None, ctx=None, visibility=True)   ``.render(camera, t) -> (H, W, 3) uint8``,
-                                                              ``.stats`` of the last frame, ``.reload(bundle)``
-track_scene(bundle, start=None, casts=()) -> Scene            the [pack] riders + [auto_objects] of a bundle
-rider_casts(["FILE[:N]", ...]) -> [(model, pack rows)]        other rider models beside the pack
-cast_model(model) -> Model                                    a glTF rider as drawn (materials kept)
-camera_at(bundle, name, i, n) -> Camera                       a scene camera at frame i of n (track cameras fly)
-render_image(bundle, camera=None, size=None, t=0.0) -> image
-render_frames(bundle, camera, frames, size, fps, video=None, first_png=None) -> list of stats
+::
+
+    ScenePreview(bundle, size=None, ctx=None, visibility=True)   ``.render(camera, t) -> (H, W, 3) uint8``,
+                                                                  ``.stats`` of the last frame, ``.reload(bundle)``
+    track_scene(bundle, start=None, casts=()) -> Scene            the [pack] riders + [auto_objects] of a bundle
+    rider_casts(["FILE[:N]", ...]) -> [(model, pack rows)]        other rider models beside the pack
+    cast_model(model) -> Model                                    a glTF rider as drawn (materials kept)
+    camera_at(bundle, name, i, n) -> Camera                       a scene camera at frame i of n (track cameras fly)
+    render_image(bundle, camera=None, size=None, t=0.0) -> image
+    render_frames(bundle, camera, frames, size, fps, video=None, first_png=None) -> list of stats
 """
 
 from __future__ import annotations
@@ -316,6 +318,8 @@ class ScenePreview:
     stream_wait : a tiled world: every frame waits for the tiles it wants (default; the same picture
         whatever the loader's timing); False in a window (far stand-ins while tiles load)
 
+    Notes
+    -----
     After :meth:`render`, ``stats`` holds the frame's counts and ``frame`` the renderer's own
     result (a :class:`piste.render.Frame` for terrain-only scenes, else a
     :class:`piste.render.SceneImage`) with its timings.

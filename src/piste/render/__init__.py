@@ -2,26 +2,28 @@
 
 Public API
 ----------
-create_context        a headless moderngl context (RenderError naming the packages if impossible)
-Offscreen             RGBA8 + depth framebuffer with ``read() -> (H, W, 4) uint8``
-save_png              atomic PNG writer
-set_depth_write       depth writes on/off for the bound framebuffer (moderngl's ``ctx.depth_mask`` is no GL state)
-TerrainRenderer       camera -> LOD -> cull -> tessellate -> upload -> draw -> read back
-SceneRenderer         the completed scene: terrain + rider shadows + objects + riders + specular
-                      (passes in character_pass, object_pass, shadow_pass; ``summarize_scene``)
-Frame, summarize      one frame's image, counts and timings; the talk's statistics over frames
-TerrainPass           the terrain draw: base texture x light map, ``modulate`` or ``ps2`` passes
-SkyPass               gradient sky
-cull_boxes            vectorised frustum culling of boxes (centre +- half extents)
-VideoWriter           atomic H.264 MP4 output (imageio-ffmpeg)
-snow_texture          procedural tileable snow base texture
-placeholder_lightmap  PLACEHOLDER light-map atlas from the normals and a fixed sun
-track_field           signed distance across a track on a world x-y grid (projected texture)
-mip_chain, mipmapped_texture, MipLevels
-                      mip levels computed on the CPU and uploaded / redrawn by piste's shader
-                      (no ``glGenerateMipmap``: Mesa compiles its blit in every process)
-LOD_COLORS            debug colours of 4x4 / 6x6 / 8x8 / glue patches
-StreamingRenderer     a tiled world paged in and out by distance under a memory budget (streaming.py)
+::
+
+    create_context        a headless moderngl context (RenderError naming the packages if impossible)
+    Offscreen             RGBA8 + depth framebuffer with ``read() -> (H, W, 4) uint8``
+    save_png              atomic PNG writer
+    set_depth_write       depth writes on/off for the bound framebuffer (moderngl's ``ctx.depth_mask`` is no GL state)
+    TerrainRenderer       camera -> LOD -> cull -> tessellate -> upload -> draw -> read back
+    SceneRenderer         the completed scene: terrain + rider shadows + objects + riders + specular
+                          (passes in character_pass, object_pass, shadow_pass; ``summarize_scene``)
+    Frame, summarize      one frame's image, counts and timings; the talk's statistics over frames
+    TerrainPass           the terrain draw: base texture x light map, ``modulate`` or ``ps2`` passes
+    SkyPass               gradient sky
+    cull_boxes            vectorised frustum culling of boxes (centre +- half extents)
+    VideoWriter           atomic H.264 MP4 output (imageio-ffmpeg)
+    snow_texture          procedural tileable snow base texture
+    placeholder_lightmap  PLACEHOLDER light-map atlas from the normals and a fixed sun
+    track_field           signed distance across a track on a world x-y grid (projected texture)
+    mip_chain, mipmapped_texture, MipLevels
+                          mip levels computed on the CPU and uploaded / redrawn by piste's shader
+                          (no ``glGenerateMipmap``: Mesa compiles its blit in every process)
+    LOD_COLORS            debug colours of 4x4 / 6x6 / 8x8 / glue patches
+    StreamingRenderer     a tiled world paged in and out by distance under a memory budget (streaming.py)
 
 Interactive window: :func:`piste.render.window.run_window` (pyglet, imported lazily).
 """

@@ -1,25 +1,27 @@
 """The completed real-time scene, one frame: terrain + projected rider shadows + objects + riders +
 specular.
 
-Order of a frame (:meth:`SceneRenderer.render`):
+Order of a frame (``SceneRenderer.render``)::
 
-CPU  1. scene update (:meth:`piste.world.scene.Scene.update`): animation, rider LOD, blended-matrix
-        skinning, light choice, object culling;
-     2. terrain: per-edge LOD, frustum culling, tessellation (:meth:`TerrainRenderer.prepare`);
-     3. shadows: one orthographic sun frustum per rider, the terrain patches each touches;
-GPU  4. shadow casters: each rider's low-LOD model into its tile of the shadow texture;
-     5. terrain (+ sky) (:meth:`TerrainRenderer.draw`, not read back);
-     6. the shadow receivers: the extra pass over the shadowed patches only;
-     7. objects (compressed formats, instanced per kind);
-     8. riders (per-vertex 1 + 3 lights), then their specular-map pass;
-     9. glFinish and read back.
+    CPU  1. scene update (piste.world.scene.Scene.update): animation, rider LOD, blended-matrix
+            skinning, light choice, object culling;
+         2. terrain: per-edge LOD, frustum culling, tessellation (TerrainRenderer.prepare);
+         3. shadows: one orthographic sun frustum per rider, the terrain patches each touches;
+    GPU  4. shadow casters: each rider's low-LOD model into its tile of the shadow texture;
+         5. terrain (+ sky) (TerrainRenderer.draw, not read back);
+         6. the shadow receivers: the extra pass over the shadowed patches only;
+         7. objects (compressed formats, instanced per kind);
+         8. riders (per-vertex 1 + 3 lights), then their specular-map pass;
+         9. glFinish and read back.
 
 API
 ---
-SceneRenderer(scene, size=(640, 448), ctx=None, lightmap="placeholder", object_lighting="dynamic",
-              shadows=True, specular=True)
-SceneRenderer.render(t) -> SceneImage      image, the terrain Frame, the SceneFrame, stats, timings
-summarize_scene(images) -> dict            means of the timings and counts
+::
+
+    SceneRenderer(scene, size=(640, 448), ctx=None, lightmap="placeholder", object_lighting="dynamic",
+                  shadows=True, specular=True)
+    SceneRenderer.render(t) -> SceneImage      image, the terrain Frame, the SceneFrame, stats, timings
+    summarize_scene(images) -> dict            means of the timings and counts
 """
 
 from __future__ import annotations

@@ -22,10 +22,12 @@ The stats report the patches per rider and per frame (:attr:`ShadowPass.patch_co
 
 API
 ---
-shadow_matrices(centers, radius, sun_direction, reach=40.0) -> (n, 4, 4) light view-projections
-shadow_patches(patch_lo, patch_hi, light_vp, candidates=None) -> list of (k_i,) patch ids
-shadow_triangles(mesh, patch_lists) -> positions, indices, per-rider (first, count)
-ShadowPass(ctx, n_max=6, tile=128)
+::
+
+    shadow_matrices(centers, radius, sun_direction, reach=40.0) -> (n, 4, 4) light view-projections
+    shadow_patches(patch_lo, patch_hi, light_vp, candidates=None) -> list of (k_i,) patch ids
+    shadow_triangles(mesh, patch_lists) -> positions, indices, per-rider (first, count)
+    ShadowPass(ctx, n_max=6, tile=128)
 """
 
 from __future__ import annotations
@@ -131,9 +133,9 @@ def shadow_triangles(mesh, patch_lists, light_vp=None):
 
     Returns
     -------
-    positions (m, 3) float32, indices (t, 3) uint32 into them, ranges (n, 2) int64 ``(first
-    triangle, triangle count)`` per rider.  A patch shadowed by two riders is emitted twice (one
-    draw per rider, each with its own shadow tile).
+    positions, indices, ranges : (m, 3) float32, (t, 3) uint32 into them, (n, 2) int64
+        ranges are ``(first triangle, triangle count)`` per rider.  A patch shadowed by two riders
+        is emitted twice (one draw per rider, each with its own shadow tile).
     """
     pid = np.asarray(mesh.patch_ids)
     lookup = np.full(int(pid.max()) + 1 if len(pid) else 1, -1, np.int64)

@@ -11,11 +11,13 @@ the GS's truncating ``>> 7`` by at most a level or two per stage.
 
 API
 ---
-SourcePass(ctx)                 .set_source((h, w, 4) uint8), .draw(mesh, mvp, stage)
-render_level(level, camera, size, lightmap_mode, ctx=None, renderer=None) -> (H, W, 3) uint8
-SsxTerrainRenderer(net, source, **TerrainRenderer kwargs)   ps2 mode with the stored Cs/As
-level_renderer(level, size, ctx=None) -> SsxTerrainRenderer with the level's atlases and LOD preset
-LevelView(renderer)             the window's view of a level (M toggles modulate / ps2)
+::
+
+    SourcePass(ctx)                 .set_source((h, w, 4) uint8), .draw(mesh, mvp, stage)
+    render_level(level, camera, size, lightmap_mode, ctx=None, renderer=None) -> (H, W, 3) uint8
+    SsxTerrainRenderer(net, source, **TerrainRenderer kwargs)   ps2 mode with the stored Cs/As
+    level_renderer(level, size, ctx=None) -> SsxTerrainRenderer with the level's atlases and LOD preset
+    LevelView(renderer)             the window's view of a level (M toggles modulate / ps2)
 """
 
 from __future__ import annotations

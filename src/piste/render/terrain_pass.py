@@ -192,11 +192,13 @@ class TerrainPass:
 
         Parameters
         ----------
-        atlas : (H, W, 3|4) float (linear light, 1.0 = full, over-bright allowed, e.g. a baked
+        atlas : (H, W, 3 or 4) float (linear light, 1.0 = full, over-bright allowed, e.g. a baked
             ``LightMap.atlas``) or uint8 (255 = 1.0, or 128 = 1.0 with ``half_bright``, the PS2's
             storage).  Rows are texture ``v`` from 0 up (no flip).
         half_bright : uint8 texels are ``round(128 c)``
 
+        Notes
+        -----
         Uploaded as a half-float texture, sampled bilinearly, clamped, without mip-maps (tiles have
         gutters; mip-maps would bleed between patches).  In ``ps2`` mode light above 1.0 survives
         the blend because :class:`~piste.render.frame.TerrainRenderer` draws ps2 frames into a

@@ -8,15 +8,17 @@ u1, v1)``: patch parameter ``(0, 0)`` samples the centre of texel ``(u0 W - 0.5,
 
 API
 ---
-snow_texture             (N, N, 4) uint8 tileable procedural snow
-placeholder_lightmap     (H, W, 4) uint8 atlas lit by a fixed sun from the surface normals
-                         (a stand-in until baked light maps exist)
-lightmap_atlas_size      (W, H) of the atlas a net's ``lightmap_rect`` describes
-track_field              (H, W) float32 signed distance across a track (metres), a projected texture
-mip_chain                the mip levels of an (H, W, C) uint8 image, as Mesa's glGenerateMipmap makes them
-mipmapped_texture        a moderngl texture with its mip levels computed on the CPU and uploaded
-MipLevels                a render target's mip levels redrawn on the GPU by piste's own shader
-LOD_COLORS               debug colours of 4x4, 6x6, 8x8 and glue patches
+::
+
+    snow_texture             (N, N, 4) uint8 tileable procedural snow
+    placeholder_lightmap     (H, W, 4) uint8 atlas lit by a fixed sun from the surface normals
+                             (a stand-in until baked light maps exist)
+    lightmap_atlas_size      (W, H) of the atlas a net's ``lightmap_rect`` describes
+    track_field              (H, W) float32 signed distance across a track (metres), a projected texture
+    mip_chain                the mip levels of an (H, W, C) uint8 image, as Mesa's glGenerateMipmap makes them
+    mipmapped_texture        a moderngl texture with its mip levels computed on the CPU and uploaded
+    MipLevels                a render target's mip levels redrawn on the GPU by piste's own shader
+    LOD_COLORS               debug colours of 4x4, 6x6, 8x8 and glue patches
 """
 
 from __future__ import annotations
@@ -304,10 +306,10 @@ _GL_FRAMEBUFFER, _GL_COLOR_ATTACHMENT0 = 0x8D40, 0x8CE0
 
 
 class MipLevels:
-    """Mip levels ``1 .. levels`` of an RGBA8 render target (``texture``, whose sides halve exactly
-    ``levels`` times: even, or 1, down to level ``levels - 1``; e.g. 384 x 128 for 4 levels), redrawn from level 0 on the GPU by :meth:`build` with piste's own shader
-    (``mip_level.frag.glsl``: the same 2 x 2 means as :func:`mip_chain` and llvmpipe's
-    ``glGenerateMipmap``).
+    """Mip levels 1 to ``levels`` of an RGBA8 render target, redrawn from level 0 on the GPU by
+    :meth:`build` with piste's own shader (``mip_level.frag.glsl``: the same 2 x 2 means as
+    :func:`mip_chain` and llvmpipe's ``glGenerateMipmap``).  The target (``texture``) has sides that
+    halve exactly ``levels`` times (even, or 1, down to level ``levels - 1``; 384 x 128 for 4 levels).
 
     Why not ``build_mipmaps``: Mesa's ``glGenerateMipmap`` draws with an internal blit shader
     that llvmpipe compiles in every process (70-110 ms at the first call: its disk cache keeps only

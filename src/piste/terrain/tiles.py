@@ -9,7 +9,7 @@ smaller); tile ``(ty, tx)`` holds patches ``[tx T, min((tx+1) T, Px))`` in x and
 ordered ``row * width + col`` inside the tile (patch ``(0, 0)`` at the tile's south-west corner).
 
 Fit with fixed shared boundaries (exact C0 across tiles)
--------------------------------------------------------
+--------------------------------------------------------
 A global least-squares fit couples every control point of the world.  The tiled fit decouples it
 in three stages, each a deterministic function of the samples it reads:
 

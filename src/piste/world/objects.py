@@ -12,9 +12,11 @@ seeded rock displacement): ``tree`` (trunk + three foliage cones), ``sign`` (pos
 is Z up with the object's base at the origin.  UVs point into one small texture atlas
 (:func:`object_texture`).
 
-Compression (:func:`compress_mesh`, decoded by :meth:`CompressedMesh.decode` and in the vertex
-shader ``object.vert.glsl``)
------------------------------------------------------------------------------------------------
+Compression
+-----------
+By :func:`compress_mesh`, decoded by :meth:`CompressedMesh.decode` and in the vertex shader
+``object.vert.glsl``:
+
 * positions: 3 x uint16, ``p = offset + extent * q / 65535`` with a per-mesh ``offset`` (the
   minimum corner) and ``extent`` (max - min); error per axis ``<= extent / 65535 / 2``
   (:attr:`CompressedMesh.position_error`);
@@ -38,12 +40,16 @@ beam slopes, the posts stay vertical).
 
 Lighting options (:class:`ObjectSet`)
 -------------------------------------
-``dynamic``  the talk's SSX scheme: 1 ambient + 3 directional lights per object
-             (:func:`piste.lighting.vertex.choose_lights` at the object's centre);
-``baked``    pre-calculated RGBs: the full lighting equation per vertex, stored as RGB8
-             half-bright (128 = 1.0) per instance vertex (:func:`bake_vertex_colors`);
-``points``   dynamic point and spot lights: up to 4 point/spot lights evaluated per vertex
-             with attenuation and cone, plus the directional lights.
+``dynamic``
+    the talk's SSX scheme: 1 ambient + 3 directional lights per object
+    (:func:`piste.lighting.vertex.choose_lights` at the object's centre);
+``baked``
+    pre-calculated RGBs: the full lighting equation per vertex, stored as RGB8 half-bright
+    (128 = 1.0) per instance vertex (:func:`bake_vertex_colors`);
+``points``
+    dynamic point and spot lights: up to 4 point/spot lights evaluated per vertex with
+    attenuation and cone, plus the directional lights.
+
 :func:`lighting_report` gives the memory and the error of each against the full equation.
 """
 

@@ -8,12 +8,14 @@ Pure numpy (no lighting or rendering): the light itself comes from elsewhere (th
 
 API
 ---
-reduce_texture(rgba) -> (8, 8, 3) uint8                 box filter to 8x8 (rows = texture v)
-base_tiles(reduced, texture_index, uv) -> (n, 8, 8, 3)  each patch's Cd at its light-map texel
-                                                       centres (u, v) = ((i + .5) / 8, (j + .5) / 8)
-gs_blend(cd, cs, as_) -> uint8                          ((Cd - Cs) As) >> 7, clamped
-light_from_source(cd, cs, as_) -> float32               the linear light CL the texels encode
-tile_params() -> (u, v)                                 texel-centre parameters, index j * 8 + i
+::
+
+    reduce_texture(rgba) -> (8, 8, 3) uint8                 box filter to 8x8 (rows = texture v)
+    base_tiles(reduced, texture_index, uv) -> (n, 8, 8, 3)  each patch's Cd at its light-map texel
+                                                           centres (u, v) = ((i + .5) / 8, (j + .5) / 8)
+    gs_blend(cd, cs, as_) -> uint8                          ((Cd - Cs) As) >> 7, clamped
+    light_from_source(cd, cs, as_) -> float32               the linear light CL the texels encode
+    tile_params() -> (u, v)                                 texel-centre parameters, index j * 8 + i
 """
 
 from __future__ import annotations

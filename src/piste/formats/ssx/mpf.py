@@ -5,11 +5,13 @@ Bytes <-> arrays (numpy). ``MpfFile.to_model()`` converts to piste's character
 rider is :mod:`piste.formats.ssx.mpf_encode`; the layout constants are in
 :mod:`piste.formats.ssx.mpf_layout`.
 
-Facts (``/work/shared/SSX-FORMATS.md``, OpenSlope's Apache-2.0 prose spec
+Facts
+-----
+From ``/work/shared/SSX-FORMATS.md``, OpenSlope's Apache-2.0 prose spec
 ``Trailmap/specs/240-models-mpf.md``, checked against SSX-Library / the SSX Collection Multitool's
 ``TrickyPS2MPF.cs`` and ``MpfStructure.go`` of ``Erickson400/TheTrickyModels`` (read for facts
-only; no code from them is in this module) and against the bytes of the three public retail models)
--------------------------------------------------------------------------------------------------
+only; no code from them is in this module) and against the bytes of the three public retail models.
+
 * Little-endian. Header 12 bytes: u32 format id (8 = Tricky PS2), i16 sub-model count, i16
   directory offset (12), u32 data start (= 12 + 80 n + 4); the directory is ``n`` 80-byte entries
   then 4 unused bytes (:data:`DIR_DTYPE`). Blob ``i`` is ``size`` bytes at ``data start + offset``;
@@ -99,15 +101,17 @@ names the chunks whose tags differ from what piste would write, i.e. what a re-l
 
 API
 ---
-read_mpf(path) -> MpfFile / parse_mpf(data, path) -> MpfFile
-write_mpf(mpf, path) -> list[str]          atomic; returns notes (what was laid out anew)
-mpf_bytes(mpf) -> bytes
-MpfFile, SubModel, Group, Link, Mesh, Chunk, MorphKey; MpfFile.to_model(*other_files) -> SsxModel
-pack_chunks(strips, uv, normals, positions, max_vertices=55) -> list[Chunk]  (the encoder's packer)
-strip_triangles(strip_lengths) -> (t, 3) int64   local vertex indices of a chunk's strips
-game_limits(mpf) -> list[(sub-model, problem)]     what the game would not take (59 / 165 vertices a chunk,
-                                                   25 matrices a link, 25 % steps, ~3000/1500/750 triangles)
-tag_differences(mpf) -> list                       chunks whose kept tag bytes differ from piste's layout
+::
+
+    read_mpf(path) -> MpfFile / parse_mpf(data, path) -> MpfFile
+    write_mpf(mpf, path) -> list[str]          atomic; returns notes (what was laid out anew)
+    mpf_bytes(mpf) -> bytes
+    MpfFile, SubModel, Group, Link, Mesh, Chunk, MorphKey; MpfFile.to_model(*other_files) -> SsxModel
+    pack_chunks(strips, uv, normals, positions, max_vertices=55) -> list[Chunk]  (the encoder's packer)
+    strip_triangles(strip_lengths) -> (t, 3) int64   local vertex indices of a chunk's strips
+    game_limits(mpf) -> list[(sub-model, problem)]     what the game would not take (59 / 165 vertices a chunk,
+                                                       25 matrices a link, 25 % steps, ~3000/1500/750 triangles)
+    tag_differences(mpf) -> list                       chunks whose kept tag bytes differ from piste's layout
 """
 
 from __future__ import annotations

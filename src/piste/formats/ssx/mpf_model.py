@@ -43,11 +43,13 @@ Frames and units (piste's assumptions where the facts are silent)
 
 API
 ---
-mpf_to_model(*files, name=None) -> SsxModel
-mpf_partners(path, texture=None) -> (head .mpf or None, [texture .ssh banks])
-MpfFile.to_model(*other_files)  (the same, from the byte module)
-SsxModel: Model + ``lods``, ``notes``
-euler_to_matrix / matrix_to_euler (Rz Ry Rx), bone_rotation / bone_euler (a bone record's convention), SSX_TO_PISTE
+::
+
+    mpf_to_model(*files, name=None) -> SsxModel
+    mpf_partners(path, texture=None) -> (head .mpf or None, [texture .ssh banks])
+    MpfFile.to_model(*other_files)  (the same, from the byte module)
+    SsxModel: Model + ``lods``, ``notes``
+    euler_to_matrix / matrix_to_euler (Rz Ry Rx), bone_rotation / bone_euler (a bone record's convention), SSX_TO_PISTE
 """
 
 from __future__ import annotations

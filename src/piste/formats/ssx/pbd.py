@@ -22,10 +22,12 @@ absolute pointers piste does not interpret.  To make a level with other patches 
 
 API
 ---
-read_pbd(path) -> Pbd / parse_pbd(data, path) -> Pbd
-write_pbd(pbd, path)                 atomic
-bezier_to_power(cp) / power_to_bezier(c)   (n, 4, 4, 3) <-> (n, 16, 3) stored order
-records_from_net(net, ...)           PatchNet (metres) -> (n,) PATCH_DTYPE records (centimetres)
+::
+
+    read_pbd(path) -> Pbd / parse_pbd(data, path) -> Pbd
+    write_pbd(pbd, path)                 atomic
+    bezier_to_power(cp) / power_to_bezier(c)   (n, 4, 4, 3) <-> (n, 16, 3) stored order
+    records_from_net(net, ...)           PatchNet (metres) -> (n,) PATCH_DTYPE records (centimetres)
 """
 
 from __future__ import annotations
@@ -210,7 +212,7 @@ class Pbd:
     """A ``.pbd`` level: its patches decoded, everything else kept as bytes.
 
     Per-patch arrays (edit them in place or assign new arrays of the same shape)
-    ---------------------------------------------------------------------------
+    ----------------------------------------------------------------------------
     control_points : (n, 4, 4, 3) float64 Bézier points, game units (cm), decoded in float64
     uv : (n, 4, 2) float32 texture UVs of corners (u0,v0), (u1,v0), (u0,v1), (u1,v1)
     lightmap_rect : (n, 4) float32 (x, y, w, h) of the tile within its 128x128 page, 0..1
