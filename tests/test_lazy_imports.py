@@ -31,7 +31,9 @@ RUNTIME = ("piste.pipeline.bundle_objects", "piste.pipeline.preview", "piste.ren
 NOT_IMPORTED = ("piste.pipeline.build", "piste.pipeline.cache", "piste.pipeline.gltf_import", "piste.pipeline.live",
                 "piste.pipeline.default_scene", "piste.pipeline.tiled_build", "piste.pipeline.dask_build",
                 "piste.pipeline.ssx_level", "piste.pipeline.ssx_rider", "piste.lighting.baker", "piste.lighting.gi",
-                "piste.formats.ssx", "piste.formats.geotiff", "piste.world.scene_file", "dask", "distributed",
+                "piste.formats.ssx", "piste.formats.geotiff", "piste.formats.gltf", "piste.world.scene_file",
+                "piste.render.streaming", "piste.render.ssx_pass", "piste.render.window", "piste.terrain.tiles",
+                "dask", "distributed",
                 "scipy", "tifffile")
 
 

@@ -44,7 +44,9 @@ import numpy as np
 from piste._jit import WarmUpHold
 from piste.character import BlendedMesh
 from piste.errors import ConfigError, FormatError
-from piste.formats.gltf import load_gltf
+# the glTF reader, the SSX terrain and the streamed tiles through the packages' lazy names (PEP 562):
+# imported when a --rider-model, an SSX level or a tiled world asks, not by every bundle render
+from piste import formats as _formats, render as _render
 from piste.pipeline.bundle_objects import camera_from_dict
 from piste.pipeline.characters import lods_from_arrays, merged_mesh, model_from_arrays
 from piste.render.context import create_context, save_png
@@ -52,8 +54,6 @@ from piste.render.frame import DEFAULT_FOG_DENSITY, TerrainRenderer
 from piste.render.object_pass import ObjectPass
 from piste.render.scene_renderer import SceneRenderer
 from piste.render.sky_pass import HORIZON
-from piste.render.ssx_pass import SsxTerrainRenderer
-from piste.render.streaming import StreamingTerrain
 from piste.render.video import VideoWriter
 from piste.terrain.resident import resident_fits, resident_terrain
 from piste.world.camera import Camera, track_camera, warn_if_no_terrain
@@ -217,7 +217,7 @@ def rider_casts(specs) -> list:
             else (str(spec), "", "2")
         if not Path(path).is_file():
             raise ConfigError(f"--rider-model {spec}: no such file {path}")
-        m = cast_model(load_gltf(path))
+        m = cast_model(_formats.load_gltf(path))
         out.append((m, pack_for(m, int(n), ahead=4.0 + 2.0 * k, across=0.0, spacing=9.0)))
     return out
 
@@ -258,10 +258,10 @@ def terrain_renderer(bundle, size, ctx, atlas, lightmap="bundle", stream_wait: b
     kw = dict(kw or {})
     t = bundle.manifest.get("terrain") or {}
     if t.get("source") == "tiles":
-        return StreamingTerrain(t["root"], bundle.net, size=size, ctx=ctx,
+        return _render.StreamingTerrain(t["root"], bundle.net, size=size, ctx=ctx,
                                 budget_bytes=int(float(t.get("budget_mb", 256.0)) * 2**20), wait=stream_wait)
     if "lightmap/source" in bundle.arrays and lightmap == "bundle":  # an SSX level: ps2 mode
-        return SsxTerrainRenderer(bundle.net, bundle.arrays["lightmap/source"], size=size, ctx=ctx, lightmap=atlas, **kw)
+        return _render.SsxTerrainRenderer(bundle.net, bundle.arrays["lightmap/source"], size=size, ctx=ctx, lightmap=atlas, **kw)
     return None
 
 

@@ -42,7 +42,8 @@ __all__, __getattr__, __dir__ = _lazy_exports(__name__, {
     "video": ("VideoWriter",),
     "terrain_pass": ("TerrainPass", "LIGHTMAP_MODES", "DEBUG_VIEWS"),
     "sky_pass": ("SkyPass",),
-    "streaming": ("StreamingRenderer", "TileCache", "render_flight"),
+    "streaming": ("StreamingRenderer", "TileCache", "render_flight", "StreamingTerrain"),
+    "ssx_pass": ("SsxTerrainRenderer",),
 })
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and the import graph
@@ -53,4 +54,5 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and the import g
     from piste.render.terrain_pass import DEBUG_VIEWS, LIGHTMAP_MODES, TerrainPass  # noqa: F401
     from piste.render.textures import LOD_COLORS, MipLevels, lightmap_atlas_size, mip_chain, mipmapped_texture, placeholder_lightmap, snow_texture, track_field  # noqa: F401
     from piste.render.video import VideoWriter  # noqa: F401
-    from piste.render.streaming import StreamingRenderer, TileCache, render_flight  # noqa: F401
+    from piste.render.streaming import StreamingRenderer, StreamingTerrain, TileCache, render_flight  # noqa: F401
+    from piste.render.ssx_pass import SsxTerrainRenderer  # noqa: F401
