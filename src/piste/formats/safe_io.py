@@ -9,10 +9,13 @@ every kind of reference (scene paths, glTF URIs, tiles, Multitool textures, SSX 
   the ``PISTE_ALLOW_PATHS`` environment variable, or the ``allow_paths=`` keyword of a library call.
   A key inside the file being read never widens it (a scene's ``allow_paths`` key is an error).
   ``..`` out of the folder, absolute paths elsewhere and URLs are refused by name.
-- **No links, no races**: the folder of a file the user named is a *confinement root*
-  (:func:`add_root`); every open below a root walks from it one component at a time with
-  ``openat(dir_fd, part, O_NOFOLLOW | O_DIRECTORY)`` (:func:`open_regular`), so a symbolic link
-  anywhere below the root, file or folder, present or swapped in while the loader runs, is refused.
+- **No links, no races**: the folder of a file the user named (a scene, a model, a tiled world, a
+  Multitool project) is a *confinement root* (:func:`add_root`, :func:`anchor`); every open below a
+  root walks from it one component at a time with ``openat(dir_fd, part, O_NOFOLLOW |
+  O_DIRECTORY)`` (:func:`open_regular`), so a symbolic link anywhere below the root, file or
+  folder, present or swapped in while the loader runs, is refused.  A path the user typed is taken
+  through its folder's real path, and its last component is not followed either (a file found
+  beside it by name, an SSX level's ``.ssh``, cannot be a link out; name a link's target).
   The last component is opened ``O_PATH`` and ``fstat``-ed: folders, devices (``/dev/zero``), named
   pipes and sockets are refused before any read (a pipe never blocks, a device is never opened);
   only then is the same inode reopened for reading.  (``openat2(RESOLVE_BENEATH |
@@ -305,8 +308,9 @@ def open_regular(path, max_bytes: int = 1 << 62, owner=None, field: str | None =
     Below a confinement root (:func:`add_root`: the folders of the files the user named, the
     folders the user allowed) the path is walked from the root one component at a time with
     ``openat(..., O_NOFOLLOW)``: a symbolic link anywhere below the root, swapped in at any moment,
-    is refused.  Elsewhere (a path the user typed) the real path is taken and its folder becomes a
-    root (so the files beside it that it names are confined the same way).  The last
+    is refused.  Elsewhere (a path the user typed) its folder's real path is taken and the file
+    itself is opened without following a link (so a file found beside another by name, an SSX
+    level's ``.ssh``, cannot be a link out; name a link's target instead of the link).  The last
     component is opened ``O_PATH`` (no open of a device or pipe ever happens) and checked with
     ``fstat``: folders, devices, pipes and sockets are refused before any read.  FormatError names
     ``owner`` (default ``path``) and ``field``.
@@ -318,13 +322,14 @@ def open_regular(path, max_bytes: int = 1 << 62, owner=None, field: str | None =
     a = os.path.normpath(os.path.abspath(text))
     root = _root_of(a)
     if root is None:
-        try:
-            a = os.path.realpath(a)  # the user's own path: its links are the user's
+        try:  # the user's own folder: its links are the user's; the file itself is not followed, so
+            # a file found beside it by name (an SSX level's .ssh / _L.ssh, an .mpf's _head.mpf)
+            # cannot be a link out of it
+            d = os.path.realpath(os.path.dirname(a))
         except (OSError, ValueError) as e:
             raise _err(owner, field, f"cannot read {what} {text!r}: {e}") from None
-        # the folder of a file the user named is a confinement root: the files beside it that it
-        # names (an SSX level's .ssh / _L.ssh, an .mpf's _head.mpf) are opened without links
-        root = _root_of(a) or add_root(os.path.dirname(a))
+        a = os.path.join(d, os.path.basename(a))
+        root = _root_of(a) or d
     if not _HAVE_DIR_FD:  # no openat: the last component only
         try:
             fd = os.open(a, _O | _NOFOLLOW | _NONBLOCK)
