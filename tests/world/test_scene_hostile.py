@@ -209,3 +209,68 @@ def test_gltf_uri_of_a_scene_model_confined(tree, uri):
     with pytest.raises(FormatError, match="leaves the model's folder|absolute path|symbolic link|not a regular") as ei:
         load_object_mesh(s.objects[0].model)
     assert "buffers[0].uri" in str(ei.value)
+
+
+def test_race_swapping_a_scene_folder_for_a_link(tmp_path):
+    """A thread swaps the scene's ``models/`` folder for a link to a folder outside holding a model
+    of the same name (whose triangle is the secret) while the scene is loaded and its object read
+    600 times: no read returns the outside model (each open walks from the scene's folder)."""
+    import json
+    import threading
+
+    import numpy as np
+
+    from piste.errors import PisteError
+    from piste.pipeline.sources import load_object_mesh
+
+    def model(folder, tri):
+        folder.mkdir(parents=True)
+        (folder / "tri.bin").write_bytes(np.asarray(tri, np.float32).tobytes())
+        doc = {"asset": {"version": "2.0"}, "buffers": [{"uri": "tri.bin", "byteLength": 36}],
+               "bufferViews": [{"buffer": 0, "byteLength": 36}],
+               "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                              "min": [0, 0, 0], "max": [9, 9, 9]}],
+               "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}], "nodes": [{"mesh": 0}],
+               "scenes": [{"nodes": [0]}], "scene": 0}
+        (folder / "thing.gltf").write_text(json.dumps(doc))
+
+    scene, out = tmp_path / "scene", tmp_path / "outside"
+    model(scene / "models", [[0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    model(out, [[7, 7, 7], [8, 8, 8], [9, 9, 9]])
+    text = '[[objects]]\nmodel = "models/thing.gltf"\nposition = [1.0, 2.0]\n'
+    stop = threading.Event()
+
+    def swap():
+        while not stop.is_set():
+            os.rename(scene / "models", scene / "models_real")
+            os.symlink(out, scene / "models")
+            os.unlink(scene / "models")
+            os.rename(scene / "models_real", scene / "models")
+
+    t = threading.Thread(target=swap, daemon=True)
+    t.start()
+    escapes = good = naive = 0
+    secret = np.asarray([[7, 7, 7], [8, 8, 8], [9, 9, 9]], np.float32).tobytes()
+    try:
+        for _ in range(600):
+            try:  # a naive open of the same path, to show the race is exercised
+                with open(scene / "models" / "tri.bin", "rb") as fh:
+                    naive += fh.read() == secret
+            except OSError:
+                pass
+            try:
+                s = loads_scene(text, scene / "scene.toml")
+                mesh = load_object_mesh(s.objects[0].model)
+            except PisteError:
+                continue
+            if np.abs(mesh.positions).max() > 5:
+                escapes += 1
+            else:
+                good += 1
+    finally:
+        stop.set()
+        t.join(5)
+    assert escapes == 0, f"{escapes} of 600 loads read the model outside the scene's folder"
+    assert good > 0
+    if naive == 0:
+        pytest.skip("the swapping thread never interleaved (no naive escape seen)")
