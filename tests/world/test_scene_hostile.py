@@ -240,12 +240,19 @@ def test_race_swapping_a_scene_folder_for_a_link(tmp_path):
     text = '[[objects]]\nmodel = "models/thing.gltf"\nposition = [1.0, 2.0]\n'
     stop = threading.Event()
 
+    swaps = []
+
     def swap():
-        while not stop.is_set():
+        import time
+
+        while not stop.is_set():  # each state held a moment, so that loads meet both
             os.rename(scene / "models", scene / "models_real")
             os.symlink(out, scene / "models")
+            time.sleep(0.0003)
             os.unlink(scene / "models")
             os.rename(scene / "models_real", scene / "models")
+            swaps.append(1)
+            time.sleep(0.0003)
 
     t = threading.Thread(target=swap, daemon=True)
     t.start()
@@ -273,4 +280,5 @@ def test_race_swapping_a_scene_folder_for_a_link(tmp_path):
     assert escapes == 0, f"{escapes} of 600 loads read the model outside the scene's folder"
     assert good > 0
     if naive == 0:
-        pytest.skip("the swapping thread never interleaved (no naive escape seen)")
+        pytest.skip(f"the swapping thread never interleaved (no naive escape seen; {len(swaps)} swaps, "
+                    f"{good} good loads)")
