@@ -26,6 +26,7 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 from functools import lru_cache
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -34,7 +35,8 @@ from piste.errors import RenderError, ValidationError
 from piste.render.context import load_shader
 from piste.terrain.bezier import grid_params
 
-__all__ = ["snow_texture", "placeholder_lightmap", "lightmap_atlas_size", "track_field", "mip_chain",
+__all__ = ["snow_texture", "compute_snow_texture", "SNOW_FILE", "placeholder_lightmap", "lightmap_atlas_size",
+           "track_field", "mip_chain",
            "mipmapped_texture", "MipLevels", "LOD_COLORS", "SUN_DIRECTION"]
 
 #: debug colours (RGB uint8) by patch kind: 4x4 green, 6x6 yellow, 8x8 red, glue (non-uniform) blue
@@ -60,11 +62,43 @@ def _periodic_noise(n: int, rng: np.random.Generator, beta: float, lo: int, hi: 
     return out / max(np.abs(out).max(), 1e-12)
 
 
+#: the default snow texture (size 256, seed 0) exactly as :func:`snow_texture` computes it, shipped with
+#: the package: in a fresh process the first FFT (numpy.fft's import and plans) cost the first frame
+#: 70-180 ms on a loaded 2-core machine; ``tests/render/test_texture_data.py`` checks the file against the code
+SNOW_FILE = Path(__file__).resolve().parents[1] / "data" / "snow_256.npz"
+
+
+@lru_cache(maxsize=1)
+def _stored_snow() -> np.ndarray | None:
+    """:data:`SNOW_FILE`'s texture (read-only), or None when it is missing or not a (256, 256, 4) uint8."""
+    try:
+        with np.load(SNOW_FILE, allow_pickle=False) as z:
+            a = z["snow"]
+    except (OSError, KeyError, ValueError):
+        return None
+    if a.shape != (256, 256, 4) or a.dtype != np.uint8:
+        return None
+    a.flags.writeable = False
+    return a
+
+
 def snow_texture(size: int = 256, seed: int = 0) -> np.ndarray:
     """A tileable snow texture: soft drifts, fine grain and a few sparkles.
 
-    Returns ``(size, size, 4) uint8`` RGBA (alpha 255).  Deterministic for a seed.
+    Returns ``(size, size, 4) uint8`` RGBA (alpha 255).  Deterministic for a seed.  The default
+    (256, seed 0) is read from :data:`SNOW_FILE` (the same bytes), any other computed.
     """
+    if size < 8 or size & (size - 1):
+        raise ValidationError(f"snow_texture: size must be a power of two >= 8, got {size}")
+    if size == 256 and seed == 0:
+        stored = _stored_snow()
+        if stored is not None:
+            return stored.copy()
+    return compute_snow_texture(size, seed)
+
+
+def compute_snow_texture(size: int = 256, seed: int = 0) -> np.ndarray:
+    """:func:`snow_texture` always computed (the reference :data:`SNOW_FILE` is checked against)."""
     if size < 8 or size & (size - 1):
         raise ValidationError(f"snow_texture: size must be a power of two >= 8, got {size}")
     rng = np.random.default_rng(seed)
