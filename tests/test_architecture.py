@@ -447,3 +447,32 @@ def test_formats_and_terrain_do_not_import_each_other():
     if up and down:
         pytest.xfail(f"known two-way arrow left: formats {sorted(FORMATS_TO_TERRAIN_LEFT)} -> terrain; "
                      f"terrain {down} -> formats (issue 25 item 4)")
+
+
+# ----------------------------------------------------------------------------- the library prints nothing
+#: modules that may print: the command line (its output is the user's), and what is left to move
+PRINT_OK = ("piste.cli", "piste.commands")
+PRINTS_LEFT = {
+    "piste.pipeline.live",  # run_headless's default log (issue 25 items 1-2: the runtime's owner)
+    "piste.render.window",  # print_benchmark: command output, called only by commands/view.py
+}
+
+
+def library_prints(trees) -> list[str]:
+    """``print(...)`` calls outside the command line: the library reports through the ``piste``
+    logger (``logging.getLogger(__name__)``; ``piste -v/-q`` sets its level), progress through tqdm."""
+    bad = []
+    for name, tree in trees:
+        if name.startswith(PRINT_OK):
+            continue
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "print":
+                bad.append(f"{name} (line {node.lineno}): {ast.unparse(node)[:100]}")
+    return bad
+
+
+def test_the_library_logs_instead_of_printing():
+    bad = [b for b in library_prints(_trees()) if b.split(" (")[0] not in PRINTS_LEFT]
+    assert not bad, "print() in library code (use logging.getLogger(__name__)):\n  " + "\n  ".join(bad)
+    trees = [("piste.terrain.x", ast.parse("def f():\n    print('hi')\n")), ("piste.commands.y", ast.parse("print(1)\n"))]
+    assert library_prints(trees) == ["piste.terrain.x (line 2): print('hi')"]
