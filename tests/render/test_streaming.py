@@ -26,6 +26,7 @@ def world(tmp_path_factory):
 def test_pages_nearest_tiles_within_the_budget(world):
     one = S.mesh_bytes(8 * 2 + 1, 8 * 2 + 1)  # a near tile's mesh
     far = (S.mesh_bytes(9, 9) + S.mesh_bytes(5, 5) + S.mesh_bytes(3, 3) + S.mesh_bytes(2, 2)) * 36  # strides 1..8
+    far += 17 * 17 * 3 * 36  # and each tile's welded light map (near and far levels sample it)
     cache = S.TileCache(world, budget_bytes=far + 3 * one + 100, near_radius=1000.0)
     try:
         assert cache.resident_bytes == far and not cache.near  # far stand-ins for every tile up front
@@ -92,7 +93,7 @@ def _views(world):
 
 def test_no_background_through_tile_borders(world, gl, monkeypatch):
     r = S.StreamingRenderer(world, size=(200, 150), budget_bytes=4 << 20, near_radius=250.0, ctx=gl,
-                            background=MAGENTA)
+                            background=MAGENTA, pixel_error=None, sky=False)
     try:
         holes = _holes(r, _views(world))
         assert r.stats["near"] >= 1 and r.stats["far"] >= 4  # both levels and their borders in view
@@ -103,7 +104,7 @@ def test_no_background_through_tile_borders(world, gl, monkeypatch):
     # the same views without skirts do show the background at near/far borders: the test can fail
     monkeypatch.setattr(S, "_with_skirts", lambda p, c, t, sides, depth, f=S._with_skirts: f(p, c, t, sides, 0.0))
     r = S.StreamingRenderer(world, size=(200, 150), budget_bytes=4 << 20, near_radius=250.0, ctx=gl,
-                            background=MAGENTA)
+                            background=MAGENTA, pixel_error=None, sky=False)
     try:
         assert sum(_holes(r, _views(world))) > 0
     finally:

@@ -63,29 +63,49 @@ SKY = (0.80, 0.86, 0.93)
 #: corner strides of the far levels (every tile keeps all of them: 1 + 1/4 + 1/16 + 1/64 of the grid)
 FAR_STRIDES = (1, 2, 4, 8)
 
+#: far levels are chosen so that a level's height error (against the full corner grid) stays
+#: under this many pixels on screen
+FAR_PIXEL_ERROR = 0.5
+
+# The tiles are drawn like the course's terrain (terrain.frag.glsl, modulate mode): the base
+# texture (repeated once a patch) times the light map, fogged per vertex.  A heightfield patch is
+# linear in x and y, so both texture coordinates are affine in the world position: per tile,
+# base uv = (p.xy - origin) / patch size and the light texel = (p.xy - origin) / patch size
+# (res - 1) + 0.5 in the tile's welded light grid (:func:`light_grid`): near and far levels of a
+# tile sample the same light, bilinearly like the course's atlas.
 _VERT = """#version 330
 uniform mat4 u_vp;
 uniform vec3 u_eye;
+uniform vec4 u_fog;        // rgb, density per metre
+uniform vec2 u_fade;       // linear fade to the fog colour between these distances (metres)
+uniform vec2 u_origin;     // the tile's (x0, y0)
+uniform vec2 u_patch;      // 1 / patch size (x, y)
+uniform vec4 u_light_uv;   // (res - 1) / width, (res - 1) / height, 0.5 / width, 0.5 / height
 in vec3 in_pos;
-in vec3 in_rgb;
-out vec3 v_rgb;
-out float v_dist;
+out vec2 v_uv;
+out vec2 v_uvl;
+out float v_fog;
 void main() {
     gl_Position = u_vp * vec4(in_pos, 1.0);
-    v_rgb = in_rgb * (255.0 / 128.0);  // half-bright texels: 128 = full light
-    v_dist = distance(in_pos, u_eye);
+    vec2 q = (in_pos.xy - u_origin) * u_patch;   // patch units from the tile's corner
+    v_uv = q;
+    v_uvl = q * u_light_uv.xy + u_light_uv.zw;
+    float d = distance(in_pos, u_eye);
+    float f = u_fog.a > 0.0 ? 1.0 - exp(-u_fog.a * d) : 0.0;
+    v_fog = max(f, clamp((d - u_fade.x) / max(u_fade.y - u_fade.x, 1.0), 0.0, 1.0));
 }
 """
 _FRAG = """#version 330
-uniform vec3 u_fog_color;
-uniform vec2 u_fog;   // start, end (metres)
-in vec3 v_rgb;
-in float v_dist;
+uniform sampler2D u_base;
+uniform sampler2D u_light;
+uniform vec4 u_fog;
+in vec2 v_uv;
+in vec2 v_uvl;
+in float v_fog;
 out vec4 f_color;
 void main() {
-    vec3 snow = vec3(0.93, 0.95, 0.98);
-    float f = clamp((v_dist - u_fog.x) / max(u_fog.y - u_fog.x, 1.0), 0.0, 1.0);
-    f_color = vec4(mix(snow * v_rgb, u_fog_color, f), 1.0);
+    vec3 c = texture(u_base, v_uv).rgb * texture(u_light, v_uvl).rgb * (255.0 / 128.0);  // half-bright texels
+    f_color = vec4(mix(c, u_fog.rgb, v_fog), 1.0);
 }
 """
 
@@ -152,6 +172,55 @@ def far_mesh(lit: dict, depth: float, stride: int = 1) -> TileMesh:
     idx = np.arange(rows * cols).reshape(rows, cols)
     sides = [idx[0], idx[:, -1], idx[-1], idx[:, 0]]
     return _with_skirts(g.reshape(-1, 3), c.reshape(-1, 3), _grid_triangles(rows, cols), sides, depth)
+
+
+def light_grid(texels: np.ndarray, grid_shape: tuple) -> np.ndarray:
+    """A tile's light map welded into one image: ``texels (n, res, res, 3)`` uint8 (patch
+    ``row * nx + col``, ``[patch, j (v), i (u)]``) -> ``(ny (res-1) + 1, nx (res-1) + 1, 3)`` uint8,
+    row = y.  Neighbouring patches' border texels are equal (the bake welds them), so bilinear
+    sampling of this image at ``(x - x0) / patch (res - 1) + 0.5`` texels is the course's atlas
+    sampled at the same surface point."""
+    t = np.asarray(texels)
+    n, res = t.shape[:2]
+    ny, nx = grid_shape
+    if n != ny * nx:
+        raise ValueError(f"light_grid: {n} patches for a {ny} x {nx} tile")
+    r = res - 1
+    out = np.empty((ny * r + 1, nx * r + 1, 3), np.uint8)
+    t = t.reshape(ny, nx, res, res, 3)
+    for j in range(res):  # a shared texel takes the value of the last patch written
+        for i in range(res):
+            out[j:j + ny * r:r, i:i + nx * r:r] = t[:, :, j, i]
+    return out
+
+
+def stride_errors(far_positions: np.ndarray) -> dict:
+    """Height error of each far level: ``{stride: metres}``, the largest vertical distance between
+    the full corner grid ``(ny+1, nx+1, 3)`` and the level's grid interpolated bilinearly."""
+    g = np.asarray(far_positions, dtype=np.float64)[..., 2]
+    rows, cols = np.arange(g.shape[0]), np.arange(g.shape[1])
+    out = {}
+    for k in FAR_STRIDES:
+        ri, ci = _stride_index(g.shape[0], k), _stride_index(g.shape[1], k)
+        c = g[ri][:, ci]
+        a = np.stack([np.interp(cols, ci, row) for row in c])  # (len(ri), cols)
+        b = np.stack([np.interp(rows, ri, a[:, x]) for x in range(a.shape[1])], 1)  # (rows, cols)
+        out[k] = float(np.abs(b - g).max())
+    return out
+
+
+def chord_error(far_positions: np.ndarray) -> float:
+    """An estimate of how far a tile's patches leave the chords of its corner grid ``(ny+1, nx+1,
+    3)``: a quarter of the largest second difference of the corner heights along x or y (a
+    parabola through three corners leaves its chords by an eighth of it: twice that for safety),
+    metres.  Tiles where this would show on screen are drawn near (evaluated patches)."""
+    z = np.asarray(far_positions, dtype=np.float64)[..., 2]
+    m = 0.0
+    if z.shape[0] >= 3:
+        m = max(m, float(np.abs(z[2:] - 2.0 * z[1:-1] + z[:-2]).max()))
+    if z.shape[1] >= 3:
+        m = max(m, float(np.abs(z[:, 2:] - 2.0 * z[:, 1:-1] + z[:, :-2]).max()))
+    return m / 4.0
 
 
 def near_mesh(fit: dict, lit: dict, grid_shape: tuple, depth: float) -> TileMesh:
@@ -235,14 +304,24 @@ class TileCache:
         self.lo[:, 2] -= [self._depth(t) for t in self.tiles]
         self._far_bytes = 0
         self.far_lod_distance = 0.5 * tile_size
+        #: per tile: its welded light map ``(rows, cols, 3)`` uint8 (:func:`light_grid`, near and
+        #: far levels sample it) and each far level's height error ``{stride: metres}``
+        self.light: dict = {}
+        self.far_error: dict = {}
+        #: per tile: how far its surface may leave the far grid's chords (metres, :func:`chord_error`)
+        self.chord_error: dict = {}
         for t in sorted(self.bounds):
             try:
-                lit = self._read("lit", t, ("far_positions", "far_colors"))
+                lit = self._read("lit", t, ("far_positions", "far_colors", "texels"))
             except TileError as exc:  # drawn as a hole; the other tiles are drawn
                 self._bad_tile(t, exc)
                 continue
+            py0, py1, px0, px1 = self.grid.patch_range(*t)
             self.far[t] = {k: far_mesh(lit, self._depth(t), k) for k in FAR_STRIDES}
-            self._far_bytes += sum(m.nbytes for m in self.far[t].values())
+            self.light[t] = light_grid(lit["texels"], (py1 - py0, px1 - px0))
+            self.far_error[t] = stride_errors(lit["far_positions"])
+            self.chord_error[t] = chord_error(lit["far_positions"])
+            self._far_bytes += sum(m.nbytes for m in self.far[t].values()) + self.light[t].nbytes
         if self.bad:  # only tiles with a far stand-in are drawn
             keep = [i for i, t in enumerate(self.tiles) if t not in self.bad]
             self.tiles = [self.tiles[i] for i in keep]
@@ -343,18 +422,25 @@ class TileCache:
         d = np.maximum(np.maximum(self.lo[:, :2] - eye, eye - self.hi[:, :2]), 0.0)
         return np.hypot(d[:, 0], d[:, 1])
 
-    def update(self, eye) -> None:
-        """Choose the near set for ``eye``: nearest tiles first within ``near_radius`` while the
-        budget allows; evict the others at once, queue the missing ones for the loader."""
+    def update(self, eye, pixel_scale: float | None = None, pixel_error: float = FAR_PIXEL_ERROR) -> None:
+        """Choose the near set for ``eye``: nearest tiles first within ``near_radius`` (and, with
+        ``pixel_scale`` (pixels a radian), every tile whose far grid's chord error,
+        :attr:`chord_error`, would show as more than ``pixel_error`` pixels) while the budget
+        allows; evict the others at once, queue the missing ones for the loader."""
         dist = self.distances(eye)
-        close = np.nonzero(dist <= self.near_radius)[0]
+        want_near = dist <= self.near_radius
+        if pixel_scale is not None and len(self.tiles):
+            e = np.asarray(eye, dtype=np.float64)
+            d = np.maximum(np.maximum(self.lo - e, e - self.hi), 0.0)
+            d3 = np.sqrt((d * d).sum(1))
+            chord = np.array([self.chord_error.get(t, 0.0) for t in self.tiles])
+            want_near |= chord * pixel_scale > pixel_error * np.maximum(d3, 1e-9)
+        close = np.nonzero(want_near)[0]
         order = [(float(dist[i]), self.tiles[i]) for i in close[np.argsort(dist[close], kind="stable")]]
         room = self.budget - self._far_bytes
         want = []
         order = [(d, t) for d, t in order if t not in self.bad]
         for d, t in order:
-            if d > self.near_radius:
-                break
             cost = self._near_estimate[t]
             if cost > room:
                 break
@@ -389,13 +475,33 @@ class TileCache:
         d = self.distance(eye, t) / self.far_lod_distance
         return next((k for k in FAR_STRIDES if d < k), FAR_STRIDES[-1])
 
-    def draw_list(self, eye=None, mask=None) -> list:
+    def far_strides(self, eye, pixel_scale: float, pixel_error: float = FAR_PIXEL_ERROR) -> np.ndarray:
+        """The far level of every tile of :attr:`tiles` seen from ``eye`` ``(3,)``: the coarsest
+        stride whose height error (:func:`stride_errors`) projects to at most ``pixel_error``
+        pixels at the tile's nearest point, ``pixel_scale`` pixels a radian (image height /
+        (2 tan(fov_y / 2))); ``(n,)`` int."""
+        eye = np.asarray(eye, dtype=np.float64)
+        d = np.maximum(np.maximum(self.lo - eye, eye - self.hi), 0.0)
+        dist = np.sqrt((d * d).sum(1))
+        allowed = dist * pixel_error / max(float(pixel_scale), 1e-9)  # metres of error allowed
+        out = np.ones(len(self.tiles), int)
+        for i, t in enumerate(self.tiles):
+            err = self.far_error[t]
+            for k in FAR_STRIDES[1:]:
+                if err[k] <= allowed[i]:
+                    out[i] = k
+        return out
+
+    def draw_list(self, eye=None, mask=None, pixel_scale: float | None = None) -> list:
         """``[(tile, level, TileMesh)]``: a near mesh where one is resident, else the far one at the
-        stride for ``eye`` (``"far1"``, ``"far2"``, ...; the full corner grid without ``eye``);
-        ``mask (n,)`` bool keeps only those of :attr:`tiles`."""
+        stride for ``eye`` (``"far1"``, ``"far2"``, ...; the full corner grid without ``eye``):
+        by screen error with ``pixel_scale`` (:meth:`far_strides`), else by distance
+        (:meth:`far_stride`); ``mask (n,)`` bool keeps only those of :attr:`tiles`."""
         with self._lock:
             near = dict(self.near)
-        if eye is not None:
+        if eye is not None and pixel_scale is not None:
+            strides = self.far_strides(eye, pixel_scale)
+        elif eye is not None:
             d = self.distances(eye) / self.far_lod_distance
             strides = np.select([d < k for k in FAR_STRIDES[:-1]], FAR_STRIDES[:-1], FAR_STRIDES[-1])
         else:
@@ -416,6 +522,15 @@ class TileCache:
         self._thread.join(timeout=5)
 
 
+def world_fog_density(cache: TileCache) -> float:
+    """The fog a bundle of the same terrain gets (:func:`piste.render.frame.scene_fog_density`:
+    the default density, thinner for worlds larger than the default course), per metre."""
+    from piste.render.frame import DEFAULT_FOG_DENSITY, FOG_REFERENCE_SIZE
+
+    diag = float(np.hypot(*(cache.hi[:, :2].max(0) - cache.lo[:, :2].min(0)))) if len(cache.tiles) else 1.0
+    return DEFAULT_FOG_DENSITY * min(1.0, FOG_REFERENCE_SIZE / max(diag, 1e-9))
+
+
 def _boxes_visible(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Axis-aligned boxes ``lo, hi (n, 3)`` against inward frustum planes ``(6, 4)`` (the positive
     vertex test): ``(n,)`` bool, False only for boxes wholly outside one plane."""
@@ -432,35 +547,76 @@ class StreamingRenderer:
     size : (width, height)
     budget_bytes, near_radius : see :class:`TileCache`
     background : clear colour (RGB 0..1); the sky colour by default
+    fog_density : per metre, towards the sky's horizon colour, per vertex like the course
+        (default: :func:`piste.render.frame.scene_fog_density` of the world's extent, what a bundle of
+        the same terrain uses); the tiles also fade to it over the last fifth of the far plane
+    sky : draw the sky gradient (:class:`piste.render.sky_pass.SkyPass`) where no tile is
+    pixel_error : tiles whose far grid would be off by more than this many pixels get near meshes
+        (evaluated patches), nearest first under the budget; None: only those within ``near_radius``
     """
 
     def __init__(self, root, size=(640, 448), budget_bytes: int = 256 << 20, near_radius: float | None = None,
-                 ctx=None, background=SKY):
+                 ctx=None, background=SKY, fog_density: float | None = None, sky: bool = True,
+                 pixel_error: float | None = FAR_PIXEL_ERROR):
+        from piste.render.textures import mipmapped_texture, snow_texture
+
         self.cache = TileCache(root, budget_bytes=budget_bytes, near_radius=near_radius)
         self.ctx = ctx or create_context()
         self.size = (int(size[0]), int(size[1]))
         self.fbo = Offscreen(self.ctx, self.size)
         self.prog = self.ctx.program(vertex_shader=_VERT, fragment_shader=_FRAG)
         self.background = tuple(float(c) for c in background)
-        self._gpu: dict = {}  # (tile, level) -> (vbo_pos, vbo_rgb, ibo, vao, mesh id)
+        self.pixel_error = None if pixel_error is None else float(pixel_error)
+        self.fog_density = world_fog_density(self.cache) if fog_density is None else float(fog_density)
+        self.sky = None
+        if sky:
+            from piste.render.sky_pass import SkyPass
+
+            self.sky = SkyPass(self.ctx)
+        import moderngl
+
+        snow = snow_texture()  # the course's base texture, filtered as terrain_pass does
+        self.base = mipmapped_texture(self.ctx, np.concatenate([snow[..., :3], np.full(snow.shape[:2] + (1,), 255,
+                                                                                         np.uint8)], 2))
+        self.base.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
+        self.base.repeat_x = self.base.repeat_y = True
+        g = self.cache.grid
+        s = g.samples_per_patch
+        self._patch = (1.0 / (s * g.spacing[0]), 1.0 / (s * g.spacing[1]))
+        self._lights: dict = {}  # tile -> its light-map texture
+        self._gpu: dict = {}  # (tile, level) -> (vbo_pos, ibo, vao, mesh id)
         self.stats: dict = {}
+
+    def _light(self, t):
+        """The GL texture of tile ``t``'s welded light map (made on first use), and its uniforms."""
+        import moderngl
+
+        got = self._lights.get(t)
+        if got is None:
+            img = self.cache.light[t]
+            h, w = img.shape[:2]
+            tex = self.ctx.texture((w, h), 3, np.ascontiguousarray(img).tobytes(), alignment=1)
+            tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            tex.repeat_x = tex.repeat_y = False
+            r = self.cache.res - 1
+            x0, y0, _, _ = self.cache.grid.tile_bounds_xy(*t)
+            got = self._lights[t] = (tex, (float(x0), float(y0)), (r / w, r / h, 0.5 / w, 0.5 / h))
+        return got
 
     def _vao(self, key, mesh: TileMesh):
         got = self._gpu.get(key)
-        if got is not None and got[4] == id(mesh):
-            return got[3]
+        if got is not None and got[3] == id(mesh):
+            return got[2]
         if got is not None:
             self._release(key)
         pos = self.ctx.buffer(np.ascontiguousarray(mesh.positions))
-        rgb = self.ctx.buffer(np.ascontiguousarray(mesh.colors))
         ibo = self.ctx.buffer(np.ascontiguousarray(mesh.indices))
-        vao = self.ctx.vertex_array(self.prog, [(pos, "3f", "in_pos"), (rgb, "3f1", "in_rgb")], index_buffer=ibo,
-                                    index_element_size=4)
-        self._gpu[key] = (pos, rgb, ibo, vao, id(mesh))
+        vao = self.ctx.vertex_array(self.prog, [(pos, "3f", "in_pos")], index_buffer=ibo, index_element_size=4)
+        self._gpu[key] = (pos, ibo, vao, id(mesh))
         return vao
 
     def _release(self, key) -> None:
-        for obj in self._gpu.pop(key)[:4][::-1]:
+        for obj in self._gpu.pop(key)[:3][::-1]:
             obj.release()
 
     def render(self, camera, wait: bool = False, read: bool = True) -> np.ndarray | None:
@@ -477,15 +633,20 @@ class StreamingRenderer:
 
     def update(self, camera, wait: bool = False) -> None:
         """Page tiles for ``camera`` (nearest first under the budget); ``wait``: until loaded."""
-        self.cache.update(camera.eye)
+        if self.pixel_error is None:
+            self.cache.update(camera.eye)
+        else:
+            self.cache.update(camera.eye, self.size[1] / (2.0 * np.tan(np.radians(camera.fov_y) / 2.0)),
+                              self.pixel_error)
         if wait:
             self.cache.wait_idle()
         elif self.cache.errors:
             raise self.cache.errors[0]
 
-    def draw(self, cam, read: bool = True, t0: float | None = None) -> np.ndarray | None:
+    def draw(self, cam, read: bool = True, t0: float | None = None, sky: bool = True) -> np.ndarray | None:
         """Draw the resident tiles for ``cam`` (its aspect the target's) into :attr:`fbo`, cleared
-        to the sky; the image ``(H, W, 3) uint8`` with ``read``, else None (more passes follow)."""
+        to the background (and the sky gradient over it with a sky pass and ``sky``); the image
+        ``(H, W, 3) uint8`` with ``read``, else None (more passes follow)."""
         import moderngl
 
         t0 = time.perf_counter() if t0 is None else t0
@@ -495,17 +656,28 @@ class StreamingRenderer:
         self.fbo.clear((*self.background, 1.0))
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.disable(moderngl.CULL_FACE)
+        from piste.render.sky_pass import HORIZON
+
         self.prog["u_vp"].write(vp.astype(np.float32).T.tobytes())
         self.prog["u_eye"].value = tuple(float(x) for x in cam.eye)
-        self.prog["u_fog_color"].value = self.background
-        self.prog["u_fog"].value = (0.6 * cam.far, cam.far)
+        self.prog["u_fog"].value = (*HORIZON, self.fog_density)
+        self.prog["u_fade"].value = (0.8 * cam.far, cam.far)
+        self.prog["u_patch"].value = self._patch
+        self.prog["u_base"].value = 0
+        self.prog["u_light"].value = 1
+        self.base.use(0)
         drawn = {"near": 0, "far": 0, "culled": 0, "near_patches": 0, "far_patches": 0, "triangles": 0}
         live = set()
         visible = _boxes_visible(planes, self.cache.lo, self.cache.hi)
         drawn["culled"] = int((~visible).sum())
-        for t, level, mesh in self.cache.draw_list(cam.eye, visible):
+        pixel_scale = self.size[1] / (2.0 * np.tan(np.radians(cam.fov_y) / 2.0))
+        for t, level, mesh in self.cache.draw_list(cam.eye, visible, pixel_scale=pixel_scale):
             key = (t, level)
             live.add(key)
+            tex, origin, luv = self._light(t)
+            tex.use(1)
+            self.prog["u_origin"].value = origin
+            self.prog["u_light_uv"].value = luv
             self._vao(key, mesh).render(moderngl.TRIANGLES)
             kind = "near" if level == "near" else "far"
             drawn[kind] += 1
@@ -513,6 +685,8 @@ class StreamingRenderer:
             drawn["triangles"] += len(mesh.indices)
         for key in [k for k in self._gpu if k[1] == "near" and k not in live and k[0] not in self.cache.near]:
             self._release(key)  # evicted near tiles leave the GPU too
+        if self.sky is not None and sky:
+            self.sky.draw(vp)  # last: only where no tile was drawn
         image = self.fbo.read()[..., :3].copy() if read else None
         self.stats = {**drawn, "resident_bytes": self.cache.resident_bytes, "ms": (time.perf_counter() - t0) * 1e3}
         return image
@@ -520,6 +694,10 @@ class StreamingRenderer:
     def close(self) -> None:
         for key in list(self._gpu):
             self._release(key)
+        for tex, _, _ in self._lights.values():
+            tex.release()
+        self._lights.clear()
+        self.base.release()
         self.prog.release()
         self.fbo.release()
         self.cache.close()
@@ -548,11 +726,12 @@ class StreamingTerrain:
     def __init__(self, root, net, size=(640, 448), ctx=None, budget_bytes: int = 256 << 20,
                  near_radius: float | None = None, wait: bool = True):
         self.streaming = StreamingRenderer(root, size=size, budget_bytes=budget_bytes, near_radius=near_radius,
-                                           ctx=ctx)
+                                           ctx=ctx, sky=True)
         self.ctx = self.streaming.ctx
         self.net = net
         self.wait = bool(wait)
-        self.fog_density = 0.0  # the tiles fog in their own shader, to the sky at the far plane
+        #: the world's fog (what a bundle of the same terrain uses), what ``fog="scene"`` draws
+        self.fog_density = self.streaming.fog_density
         self.visibility = None
         self.cull_stats: dict = {}
         self.level = max(int(self.streaming.cache.res), 2)
@@ -596,11 +775,18 @@ class StreamingTerrain:
     def draw(self, camera, mesh=None, lightmap_mode: str = "modulate", debug: str | None = None, fog=None,
              sky: bool = True, clear=None, read: bool = True, timings: dict | None = None, resolve: bool = True,
              sync: bool = True):
-        """Draw the streamed tiles (the light-map and debug modes are the tiles' own: texels baked
-        into their vertices); a :class:`piste.render.frame.Frame`."""
+        """Draw the streamed tiles like the course's terrain in modulate mode (base texture x light
+        map; the other light-map and debug modes are not drawn differently), fogged with ``fog``
+        (density per metre, "scene": :attr:`fog_density`, None or 0: none), the sky over the rest
+        with ``sky``; a :class:`piste.render.frame.Frame`."""
         cam = camera.with_aspect(*self.size)
         t0 = time.perf_counter()
-        self.streaming.draw(cam, read=False, t0=t0)
+        density = self.fog_density if isinstance(fog, str) else float(fog or 0.0)
+        self.streaming.fog_density, own = density, self.streaming.fog_density
+        try:
+            self.streaming.draw(cam, read=False, t0=t0, sky=sky)
+        finally:
+            self.streaming.fog_density = own
         if sync and not read:
             self.ctx.finish()
         t1 = time.perf_counter()
@@ -618,11 +804,11 @@ class StreamingTerrain:
                      0, t)
 
     def render(self, camera, lod: bool = True, lightmap_mode: str = "modulate", debug: str | None = None,
-               fog=None, read: bool = True, **_ignored):
+               fog="scene", read: bool = True, **_ignored):
         """One frame of the tiles alone (:meth:`prepare` + :meth:`draw`)."""
         cam = camera.with_aspect(*self.size)
         self.streaming.update(cam, wait=self.wait)
-        return self.draw(cam, read=read)
+        return self.draw(cam, read=read, fog=fog)
 
     def release(self) -> None:
         self.streaming.close()
