@@ -171,11 +171,14 @@ def test_cli_and_scene_keys(tmp_path, capsys):
     assert lm.manifest["gi"]["bounces"] == 1 and lm.manifest["gi"]["sun_radius"] == 0.27
     want = bake_lightmap(net, lights, res=RES, bounces=1, sun_radius=0.27)
     assert np.array_equal(lm.atlas, want.atlas)
-    for bad in (["--bounces", "-1"], ["--bounces", "x"], ["--sun-radius", "nan"], ["--sun-radius", "11"]):
+    for bad in (["--bounces", "-1"], ["--bounces", "x"], ["--sun-radius", "nan"], ["--sun-radius", "11"],
+                ["--tracer", "optix"]):
         with pytest.raises(SystemExit) as exc:
             main([*args[:-4], *bad])
         assert exc.value.code == 2
     capsys.readouterr()
+    assert main([*args[:-4], "--tracer", "embree"]) == 1  # without --bounces: a one-line error
+    assert "--tracer embree chooses the gather rays of --bounces" in capsys.readouterr().err
 
     (tmp_path / "net.bpt").write_text("1\n3 3\n" + "0 0 0\n" * 16)
     head = '[terrain]\nsource = "net.bpt"\n[lightmap]\n'

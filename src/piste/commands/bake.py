@@ -73,6 +73,8 @@ def run(args) -> int:
         return 0
     if args.jobs < 0:
         raise ConfigError(f"--jobs must be >= 0, got {args.jobs}")
+    if args.tracer != "exact" and not args.bounces:
+        raise ConfigError(f"--tracer {args.tracer} chooses the gather rays of --bounces: give --bounces N (N >= 1) too")
     if args.chunk_size < 1:
         raise ConfigError(f"--chunk-size must be >= 1, got {args.chunk_size}")
     out = check_writable_folder(args.out)  # before the bake, not after it
