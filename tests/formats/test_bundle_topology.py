@@ -160,3 +160,44 @@ def test_the_build_stores_the_topology(tmp_path):
     for k in TOPOLOGY_ARRAYS:
         assert np.array_equal(data.arrays[f"terrain/{k}"], getattr(computed, k)), k
     _same_net(b.net, computed)
+
+
+def test_the_terrain_members_are_read_first_and_handed_over(tmp_path):
+    """read_bundle(on_terrain=) gets the net's members (and its topology) before the others are read,
+    so load_bundle(warm=True) starts the vertex blocks while the light map etc. are still being read."""
+    net = grid_net(3, 3, seed=5)
+    path = _bundle(tmp_path, net)
+    seen = []
+    data = read_bundle(path, on_terrain=lambda man, arrays: seen.append((man["terrain"]["patches"], sorted(arrays))))
+    assert len(seen) == 1
+    patches, names = seen[0]
+    assert patches == len(net) and "lightmap/atlas" not in names and "lightmap/atlas" in data.arrays
+    assert set(names) == {"terrain/control_points", "terrain/uv", "lightmap/rects", *TOPOLOGY_MEMBERS}
+
+
+def test_load_bundle_warm_uses_the_net_it_made_early(tmp_path):
+    from piste.terrain.resident import resident_terrain
+
+    b = load_bundle(_bundle(tmp_path, grid_net(3, 3, seed=6)), warm=True)
+    jobs = {**b.net.__dict__.get("_resident", {}), **b.net.__dict__.get("_resident_pending", {})}
+    assert jobs, "no vertex-block build was started for the bundle's net"
+    assert resident_terrain(b.net, wait=True) is not None
+    _same_net(b.net, grid_net(3, 3, seed=6))
+
+
+def test_a_corrupt_later_member_still_fails_after_the_early_net(tmp_path):
+    import zipfile
+
+    path = _bundle(tmp_path, grid_net(2, 2))
+    with zipfile.ZipFile(path) as zf:
+        parts = {n: zf.read(n) for n in zf.namelist()}
+    atlas = bytearray(parts["lightmap/atlas.npy"])
+    atlas[-1] ^= 0xFF
+    parts["lightmap/atlas.npy"] = bytes(atlas)
+    bad = tmp_path / "bad.piste"
+    with zipfile.ZipFile(bad, "w") as zf:
+        for n, d in parts.items():
+            zf.writestr(n, d)
+    with pytest.raises(FormatError, match="checksum") as exc:
+        load_bundle(bad, warm=True)
+    assert exc.value.field == "lightmap/atlas.npy"

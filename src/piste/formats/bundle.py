@@ -55,12 +55,16 @@ BUNDLE_FORMAT = "piste.bundle/1"
 _EPOCH = (1980, 1, 1, 0, 0, 0)
 #: members every bundle has (the terrain and its light map)
 REQUIRED_MEMBERS = ("terrain/control_points", "terrain/uv", "lightmap/atlas", "lightmap/rects")
+#: what the terrain net is made of (read first: see :func:`read_bundle`'s ``on_terrain``)
+_NET_MEMBERS = ("terrain/control_points", "terrain/uv", "lightmap/rects")
 #: the terrain net's topology as the build stores it (``manifest.terrain.topology`` = 1; older bundles
 #: have none and the load computes it): member -> (dtype, ndim, length of the last axis or None).
 #: The same arrays as :data:`piste.terrain.net.TOPOLOGY_ARRAYS` (tests/formats/test_bundle_topology.py)
 TOPOLOGY_MEMBERS = {"terrain/side_edge": ("<i4", 2, 4), "terrain/side_flip": ("|b1", 2, 4),
                     "terrain/edge_patches": ("<i4", 2, 2), "terrain/edge_sides": ("<i4", 2, 2),
                     "terrain/edge_degenerate": ("|b1", 1, None), "terrain/corner_ids": ("<i4", 2, 4)}
+#: the members :func:`read_bundle` reads first (the net and its topology)
+TERRAIN_MEMBERS = frozenset(_NET_MEMBERS) | frozenset(TOPOLOGY_MEMBERS)
 
 
 def _npy_bytes(arr: np.ndarray) -> bytes:
@@ -151,10 +155,17 @@ def read_manifest(path) -> dict:
         return _manifest(path, zf)
 
 
-def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool) -> dict:
+def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool, on_terrain=None) -> dict:
     out = {}
     names = set(zf.namelist())
-    for name, info in members.items():
+    # the terrain's members first: ``on_terrain(out)`` can start on the net (e.g. the renderer's vertex
+    # blocks, in the background) while the light map, characters and objects are read
+    first = [n for n in members if n in TERRAIN_MEMBERS]
+    order = first + [n for n in members if n not in TERRAIN_MEMBERS]
+    for k, name in enumerate(order):
+        if on_terrain is not None and k == len(first):
+            on_terrain(out)
+        info = members[name]
         member = f"{name}.npy"
         if member not in names:
             raise FormatError(path, "member listed in the manifest is missing", field=member)
@@ -175,6 +186,8 @@ def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool) -
             raise FormatError(path, f"expected shape {info.get('shape')} dtype {info.get('dtype')}, got "
                                     f"{list(a.shape)} {a.dtype.str}", field=member)
         out[name] = a
+    if on_terrain is not None and len(first) == len(order):
+        on_terrain(out)
     return out
 
 
@@ -198,17 +211,28 @@ class BundleData:
     arrays: dict
 
 
-def read_bundle(path, verify: bool = True) -> BundleData:
+def read_bundle(path, verify: bool = True, on_terrain=None) -> BundleData:
     """Read a ``.piste`` bundle's manifest and arrays (see the module docstring).
 
     ``verify`` checks each member's SHA-256 against the manifest (the zip CRC is always checked).
     Raises :class:`~piste.errors.FormatError` on a missing file, a wrong format version, a missing
     or corrupt member, or a missing required member (:data:`REQUIRED_MEMBERS`).
+
+    ``on_terrain(man, arrays)``: called once the :data:`TERRAIN_MEMBERS` the bundle has are read and
+    checked (the manifest and those arrays; the topology members' dtypes and shapes are checked
+    before), before the others are read: :func:`piste.pipeline.load_bundle` starts building the
+    terrain's vertex blocks there.  An error in a later member still raises (after the call).
     """
     path = Path(path)
     with _open(path) as zf:
         man = _manifest(path, zf)
-        arrays = _read_arrays(path, zf, man["members"], verify)
+
+        def terrain_ready(part: dict) -> None:
+            if on_terrain is not None and all(n in part for n in _NET_MEMBERS):
+                _check_topology_members(path, man, part)
+                on_terrain(man, part)
+
+        arrays = _read_arrays(path, zf, man["members"], verify, terrain_ready if on_terrain is not None else None)
     for need in REQUIRED_MEMBERS:
         if need not in arrays:
             raise FormatError(path, "required member is missing", field=f"{need}.npy")

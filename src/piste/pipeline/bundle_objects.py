@@ -206,29 +206,45 @@ class Bundle:
         return np.asarray(f, dtype=np.float32), tuple(float(x) for x in rect)
 
 
-@_manifest_errors
-def bundle_from_data(data: BundleData, warm: bool = False) -> Bundle:
-    """Build the terrain net, light map, lights, cameras and visibility of a read bundle (objects
-    and characters are built when first asked for).  Raises :class:`~piste.errors.FormatError`
-    naming the file and member when they are not valid.  ``warm``: as soon as the net exists, start
-    building its GPU-resident vertex blocks in the background (for a renderer about to draw it)."""
-    path, man, arrays = data.path, data.manifest, data.arrays
-    t = man.get("terrain", {})
+def _terrain_net(path, man: dict, arrays: dict) -> PatchNet:
+    """The bundle's terrain :class:`PatchNet`: its stored topology taken (checked) when the build
+    stored one of this format, else computed.  FormatError naming the member when invalid."""
+    t = man.get("terrain") or {}
     kw = dict(uv=arrays["terrain/uv"], lightmap_rect=arrays["lightmap/rects"], tol=t.get("tol"),
               name=t.get("name", "terrain"))
     topo = None  # the topology the build stored (read_bundle checked its members), else computed here
     if t.get("topology") == TOPOLOGY_FORMAT:
         topo = {k: arrays[f"terrain/{k}"] for k in TOPOLOGY_ARRAYS}
     try:
-        net = (PatchNet(arrays["terrain/control_points"], **kw) if topo is None else
-               PatchNet.from_topology(arrays["terrain/control_points"], topo, **kw))
+        return (PatchNet(arrays["terrain/control_points"], **kw) if topo is None else
+                PatchNet.from_topology(arrays["terrain/control_points"], topo, **kw))
     except Exception as exc:
         member = "control_points"
         if topo is not None and "stored topology " in str(exc):
             member = str(exc).split("stored topology ", 1)[1].split(":", 1)[0]
         raise FormatError(path, f"invalid terrain ({exc})", field=f"terrain/{member}.npy") from None
-    if warm and resident_fits(net):  # overlaps the rest of the load and the renderer's set-up
+
+
+def _warm(net: PatchNet) -> None:
+    """Start building the net's GPU-resident vertex blocks in the background (a renderer is about to
+    draw it): they overlap the rest of the load and the renderer's set-up."""
+    if resident_fits(net):
         resident_terrain(net, wait=False)
+
+
+@_manifest_errors
+def bundle_from_data(data: BundleData, warm: bool = False, net: PatchNet | None = None) -> Bundle:
+    """Build the terrain net, light map, lights, cameras and visibility of a read bundle (objects
+    and characters are built when first asked for).  Raises :class:`~piste.errors.FormatError`
+    naming the file and member when they are not valid.  ``warm``: as soon as the net exists, start
+    building its GPU-resident vertex blocks in the background (for a renderer about to draw it).
+    ``net``: the terrain net already made from these arrays (:func:`load_bundle` makes it while the
+    other members are still being read)."""
+    path, man, arrays = data.path, data.manifest, data.arrays
+    if net is None:
+        net = _terrain_net(path, man, arrays)
+        if warm:
+            _warm(net)
     lm_info = man.get("lightmap", {})
     lightmap = LightMap(atlas=arrays["lightmap/atlas"].astype(np.float32), rects=arrays["lightmap/rects"],
                         res=int(lm_info.get("res", 8)), gutter=int(lm_info.get("gutter", 1)), manifest=lm_info)
@@ -256,4 +272,11 @@ def load_bundle(path, verify: bool = True, warm: bool = False) -> Bundle:
     or corrupt member.  ``warm``: start the terrain's resident vertex blocks in the background at
     once (``piste demo``/``render``/``view``: a fresh process's first frame waited for them).
     """
-    return bundle_from_data(read_bundle(path, verify), warm=warm)
+    early: dict = {}
+
+    def terrain_ready(man: dict, arrays: dict) -> None:  # the terrain members are read, the rest not yet
+        early["net"] = _terrain_net(path, man, arrays)
+        if warm:
+            _warm(early["net"])
+
+    return bundle_from_data(read_bundle(path, verify, on_terrain=terrain_ready), warm=warm, net=early.get("net"))
