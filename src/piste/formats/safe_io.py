@@ -150,11 +150,22 @@ def set_user_allow_paths(paths, source: str = "--allow-path") -> tuple:
 def user_allow_paths() -> tuple:
     """Real paths of the folders the user allows: ``--allow-path`` (:func:`set_user_allow_paths`)
     and the ``PISTE_ALLOW_PATHS`` environment variable.  A key inside a file never adds to them."""
-    env = [p for p in os.environ.get(ALLOW_PATHS_ENV, "").split(os.pathsep) if p]
-    out = list(_user_allowed) + _folder_list(env, ALLOW_PATHS_ENV)
-    for f in out:
-        add_root(f)
+    out = list(_user_allowed) + list(_env_folders(os.environ.get(ALLOW_PATHS_ENV, "")))
     return tuple(Path(p) for p in dict.fromkeys(out))
+
+
+_env_cache: dict = {}
+
+
+def _env_folders(value: str) -> tuple:
+    """The real folders of a PISTE_ALLOW_PATHS value (checked and registered once per value)."""
+    if value not in _env_cache:
+        folders = tuple(_folder_list([p for p in value.split(os.pathsep) if p], ALLOW_PATHS_ENV))
+        for f in folders:
+            add_root(f)
+        _env_cache.clear()
+        _env_cache[value] = folders
+    return _env_cache[value]
 
 
 # ----------------------------------------------------------------------------- confinement roots
