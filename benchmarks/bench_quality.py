@@ -57,7 +57,7 @@ def cost(times: dict, plain: str) -> dict:
 
 def line(flags: str, error: str, t: float, extra: float | None) -> str:
     c = "" if extra is None else f"+{extra:.1f}x of the bake" if extra >= 1 else f"+{extra * 100:.0f} % of the bake"
-    return f"  {flags:<44} {error:<52} {t * 1e3:9.1f} ms  {c}"
+    return f"  {flags:<52} {error:<52} {t * 1e3:9.1f} ms  {c}"
 
 
 def bake_gi(args) -> None:
