@@ -22,6 +22,20 @@ from piste.world.scene_file import TerrainSpec  # noqa: E402
 N = 2000
 
 
+@pytest.fixture
+def request_close():
+    """Closes the windows a test opened when it ends."""
+    opened = []
+
+    def keep(win):
+        opened.append(win)
+        return win
+
+    yield keep
+    for win in opened:
+        win.close()
+
+
 @pytest.fixture(scope="module")
 def field() -> np.ndarray:
     """(2000, 2000) float64 heights that float32 holds exactly (a fractal range, quantised)."""
@@ -46,9 +60,10 @@ def files(field, tmp_path_factory) -> dict:
 
 
 @pytest.mark.parametrize("kind", ["tiled", "striped", "zlib", "generated", "uint16"])
-def test_windows_have_the_bits_of_the_whole_read(files, kind):
+def test_windows_have_the_bits_of_the_whole_read(files, kind, request_close):
     whole = read_geotiff(files[kind])
     win = open_geotiff_windows(files[kind])
+    request_close(win)
     assert win.shape == whole.z.shape == (N, N)
     assert win.spacing == whole.spacing and win.origin == whole.origin
     rng = np.random.default_rng(7)
@@ -62,10 +77,10 @@ def test_windows_have_the_bits_of_the_whole_read(files, kind):
         assert np.array_equal(z, whole.z[rows, cols]), (rows, cols)
 
 
-def test_a_window_allocates_about_the_window(files):
+def test_a_window_allocates_about_the_window(files, request_close):
     whole_bytes = N * N * 8
     for kind in ("tiled", "striped", "zlib"):
-        win = open_geotiff_windows(files[kind])
+        win = request_close(open_geotiff_windows(files[kind]))
         tracemalloc.start()
         try:
             z, _ = win.read(slice(900, 1100), slice(900, 1100))  # 200 x 200: 320 kB of float64
@@ -111,11 +126,11 @@ def test_tiled_build_fits_the_same_tiles_windowed_as_whole(files, field, tmp_pat
         assert np.array_equal(a["control_points"], b["control_points"]) and np.array_equal(a["uv"], b["uv"])
 
 
-def test_missing_samples_windowed_and_whole(field, tmp_path):
+def test_missing_samples_windowed_and_whole(field, tmp_path, request_close):
     z = field[:300, :400].copy()
     z[10:14, 200:230] = -9999.0
     p = write_geotiff(tmp_path / "holes.tif", z, 5.0, nodata=-9999.0, tile=(64, 64))
-    win = open_geotiff_windows(p)
+    win = request_close(open_geotiff_windows(p))
     got, mask = win.read(slice(0, 64), slice(192, 256))
     assert mask.sum() == 4 * 30 and np.array_equal(got[~mask], z[:64, 192:256][~mask])
     assert np.array_equal(win.filled(slice(0, 64), slice(192, 256), 1.5)[mask], np.full(120, 1.5))
@@ -144,9 +159,12 @@ def test_hostile_segment_tables_are_format_errors(field, tmp_path):
     with pytest.raises(PisteError, match="past_end.tif"):
         open_geotiff_windows(q).read(slice(200, 256), slice(200, 256))
     # the file changes between opening and reading
-    win = open_geotiff_windows(p)
-    write_geotiff(p, field[:128, :256], 5.0, tile=(64, 64))
-    with pytest.raises(FormatError, match="changed"):
+    with open_geotiff_windows(p) as win:
+        assert win.read(slice(0, 10), slice(0, 10))[0].shape == (10, 10)
+        write_geotiff(p, field[:128, :256], 5.0, tile=(64, 64))
+        with pytest.raises(FormatError, match="changed"):
+            win.read(slice(0, 10), slice(0, 10))
+    with pytest.raises(FormatError, match="closed"):
         win.read(slice(0, 10), slice(0, 10))
 
 
@@ -162,11 +180,20 @@ def test_mangled_tiled_files_are_read_or_refused_cleanly(field, tmp_path):
         q = tmp_path / f"m{i}.tif"
         q.write_bytes(bytes(b))
         try:
-            win = open_geotiff_windows(q)
-            h, w = win.shape
-            win.read(slice(h // 3, h), slice(0, max(w // 2, 1)))
+            with open_geotiff_windows(q) as win:
+                h, w = win.shape
+                win.read(slice(h // 3, h), slice(0, max(w // 2, 1)))
             read += 1
         except PisteError as exc:
             assert f"m{i}.tif" in str(exc)
             refused += 1
     assert read + refused == 60 and read > 0
+
+
+def test_bad_window_slices_are_validation_errors(files, request_close):
+    from piste.errors import ValidationError
+
+    win = request_close(open_geotiff_windows(files["tiled"]))
+    for rows, cols in [(slice(5, 5), slice(0, 3)), (slice(0, 10, 2), slice(0, 3)), (slice(N, N + 5), slice(0, 3))]:
+        with pytest.raises(ValidationError, match="tiled.tif"):
+            win.read(rows, cols)

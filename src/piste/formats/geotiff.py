@@ -18,7 +18,14 @@ to a fraction of a percent over a few kilometres.  Missing samples (nodata or no
 from the nearest valid sample (``fill="nearest"``), with a constant (``fill=<number>``), or refused
 (``fill="error"``); ``mask`` says which samples were missing.
 
-:func:`write_geotiff` writes such a file (float32 heights, PixelIsArea, metres), atomically.
+:func:`open_geotiff_windows` checks the same header and reads windows of a raster larger than
+memory (:class:`GeoTiffWindows`): only the tiles or strips under a window are decoded, and a window
+has exactly the bits of the same samples read whole (missing samples are reported, filled with a
+number, or refused; ``"nearest"`` needs the whole raster).
+
+:func:`write_geotiff` writes such a file (float32 heights, PixelIsArea, metres; strips or tiles,
+optionally compressed), atomically; :func:`write_geotiff_tiled` writes a tiled one tile row by tile
+row from a window function, for DEMs larger than memory.
 
 Needs ``tifffile`` (the ``dask`` extra: ``pip install 'piste[dask]'``).
 """
@@ -30,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from piste.errors import ConfigError, FormatError, PisteError
+from piste.errors import ConfigError, FormatError, PisteError, ValidationError
 from piste.formats.atomic import atomic_path
 from piste.formats.safe_io import open_file
 
@@ -306,12 +313,16 @@ def read_geotiff(path, fill="nearest", vertical_units: str | None = None) -> Dem
 class GeoTiffWindows:
     """Windows of a GeoTIFF DEM read without reading the whole raster (:func:`open_geotiff_windows`).
 
-    The header is checked once, as :func:`read_geotiff` checks it; each :meth:`read` opens the file
-    again through the confinement (:mod:`piste.formats.safe_io`), re-checks the header, and decodes
-    only the tiles or strips that meet the window: a window of ``h x w`` samples allocates about
-    ``h x w`` float64 plus one decoded tile (tiled files) or one strip row of strips (striped
-    files; a file of one strip decodes it whole).  Windows carry the whole raster's bits: the same
-    element-wise steps as :func:`read_geotiff` (unit factor, rows flipped to piste's south-up order).
+    The file is opened once through the confinement (:mod:`piste.formats.safe_io`) and its header
+    checked as :func:`read_geotiff` checks it, its segment table (offsets and byte counts, each
+    within the file) read once; each :meth:`read` checks that the file at ``path`` is still the one
+    opened (same inode, size and modification time: a FormatError otherwise) and decodes only the
+    tiles or strips that meet the window: a window of ``h x w`` samples allocates about ``h x w``
+    float64 plus one decoded tile (tiled files) or one strip (striped files; a file of one strip
+    decodes it whole).  Windows carry the whole raster's bits: the same element-wise steps as
+    :func:`read_geotiff` (unit factor, rows flipped to piste's south-up order).  Reads are
+    serialised by a lock (threads of one process may share the object); :meth:`close` it when done
+    (or use it as a context manager).
 
     Attributes
     ----------
@@ -320,35 +331,65 @@ class GeoTiffWindows:
     """
 
     def __init__(self, path, vertical_units: str | None = None):
+        import os
+        import threading
+
         self.path = Path(path)
-        fh, tf = _open_tiff(self.path)
-        with fh, tf:
-            self._size = self.path.stat().st_size
-            _page, self._hd = _header(self.path, tf, self._size, vertical_units)
-        self._vertical_units = vertical_units
+        self._fh, self._tf = _open_tiff(self.path)
+        try:
+            st = os.fstat(self._fh.fileno())
+            self._stat = (st.st_ino, st.st_size, st.st_mtime_ns)
+            self._page, self._hd = _header(self.path, self._tf, st.st_size, vertical_units)
+            self._table = _segment_table(self.path, self._page, self._hd, st.st_size)
+        except BaseException:
+            self.close()
+            raise
+        self._lock = threading.Lock()
         self.shape = tuple(self._hd.shape)
         self.spacing, self.origin = _place(self._hd)
         self.vertical_units = {9001: "metre", 9002: "foot", 9003: "us_survey_foot", 9036: "kilometre"}[self._hd.vcode]
         self.geographic = self._hd.geographic
 
+    def close(self) -> None:
+        """Close the file (a later :meth:`read` raises a FormatError)."""
+        tf, fh = getattr(self, "_tf", None), getattr(self, "_fh", None)
+        self._tf = self._fh = None
+        if tf is not None:
+            tf.close()
+        if fh is not None:
+            fh.close()
+
+    def __enter__(self) -> GeoTiffWindows:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
     def read(self, rows: slice, cols: slice) -> tuple[np.ndarray, np.ndarray]:
         """Samples ``z[rows, cols]`` in piste layout (row 0 the south edge), ``(h, w)`` float64 metres,
         and their missing mask ``(h, w)`` bool (nodata or non-finite, not filled: see
         :meth:`filled`).  ``rows``/``cols``: slices with step 1, clipped to the raster."""
+        import os
+
         h, w = self.shape
         r0, r1, _ = rows.indices(h)
         c0, c1, _ = cols.indices(w)
         if rows.step not in (None, 1) or cols.step not in (None, 1) or r1 <= r0 or c1 <= c0:
-            raise ValueError(f"{self.path}: window rows {rows}, columns {cols} of a {h} x {w} raster: expected "
-                             "non-empty slices with step 1")
+            raise ValidationError(f"{self.path}: window rows {rows}, columns {cols} of a {h} x {w} raster: expected "
+                                  "non-empty slices with step 1")
         fr0, fr1 = (h - r1, h - r0) if self._hd.scale[1] > 0 else (r0, r1)  # file rows (north-up)
-        fh, tf = _open_tiff(self.path)
-        with fh, tf:
-            page, hd = _header(self.path, tf, self._size, self._vertical_units)
-            if _header_key(hd) != _header_key(self._hd) or fh.seek(0, 2) != self._size:
+        with self._lock:
+            if self._tf is None:
+                raise FormatError(self.path, "the GeoTIFF's windows were closed")
+            try:
+                st = os.stat(self.path)
+                now = (st.st_ino, st.st_size, st.st_mtime_ns)
+            except OSError:
+                now = None
+            if now != self._stat:
                 raise FormatError(self.path, "the file changed while its windows were being read")
-            raw = _read_window(self.path, tf, page, hd, fr0, fr1, c0, c1, self._size)
-        return _to_metres(hd, raw)
+            raw = _read_window(self.path, self._tf, self._page, self._hd, self._table, fr0, fr1, c0, c1)
+        return _to_metres(self._hd, raw)
 
     def filled(self, rows: slice, cols: slice, fill) -> np.ndarray:
         """:meth:`read` with missing samples set to ``fill`` (a number), or a FormatError naming the
@@ -370,15 +411,9 @@ class GeoTiffWindows:
         return _fill(self.path, z, mask, fill)
 
 
-def _header_key(hd: _Header) -> tuple:
-    """A comparable digest of a header (a NaN nodata equals itself here)."""
-    return (hd.shape, str(hd.dtype), hd.scale, hd.corner, hd.geographic, sorted(hd.keys.items()), repr(hd.nodata),
-            hd.vcode)
-
-
 def open_geotiff_windows(path, vertical_units: str | None = None) -> GeoTiffWindows:
-    """A :class:`GeoTiffWindows` of ``path``: its header checked (the same FormatErrors as
-    :func:`read_geotiff`), no sample read yet."""
+    """A :class:`GeoTiffWindows` of ``path``: the file opened, its header checked (the same
+    FormatErrors as :func:`read_geotiff`) and its segment table read; no sample read yet."""
     return GeoTiffWindows(path, vertical_units)
 
 
@@ -411,10 +446,10 @@ def _segment_table(path: Path, page, hd: _Header, size: int):
     return th, tw, across, offsets, counts
 
 
-def _read_window(path: Path, tf, page, hd: _Header, r0: int, r1: int, c0: int, c1: int, size: int) -> np.ndarray:
+def _read_window(path: Path, tf, page, hd: _Header, table, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
     """File rows ``r0:r1``, columns ``c0:c1`` of the page, ``(r1 - r0, c1 - c0)`` of its dtype,
-    decoding only the segments that meet them (the whole page where they cannot be addressed)."""
-    table = _segment_table(path, page, hd, size)
+    decoding only the segments that meet them (``table`` from :func:`_segment_table`; None: the
+    segments cannot be addressed one by one, the whole page is decoded)."""
     try:
         if table is None:
             return np.asarray(page.asarray()).reshape(hd.shape)[r0:r1, c0:c1].copy()

@@ -44,7 +44,7 @@ import numpy as np
 from piste.errors import ConfigError, FormatError, PisteError, ValidationError
 from piste.formats.geotiff import open_geotiff_windows
 from piste.formats.safe_io import open_file
-from piste.lighting.lightmap import encode_half_bright, sample_points
+from piste.lighting.lightmap import encode_half_bright, sample_points, weld_seam_light
 from piste.lighting.lights import default_lights, dumps_lights, light_terms, loads_lights, shade
 from piste.lighting.shadows import shadow_visibility
 from piste.pipeline.build import scene_lights
@@ -62,7 +62,7 @@ __all__ = ["TiledSpec", "TiledResult", "ArraySource", "FileSource", "SyntheticSo
            "build_tiles", "write_index", "TILE_BAKE_VERSION"]
 
 #: bumped whenever :func:`lit_task`'s output for the same input changes
-TILE_BAKE_VERSION = "piste.tile-bake/1"
+TILE_BAKE_VERSION = "piste.tile-bake/2"  # 2: seam light welded (as the one-bundle bake: weld_seam_light)
 
 
 class TileError(TileFileError):
@@ -126,11 +126,14 @@ class FileSource:
         return (str(p), st.st_mtime_ns, st.st_size, self.spec.vertical_units)
 
     def _windows(self):
-        """The GeoTIFF's :class:`~piste.formats.geotiff.GeoTiffWindows` (header only), None for other files."""
+        """The GeoTIFF's :class:`~piste.formats.geotiff.GeoTiffWindows` (the file held open, its header and
+        segment table read once per process), None for other files."""
         if self.spec.kind != "geotiff":
             return None
         k = self._stat_key()
         if k not in _WINDOWS_CACHE:
+            for old in _WINDOWS_CACHE.values():  # one DEM at a time per process
+                old.close()
             _WINDOWS_CACHE.clear()
             _WINDOWS_CACHE[k] = open_geotiff_windows(self.spec.path, vertical_units=self.spec.vertical_units)
         return _WINDOWS_CACHE[k]
@@ -341,10 +344,13 @@ def _bake_tile(spec: TiledSpec, ty: int, tx: int) -> tuple[dict, dict]:
     g, res = spec.grid, spec.res
     store = spec.store
     lights = spec.lights()
-    # seam-averaged sample points: the tile plus a ring of one patch of its neighbours
+    # seam-averaged sample points: the tile plus a ring of one patch of its neighbours, all lit, so
+    # that the seams' light is welded like the one-bundle bake's (weld_seam_light: both patches of
+    # an edge, the tile's border included, hold the mean of their two sides)
     ring_net, centre = neighbourhood_net(store, g, ty, tx, halo=1, ring=1)
     pos, nrm = sample_points(ring_net, res)
-    pos, nrm = pos[centre].reshape(-1, 3), nrm[centre].reshape(-1, 3)
+    m = len(ring_net)
+    pos, nrm = pos.reshape(-1, 3), nrm.reshape(-1, 3)
     n = len(centre)
     stats: dict = {}
     shadow = None
@@ -353,7 +359,8 @@ def _bake_tile(spec: TiledSpec, ty: int, tx: int) -> tuple[dict, dict]:
         terms = light_terms(lights, pos, nrm)
         shadow = shadow_visibility(occluders, lights, pos, nrm, terms, stats=stats)
         del occluders
-    colors = shade(lights, pos, nrm, shadow).reshape(n, res, res, 3)
+    colors = shade(lights, pos, nrm, shadow).reshape(m, res, res, 3)
+    colors = weld_seam_light(ring_net, colors)[centre]
     texels = encode_half_bright(colors)
     # far field: the tile's patch-corner grid (exact surface points) and the texel at each corner
     py0, py1, px0, px1 = g.patch_range(ty, tx)
@@ -381,7 +388,7 @@ def _bake_tile(spec: TiledSpec, ty: int, tx: int) -> tuple[dict, dict]:
         for k, v in va.items():
             arrays[f"vis_{k}"] = v
         arrays["vis_meta"] = np.array(_json(vm))
-    info = {"samples": n * res * res, "rays": int(stats.get("rays", 0)), "zmin": float(lo[2]), "zmax": float(hi[2]),
+    info = {"samples": m * res * res, "rays": int(stats.get("rays", 0)), "zmin": float(lo[2]), "zmax": float(hi[2]),
             "patches": n}
     return arrays, info
 
