@@ -66,6 +66,8 @@ FAR_STRIDES = (1, 2, 4, 8)
 #: far levels are chosen so that a level's height error (against the full corner grid) stays
 #: under this many pixels on screen
 FAR_PIXEL_ERROR = 0.5
+#: near meshes evaluate every patch at least this many samples a side (the course's LOD beyond 180 m)
+NEAR_SAMPLES = 4
 
 # The tiles are drawn like the course's terrain (terrain.frag.glsl, modulate mode): the base
 # texture (repeated once a patch) times the light map, fogged per vertex.  A heightfield patch is
@@ -223,28 +225,47 @@ def chord_error(far_positions: np.ndarray) -> float:
     return m / 4.0
 
 
-def near_mesh(fit: dict, lit: dict, grid_shape: tuple, depth: float) -> TileMesh:
-    """The near mesh of a tile: every patch on its ``res x res`` light-map grid, coloured by its
-    texels, welded into one ``(ny (res-1) + 1, nx (res-1) + 1)`` vertex grid (patches share their
-    edge vertices: no cracks inside a tile by construction), plus skirts.
+def _bilinear(img: np.ndarray, y: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``img (h, w, c)`` at fractional pixel rows ``y (rows,)`` and columns ``x (cols,)``:
+    ``(rows, cols, c)`` float64."""
+    h, w = img.shape[:2]
+    y0 = np.clip(np.floor(y).astype(int), 0, h - 2) if h > 1 else np.zeros(len(y), int)
+    x0 = np.clip(np.floor(x).astype(int), 0, w - 2) if w > 1 else np.zeros(len(x), int)
+    fy = (y - y0)[:, None, None] if h > 1 else np.zeros((len(y), 1, 1))
+    fx = (x - x0)[None, :, None] if w > 1 else np.zeros((1, len(x), 1))
+    y1, x1 = np.minimum(y0 + 1, h - 1), np.minimum(x0 + 1, w - 1)
+    a = img.astype(np.float64)
+    top = a[y0][:, x0] * (1 - fx) + a[y0][:, x1] * fx
+    bot = a[y1][:, x0] * (1 - fx) + a[y1][:, x1] * fx
+    return top * (1 - fy) + bot * fy
+
+
+def near_mesh(fit: dict, lit: dict, grid_shape: tuple, depth: float, samples: int | None = None) -> TileMesh:
+    """The near mesh of a tile: every patch evaluated on a ``samples x samples`` parameter grid
+    (default: its ``res x res`` light-map grid), welded into one ``(ny (samples-1) + 1, nx
+    (samples-1) + 1)`` vertex grid (patches share their edge vertices: no cracks inside a tile by
+    construction), coloured by its light map (bilinear between texels), plus skirts.
 
     ``grid_shape``: ``(ny, nx)`` patches of the tile (patch ``row * nx + col``).
     """
     texels = np.asarray(lit["texels"])  # (n, res, res, 3), [patch, j (v), i (u)]
     n, res = texels.shape[:2]
-    u, v = grid_params(res)
-    pos = evaluate(np.asarray(fit["control_points"]), u, v, normals=False)  # (n, res*res, 3)
+    m = int(samples) if samples is not None else res
+    if m < 2:
+        raise ValueError(f"near_mesh: samples must be >= 2, got {m}")
+    u, v = grid_params(m)
+    pos = evaluate(np.asarray(fit["control_points"]), u, v, normals=False)  # (n, m*m, 3)
     ny, nx = grid_shape
-    r = res - 1
+    r = m - 1
     rows, cols = ny * r + 1, nx * r + 1
     gp = np.empty((rows, cols, 3))
-    gc = np.empty((rows, cols, 3), np.uint8)
-    pos = pos.reshape(ny, nx, res, res, 3)
-    tex = texels.reshape(ny, nx, res, res, 3)
-    for j in range(res):  # scatter: a shared vertex takes the value of the last patch written
-        for i in range(res):
+    pos = pos.reshape(ny, nx, m, m, 3)
+    for j in range(m):  # scatter: a shared vertex takes the value of the last patch written
+        for i in range(m):
             gp[j:j + ny * r:r, i:i + nx * r:r] = pos[:, :, j, i]
-            gc[j:j + ny * r:r, i:i + nx * r:r] = tex[:, :, j, i]
+    light = light_grid(texels, grid_shape)  # (ny (res-1) + 1, nx (res-1) + 1, 3)
+    k = (res - 1) / r  # light texels a vertex step
+    gc = np.clip(np.rint(_bilinear(light, np.arange(rows) * k, np.arange(cols) * k)), 0, 255).astype(np.uint8)
     idx = np.arange(rows * cols).reshape(rows, cols)
     sides = [idx[0], idx[:, -1], idx[-1], idx[:, 0]]
     return _with_skirts(gp.reshape(-1, 3), gc.reshape(-1, 3), _grid_triangles(rows, cols), sides, depth)
@@ -272,7 +293,7 @@ class TileCache:
     """
 
     def __init__(self, root, budget_bytes: int = 256 << 20, near_radius: float | None = None,
-                 view_distance: float | None = None):
+                 view_distance: float | None = None, near_samples: int | None = None):
         self.store = TileStore(root)
         self.index = self.store.read_index()  # schema-checked (piste.terrain.tiles.check_index)
         self.grid = self.store.grid()
@@ -287,6 +308,11 @@ class TileCache:
         self.near_radius = float(near_radius) if near_radius is not None else 0.3 * tile_size
         self.view_distance = view_distance
         self.res = int(self.index["res"])
+        #: samples a patch side of the near meshes (evaluated patches; the light comes from the
+        #: tile's light-map texture whatever the count)
+        self.near_samples = max(self.res, NEAR_SAMPLES) if near_samples is None else int(near_samples)
+        if self.near_samples < 2:
+            raise ConfigError(f"near_samples must be >= 2, got {self.near_samples}")
         self._lock = threading.Lock()
         self.near: dict = {}
         self.far: dict = {}
@@ -341,7 +367,7 @@ class TileCache:
     # ---------------------------------------------------------------- sizes
     def _near_bytes(self, n: int, t) -> int:
         py0, py1, px0, px1 = self.grid.patch_range(*t)
-        r = self.res - 1
+        r = self.near_samples - 1
         return mesh_bytes((py1 - py0) * r + 1, (px1 - px0) * r + 1)
 
     def _depth(self, t) -> float:
@@ -395,7 +421,7 @@ class TileCache:
                 if wanted:
                     py0, py1, px0, px1 = self.grid.patch_range(*t)
                     mesh = near_mesh(self._read("fit", t, ("control_points",)), self._read("lit", t, ("texels",)),
-                                     (py1 - py0, px1 - px0), self._depth(t))
+                                     (py1 - py0, px1 - px0), self._depth(t), self.near_samples)
                     with self._lock:
                         if t in self._wanted:  # still wanted and still fits: the budget was reserved
                             self.near[t] = mesh
