@@ -11,7 +11,8 @@ Order of a frame (``SceneRenderer.render``)::
          5. terrain (+ sky) (TerrainRenderer.draw, not read back);
          6. the shadow receivers: the extra pass over the shadowed patches only;
          7. objects (compressed formats, instanced per kind);
-         8. riders (per-vertex 1 + 3 lights), then their specular-map pass;
+         8. riders (per-vertex 1 + 3 lights) with their specular map's highlights (added in the
+            same pass: CharacterPass.fold_specular; the talk's second pass with it off);
          9. glFinish and read back.
 
 API
@@ -78,7 +79,7 @@ class SceneRenderer:
     object_lighting : "dynamic" | "baked" | "points"
     object_lod : the objects' levels of detail: the simplification error an instance may show, in
         pixels (0: every object drawn with its full mesh; :class:`piste.render.object_pass.ObjectPass`)
-    shadows, specular : draw the projected shadows / the specular pass
+    shadows, specular : draw the projected shadows / the riders' specular highlights
     shadow_tile : pixels per rider shadow tile
     casts : more riders with other models: Scene-like objects (``model``, ``lods``, ``skinners``,
         ``riders``, ``update(t, aspect, camera=...)``; e.g. ``Scene(net, line, lights, model=m,
