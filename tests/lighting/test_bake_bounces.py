@@ -166,7 +166,7 @@ def test_cli_and_scene_keys(tmp_path, capsys):
             "--jobs", "1", "--quiet", "--bounces", "1", "--sun-radius", "0.27"]
     assert main(args) == 0
     said = capsys.readouterr().out
-    assert "1 bounces (" in said and "sun radius 0.27 deg (16 rays per sample)" in said
+    assert "1 bounces (" in said and "sun radius 0.27 deg (up to 64 rays per sample)" in said
     lm = load_lightmap(out)
     assert lm.manifest["gi"]["bounces"] == 1 and lm.manifest["gi"]["sun_radius"] == 0.27
     want = bake_lightmap(net, lights, res=RES, bounces=1, sun_radius=0.27)

@@ -120,7 +120,7 @@ def run(args) -> int:
         gi = m["gi"]
         print(", ".join(([f"{gi['bounces']} bounces ({st.get('gather_rays', 0):,} gather rays, "
                           f"{st.get('gather_escaped', 0):,} to the sky)"] if "bounces" in gi else [])
-                        + ([f"sun radius {gi['sun_radius']:g} deg ({gi['sun_rays']} rays per sample)"]
+                        + ([f"sun radius {gi['sun_radius']:g} deg (up to {gi['sun_rays']} rays per sample)"]
                            if "sun_radius" in gi else [])))
     print(f"atlas {m['atlas_size'][0]}x{m['atlas_size'][1]}: {paths['png']}, {paths['npz']}, {paths['manifest']}")
     return 0

@@ -132,7 +132,7 @@ def bake_lightmap(
     *,
     gather_rays: int = DEFAULT_GATHER_RAYS,
     albedo: float = DEFAULT_ALBEDO,
-    sun_rays: int = 16,
+    sun_rays: int = 64,
     seed: int = 0,
     tracer: str = "exact",
 ) -> LightMap:
@@ -157,7 +157,8 @@ def bake_lightmap(
     sun_radius : angular radius of the directional lights in degrees (soft shadows; 0 = a hard sun,
         as before; the real sun: :data:`piste.lighting.gi.REAL_SUN_RADIUS`)
     gather_rays, albedo : with bounces: rays per sample (a square number) and the terrain's albedo
-    sun_rays : with ``sun_radius``: shadow rays per sample to the sun's disc (a square number)
+    sun_rays : with ``sun_radius``: shadow rays per sample to the sun's disc (a square number; the
+        eight rim strata first, all of them in the penumbra only)
     seed : the rays' jitter
     tracer : the gather rays' tracer, ``"exact"`` (the patches) or ``"embree"`` (a tessellation through
         Embree, the ``bench`` extra; near hits again exactly): see :mod:`piste.lighting.gi`

@@ -40,7 +40,8 @@ vertex on the exact surface, no light-map interpolation and no strata.
 
 The area sun (:func:`soft_sun_directions`): a directional light with ``sun_radius`` degrees is a
 disc of that angular radius; the shadow ray of each sample goes to ``sun_rays`` points on it
-(``s x s`` strata of the disc, jittered per sample), visibility = the unoccluded fraction.
+(``s x s`` strata of the disc, jittered per sample; eight on the rim first, the rest only in a
+penumbra: :mod:`piste.lighting.shadows`), visibility = the unoccluded fraction.
 """
 
 from __future__ import annotations

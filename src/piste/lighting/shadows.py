@@ -11,8 +11,11 @@ dropped: a ray starting on the surface is always below the bound of its own cell
 field needs the exact test anyway, and exact rays cut to 5 m still cost ~60 % of full-length ones.
 
 An area sun (``sun_radius > 0`` degrees): each point's ray towards a directional light is replaced
-by ``sun_rays`` rays to jittered strata of the sun's disc (:func:`piste.lighting.gi.disc_directions`);
-the visibility is the unoccluded fraction (soft shadows, penumbrae).  ``sun_radius = 0`` is the
+by rays to jittered strata of the sun's disc (:func:`piste.lighting.sampling.disc_directions`):
+eight rim strata first, and all ``sun_rays`` (64: 8 x 8) only where those disagree; the visibility
+is the unoccluded fraction (soft shadows, penumbrae).  Sampling the rim eight ways finds every
+penumbra sample of the tests' and benchmark's scenes (same error as casting all 64 everywhere) at
+about 8 rays a lit sample.  ``sun_radius = 0`` is the
 hard sun, one ray, bit-identical to before.
 """
 
@@ -21,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from piste.lighting.lights import DirectionalLight, Lights, light_vectors
-from piste.lighting.sampling import disc_directions
+from piste.lighting.sampling import disc_directions, strata_side
 from piste.terrain.query import ray_intersect
 
 __all__ = ["shadow_rays", "shadow_visibility", "ray_offset"]
@@ -64,7 +67,7 @@ def _exact_occluded(net, origins, directions, t_max) -> np.ndarray:
 
 
 def shadow_visibility(net, lights: Lights, positions, normals, terms, stats=None, sun_radius: float = 0.0,
-                      sun_rays: int = 16, ids=None, seed: int = 0):
+                      sun_rays: int = 64, ids=None, seed: int = 0, sun_adaptive: bool = True):
     """Visibility of every direct light at every point, 1 = lit, 0 = shadowed (fractions under an
     area sun).
 
@@ -80,6 +83,9 @@ def shadow_visibility(net, lights: Lights, positions, normals, terms, stats=None
     sun_rays : rays per point to the sun's disc (a square number: strata) when ``sun_radius > 0``
     ids : (k,) int global sample indices (the disc jitter's counters; default ``arange(k)``)
     seed : the jitter's seed
+    sun_adaptive : first the rays of eight rim strata (the corners and the middle of each side of
+        the ``s x s`` strata: the disc's rim eight ways); all ``sun_rays`` only where those disagree
+        (a penumbra); False: all rays everywhere (the references)
 
     Returns
     -------
@@ -97,10 +103,9 @@ def shadow_visibility(net, lights: Lights, positions, normals, terms, stats=None
             continue
         if sun_radius > 0.0 and isinstance(light, DirectionalLight):
             sid = np.arange(len(positions)) if ids is None else np.asarray(ids)
-            frac, n_occ = _soft_visibility(net, light, positions[idx], normals[idx], sid[idx], eps, sun_radius,
-                                           sun_rays, seed)
+            frac, n_rays, n_occ = _soft_visibility(net, light, positions[idx], normals[idx], sid[idx], eps,
+                                                   sun_radius, sun_rays, seed, sun_adaptive)
             vis[idx, col] = frac
-            n_rays = len(idx) * sun_rays
         else:
             o, dvec, tm = shadow_rays(light, positions[idx], normals[idx], eps)
             occ = _exact_occluded(net, o, dvec, tm)
@@ -113,19 +118,41 @@ def shadow_visibility(net, lights: Lights, positions, normals, terms, stats=None
 
 
 def _soft_visibility(net, light, positions, normals, ids, eps: float, radius: float, rays: int, seed: int,
-                     batch: int = 65536):
+                     adaptive: bool = True, batch: int = 65536):
     """Unoccluded fraction of ``rays`` rays per point to the disc of ``light`` (radius degrees):
-    ``(k,)`` float64 and the number of occluded rays."""
+    ``(k,)`` float64, the rays cast and how many were occluded.  ``adaptive``: eight rim strata
+    first, the rest only where those disagree."""
     k = len(positions)
     frac = np.empty(k)
-    n_occ = 0
+    n_rays = n_occ = 0
     axis = -np.asarray(light.direction, dtype=np.float64)
+    s = strata_side(rays, "sun_rays")
+    # the rim, eight ways: the corner strata and one stratum in the middle of each side
+    m = s // 2
+    rim = [0, s - 1, s * (s - 1), s * s - 1, m, (s - 1) * s + (s - 1 - m), m * s + s - 1, (s - 1 - m) * s]
+    first = np.unique(rim) if adaptive and s >= 4 else np.arange(rays)
+    rest = np.setdiff1d(np.arange(rays), first)
     step = max(1, batch // rays)
+
+    def occluded(p, n, d):
+        o = np.repeat(p + eps * n, d.shape[1], axis=0) + eps * d.reshape(-1, 3)
+        dd = np.ascontiguousarray(d.reshape(-1, 3))
+        return _exact_occluded(net, o, dd, np.full(len(dd), np.inf)).reshape(d.shape[:2])
+
     for lo in range(0, k, step):
         hi = min(lo + step, k)
-        d = disc_directions(axis, ids[lo:hi], rays, radius, seed).reshape(-1, 3)
-        o = np.repeat(positions[lo:hi] + eps * normals[lo:hi], rays, axis=0) + eps * d
-        occ = _exact_occluded(net, o, np.ascontiguousarray(d), np.full(len(d), np.inf)).reshape(hi - lo, rays)
-        frac[lo:hi] = 1.0 - occ.mean(axis=1)
+        d = disc_directions(axis, ids[lo:hi], rays, radius, seed)  # (b, rays, 3)
+        occ = np.zeros(d.shape[:2], dtype=bool)
+        occ[:, first] = occluded(positions[lo:hi], normals[lo:hi], d[:, first])
+        n_rays += occ.shape[0] * len(first)
+        mixed = np.flatnonzero(occ[:, first].any(axis=1) & ~occ[:, first].all(axis=1)) if len(rest) else []
+        if len(mixed):
+            occ[np.ix_(mixed, rest)] = occluded(positions[lo:hi][mixed], normals[lo:hi][mixed], d[mixed][:, rest])
+            n_rays += len(mixed) * len(rest)
+        agree = np.ones(len(occ), dtype=bool)
+        if len(mixed):
+            agree[mixed] = False
+        # where the rim rays agree the disc is taken as whole (lit or shadowed): their value for all
+        frac[lo:hi] = np.where(agree, 1.0 - occ[:, first].mean(axis=1), 1.0 - occ.mean(axis=1))
         n_occ += int(occ.sum())
-    return frac, n_occ
+    return frac, n_rays, n_occ
