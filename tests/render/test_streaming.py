@@ -163,3 +163,73 @@ def test_piste_view_tiles_headless_and_in_a_window(world, gl_context, tmp_path, 
     assert "4 frames" in r.stdout
     img = np.asarray(Image.open(shot))
     assert img.shape == (64, 96, 3) and img.std() > 5
+
+
+@pytest.fixture(scope="module")
+def rough_world(tmp_path_factory):
+    """24 x 24 patches of 600 m relief in 3 x 3 tiles, with per-tile visibility sets (60 m cells)."""
+    from piste.pipeline.tiled_build import SyntheticSource
+
+    root = tmp_path_factory.mktemp("streaming_vis") / "w.tiles"
+    spec = synthetic_spec(root, 24, tile_patches=8, res=3, spacing=20.0, shadows=False, cell=60.0)
+    spec.source = SyntheticSource(spec.source.shape, spec.source.spacing, 0, relief=600.0, wavelength=400.0)
+    build_tiles(spec)
+    return root
+
+
+def _ground_cameras(cache, n: int, seed: int = 0) -> list:
+    """``n`` eyes 2 m over the snow (riders' eyes: within the sets' band), looking level-ish."""
+    from piste.terrain.query import height_at
+    from piste.terrain.tiles import tile_net
+
+    rng = np.random.default_rng(seed)
+    cams = []
+    for _ in range(n):
+        x, y = rng.uniform(100.0, 1340.0, 2)
+        z = float(height_at(tile_net(cache.store, *cache.grid.tile_of(x, y)), np.array([[x, y]]))[0][0])
+        a = rng.uniform(0.0, 2.0 * np.pi)
+        cams.append(Camera(np.array([x, y, z + 2.0]), np.array([x + 300.0 * np.cos(a), y + 300.0 * np.sin(a), z - 20.0]),
+                           near=0.5, far=5000.0))
+    return cams
+
+
+def test_visibility_sets_cull_near_patches_without_losing_pixels(rough_world, gl):
+    r = S.StreamingRenderer(rough_world, size=(160, 120), near_radius=100.0, pixel_error=None, ctx=gl)
+    try:
+        drawn = {True: 0, False: 0}
+        culled = lost = 0
+        for cam in _ground_cameras(r.cache, 24):
+            img = {}
+            for v in (False, True):
+                r.visibility = v
+                img[v] = r.render(cam, wait=True)
+                drawn[v] += r.stats["near_patches"]
+            culled += r.stats["vis_culled"]
+            lost += int((img[True] != img[False]).any(-1).sum())
+        assert all(r.cache.vis[t] is not None for t in r.cache.near)  # the build's sets were read
+    finally:
+        r.close()
+    assert culled > 0 and drawn[True] == drawn[False] - culled  # patches left out ...
+    assert lost == 0  # ... and not a pixel lost
+
+
+def test_bad_visibility_sets_name_the_tile(rough_world, tmp_path):
+    import shutil
+
+    from piste.terrain.tiles import TileError
+
+    root = tmp_path / "w.tiles"
+    shutil.copytree(rough_world, root)
+    cache = S.TileCache(root)
+    try:
+        assert cache._read_vis((1, 1)) is not None
+        p = cache.store.path("lit", 1, 1)
+        a = dict(np.load(p))
+        a["vis_patch_bits"] = a["vis_patch_bits"][:, :3]
+        with open(p, "wb") as fh:
+            np.savez(fh, **a)
+        with pytest.raises(TileError, match="patch bits") as exc:
+            cache._read_vis((1, 1))
+        assert "1,1" in str(exc.value) or "(1, 1)" in str(exc.value)
+    finally:
+        cache.close()

@@ -115,11 +115,13 @@ void main() {
 @dataclass
 class TileMesh:
     """A tile's triangles: positions ``(k, 3)`` float32, colours ``(k, 3)`` uint8 (half-bright),
-    indices ``(t, 3)`` uint32."""
+    indices ``(t, 3)`` uint32; ``patch_triangles``: the first ``n * patch_triangles`` triangles
+    are patch-major (patch ``p``'s at ``[p pt, (p+1) pt)``, the skirts after them; 0: not ordered)."""
 
     positions: np.ndarray
     colors: np.ndarray
     indices: np.ndarray
+    patch_triangles: int = 0
 
     @property
     def nbytes(self) -> int:
@@ -268,7 +270,23 @@ def near_mesh(fit: dict, lit: dict, grid_shape: tuple, depth: float, samples: in
     gc = np.clip(np.rint(_bilinear(light, np.arange(rows) * k, np.arange(cols) * k)), 0, 255).astype(np.uint8)
     idx = np.arange(rows * cols).reshape(rows, cols)
     sides = [idx[0], idx[:, -1], idx[-1], idx[:, 0]]
-    return _with_skirts(gp.reshape(-1, 3), gc.reshape(-1, 3), _grid_triangles(rows, cols), sides, depth)
+    cr, cc = np.mgrid[0:rows - 1, 0:cols - 1]
+    cell_patch = ((cr // r) * nx + cc // r).ravel()
+    order = np.argsort(np.concatenate([cell_patch, cell_patch]), kind="stable")  # patch-major (visibility sets)
+    mesh = _with_skirts(gp.reshape(-1, 3), gc.reshape(-1, 3), _grid_triangles(rows, cols)[order], sides, depth)
+    mesh.patch_triangles = 2 * r * r
+    return mesh
+
+
+def visible_indices(mesh: TileMesh, visible: np.ndarray) -> np.ndarray:
+    """The triangles of a patch-major ``mesh`` (:func:`near_mesh`) whose patch is ``visible
+    (n,) bool``, and every skirt triangle: ``(t', 3)`` uint32."""
+    pt = mesh.patch_triangles
+    n = len(visible)
+    tri = mesh.indices
+    keep = np.ones(len(tri), bool)
+    keep[:n * pt] = np.repeat(np.asarray(visible, bool), pt)
+    return np.ascontiguousarray(tri[keep])
 
 
 def mesh_bytes(rows: int, cols: int) -> int:
@@ -315,6 +333,8 @@ class TileCache:
             raise ConfigError(f"near_samples must be >= 2, got {self.near_samples}")
         self._lock = threading.Lock()
         self.near: dict = {}
+        #: resident near tiles' visibility sets (:meth:`_read_vis`; None: built without)
+        self.vis: dict = {}
         self.far: dict = {}
         self.bounds: dict = {t: e["bounds"] for t, e in entries.items()}
         self.patches: dict = {t: e["patches"] for t, e in entries.items()}
@@ -397,6 +417,64 @@ class TileCache:
                 raise TileError(self.store.path(product, *t), t, f"expected uint8 colours, got {a[k].dtype}", field=k)
         return a
 
+    def _read_vis(self, t):
+        """Tile ``t``'s visibility sets (the build's ``vis_*`` members of its lit file: which of its
+        patches eyes over each of its cells see), a :class:`piste.pipeline.visibility.Visibility`;
+        None when the world was built without them.  Sets that do not fit the tile are a TileError
+        naming the file and the member."""
+        if not float(self.index.get("cell", 0.0) or 0.0) > 0.0:
+            return None
+        import json
+
+        from piste.pipeline.visibility import Visibility
+
+        path = self.store.path("lit", *t)
+        a = self.store.read("lit", *t, expect=self._expect(t))
+        if "vis_meta" not in a:
+            return None
+        try:
+            meta = json.loads(str(a["vis_meta"]))
+            cells = int(np.prod(meta["shape"]))
+            n = int(meta["n_patches"])
+        except (ValueError, TypeError, KeyError) as exc:
+            raise TileError(path, t, f"unreadable visibility metadata ({exc})", field="vis_meta") from None
+        if n != self.patches[t] or cells < 1 or float(meta.get("cell", 0)) <= 0:
+            raise TileError(path, t, f"visibility sets for {n} patches in {cells} cells, expected {self.patches[t]} "
+                                     "patches in at least one cell", field="vis_meta")
+        arrays = {k[4:]: v for k, v in a.items() if k.startswith("vis_") and k != "vis_meta"}
+        pb = arrays.get("patch_bits")
+        if pb is None or pb.dtype != np.uint8 or pb.shape != (cells, (n + 7) // 8):
+            raise TileError(path, t, f"expected ({cells}, {(n + 7) // 8}) uint8 patch bits, got "
+                                     f"{None if pb is None else (pb.shape, str(pb.dtype))}", field="vis_patch_bits")
+        lb = arrays.get("level_bits")
+        if lb is not None and lb.dtype != np.uint8:
+            raise TileError(path, t, f"expected uint8 level bits, got {lb.dtype}", field="vis_level_bits")
+        arrays.setdefault("object_bits", np.zeros((cells, 0), np.uint8))
+        try:
+            return Visibility.from_arrays(arrays, meta)
+        except FormatError as exc:
+            raise TileError(path, t, getattr(exc, "reason", str(exc)), field=str(exc.field or "vis_meta").replace("visibility/", "vis_")) from None
+
+    def visible_patches(self, t, eye) -> np.ndarray | None:
+        """``(n,) bool`` patches of resident near tile ``t`` seen from ``eye`` (its visibility sets:
+        only for an eye over the tile and within the sets' height band), None: draw them all."""
+        with self._lock:
+            vis = self.vis.get(t) if t in self.near else None
+        if vis is None:
+            return None
+        eye = np.asarray(eye, dtype=np.float64)
+        if vis.patches_at(eye) is None:  # outside the tile's grid or above the band: draw all
+            return None
+        # the sets are sampled at 5 eye points a cell (its corners and centre): an eye between them can
+        # see a little more, so the union over the cells around the eye's, each at its band's top
+        rows, cols = vis.shape
+        c = vis.cell_of(eye)
+        r0, c0 = divmod(c, cols)
+        cells = [(r * cols + q) for r in range(max(r0 - 1, 0), min(r0 + 2, rows))
+                 for q in range(max(c0 - 1, 0), min(c0 + 2, cols))]
+        bits = np.bitwise_or.reduce(vis.patch_bits[cells], axis=0)
+        return np.unpackbits(bits, count=vis.n_patches, bitorder="little").astype(bool)
+
     def _bad_tile(self, t, exc: TileError) -> None:
         """Remember a tile that cannot be read; the first one is a warning, the rest debug lines."""
         with self._lock:
@@ -422,8 +500,10 @@ class TileCache:
                     py0, py1, px0, px1 = self.grid.patch_range(*t)
                     mesh = near_mesh(self._read("fit", t, ("control_points",)), self._read("lit", t, ("texels",)),
                                      (py1 - py0, px1 - px0), self._depth(t), self.near_samples)
+                    vis = self._read_vis(t)
                     with self._lock:
                         if t in self._wanted:  # still wanted and still fits: the budget was reserved
+                            self.vis[t] = vis
                             self.near[t] = mesh
                             self.loaded_count += 1
             except TileError as exc:  # a bad tile: warned, left out; the others are drawn
@@ -476,6 +556,7 @@ class TileCache:
             self._wanted = {t for _, t in want}
             for t in [t for t in self.near if t not in self._wanted]:
                 del self.near[t]
+                self.vis.pop(t, None)
             todo = [(d, t) for d, t in want if t not in self.near and t not in self._pending]
             self._pending.update(t for _, t in todo)
         for d, t in todo:
@@ -579,11 +660,13 @@ class StreamingRenderer:
     sky : draw the sky gradient (:class:`piste.render.sky_pass.SkyPass`) where no tile is
     pixel_error : tiles whose far grid would be off by more than this many pixels get near meshes
         (evaluated patches), nearest first under the budget; None: only those within ``near_radius``
+    visibility : near tiles draw only the patches their visibility sets (built with ``cell > 0``)
+        say an eye over the tile and within the sets' band can see (:attr:`stats` ``vis_culled``)
     """
 
     def __init__(self, root, size=(640, 448), budget_bytes: int = 256 << 20, near_radius: float | None = None,
                  ctx=None, background=SKY, fog_density: float | None = None, sky: bool = True,
-                 pixel_error: float | None = FAR_PIXEL_ERROR):
+                 pixel_error: float | None = FAR_PIXEL_ERROR, visibility: bool = True):
         from piste.render.textures import mipmapped_texture, snow_texture
 
         self.cache = TileCache(root, budget_bytes=budget_bytes, near_radius=near_radius)
@@ -611,6 +694,9 @@ class StreamingRenderer:
         self._patch = (1.0 / (s * g.spacing[0]), 1.0 / (s * g.spacing[1]))
         self._lights: dict = {}  # tile -> its light-map texture
         self._gpu: dict = {}  # (tile, level) -> (vbo_pos, ibo, vao, mesh id)
+        self._vis_gpu: dict = {}  # ((tile, level), mesh id, packed set) -> (ibo, vao, triangles)
+        #: near tiles draw only the patches their visibility sets say the eye can see
+        self.visibility = bool(visibility)
         self.stats: dict = {}
 
     def _light(self, t):
@@ -644,6 +730,26 @@ class StreamingRenderer:
     def _release(self, key) -> None:
         for obj in self._gpu.pop(key)[:3][::-1]:
             obj.release()
+        for k in [k for k in self._vis_gpu if k[0] == key]:
+            for obj in self._vis_gpu.pop(k)[:2][::-1]:
+                obj.release()
+
+    def _vis_vao(self, key, mesh: TileMesh, seen: np.ndarray):
+        """A vertex array drawing only the patches ``seen (n,) bool`` of near ``mesh`` (and its
+        skirts): the mesh's positions with its own index buffer, kept while the mesh is resident."""
+        self._vao(key, mesh)  # the positions
+        vkey = (key, id(mesh), np.packbits(seen).tobytes())
+        got = self._vis_gpu.get(vkey)
+        if got is None:
+            if len(self._vis_gpu) >= 32:  # a few cells' worth; the oldest go first
+                for obj in self._vis_gpu.pop(next(iter(self._vis_gpu)))[:2][::-1]:
+                    obj.release()
+            idx = visible_indices(mesh, seen)
+            ibo = self.ctx.buffer(idx)
+            vao = self.ctx.vertex_array(self.prog, [(self._gpu[key][0], "3f", "in_pos")], index_buffer=ibo,
+                                        index_element_size=4)
+            got = self._vis_gpu[vkey] = (ibo, vao, len(idx))
+        return got[1], got[2]
 
     def render(self, camera, wait: bool = False, read: bool = True) -> np.ndarray | None:
         """One frame from ``camera`` (:class:`piste.world.camera.Camera`): ``(H, W, 3)`` uint8.
@@ -692,7 +798,8 @@ class StreamingRenderer:
         self.prog["u_base"].value = 0
         self.prog["u_light"].value = 1
         self.base.use(0)
-        drawn = {"near": 0, "far": 0, "culled": 0, "near_patches": 0, "far_patches": 0, "triangles": 0}
+        drawn = {"near": 0, "far": 0, "culled": 0, "near_patches": 0, "far_patches": 0, "triangles": 0,
+                 "vis_culled": 0}
         live = set()
         visible = _boxes_visible(planes, self.cache.lo, self.cache.hi)
         drawn["culled"] = int((~visible).sum())
@@ -704,11 +811,19 @@ class StreamingRenderer:
             tex.use(1)
             self.prog["u_origin"].value = origin
             self.prog["u_light_uv"].value = luv
-            self._vao(key, mesh).render(moderngl.TRIANGLES)
             kind = "near" if level == "near" else "far"
+            seen = self.cache.visible_patches(t, cam.eye) if level == "near" and self.visibility else None
+            if seen is not None and mesh.patch_triangles and not seen.all():
+                vao, ntri = self._vis_vao(key, mesh, seen)
+                vao.render(moderngl.TRIANGLES)
+                drawn[f"{kind}_patches"] += int(seen.sum())
+                drawn["vis_culled"] += int((~seen).sum())
+                drawn["triangles"] += ntri
+            else:
+                self._vao(key, mesh).render(moderngl.TRIANGLES)
+                drawn[f"{kind}_patches"] += self.cache.patches[t]
+                drawn["triangles"] += len(mesh.indices)
             drawn[kind] += 1
-            drawn[f"{kind}_patches"] += self.cache.patches[t]
-            drawn["triangles"] += len(mesh.indices)
         for key in [k for k in self._gpu if k[1] == "near" and k not in live and k[0] not in self.cache.near]:
             self._release(key)  # evicted near tiles leave the GPU too
         if self.sky is not None and sky:
@@ -778,7 +893,8 @@ class StreamingTerrain:
         """(Nothing to build: tiles load as the camera moves.)"""
 
     def set_visibility(self, visibility=None) -> None:
-        """Tiled worlds have no pre-computed visibility (kept for the interface; not applied)."""
+        """(The interface's; a tiled world's near tiles use their own per-tile sets, built with
+        ``cell > 0``: :attr:`StreamingRenderer.visibility`.)"""
         self.visibility = visibility
 
     def levels(self, camera, lod: bool = True) -> int:
@@ -818,7 +934,8 @@ class StreamingTerrain:
         t1 = time.perf_counter()
         image = self.streaming.fbo.read() if read else None  # (a fresh array; waits for the GL)
         st = self.streaming.stats
-        self.cull_stats.update(near_tiles=st["near"], far_tiles=st["far"], resident_bytes=st["resident_bytes"])
+        self.cull_stats.update(near_tiles=st["near"], far_tiles=st["far"], resident_bytes=st["resident_bytes"],
+                               vis_culled=st["vis_culled"])
         t = {"lod": 0.0, "cull": 0.0, "tessellate": 0.0, **(timings or {})}
         t.update(upload=0.0, draw=(t1 - t0) * 1e3, readback=(time.perf_counter() - t1) * 1e3)
         t["cpu"] = t["lod"] + t["cull"] + t["tessellate"]
