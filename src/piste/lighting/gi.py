@@ -38,7 +38,7 @@ of a bake's inputs (its key and manifest), never chosen by what happens to be in
 paths of up to ``N + 1`` diffuse segments with the direct lights evaluated (shadow rays) at every
 vertex on the exact surface, no light-map interpolation and no strata.
 
-The area sun (:func:`soft_sun_directions`): a directional light with ``sun_radius`` degrees is a
+The area sun (:func:`~piste.lighting.sampling.disc_directions`): a directional light with ``sun_radius`` degrees is a
 disc of that angular radius; the shadow ray of each sample goes to ``sun_rays`` points on it
 (``s x s`` strata of the disc, jittered per sample; eight on the rim first, the rest only in a
 penumbra: :mod:`piste.lighting.shadows`), visibility = the unoccluded fraction.
@@ -77,6 +77,9 @@ __all__ = [
     "path_traced_reference",
     "valley_scene",
     "reference_error",
+    "check_bounces",
+    "check_sun_radius",
+    "MAX_BOUNCES",
 ]
 
 #: gather rays per sample (8 x 8 strata)
