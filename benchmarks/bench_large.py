@@ -2,6 +2,7 @@
 
     python benchmarks/bench_large.py [--quick] [--sizes 10000 100000] [--million] [--workers 2]
                                      [--res 4] [--no-shadows] [--frames 60] [--repeats 1]
+                                     [--dem [SIDE]] [--dem-only] [--dem-dtype float32|uint16]
 
 For every size (patches; a square world at 3 samples a patch side, 10 m spacing, tiles of 64 x 64
 patches) it builds the world from scratch in a child process -- fit, bake (light maps with shadow
@@ -17,6 +18,10 @@ Dask build are compared byte for byte with the local ones.
 The Dask time excludes starting the cluster and the workers' first imports (printed beside it).
 ``--million`` adds the 1,000,000-patch world (3,001 x 3,001 samples): minutes on 2 cores.
 ``--quick``: 10,000 patches only, 2 x 2-texel light maps, 10 frames.
+``--dem [SIDE]`` (``--dem-only`` for it alone): a SIDE x SIDE (default 20,000) tiled GeoTIFF DEM is
+written to the temp folder by tifffile (float32 or ``--dem-dtype uint16``, never kept) and fitted
+tile by tile in a child process through windowed reads (4 samples a patch, tiles of
+``--dem-tile-patches``): time and peak RSS, which stay those of one tile, not of the DEM.
 """
 
 from __future__ import annotations
@@ -71,6 +76,96 @@ def _child(argv) -> None:
     print(json.dumps(out))
 
 
+def _dem_heights(side: int):
+    """A cheap smooth range for ``side x side`` samples at 10 m: window function of global indices."""
+    import numpy as np
+
+    def window(rows: slice, cols: slice):
+        y = np.arange(rows.start, rows.stop, dtype=np.float64) * 10.0
+        x = np.arange(cols.start, cols.stop, dtype=np.float64) * 10.0
+        return (800.0 + 300.0 * np.sin(x / 2300.0)[None, :] + 250.0 * np.cos(y / 1700.0)[:, None]
+                + 120.0 * np.sin(x / 410.0)[None, :] * np.cos(y / 530.0)[:, None])
+
+    return window
+
+
+def _peak_rss_mb() -> float:
+    """This process's peak resident set (MB): VmHWM, which exec resets (ru_maxrss keeps the forking
+    parent's peak on Linux), else ru_maxrss."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def _dem_child(argv) -> None:
+    """``--_dem PATH TILE_PATCHES``: fit a GeoTIFF DEM tile by tile in a fresh process (windowed
+    reads; each tile's control points are computed and dropped); prints JSON."""
+    path, tile_patches = argv
+    import tracemalloc
+
+    from piste.pipeline.tiled_build import FileSource
+    from piste.terrain.heightfield import single_threaded
+    from piste.terrain.tiles import TileGrid, fit_tile
+    from piste.world.scene_file import TerrainSpec
+
+    rss0 = _peak_rss_mb()
+    tracemalloc.start()
+    t0 = time.perf_counter()
+    src = FileSource(TerrainSpec(kind="geotiff", path=Path(path), samples_per_patch=4, tile_patches=int(tile_patches)))
+    grid = TileGrid(src.shape, 4, int(tile_patches), src.spacing)
+    read_s = fit_s = 0.0
+    patches = 0
+    for ty, tx in grid.tiles():
+        rows, cols = grid.sample_window(ty, tx)
+        t1 = time.perf_counter()
+        window = src.window(rows, cols)
+        t2 = time.perf_counter()
+        with single_threaded():
+            cp = fit_tile(grid, ty, tx, window)["control_points"]
+        fit_s += time.perf_counter() - t2
+        read_s += t2 - t1
+        patches += len(cp)
+        del cp, window
+    seconds = time.perf_counter() - t0
+    traced_peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    print(json.dumps({"seconds": seconds, "read_s": read_s, "fit_s": fit_s, "patches": patches,
+                      "tiles": len(grid.tiles()), "shape": list(src.shape),
+                      "rss_mb": _peak_rss_mb(), "rss_after_imports_mb": rss0, "traced_peak_mb": traced_peak / 2**20}))
+
+
+def _dem(tmp: Path, side: int, dtype: str, tile_patches: int) -> None:
+    """Write a ``side x side`` tiled GeoTIFF (into ``tmp``, deleted afterwards) and fit it tile by tile
+    in a child process: time and peak memory, which should not grow with ``side``."""
+    from piste.formats.geotiff import write_geotiff_tiled
+
+    flags = f"--dem {side} --dem-dtype {dtype} --dem-tile-patches {tile_patches}"
+    path = tmp / f"dem_{side}.tif"
+    t0 = time.perf_counter()
+    write_geotiff_tiled(path, (side, side), _dem_heights(side), 10.0, tile=(256, 256), dtype=dtype)
+    wrote = time.perf_counter() - t0
+    size_mb = path.stat().st_size / 2**20
+    whole_mb = side * side * 8 / 2**20  # what read_geotiff would hold (float64), before filling
+    print(f"\nDEM {side:,} x {side:,} {dtype} tiled GeoTIFF (256 x 256 tiles): {size_mb:,.0f} MiB on disk, written in "
+          f"{wrote:.1f} s (a whole-raster read would hold {whole_mb:,.0f} MiB of float64)  [{flags}]")
+    cmd = [sys.executable, __file__, "--_dem", str(path), str(tile_patches)]
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    p = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    path.unlink()
+    if p.returncode != 0:
+        raise SystemExit(f"DEM fit failed:\n{p.stderr[-3000:]}")
+    r = json.loads(p.stdout.strip().splitlines()[-1])
+    print(f"  fitted tile by tile: {r['patches']:,} patches in {r['tiles']:,} tiles, {r['seconds']:.1f} s (window reads "
+          f"{r['read_s']:.1f} s, fits {r['fit_s']:.1f} s); peak RSS {r['rss_mb']:.0f} MB (after imports "
+          f"{r['rss_after_imports_mb']:.0f} MB), tracemalloc peak {r['traced_peak_mb']:.1f} MiB  [{flags}]")
+    record("large", f"{side:,}^2 {dtype} GeoTIFF DEM fitted tile by tile (windowed reads) [{flags}]", "",
+           f"{r['seconds']:.1f} s", f"peak RSS {r['rss_mb']:.0f} MB, traced {r['traced_peak_mb']:.1f} MiB", "")
+
+
 def _warm_worker() -> None:
     import piste.pipeline.tiled_build  # noqa: F401
     import scipy.sparse.csgraph  # noqa: F401
@@ -102,6 +197,9 @@ def main(argv=None) -> None:
     if len(sys.argv) > 1 and sys.argv[1] == "--_child":
         _child(sys.argv[2:])
         return
+    if len(sys.argv) > 1 and sys.argv[1] == "--_dem":
+        _dem_child(sys.argv[2:])
+        return
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     ap.add_argument("--quick", action="store_true", help="10k patches, 2x2 texels, 10 frames")
@@ -114,6 +212,12 @@ def main(argv=None) -> None:
     ap.add_argument("--frames", type=int, default=60, help="streaming frames (default 60; 0 = none)")
     ap.add_argument("--repeats", type=int, default=1, help="builds of each kind and size (default 1)")
     ap.add_argument("--keep", metavar="DIR", help="build into DIR and keep the worlds")
+    ap.add_argument("--dem", type=int, nargs="?", const=20_000, metavar="SIDE",
+                    help="also write a SIDE x SIDE tiled GeoTIFF DEM (default 20,000) to the temp folder and fit it "
+                         "tile by tile (windowed reads): time and peak RSS")
+    ap.add_argument("--dem-only", action="store_true", help="only the DEM benchmark (with --dem)")
+    ap.add_argument("--dem-dtype", choices=["float32", "uint16"], default="float32", help="the DEM's sample type")
+    ap.add_argument("--dem-tile-patches", type=int, default=64, help="patches a tile side for the DEM fit (default 64)")
     args = ap.parse_args(argv)
     sizes = [10_000] if args.quick else list(args.sizes)
     if args.million and 1_000_000 not in sizes:
@@ -124,8 +228,13 @@ def main(argv=None) -> None:
     # printed with every figure: the build's settings, as the command line that reproduces them
     flags = f"--res {res}{'' if shadows else ' --no-shadows'}{' (--quick)' if args.quick else ''}"
     tmp = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="bench_large_"))
+    if args.dem_only:
+        if not args.dem:
+            ap.error("--dem-only needs --dem [SIDE]")
+        sizes, frames = [], 0
     print(f"bench_large: sizes {sizes}, light maps {res}x{res}, shadows {shadows}, Dask workers "
-          f"{0 if args.no_dask else args.workers}, {os.cpu_count()} cores (timings on a shared machine are noisy)")
+          f"{0 if args.no_dask else args.workers}, DEM {args.dem or 'none'}, {os.cpu_count()} cores "
+          "(timings on a shared machine are noisy)")
     rows = []
     try:
         for n in sizes:
@@ -168,6 +277,8 @@ def main(argv=None) -> None:
             print(f"\nscaling exponent (local build time ~ patches^k): k = {slope:.2f}  [{flags}]")
         if frames > 0:
             _streaming(tmp, rows, frames)
+        if args.dem:
+            _dem(tmp, args.dem, args.dem_dtype, args.dem_tile_patches)
     finally:
         if not args.keep:
             shutil.rmtree(tmp, ignore_errors=True)
