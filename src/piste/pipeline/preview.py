@@ -49,6 +49,7 @@ from piste.errors import ConfigError, FormatError
 from piste import formats as _formats, render as _render
 from piste.pipeline.bundle_objects import camera_from_dict
 from piste.pipeline.characters import lods_from_arrays, merged_mesh, model_from_arrays
+from piste.render.aa import AATarget, check_aa, downsample
 from piste.render.context import create_context, save_png
 from piste.render.frame import DEFAULT_FOG_DENSITY, TerrainRenderer
 from piste.render.object_pass import ObjectPass
@@ -317,6 +318,10 @@ class ScenePreview:
         scene file's ``[lod] morph``, else on
     stream_wait : a tiled world: every frame waits for the tiles it wants (default; the same picture
         whatever the loader's timing); False in a window (far stand-ins while tiles load)
+    aa : anti-aliasing, "off", "msaa2", "msaa4", "msaa8" or "fxaa" (:mod:`piste.render.aa`; the
+        CLI's ``--aa``); default: the scene file's ``render.aa``, else "off"
+    supersample : draw at N x N the size and box-filter down (the anti-aliasing reference; the
+        objects' LOD error scaled by N so the same meshes are drawn); default 1
 
     Notes
     -----
@@ -329,18 +334,23 @@ class ScenePreview:
                  object_lighting: str = "baked", shadows: bool = True, specular: bool = True,
                  lightmap_mode: str | None = None, start: float | None = None, casts=(),
                  terrain_only: bool = False, face: str | None = None, fog=None, object_lod: float | None = None,
-                 lod_morph: bool | None = None, stream_wait: bool = True):
+                 lod_morph: bool | None = None, stream_wait: bool = True, aa: str | None = None,
+                 supersample: int = 1):
         if not (isinstance(lightmap, str) and lightmap in ("bundle", "placeholder")) and lightmap is not None:
             raise ConfigError(f"lightmap must be 'bundle', 'placeholder' or None, got {lightmap!r}")
         self.ctx = ctx if ctx is not None else create_context()
         self._own_ctx = ctx is None
         self.use_visibility = bool(visibility)
         self.size = tuple(size) if size is not None else tuple(bundle.manifest.get("render", {}).get("size", (640, 448)))
+        if isinstance(supersample, bool) or not isinstance(supersample, int) or not 1 <= supersample <= 8:
+            raise ConfigError(f"supersample must be an integer in 1..8, got {supersample!r}")
+        self.supersample = supersample
+        self.render_size = (self.size[0] * supersample, self.size[1] * supersample)  # what the renderers draw
         self.options = {"scene": scene, "lightmap": lightmap, "object_lighting": object_lighting,
                         "shadows": bool(shadows), "specular": bool(specular), "lightmap_mode": lightmap_mode,
                         "start": start, "casts": list(casts), "terrain_only": bool(terrain_only), "face": face,
                         "fog": fog, "object_lod": object_lod, "lod_morph": lod_morph,
-                        "stream_wait": bool(stream_wait)}
+                        "stream_wait": bool(stream_wait), "aa": aa}
         self.stats: dict = {}
         self.frame = None
         # numba's background import (~0.8 s, mostly holding the GIL) waits until the first frame is
@@ -376,10 +386,12 @@ class ScenePreview:
         if fog != "auto" and (isinstance(fog, (bool, str)) or not isinstance(fog, (int, float)) or not fog >= 0):
             raise ConfigError(f"fog must be a density per metre >= 0 or 'auto', got {fog!r}")
         self.face = face
+        self.aa = check_aa(opt["aa"] if opt["aa"] is not None else rman.get("aa", "off"))
         self.fog = None if fog == "auto" else float(fog)  # None: the renderer's scene-sized default
         olod = opt["object_lod"] if opt["object_lod"] is not None else rman.get("object_lod", DEFAULT_LOD_PIXELS)
         if isinstance(olod, bool) or not isinstance(olod, (int, float)) or not 0 <= olod <= 64:
             raise ConfigError(f"object_lod must be pixels in 0..64 (0: full meshes), got {olod!r}")
+        olod = olod * self.supersample  # the same meshes as at the output size
         pack = bool(man.get("pack")) and not opt["terrain_only"]
         # a run-time scene or riders following the track ([pack]): the camera chases rider 0
         self.follow = (opt["scene"] is not None or pack) and not opt["terrain_only"]
@@ -390,11 +402,11 @@ class ScenePreview:
                 self.scene = track_scene(bundle, opt["start"], opt["casts"])
             else:
                 self.scene = BundleScene(bundle)
-            terrain = terrain_renderer(bundle, self.size, self.ctx, atlas, opt["lightmap"], opt["stream_wait"], kw)
+            terrain = terrain_renderer(bundle, self.render_size, self.ctx, atlas, opt["lightmap"], opt["stream_wait"], kw)
             sun = getattr(self.scene, "sun", None)  # the build's sun visibility when it is this scene's
             sunlight = bundle.sun_visibility(sun.direction) \
                 if sun is not None and opt["shadows"] and self.scene.net is bundle.net else None
-            self.renderer = SceneRenderer(self.scene, size=self.size, ctx=self.ctx, lightmap=atlas,
+            self.renderer = SceneRenderer(self.scene, size=self.render_size, ctx=self.ctx, lightmap=atlas,
                                           object_lighting=mode, shadows=opt["shadows"], specular=opt["specular"],
                                           face=None if face == "off" else face, terrain=terrain, sunlight=sunlight,
                                           object_lod=float(olod), **kw)
@@ -405,14 +417,19 @@ class ScenePreview:
         else:
             self.scene = None
             self.renderer = None
-            self.terrain = terrain_renderer(bundle, self.size, self.ctx, atlas, opt["lightmap"], opt["stream_wait"], kw)
+            self.terrain = terrain_renderer(bundle, self.render_size, self.ctx, atlas, opt["lightmap"], opt["stream_wait"], kw)
             if self.terrain is None:
-                self.terrain = TerrainRenderer(bundle.net, size=self.size, ctx=self.ctx, lightmap=atlas, **kw)
+                self.terrain = TerrainRenderer(bundle.net, size=self.render_size, ctx=self.ctx, lightmap=atlas, **kw)
             objs = None if opt["terrain_only"] else (auto_objects(bundle) or bundle.objects())
             self.objects = None
             if objs is not None:
                 self.objects = ObjectPass(self.ctx, objs, bundle.lights, mode=mode, lod_pixels=float(olod),
                                           colors=colors if mode == "baked" and objs is bundle.objects() else None)
+        if self.aa != "off":  # the frame drawn into an anti-aliasing target (resolved when read)
+            old = self.terrain.target
+            self.terrain.target = AATarget(self.ctx, old.size, self.aa)
+            old.release()
+            self.stats["aa_samples"] = self.terrain.target.samples
         # the pre-computed visibility in front of frustum culling
         self.terrain.set_visibility(bundle.visibility if self.use_visibility else None)
 
@@ -444,7 +461,7 @@ class ScenePreview:
             self.frame = img
             self.stats.update(img.stats)
             self.stats.update(self.terrain.cull_stats)
-            return img.image[..., :3] if read else None
+            return self._output(img.image) if read else None
         frame = self.terrain.render(cam, lod=lod, lightmap_mode=self.lightmap_mode, debug=debug,
                                     read=read and self.objects is None, fog="scene" if self.fog is None else self.fog)
         self.frame = frame
@@ -463,7 +480,12 @@ class ScenePreview:
             frame.image = image
         self.stats.update(self.terrain.cull_stats)
         self.stats.update(terrain_patches=frame.patches, terrain_triangles=frame.triangles)
-        return image[..., :3] if read else None
+        return self._output(image) if read else None
+
+    def _output(self, image) -> np.ndarray:
+        """A frame as returned: ``(H, W, 3) uint8``, box-filtered down from the drawn size when
+        supersampled."""
+        return downsample(image[..., :3], self.supersample)
 
     def frames(self, times, lod: bool = True, read: bool = True):
         """Frames ``(H, W, 3) uint8`` (None without ``read``) at each of ``times`` along the chase
@@ -478,7 +500,7 @@ class ScenePreview:
             self.frame = img
             self.stats.update(img.stats)
             self.stats.update(self.terrain.cull_stats)
-            yield img.image[..., :3] if read else None
+            yield self._output(img.image) if read else None
             self._warm_up_hold.release()
 
     def _release_passes(self) -> None:

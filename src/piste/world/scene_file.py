@@ -62,6 +62,7 @@ scene file.  Every table and key is optional except where noted::
     face = "morph"                # riders' faces: "morph" targets, their "null_bones" fit, or "off"
     object_lod = 0.5              # objects' levels of detail: the simplification error an instance
                                   #   may show, in pixels (0: every object drawn in full)
+    aa = "off"                    # anti-aliasing: "off", "msaa2|4|8" or "fxaa" (`--aa` overrides)
 
     [pack]                        # instead of [[riders]], on the default course: riders following the
     follow = "track"              #   track (piste demo's six, the camera chasing the first)
@@ -371,6 +372,7 @@ class RenderSpec:
     fog: object = "auto"     # density per metre, or "auto" (scaled to the scene's size)
     face: str = "morph"      # "morph", "null_bones" or "off"
     object_lod: float = 0.5  # pixels of simplification error an object may show (0: full meshes)
+    aa: str = "off"          # anti-aliasing: "off", "msaa2", "msaa4", "msaa8" or "fxaa"
 
 
 #: [auto_objects] keys and their defaults (piste.world.objects.place_objects' counts)
@@ -662,7 +664,7 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     if scene.visibility.method not in ("auto", "horizon", "rays"):
         raise vi.error("method", f"expected \"auto\", \"horizon\" or \"rays\", got {scene.visibility.method!r}")
     re_ = _table(top, "render")
-    re_.allow({"size", "lightmap_mode", "fog", "face", "object_lod"})
+    re_.allow({"size", "lightmap_mode", "fog", "face", "object_lod", "aa"})
     size = re_.get("size", "vec2", (640, 448))
     if not all(float(s).is_integer() and 16 <= s <= 8192 for s in size):
         raise re_.error("size", f"expected [width, height], whole pixels in 16..8192, got {list(size)}")
@@ -681,6 +683,9 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     scene.render.object_lod = re_.get("object_lod", "float", 0.5)
     if not 0.0 <= scene.render.object_lod <= 64.0:
         raise re_.error("object_lod", f"expected pixels in 0..64 (0: full meshes), got {scene.render.object_lod!r}")
+    scene.render.aa = re_.get("aa", "str", "off")
+    if scene.render.aa not in ("off", "msaa2", "msaa4", "msaa8", "fxaa"):
+        raise re_.error("aa", f"expected \"off\", \"msaa2\", \"msaa4\", \"msaa8\" or \"fxaa\", got {scene.render.aa!r}")
 
     # the default course's riders following the track and objects placed along it
     pk = _table(top, "pack")
