@@ -377,7 +377,6 @@ class TileCache:
                               f"{self._far_bytes / 2**20:.1f} MiB: raise it")
         self._queue: queue.PriorityQueue = queue.PriorityQueue()
         self._pending: set = set()
-        self._wanted: set = set()
         self.loaded_count = 0
         self.errors: list = []
         self._stop = False
