@@ -63,6 +63,13 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--lod-morph", choices=("on", "off"), default=None,
                            help="geomorph terrain vertices between LOD levels (default: on, or the scene file's "
                                 "[lod] morph); off: the talk's exact behaviour")
+            p.add_argument("--aa", choices=("off", "msaa2", "msaa4", "msaa8", "fxaa"), default=None,
+                           help="anti-aliasing: multisampling (msaaN, capped at the GL's maximum: 4 on llvmpipe) "
+                                "or the FXAA post pass (default: off, or the scene file's [render] aa)")
+            if name != "view":  # (a window shows the frame at its own size)
+                p.add_argument("--supersample", type=importlib.import_module("piste.commands._numbers").integer(1, 8),
+                               default=1, metavar="N", help="draw at N x N the size and box-filter down (the "
+                               "anti-aliasing reference; default 1)")
     return parser
 
 

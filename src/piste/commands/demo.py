@@ -98,7 +98,8 @@ def run(args) -> int:
     if args.scene == "full" and args.debug is None:
         return run_scene(args, bundle, lightmap, lighting, t0)
     preview = ScenePreview(bundle, size=(w, h), lightmap=lightmap, lightmap_mode=args.lightmap, terrain_only=True,
-                           lod_morph=_morph(args))
+                           lod_morph=_morph(args), aa=getattr(args, "aa", None),
+                           supersample=getattr(args, "supersample", 1))
     lod_on = args.lod == "on"
     # warm-up (not timed): compiled kernels, the terrain's resident vertex blocks, shaders, GL buffers
     from piste._jit import warm_up
@@ -214,7 +215,8 @@ def run_scene(args, bundle, lightmap, lighting: str, t0: float) -> int:
     preview = ScenePreview(bundle, size=(w, h), lightmap=lightmap, object_lighting=args.objects,
                            shadows=not args.no_shadows, specular=not args.no_specular, lightmap_mode=args.lightmap,
                            start=args.start, casts=rider_casts(args.rider_model),
-                           object_lod=getattr(args, "object_lod", None), lod_morph=_morph(args))
+                           object_lod=getattr(args, "object_lod", None), lod_morph=_morph(args),
+                           aa=getattr(args, "aa", None), supersample=getattr(args, "supersample", 1))
     scene, renderer = preview.scene, preview.renderer
     lod_on = args.lod == "on"
     from piste._jit import warm_up

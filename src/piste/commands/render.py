@@ -95,7 +95,8 @@ def run(args) -> int:
             print(f"warning: {msg}", file=sys.stderr)
     stats = render_frames(b, cam if cam is not None else args.camera, args.frames, size=size, fps=args.fps, video=args.video,
                           first_png=args.out, progress=not args.quiet and sys.stderr.isatty() and args.frames > 1,
-                          lod_morph=_morph(args))
+                          lod_morph=_morph(args), aa=getattr(args, "aa", None),
+                          supersample=getattr(args, "supersample", 1))
     if kind == "tiles":
         import numpy as np
 

@@ -85,7 +85,8 @@ def course_preview(args, bundle, ctx=None):
     start = min(max(float(args.start), 0.0), max(length - PACK_TRACK_AHEAD, 0.0) / length)  # the pack: 120 m ahead
     return ScenePreview(bundle, size=tuple(args.size), ctx=ctx, lightmap=lightmap, object_lighting="dynamic",
                         lightmap_mode=args.lightmap, terrain_only=args.terrain_only, start=start,
-                        casts=rider_casts(args.rider_model), face=args.face, lod_morph=_morph(args))
+                        casts=rider_casts(args.rider_model), face=args.face, lod_morph=_morph(args),
+                        aa=getattr(args, "aa", None))
 
 
 def _morph(args):
@@ -101,7 +102,7 @@ def _view_scene(args) -> int:
     from piste.render.window import HELP, ViewOptions, has_display, print_benchmark
 
     size = tuple(args.size) if getattr(args, "size", None) else None
-    kw = {"face": args.face, "lod_morph": _morph(args)}
+    kw = {"face": args.face, "lod_morph": _morph(args), "aa": getattr(args, "aa", None)}
     if args.headless or not has_display():
         live = LiveScene(args.scene, size=size, camera=args.camera, **kw)
         try:
@@ -151,7 +152,7 @@ def _view_source(args, kind: str) -> int:
 
     bundle = open_source(args.scene, warm=True, riders=args.riders, objects=args.add_objects, budget_mb=args.budget)
     size = tuple(args.size)
-    kw = {"lightmap_mode": args.lightmap, "face": args.face, "lod_morph": _morph(args)}
+    kw = {"lightmap_mode": args.lightmap, "face": args.face, "lod_morph": _morph(args), "aa": getattr(args, "aa", None)}
     cam = eye_camera(args.eye, args.target) or camera_at(bundle, args.camera)
     if not has_display():
         print("piste view: no display (DISPLAY / WAYLAND_DISPLAY unset), so no window; rendering one frame "

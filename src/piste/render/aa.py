@@ -106,8 +106,8 @@ class AATarget(Offscreen):
     """
 
     def __init__(self, ctx, size: tuple[int, int], mode: str):
-        super().__init__(ctx, size)  # the single-sampled output (what read() returns)
         self.mode = check_aa(mode)
+        super().__init__(ctx, size)  # the single-sampled output (what read() returns)
         self.samples = min(aa_samples(mode), int(ctx.max_samples)) if mode.startswith("msaa") else 0
         self.out = self.fbo, self.color, self.depth
         w, h = self.size
@@ -160,6 +160,7 @@ class AATarget(Offscreen):
             return
         self.resolve()
         self.ctx.copy_framebuffer(self.screen, self.out[0])
+        self.screen.use()  # (an overlay drawn next lands on the screen)
 
     def release(self) -> None:
         if self.ctx.fbo is self.fbo or self.ctx.fbo is self.out[0]:

@@ -89,6 +89,9 @@ def riders_in_view(camera, anchors, radius: float = 1.2) -> int:
 
 
 def _wrap_screen(renderer_terrain, ctx) -> None:
+    if hasattr(renderer_terrain.target, "present"):  # anti-aliased (render.aa): drawn off-screen, shown by present()
+        renderer_terrain.target.screen = ctx.screen
+        return
     renderer_terrain.target.release()
     renderer_terrain.target = Offscreen.wrap(ctx, ctx.screen)
 
@@ -308,6 +311,8 @@ def run_window(make_view, camera, size=(640, 448), caption: str = "piste view", 
             cam = cam_override if cam_override is not None else fly.camera(w / h)
             ctx.error  # noqa: B018  pyglet's own calls may leave an error behind (Xvfb + llvmpipe): clear it
             vf = view.draw(cam, st["t"], opts)
+            if hasattr(view.terrain.target, "present"):  # an anti-aliased frame (render.aa) to the screen
+                view.terrain.target.present()
             st["cam"] = vf.camera
             if opts.overlay:
                 overlay.draw((w, h))
