@@ -53,8 +53,10 @@ from piste.render.aa import AATarget, check_aa, downsample
 from piste.render.context import create_context, save_png
 from piste.render.frame import DEFAULT_FOG_DENSITY, TerrainRenderer
 from piste.render.object_pass import ObjectPass
+from piste.render.interlace import weave
 from piste.render.scene_renderer import SceneRenderer
 from piste.render.sky_pass import HORIZON
+from piste.render.trace import make_tracer
 from piste.render.video import VideoWriter
 from piste.terrain.resident import resident_fits, resident_terrain
 from piste.world.camera import Camera, track_camera, warn_if_no_terrain
@@ -318,6 +320,8 @@ class ScenePreview:
         scene file's ``[lod] morph``, else on
     stream_wait : a tiled world: every frame waits for the tiles it wants (default; the same picture
         whatever the loader's timing); False in a window (far stand-ins while tiles load)
+    trace : a ``.json`` path: every frame's CPU steps and GPU passes recorded as a Chrome / Perfetto
+        trace (:mod:`piste.render.trace`; the CLI's ``--trace``), written by :meth:`release`
     aa : anti-aliasing, "off", "msaa2", "msaa4", "msaa8" or "fxaa" (:mod:`piste.render.aa`; the
         CLI's ``--aa``); default: the scene file's ``render.aa``, else "off"
     supersample : draw at N x N the size and box-filter down (the anti-aliasing reference; the
@@ -334,7 +338,7 @@ class ScenePreview:
                  object_lighting: str = "baked", shadows: bool = True, specular: bool = True,
                  lightmap_mode: str | None = None, start: float | None = None, casts=(),
                  terrain_only: bool = False, face: str | None = None, fog=None, object_lod: float | None = None,
-                 lod_morph: bool | None = None, stream_wait: bool = True, aa: str | None = None,
+                 lod_morph: bool | None = None, stream_wait: bool = True, trace=None, aa: str | None = None,
                  supersample: int = 1):
         if not (isinstance(lightmap, str) and lightmap in ("bundle", "placeholder")) and lightmap is not None:
             raise ConfigError(f"lightmap must be 'bundle', 'placeholder' or None, got {lightmap!r}")
@@ -353,6 +357,7 @@ class ScenePreview:
                         "stream_wait": bool(stream_wait), "aa": aa}
         self.stats: dict = {}
         self.frame = None
+        self.tracer = make_tracer(trace, self.ctx)  # the no-op NULL_TRACER without a trace file
         # numba's background import (~0.8 s, mostly holding the GIL) waits until the first frame is
         # drawn: beside it a fresh process's first frame took ~0.13 s longer (released by the next
         # frame; release() drops it without starting numba: `piste render` draws one frame)
@@ -411,6 +416,7 @@ class ScenePreview:
                                           face=None if face == "off" else face, terrain=terrain, sunlight=sunlight,
                                           object_lod=float(olod), **kw)
             self.terrain = self.renderer.terrain
+            self.renderer.tracer = self.tracer
             self.objects = None
             if self.renderer.objects is not None and mode == "baked" and self.scene.objects is bundle.objects():
                 self.renderer.objects.set_vertex_colors(colors)
@@ -440,6 +446,13 @@ class ScenePreview:
 
     def render(self, camera=None, t: float = 0.0, lod: bool = True, debug: str | None = None,
                read: bool = True) -> np.ndarray | None:
+        """One frame ``(H, W, 3) uint8`` for ``camera`` at ``t`` seconds (None with ``read=False``);
+        see :meth:`_render_frame`.  Traced as one frame (``trace=``)."""
+        with self.tracer.frame():
+            return self._render_frame(camera, t, lod, debug, read)
+
+    def _render_frame(self, camera=None, t: float = 0.0, lod: bool = True, debug: str | None = None,
+                      read: bool = True) -> np.ndarray | None:
         """One frame ``(H, W, 3) uint8`` for ``camera`` at ``t`` seconds (None with ``read=False``).
 
         ``camera`` defaults to the chase camera of a run-time ``scene``, else the scene's first
@@ -462,8 +475,9 @@ class ScenePreview:
             self.stats.update(img.stats)
             self.stats.update(self.terrain.cull_stats)
             return self._output(img.image) if read else None
-        frame = self.terrain.render(cam, lod=lod, lightmap_mode=self.lightmap_mode, debug=debug,
-                                    read=read and self.objects is None, fog="scene" if self.fog is None else self.fog)
+        with self.tracer.gpu_pass("terrain"):
+            frame = self.terrain.render(cam, lod=lod, lightmap_mode=self.lightmap_mode, debug=debug,
+                                        read=read and self.objects is None, fog="scene" if self.fog is None else self.fog)
         self.frame = frame
         image = frame.image
         if self.objects is not None:
@@ -473,7 +487,8 @@ class ScenePreview:
                 if keep is not None:
                     vis_objs = vis_objs[keep[vis_objs]]
             density = DEFAULT_FOG_DENSITY if self.fog is None else self.fog
-            self.objects.draw(cam.view_projection(), cam.eye, vis_objs, fog=(*HORIZON, density) if density else None)
+            with self.tracer.gpu_pass("objects"):
+                self.objects.draw(cam.view_projection(), cam.eye, vis_objs, fog=(*HORIZON, density) if density else None)
             self.ctx.finish()
             self.stats["objects_drawn"] = int(len(vis_objs))
             image = self.terrain.target.read() if read else None
@@ -496,12 +511,24 @@ class ScenePreview:
             for t in times:
                 yield self.render(None, t, lod=lod, read=read)
             return
-        for img in self.renderer.frames(times, read=read, lod=lod, lightmap_mode=self.lightmap_mode, fog=self.fog):
+        for img in self._traced(self.renderer.frames(times, read=read, lod=lod, lightmap_mode=self.lightmap_mode,
+                                                     fog=self.fog)):
             self.frame = img
             self.stats.update(img.stats)
             self.stats.update(self.terrain.cull_stats)
             yield self._output(img.image) if read else None
             self._warm_up_hold.release()
+
+    def _traced(self, frames):
+        """``frames`` (a generator) with each step traced as a frame: in a pipelined loop a frame's
+        span holds its passes and the next frame's planning, which runs while the GPU draws it."""
+        it = iter(frames)
+        while True:
+            with self.tracer.frame():
+                item = next(it, None)
+            if item is None:
+                return
+            yield item
 
     def _release_passes(self) -> None:
         if self.renderer is not None:
@@ -515,6 +542,7 @@ class ScenePreview:
     def release(self) -> None:
         self._warm_up_hold.release(start=False)  # (no frames follow: numba need not load)
         self._release_passes()
+        self.tracer.close()  # (before the context goes: the trace names its renderer)
         if self._own_ctx:
             self.ctx.release()
 
@@ -529,13 +557,20 @@ def render_image(bundle, camera: str | None = None, size=None, t: float = 0.0, c
 
 
 def render_frames(bundle, camera=None, frames: int = 1, size=None, fps: int = 30, video=None,
-                  first_png=None, ctx=None, progress: bool = False, **preview_kw) -> list:
+                  first_png=None, ctx=None, progress: bool = False, interlace: bool = False,
+                  flicker_filter: bool = False, **preview_kw) -> list:
     """Render ``frames`` frames (time ``i / fps``; track cameras fly), writing the first to
     ``first_png`` and all to the MP4 ``video`` when given.  Returns each frame's stats.  ``camera``:
     a scene camera's name, a :class:`piste.world.camera.Camera` (stays put), a list of cameras (one
     a frame: a tiled world's flight) or None (the first
     scene camera; a ``[pack]`` scene, riders following the track, is seen by the chase camera, as in
-    ``piste demo``).  ``preview_kw``: :class:`ScenePreview` options (``lod_morph``, ...)."""
+    ``piste demo``).  ``preview_kw``: :class:`ScenePreview` options (``lod_morph``, ``trace``, ...).
+
+    ``interlace``: each frame woven from two fields drawn half a frame apart (even lines at
+    ``i / fps``, odd lines at ``(i + 0.5) / fps``: :mod:`piste.render.interlace`), each vertically
+    filtered [1 2 1] / 4 first with ``flicker_filter``; a returned frame's ``ms`` covers both fields."""
+    if flicker_filter and not interlace:
+        raise ConfigError("flicker_filter filters the fields of interlaced video: use it with interlace")
     p = ScenePreview(bundle, size=size, ctx=ctx, **preview_kw)
     writer = None
     out = []
@@ -549,12 +584,17 @@ def render_frames(bundle, camera=None, frames: int = 1, size=None, fps: int = 30
             it = tqdm(it, desc="rendering", unit="frame", leave=False)
         for i in it:
             chase = camera is None and p.follow
-            if isinstance(camera, (list, tuple)):
-                cam = camera[i]
-            else:
-                cam = camera if isinstance(camera, Camera) else (None if chase else camera_at(bundle, camera, i, frames))
+
+            def cam_at(k):  # k: a frame (k + 0.5: a frame's second field)
+                if isinstance(camera, (list, tuple)):
+                    return camera[i]
+                return camera if isinstance(camera, Camera) else (None if chase else camera_at(bundle, camera, k, frames))
             t0 = time.perf_counter()
-            img = p.render(cam, i / float(fps))
+            if interlace:
+                img = weave(*(p.render(cam_at(i + h), (i + h) / float(fps)) for h in (0.0, 0.5)),
+                            filtered=flicker_filter)
+            else:
+                img = p.render(cam_at(i), i / float(fps))
             ms = (time.perf_counter() - t0) * 1e3
             if i == 0 and first_png is not None:
                 save_png(first_png, img)

@@ -41,6 +41,7 @@ from piste.render.frame import TerrainRenderer
 from piste.render.object_pass import ObjectPass
 from piste.render.shadow_pass import ShadowPass, sun_visibility, shadow_matrices, shadow_patches
 from piste.render.sky_pass import HORIZON
+from piste.render.trace import NULL_TRACER
 from piste.terrain.cull import patch_tree
 from piste.world.course import TRACK_HALF_WIDTH
 from piste.world.object_lod import DEFAULT_LOD_PIXELS
@@ -138,6 +139,8 @@ class SceneRenderer:
         self.face = face
         self.faces = [[FaceSkin(lod.mesh, lod.palette.index, face) for lod in c.lods] if face else []
                       for c in self.casts]
+        #: the performance analyzer (piste.render.trace): spans per step and pass; a no-op by default
+        self.tracer = NULL_TRACER
 
     @property
     def size(self):
@@ -151,9 +154,10 @@ class SceneRenderer:
         debug view (e.g. "lod"); ``count_rider_pixels`` counts the riders' pixels that pass the depth
         test (an occlusion query: ``stats["rider_pixels"]``); ``face_time`` is the face animation's
         time (default ``t``)."""
-        plan = self._plan(t, camera=camera, lod=lod, lightmap_mode=lightmap_mode, debug=debug, face_time=face_time)
-        self._issue(plan, fog=fog, light_only=light_only, count_rider_pixels=count_rider_pixels)
-        return self._finish(plan, read)
+        with self.tracer.frame():  # (a no-op inside a frame the caller opened)
+            plan = self._plan(t, camera=camera, lod=lod, lightmap_mode=lightmap_mode, debug=debug, face_time=face_time)
+            self._issue(plan, fog=fog, light_only=light_only, count_rider_pixels=count_rider_pixels)
+            return self._finish(plan, read)
 
     def frames(self, times, read: bool = True, fog: float | None = None, cameras=None, lod: bool = True,
                lightmap_mode: str = "modulate", face_times=None):
@@ -188,31 +192,40 @@ class SceneRenderer:
               debug: str | None = None, face_time: float | None = None) -> dict:
         """A frame's CPU side (no GL call): scene update (animation, LOD, skinning, lights, object
         culling), faces, terrain LOD / culling / indices, shadow frustums and their patches."""
+        with self.tracer.span("plan", t=float(t)):
+            return self._plan_steps(t, camera, lod, lightmap_mode, debug, face_time)
+
+    def _plan_steps(self, t, camera, lod, lightmap_mode, debug, face_time) -> dict:
         w, h = self.size
+        tr = self.tracer
         t0 = time.perf_counter()
-        sf = self.scene.update(t, aspect=w / h, camera=camera)
+        with tr.span("scene update"):
+            sf = self.scene.update(t, aspect=w / h, camera=camera)
         cam = sf.camera
         # the other models' riders, seen by the same camera
-        frames = [sf] + [c.update(t, aspect=w / h, camera=cam) for c in self.casts[1:]]
-        for c, f, faces in zip(self.casts, frames, self.faces):
-            if faces:
-                self._add_faces(c, f, faces, t, t if face_time is None else face_time)
+        with tr.span("casts + faces"):
+            frames = [sf] + [c.update(t, aspect=w / h, camera=cam) for c in self.casts[1:]]
+            for c, f, faces in zip(self.casts, frames, self.faces):
+                if faces:
+                    self._add_faces(c, f, faces, t, t if face_time is None else face_time)
         t1 = time.perf_counter()
         tt: dict = {}
         ssx_ps2 = self.ssx_source is not None and lightmap_mode == "ps2" and debug is None
         # the SSX pass draws a CPU-tessellated mesh: explicit levels (as SsxTerrainRenderer.render)
-        mesh = self.terrain.prepare(cam, lod=lod, timings=tt,
-                                    levels=self.terrain.levels(cam, lod) if ssx_ps2 else None)
+        with tr.span("terrain LOD + cull + tessellate"):
+            mesh = self.terrain.prepare(cam, lod=lod, timings=tt,
+                                        levels=self.terrain.levels(cam, lod) if ssx_ps2 else None)
         t2 = time.perf_counter()
         patches = []
         light_vp = None
         sun = self.scene.sun
         if self.shadows is not None and sun is not None:
-            centers = np.concatenate([f.riders.anchor + f.riders.normal * 0.9 for f in frames])
-            radius = np.concatenate([np.full(len(f.riders), r) for f, r in zip(frames, self.cast_radius)])
-            light_vp = shadow_matrices(centers, radius, sun.direction)
-            patches = shadow_patches(self.patch_lo, self.patch_hi, light_vp, candidates=mesh.patch_ids,
-                                     tree=patch_tree(self.scene.net))
+            with tr.span("shadow frusta"):
+                centers = np.concatenate([f.riders.anchor + f.riders.normal * 0.9 for f in frames])
+                radius = np.concatenate([np.full(len(f.riders), r) for f, r in zip(frames, self.cast_radius)])
+                light_vp = shadow_matrices(centers, radius, sun.direction)
+                patches = shadow_patches(self.patch_lo, self.patch_hi, light_vp, candidates=mesh.patch_ids,
+                                         tree=patch_tree(self.scene.net))
         t3 = time.perf_counter()
         return dict(sf=sf, cam=cam, frames=frames, mesh=mesh, patches=patches, light_vp=light_vp, tt=tt,
                     ssx_ps2=ssx_ps2, lightmap_mode=lightmap_mode, debug=debug, stamps=[t0, t1, t2, t3])
@@ -226,32 +239,54 @@ class SceneRenderer:
         sf, cam, frames, mesh, tt = plan["sf"], plan["cam"], plan["frames"], plan["mesh"], plan["tt"]
         ssx_ps2, light_vp, sun = plan["ssx_ps2"], plan["light_vp"], self.scene.sun
         t3 = time.perf_counter()
+        tr = self.tracer
         # ---- GPU work (uploads count as CPU time: they are memcpy on the CPU side)
-        for cp, f in zip(self.cast_passes, frames):
-            cp.upload(f.skinned)
+        with tr.span("upload riders"):
+            for cp, f in zip(self.cast_passes, frames):
+                cp.upload(f.skinned)
         if self.shadows is not None and sun is not None:
-            first = 0
-            for g, (c, f) in enumerate(zip(self.casts, frames)):
-                k = len(f.riders)
-                self.shadows.render_casters(f.shadow[0], c.lods[-1].mesh.indices, light_vp[first:first + k],
-                                            first=first, group=g)
-                first += k
+            with tr.gpu_pass("shadow casters"):
+                first = 0
+                for g, (c, f) in enumerate(zip(self.casts, frames)):
+                    k = len(f.riders)
+                    self.shadows.render_casters(f.shadow[0], c.lods[-1].mesh.indices, light_vp[first:first + k],
+                                                first=first, group=g)
+                    first += k
         t4 = time.perf_counter()
-        if ssx_ps2:  # the game's way: base texture Cd, then (Cd - Cs) x As with the level's stored texels
-            frame = self.terrain.draw(cam, mesh, debug="base", read=False, timings=tt, sync=False)
-            self.ssx_source.upload(mesh)
-            self.terrain.target.use()
-            self.ssx_source.draw(cam.with_aspect(w, h).view_projection())
-        else:
-            frame = self.terrain.draw(cam, mesh, lightmap_mode=plan["lightmap_mode"], fog=fog, read=False, timings=tt,
-                                      debug=plan["debug"], sync=False)  # a ps2 frame resolves here: the 8-bit frame buffer the rest blends on
+        with tr.gpu_pass("terrain"):
+            frame = self._draw_terrain(plan, cam, mesh, tt, fog, w, h)
         t5 = time.perf_counter()
         vp = frame_vp = cam.with_aspect(w, h).view_projection()
         fog_rgba = (*HORIZON, float(fog)) if fog and not ssx_ps2 else None  # the SSX ps2 frame has no fog
         if self.shadows is not None and sun is not None:
-            self.shadows.draw_receivers(mesh, plan["patches"], frame_vp)
+            with tr.gpu_pass("shadow receivers"):
+                self.shadows.draw_receivers(mesh, plan["patches"], frame_vp)
         if self.objects is not None:
-            self.objects.draw(vp, cam.eye, sf.objects_visible, fog=fog_rgba, light_only=light_only)
+            with tr.gpu_pass("objects"):
+                self.objects.draw(vp, cam.eye, sf.objects_visible, fog=fog_rgba, light_only=light_only)
+        with tr.gpu_pass("riders"):
+            rider_pixels = self._draw_riders(plan, vp, cam, fog_rgba, light_only, count_rider_pixels)
+        plan.update(frame=frame, rider_pixels=rider_pixels,
+                    objects_drawn=self.objects.drawn if self.objects is not None else 0,
+                    object_triangles=self.objects.triangles if self.objects is not None else 0,
+                    rider_triangles=int(sum(cp.triangles for cp in self.cast_passes)),
+                    shadow_triangles=self.shadows.triangles if self.shadows is not None else 0)
+        plan["stamps"] += [t3, t4, t5]
+
+    def _draw_terrain(self, plan, cam, mesh, tt, fog, w, h):
+        """The terrain (+ sky) of a planned frame, drawn into the target (not read back)."""
+        if plan["ssx_ps2"]:  # the game's way: base texture Cd, then (Cd - Cs) x As with the level's stored texels
+            frame = self.terrain.draw(cam, mesh, debug="base", read=False, timings=tt, sync=False)
+            self.ssx_source.upload(mesh)
+            self.terrain.target.use()
+            self.ssx_source.draw(cam.with_aspect(w, h).view_projection())
+            return frame
+        return self.terrain.draw(cam, mesh, lightmap_mode=plan["lightmap_mode"], fog=fog, read=False, timings=tt,
+                                 debug=plan["debug"], sync=False)  # a ps2 frame resolves here: the 8-bit frame buffer the rest blends on
+
+    def _draw_riders(self, plan, vp, cam, fog_rgba, light_only, count_rider_pixels):
+        """Every model's riders (base pass, specular); the riders' pixels when counted, else None."""
+        frames, sun = plan["frames"], self.scene.sun
         query = self.ctx.query(samples=True) if count_rider_pixels else None
         rider_pixels = 0
         for cp, f in zip(self.cast_passes, frames):
@@ -263,18 +298,15 @@ class SceneRenderer:
                 # with the query the base pass is drawn inside it; the specular pass adds on top
                 cp.draw(vp, cam.eye, f.rider_lights, sun=sun if self.specular else None, fog=fog_rgba,
                         light_only=light_only, base=query is None)
-        plan.update(frame=frame, rider_pixels=rider_pixels if query is not None else None,
-                    objects_drawn=self.objects.drawn if self.objects is not None else 0,
-                    object_triangles=self.objects.triangles if self.objects is not None else 0,
-                    rider_triangles=int(sum(cp.triangles for cp in self.cast_passes)),
-                    shadow_triangles=self.shadows.triangles if self.shadows is not None else 0)
-        plan["stamps"] += [t3, t4, t5]
+        return rider_pixels if query is not None else None
 
     def _finish(self, plan: dict, read: bool) -> SceneImage:
         """Wait for an issued frame, read it back, and gather its timings and counts."""
-        self.ctx.finish()
+        with self.tracer.span("wait (glFinish)"):
+            self.ctx.finish()
         t6 = time.perf_counter()
-        image = self.terrain.target.read() if read else None
+        with self.tracer.span("read back"):
+            image = self.terrain.target.read() if read else None
         t7 = time.perf_counter()
         check_gl_error(self.ctx, "drawing the scene")
         t0, t1, t2, t3, t3b, t4, t5 = plan["stamps"]
