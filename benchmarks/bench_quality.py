@@ -154,6 +154,48 @@ def bake_soft_sun(args) -> None:
                    f"hard {eh:.3f}", f"+{c[r][1]:.1f}x bake", None)
 
 
+def render_aa(args) -> None:
+    """Run-time side, anti-aliasing (issue 27 item 1), on the default demo scene (``piste demo``'s
+    bundle, chase camera, frames at t = 0 and 1 s, 640x448): the edge error (mean |difference|, 0..255
+    a channel, over the pixels where the reference's luma gradient is >= 24) of each ``--aa`` mode and
+    of ``--supersample 2`` against ``--supersample 4``; cost: a frame's wall time (draw + read back)
+    over ``--aa off``'s, medians of ``--rounds`` interleaved rounds."""
+    from piste.pipeline.bundle_objects import load_bundle
+    from piste.pipeline.default_scene import build_default_scene
+    from piste.pipeline.preview import ScenePreview
+    from piste.render.aa import edge_error
+    from piste.render.context import create_context
+
+    print("render: anti-aliasing, default demo scene 640x448, 2 chase frames; edge error vs --supersample 4")
+    bundle = load_bundle(build_default_scene(0).path, verify=False, warm=True)
+    ctx = create_context()
+    times = (0.0, 1.0)
+    modes = {"--aa off": ("off", 1), "--aa msaa2": ("msaa2", 1), "--aa msaa4": ("msaa4", 1),
+             "--aa msaa8": ("msaa8", 1), "--aa fxaa": ("fxaa", 1), "--supersample 2": ("off", 2),
+             "--supersample 4": ("off", 4)}
+    previews = {k: ScenePreview(bundle, size=(640, 448), ctx=ctx, object_lighting="dynamic", aa=aa, supersample=n)
+                for k, (aa, n) in modes.items()}
+    try:
+        images = {k: [p.render(None, t) for t in times] for k, p in previews.items()}
+        tm = interleaved({k: (lambda p=p: [p.render(None, t) for t in times]) for k, p in previews.items()},
+                         args.rounds)
+        base = stat(tm["--aa off"])[0]
+        ref = images["--supersample 4"]
+        for k, p in previews.items():
+            e = float(np.mean([edge_error(a, r)[0] for a, r in zip(images[k], ref)]))
+            t = stat(tm[k])[0] / len(times)
+            extra = stat(tm[k])[0] / base - 1.0
+            s = p.stats.get("aa_samples")
+            err = f"edge error {e:5.2f}" + (f" ({s} samples drawn)" if s else "")
+            print(f"  {k:<52} {err:<52} {t * 1e3:9.1f} ms  {extra * 100:+.0f} % of the frame")
+            record("quality", f"render {k}: edge error vs --supersample 4", "", f"{e:.2f}", "",
+                   f"{extra * 100:+.0f} % frame", None)
+    finally:
+        for p in previews.values():
+            p.release()
+        ctx.release()
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="64 points x 1024 paths, 3 rounds")
@@ -166,6 +208,7 @@ def main() -> int:
     print("piste bench_quality: feature, its error against piste's own reference, its cost (one process)")
     bake_gi(args)
     bake_soft_sun(args)
+    render_aa(args)
     return 0
 
 
