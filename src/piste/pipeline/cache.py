@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 from piste.extras import environ
 from piste.formats.atomic import write_bytes_atomic
+from piste.formats.safe_io import read_regular
 
 __all__ = ["Hasher", "content_key", "Cache", "npz_bytes", "read_npz_bytes", "cache_root"]
 
@@ -59,8 +60,8 @@ class Hasher:
 
     def update(self, part) -> "Hasher":
         h = self._h
-        if isinstance(part, Path):
-            data = part.read_bytes()
+        if isinstance(part, Path):  # a source file: opened like its reader opens it (piste.formats.safe_io)
+            data = read_regular(part, 1 << 40, what="source file")
             h.update(b"F%d:" % len(data))
             h.update(data)
         elif isinstance(part, (bytes, bytearray, memoryview)):
