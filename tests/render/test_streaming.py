@@ -188,8 +188,8 @@ def _ground_cameras(cache, n: int, seed: int = 0) -> list:
         x, y = rng.uniform(100.0, 1340.0, 2)
         z = float(height_at(tile_net(cache.store, *cache.grid.tile_of(x, y)), np.array([[x, y]]))[0][0])
         a = rng.uniform(0.0, 2.0 * np.pi)
-        cams.append(Camera(np.array([x, y, z + 2.0]), np.array([x + 300.0 * np.cos(a), y + 300.0 * np.sin(a), z - 20.0]),
-                           near=0.5, far=5000.0))
+        look = np.array([x + 300.0 * np.cos(a), y + 300.0 * np.sin(a), z - 20.0])
+        cams.append(Camera(np.array([x, y, z + 2.0]), look, near=0.5, far=5000.0))
     return cams
 
 

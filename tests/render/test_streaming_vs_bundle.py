@@ -21,6 +21,7 @@ enabled = false
 #: eye, target (metres): across the world from a corner, and along it from the south
 VIEWS = [((20.0, 20.0, 300.0), (300.0, 300.0, 60.0)), ((180.0, -40.0, 230.0), (180.0, 260.0, 80.0))]
 SIZE = ("128", "96")
+GREY = np.array([0.299, 0.587, 0.114])  # PIL's "L" weights
 
 
 @pytest.fixture(scope="module")
@@ -80,15 +81,44 @@ def test_far_stand_ins_carry_the_light_map_and_base_texture(scenes, gl, tmp_path
     try:
         img = r.render(eye_camera(eye, target, 50.0), wait=True)
         assert r.stats["near"] == 0 and r.stats["far"] == 4
-        far = np.asarray(img, np.float64) @ np.array([0.299, 0.587, 0.114])
+        far = np.asarray(img, np.float64) @ GREY
         d = np.abs(one - far)
         for tile in r.cache.light:  # unlit (full light everywhere): the shading is gone
             r.cache.light[tile] = np.full_like(r.cache.light[tile], 128)
         for tex, _, _ in r._lights.values():
             tex.release()
         r._lights.clear()
-        flat = np.asarray(r.render(eye_camera(eye, target, 50.0), wait=True), np.float64) @ np.array([0.299, 0.587, 0.114])
+        flat = np.asarray(r.render(eye_camera(eye, target, 50.0), wait=True), np.float64) @ GREY
     finally:
         r.close()
     assert d.mean() <= 10.0 and np.percentile(d, 95) <= 40.0, (d.mean(), np.percentile(d, 95))
     assert np.abs(one - flat).mean() > 2.0 * d.mean()
+
+
+def test_every_level_in_one_picture_under_a_tight_budget(scenes, gl, tmp_path):
+    """A budget with room for two near meshes and one middle-level one (evaluated patches, 3
+    samples a side, where a near mesh no longer fits): near, middle and far tiles in one frame,
+    still the bundle's picture."""
+    from piste.cli import main
+    from piste.pipeline.open_scene import eye_camera
+    from piste.render import streaming as S
+
+    eye, target = VIEWS[0]
+    one = _render(main, scenes / "one.piste", eye, target, tmp_path / "one.png")
+    probe = S.TileCache(scenes / "w.tiles")
+    try:
+        far, t = probe._far_bytes, probe.tiles[0]
+        near_b, mid_b = probe._near_bytes(0, t), probe._near_bytes(0, t, S.MID_SAMPLES)
+    finally:
+        probe.close()
+    assert near_b > 1.5 * mid_b
+    r = S.StreamingRenderer(scenes / "w.tiles", size=tuple(map(int, SIZE)), budget_bytes=far + near_b + 3 * mid_b + 64,
+                            ctx=gl)
+    try:
+        img = r.render(eye_camera(eye, target, 50.0), wait=True)
+        st = r.stats
+    finally:
+        r.close()
+    assert st["near"] - st["mid"] == 2 and st["mid"] == 1 and st["far"] == 1, st  # nearest first
+    d = np.abs(one - np.asarray(img, np.float64) @ GREY)
+    assert d.mean() <= 4.0 and np.percentile(d, 95) <= 12.0, (d.mean(), np.percentile(d, 95))

@@ -51,6 +51,7 @@ from piste.pipeline.build import scene_lights
 from piste.pipeline.cache import content_key
 from piste.pipeline.sources import load_heightfield
 from piste.pipeline.visibility import compute_visibility
+from piste.terrain.bezier import evaluate, grid_params
 from piste.terrain.heightfield import single_threaded
 from piste.terrain.net import PatchNet
 from piste.terrain.tiles import TILE_FIT_VERSION, TILES_FORMAT, TileGrid, TileStore, fit_tile, neighbourhood_net
@@ -59,10 +60,10 @@ from piste.terrain.tiles import TileError as TileFileError
 __all__ = ["TiledSpec", "TiledResult", "ArraySource", "FileSource", "SyntheticSource", "TileError", "fit_task",
            "lit_task",
            "spec_from_scene", "synthetic_spec",
-           "build_tiles", "write_index", "TILE_BAKE_VERSION"]
+           "build_tiles", "write_index", "TILE_BAKE_VERSION", "far_errors"]
 
 #: bumped whenever :func:`lit_task`'s output for the same input changes
-TILE_BAKE_VERSION = "piste.tile-bake/2"  # 2: seam light welded (as the one-bundle bake: weld_seam_light)
+TILE_BAKE_VERSION = "piste.tile-bake/3"  # 2: seam light welded (as the one-bundle bake: weld_seam_light); 3: far_error
 
 
 class TileError(TileFileError):
@@ -380,6 +381,7 @@ def _bake_tile(spec: TiledSpec, ty: int, tx: int) -> tuple[dict, dict]:
     lo = cp.reshape(-1, 3).min(0)
     hi = cp.reshape(-1, 3).max(0)
     arrays = {"texels": texels, "far_positions": far, "far_colors": far_rgb,
+              "far_error": far_errors(cp.reshape(-1, 4, 4, 3)),
               "meta": np.array([lo[2], hi[2], n], dtype=np.float64)}
     if spec.cell > 0:
         tile = PatchNet(ring_net.control_points[centre], tol=ring_net.tol, name=f"tile {ty},{tx}")
@@ -391,6 +393,39 @@ def _bake_tile(spec: TiledSpec, ty: int, tx: int) -> tuple[dict, dict]:
     info = {"samples": m * res * res, "rays": int(stats.get("rays", 0)), "zmin": float(lo[2]), "zmax": float(hi[2]),
             "patches": n}
     return arrays, info
+
+
+def _piecewise(z: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Heights of the triangulated grid ``z (n, m, m)`` (``[patch, j (v), i (u)]`` at parameters
+    ``i / (m-1)``; each cell split along its (0, 0)-(1, 1) diagonal, as the streaming meshes are) at
+    parameters ``t (k,)`` in both directions: ``(n, k, k)``."""
+    m = z.shape[1]
+    c = np.minimum(np.floor(t * (m - 1)).astype(int), m - 2)
+    f = t * (m - 1) - c
+    ci, fu = c[None, :], f[None, :]  # u along the last axis
+    cj, fv = c[:, None], f[:, None]
+    z00, z10 = z[:, cj, ci], z[:, cj, ci + 1]
+    z01, z11 = z[:, cj + 1, ci], z[:, cj + 1, ci + 1]
+    lower = z00 + fu * (z10 - z00) + fv * (z11 - z10)  # fu >= fv
+    upper = z00 + fv * (z01 - z00) + fu * (z11 - z01)
+    return np.where(fu >= fv, lower, upper)
+
+
+def far_errors(control_points: np.ndarray, k: int = 9) -> np.ndarray:
+    """How far a tile's patches ``(n, 4, 4, 3)`` leave the streaming renderer's coarse levels,
+    ``(2,)`` float64 metres (the tile member ``far_error``): the largest vertical distance, over
+    ``k x k`` points a patch, between the surface and (0) the patch-corner grid, (1) the middle
+    level (every patch evaluated 3 samples a side).  The renderer picks a tile's level by these
+    errors on screen (:class:`piste.render.streaming.TileCache`)."""
+    t = np.linspace(0.0, 1.0, k)
+    u, v = grid_params(k)
+    cp = np.asarray(control_points, dtype=np.float64)
+    z = evaluate(cp, u, v, normals=False)[..., 2].reshape(len(cp), k, k)  # [patch, j (v), i (u)]
+    mid = (k - 1) // 2
+    out = []
+    for idx in ([0, k - 1], [0, mid, k - 1]):  # the levels' vertices among the k samples (k odd)
+        out.append(float(np.abs(z - _piecewise(z[:, idx][:, :, idx], t)).max()) if len(cp) else 0.0)
+    return np.array(out, dtype=np.float64)
 
 
 def _json(d) -> str:

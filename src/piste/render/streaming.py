@@ -46,7 +46,9 @@ import numpy as np
 
 from piste.errors import ConfigError, FormatError
 from piste.render.context import Offscreen, create_context, save_png
-from piste.render.frame import Frame
+from piste.render.frame import DEFAULT_FOG_DENSITY, FOG_REFERENCE_SIZE, Frame
+from piste.render.sky_pass import HORIZON, SkyPass
+from piste.render.textures import mipmapped_texture, snow_texture
 from piste.render.video import VideoWriter
 from piste.terrain.bezier import evaluate, grid_params
 from piste.terrain.cull import patch_tree
@@ -55,7 +57,7 @@ from piste.terrain.tiles import TileError, TileGrid, TileStore, tile_entries
 from piste.world.camera import Camera
 
 __all__ = ["TileCache", "StreamingRenderer", "StreamingTerrain", "TileMesh", "near_mesh", "far_mesh", "mesh_bytes", "fly_path",
-           "render_flight"]
+           "render_flight", "TileSets", "light_grid", "stride_errors", "chord_error", "visible_indices", "world_fog_density"]
 
 _log = logging.getLogger(__name__)
 
@@ -68,6 +70,10 @@ FAR_STRIDES = (1, 2, 4, 8)
 FAR_PIXEL_ERROR = 0.5
 #: near meshes evaluate every patch at least this many samples a side (the course's LOD beyond 180 m)
 NEAR_SAMPLES = 4
+#: samples a patch side of the middle level: evaluated patches (a centre and edge midpoints: a
+#: quarter of the corner grid's chord error) for tiles too far for near meshes but whose
+#: corner grid would show, about a sixth of a near mesh's bytes at res 8
+MID_SAMPLES = 3
 
 # The tiles are drawn like the course's terrain (terrain.frag.glsl, modulate mode): the base
 # texture (repeated once a patch) times the light map, fogged per vertex.  A heightfield patch is
@@ -297,6 +303,39 @@ def mesh_bytes(rows: int, cols: int) -> int:
     return verts * 15 + tris * 12
 
 
+@dataclass
+class TileSets:
+    """A tile's visibility sets at run time (what :class:`piste.pipeline.visibility.Visibility`
+    wrote: ``origin (2,)``, ``cell`` metres, ``shape (rows, cols)``, ``patch_bits (cells, ceil(n/8))``
+    uint8 little bit order, ``n`` patches, ``ground_min (cells,)`` or None, ``band`` metres)."""
+
+    origin: np.ndarray
+    cell: float
+    shape: tuple
+    patch_bits: np.ndarray
+    n: int
+    ground_min: np.ndarray | None
+    band: float
+
+    def visible(self, eye) -> np.ndarray | None:
+        """``(n,) bool`` patches an eye ``(3,)`` over the tile may see, or None (outside the grid,
+        or above the band over its cell: draw all).  The sets were sampled at five eye points a
+        cell (its corners and centre) and an eye between them can see a little more, so this is
+        the union of the sets of the eye's cell and its neighbours (at the band's top)."""
+        e = np.asarray(eye, dtype=np.float64).reshape(-1)
+        rows, cols = self.shape
+        ij = np.floor((e[:2] - self.origin) / self.cell)
+        if not (0 <= ij[0] < cols and 0 <= ij[1] < rows):
+            return None
+        q0, r0 = int(ij[0]), int(ij[1])
+        if self.ground_min is not None and e[2] > self.ground_min[r0 * cols + q0] + self.band:
+            return None
+        cells = [r * cols + q for r in range(max(r0 - 1, 0), min(r0 + 2, rows))
+                 for q in range(max(q0 - 1, 0), min(q0 + 2, cols))]
+        bits = np.bitwise_or.reduce(self.patch_bits[cells], axis=0)
+        return np.unpackbits(bits, count=self.n, bitorder="little").astype(bool)
+
+
 class TileCache:
     """Which tiles are resident, at which level, under ``budget_bytes`` (see the module docstring).
 
@@ -306,8 +345,11 @@ class TileCache:
     budget_bytes : the most bytes of tile meshes held at once
     near_radius : metres (from the eye to a tile's rectangle) within which tiles get near meshes
         (default 0.3 tile: the eye's tile and the ones whose border is close; the near mesh has
-        2 (res - 1)^2 triangles a patch, the far levels 2 / stride^2)
+        2 (near_samples - 1)^2 triangles a patch, the middle level 8, the far levels 2 / stride^2;
+        with a camera, tiles further out get near or middle meshes where the far grid would show:
+        :meth:`update`)
     view_distance : far tiles beyond this are not loaded (default: the whole world)
+    near_samples : samples a patch side of the near meshes (default max(res, ``NEAR_SAMPLES``))
     """
 
     def __init__(self, root, budget_bytes: int = 256 << 20, near_radius: float | None = None,
@@ -335,12 +377,14 @@ class TileCache:
         self.near: dict = {}
         #: resident near tiles' visibility sets (:meth:`_read_vis`; None: built without)
         self.vis: dict = {}
+        #: resident tiles' samples a patch side (``near_samples``, or ``MID_SAMPLES``: the middle level)
+        self.near_level: dict = {}
         self.far: dict = {}
         self.bounds: dict = {t: e["bounds"] for t, e in entries.items()}
         self.patches: dict = {t: e["patches"] for t, e in entries.items()}
         #: tiles that could not be read: ``{(ty, tx): TileError}`` (not drawn; the others are)
         self.bad: dict = {}
-        self._wanted: set = set()
+        self._wanted: dict = {}  # tile -> samples a patch side of the mesh it should have
         # the bytes of a tile's near mesh, estimated exactly from its patch count
         self._near_estimate = {t: self._near_bytes(self.patches[t], t) for t in self.bounds}
         #: the tiles in a fixed order, their boxes ``(n, 3)`` (skirts included below)
@@ -354,11 +398,19 @@ class TileCache:
         #: far levels sample it) and each far level's height error ``{stride: metres}``
         self.light: dict = {}
         self.far_error: dict = {}
-        #: per tile: how far its surface may leave the far grid's chords (metres, :func:`chord_error`)
+        #: per tile: how far its surface leaves the far grid's chords and the middle level's (metres:
+        #: the build's ``far_error`` member, :func:`piste.pipeline.tiled_build.far_errors`; for
+        #: worlds built without it, :func:`chord_error` and a quarter of it)
         self.chord_error: dict = {}
+        self.mid_error: dict = {}
         for t in sorted(self.bounds):
             try:
-                lit = self._read("lit", t, ("far_positions", "far_colors", "texels"))
+                lit = self._read("lit", t, None)  # every member (the far field, texels, far_error, sets)
+                for k in ("far_positions", "far_colors", "texels"):
+                    if k not in lit:
+                        raise TileError(self.store.path("lit", *t), t, f"has no {k}", field=k)
+                if "far_error" in lit and (lit["far_error"] < 0).any():
+                    raise TileError(self.store.path("lit", *t), t, "expected errors >= 0 metres", field="far_error")
             except TileError as exc:  # drawn as a hole; the other tiles are drawn
                 self._bad_tile(t, exc)
                 continue
@@ -366,7 +418,11 @@ class TileCache:
             self.far[t] = {k: far_mesh(lit, self._depth(t), k) for k in FAR_STRIDES}
             self.light[t] = light_grid(lit["texels"], (py1 - py0, px1 - px0))
             self.far_error[t] = stride_errors(lit["far_positions"])
-            self.chord_error[t] = chord_error(lit["far_positions"])
+            if "far_error" in lit:  # measured by the build (tiled_build.far_errors)
+                self.chord_error[t], self.mid_error[t] = (float(x) for x in lit["far_error"])
+            else:  # a world built before it: estimated from the corner grid
+                self.chord_error[t] = chord_error(lit["far_positions"])
+                self.mid_error[t] = self.chord_error[t] / 4.0
             self._far_bytes += sum(m.nbytes for m in self.far[t].values()) + self.light[t].nbytes
         if self.bad:  # only tiles with a far stand-in are drawn
             keep = [i for i, t in enumerate(self.tiles) if t not in self.bad]
@@ -384,9 +440,9 @@ class TileCache:
         self._thread.start()
 
     # ---------------------------------------------------------------- sizes
-    def _near_bytes(self, n: int, t) -> int:
+    def _near_bytes(self, n: int, t, samples: int | None = None) -> int:
         py0, py1, px0, px1 = self.grid.patch_range(*t)
-        r = self.near_samples - 1
+        r = (self.near_samples if samples is None else samples) - 1
         return mesh_bytes((py1 - py0) * r + 1, (px1 - px0) * r + 1)
 
     def _depth(self, t) -> float:
@@ -404,7 +460,8 @@ class TileCache:
         py0, py1, px0, px1 = self.grid.patch_range(*t)
         ny, nx, r = py1 - py0, px1 - px0, self.res
         return {"control_points": ((ny * nx, 4, 4, 3), "fiu"), "texels": ((ny * nx, r, r, 3), "u"),
-                "far_positions": ((ny + 1, nx + 1, 3), "fiu"), "far_colors": ((ny + 1, nx + 1, 3), "u")}
+                "far_positions": ((ny + 1, nx + 1, 3), "fiu"), "far_colors": ((ny + 1, nx + 1, 3), "u"),
+                "far_error": ((2,), "f")}
 
     def _read(self, product: str, t, names) -> dict:
         """Members ``names`` of tile ``t``'s ``product`` file, every header checked before a byte is
@@ -417,15 +474,13 @@ class TileCache:
         return a
 
     def _read_vis(self, t):
-        """Tile ``t``'s visibility sets (the build's ``vis_*`` members of its lit file: which of its
-        patches eyes over each of its cells see), a :class:`piste.pipeline.visibility.Visibility`;
-        None when the world was built without them.  Sets that do not fit the tile are a TileError
-        naming the file and the member."""
+        """Tile ``t``'s visibility sets (the build's ``vis_*`` members of its lit file, written by
+        :class:`piste.pipeline.visibility.Visibility`: which of its patches eyes over each of its
+        cells see), a :class:`TileSets`; None when the world was built without them.  Sets that do
+        not fit the tile are a TileError naming the file and the member."""
         if not float(self.index.get("cell", 0.0) or 0.0) > 0.0:
             return None
         import json
-
-        from piste.pipeline.visibility import Visibility
 
         path = self.store.path("lit", *t)
         a = self.store.read("lit", *t, expect=self._expect(t))
@@ -433,53 +488,39 @@ class TileCache:
             return None
         try:
             meta = json.loads(str(a["vis_meta"]))
-            cells = int(np.prod(meta["shape"]))
-            n = int(meta["n_patches"])
+            shape = tuple(int(x) for x in meta["shape"])
+            n, cell = int(meta["n_patches"]), float(meta["cell"])
+            origin = np.asarray(meta["origin"], dtype=np.float64).reshape(2)
+            band = max((float(h) for h in meta.get("eye_heights", ())), default=0.0)
         except (ValueError, TypeError, KeyError) as exc:
-            raise TileError(path, t, f"unreadable visibility metadata ({exc})", field="vis_meta") from None
-        if n != self.patches[t] or cells < 1 or float(meta.get("cell", 0)) <= 0:
-            raise TileError(path, t, f"visibility sets for {n} patches in {cells} cells, expected {self.patches[t]} "
-                                     "patches in at least one cell", field="vis_meta")
-        arrays = {k[4:]: v for k, v in a.items() if k.startswith("vis_") and k != "vis_meta"}
-        pb = arrays.get("patch_bits")
+            raise TileError(path, t, f"unreadable visibility metadata ({str(exc)[:80]})", field="vis_meta") from None
+        cells = int(np.prod(shape)) if len(shape) == 2 else 0
+        if n != self.patches[t] or cells < 1 or not (cell > 0 and np.isfinite(cell)) or not np.isfinite(origin).all():
+            raise TileError(path, t, f"visibility sets for {n} patches in {cells} cells of {cell} m, expected "
+                                     f"{self.patches[t]} patches in at least one cell", field="vis_meta")
+        pb = a.get("vis_patch_bits")
         if pb is None or pb.dtype != np.uint8 or pb.shape != (cells, (n + 7) // 8):
             raise TileError(path, t, f"expected ({cells}, {(n + 7) // 8}) uint8 patch bits, got "
                                      f"{None if pb is None else (pb.shape, str(pb.dtype))}", field="vis_patch_bits")
-        lb = arrays.get("level_bits")
-        if lb is not None and lb.dtype != np.uint8:
-            raise TileError(path, t, f"expected uint8 level bits, got {lb.dtype}", field="vis_level_bits")
-        arrays.setdefault("object_bits", np.zeros((cells, 0), np.uint8))
-        try:
-            return Visibility.from_arrays(arrays, meta)
-        except FormatError as exc:
-            raise TileError(path, t, getattr(exc, "reason", str(exc)), field=str(exc.field or "vis_meta").replace("visibility/", "vis_")) from None
+        gm = a.get("vis_ground_min")
+        if gm is not None and (gm.shape != (cells,) or gm.dtype.kind != "f" or not np.isfinite(gm).all()):
+            raise TileError(path, t, f"expected ({cells},) finite ground heights, got {gm.shape} {gm.dtype}",
+                            field="vis_ground_min")
+        return TileSets(origin, cell, shape, pb, n, None if gm is None else gm.astype(np.float64), band)
 
     def visible_patches(self, t, eye) -> np.ndarray | None:
-        """``(n,) bool`` patches of resident near tile ``t`` seen from ``eye`` (its visibility sets:
-        only for an eye over the tile and within the sets' height band), None: draw them all."""
+        """``(n,) bool`` patches of resident near tile ``t`` seen from ``eye`` (:meth:`TileSets.visible`),
+        None: draw them all."""
         with self._lock:
             vis = self.vis.get(t) if t in self.near else None
-        if vis is None:
-            return None
-        eye = np.asarray(eye, dtype=np.float64)
-        if vis.patches_at(eye) is None:  # outside the tile's grid or above the band: draw all
-            return None
-        # the sets are sampled at 5 eye points a cell (its corners and centre): an eye between them can
-        # see a little more, so the union over the cells around the eye's, each at its band's top
-        rows, cols = vis.shape
-        c = vis.cell_of(eye)
-        r0, c0 = divmod(c, cols)
-        cells = [(r * cols + q) for r in range(max(r0 - 1, 0), min(r0 + 2, rows))
-                 for q in range(max(c0 - 1, 0), min(c0 + 2, cols))]
-        bits = np.bitwise_or.reduce(vis.patch_bits[cells], axis=0)
-        return np.unpackbits(bits, count=vis.n_patches, bitorder="little").astype(bool)
+        return None if vis is None else vis.visible(eye)
 
     def _bad_tile(self, t, exc: TileError) -> None:
         """Remember a tile that cannot be read; the first one is a warning, the rest debug lines."""
         with self._lock:
             first = not self.bad
             self.bad[t] = exc
-            self._wanted.discard(t)
+            self._wanted.pop(t, None)
         (_log.warning if first else _log.debug)(
             "%s (the tile is not drawn; the other tiles are%s)", exc,
             "" if not first else ": further bad tiles are logged at debug level")
@@ -494,16 +535,17 @@ class TileCache:
                 break
             try:
                 with self._lock:
-                    wanted = t in self._wanted
-                if wanted:
+                    samples = self._wanted.get(t)
+                if samples is not None:
                     py0, py1, px0, px1 = self.grid.patch_range(*t)
                     mesh = near_mesh(self._read("fit", t, ("control_points",)), self._read("lit", t, ("texels",)),
-                                     (py1 - py0, px1 - px0), self._depth(t), self.near_samples)
+                                     (py1 - py0, px1 - px0), self._depth(t), samples)
                     vis = self._read_vis(t)
                     with self._lock:
-                        if t in self._wanted:  # still wanted and still fits: the budget was reserved
+                        if self._wanted.get(t) == samples:  # still wanted and still fits: the budget was reserved
                             self.vis[t] = vis
                             self.near[t] = mesh
+                            self.near_level[t] = samples
                             self.loaded_count += 1
             except TileError as exc:  # a bad tile: warned, left out; the others are drawn
                 self._bad_tile(t, exc)
@@ -528,35 +570,44 @@ class TileCache:
         return np.hypot(d[:, 0], d[:, 1])
 
     def update(self, eye, pixel_scale: float | None = None, pixel_error: float = FAR_PIXEL_ERROR) -> None:
-        """Choose the near set for ``eye``: nearest tiles first within ``near_radius`` (and, with
-        ``pixel_scale`` (pixels a radian), every tile whose far grid's chord error,
-        :attr:`chord_error`, would show as more than ``pixel_error`` pixels) while the budget
-        allows; evict the others at once, queue the missing ones for the loader."""
+        """Choose the paged meshes for ``eye``: nearest tiles first, while the budget allows, get
+        near meshes (``near_samples`` a patch side) within ``near_radius`` and, with
+        ``pixel_scale`` (pixels a radian), wherever the middle level's error (:attr:`mid_error`)
+        would show as more than ``pixel_error`` pixels; the
+        middle level (``MID_SAMPLES``) where only the corner grid's would (or where a near mesh no
+        longer fits).  Evict the others at once, queue the missing ones for the loader."""
         dist = self.distances(eye)
-        want_near = dist <= self.near_radius
+        level = np.where(dist <= self.near_radius, self.near_samples, 0)
+        mid = min(MID_SAMPLES, self.near_samples)
         if pixel_scale is not None and len(self.tiles):
             e = np.asarray(eye, dtype=np.float64)
             d = np.maximum(np.maximum(self.lo - e, e - self.hi), 0.0)
-            d3 = np.sqrt((d * d).sum(1))
+            allowed = pixel_error * np.maximum(np.sqrt((d * d).sum(1)), 1e-9) / float(pixel_scale)  # metres
             chord = np.array([self.chord_error.get(t, 0.0) for t in self.tiles])
-            want_near |= chord * pixel_scale > pixel_error * np.maximum(d3, 1e-9)
-        close = np.nonzero(want_near)[0]
-        order = [(float(dist[i]), self.tiles[i]) for i in close[np.argsort(dist[close], kind="stable")]]
+            mid_err = np.array([self.mid_error.get(t, 0.0) for t in self.tiles])
+            level = np.where(level > 0, level, np.where(mid_err > allowed, self.near_samples,
+                                                        np.where(chord > allowed, mid, 0)))
+        close = np.nonzero(level > 0)[0]
+        order = [(float(dist[i]), self.tiles[i], int(level[i])) for i in close[np.argsort(dist[close], kind="stable")]]
         room = self.budget - self._far_bytes
         want = []
-        order = [(d, t) for d, t in order if t not in self.bad]
-        for d, t in order:
-            cost = self._near_estimate[t]
+        for d, t, k in order:
+            if t in self.bad:
+                continue
+            cost = self._near_estimate[t] if k == self.near_samples else self._near_bytes(0, t, k)
+            if cost > room and k != mid:  # no room for a near mesh: the middle level, if that fits
+                k, cost = mid, self._near_bytes(0, t, mid)
             if cost > room:
                 break
             room -= cost
-            want.append((d, t))
+            want.append((d, t, k))
         with self._lock:
-            self._wanted = {t for _, t in want}
-            for t in [t for t in self.near if t not in self._wanted]:
+            self._wanted = {t: k for _, t, k in want}
+            for t in [t for t in self.near if self._wanted.get(t) != self.near_level.get(t)]:
                 del self.near[t]
                 self.vis.pop(t, None)
-            todo = [(d, t) for d, t in want if t not in self.near and t not in self._pending]
+                self.near_level.pop(t, None)
+            todo = [(d, t) for d, t, _ in want if t not in self.near and t not in self._pending]
             self._pending.update(t for _, t in todo)
         for d, t in todo:
             self._queue.put((d, t))
@@ -583,18 +634,18 @@ class TileCache:
 
     def far_strides(self, eye, pixel_scale: float, pixel_error: float = FAR_PIXEL_ERROR) -> np.ndarray:
         """The far level of every tile of :attr:`tiles` seen from ``eye`` ``(3,)``: the coarsest
-        stride whose height error (:func:`stride_errors`) projects to at most ``pixel_error``
-        pixels at the tile's nearest point, ``pixel_scale`` pixels a radian (image height /
-        (2 tan(fov_y / 2))); ``(n,)`` int."""
+        stride whose height error (:func:`stride_errors` plus the corner grid's :attr:`chord_error`)
+        projects to at most ``pixel_error`` pixels at the tile's nearest point, ``pixel_scale``
+        pixels a radian (image height / (2 tan(fov_y / 2))); ``(n,)`` int."""
         eye = np.asarray(eye, dtype=np.float64)
         d = np.maximum(np.maximum(self.lo - eye, eye - self.hi), 0.0)
         dist = np.sqrt((d * d).sum(1))
         allowed = dist * pixel_error / max(float(pixel_scale), 1e-9)  # metres of error allowed
         out = np.ones(len(self.tiles), int)
         for i, t in enumerate(self.tiles):
-            err = self.far_error[t]
+            err, chord = self.far_error[t], self.chord_error[t]
             for k in FAR_STRIDES[1:]:
-                if err[k] <= allowed[i]:
+                if err[k] + chord <= allowed[i]:  # the coarser grid's error on top of the chords'
                     out[i] = k
         return out
 
@@ -605,6 +656,7 @@ class TileCache:
         (:meth:`far_stride`); ``mask (n,)`` bool keeps only those of :attr:`tiles`."""
         with self._lock:
             near = dict(self.near)
+            level = dict(self.near_level)
         if eye is not None and pixel_scale is not None:
             strides = self.far_strides(eye, pixel_scale)
         elif eye is not None:
@@ -616,7 +668,7 @@ class TileCache:
         for i in (range(len(self.tiles)) if mask is None else np.nonzero(mask)[0]):
             t = self.tiles[i]
             if t in near:
-                out.append((t, "near", near[t]))
+                out.append((t, "near" if level.get(t) == self.near_samples else "mid", near[t]))
             else:
                 k = int(strides[i])
                 out.append((t, f"far{k}", self.far[t][k]))
@@ -631,8 +683,6 @@ class TileCache:
 def world_fog_density(cache: TileCache) -> float:
     """The fog a bundle of the same terrain gets (:func:`piste.render.frame.scene_fog_density`:
     the default density, thinner for worlds larger than the default course), per metre."""
-    from piste.render.frame import DEFAULT_FOG_DENSITY, FOG_REFERENCE_SIZE
-
     diag = float(np.hypot(*(cache.hi[:, :2].max(0) - cache.lo[:, :2].min(0)))) if len(cache.tiles) else 1.0
     return DEFAULT_FOG_DENSITY * min(1.0, FOG_REFERENCE_SIZE / max(diag, 1e-9))
 
@@ -651,7 +701,7 @@ class StreamingRenderer:
     ----------
     root : the tiled world folder
     size : (width, height)
-    budget_bytes, near_radius : see :class:`TileCache`
+    budget_bytes, near_radius, near_samples : see :class:`TileCache`
     background : clear colour (RGB 0..1); the sky colour by default
     fog_density : per metre, towards the sky's horizon colour, per vertex like the course
         (default: :func:`piste.render.frame.scene_fog_density` of the world's extent, what a bundle of
@@ -665,10 +715,8 @@ class StreamingRenderer:
 
     def __init__(self, root, size=(640, 448), budget_bytes: int = 256 << 20, near_radius: float | None = None,
                  ctx=None, background=SKY, fog_density: float | None = None, sky: bool = True,
-                 pixel_error: float | None = FAR_PIXEL_ERROR, visibility: bool = True):
-        from piste.render.textures import mipmapped_texture, snow_texture
-
-        self.cache = TileCache(root, budget_bytes=budget_bytes, near_radius=near_radius)
+                 pixel_error: float | None = FAR_PIXEL_ERROR, visibility: bool = True, near_samples: int | None = None):
+        self.cache = TileCache(root, budget_bytes=budget_bytes, near_radius=near_radius, near_samples=near_samples)
         self.ctx = ctx or create_context()
         self.size = (int(size[0]), int(size[1]))
         self.fbo = Offscreen(self.ctx, self.size)
@@ -678,8 +726,6 @@ class StreamingRenderer:
         self.fog_density = world_fog_density(self.cache) if fog_density is None else float(fog_density)
         self.sky = None
         if sky:
-            from piste.render.sky_pass import SkyPass
-
             self.sky = SkyPass(self.ctx)
         import moderngl
 
@@ -787,8 +833,6 @@ class StreamingRenderer:
         self.fbo.clear((*self.background, 1.0))
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.disable(moderngl.CULL_FACE)
-        from piste.render.sky_pass import HORIZON
-
         self.prog["u_vp"].write(vp.astype(np.float32).T.tobytes())
         self.prog["u_eye"].value = tuple(float(x) for x in cam.eye)
         self.prog["u_fog"].value = (*HORIZON, self.fog_density)
@@ -798,7 +842,7 @@ class StreamingRenderer:
         self.prog["u_light"].value = 1
         self.base.use(0)
         drawn = {"near": 0, "far": 0, "culled": 0, "near_patches": 0, "far_patches": 0, "triangles": 0,
-                 "vis_culled": 0}
+                 "vis_culled": 0, "mid": 0}
         live = set()
         visible = _boxes_visible(planes, self.cache.lo, self.cache.hi)
         drawn["culled"] = int((~visible).sum())
@@ -810,8 +854,9 @@ class StreamingRenderer:
             tex.use(1)
             self.prog["u_origin"].value = origin
             self.prog["u_light_uv"].value = luv
-            kind = "near" if level == "near" else "far"
-            seen = self.cache.visible_patches(t, cam.eye) if level == "near" and self.visibility else None
+            kind = "far" if level.startswith("far") else "near"  # near and mid: evaluated patches
+            drawn["mid"] += level == "mid"
+            seen = self.cache.visible_patches(t, cam.eye) if kind == "near" and self.visibility else None
             if seen is not None and mesh.patch_triangles and not seen.all():
                 vao, ntri = self._vis_vao(key, mesh, seen)
                 vao.render(moderngl.TRIANGLES)
@@ -823,8 +868,11 @@ class StreamingRenderer:
                 drawn[f"{kind}_patches"] += self.cache.patches[t]
                 drawn["triangles"] += len(mesh.indices)
             drawn[kind] += 1
-        for key in [k for k in self._gpu if k[1] == "near" and k not in live and k[0] not in self.cache.near]:
-            self._release(key)  # evicted near tiles leave the GPU too
+        with self.cache._lock:
+            resident = {t: id(m) for t, m in self.cache.near.items()}
+        for key in [k for k in self._gpu if k[1] in ("near", "mid") and k not in live
+                    and resident.get(k[0]) != self._gpu[k][3]]:
+            self._release(key)  # evicted (or replaced) near tiles leave the GPU too
         if self.sky is not None and sky:
             self.sky.draw(vp)  # last: only where no tile was drawn
         image = self.fbo.read()[..., :3].copy() if read else None
