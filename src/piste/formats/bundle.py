@@ -5,7 +5,10 @@ Layout: a zip archive with
 * ``manifest.json`` -- ``{"format": "piste.bundle/1", ...}``: the scene's name, lights, cameras,
   riders, objects, settings, and a ``members`` table (shape, dtype and SHA-256 of each array);
 * one ``.npy`` member per array, named by path (``terrain/control_points.npy``,
-  ``lightmap/atlas.npy``, ``visibility/patch_bits.npy``, ``characters/<model>/lod0/strips.npy``, ...).
+  ``lightmap/atlas.npy``, ``visibility/patch_bits.npy``, ``characters/<model>/lod0/strips.npy``, ...);
+  the terrain net's topology as the build computed it (:data:`TOPOLOGY_MEMBERS`, ``terrain.topology``
+  in the manifest: a load checks it against the control points instead of welding them again; a
+  bundle without it is still read, its topology computed).
 
 Members are sorted, every timestamp is 1980-01-01 and arrays are written with fixed headers, so the
 same content gives the same bytes.  The file is written atomically (temp file + rename).
