@@ -7,20 +7,22 @@ edges.  Three ways here, each off by default (the picture is unchanged without t
   resolved (a framebuffer blit averages each pixel's samples) when it is read.  The sample count is
   capped at the GL's ``GL_MAX_SAMPLES`` (Mesa llvmpipe: 4, so ``msaa8`` draws 4 there;
   :attr:`AATarget.samples` says what was drawn).
-* ``fxaa``: the frame is drawn as usual into a colour texture, then a post pass (FXAA 3.11's console
-  variant, written from Lottes' description: a luma range test, the edge direction from the four
-  diagonal lumas, a two- and a four-tap blur along it, the four-tap one rejected where it leaves the
-  local luma range) writes the anti-aliased picture.
+* ``fxaa``: the frame is drawn as usual into a colour texture, then a post pass (FXAA 3.11's quality
+  variant, written from Lottes' description: a luma contrast test, the edge's orientation and side,
+  a search along it for its ends, the pixel resampled across the edge by its distance to the nearer
+  end, plus a sub-pixel blend) writes the anti-aliased picture.
 * the reference, ``supersample N`` (:class:`piste.pipeline.preview.ScenePreview`): the frame drawn at
   N x N the size and box-filtered down (:func:`downsample`).
 
 API
 ---
-AA_MODES                         "off", "msaa2", "msaa4", "msaa8", "fxaa"
-aa_samples(mode) -> int          samples a pixel the mode asks for (0: not multisampled)
-AATarget(ctx, size, mode)        an :class:`~piste.render.context.Offscreen` that anti-aliases on read()
-downsample(image, n) -> image    (H n, W n, C) uint8 -> (H, W, C) uint8, the mean of each n x n block
-edge_error(image, reference)     mean |difference| (0..255) on the reference's edge pixels, and their count
+::
+
+    AA_MODES                         "off", "msaa2", "msaa4", "msaa8", "fxaa"
+    aa_samples(mode) -> int          samples a pixel the mode asks for (0: not multisampled)
+    AATarget(ctx, size, mode)        an :class:`~piste.render.context.Offscreen` that anti-aliases on read()
+    downsample(image, n) -> image    (H n, W n, C) uint8 -> (H, W, C) uint8, the mean of each n x n block
+    edge_error(image, reference)     mean |difference| (0..255) on the reference's edge pixels, and their count
 """
 
 from __future__ import annotations
@@ -42,42 +44,69 @@ void main() {  // one triangle over the whole viewport
 }
 """
 
-# FXAA 3.11, console variant (Timothy Lottes, NVIDIA 2011), written from the algorithm's description
+# FXAA 3.11, quality variant (Timothy Lottes, NVIDIA 2011), written from the algorithm's description:
+# local contrast test on the 4 neighbours, horizontal or vertical edge from the 3x3 lumas, which side
+# the edge lies on, a search along it (up to 8 steps, growing) for both ends, the pixel moved across
+# the edge by its distance to the nearer end, and a sub-pixel term for pixel-sized features.
+# "N" is texel row -1, "S" row +1 (the algorithm is symmetric: only the names follow its D3D origin).
 _FXAA_FS = """
 #version 330
 uniform sampler2D u_color;
 uniform vec2 u_rcp;  // 1 / size
 out vec4 f_color;
-const float EDGE_SHARPNESS = 8.0;
 const float EDGE_THRESHOLD = 0.125;
-const float EDGE_THRESHOLD_MIN = 0.05;
+const float EDGE_THRESHOLD_MIN = 0.0625;
+const float SUBPIX = 0.75;
+const int STEPS = 8;
+const float QUALITY[8] = float[8](1.0, 1.5, 2.0, 2.0, 2.0, 2.0, 4.0, 8.0);
 float luma(vec3 c) { return dot(c, vec3(0.299, 0.587, 0.114)); }
+float L(vec2 p) { return luma(textureLod(u_color, p, 0.0).rgb); }
+float Lo(vec2 p, vec2 o) { return L(p + o * u_rcp); }  // (texel centres: no filtering)
 void main() {
-    vec2 uv = gl_FragCoord.xy * u_rcp;
-    vec4 m = texture(u_color, uv);
-    vec2 h = 0.5 * u_rcp;
-    float lNW = luma(texture(u_color, uv + vec2(-h.x,  h.y)).rgb);
-    float lNE = luma(texture(u_color, uv + vec2( h.x,  h.y)).rgb);
-    float lSW = luma(texture(u_color, uv + vec2(-h.x, -h.y)).rgb);
-    float lSE = luma(texture(u_color, uv + vec2( h.x, -h.y)).rgb);
-    float lM = luma(m.rgb);
-    float lMax = max(max(lNW, lNE), max(lSW, lSE));
-    float lMin = min(min(lNW, lNE), min(lSW, lSE));
-    lNE += 1.0 / 384.0;
-    float lMaxM = max(lMax, lM), lMinM = min(lMin, lM);
-    if (lMaxM - lMinM < max(EDGE_THRESHOLD_MIN, lMaxM * EDGE_THRESHOLD)) { f_color = m; return; }
-    float a = lSW - lNE, b = lSE - lNW;
-    vec2 dir1 = normalize(vec2(a + b, a - b));
-    vec4 n1 = texture(u_color, uv - dir1 * u_rcp * 0.5);
-    vec4 p1 = texture(u_color, uv + dir1 * u_rcp * 0.5);
-    float dirAbsMinTimesC = min(abs(dir1.x), abs(dir1.y)) * EDGE_SHARPNESS;
-    vec2 dir2 = clamp(dir1 / dirAbsMinTimesC, -2.0, 2.0);
-    vec4 n2 = texture(u_color, uv - dir2 * u_rcp * 2.0);
-    vec4 p2 = texture(u_color, uv + dir2 * u_rcp * 2.0);
-    vec4 rgbyA = n1 + p1;
-    vec4 rgbyB = (n2 + p2) * 0.25 + rgbyA * 0.25;
-    float lB = luma(rgbyB.rgb);
-    f_color = (lB < lMin || lB > lMax) ? rgbyA * 0.5 : rgbyB;
+    vec2 pos = gl_FragCoord.xy * u_rcp;
+    vec4 rgbM = textureLod(u_color, pos, 0.0);
+    float lM = luma(rgbM.rgb);
+    float lS = Lo(pos, vec2(0, 1)), lE = Lo(pos, vec2(1, 0)), lN = Lo(pos, vec2(0, -1)), lW = Lo(pos, vec2(-1, 0));
+    float rMax = max(max(max(lS, lE), max(lN, lW)), lM);
+    float rMin = min(min(min(lS, lE), min(lN, lW)), lM);
+    float range = rMax - rMin;
+    if (range < max(EDGE_THRESHOLD_MIN, rMax * EDGE_THRESHOLD)) { f_color = rgbM; return; }
+    float lNW = Lo(pos, vec2(-1, -1)), lSE = Lo(pos, vec2(1, 1));
+    float lNE = Lo(pos, vec2(1, -1)), lSW = Lo(pos, vec2(-1, 1));
+    float lNS = lN + lS, lWE = lW + lE;
+    float edgeHorz = abs(-2.0 * lW + lNW + lSW) + 2.0 * abs(-2.0 * lM + lNS) + abs(-2.0 * lE + lNE + lSE);
+    float edgeVert = abs(-2.0 * lS + lSW + lSE) + 2.0 * abs(-2.0 * lM + lWE) + abs(-2.0 * lN + lNW + lNE);
+    bool horz = edgeHorz >= edgeVert;  // a horizontal edge: the pixels across it are N and S
+    float subA = 2.0 * (lNS + lWE) + (lNW + lSW + lNE + lSE);
+    float l1 = horz ? lN : lW, l2 = horz ? lS : lE;
+    float g1 = l1 - lM, g2 = l2 - lM;
+    bool pair1 = abs(g1) >= abs(g2);
+    float gradient = max(abs(g1), abs(g2));
+    float stepLen = horz ? u_rcp.y : u_rcp.x;
+    float lLocal;  // the mean luma of the pixel and its neighbour across the edge
+    if (pair1) { stepLen = -stepLen; lLocal = 0.5 * (l1 + lM); } else { lLocal = 0.5 * (l2 + lM); }
+    vec2 posB = pos;
+    if (horz) posB.y += 0.5 * stepLen; else posB.x += 0.5 * stepLen;  // on the edge
+    vec2 off = horz ? vec2(u_rcp.x, 0.0) : vec2(0.0, u_rcp.y);
+    vec2 posN = posB - off * QUALITY[0], posP = posB + off * QUALITY[0];
+    float endN = L(posN) - lLocal, endP = L(posP) - lLocal;
+    float gScaled = 0.25 * gradient;
+    bool doneN = abs(endN) >= gScaled, doneP = abs(endP) >= gScaled;
+    for (int i = 1; i < STEPS && !(doneN && doneP); i++) {
+        if (!doneN) { posN -= off * QUALITY[i]; endN = L(posN) - lLocal; doneN = abs(endN) >= gScaled; }
+        if (!doneP) { posP += off * QUALITY[i]; endP = L(posP) - lLocal; doneP = abs(endP) >= gScaled; }
+    }
+    float dN = horz ? pos.x - posN.x : pos.y - posN.y;
+    float dP = horz ? posP.x - pos.x : posP.y - pos.y;
+    bool mLess = lM - lLocal < 0.0;
+    bool good = (dN < dP) ? ((endN < 0.0) != mLess) : ((endP < 0.0) != mLess);
+    float offEdge = good ? 0.5 - min(dN, dP) / (dN + dP) : 0.0;
+    float subB = clamp(abs(subA / 12.0 - lM) / range, 0.0, 1.0);
+    float subF = (-2.0 * subB + 3.0) * subB * subB;
+    float o = max(offEdge, subF * subF * SUBPIX);
+    vec2 p = pos;
+    if (horz) p.y += o * stepLen; else p.x += o * stepLen;
+    f_color = textureLod(u_color, p, 0.0);
 }
 """
 
