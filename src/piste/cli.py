@@ -70,6 +70,15 @@ def build_parser() -> argparse.ArgumentParser:
                 p.add_argument("--supersample", type=importlib.import_module("piste.commands._numbers").integer(1, 8),
                                default=1, metavar="N", help="draw at N x N the size and box-filter down (the "
                                "anti-aliasing reference; default 1)")
+                p.add_argument("--interlace", action="store_true",
+                               help="video as a PS2 on a television showed it: each frame's even lines from one field, "
+                                    "its odd lines from the next, half a frame later (fields at 2 x --fps)")
+                p.add_argument("--flicker-filter", action="store_true",
+                               help="with --interlace: each field filtered [1 2 1] / 4 down its columns before weaving "
+                                    "(the PS2 games' cure for interlace flicker)")
+            p.add_argument("--trace", metavar="FILE.json", default=None,
+                           help="write a Chrome / Perfetto trace (ui.perfetto.dev) of every frame: CPU spans per step, "
+                                "GPU spans per pass from GL timer queries")
     return parser
 
 

@@ -103,3 +103,16 @@ def test_the_flicker_filter_needs_interlace(small_scene, gl):
     b = open_source(str(small_scene(riders=False)), quiet=True, warm=True)
     with pytest.raises(ConfigError, match="interlace"):
         render_frames(b, "main", 1, size=SIZE, ctx=gl, flicker_filter=True)
+
+
+def test_the_cli_flags_reach_the_runtime(small_scene, tmp_path, capsys):
+    from piste.cli import main
+
+    scene = small_scene(riders=True)
+    trace = tmp_path / "r.json"
+    png = tmp_path / "r.png"
+    assert main(["render", str(scene), "--frames", "2", "--size", "96", "64", "--out", str(png), "--quiet",
+                 "--interlace", "--flicker-filter", "--trace", str(trace)]) == 0
+    assert load_trace(trace)["metadata"]["frames"] == 4  # two fields a frame
+    assert main(["render", str(scene), "--out", str(png), "--quiet", "--flicker-filter"]) != 0
+    assert "--interlace" in capsys.readouterr().err

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from piste.errors import RenderError
-from piste.render.interlace import field_times, flicker, flicker_filter, interlace, line_alternation, weave
+from piste.render.interlace import FlickerMeter, field_times, flicker, flicker_filter, interlace, line_alternation, weave
 
 
 def _bar_video(n=8, h=32, w=24, step=1):
@@ -63,3 +63,14 @@ def test_interlaced_motion_flickers_and_the_filter_cures_most_of_it():
     assert not diff[:4].any() and not diff[4 + 2 * len(fields):].any()
     with pytest.raises(RenderError, match="at least 2"):
         flicker(raw[:1])
+
+
+def test_the_meter_measures_a_video_frame_by_frame_as_flicker_does():
+    raw = np.stack(list(interlace(_bar_video())))
+    m = FlickerMeter()
+    assert m.value is None
+    for f in raw:
+        m.add(f)
+    assert m.pairs == len(raw) - 1 and m.value == pytest.approx(flicker(raw), rel=1e-5)
+    with pytest.raises(RenderError, match="sizes differ"):
+        m.add(raw[0, :10])

@@ -82,6 +82,7 @@ def run(args) -> int:
     from piste.pipeline.preview import ScenePreview
     from piste.render import summarize
     from piste.render.context import save_png
+    from piste.render.interlace import FlickerMeter, weave
     from piste.render.video import VideoWriter
     from piste.terrain import format_stats
     from piste.world.camera import track_camera
@@ -91,6 +92,8 @@ def run(args) -> int:
         raise ConfigError(f"--size {w} {h}: H.264 video needs an even width and height")
     if not (0.0 <= args.start <= 1.0 and 0.0 <= args.end <= 1.0):
         raise ConfigError(f"--start/--end must be fractions of the track in [0, 1], got {args.start}, {args.end}")
+    if getattr(args, "flicker_filter", False) and not getattr(args, "interlace", False):
+        raise ConfigError("--flicker-filter filters the fields of interlaced video: add --interlace")
     require("moderngl", "piste demo")  # before building: say at once that OpenGL is missing
     t0 = time.perf_counter()
     bundle, lightmap, lighting = demo_bundle(args)
@@ -99,7 +102,7 @@ def run(args) -> int:
         return run_scene(args, bundle, lightmap, lighting, t0)
     preview = ScenePreview(bundle, size=(w, h), lightmap=lightmap, lightmap_mode=args.lightmap, terrain_only=True,
                            lod_morph=_morph(args), aa=getattr(args, "aa", None),
-                           supersample=getattr(args, "supersample", 1))
+                           supersample=getattr(args, "supersample", 1), trace=getattr(args, "trace", None))
     lod_on = args.lod == "on"
     # warm-up (not timed): compiled kernels, the terrain's resident vertex blocks, shaders, GL buffers
     from piste._jit import warm_up
@@ -114,6 +117,8 @@ def run(args) -> int:
     setup_s = time.perf_counter() - t0
     ts = np.linspace(args.start, args.end, args.frames) if args.frames > 1 else np.array([args.start])
     frames = []
+    meter = FlickerMeter()
+    inter, filt = getattr(args, "interlace", False), getattr(args, "flicker_filter", False)
     try:
         from tqdm import tqdm
 
@@ -123,6 +128,11 @@ def run(args) -> int:
             for i, t in enumerate(bar):
                 cam = track_camera(line, float(t), height=args.height, fov_y=args.fov)
                 image = preview.render(cam, lod=lod_on, debug=args.debug)
+                if inter:  # the odd lines: a second field half a frame on along the flight
+                    half = 0.5 * float(ts[1] - ts[0]) if len(ts) > 1 else 0.0
+                    cam2 = track_camera(line, float(t) + half, height=args.height, fov_y=args.fov)
+                    image = weave(image, preview.render(cam2, lod=lod_on, debug=args.debug), filtered=filt)
+                meter.add(image)
                 if i == 0:
                     out = save_png(args.out, image)
                 if video is not None:
@@ -153,9 +163,20 @@ def run(args) -> int:
     print(f"  draw (GL + finish)         {med['draw']:7.2f} ms")
     print(f"  read back                  {med['readback']:7.2f} ms")
     print(f"  frame                      {med['total']:7.2f} ms = {1e3 / med['total']:.1f} fps")
+    _print_flicker(args, meter)
     print(f"  (set-up, not in the frame times: course, light map, GL context, shaders: {setup_s:.2f} s)")
     print(f"wrote {out}" + (f" and {args.video} ({len(frames)} frames at {args.fps} fps)" if args.video else ""))
     return 0
+
+
+def _print_flicker(args, meter) -> None:
+    """The video's flicker (:func:`piste.render.interlace.flicker`), with how it was drawn."""
+    if meter.value is None:
+        return
+    inter, filt = getattr(args, "interlace", False), getattr(args, "flicker_filter", False)
+    how = ("interlaced, flicker filter" if filt else "interlaced") if inter else "progressive"
+    print(f"flicker ({how}; line-alternating luma component's mean squared change frame to frame, "
+          f"{meter.pairs} frame pairs): {meter.value:.2f}")
 
 
 def _morph(args):
@@ -207,6 +228,7 @@ def run_scene(args, bundle, lightmap, lighting: str, t0: float) -> int:
     from piste.render import summarize
     from piste.render.context import save_png
     from piste.render.scene_renderer import summarize_scene
+    from piste.render.interlace import FlickerMeter, field_times, interlace
     from piste.render.video import VideoWriter
     from piste.terrain import format_stats
 
@@ -216,7 +238,8 @@ def run_scene(args, bundle, lightmap, lighting: str, t0: float) -> int:
                            shadows=not args.no_shadows, specular=not args.no_specular, lightmap_mode=args.lightmap,
                            start=args.start, casts=rider_casts(args.rider_model),
                            object_lod=getattr(args, "object_lod", None), lod_morph=_morph(args),
-                           aa=getattr(args, "aa", None), supersample=getattr(args, "supersample", 1))
+                           aa=getattr(args, "aa", None), supersample=getattr(args, "supersample", 1),
+                           trace=getattr(args, "trace", None))
     scene, renderer = preview.scene, preview.renderer
     lod_on = args.lod == "on"
     from piste._jit import warm_up
@@ -229,6 +252,9 @@ def run_scene(args, bundle, lightmap, lighting: str, t0: float) -> int:
         preview.render(None, k / args.fps, lod=lod_on, read=False)
     setup_s = time.perf_counter() - t0
     images = []
+    meter = FlickerMeter()
+    times = [i / args.fps for i in range(args.frames)]
+    inter, filt = getattr(args, "interlace", False), getattr(args, "flicker_filter", False)
     try:
         from tqdm import tqdm
 
@@ -237,8 +263,12 @@ def run_scene(args, bundle, lightmap, lighting: str, t0: float) -> int:
                        disable=args.no_progress or args.frames < 2, file=sys.stderr)
             t_loop = time.perf_counter()
             # pipelined: each frame's CPU side runs while the GL draws the one before
-            for i, image in enumerate(preview.frames([i / args.fps for i in range(args.frames)], lod=lod_on)):
+            # --interlace: two fields a frame, half a frame apart, woven (the frame's stats: its second field's)
+            stream = interlace(preview.frames(field_times(times, args.fps), lod=lod_on), filt) \
+                if inter else preview.frames(times, lod=lod_on)
+            for i, image in enumerate(stream):
                 bar.update(1)
+                meter.add(image)
                 if i == 0:
                     out = save_png(args.out, image)
                 if video is not None:
@@ -316,5 +346,6 @@ def run_scene(args, bundle, lightmap, lighting: str, t0: float) -> int:
         print(f"  {'pipelined loop (wall time / frames)':<42} {1e3 * loop_s / len(images):7.2f} ms = "
               f"{len(images) / loop_s:.1f} fps  ({len(images)} frames, PNG/video writing included)")
     print(f"  (set-up, not in the frame times: course, light map, riders, objects, GL context, shaders: {setup_s:.2f} s)")
+    _print_flicker(args, meter)
     print(f"wrote {out}" + (f" and {args.video} ({len(images)} frames at {args.fps} fps)" if args.video else ""))
     return 0

@@ -79,7 +79,9 @@ def run(args) -> int:
         w, h = size or tuple(b.manifest.get("render", {}).get("size", (640, 448)))
         if w % 2 or h % 2:
             raise ConfigError(f"--size {w} {h}: H.264 video needs an even width and height")
-    for out in (args.out, args.video):  # unwritable outputs are reported before rendering
+    if getattr(args, "flicker_filter", False) and not getattr(args, "interlace", False):
+        raise ConfigError("--flicker-filter filters the fields of interlaced video: add --interlace")
+    for out in (args.out, args.video, getattr(args, "trace", None)):  # unwritable outputs are reported before rendering
         if out:
             check_writable_folder(Path(out).parent)
     flight = kind == "tiles" and cam is None and not args.camera  # a tiled world: fly across it at --speed
@@ -96,7 +98,9 @@ def run(args) -> int:
     stats = render_frames(b, cam if cam is not None else args.camera, args.frames, size=size, fps=args.fps, video=args.video,
                           first_png=args.out, progress=not args.quiet and sys.stderr.isatty() and args.frames > 1,
                           lod_morph=_morph(args), aa=getattr(args, "aa", None),
-                          supersample=getattr(args, "supersample", 1))
+                          supersample=getattr(args, "supersample", 1), trace=getattr(args, "trace", None),
+                          interlace=getattr(args, "interlace", False),
+                          flicker_filter=getattr(args, "flicker_filter", False))
     if kind == "tiles":
         import numpy as np
 

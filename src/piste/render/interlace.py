@@ -27,6 +27,7 @@ API
     interlace(fields, filtered=False) -> iterator of frames     two fields per frame
     line_alternation(frames) -> (n, H - 2, W) float32
     flicker(frames) -> float                                    mean squared frame-to-frame change
+    FlickerMeter()        ``.add(frame)`` one frame at a time (a long video), ``.value`` = flicker(frames so far)
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ import numpy as np
 
 from piste.errors import RenderError
 
-__all__ = ["field_times", "flicker_filter", "weave", "interlace", "line_alternation", "flicker"]
+__all__ = ["field_times", "flicker_filter", "weave", "interlace", "line_alternation", "flicker", "FlickerMeter"]
 
 #: Rec. 601 luma weights (the PS2's video encoder's)
 _LUMA = np.array([0.299, 0.587, 0.114], dtype=np.float32)
@@ -111,3 +112,27 @@ def flicker(frames) -> float:
     if len(hf) < 2:
         raise RenderError(f"flicker: needs at least 2 frames, got {len(hf)}")
     return float(np.mean(np.square(np.diff(hf, axis=0))))
+
+
+class FlickerMeter:
+    """:func:`flicker` over a video seen one frame at a time (only the last frame's component kept)."""
+
+    def __init__(self):
+        self._last = None
+        self._sum = 0.0
+        self.pairs = 0
+
+    def add(self, frame) -> None:
+        """One more frame ``(H, W, 3) uint8``."""
+        hf = line_alternation(np.asarray(frame)[None])[0]
+        if self._last is not None:
+            if hf.shape != self._last.shape:
+                raise RenderError(f"flicker: frame sizes differ: {hf.shape} and {self._last.shape}")
+            self._sum += float(np.mean(np.square(hf - self._last), dtype=np.float64))
+            self.pairs += 1
+        self._last = hf
+
+    @property
+    def value(self) -> float | None:
+        """The flicker so far (None before two frames)."""
+        return self._sum / self.pairs if self.pairs else None

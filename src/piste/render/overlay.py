@@ -4,7 +4,8 @@
 draws the table (this window's figures beside the talk's) and a plot of the LOD mix (stacked 4x4 /
 6x6 / 8x8 / glue shares, coloured as the LOD view colours them) with the frame time over it, into an
 RGBA image with Pillow; :class:`OverlayPass` blends that image over the top-left corner of the
-frame.  The image is redrawn a few times a second (text drawing costs ~2 ms), the blend every frame.
+frame.  With ``--trace`` (frames whose ``extra`` carries ``passes``: :attr:`piste.render.trace.ChromeTracer.last`)
+:func:`pass_bars` adds a bar per render pass: its GPU time (timer query) and its CPU issue time.  The image is redrawn a few times a second (text drawing costs ~2 ms), the blend every frame.
 
 API
 ---
@@ -22,7 +23,7 @@ import numpy as np
 from piste.render.textures import LOD_COLORS
 from piste.terrain.stats import TALK
 
-__all__ = ["StatsHistory", "overlay_image", "OverlayPass", "LOD_COLOURS"]
+__all__ = ["StatsHistory", "overlay_image", "OverlayPass", "LOD_COLOURS", "pass_bars"]
 
 #: plot colours of the 4x4, 6x6, 8x8 and glue shares: the LOD view's own (piste.render.textures)
 LOD_COLOURS = {k: tuple(int(c) for c in LOD_COLORS[k][:3]) for k in (4, 6, 8, 0)}
@@ -58,6 +59,14 @@ class StatsHistory:
     def frame_ms(self) -> np.ndarray:
         """``(k,)`` wall milliseconds per recorded frame."""
         return np.array([f["frame_ms"] for f in self.frames], dtype=np.float64)
+
+    def passes(self) -> dict:
+        """``{pass: (cpu_ms, gpu_ms)}`` means over the recorded frames that carry them (``--trace``)."""
+        got = [f["passes"] for f in self.frames if f.get("passes")]
+        if not got:
+            return {}
+        names = list(dict.fromkeys(k for p in got for k in p))
+        return {k: tuple(float(np.mean([p[k][j] for p in got if k in p])) for j in (0, 1)) for k in names}
 
     def fps(self) -> float:
         ms = self.frame_ms()
@@ -147,6 +156,40 @@ def overlay_image(history: StatsHistory, header: str, width: int = 300, plot_h: 
         if len(pts) > 1:
             d.line(pts, fill=(255, 255, 255, 255), width=1)
         d.text((x0 + 2, y0 + 1), f"frame ms (top {scale:.0f})", fill=(255, 255, 255, 255), font=font)
+    passes = history.passes()
+    if passes:
+        bars = pass_bars(passes, width)
+        out = np.zeros((height + bars.shape[0], width, 4), np.uint8)
+        out[:height] = np.asarray(img)
+        out[height:] = bars
+        return out
+    return np.asarray(img)
+
+
+#: the bars' colours: GPU time (timer query), CPU time (issuing the pass)
+_GPU_BAR, _CPU_BAR = (255, 170, 60, 255), (110, 170, 255, 255)
+
+
+def pass_bars(passes: dict, width: int = 300, line: int = 12) -> np.ndarray:
+    """``(H, W, 4) uint8``: one row per pass of ``{name: (cpu_ms, gpu_ms)}`` (means over the recent
+    frames), its GPU time as an orange bar over its CPU issue time in blue, scaled to the longest."""
+    from PIL import Image, ImageDraw
+
+    font = _font()
+    height = 4 + line * (1 + len(passes)) + 2
+    img = Image.new("RGBA", (width, height), (0, 0, 0, 150))
+    d = ImageDraw.Draw(img)
+    d.text((4, 2), "pass ms:  GPU", fill=(*_GPU_BAR[:3], 255), font=font)
+    d.text((4 + d.textlength("pass ms:  GPU ", font=font), 2), "/ CPU", fill=(*_CPU_BAR[:3], 255), font=font)
+    top = max(max(max(c, g) for c, g in passes.values()), 1e-3)
+    x0, x1 = 104, width - 44
+    y = 2 + line
+    for name, (cpu, gpu) in passes.items():
+        d.text((4, y), name[:16], fill=(220, 220, 220, 255), font=font)
+        d.rectangle((x0, y + 1, x0 + (x1 - x0) * gpu / top, y + 5), fill=_GPU_BAR)
+        d.rectangle((x0, y + 6, x0 + (x1 - x0) * cpu / top, y + 9), fill=_CPU_BAR)
+        d.text((x1 + 4, y), f"{gpu:5.2f}", fill=(255, 255, 255, 255), font=font)
+        y += line
     return np.asarray(img)
 
 

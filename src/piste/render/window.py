@@ -151,6 +151,8 @@ class SceneView:
                  "rider_models": s.get("rider_models", 1),
                  "rider_pixels": s.get("rider_pixels", 0), "rider_triangles": s["rider_triangles"],
                  "objects": s["objects_drawn"], "shadow_patches": s["shadow_patches"]}
+        if self.renderer.tracer.enabled:  # --trace: the overlay's per-pass bars (piste.render.trace)
+            extra["passes"] = dict(self.renderer.tracer.last)
         return ViewFrame(cam, img.terrain, extra)
 
     def release(self) -> None:
