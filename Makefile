@@ -58,9 +58,10 @@ test-latest: system test-tools
 lock:
 	$(BIN)/pip freeze --all --exclude-editable | grep -v -e '^-e ' -e '^pip==' > constraints.txt
 
-# The documentation site (Sphinx + sphinx-gallery): docs/_build/html/index.html.
+# The documentation site (Sphinx + sphinx-gallery): docs/_build/html/index.html.  -W: a warning
+# (a broken reference, a docstring docutils cannot parse) fails the build; --keep-going lists them all.
 docs: setup
-	$(BIN)/python -m sphinx -q -b html docs docs/_build/html
+	$(BIN)/python -m sphinx -q -W --keep-going -b html docs docs/_build/html
 
 # The Blender add-on as an installable zip (out/piste_addon.zip) and the copy the wheel ships.
 blender-addon: setup

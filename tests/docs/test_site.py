@@ -33,7 +33,8 @@ def site(tmp_path_factory):
     pytest.importorskip("sphinx_gallery") if not REQUIRE else None
     out = tmp_path_factory.mktemp("site")
     env = dict(os.environ, MPLBACKEND="Agg", PISTE_CACHE_DIR=str(out / "cache"))
-    r = subprocess.run([sys.executable, "-m", "sphinx", "-b", "html", "-q", str(ROOT / "docs"), str(out / "html")],
+    r = subprocess.run([sys.executable, "-m", "sphinx", "-b", "html", "-q", "-W", "--keep-going", str(ROOT / "docs"),
+                        str(out / "html")],
                        capture_output=True, text=True, env=env, cwd=ROOT, timeout=1200)
     assert r.returncode == 0, r.stdout[-4000:] + r.stderr[-4000:]
     return out / "html"

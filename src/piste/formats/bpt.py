@@ -21,7 +21,7 @@ from piste.formats.atomic import write_bytes_atomic
 #: largest .bpt read (a patch takes ~400 bytes of text: ~2.6 million patches)
 MAX_BPT_BYTES = 1 << 30
 _MIN_PATCH_BYTES = 4 + 16 * 6  # "3 3\n" and 16 lines of "0 0 0\n"
-#: largest |coordinate| of a control point: 100,000 km, beyond any map projection's metres (UTM
+#: largest absolute coordinate of a control point: 100,000 km, beyond any map projection's metres (UTM
 #: northings stop at 1e7).  Larger values only overflow later (extents, welding tolerances: 1e300
 #: once reached scipy as a raw ValueError), so they are refused here, naming the line.
 MAX_BPT_COORDINATE = 1e8

@@ -42,11 +42,13 @@ Conventions
 
 API
 ---
-TerrainExport(net, lightmap=None, level=4, base_texture=None, lightmap_scale=1.0, name="terrain")
-CharacterExport(model, matrix=eye(4), name="character", clips=None, prefix="")
-ObjectsExport(meshes, kinds, kind, matrix, texture=None)
-export_gltf(path, terrain=None, characters=(), objects=None, lights=(), cameras=(), instancing="ext",
-            extras=None) -> ExportReport
+::
+
+    TerrainExport(net, lightmap=None, level=4, base_texture=None, lightmap_scale=1.0, name="terrain")
+    CharacterExport(model, matrix=eye(4), name="character", clips=None, prefix="")
+    ObjectsExport(meshes, kinds, kind, matrix, texture=None)
+    export_gltf(path, terrain=None, characters=(), objects=None, lights=(), cameras=(), instancing="ext",
+                extras=None) -> ExportReport
 """
 
 from __future__ import annotations

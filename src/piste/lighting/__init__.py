@@ -2,22 +2,24 @@
 
 Public API
 ----------
-AmbientLight, DirectionalLight, PointLight, SpotLight   light types (negative intensity darkens)
-Lights                      an ordered collection; ``load_lights(path)`` reads TOML,
-                            ``default_lights()`` the default course's lights
-shade                       the lighting equation at (k, 3) points -> (k, 3) float32
-light_terms                 per-light Lambert x attenuation x cone factors, (k, m)
-atlas_layout, AtlasLayout   light-map atlas tiles (texel-centre UVs, gutters)
-with_lightmap_layout        a net whose ``lightmap_rect`` points at a layout's tiles
-sample_points               a net's light-map sample points and seam-consistent normals
-sample_atlas                point / bilinear atlas sampling (numpy, like the GPU)
-LightMap                    a baked atlas (+ rects, manifest); ``.sample``, ``.apply(net)``
-bake_lightmap               the baker (shadows, chunks, process pool, resumable; ``bounces`` for sky
-                            light and inter-reflection, ``sun_radius`` for an area sun: piste.lighting.gi)
-write_lightmap, load_lightmap   the on-disk form (PNG half-bright, .npz float, manifest.json)
-load_or_bake_default_lightmap   cached bake of the default course for the renderer
-ps2_source, ps2_blend, modulate, ps2_error_report   the PS2 light-map blend trick
-VertexLights, choose_lights, vertex_light   per-vertex 1 ambient + 3 directional (characters, objects)
+::
+
+    AmbientLight, DirectionalLight, PointLight, SpotLight   light types (negative intensity darkens)
+    Lights                      an ordered collection; ``load_lights(path)`` reads TOML,
+                                ``default_lights()`` the default course's lights
+    shade                       the lighting equation at (k, 3) points -> (k, 3) float32
+    light_terms                 per-light Lambert x attenuation x cone factors, (k, m)
+    atlas_layout, AtlasLayout   light-map atlas tiles (texel-centre UVs, gutters)
+    with_lightmap_layout        a net whose ``lightmap_rect`` points at a layout's tiles
+    sample_points               a net's light-map sample points and seam-consistent normals
+    sample_atlas                point / bilinear atlas sampling (numpy, like the GPU)
+    LightMap                    a baked atlas (+ rects, manifest); ``.sample``, ``.apply(net)``
+    bake_lightmap               the baker (shadows, chunks, process pool, resumable; ``bounces`` for sky
+                                light and inter-reflection, ``sun_radius`` for an area sun: piste.lighting.gi)
+    write_lightmap, load_lightmap   the on-disk form (PNG half-bright, .npz float, manifest.json)
+    load_or_bake_default_lightmap   cached bake of the default course for the renderer
+    ps2_source, ps2_blend, modulate, ps2_error_report   the PS2 light-map blend trick
+    VertexLights, choose_lights, vertex_light   per-vertex 1 ambient + 3 directional (characters, objects)
 """
 
 from typing import TYPE_CHECKING

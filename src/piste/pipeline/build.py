@@ -5,16 +5,16 @@ Steps (each keyed by a content hash of what it reads; a key found in the cache i
 ============== ============================================================ =====================
 step           reads                                                        makes
 ============== ============================================================ =====================
-terrain        the terrain source file bytes (or the course seed), settings control points, UVs
+terrain        the terrain source's bytes (or the course seed), settings    control points, UVs
 lightmap       terrain key, lights, res / gutter / shadows                  the baked atlas
 shadow         terrain key, the sun's direction                             where the terrain sees
                                                                             the sun (riders' shadows)
 characters     the rider model (file bytes or built-in name), LOD ratios    LOD meshes, palettes,
                                                                             batches, strips, clips
-objects        terrain key, object models and placements, lights           compressed meshes,
+objects        terrain key, object models and placements, lights            compressed meshes,
                                                                             instances, vertex RGBs
 visibility     terrain key, visibility settings                             per-cell patch bits
-object_vis...  terrain key, object bounds, visibility settings             per-cell object bits
+object_vis...  terrain key, object bounds, visibility settings              per-cell object bits
 ============== ============================================================ =====================
 
 (``object_visibility`` is its own step so that moving an object re-tests only the objects: with

@@ -40,11 +40,13 @@ node's +Y as up (roll is kept).  Orthographic: ``ortho_height = 2 * ymag * scale
 
 API
 ---
-axis_matrix(up) -> (3, 3)                 glTF axes -> piste axes
-import_gltf(spec) -> (lights, cameras)    piste lights (list) and ``{name: piste.world.camera.Camera}``
-convert_lights(model_lights, ...), convert_cameras(model_cameras, ...)
-write_scene_gltf(path, lights, cameras)   a small glTF with KHR_lights_punctual lights and cameras
-                                          (examples and tests: what Blender would export)
+::
+
+    axis_matrix(up) -> (3, 3)                 glTF axes -> piste axes
+    import_gltf(spec) -> (lights, cameras)    piste lights (list) and ``{name: piste.world.camera.Camera}``
+    convert_lights(model_lights, ...), convert_cameras(model_cameras, ...)
+    write_scene_gltf(path, lights, cameras)   a small glTF with KHR_lights_punctual lights and cameras
+                                              (examples and tests: what Blender would export)
 """
 
 from __future__ import annotations

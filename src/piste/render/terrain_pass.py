@@ -2,11 +2,13 @@
 
 Light-map modes
 ---------------
-``modulate``  one pass, ``Cd x CL`` in the fragment shader (what modern GPUs do).
-``ps2``       the talk's two passes for hardware that cannot multiply by the frame buffer: the
-              base texture ``Cd`` first, then ``(Cd - Cs) x As`` by blending
-              (``FUNC_REVERSE_SUBTRACT``, ``SRC_ALPHA, SRC_ALPHA``; alpha kept by separate alpha
-              blending), with ``As = max(CL.r, CL.g, CL.b)`` and ``Cs = Cd - Cd x CL / As``.
+``modulate``
+    one pass, ``Cd x CL`` in the fragment shader (what modern GPUs do).
+``ps2``
+    the talk's two passes for hardware that cannot multiply by the frame buffer: the base texture
+    ``Cd`` first, then ``(Cd - Cs) x As`` by blending (``FUNC_REVERSE_SUBTRACT``,
+    ``SRC_ALPHA, SRC_ALPHA``; alpha kept by separate alpha blending), with
+    ``As = max(CL.r, CL.g, CL.b)`` and ``Cs = Cd - Cd x CL / As``.
 
 Debug views (``debug=``): ``base`` (Cd only), ``lightmap`` (CL only), ``lod`` (patches coloured by
 kind, 4x4 / 6x6 / 8x8 / glue, over the light map, with a wireframe overlay), ``wire`` (the lit

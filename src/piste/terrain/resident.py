@@ -32,12 +32,14 @@ positions themselves (the talk's exact behaviour, pictures identical to the CPU 
 
 API
 ---
-ResidentTerrain(net, levels=(4, 6, 8))    the blocks and templates (``vertices (N B, 11) float32``)
-ResidentTerrain.frame(eye, planes, ...)  -> ResidentMesh (indices, patch list, morph factors)
-shape_templates(levels) -> the 81 shapes' block-local index templates (shipped for 4/6/8:
-    shipped_templates / write_templates / TEMPLATES_FILE)
-ResidentMesh.morphed_positions(rows)     CPU twin of the vertex shader's morph (tests, shadows)
-ResidentMesh.to_mesh()                   the same frame as a classic TerrainMesh (debug views, export)
+::
+
+    ResidentTerrain(net, levels=(4, 6, 8))    the blocks and templates (``vertices (N B, 11) float32``)
+    ResidentTerrain.frame(eye, planes, ...)  -> ResidentMesh (indices, patch list, morph factors)
+    shape_templates(levels) -> the 81 shapes' block-local index templates (shipped for 4/6/8:
+        shipped_templates / write_templates / TEMPLATES_FILE)
+    ResidentMesh.morphed_positions(rows)     CPU twin of the vertex shader's morph (tests, shadows)
+    ResidentMesh.to_mesh()                   the same frame as a classic TerrainMesh (debug views, export)
 """
 
 from __future__ import annotations
@@ -247,8 +249,10 @@ class ResidentTerrain:
 
     Attributes
     ----------
-    vertices : (N B, 11) float32: position, morph target, uv, light-map uv, morph slot
-    block : B, vertices per patch;  level_offset : {n: offset of level n's grid in a block}
+    block : int
+        B, vertices per patch (:attr:`vertices` holds ``N B`` of them)
+    level_offset : dict
+        ``{n: offset of level n's grid in a block}``
     """
 
     def __init__(self, net: PatchNet, levels=LEVELS):

@@ -83,7 +83,7 @@ MAX_TILE_MEMBER_BYTES = 1 << 30
 #: largest tile file (compressed) and most members in one
 MAX_TILE_FILE_BYTES = 1 << 31
 MAX_TILE_MEMBERS = 64
-#: largest |coordinate| in an index's bounds, metres (the Earth's circumference is 4e7)
+#: largest absolute coordinate in an index's bounds, metres (the Earth's circumference is 4e7)
 MAX_BOUND = 1e12
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)
 

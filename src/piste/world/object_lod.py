@@ -11,9 +11,11 @@ compressed formats are shared by every level; only the index list differs.
 
 API
 ---
-object_lods(positions (v, 3), indices (t, 3), ratio=0.5, min_triangles=8, max_levels=4) -> [ObjectLOD]
-choose_lods(errors (l,), centers (n, 3), radius (n,), scale (n,), view_projection (4, 4), height_px,
-            max_pixels=0.5) -> (n,) int level per instance
+::
+
+    object_lods(positions (v, 3), indices (t, 3), ratio=0.5, min_triangles=8, max_levels=4) -> [ObjectLOD]
+    choose_lods(errors (l,), centers (n, 3), radius (n,), scale (n,), view_projection (4, 4), height_px,
+                max_pixels=0.5) -> (n,) int level per instance
 """
 
 from __future__ import annotations

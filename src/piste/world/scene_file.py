@@ -168,7 +168,7 @@ HEIGHTFIELD_IMAGES = (".png", ".tif", ".tiff", ".pgm")
 MAX_TOML_DEPTH = 32
 #: [lod] preset -> (near, far) metres: piste's own, and SSX Tricky's 3000 / 15000 game units
 LOD_PRESETS = {"piste": (60.0, 180.0), "ssx_tricky": (30.0, 150.0)}
-#: largest |coordinate| in metres a scene may give (eyes, targets, positions, offsets): 100,000 km
+#: largest absolute coordinate in metres a scene may give (eyes, targets, positions, offsets): 100,000 km
 MAX_SCENE_COORDINATE = 1e8
 #: seeds are unsigned 32-bit (numpy's generators refuse negative ones with a raw ValueError)
 MAX_SEED = 2**32 - 1
