@@ -116,3 +116,49 @@ def test_the_cli_flags_reach_the_runtime(small_scene, tmp_path, capsys):
     assert load_trace(trace)["metadata"]["frames"] == 4  # two fields a frame
     assert main(["render", str(scene), "--out", str(png), "--quiet", "--flicker-filter"]) != 0
     assert "--interlace" in capsys.readouterr().err
+
+
+PACK_SCENE = """\
+name = "pack"
+[terrain]
+source = "default"
+[lightmap]
+res = 2
+shadows = false
+[visibility]
+enabled = false
+[pack]
+follow = "track"
+start = 0.2
+[auto_objects]
+seed = 3
+trees = 12
+rocks = 3
+"""
+
+
+def test_the_pipelined_loop_traces_each_frame_with_the_next_ones_planning(tmp_path, gl):
+    from piste.pipeline.build import build_scene
+    from piste.pipeline.bundle_objects import load_bundle
+
+    (tmp_path / "pack.toml").write_text(PACK_SCENE)
+    b = load_bundle(build_scene(tmp_path / "pack.toml").path)
+    path = tmp_path / "pipelined.json"
+    p = ScenePreview(b, size=SIZE, ctx=gl, trace=path)
+    try:
+        assert p.follow
+        n = sum(1 for _ in p.frames([k / 30 for k in range(4)]))
+    finally:
+        p.release()
+    assert n == 4
+    evs = [e for e in load_trace(path)["traceEvents"] if e["ph"] == "X" and e["tid"] == 1]
+    frames = sorted((e for e in evs if e["name"] == "frame"), key=lambda e: e["ts"])
+    assert [f["args"]["frame"] for f in frames] == [0, 1, 2, 3]
+    plans = sorted((e for e in evs if e["name"] == "plan"), key=lambda e: e["ts"])
+    assert [pl["args"]["t"] for pl in plans] == pytest.approx([k / 30 for k in range(4)])
+    for f in frames:
+        i = f["args"]["frame"]
+        passes = [e for e in evs if e["cat"] == "pass" and e["args"]["frame"] == i]
+        assert sorted(e["name"] for e in passes) == sorted(PASSES) and all(_inside(e, f) for e in passes)
+        if i + 1 < len(plans):  # frame i + 1 is planned while frame i draws: inside frame i's span
+            assert _inside(plans[i + 1], f)
