@@ -102,7 +102,8 @@ def run(args) -> int:
         return run_scene(args, bundle, lightmap, lighting, t0)
     preview = ScenePreview(bundle, size=(w, h), lightmap=lightmap, lightmap_mode=args.lightmap, terrain_only=True,
                            lod_morph=_morph(args), aa=getattr(args, "aa", None),
-                           supersample=getattr(args, "supersample", 1), trace=getattr(args, "trace", None))
+                           supersample=getattr(args, "supersample", 1), trace=getattr(args, "trace", None),
+                           dof=getattr(args, "dof", None))
     lod_on = args.lod == "on"
     # warm-up (not timed): compiled kernels, the terrain's resident vertex blocks, shaders, GL buffers
     from piste._jit import warm_up
@@ -239,7 +240,7 @@ def run_scene(args, bundle, lightmap, lighting: str, t0: float) -> int:
                            start=args.start, casts=rider_casts(args.rider_model),
                            object_lod=getattr(args, "object_lod", None), lod_morph=_morph(args),
                            aa=getattr(args, "aa", None), supersample=getattr(args, "supersample", 1),
-                           trace=getattr(args, "trace", None))
+                           trace=getattr(args, "trace", None), dof=getattr(args, "dof", None))
     scene, renderer = preview.scene, preview.renderer
     lod_on = args.lod == "on"
     from piste._jit import warm_up

@@ -99,6 +99,7 @@ def run(args) -> int:
                           first_png=args.out, progress=not args.quiet and sys.stderr.isatty() and args.frames > 1,
                           lod_morph=_morph(args), aa=getattr(args, "aa", None),
                           supersample=getattr(args, "supersample", 1), trace=getattr(args, "trace", None),
+                          dof=getattr(args, "dof", None),
                           interlace=getattr(args, "interlace", False),
                           flicker_filter=getattr(args, "flicker_filter", False))
     if kind == "tiles":

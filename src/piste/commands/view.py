@@ -86,7 +86,7 @@ def course_preview(args, bundle, ctx=None):
     return ScenePreview(bundle, size=tuple(args.size), ctx=ctx, lightmap=lightmap, object_lighting="dynamic",
                         lightmap_mode=args.lightmap, terrain_only=args.terrain_only, start=start,
                         casts=rider_casts(args.rider_model), face=args.face, lod_morph=_morph(args),
-                        aa=getattr(args, "aa", None), trace=getattr(args, "trace", None))
+                        aa=getattr(args, "aa", None), trace=getattr(args, "trace", None), dof=getattr(args, "dof", None))
 
 
 def _morph(args):
@@ -102,7 +102,7 @@ def _view_scene(args) -> int:
     from piste.render.window import HELP, ViewOptions, has_display, print_benchmark
 
     size = tuple(args.size) if getattr(args, "size", None) else None
-    kw = {"face": args.face, "lod_morph": _morph(args), "aa": getattr(args, "aa", None),
+    kw = {"face": args.face, "lod_morph": _morph(args), "aa": getattr(args, "aa", None), "dof": getattr(args, "dof", None),
           "trace": getattr(args, "trace", None)}
     if args.headless or not has_display():
         live = LiveScene(args.scene, size=size, camera=args.camera, **kw)
@@ -154,6 +154,7 @@ def _view_source(args, kind: str) -> int:
     bundle = open_source(args.scene, warm=True, riders=args.riders, objects=args.add_objects, budget_mb=args.budget)
     size = tuple(args.size)
     kw = {"lightmap_mode": args.lightmap, "face": args.face, "lod_morph": _morph(args), "aa": getattr(args, "aa", None),
+          "dof": getattr(args, "dof", None),
           "trace": getattr(args, "trace", None)}
     cam = eye_camera(args.eye, args.target) or camera_at(bundle, args.camera)
     if not has_display():

@@ -50,6 +50,7 @@ from piste import formats as _formats, render as _render
 from piste.pipeline.bundle_objects import camera_from_dict
 from piste.pipeline.characters import lods_from_arrays, merged_mesh, model_from_arrays
 from piste.render.aa import AATarget, check_aa, downsample
+from piste.render.dof import check_dof
 from piste.render.context import create_context, save_png
 from piste.render.frame import DEFAULT_FOG_DENSITY, TerrainRenderer
 from piste.render.object_pass import ObjectPass
@@ -326,6 +327,8 @@ class ScenePreview:
         CLI's ``--aa``); default: the scene file's ``render.aa``, else "off"
     supersample : draw at N x N the size and box-filter down (the anti-aliasing reference; the
         objects' LOD error scaled by N so the same meshes are drawn); default 1
+    dof : depth of field, ``(focus metres, aperture = lens radius metres)`` (:mod:`piste.render.dof`;
+        the CLI's ``--dof FOCUS_M:APERTURE``), or "off"; default: the scene file's ``render.dof``, else off
 
     Notes
     -----
@@ -339,7 +342,7 @@ class ScenePreview:
                  lightmap_mode: str | None = None, start: float | None = None, casts=(),
                  terrain_only: bool = False, face: str | None = None, fog=None, object_lod: float | None = None,
                  lod_morph: bool | None = None, stream_wait: bool = True, trace=None, aa: str | None = None,
-                 supersample: int = 1):
+                 supersample: int = 1, dof=None):
         if not (isinstance(lightmap, str) and lightmap in ("bundle", "placeholder")) and lightmap is not None:
             raise ConfigError(f"lightmap must be 'bundle', 'placeholder' or None, got {lightmap!r}")
         self.ctx = ctx if ctx is not None else create_context()
@@ -354,7 +357,7 @@ class ScenePreview:
                         "shadows": bool(shadows), "specular": bool(specular), "lightmap_mode": lightmap_mode,
                         "start": start, "casts": list(casts), "terrain_only": bool(terrain_only), "face": face,
                         "fog": fog, "object_lod": object_lod, "lod_morph": lod_morph,
-                        "stream_wait": bool(stream_wait), "aa": aa}
+                        "stream_wait": bool(stream_wait), "aa": aa, "dof": dof}
         self.stats: dict = {}
         self.frame = None
         self.tracer = make_tracer(trace, self.ctx)  # the no-op NULL_TRACER without a trace file
@@ -392,6 +395,11 @@ class ScenePreview:
             raise ConfigError(f"fog must be a density per metre >= 0 or 'auto', got {fog!r}")
         self.face = face
         self.aa = check_aa(opt["aa"] if opt["aa"] is not None else rman.get("aa", "off"))
+        dof = opt["dof"] if opt["dof"] is not None else rman.get("dof")
+        self.dof = None if dof is None or dof == "off" else check_dof(*dof) if isinstance(dof, (list, tuple)) and \
+            len(dof) == 2 else check_dof(dof, None)
+        if self.dof is not None and self.dof[1] == 0.0:
+            self.dof = None  # (a pinhole: nothing to blur)
         self.fog = None if fog == "auto" else float(fog)  # None: the renderer's scene-sized default
         olod = opt["object_lod"] if opt["object_lod"] is not None else rman.get("object_lod", DEFAULT_LOD_PIXELS)
         if isinstance(olod, bool) or not isinstance(olod, (int, float)) or not 0 <= olod <= 64:
@@ -431,9 +439,9 @@ class ScenePreview:
             if objs is not None:
                 self.objects = ObjectPass(self.ctx, objs, bundle.lights, mode=mode, lod_pixels=float(olod),
                                           colors=colors if mode == "baked" and objs is bundle.objects() else None)
-        if self.aa != "off":  # the frame drawn into an anti-aliasing target (resolved when read)
+        if self.aa != "off" or self.dof is not None:  # the frame drawn into a target that post-processes it when read
             old = self.terrain.target
-            self.terrain.target = AATarget(self.ctx, old.size, self.aa)
+            self.terrain.target = AATarget(self.ctx, old.size, self.aa, dof=self.dof)
             old.release()
             self.stats["aa_samples"] = self.terrain.target.samples
         # the pre-computed visibility in front of frustum culling
@@ -470,11 +478,16 @@ class ScenePreview:
             warn_if_no_terrain(cam, *self._bounds, seen=self.__dict__.setdefault("_no_terrain_seen", set()))
         if self.renderer is not None:
             img = self.renderer.render(t, camera=cam, lod=lod, lightmap_mode=self.lightmap_mode, debug=debug,
-                                       read=read, fog=self.fog)
+                                       read=read and self.dof is None, fog=self.fog)
+            if self.dof is not None:  # the post pass needs the frame's camera (a chase camera is made by the renderer)
+                self.terrain.target.camera = img.scene.camera
+                img.image = self.terrain.target.read() if read else None
             self.frame = img
             self.stats.update(img.stats)
             self.stats.update(self.terrain.cull_stats)
             return self._output(img.image) if read else None
+        if self.dof is not None:
+            self.terrain.target.camera = cam
         with self.tracer.gpu_pass("terrain"):
             frame = self.terrain.render(cam, lod=lod, lightmap_mode=self.lightmap_mode, debug=debug,
                                         read=read and self.objects is None, fog="scene" if self.fog is None else self.fog)
@@ -507,7 +520,7 @@ class ScenePreview:
         camera, pipelined where the scene has riders (:meth:`piste.render.SceneRenderer.frames`: the
         next frame's CPU work runs while the GL draws this one); else one :meth:`render` a frame.
         After each, :attr:`frame` and :attr:`stats` describe that frame."""
-        if self.renderer is None or not self.follow:
+        if self.renderer is None or not self.follow or self.dof is not None:
             for t in times:
                 yield self.render(None, t, lod=lod, read=read)
             return

@@ -132,9 +132,13 @@ class AATarget(Offscreen):
     ``fxaa``: :attr:`fbo` draws into an RGBA8 texture, :meth:`resolve` runs the FXAA pass into the
     output framebuffer.  :meth:`read` resolves, then reads ``(H, W, 4) uint8`` top row first.
     ``screen``: a window's framebuffer that :meth:`present` copies the resolved frame to.
+
+    ``dof``: ``(focus m, aperture m)`` adds the depth-of-field pass (:mod:`piste.render.dof`) before
+    FXAA / after the MSAA resolve, for :attr:`camera` (set it before reading each frame).  A frame
+    is resolved once: :meth:`use` marks a new one.
     """
 
-    def __init__(self, ctx, size: tuple[int, int], mode: str):
+    def __init__(self, ctx, size: tuple[int, int], mode: str, dof: tuple[float, float] | None = None):
         self.mode = check_aa(mode)
         super().__init__(ctx, size)  # the single-sampled output (what read() returns)
         self.samples = min(aa_samples(mode), int(ctx.max_samples)) if mode.startswith("msaa") else 0
@@ -155,15 +159,34 @@ class AATarget(Offscreen):
         if self.color is not self.out[1]:
             self.fbo = ctx.framebuffer(color_attachments=[self.color], depth_attachment=self.depth)
         self.screen = None
+        self.dof = dof
+        self.camera = None
+        self._dof = None
+        self._fresh = True  # a frame drawn since the last resolve
+
+    def use(self) -> None:
+        super().use()
+        self._fresh = True
 
     def resolve(self) -> None:
         """Write the anti-aliased frame into the output framebuffer (the draw target is kept)."""
-        out = self.out[0]
-        if self.fbo is out:
+        if not self._fresh:
             return
+        self._fresh = False
+        out = self.out[0]
         ctx = self.ctx
         if self.samples > 1:
             ctx.copy_framebuffer(out, self.fbo)
+        if self.dof is not None and self.dof[1] > 0.0:
+            if self.camera is None:
+                raise ConfigError("depth of field: the frame's camera was not given (AATarget.camera)")
+            if self._dof is None:
+                from piste.render.dof import DofPass
+
+                self._dof = DofPass(ctx, self.size)
+            src = out if self.samples > 1 else self.fbo
+            self._dof.apply(src, self.fbo if self.mode == "fxaa" else out, self.camera, *self.dof)
+        if self.mode != "fxaa":
             return
         import moderngl
 
@@ -194,9 +217,10 @@ class AATarget(Offscreen):
     def release(self) -> None:
         if self.ctx.fbo is self.fbo or self.ctx.fbo is self.out[0]:
             (self.ctx.screen or self.ctx.detect_framebuffer(0)).use()
-        for obj in (self._vao, self._prog):
+        for obj in (self._vao, self._prog, self._dof):
             if obj is not None:
                 obj.release()
+        self._dof = None
         if self.fbo is not self.out[0]:
             for obj in (self.fbo, self.color, self.depth):
                 obj.release()

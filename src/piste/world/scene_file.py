@@ -63,6 +63,8 @@ scene file.  Every table and key is optional except where noted::
     object_lod = 0.5              # objects' levels of detail: the simplification error an instance
                                   #   may show, in pixels (0: every object drawn in full)
     aa = "off"                    # anti-aliasing: "off", "msaa2|4|8" or "fxaa" (`--aa` overrides)
+    dof = [20.0, 0.05]            # depth of field: focus distance and lens radius in metres (default:
+                                  #   none, a pinhole; `--dof FOCUS_M:APERTURE` overrides)
 
     [pack]                        # instead of [[riders]], on the default course: riders following the
     follow = "track"              #   track (piste demo's six, the camera chasing the first)
@@ -373,6 +375,7 @@ class RenderSpec:
     face: str = "morph"      # "morph", "null_bones" or "off"
     object_lod: float = 0.5  # pixels of simplification error an object may show (0: full meshes)
     aa: str = "off"          # anti-aliasing: "off", "msaa2", "msaa4", "msaa8" or "fxaa"
+    dof: object = None       # depth of field: [focus metres, aperture metres] or None (off)
 
 
 #: [auto_objects] keys and their defaults (piste.world.objects.place_objects' counts)
@@ -664,7 +667,7 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     if scene.visibility.method not in ("auto", "horizon", "rays"):
         raise vi.error("method", f"expected \"auto\", \"horizon\" or \"rays\", got {scene.visibility.method!r}")
     re_ = _table(top, "render")
-    re_.allow({"size", "lightmap_mode", "fog", "face", "object_lod", "aa"})
+    re_.allow({"size", "lightmap_mode", "fog", "face", "object_lod", "aa", "dof"})
     size = re_.get("size", "vec2", (640, 448))
     if not all(float(s).is_integer() and 16 <= s <= 8192 for s in size):
         raise re_.error("size", f"expected [width, height], whole pixels in 16..8192, got {list(size)}")
@@ -686,6 +689,12 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     scene.render.aa = re_.get("aa", "str", "off")
     if scene.render.aa not in ("off", "msaa2", "msaa4", "msaa8", "fxaa"):
         raise re_.error("aa", f"expected \"off\", \"msaa2\", \"msaa4\", \"msaa8\" or \"fxaa\", got {scene.render.aa!r}")
+    if "dof" in re_.table:
+        dof = re_.get("dof", "vec2")
+        if not (0.0 < dof[0] <= 1e5 and 0.0 <= dof[1] <= 100.0):
+            raise re_.error("dof", f"expected [focus, aperture]: a focus distance in (0, 100000] m and a lens radius "
+                                   f"in [0, 100] m, got {list(dof)}")
+        scene.render.dof = [float(dof[0]), float(dof[1])]
 
     # the default course's riders following the track and objects placed along it
     pk = _table(top, "pack")
