@@ -11,7 +11,8 @@ API
 ---
 load_terrain(spec) -> PatchNet               a TerrainSpec's net
 load_rider_model(model) -> Model             "builtin:rider" or a glTF file
-add_rider_clips(model, [(file, bone_map)])   clips from other glTF files, retargeted (riders' clips_from)
+add_rider_clips(model, [(file, bone_map)])   clips from other glTF files, retargeted, or an SSX .afl
+                                             bank's clips on an ssx: rider (riders' clips_from)
 load_object_mesh(model) -> ObjectMesh        "builtin:<kind>" or a glTF file (meshes merged, Z up)
 rider_matrices(net, riders) -> (n, 4, 4)     rider space (Y up, board along +X) -> world
 object_matrices(net, objects, meshes) -> (m, 4, 4)   object space (Z up) -> world
@@ -184,13 +185,60 @@ def load_rider_model(model: str, allow_paths=()):
 
 def add_rider_clips(model, sources, allow_paths=()):
     """``model`` with the clips of each ``(file, bone_map)`` in ``sources`` retargeted onto it
-    (:func:`piste.character.retarget.add_clips`, relative rule baked; a scene's ``clips_from``)."""
+    (:func:`piste.character.retarget.add_clips`, relative rule baked; a scene's ``clips_from``).
+    An ``.afl`` file (SSX Tricky animation bank, ``bone_map`` None) adds its clips to an ``.mpf``
+    rider (:func:`_add_afl_clips`)."""
     for file, bone_map in sources:
+        if str(file).lower().endswith(".afl"):
+            model = _add_afl_clips(model, file)
+            continue
         src = load_gltf(file, allow_paths=allow_paths)
         if src.skeleton is None or not src.clips:
             raise ConfigError(f"{file}: clips_from needs a file with a skin and at least one animation")
         model = add_clips(model, src, bone_map if bone_map is not None else "builtin")
     return model
+
+
+def _add_afl_clips(model, file):
+    """A copy of ``model`` (an ``.mpf`` rider, :func:`piste.pipeline.ssx_rider.load_mpf_rider`) with
+    the clips of the ``.afl`` bank ``file`` (:func:`piste.formats.ssx.afl.afl_clips`: the body
+    track's channels on the body bones in ``.mpf`` file order, the board track on ``board``); a
+    name the model already has gets the file's stem in front (``"bank:clip_1234abcd"``). The root
+    channels are the file's coordinates: a rider lifted to stand on its origin
+    (:func:`piste.pipeline.ssx_rider.stand_on_origin`) gets the same lift on its root tracks."""
+    from dataclasses import replace
+
+    from piste.character.model import Track
+    from piste.formats.ssx.afl import afl_clips, mpf_body_bones, read_afl
+    from piste.formats.ssx.mpf_model import CM, SSX_TO_PISTE
+
+    if not getattr(model, "files", None) or model.skeleton is None:
+        raise ConfigError(f"{file}: an .afl bank plays only on an ssx:<RIDER.mpf> model")
+    afl = read_afl(file)
+    clips = afl_clips(afl, model.skeleton, mpf_body_bones(model))
+    if not clips:
+        raise ConfigError(f"{file}: clips_from needs an .afl with at least one clip with a body track "
+                          f"({len(afl.clips)} clips, none with one)")
+    sk = model.skeleton
+    lift = {}  # root bone -> (3,) metres: its rest translation less the file's bind translation
+    for sub in model.files[0].models:
+        if len(sub.bones):
+            for rec, n in zip(sub.bones, sub.bone_names):
+                j = sk.get(n)
+                if j is not None and sk.parents[j] < 0:
+                    bind = (np.asarray(rec["translation"], np.float64)[:3] @ SSX_TO_PISTE.T) * CM
+                    lift[n] = np.asarray(sk.rest_translation[j], np.float64) - bind
+            break
+    new = dict(model.clips)
+    for n, c in clips.items():
+        for b, off in lift.items():
+            t = c.tracks.get(b, {}).get("translation")
+            if t is not None and np.any(off != 0):
+                c.tracks[b]["translation"] = Track(t.times, t.values + off)
+        key = n if n not in new else f"{Path(file).stem}:{n}"
+        c.name = key
+        new[key] = c
+    return replace(model, clips=new)
 
 
 def load_object_mesh(model: str, allow_paths=()):

@@ -95,6 +95,7 @@ scene file.  Every table and key is optional except where noted::
     clip = "ride"
     phase = 0.0                   # seconds into the clip at t = 0
     clips_from = "Fox.glb"        # optional: play this file's clips, retargeted onto the model
+                                  #   (ssx: models also take an SSX Tricky .afl bank, no bone_map)
     bone_map = "builtin"          #   by the built-in map, or { "b_Hip_01" = "pelvis", ... }
     scale = 1.0
 
@@ -303,7 +304,7 @@ class ActorSpec:
     phase: float = 0.0
     scale: float = 1.0
     line: int | None = None
-    clips_from: str | None = None     # riders: a glTF file whose clips are retargeted onto the model
+    clips_from: str | None = None     # riders: a glTF file whose clips are retargeted onto the model (or an .afl)
     bone_map: object = None           # riders: "builtin" or {clip bone: model bone} (piste.character.retarget)
     texture: str | None = None        # ssx: riders: the .ssh texture bank given (None: found beside the .mpf)
 
@@ -411,6 +412,7 @@ class SceneFile:
         if self.terrain.path is not None:
             files.add(Path(self.terrain.path))
         gltfs = [g.file for g in self.gltf] + [Path(a.model) for a in self.riders + self.objects if a.builtin is None]
+        gltfs += [Path(a.clips_from) for a in self.riders if a.clips_from]  # a glTF's or an .afl's clips
         for g in gltfs:
             files.add(Path(g))
             files.update(_gltf_dependencies(Path(g), self.allow_paths))
@@ -764,8 +766,16 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
             names.add(name)
             spec = ActorSpec(name, model, a.get("position", "vec23", required=True), a.get("heading", "float", 0.0),
                              a.get("clip", "str"), a.get("phase", "float", 0.0), a.get("scale", "pos", 1.0), a.line())
-            if "clips_from" in a.table:
-                spec.clips_from = str(_file(a, "clips_from", base, (".gltf", ".glb")))
+            cf = a.table.get("clips_from")
+            if isinstance(cf, str) and cf.lower().endswith(".afl"):  # an SSX Tricky bank (piste.formats.ssx.afl)
+                if not model.lower().endswith(".mpf"):
+                    raise a.error("clips_from", "an .afl animation bank plays only on an ssx:<RIDER.mpf> model")
+                if "bone_map" in a.table:
+                    raise a.error("bone_map", "an .afl bank drives the .mpf's body bones in file order: no bone_map")
+                spec.clips_from = str(_file(a, "clips_from", base, (".afl",)))
+            elif "clips_from" in a.table:
+                spec.clips_from = str(_file(a, "clips_from", base, (".gltf", ".glb") + (
+                    (".afl",) if model.lower().endswith(".mpf") else ())))
                 bm = a.table.get("bone_map", "builtin")
                 if not (bm == "builtin" or (isinstance(bm, dict) and all(
                         isinstance(k, str) and isinstance(v, str) for k, v in bm.items()))):
