@@ -20,6 +20,14 @@ Per rider ``i`` (all numpy until the draw):
 
 The stats report the patches per rider and per frame (:attr:`ShadowPass.patch_counts`).
 
+Soft shadows (``ShadowPass(soft=True, sun_radius=0.27)``, the CLI's ``--soft-shadows``, off by
+default): percentage-closer soft shadows.  The casters also write their nearest light depth
+(``shadow_caster_soft.frag.glsl``: alpha, blend MIN, over the caster's bounding sphere), and the
+receivers (``shadow_receiver_soft.frag.glsl``) search the blockers in the disc a sun of that
+angular radius can see past, size the penumbra ``(receiver - blocker) tan(radius)`` from their mean
+depth and average the coverage over it.  :func:`area_light_visibility` is the reference: the
+fraction of the sun's disc each point sees past the caster's triangles, ray traced in numpy.
+
 API
 ---
 ::
@@ -27,7 +35,8 @@ API
     shadow_matrices(centers, radius, sun_direction, reach=40.0) -> (n, 4, 4) light view-projections
     shadow_patches(patch_lo, patch_hi, light_vp, candidates=None) -> list of (k_i,) patch ids
     shadow_triangles(mesh, patch_lists) -> positions, indices, per-rider (first, count)
-    ShadowPass(ctx, n_max=6, tile=128)
+    area_light_visibility(points, triangles, sun_direction, sun_radius, rays=64) -> (p,) visibility
+    ShadowPass(ctx, n_max=6, tile=128, soft=False, sun_radius=0.27)
 """
 
 from __future__ import annotations
@@ -40,10 +49,71 @@ from piste.render.textures import MipLevels
 from piste.terrain.query import height_at
 from piste.world.camera import look_at, orthographic
 
-__all__ = ["shadow_matrices", "shadow_patches", "shadow_triangles", "ShadowPass", "SHADE", "sun_visibility"]
+__all__ = ["shadow_matrices", "shadow_patches", "shadow_triangles", "ShadowPass", "SHADE", "sun_visibility",
+           "area_light_visibility", "SUN_RADIUS"]
 
 #: colour multiplier in full shadow (what the sun adds over the sky's blue ambient is taken away)
 SHADE = (0.55, 0.6, 0.75)
+
+#: the real sun's angular radius, degrees (the soft shadows' default)
+SUN_RADIUS = 0.27
+
+
+def sun_disc_directions(sun_direction, sun_radius: float, rays: int) -> np.ndarray:
+    """``rays`` unit directions ``(rays, 3) float64`` *towards* the sun, spread evenly over its disc
+    of angular radius ``sun_radius`` degrees (Vogel's spiral in the disc's tangent plane)."""
+    d = -np.asarray(sun_direction, dtype=np.float64)
+    d = d / np.linalg.norm(d)
+    a = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(d, a)
+    u /= np.linalg.norm(u)
+    v = np.cross(d, u)
+    i = np.arange(int(rays), dtype=np.float64)
+    r = np.tan(np.radians(float(sun_radius))) * np.sqrt((i + 0.5) / rays)
+    ang = i * 2.39996323
+    out = d + (r * np.cos(ang))[:, None] * u + (r * np.sin(ang))[:, None] * v
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+def area_light_visibility(points, triangles, sun_direction, sun_radius: float = SUN_RADIUS, rays: int = 64,
+                          chunk: int = 1 << 22) -> np.ndarray:
+    """The reference of the soft shadows: the fraction of the sun's disc each point sees.
+
+    Parameters
+    ----------
+    points : (p, 3) receiver points;  triangles : (t, 3, 3) the caster's triangles (world space)
+    sun_direction : (3,) the way the light travels;  sun_radius : the disc's angular radius, degrees
+    rays : directions over the disc per point (:func:`sun_disc_directions`)
+
+    Returns
+    -------
+    (p,) float64 in 0..1: 1 sees the whole disc.  Every ray against every triangle
+    (Moller-Trumbore), ``chunk`` ray-triangle pairs at a time.
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
+    if rays < 1:
+        raise RenderError(f"area_light_visibility: rays must be >= 1, got {rays}")
+    dirs = sun_disc_directions(sun_direction, sun_radius, rays)
+    v0 = tri[:, 0]
+    e1, e2 = tri[:, 1] - v0, tri[:, 2] - v0
+    hit = np.zeros((len(pts), len(dirs)), dtype=bool)
+    if len(tri) == 0 or len(pts) == 0:
+        return np.ones(len(pts))
+    step = max(1, chunk // (len(tri) * len(dirs)))
+    for s in range(0, len(pts), step):
+        o = pts[s:s + step, None, None, :] - v0  # (q, 1, t, 3)
+        d = dirs[None, :, None, :]  # (1, k, 1, 3)
+        pv = np.cross(d, e2)  # (1, k, t, 3)
+        det = np.einsum("...i,...i", pv, e1)  # (1, k, t)
+        inv = 1.0 / np.where(np.abs(det) < 1e-12, np.inf, det)
+        u = np.einsum("...i,...i", o, pv) * inv  # (q, k, t)
+        qv = np.cross(o, e1)  # (q, 1, t, 3)
+        v = np.einsum("...i,...i", d, qv) * inv
+        tt = np.einsum("...i,...i", qv, e2) * inv
+        ok = (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (tt > 1e-6)
+        hit[s:s + step] = ok.any(axis=2)
+    return 1.0 - hit.mean(axis=1)
 
 
 def shadow_matrices(centers, radius, sun_direction, reach: float = 40.0) -> np.ndarray:
@@ -259,12 +329,26 @@ def _gaussian_blur(f: np.ndarray, sigma: float) -> np.ndarray:
     return out.astype(np.float32)
 
 
-class ShadowPass:
-    """The shadow texture (``n_max`` tiles of ``tile`` x ``tile`` side by side) and both draws."""
+def _light_spans(light_vp) -> tuple[float, float]:
+    """An orthographic light matrix's tile width ``2 r`` and depth range ``far - near``, metres."""
+    m = np.asarray(light_vp, dtype=np.float64)
+    return 2.0 / float(np.linalg.norm(m[0, :3])), 2.0 / float(np.linalg.norm(m[2, :3]))
 
-    def __init__(self, ctx, n_max: int = 6, tile: int = 128):
+
+class ShadowPass:
+    """The shadow texture (``n_max`` tiles of ``tile`` x ``tile`` side by side) and both draws.
+
+    ``soft``: percentage-closer soft shadows from a sun of ``sun_radius`` degrees (see the module
+    docstring); False (default): the talk's hard projected shadows."""
+
+    def __init__(self, ctx, n_max: int = 6, tile: int = 128, soft: bool = False, sun_radius: float = SUN_RADIUS):
         import moderngl
 
+        sun_radius = float(sun_radius)
+        if not 0.0 <= sun_radius <= 10.0 or not np.isfinite(sun_radius):
+            raise RenderError(f"shadow pass: sun_radius must be 0..10 degrees, got {sun_radius}")
+        self.soft = bool(soft)
+        self.sun_radius = sun_radius
         self.ctx = ctx
         self.n_max = int(n_max)
         self.tile = int(tile)
@@ -282,10 +366,14 @@ class ShadowPass:
         self.texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self.texture.repeat_x = self.texture.repeat_y = False
         self.fbo = ctx.framebuffer(color_attachments=[self.texture])
+        soft_name = "_soft" if self.soft else ""
         self.caster = ctx.program(vertex_shader=load_shader("shadow_caster.vert.glsl"),
-                                  fragment_shader=load_shader("shadow_caster.frag.glsl"))
+                                  fragment_shader=load_shader(f"shadow_caster{soft_name}.frag.glsl"))
         self.receiver = ctx.program(vertex_shader=load_shader("shadow_receiver.vert.glsl"),
-                                    fragment_shader=load_shader("shadow_receiver.frag.glsl"))
+                                    fragment_shader=load_shader(f"shadow_receiver{soft_name}.frag.glsl"))
+        if self.soft:
+            self.receiver["u_tan"].value = float(np.tan(np.radians(sun_radius)))
+            self.receiver["u_texel"].value = 1.0 / self.tile
         self.receiver["u_shadow"].value = 3
         self.receiver["u_sunlit"].value = 4
         self.sunlit = None
@@ -329,13 +417,22 @@ class ShadowPass:
             self.light_vp = np.concatenate([self.light_vp[:first], lvp])
         self.fbo.use()
         if first == 0:
-            self.fbo.clear(0.0, 0.0, 0.0, 0.0)
+            self.fbo.clear(0.0, 0.0, 0.0, 1.0 if self.soft else 0.0)
         ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE | moderngl.BLEND)
+        if self.soft:  # coverage: the largest; depth (alpha): the nearest
+            ctx.enable(moderngl.BLEND)
+            ctx.blend_equation = (moderngl.MAX, moderngl.MIN)
         nt = 3 * c["nt"]
         for i in range(n):
             ctx.viewport = ((first + i) * self.tile, 0, self.tile, self.tile)
             self.caster["u_light_vp"].write(lvp[i].astype(np.float32).T.tobytes())
+            if self.soft:
+                span, depth = _light_spans(lvp[i])
+                self.caster["u_depth_scale"].value = depth / span
             c["vao"].render(moderngl.TRIANGLES, vertices=nt, first=i * nt)
+        if self.soft:
+            ctx.blend_equation = moderngl.FUNC_ADD
+            ctx.disable(moderngl.BLEND)
         # this frame's tiles mip-mapped here, before the frame's main passes: glGenerateMipmap must wait
         # for what it reads, and after the terrain's draw llvmpipe waited for the whole terrain there
         if self._mips is not None and self._mips.levels == self.mip_levels:
@@ -409,6 +506,8 @@ class ShadowPass:
                     continue
                 p["u_light_vp"].write(self.light_vp[i].astype(np.float32).T.tobytes())
                 p["u_tile"].value = (i * w, 0.0, w, 1.0)
+                if self.soft:
+                    p["u_span"].value = _light_spans(self.light_vp[i])
                 r["vao"].render(moderngl.TRIANGLES, vertices=int(3 * count), first=int(3 * first))
         finally:
             ctx.disable(moderngl.BLEND)
@@ -425,3 +524,60 @@ class ShadowPass:
             self._mips.release()
         for obj in (self.fbo, self.texture, self.caster, self.receiver, self.sunlit):
             obj.release()
+
+
+def shadow_on_plane(ctx, positions, indices, sun_direction, rect, res: int = 96, soft: bool = False,
+                    sun_radius: float = SUN_RADIUS, tile: int = 128, radius: float | None = None):
+    """One caster's projected shadow on the flat ground ``z = 0`` as the pass draws it, seen from
+    straight above: the visibility the receivers leave (1 lit, 0 fully shadowed) and the ground
+    points of the pixels, to compare with :func:`area_light_visibility` (tests, benchmarks).
+
+    Parameters
+    ----------
+    positions : (v, 3) the caster's vertices, world space;  indices : (t, 3) its triangles
+    rect : (x0, y0, x1, y1) the ground square drawn, metres;  res : its pixels a side
+    radius : the caster's bounding-sphere radius (default: the vertices' extent around their centre)
+
+    Returns
+    -------
+    visibility (res, res) float64 0..1 rows along y, points (res, res, 3) float64 pixel centres.
+    """
+    from types import SimpleNamespace
+
+    from piste.render.context import Offscreen
+
+    pos = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    lo, hi = pos.min(0), pos.max(0)
+    centre = 0.5 * (lo + hi)
+    r = float(radius) if radius is not None else 0.5 * float(np.linalg.norm(hi - lo)) + 0.05
+    lvp = shadow_matrices(centre[None], r, sun_direction)
+    sp = ShadowPass(ctx, n_max=1, tile=tile, soft=soft, sun_radius=sun_radius)
+    target = Offscreen(ctx, (res, res))
+    try:
+        sp.render_casters(pos[None].astype(np.float32), indices, lvp)
+        x0, y0, x1, y1 = (float(v) for v in rect)
+        n = 64  # the ground: one patch of n x n quads
+        gx, gy = np.meshgrid(np.linspace(x0, x1, n + 1), np.linspace(y0, y1, n + 1), indexing="xy")
+        ground = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], -1).astype(np.float32)
+        k = np.arange(n * n)
+        a = (k // n) * (n + 1) + k % n
+        tris = np.concatenate([np.stack([a, a + 1, a + n + 2], 1), np.stack([a, a + n + 2, a + n + 1], 1)])
+        mesh = SimpleNamespace(patch_ids=np.array([0]), vertex_start=np.array([0, len(ground)]),
+                               tri_start=np.array([0, len(tris)]), indices=tris.astype(np.uint32), positions=ground)
+        # looking straight down, x right and y up on the picture
+        ortho = np.array([[2.0 / (x1 - x0), 0, 0, -(x1 + x0) / (x1 - x0)],
+                          [0, 2.0 / (y1 - y0), 0, -(y1 + y0) / (y1 - y0)],
+                          [0, 0, -0.1, 0.0], [0, 0, 0, 1.0]])
+        target.use()
+        target.clear((1.0, 1.0, 1.0, 1.0))
+        sp.draw_receivers(mesh, [np.array([0])], ortho, shade=(0.0, 0.0, 0.0), depth_bias=0.0)
+        ctx.finish()
+        img = target.read()
+    finally:
+        sp.release()
+        target.release()
+    vis = img[::-1, :, 0].astype(np.float64) / 255.0  # read() is top row first: rows along y again
+    px = x0 + (np.arange(res) + 0.5) * (x1 - x0) / res
+    py = y0 + (np.arange(res) + 0.5) * (y1 - y0) / res
+    X, Y = np.meshgrid(px, py, indexing="xy")
+    return vis, np.stack([X, Y, np.zeros_like(X)], -1)
