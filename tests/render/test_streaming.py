@@ -24,7 +24,7 @@ def world(tmp_path_factory):
 
 
 def test_pages_nearest_tiles_within_the_budget(world):
-    one = S.mesh_bytes(8 * 2 + 1, 8 * 2 + 1)  # a near tile's mesh
+    one = S.mesh_bytes(8 * 2 + 1, 8 * 2 + 1, morph=True)  # a near tile's mesh (with its geomorph targets)
     far = (S.mesh_bytes(9, 9) + S.mesh_bytes(5, 5) + S.mesh_bytes(3, 3) + S.mesh_bytes(2, 2)) * 36  # strides 1..8
     far += 17 * 17 * 3 * 36  # and each tile's welded light map (near and far levels sample it)
     cache = S.TileCache(world, budget_bytes=far + 3 * one + 100, near_radius=1000.0, near_samples=3)

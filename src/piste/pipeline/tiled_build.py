@@ -54,7 +54,8 @@ from piste.pipeline.visibility import compute_visibility
 from piste.terrain.bezier import evaluate, grid_params
 from piste.terrain.heightfield import single_threaded
 from piste.terrain.net import PatchNet
-from piste.terrain.tiles import TILE_FIT_VERSION, TILES_FORMAT, TileGrid, TileStore, fit_tile, neighbourhood_net
+from piste.terrain.tiles import (TILE_FIT_VERSION, TILES_FORMAT, TileGrid, TileStore, fit_tile, neighbourhood_net,
+                                 triangulated_heights)
 from piste.terrain.tiles import TileError as TileFileError
 
 __all__ = ["TiledSpec", "TiledResult", "ArraySource", "FileSource", "SyntheticSource", "TileError", "fit_task",
@@ -395,22 +396,6 @@ def _bake_tile(spec: TiledSpec, ty: int, tx: int) -> tuple[dict, dict]:
     return arrays, info
 
 
-def _piecewise(z: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Heights of the triangulated grid ``z (n, m, m)`` (``[patch, j (v), i (u)]`` at parameters
-    ``i / (m-1)``; each cell split along its (0, 0)-(1, 1) diagonal, as the streaming meshes are) at
-    parameters ``t (k,)`` in both directions: ``(n, k, k)``."""
-    m = z.shape[1]
-    c = np.minimum(np.floor(t * (m - 1)).astype(int), m - 2)
-    f = t * (m - 1) - c
-    ci, fu = c[None, :], f[None, :]  # u along the last axis
-    cj, fv = c[:, None], f[:, None]
-    z00, z10 = z[:, cj, ci], z[:, cj, ci + 1]
-    z01, z11 = z[:, cj + 1, ci], z[:, cj + 1, ci + 1]
-    lower = z00 + fu * (z10 - z00) + fv * (z11 - z10)  # fu >= fv
-    upper = z00 + fv * (z01 - z00) + fu * (z11 - z01)
-    return np.where(fu >= fv, lower, upper)
-
-
 def far_errors(control_points: np.ndarray, k: int = 9) -> np.ndarray:
     """How far a tile's patches ``(n, 4, 4, 3)`` leave the streaming renderer's coarse levels,
     ``(2,)`` float64 metres (the tile member ``far_error``): the largest vertical distance, over
@@ -424,7 +409,7 @@ def far_errors(control_points: np.ndarray, k: int = 9) -> np.ndarray:
     mid = (k - 1) // 2
     out = []
     for idx in ([0, k - 1], [0, mid, k - 1]):  # the levels' vertices among the k samples (k odd)
-        out.append(float(np.abs(z - _piecewise(z[:, idx][:, :, idx], t)).max()) if len(cp) else 0.0)
+        out.append(float(np.abs(z - triangulated_heights(z[:, idx][:, :, idx], t)).max()) if len(cp) else 0.0)
     return np.array(out, dtype=np.float64)
 
 

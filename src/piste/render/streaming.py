@@ -53,7 +53,7 @@ from piste.render.video import VideoWriter
 from piste.terrain.bezier import evaluate, grid_params
 from piste.terrain.cull import patch_tree
 from piste.terrain.tessellate import tessellate
-from piste.terrain.tiles import TileError, TileGrid, TileStore, tile_entries
+from piste.terrain.tiles import TileError, TileGrid, TileStore, tile_entries, triangulated_heights
 from piste.world.camera import Camera
 
 __all__ = ["TileCache", "StreamingRenderer", "StreamingTerrain", "TileMesh", "near_mesh", "far_mesh", "mesh_bytes", "fly_path",
@@ -67,7 +67,7 @@ FAR_STRIDES = (1, 2, 4, 8)
 
 #: far levels are chosen so that a level's height error (against the full corner grid) stays
 #: under this many pixels on screen
-FAR_PIXEL_ERROR = 0.5
+FAR_PIXEL_ERROR = 3.0
 #: near meshes evaluate every patch at least this many samples a side (the course's LOD beyond 180 m)
 NEAR_SAMPLES = 4
 #: samples a patch side of the middle level: evaluated patches (a centre and edge midpoints: a
@@ -89,16 +89,19 @@ uniform vec2 u_fade;       // linear fade to the fog colour between these distan
 uniform vec2 u_origin;     // the tile's (x0, y0)
 uniform vec2 u_patch;      // 1 / patch size (x, y)
 uniform vec4 u_light_uv;   // (res - 1) / width, (res - 1) / height, 0.5 / width, 0.5 / height
+uniform float u_morph;     // geomorph: 1 the mesh's own heights, 0 its coarser level's (in_target)
 in vec3 in_pos;
+in float in_target;
 out vec2 v_uv;
 out vec2 v_uvl;
 out float v_fog;
 void main() {
-    gl_Position = u_vp * vec4(in_pos, 1.0);
-    vec2 q = (in_pos.xy - u_origin) * u_patch;   // patch units from the tile's corner
+    vec3 p = vec3(in_pos.xy, in_target + u_morph * (in_pos.z - in_target));
+    gl_Position = u_vp * vec4(p, 1.0);
+    vec2 q = (p.xy - u_origin) * u_patch;   // patch units from the tile's corner
     v_uv = q;
     v_uvl = q * u_light_uv.xy + u_light_uv.zw;
-    float d = distance(in_pos, u_eye);
+    float d = distance(p, u_eye);
     float f = u_fog.a > 0.0 ? 1.0 - exp(-u_fog.a * d) : 0.0;
     v_fog = max(f, clamp((d - u_fade.x) / max(u_fade.y - u_fade.x, 1.0), 0.0, 1.0));
 }
@@ -122,16 +125,19 @@ void main() {
 class TileMesh:
     """A tile's triangles: positions ``(k, 3)`` float32, colours ``(k, 3)`` uint8 (half-bright),
     indices ``(t, 3)`` uint32; ``patch_triangles``: the first ``n * patch_triangles`` triangles
-    are patch-major (patch ``p``'s at ``[p pt, (p+1) pt)``, the skirts after them; 0: not ordered)."""
+    are patch-major (patch ``p``'s at ``[p pt, (p+1) pt)``, the skirts after them; 0: not ordered);
+    ``targets`` ``(k,)`` float32 or None: each vertex's height on the next coarser level (geomorph)."""
 
     positions: np.ndarray
     colors: np.ndarray
     indices: np.ndarray
     patch_triangles: int = 0
+    targets: np.ndarray | None = None
 
     @property
     def nbytes(self) -> int:
-        return self.positions.nbytes + self.colors.nbytes + self.indices.nbytes
+        extra = 0 if self.targets is None else self.targets.nbytes
+        return self.positions.nbytes + self.colors.nbytes + self.indices.nbytes + extra
 
 
 def _grid_triangles(rows: int, cols: int, offset: int = 0) -> np.ndarray:
@@ -268,9 +274,17 @@ def near_mesh(fit: dict, lit: dict, grid_shape: tuple, depth: float, samples: in
     rows, cols = ny * r + 1, nx * r + 1
     gp = np.empty((rows, cols, 3))
     pos = pos.reshape(ny, nx, m, m, 3)
+    # geomorph targets: the next coarser level's surface above each vertex (the middle level's for
+    # a near mesh, the corner grid's for a middle one): drawn fully morphed, a mesh is that level
+    coarse = 3 if m > 3 else 2
+    cu, cv = grid_params(coarse)
+    zc = evaluate(np.asarray(fit["control_points"]), cu, cv, normals=False)[..., 2].reshape(-1, coarse, coarse)
+    tz = triangulated_heights(zc, np.linspace(0.0, 1.0, m)).reshape(ny, nx, m, m)
+    gt = np.empty((rows, cols))
     for j in range(m):  # scatter: a shared vertex takes the value of the last patch written
         for i in range(m):
             gp[j:j + ny * r:r, i:i + nx * r:r] = pos[:, :, j, i]
+            gt[j:j + ny * r:r, i:i + nx * r:r] = tz[:, :, j, i]
     light = light_grid(texels, grid_shape)  # (ny (res-1) + 1, nx (res-1) + 1, 3)
     k = (res - 1) / r  # light texels a vertex step
     gc = np.clip(np.rint(_bilinear(light, np.arange(rows) * k, np.arange(cols) * k)), 0, 255).astype(np.uint8)
@@ -281,6 +295,8 @@ def near_mesh(fit: dict, lit: dict, grid_shape: tuple, depth: float, samples: in
     order = np.argsort(np.concatenate([cell_patch, cell_patch]), kind="stable")  # patch-major (visibility sets)
     mesh = _with_skirts(gp.reshape(-1, 3), gc.reshape(-1, 3), _grid_triangles(rows, cols)[order], sides, depth)
     mesh.patch_triangles = 2 * r * r
+    t = gt.reshape(-1)
+    mesh.targets = np.concatenate([t] + [np.concatenate([t[i], t[i] - depth]) for i in sides]).astype(np.float32)
     return mesh
 
 
@@ -295,12 +311,13 @@ def visible_indices(mesh: TileMesh, visible: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(tri[keep])
 
 
-def mesh_bytes(rows: int, cols: int) -> int:
-    """Bytes of a grid mesh of ``rows x cols`` vertices with skirts (positions, colours, indices)."""
+def mesh_bytes(rows: int, cols: int, morph: bool = False) -> int:
+    """Bytes of a grid mesh of ``rows x cols`` vertices with skirts (positions, colours, indices;
+    with ``morph`` the geomorph targets of a near or middle mesh)."""
     border = 2 * (rows + cols)
     verts = rows * cols + 2 * border
     tris = 2 * (rows - 1) * (cols - 1) + 2 * (border - 4)
-    return verts * 15 + tris * 12
+    return verts * (19 if morph else 15) + tris * 12
 
 
 @dataclass
@@ -443,7 +460,7 @@ class TileCache:
     def _near_bytes(self, n: int, t, samples: int | None = None) -> int:
         py0, py1, px0, px1 = self.grid.patch_range(*t)
         r = (self.near_samples if samples is None else samples) - 1
-        return mesh_bytes((py1 - py0) * r + 1, (px1 - px0) * r + 1)
+        return mesh_bytes((py1 - py0) * r + 1, (px1 - px0) * r + 1, morph=True)
 
     def _depth(self, t) -> float:
         b = self.bounds[t]
@@ -649,6 +666,30 @@ class TileCache:
                     out[i] = k
         return out
 
+    def morph_factors(self, eye, pixel_scale: float, pixel_error: float | None) -> dict:
+        """Geomorph factor of every resident near or middle tile seen from ``eye``: ``{tile: f}``,
+        f = clamp(e / pixel_error - 1, 0, 1) where e is the pixels the coarser level's error
+        (:attr:`mid_error` under a near mesh, :attr:`chord_error` under a middle one) projects to at
+        the tile's nearest point.  A tile changes level where its error crosses ``pixel_error``
+        (:meth:`update`), exactly where its mesh is drawn fully morphed (f = 0) onto the coarser
+        level, so switching levels does not pop; ``pixel_error`` None: 1 (no morphing)."""
+        with self._lock:
+            level = dict(self.near_level)
+        if pixel_error is None or not level:
+            return {t: 1.0 for t in level}
+        e = np.asarray(eye, dtype=np.float64)
+        index = {t: i for i, t in enumerate(self.tiles)}
+        out = {}
+        for t, k in level.items():
+            i = index.get(t)
+            if i is None:
+                continue
+            d = np.maximum(np.maximum(self.lo[i] - e, e - self.hi[i]), 0.0)
+            err = self.mid_error[t] if k > MID_SAMPLES else self.chord_error[t]
+            px = err * float(pixel_scale) / max(float(np.sqrt((d * d).sum())), 1e-9)
+            out[t] = float(np.clip(px / float(pixel_error) - 1.0, 0.0, 1.0))
+        return out
+
     def draw_list(self, eye=None, mask=None, pixel_scale: float | None = None) -> list:
         """``[(tile, level, TileMesh)]``: a near mesh where one is resident, else the far one at the
         stride for ``eye`` (``"far1"``, ``"far2"``, ...; the full corner grid without ``eye``):
@@ -738,7 +779,7 @@ class StreamingRenderer:
         s = g.samples_per_patch
         self._patch = (1.0 / (s * g.spacing[0]), 1.0 / (s * g.spacing[1]))
         self._lights: dict = {}  # tile -> its light-map texture
-        self._gpu: dict = {}  # (tile, level) -> (vbo_pos, ibo, vao, mesh id)
+        self._gpu: dict = {}  # (tile, level) -> (vbo_pos, ibo, vao, mesh id, vbo_targets or None)
         self._vis_gpu: dict = {}  # ((tile, level), mesh id, packed set) -> (ibo, vao, triangles)
         #: near tiles draw only the patches their visibility sets say the eye can see
         self.visibility = bool(visibility)
@@ -768,13 +809,21 @@ class StreamingRenderer:
             self._release(key)
         pos = self.ctx.buffer(np.ascontiguousarray(mesh.positions))
         ibo = self.ctx.buffer(np.ascontiguousarray(mesh.indices))
-        vao = self.ctx.vertex_array(self.prog, [(pos, "3f", "in_pos")], index_buffer=ibo, index_element_size=4)
-        self._gpu[key] = (pos, ibo, vao, id(mesh))
+        tgt = None if mesh.targets is None else self.ctx.buffer(np.ascontiguousarray(mesh.targets))
+        vao = self.ctx.vertex_array(self.prog, self._attributes(pos, tgt), index_buffer=ibo, index_element_size=4)
+        self._gpu[key] = (pos, ibo, vao, id(mesh), tgt)
         return vao
 
+    @staticmethod
+    def _attributes(pos, tgt) -> list:
+        """The vertex arrays' attributes (a far mesh has no morph targets: drawn with u_morph = 1)."""
+        return [(pos, "3f", "in_pos")] + ([] if tgt is None else [(tgt, "1f", "in_target")])
+
     def _release(self, key) -> None:
-        for obj in self._gpu.pop(key)[:3][::-1]:
-            obj.release()
+        got = self._gpu.pop(key)
+        for obj in (got[2], got[1], got[0], got[4]):
+            if obj is not None:
+                obj.release()
         for k in [k for k in self._vis_gpu if k[0] == key]:
             for obj in self._vis_gpu.pop(k)[:2][::-1]:
                 obj.release()
@@ -791,7 +840,8 @@ class StreamingRenderer:
                     obj.release()
             idx = visible_indices(mesh, seen)
             ibo = self.ctx.buffer(idx)
-            vao = self.ctx.vertex_array(self.prog, [(self._gpu[key][0], "3f", "in_pos")], index_buffer=ibo,
+            g = self._gpu[key]
+            vao = self.ctx.vertex_array(self.prog, self._attributes(g[0], g[4]), index_buffer=ibo,
                                         index_element_size=4)
             got = self._vis_gpu[vkey] = (ibo, vao, len(idx))
         return got[1], got[2]
@@ -847,6 +897,7 @@ class StreamingRenderer:
         visible = _boxes_visible(planes, self.cache.lo, self.cache.hi)
         drawn["culled"] = int((~visible).sum())
         pixel_scale = self.size[1] / (2.0 * np.tan(np.radians(cam.fov_y) / 2.0))
+        morph = self.cache.morph_factors(cam.eye, pixel_scale, self.pixel_error)
         for t, level, mesh in self.cache.draw_list(cam.eye, visible, pixel_scale=pixel_scale):
             key = (t, level)
             live.add(key)
@@ -855,6 +906,7 @@ class StreamingRenderer:
             self.prog["u_origin"].value = origin
             self.prog["u_light_uv"].value = luv
             kind = "far" if level.startswith("far") else "near"  # near and mid: evaluated patches
+            self.prog["u_morph"].value = 1.0 if kind == "far" or mesh.targets is None else morph.get(t, 1.0)
             drawn["mid"] += level == "mid"
             seen = self.cache.visible_patches(t, cam.eye) if kind == "near" and self.visibility else None
             if seen is not None and mesh.patch_triangles and not seen.all():

@@ -68,7 +68,7 @@ from piste.terrain.bezier import bernstein
 from piste.terrain.net import PatchNet
 
 __all__ = ["TileGrid", "TileStore", "TileError", "check_index", "tile_entries", "fit_tile", "fit_edge", "tile_net",
-           "neighbourhood_net", "npz_bytes", "TILES_FORMAT", "TILE_FIT_VERSION"]
+           "neighbourhood_net", "npz_bytes", "TILES_FORMAT", "TILE_FIT_VERSION", "triangulated_heights"]
 
 TILES_FORMAT = "piste.TiledNet/1"
 #: bumped whenever :func:`fit_tile`'s output for the same input changes
@@ -609,6 +609,26 @@ def _read_npz(p: Path, tile=None, names=None, expect=None, product: str = "tile"
                         raise TileError(p, tile, f"holds values beyond +-{MAX_BOUND:g}", field=name)
                 out[name] = arr
     return out
+
+
+def triangulated_heights(z: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Heights of a triangulated per-patch grid ``z (n, m, m)`` (``[patch, j (v), i (u)]`` at
+    parameters ``i / (m-1)``, each cell split along its (0, 0)-(1, 1) diagonal, as the streamed
+    tile meshes are) at parameters ``t (k,)`` in both directions: ``(n, k, k)`` float64.  On a height
+    field (x, y linear in u, v) this is the coarse mesh's surface above those points: the far
+    levels' errors (the build's ``far_error``) and the streaming renderer's geomorph targets."""
+    z = np.asarray(z, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)
+    m = z.shape[1]
+    c = np.minimum(np.floor(t * (m - 1)).astype(int), m - 2)
+    f = t * (m - 1) - c
+    ci, fu = c[None, :], f[None, :]  # u along the last axis
+    cj, fv = c[:, None], f[:, None]
+    z00, z10 = z[:, cj, ci], z[:, cj, ci + 1]
+    z01, z11 = z[:, cj + 1, ci], z[:, cj + 1, ci + 1]
+    lower = z00 + fu * (z10 - z00) + fv * (z11 - z10)  # fu >= fv: the triangle (00, 10, 11)
+    upper = z00 + fv * (z01 - z00) + fu * (z11 - z01)  # the triangle (00, 11, 01)
+    return np.where(fu >= fv, lower, upper)
 
 
 def tile_net(store: TileStore, ty: int, tx: int, name: str | None = None) -> PatchNet:
