@@ -26,7 +26,8 @@ import time
 import weakref
 
 from piste.errors import ConfigError
-from piste.pipeline.tiled_build import (TiledResult, TiledSpec, build_tiles, fit_task, lit_task, spec_from_scene,
+from piste.pipeline.tiled_build import (TiledResult, TiledSpec, build_tiles, far_heights_task, fit_task, lit_task,
+                                        spec_from_scene,
                                         write_index)
 
 __all__ = ["dask_client", "close_client", "build_tiles_dask", "build_scene_tiles"]
@@ -91,12 +92,14 @@ def build_tiles_dask(spec: TiledSpec, client, progress: bool = False) -> TiledRe
     fit_f = {t: client.submit(fit_task, spec, *t, pure=False, key=f"piste-fit-{t[0]}-{t[1]}-{time.time_ns()}")
              for t in g.tiles()}
     lit_f = {}
+    # the world's far heights (far-field shadows): after every fit, before every bake
+    far_f = client.submit(far_heights_task, spec, *fit_f.values(), pure=False, key=f"piste-far-{time.time_ns()}")
     for ty, tx in g.tiles():
         deps = [fit_f[(y, x)] for y in range(max(ty - 1, 0), min(ty + 2, g.shape[0]))
-                for x in range(max(tx - 1, 0), min(tx + 2, g.shape[1]))]
+                for x in range(max(tx - 1, 0), min(tx + 2, g.shape[1]))] + [far_f]
         lit_f[(ty, tx)] = client.submit(lit_task, spec, ty, tx, *deps, pure=False,
                                         key=f"piste-lit-{ty}-{tx}-{time.time_ns()}")
-    futures = list(fit_f.values()) + list(lit_f.values())
+    futures = list(fit_f.values()) + [far_f] + list(lit_f.values())
     bar = None
     if progress:
         from tqdm import tqdm

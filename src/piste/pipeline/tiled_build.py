@@ -8,12 +8,20 @@ and returns a few numbers.  Two passes:
    (control points, UVs).  Shared tile edges are bit-identical by construction.
 2. ``lit``  (every tile, after the fits of its 3 x 3 neighbourhood): light-map texels of the tile's
    patches (``(n, res, res, 3)`` uint8, half-bright), with normals averaged across tile seams and
-   shadow rays against the neighbourhood (a halo of one tile: mountains further away than one tile
-   cast no shadow here), the **far field** (the tile's patch-corner grid with colours: a coarse
+   shadow rays against the neighbourhood (a halo of one tile, exact patches) and, beyond it, against
+   the world's **far heights** (see below: a mountain several tiles away shadows this tile as far as the
+   sun angle says), the **far field** (the tile's patch-corner grid with colours: a coarse
    stand-in the runtime draws for distant tiles), and per-cell **visibility** bitsets of the tile's
    patches from eyes over the tile (:func:`piste.pipeline.visibility.compute_visibility`, horizon
    method, 180 azimuths, cells of at least a quarter tile; the tile itself is the only occluder, and
    the streaming renderer does not use them yet: it culls whole tiles by the view frustum).
+
+Between the two passes one task (:func:`far_heights_task`, after every fit) writes the world's
+**far heights** ``far/t_0000_0000.npz``: the patch-corner heights of the whole world (the exact
+surface at the corners), max-pooled over blocks of patches when the world has more than
+:data:`FAR_MAX_CELLS` patches a side (an upper bound: distant ridges never lose height), a few MB at
+most.  Each bake marches its sun rays over it outside its 3 x 3 neighbourhood
+(:func:`piste.lighting.shadows.far_field_occluded`).
 
 Every task is a pure function of its inputs: the single-machine build (:func:`build_tiles`) and the
 Dask build (:mod:`piste.pipeline.dask_build`) run the same tasks and write the same bytes.  A task's
@@ -46,7 +54,8 @@ from piste.formats.geotiff import open_geotiff_windows
 from piste.formats.safe_io import open_file
 from piste.lighting.lightmap import encode_half_bright, sample_points, weld_seam_light
 from piste.lighting.lights import default_lights, dumps_lights, light_terms, loads_lights, shade
-from piste.lighting.shadows import shadow_visibility
+from piste.lighting.lights import DirectionalLight
+from piste.lighting.shadows import far_field_occluded, ray_offset, shadow_rays, shadow_visibility
 from piste.pipeline.build import scene_lights
 from piste.pipeline.cache import content_key
 from piste.pipeline.sources import load_heightfield
@@ -61,10 +70,16 @@ from piste.terrain.tiles import TileError as TileFileError
 __all__ = ["TiledSpec", "TiledResult", "ArraySource", "FileSource", "SyntheticSource", "TileError", "fit_task",
            "lit_task",
            "spec_from_scene", "synthetic_spec",
-           "build_tiles", "write_index", "TILE_BAKE_VERSION", "far_errors"]
+           "build_tiles", "write_index", "TILE_BAKE_VERSION", "far_errors", "far_heights_task", "FAR_HEIGHTS_VERSION",
+           "FAR_MAX_CELLS"]
 
 #: bumped whenever :func:`lit_task`'s output for the same input changes
-TILE_BAKE_VERSION = "piste.tile-bake/3"  # 2: seam light welded (as the one-bundle bake: weld_seam_light); 3: far_error
+TILE_BAKE_VERSION = "piste.tile-bake/4"  # 2: seam light welded (as the one-bundle bake: weld_seam_light); 3: far_error
+# 4: far-field shadows (sun rays beyond the 3 x 3 neighbourhood marched over the world's far heights)
+#: bumped whenever :func:`far_heights_task`'s output for the same fits changes
+FAR_HEIGHTS_VERSION = "piste.far-heights/1"
+#: most cells a side of the far heights grid (more patches a side: corners max-pooled in blocks)
+FAR_MAX_CELLS = 1024
 
 
 class TileError(TileFileError):
@@ -259,6 +274,8 @@ class TiledSpec:
     lights_toml : the lights as :func:`piste.lighting.lights.dumps_lights` text ("": the default lights)
     res, shadows : light-map texels a patch side, terrain self-shadowing
     cell, eye_heights : visibility cells (metres) and eye heights; ``cell = 0`` skips visibility
+    far_shadows : with ``shadows``, sun rays leaving the 3 x 3 neighbourhood are tested against the
+        world's far heights (False: occluders within one tile only, as before)
     """
 
     root: str
@@ -270,6 +287,7 @@ class TiledSpec:
     cell: float = 0.0
     eye_heights: tuple = (1.7, 9.0)
     name: str = "world"
+    far_shadows: bool = True
     _src_key: str = field(default="", repr=False)
 
     @property
@@ -288,8 +306,19 @@ class TiledSpec:
         g = self.grid
         near = [self.fit_key(y, x) for y in range(max(ty - 1, 0), min(ty + 2, g.shape[0]))
                 for x in range(max(tx - 1, 0), min(tx + 2, g.shape[1]))]
+        far = self.far_key() if self.uses_far_heights else ""
         return content_key(TILE_BAKE_VERSION, near, self.lights_toml, self.res, self.shadows, self.cell,
-                           list(self.eye_heights))
+                           list(self.eye_heights), far)
+
+    @property
+    def uses_far_heights(self) -> bool:
+        """True when the bake tests sun rays against the far heights (shadows on, and some tile lies
+        outside some tile's 3 x 3 neighbourhood)."""
+        return bool(self.shadows and self.far_shadows and max(self.grid.shape) > 2)
+
+    def far_key(self) -> str:
+        """The key of the far heights (a function of every fit: of the source and the grid)."""
+        return content_key(FAR_HEIGHTS_VERSION, TILE_FIT_VERSION, self.source_key(), self.grid.to_dict(), FAR_MAX_CELLS)
 
     def lights(self):
         return loads_lights(self.lights_toml, "<lights>") if self.lights_toml else _default_lights()
@@ -319,6 +348,103 @@ def fit_task(spec: TiledSpec, ty: int, tx: int) -> dict:
     return {"tile": (ty, tx), "sha256": sha, "skipped": False, "seconds": time.perf_counter() - t0}
 
 
+def _corner_grid(cp: np.ndarray) -> np.ndarray:
+    """The patch-corner grid ``(ny + 1, nx + 1, 3)`` of a tile's control points ``(ny, nx, 4, 4, 3)``
+    (rows along y, columns along x: exact surface points)."""
+    ny, nx = cp.shape[:2]
+    far = np.empty((ny + 1, nx + 1, 3))
+    far[:-1, :-1] = cp[:, :, 0, 0]
+    far[:-1, -1] = cp[:, -1, 3, 0]
+    far[-1, :-1] = cp[-1, :, 0, 3]
+    far[-1, -1] = cp[-1, -1, 3, 3]
+    return far
+
+
+def far_heights(spec: TiledSpec) -> dict:
+    """The world's far heights from its fits: ``{"heights": (ny, nx) float64 metres, "frame": (4,)
+    float64 (x, y of node [0, 0], node spacing x, y)}``.  Nodes every ``stride`` patch corners
+    (``stride = ceil(patches a side / FAR_MAX_CELLS)``); with ``stride > 1`` a node holds the
+    highest corner within half a stride of it."""
+    g = spec.grid
+    py, px = g.patches
+    corners = np.empty((py + 1, px + 1))
+    store = spec.store
+    for ty, tx in g.tiles():
+        y0, y1, x0, x1 = g.patch_range(ty, tx)
+        cp = store.read_fit(g, ty, tx)["control_points"].reshape(y1 - y0, x1 - x0, 4, 4, 3)
+        corners[y0:y1 + 1, x0:x1 + 1] = _corner_grid(cp)[..., 2]
+    stride = max(1, -(-max(py, px) // FAR_MAX_CELLS))
+    if stride > 1:
+        from scipy.ndimage import maximum_filter
+
+        ny, nx = -(-py // stride) + 1, -(-px // stride) + 1
+        padded = np.pad(corners, ((0, (ny - 1) * stride - py), (0, (nx - 1) * stride - px)), mode="edge")
+        corners = maximum_filter(padded, size=stride + 1 - stride % 2, mode="nearest")[::stride, ::stride]
+    s = g.samples_per_patch * stride
+    (dx, dy), (ox, oy) = g.spacing, g.origin
+    return {"heights": np.ascontiguousarray(corners), "frame": np.array([ox, oy, s * dx, s * dy], dtype=np.float64)}
+
+
+def far_heights_task(spec: TiledSpec, *_deps) -> dict:
+    """Write the world's far heights (after every fit; skipped when its output verifies or no bake
+    needs it): ``{"sha256", "skipped", "seconds"}``.  ``_deps`` only orders the task after the fits."""
+    t0 = time.perf_counter()
+    if not spec.uses_far_heights:
+        return {"sha256": "", "skipped": True, "seconds": 0.0}
+    key = spec.far_key()
+    store = spec.store
+    sha = store.verify("far", 0, 0, key)
+    if sha is not None:
+        return {"sha256": sha, "skipped": True, "seconds": 0.0}
+    try:
+        arrays = far_heights(spec)
+        sha = store.write("far", 0, 0, arrays, key)
+    except Exception as exc:
+        raise TileError("far heights", 0, 0, exc) from exc
+    return {"sha256": sha, "skipped": False, "seconds": time.perf_counter() - t0}
+
+
+_FAR_CACHE: dict = {}
+
+
+def _read_far_heights(spec: TiledSpec) -> dict:
+    """The far heights written by :func:`far_heights_task` (read once per process and key)."""
+    key = spec.far_key()
+    root = str(spec.store.root)
+    if (root, key) not in _FAR_CACHE:
+        a = spec.store.read("far", 0, 0, key=key, names=("heights", "frame"), expect={"frame": ((4,), "f")})
+        h = a["heights"]
+        if h.ndim != 2 or min(h.shape) < 2 or not np.isfinite(h).all():
+            raise TileFileError(spec.store.path("far", 0, 0), (0, 0), f"member 'heights': expected a finite "
+                                f"(ny, nx) grid of at least 2 x 2, got shape {h.shape}", field="heights")
+        _FAR_CACHE.clear()  # one world at a time per process
+        _FAR_CACHE[(root, key)] = {"heights": h.astype(np.float64), "frame": a["frame"].astype(np.float64)}
+    return _FAR_CACHE[(root, key)]
+
+
+def _far_shadows(spec: TiledSpec, ty: int, tx: int, lights, pos, nrm, terms, shadow, eps: float, stats: dict) -> None:
+    """Zero ``shadow (k, m)`` where a directional light's ray, lit by the neighbourhood's exact
+    test, passes below the far heights beyond the 3 x 3 neighbourhood."""
+    far = _read_far_heights(spec)
+    g = spec.grid
+    fx0, fy0, cx, cy = (float(v) for v in far["frame"])
+    y0, x0 = max(ty - 1, 0), max(tx - 1, 0)
+    y1, x1 = min(ty + 1, g.shape[0] - 1), min(tx + 1, g.shape[1] - 1)
+    box = (g.tile_bounds_xy(y0, x0)[0], g.tile_bounds_xy(y0, x0)[1], g.tile_bounds_xy(y1, x1)[2],
+           g.tile_bounds_xy(y1, x1)[3])
+    for col, light in enumerate(lights.direct):
+        if not (light.shadows and light.intensity != 0.0 and isinstance(light, DirectionalLight)):
+            continue  # point and spot lights: occluders within the neighbourhood only
+        idx = np.flatnonzero((terms[:, col] > 0.0) & (shadow[:, col] > 0.0))
+        if len(idx) == 0:
+            continue
+        o, d, _ = shadow_rays(light, pos[idx], nrm[idx], eps)
+        occ = far_field_occluded(far["heights"], (fx0, fy0), (cx, cy), o, d, box)
+        shadow[idx[occ], col] = 0.0
+        stats["far_rays"] = stats.get("far_rays", 0) + len(idx)
+        stats["far_occluded"] = stats.get("far_occluded", 0) + int(occ.sum())
+
+
 def lit_task(spec: TiledSpec, ty: int, tx: int, *_deps) -> dict:
     """Bake one tile's light map, far field and visibility (needs the fits of its neighbourhood).
 
@@ -331,7 +457,7 @@ def lit_task(spec: TiledSpec, ty: int, tx: int, *_deps) -> dict:
     sha = store.verify("lit", ty, tx, key)
     if sha is not None:
         meta = store.read("lit", ty, tx)["meta"]
-        return {"tile": (ty, tx), "sha256": sha, "skipped": True, "seconds": 0.0, "samples": 0, "rays": 0,
+        return {"tile": (ty, tx), "sha256": sha, "skipped": True, "seconds": 0.0, "samples": 0, "rays": 0, "far_rays": 0,
                 "zmin": float(meta[0]), "zmax": float(meta[1]), "patches": int(meta[2])}
     try:
         with single_threaded():  # one BLAS thread: the same bits locally and on any Dask worker
@@ -342,7 +468,10 @@ def lit_task(spec: TiledSpec, ty: int, tx: int, *_deps) -> dict:
     return {"tile": (ty, tx), "sha256": sha, "skipped": False, "seconds": time.perf_counter() - t0, **info}
 
 
-def _bake_tile(spec: TiledSpec, ty: int, tx: int) -> tuple[dict, dict]:
+def _bake_tile(spec: TiledSpec, ty: int, tx: int, halo: int = 1) -> tuple[dict, dict]:
+    """The arrays of tile ``(ty, tx)``'s ``lit`` file and the task's numbers.  ``halo``: the tiles
+    around it whose exact patches are the occluders (1 in a build; a whole world's halo with
+    ``spec.far_shadows`` off is the non-tiled reference bake the tests compare against)."""
     g, res = spec.grid, spec.res
     store = spec.store
     lights = spec.lights()
@@ -357,9 +486,11 @@ def _bake_tile(spec: TiledSpec, ty: int, tx: int) -> tuple[dict, dict]:
     stats: dict = {}
     shadow = None
     if spec.shadows and any(light.shadows for light in lights.direct):
-        occluders, _ = neighbourhood_net(store, g, ty, tx, halo=1)
+        occluders, _ = neighbourhood_net(store, g, ty, tx, halo=halo)
         terms = light_terms(lights, pos, nrm)
         shadow = shadow_visibility(occluders, lights, pos, nrm, terms, stats=stats)
+        if spec.uses_far_heights and halo == 1:
+            _far_shadows(spec, ty, tx, lights, pos, nrm, terms, shadow, ray_offset(occluders), stats)
         del occluders
     colors = shade(lights, pos, nrm, shadow).reshape(m, res, res, 3)
     colors = weld_seam_light(ring_net, colors)[centre]
@@ -368,11 +499,7 @@ def _bake_tile(spec: TiledSpec, ty: int, tx: int) -> tuple[dict, dict]:
     py0, py1, px0, px1 = g.patch_range(ty, tx)
     ny, nx = py1 - py0, px1 - px0
     cp = ring_net.control_points[centre].reshape(ny, nx, 4, 4, 3)
-    far = np.empty((ny + 1, nx + 1, 3))
-    far[:-1, :-1] = cp[:, :, 0, 0]
-    far[:-1, -1] = cp[:, -1, 3, 0]
-    far[-1, :-1] = cp[-1, :, 0, 3]
-    far[-1, -1] = cp[-1, -1, 3, 3]
+    far = _corner_grid(cp)
     t = texels.reshape(ny, nx, res, res, 3)
     far_rgb = np.empty((ny + 1, nx + 1, 3), np.uint8)
     far_rgb[:-1, :-1] = t[:, :, 0, 0]
@@ -391,7 +518,7 @@ def _bake_tile(spec: TiledSpec, ty: int, tx: int) -> tuple[dict, dict]:
         for k, v in va.items():
             arrays[f"vis_{k}"] = v
         arrays["vis_meta"] = np.array(_json(vm))
-    info = {"samples": m * res * res, "rays": int(stats.get("rays", 0)), "zmin": float(lo[2]), "zmax": float(hi[2]),
+    info = {"samples": m * res * res, "rays": int(stats.get("rays", 0)), "far_rays": int(stats.get("far_rays", 0)), "zmin": float(lo[2]), "zmax": float(hi[2]),
             "patches": n}
     return arrays, info
 
@@ -470,6 +597,8 @@ def build_tiles(spec: TiledSpec, progress: bool = False) -> TiledResult:
     spec.store.root.mkdir(parents=True, exist_ok=True)
     fits, lits = {}, {}
     for step, fn, out in (("fit", fit_task, fits), ("lit", lit_task, lits)):
+        if step == "lit":
+            far_heights_task(spec)  # after every fit, before any bake
         it = g.tiles()
         if progress:
             from tqdm import tqdm

@@ -1,0 +1,116 @@
+"""Shadows across tiles: a tiled bake sees occluders beyond its 3 x 3 neighbourhood through the
+world's far heights (a ridge three tiles away shadows a valley as the non-tiled bake does)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from piste.lighting.lights import AmbientLight, DirectionalLight, Lights, dumps_lights
+from piste.lighting.shadows import far_field_occluded
+from piste.pipeline import tiled_build
+from piste.pipeline.tiled_build import ArraySource, TiledSpec, _bake_tile, build_tiles, far_heights
+from piste.terrain.tiles import TileError, TileGrid, TileStore
+
+SPP, TP, SP = 3, 4, 10.0  # samples a patch, patches a tile, metres a sample: tiles of 120 m
+TILE_M = TP * SPP * SP
+
+
+def _ridge_world(root, elevation: float, far_shadows: bool = True) -> TiledSpec:
+    """7 x 3 tiles: a 250 m ridge along y in tile column 4 (x = 540 m), lower ground elsewhere; a
+    sun from +x at ``elevation`` degrees.  Tile (1, 1) (x 120..240 m) lies three tiles from the ridge."""
+    nx, ny = 7 * TP * SPP + 1, 3 * TP * SPP + 1
+    x, y = np.meshgrid(np.arange(nx) * SP, np.arange(ny) * SP)
+    z = 250.0 * np.exp(-((x - 4.5 * TILE_M) / 45.0) ** 2) + 5.0 * np.sin(y / 70.0)
+    e = np.radians(elevation)
+    lights = Lights((AmbientLight(color=(0.3, 0.3, 0.35)), DirectionalLight(direction=(-np.cos(e), 0.0, -np.sin(e)))))
+    grid = TileGrid((ny, nx), SPP, TP, (SP, SP))
+    return TiledSpec(str(root), ArraySource(z, (SP, SP)), grid, dumps_lights(lights), res=4, shadows=True,
+                     far_shadows=far_shadows)
+
+
+def _shadowed(texels: np.ndarray, lit: np.ndarray) -> np.ndarray:
+    """Texels in the sun's shadow: over 15 grey levels darker than the same texels all sun-lit
+    (``lit``; the sun lights the valley ~3x brighter than the sky alone): (n, res, res) bool."""
+    return texels[..., 1].astype(int) < lit[..., 1].astype(int) - 15
+
+
+@pytest.mark.parametrize("elevation", [12.0, 34.8])
+def test_ridge_three_tiles_away_shadows_the_valley_as_the_single_bake_does(tmp_path, elevation):
+    spec = _ridge_world(tmp_path / "w", elevation)
+    r = build_tiles(spec)
+    assert r.lit[(1, 1)]["far_rays"] > 0
+    tiled = TileStore(spec.root).read("lit", 1, 1)["texels"]
+    # the reference: the same tile's samples, shading and encoding, shadow rays against every exact
+    # patch of the world (a non-tiled bake); and the bake as it was (occluders within one tile only)
+    ref, _ = _bake_tile(replace(spec, far_shadows=False), 1, 1, halo=99)
+    near, _ = _bake_tile(replace(spec, far_shadows=False), 1, 1, halo=1)
+    ref, near = ref["texels"], near["texels"]
+    sr = _shadowed(ref, near)
+    assert sr.mean() > 0.4  # the ridge's shadow covers the valley, or part of it
+    d_near = np.abs(near.astype(int) - ref.astype(int))
+    d_tiled = np.abs(tiled.astype(int) - ref.astype(int))
+    assert d_near.mean() > 20.0  # today: lit where the single bake is in shadow
+    # tolerance: a mean of 10 grey levels, the shadow's edge within two texel lines across the tile
+    # (the far heights are the patch-corner grid: chords 30 m long round off the ridge's crest)
+    assert d_tiled.mean() <= 10.0
+    side = TP * spec.res
+    assert abs(int(_shadowed(tiled, near).sum()) - int(sr.sum())) <= 2 * side
+    if elevation < 20.0:  # the whole valley in shadow: exactly the single bake's texels
+        assert np.array_equal(tiled, ref)
+
+
+def test_far_shadows_off_is_the_old_bake_and_changes_the_key(tmp_path):
+    on, off = _ridge_world(tmp_path / "a", 34.8), _ridge_world(tmp_path / "b", 34.8, far_shadows=False)
+    assert on.lit_key(1, 1) != off.lit_key(1, 1)
+    build_tiles(off)
+    assert not (tmp_path / "b" / "far").exists()
+    assert off.uses_far_heights is False and on.uses_far_heights is True
+
+
+def test_far_heights_are_the_corner_grid_and_max_pooled_beyond_the_limit(tmp_path, monkeypatch):
+    spec = _ridge_world(tmp_path / "w", 30.0)
+    build_tiles(spec)
+    far = far_heights(spec)
+    h, frame = far["heights"], far["frame"]
+    z = spec.source.z
+    assert h.shape == (13, 29) and np.allclose(frame, [0.0, 0.0, 30.0, 30.0])
+    assert np.allclose(h, z[::SPP, ::SPP], atol=1.0)  # the fitted corners follow the samples
+    monkeypatch.setattr(tiled_build, "FAR_MAX_CELLS", 7)  # 28 patches a side -> stride 4
+    pooled = far_heights(spec)
+    hp = pooled["heights"]
+    assert hp.shape == (4, 8) and np.allclose(pooled["frame"], [0.0, 0.0, 120.0, 120.0])
+    for i in range(hp.shape[0]):
+        for j in range(hp.shape[1]):  # each node: the highest corner within half a stride
+            blk = h[max(4 * i - 2, 0):4 * i + 3, max(4 * j - 2, 0):4 * j + 3]
+            assert hp[i, j] == blk.max()
+
+
+def test_far_heights_stale_or_torn_is_a_tile_error(tmp_path):
+    spec = _ridge_world(tmp_path / "w", 30.0)
+    build_tiles(spec)
+    p = TileStore(spec.root).path("far", 0, 0)
+    p.write_bytes(p.read_bytes()[:200])
+    tiled_build._FAR_CACHE.clear()
+    with pytest.raises(TileError, match="far"):
+        tiled_build._bake_tile(spec, 1, 1)
+
+
+def test_far_field_occluded_marches_only_outside_the_box():
+    h = np.zeros((11, 11))
+    h[:, 8] = 100.0  # a wall at x = 80
+    o = np.array([[10.0, 50.0, 0.0], [10.0, 50.0, 0.0], [10.0, 50.0, 0.0], [90.0, 50.0, 0.0]])
+    up = np.array([0.7, 0.0, 0.7]) / np.hypot(0.7, 0.7)  # 45 degrees: at x = 80 the ray is 70 m up
+    d = np.array([[1.0, 0.0, 0.2], up, [-1.0, 0.0, 0.2], [1.0, 0.0, 0.2]])
+    d[0] /= np.linalg.norm(d[0])
+    d[2] /= np.linalg.norm(d[2])
+    d[3] /= np.linalg.norm(d[3])
+    occ = far_field_occluded(h, (0.0, 0.0), (10.0, 10.0), o, d, (0.0, 0.0, 30.0, 100.0))
+    assert occ.tolist() == [True, True, False, False]  # low and 45-degree rays hit the wall; away/past: lit
+    # the wall (bilinear: its foot from x = 70 to 90) inside the excluded box is not an occluder
+    assert not far_field_occluded(h, (0.0, 0.0), (10.0, 10.0), o[:1], d[:1], (0.0, 0.0, 95.0, 100.0)).any()
+    # a steeper ray clears it
+    steep = np.array([[1.0, 0.0, 2.0]]) / np.sqrt(5.0)
+    assert not far_field_occluded(h, (0.0, 0.0), (10.0, 10.0), o[:1], steep, (0.0, 0.0, 30.0, 100.0)).any()
