@@ -233,3 +233,39 @@ def test_bad_visibility_sets_name_the_tile(rough_world, tmp_path):
         assert "1,1" in str(exc.value) or "(1, 1)" in str(exc.value)
     finally:
         cache.close()
+
+
+def test_a_level_switch_does_not_pop(world, gl):
+    """The camera still, the pixel error set just above and then just below one tile's far-grid
+    error on screen: the tile goes from its far grid to the middle level (evaluated patches), drawn
+    fully morphed onto the far grid at that point, so the picture stays the same; without the
+    geomorph the switch shows."""
+    r = S.StreamingRenderer(world, size=(160, 120), ctx=gl)
+    try:
+        cam = next(S.fly_path(r.cache.index, 1)).with_aspect(160, 120)
+        c, e = r.cache, np.asarray(cam.eye)
+        ps = 120 / (2 * np.tan(np.radians(cam.fov_y) / 2))
+        seen = S._boxes_visible(cam.frustum_planes(), c.lo, c.hi)
+        d3 = np.sqrt((np.maximum(np.maximum(c.lo - e, e - c.hi), 0.0) ** 2).sum(1))
+        px = [(c.chord_error[t] * ps / d3[i], t) for i, t in enumerate(c.tiles)
+              if seen[i] and c.distances(e)[i] > c.near_radius]
+        err, tile = max(px)  # the far tile whose grid shows most
+        assert err > 0.5
+
+        def pair(morph: bool):
+            out = []
+            for pe in (err * 1.001, err * 0.999):
+                r.pixel_error = pe
+                if not morph:
+                    c.morph_factors = lambda eye, p, q: {}
+                img = r.render(cam, wait=True).astype(float)
+                out.append((img, c.near_level.get(tile)))
+            return out
+
+        (a, la), (b, lb) = pair(True)
+        assert la is None and lb == S.MID_SAMPLES  # the tile switched from far to middle
+        assert np.abs(a - b).max() <= 2.0  # no pop (rounding at most)
+        (a, _), (b, _) = pair(False)
+        assert (np.abs(a - b).max(-1) > 8).sum() > 10  # without the geomorph it pops
+    finally:
+        r.close()

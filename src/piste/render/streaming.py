@@ -2,13 +2,27 @@
 memory budget, loaded by a background thread, with coarse far-field stand-ins so the horizon never
 shows holes.
 
-Two levels a tile
------------------
-* **far** (always drawn until its near mesh is resident): the tile's patch-corner grid from the
-  build (``lit/*.npz`` ``far_positions``/``far_colors``: one vertex a patch corner, i.e. a 2 x 2
-  evaluation of every patch with shared corners).  Corners are exact surface points and
-  bit-identical between neighbouring tiles, so far tiles meet without cracks.
-* **near**: every patch evaluated on its ``res x res`` light-map grid, coloured by its baked texels.
+Levels of a tile
+----------------
+Every level is drawn like the course's terrain (``terrain.frag.glsl``, modulate): the base snow
+texture times the tile's light map, a texture of its baked texels welded across patches
+(:func:`light_grid`, sampled bilinearly like the course's atlas), fogged per vertex as a bundle of
+the same terrain is.  The geometry differs by level:
+
+* **far** (resident for every tile): the tile's patch-corner grid from the build (``lit/*.npz``
+  ``far_positions``; one vertex a patch corner) at corner strides 1, 2, 4 and 8.  Corners are exact
+  surface points and bit-identical between neighbouring tiles, so far tiles meet without cracks.
+* **middle** (paged): every patch evaluated 3 samples a side (``MID_SAMPLES``).
+* **near** (paged): every patch evaluated ``max(res, 4)`` samples a side (``NEAR_SAMPLES``).
+
+A tile's level follows its error on screen: the build measures how far each tile's patches leave
+the corner grid and the middle level (``far_error``, :func:`piste.pipeline.tiled_build.far_errors`);
+a tile is drawn at the coarsest level whose error projects to at most ``pixel_error`` pixels
+(``FAR_PIXEL_ERROR``), nearest tiles first under the budget (and near within ``near_radius``).
+Near and middle meshes geomorph: each vertex carries its height on the next coarser level and is
+drawn between the two by the tile's error (:meth:`TileCache.morph_factors`), fully on the coarser
+level where the tile switches, so a switch does not pop.  Near tiles draw through the build's
+per-tile visibility sets when the eye is over them (:class:`TileSets`).
 
 Where a near tile meets a far one, the near tile's border follows the patch edge curves and the
 far tile's border their chords.  Both lie in the same vertical plane (patch edges are straight in
@@ -19,14 +33,15 @@ higher, the other tile's skirt closes the gap; skirts are hidden under the terra
 Paging
 ------
 :class:`TileCache` (no OpenGL; testable alone) keeps every far tile within the view distance
-(loaded up front at corner strides 1, 2, 4 and 8, drawn coarser with distance: about 20 bytes a
-patch) and chooses near tiles by distance from the eye (nearest
-first, within ``near_radius``) while their bytes fit ``budget_bytes``; a loader thread builds the
-near meshes, the renderer uploads finished ones and releases evicted ones.  ``resident_bytes``
-(far + near meshes, the CPU copies; the GPU holds the same arrays) never exceeds the budget.
+(loaded up front at corner strides 1, 2, 4 and 8 with its light map) and chooses the paged
+levels (:meth:`TileCache.update`) while their bytes fit ``budget_bytes``; a loader thread builds
+the meshes, the renderer uploads finished ones and releases evicted ones.  ``resident_bytes``
+(far + paged meshes and light maps, the CPU copies; the GPU holds the same arrays) never exceeds
+the budget.
 
 :class:`StreamingRenderer` draws a frame: far tiles not covered by a resident near tile, near
-tiles, frustum-culled per tile, fogged to the sky colour at the view distance.
+tiles, frustum-culled per tile, fogged like the course (and faded out over the last fifth of
+the far plane), the sky gradient behind.
 :class:`StreamingTerrain` is the same renderer as the runtime's terrain (the interface of
 :class:`piste.render.frame.TerrainRenderer`): ``piste render|view WORLD.tiles`` draw through
 :class:`piste.pipeline.preview.ScenePreview` with riders, objects and shadows like any scene
