@@ -19,7 +19,7 @@ from PIL import Image
 from piste.errors import FormatError
 from piste.formats.ssx import make_level, parse_pbd, read_pbd
 from piste.formats.ssx.multitool import brighten, darken, export_texture, read_project, write_project
-from piste.formats.ssx.pbd import PATCH_SIZE
+from piste.formats.ssx.pbd import LIGHT_DTYPE, PATCH_SIZE, hash_section_bytes
 from piste.formats.ssx.ssh import SshBank, SshImage, lightmap_bank, lightmap_pages
 from piste.formats.ssx.synth import pbd_bytes
 
@@ -121,10 +121,24 @@ def _level_with_sections():
     unchanged)."""
     lv = make_level(rows=2, cols=3, seed=5)
     rng = np.random.default_rng(9)
-    sec = {"instances": (3, rng.bytes(3 * 112)), "lights": (2, rng.bytes(2 * 96)), "splines": (1, rng.bytes(48)),
+    sec = {"instances": (3, rng.bytes(3 * 112)), "lights": (2, _lights(2).tobytes()), "splines": (1, rng.bytes(48)),
            "spline_segments": (2, rng.bytes(2 * 112)), "models": (1, rng.bytes(64)),
-           "model_pointers": (None, rng.bytes(16)), "mesh_data": (None, rng.bytes(256))}
+           "model_pointers": (None, rng.bytes(16)), "hash": (None, hash_section_bytes([-7, 123456789])),
+           "mesh_data": (None, rng.bytes(256))}
     return parse_pbd(pbd_bytes(lv.pbd.records, 3, 1, sec)), lv
+
+
+def _lights(k: int, seed: int = 3) -> np.ndarray:
+    """``k`` light records with every field set (finite floats, integers across the u32 range)."""
+    rng = np.random.default_rng(seed)
+    rec = np.zeros(k, LIGHT_DTYPE)
+    for name in LIGHT_DTYPE.names:
+        shape = rec[name].shape
+        if rec[name].dtype.kind == "f":
+            rec[name] = rng.uniform(-5e3, 5e3, shape).astype(np.float32)
+        else:
+            rec[name] = rng.integers(0, 2**32, shape, dtype=np.uint64).astype(np.uint32)
+    return rec
 
 
 def _convert_and_import(pbd, lv, tmp_path, name):
@@ -180,8 +194,12 @@ def test_changed_patch_count_gets_the_minimal_default(tmp_path):
     project = read_project(proj)
     out, _, _ = project.to_level()
     assert len(out) == 5 and "6 patches, Patches.json 5" in project.notes[0] and "3 instances" in project.notes[0]
-    assert {k: v for k, v in out.counts.items() if v} == {"patches": 5, "textures": 3}
-    assert out.raw[out.patch_offset + 5 * PATCH_SIZE:] == b""  # no filler bytes after the patches
+    assert "lights" not in project.notes[0]  # they come from Lights.json
+    assert {k: v for k, v in out.counts.items() if v} == {"patches": 5, "textures": 3, "lights": 2}
+    # after the patches: the lights and their hash list (each padded to 16 bytes), no filler bytes
+    tail = out.raw[out.patch_offset + 5 * PATCH_SIZE:]
+    assert tail == pbd.read_lights().tobytes() + b"\0" * 8 + hash_section_bytes([-7, 123456789]) + b"\0" * 12
+    assert out.light_hashes().tolist() == [-7, 123456789]
 
 
 def test_empty_level_invents_nothing(tmp_path, capsys):
@@ -202,10 +220,12 @@ def test_empty_level_invents_nothing(tmp_path, capsys):
     # without piste's record (a project as the Multitool writes it): patches + the minimal default
     for f in ("PisteLevel.json", "PisteLevel.pbd"):
         (tmp_path / "mta" / f).unlink()
-    (tmp_path / "mta" / "Lights.json").write_text("{}")
+    (tmp_path / "mta" / "Lights.json").write_text("{}")  # read: no lights
+    (tmp_path / "mta" / "Splines.json").write_text("{}")
     capsys.readouterr()
     assert main(["ssx", "import", str(tmp_path / "mta"), "--out", str(tmp_path / "c" / "C.pbd")]) == 0
-    assert "Lights.json: not read by piste" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "Splines.json: not read by piste" in err and "Lights.json" not in err
     c = read_pbd(tmp_path / "c" / "C.pbd")
     assert {k: v for k, v in c.counts.items() if v} == {"patches": 4, "textures": 3}
     assert c.raw[c.patch_offset + 4 * PATCH_SIZE:] == b""

@@ -32,9 +32,26 @@ What a project holds, and nothing else, becomes the level (:meth:`Project.to_lev
   splines, models and every other section come back as they were; texture numbering starts from
   the recorded bank order (which the level's materials refer to), then first appearance;
 * otherwise the ``.pbd`` holds the project's patches and the minimal default for every other
-  section (empty, count 0; :func:`piste.formats.ssx.synth.pbd_bytes`).  The Multitool's
-  ``Instances.json``, ``Lights.json``, ``Splines.json``, ``Models.json``, ... are not read by
-  piste: each one present is named in :attr:`Project.notes` (what the new level lacks);
+  section (empty, count 0; :func:`piste.formats.ssx.synth.pbd_bytes`) but the lights.  The
+  Multitool's ``Instances.json``, ``Splines.json``, ``Models.json``, ... are not read by piste:
+  each one present is named in :attr:`Project.notes` (what the new level lacks);
+* **lights** (``Lights.json``, ``{"Lights": [...]}``; SSX-Library ``LightJsonHandler.cs`` and the
+  export/rebuild in ``TrickyLevelInterface.cs``, facts only): one object per 92-byte light record
+  (:data:`~piste.formats.ssx.pbd.LIGHT_DTYPE`), fields ``LightName``, ``Type``, ``SpriteRes``,
+  ``UnknownFloat1``, ``UnknownInt1``, ``Colour[3]``, ``Direction[3]``, ``Position[3]``,
+  ``LowestXYZ[3]``, ``HighestXYZ[3]``, ``UnknownFloat2``, ``UnknownInt2``, ``UnknownFloat3``,
+  ``UnknownInt3`` (the record's fields in file order, copied as they are; integers as signed
+  32-bit) and ``Hash`` (the light's entry in the hash section's light list; 0 when it has none).
+  ``LightName`` lives in the level's ``.map`` (which piste does not write): piste writes the
+  Multitool's fallback ``Light_<i>`` and ignores the name on import.  Non-finite floats are the
+  strings ``"NaN"``, ``"Infinity"``, ``"-Infinity"`` (Json.NET's default).  ``convert --to
+  multitool`` always writes it (as the Multitool does); on import, with the recorded level, the
+  light records are written over the level's in place (a light whose fields did not change keeps
+  its stored bytes; the count must stay, the later sections' offsets are not relocated), the
+  hashes likewise when the level has a hash section with a light list of that count; without the
+  recorded level the lights section holds the project's lights and, when there are any, the hash
+  section holds only their hashes (:func:`piste.formats.ssx.pbd.hash_section_bytes`).  A project
+  without ``Lights.json`` keeps the recorded level's lights (or has none);
 * no ``Textures/`` folder: no texture bank; no ``Lightmaps/`` folder: no light-map bank.
 
 Reading and writing are deterministic: the same input gives the same bytes.
@@ -61,12 +78,15 @@ import numpy as np
 from piste.errors import FormatError, PisteError
 from piste.formats.atomic import write_bytes_atomic
 from piste.formats.safe_io import anchor, loads_json, read_regular
-from piste.formats.ssx.pbd import COUNT_NAMES, MAX_FILE_BYTES as MAX_PBD_BYTES, Pbd, parse_pbd, records_from_arrays
+from piste.formats.ssx.pbd import (
+    COUNT_NAMES, LIGHT_DTYPE, LIGHT_SIZE, MAX_FILE_BYTES as MAX_PBD_BYTES, Pbd, hash_section_bytes, parse_pbd,
+    records_from_arrays,
+)
 from piste.formats.ssx.ssh import INDEXED, PAGE_SIZE, SshBank, SshImage, half_bright, lightmap_bank
 from piste.formats.ssx.synth import pbd_bytes
 
 __all__ = ["write_project", "read_project", "Project", "brighten", "darken", "export_texture", "export_lightmap",
-           "SOURCE_PBD", "SOURCE_JSON", "OTHER_JSON"]
+           "SOURCE_PBD", "SOURCE_JSON", "OTHER_JSON", "LIGHTS_JSON", "lights_json", "lights_from_json"]
 
 #: most patches / images a project may hold (hostile files are refused before allocating)
 MAX_PATCHES = 1_000_000
@@ -82,8 +102,20 @@ _NAME = re.compile(r"^[A-Za-z0-9_.\- ]+\.png$")
 SOURCE_PBD = "PisteLevel.pbd"
 SOURCE_JSON = "PisteLevel.json"
 #: the Multitool's other files, which piste does not read (named in Project.notes when present)
-OTHER_JSON = ("Instances.json", "ParticleInstances.json", "Materials.json", "Lights.json", "Splines.json",
+OTHER_JSON = ("Instances.json", "ParticleInstances.json", "Materials.json", "Splines.json",
               "Models.json", "ParticleModels.json", "Cameras.json", "AIP.json", "SOP.json", "SSFLogic.json")
+#: the Multitool's lights file (read and written)
+LIGHTS_JSON = "Lights.json"
+#: most lights a Lights.json may hold
+MAX_LIGHTS = 1_000_000
+#: Lights.json keys of the record's fields, in file order: (key, LIGHT_DTYPE field, kind)
+_LIGHT_KEYS = (("Type", "type", "i"), ("SpriteRes", "sprite_res", "i"), ("UnknownFloat1", "unknown_float1", "f"),
+               ("UnknownInt1", "unknown_int1", "i"), ("Colour", "colour", "v"), ("Direction", "direction", "v"),
+               ("Position", "position", "v"), ("LowestXYZ", "lowest", "v"), ("HighestXYZ", "highest", "v"),
+               ("UnknownFloat2", "unknown_float2", "f"), ("UnknownInt2", "unknown_int2", "i"),
+               ("UnknownFloat3", "unknown_float3", "f"), ("UnknownInt3", "unknown_int3", "i"))
+_NONFINITE = {"NaN": float("nan"), "Infinity": float("inf"), "-Infinity": float("-inf")}
+_F32_MAX = float(np.finfo(np.float32).max)
 
 
 # ----------------------------------------------------------------------------- the conventions
@@ -138,6 +170,85 @@ def _bank_names(bank: SshBank | None) -> list | None:
     return [f"{i:04d}.png" for i in range(len(bank))]
 
 
+# ----------------------------------------------------------------------------- lights
+def _json_float(x) -> float | str:
+    v = float(x)
+    if np.isfinite(v):
+        return v
+    return "NaN" if np.isnan(v) else ("Infinity" if v > 0 else "-Infinity")
+
+
+def lights_json(lights: np.ndarray, hashes=None) -> dict:
+    """``{"Lights": [...]}`` of light records ``(k,)`` :data:`~piste.formats.ssx.pbd.LIGHT_DTYPE`
+    and their hashes ``(k,)`` (None: 0 each), the Multitool's ``Lights.json`` (module docstring)."""
+    rec = np.asarray(lights, LIGHT_DTYPE).reshape(-1)
+    h = np.zeros(len(rec), np.int64) if hashes is None else np.asarray(hashes, np.int64).reshape(-1)
+    signed = {f: rec[f].astype(np.uint32).view(np.int32) for _, f, kind in _LIGHT_KEYS if kind == "i"}
+    out = []
+    for i in range(len(rec)):
+        d = {"LightName": f"Light_{i}"}
+        for key, f, kind in _LIGHT_KEYS:
+            if kind == "i":
+                d[key] = int(signed[f][i])
+            elif kind == "f":
+                d[key] = _json_float(rec[f][i])
+            else:
+                d[key] = [_json_float(x) for x in rec[f][i]]
+        d["Hash"] = int(np.int64(h[i]).astype(np.int32)) if -2**31 <= h[i] < 2**32 else 0
+        out.append(d)
+    return {"Lights": out}
+
+
+def _light_number(v, path, where: str, key: str, kind: str):
+    """A Lights.json value as the record stores it: ``i`` a 32-bit integer (signed or unsigned),
+    ``f`` a float32 (a number or "NaN"/"Infinity"/"-Infinity")."""
+    if kind == "i":
+        if isinstance(v, bool) or not isinstance(v, int) or not -2**31 <= v < 2**32:
+            raise FormatError(path, f"{where}: {key} must be a 32-bit integer, got {v!r:.40}", field=key)
+        return v & 0xFFFFFFFF
+    if isinstance(v, str) and v in _NONFINITE:
+        return _NONFINITE[v]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or (np.isfinite(v) and abs(v) > _F32_MAX):
+        raise FormatError(path, f"{where}: {key} must be a number (float32), got {v!r:.40}", field=key)
+    return float(v)
+
+
+def lights_from_json(doc, path) -> tuple[np.ndarray, np.ndarray]:
+    """``(records (k,) LIGHT_DTYPE, hashes (k,) int64)`` from a parsed ``Lights.json`` (``{"Lights":
+    [...]}`` or a bare list).  Scalars the file leaves out are 0 (as the Multitool's JSON reader
+    leaves them); the five vectors are required (3 numbers each)."""
+    items = doc.get("Lights") if isinstance(doc, dict) else doc
+    if isinstance(doc, dict) and "Lights" not in doc:
+        items = []  # the Multitool reads {} as no lights
+    if not isinstance(items, list):
+        raise FormatError(path, "expected a list of lights (or {\"Lights\": [...]})", field="Lights")
+    if len(items) > MAX_LIGHTS:
+        raise FormatError(path, f"{len(items)} lights: more than the limit of {MAX_LIGHTS}", field="Lights")
+    rec = np.zeros(len(items), LIGHT_DTYPE)
+    hashes = np.zeros(len(items), np.int64)
+    for i, d in enumerate(items):
+        where = f"light {i}"
+        if not isinstance(d, dict):
+            raise FormatError(path, f"{where}: expected an object, got {type(d).__name__}", field="Lights")
+        for key, f, kind in _LIGHT_KEYS:
+            if kind == "v":
+                v = d.get(key)
+                if not isinstance(v, list) or len(v) != 3:
+                    raise FormatError(path, f"{where}: {key} must be a list of 3 numbers, got {v!r:.60}", field=key)
+                rec[f][i] = [_light_number(x, path, where, key, "f") for x in v]
+            else:
+                rec[f][i] = _light_number(d.get(key, 0), path, where, key, kind)
+        h = _light_number(d.get("Hash", 0), path, where, "Hash", "i")
+        hashes[i] = h - (1 << 32) if h >= 1 << 31 else h
+    return rec, hashes
+
+
+def _light_keys(rec: np.ndarray, hashes) -> list:
+    """Per light, its Lights.json fields without the name, comparable with == (NaN as a string)."""
+    doc = lights_json(rec, hashes)["Lights"]
+    return [json.dumps({k: v for k, v in d.items() if k != "LightName"}, sort_keys=True) for d in doc]
+
+
 # ----------------------------------------------------------------------------- writing
 def write_project(folder, pbd: Pbd, textures: SshBank | None = None, lightmaps: SshBank | None = None) -> Path:
     """Write ``Patches.json``, ``Textures/NAME.png`` and ``Lightmaps/NNNN.png`` into ``folder`` the
@@ -165,6 +276,8 @@ def write_project(folder, pbd: Pbd, textures: SshBank | None = None, lightmaps: 
             "LightmapID": int(pbd.lightmap_page[k]),
         })
     write_bytes_atomic(folder / "Patches.json", json.dumps({"Patches": patches}, indent=1).encode())
+    write_bytes_atomic(folder / LIGHTS_JSON, json.dumps(lights_json(pbd.read_lights(), pbd.light_hashes()),
+                                                        indent=1).encode())
     if textures is not None:
         for name, im in zip(tex_names, textures.images):
             write_bytes_atomic(folder / "Textures" / name, _png_bytes(export_texture(im)))
@@ -202,6 +315,8 @@ class Project:
     has_lightmaps: bool = False
     source: Pbd | None = None
     notes: list = field(default_factory=list)
+    lights: np.ndarray | None = None      # (k,) LIGHT_DTYPE from Lights.json, None without the file
+    light_hashes: np.ndarray | None = None  # (k,) int64
 
     def __len__(self) -> int:
         return len(self.control_points)
@@ -234,11 +349,47 @@ class Project:
             data = bytearray(pbd.to_bytes())
             if textures is not None:  # the header's texture count follows the bank written beside it
                 struct.pack_into("<I", data, 4 + 4 * COUNT_NAMES.index("textures"), len(textures))
+            if self.lights is not None:
+                self._lights_in_place(pbd, data)
             return parse_pbd(bytes(data), self.path), textures, lightmaps
         rec = records_from_arrays(self.control_points, self.uv, self.lightmap_rect, self.lightmap_page,
                                   self.texture_index, self.surface_type, self.trick_only)
         platform = self.source.platform if self.source is not None else 1
-        return parse_pbd(pbd_bytes(rec, n_tex, platform), self.path), textures, lightmaps
+        sections = {}
+        if self.lights is not None and len(self.lights):
+            sections = {"lights": (len(self.lights), self.lights.tobytes()),
+                        "hash": (None, hash_section_bytes(self.light_hashes))}
+        return parse_pbd(pbd_bytes(rec, n_tex, platform, sections), self.path), textures, lightmaps
+
+    def _lights_in_place(self, pbd: Pbd, data: bytearray) -> None:
+        """Write the project's lights over the recorded level's (same count), and their hashes over
+        its hash section's light list when it has one of that count; unchanged lights and hashes
+        keep their stored bytes."""
+        lpath = self.path.parent / LIGHTS_JSON
+        old = pbd.read_lights()
+        k = len(self.lights)
+        if k != len(old):
+            raise FormatError(lpath, f"{k} lights, but {SOURCE_PBD} holds {len(old)}: the count of a recorded "
+                                     "level's lights cannot change (the sections after them hold absolute offsets "
+                                     f"piste does not relocate); remove {SOURCE_JSON} to build the level from the "
+                                     "project's files alone", field="Lights")
+        old_h = pbd.light_hashes()
+        same = [a == b for a, b in zip(_light_keys(self.lights, None), _light_keys(old, None))]
+        rec = self.lights.copy()
+        keep = np.array(same, bool)
+        rec[keep] = old[keep]
+        off = pbd.offsets["lights"]
+        data[off:off + k * LIGHT_SIZE] = np.ascontiguousarray(rec, LIGHT_DTYPE).tobytes()
+        h = pbd.hash_header()
+        want = np.asarray(self.light_hashes, np.int64)
+        if old_h is not None and np.array_equal(old_h, want):
+            return
+        if h is not None and h["count_lights"] == k:
+            lo = pbd.offsets["hash"] + h["offset_lights"]
+            data[lo:lo + 8 * k] = hash_section_bytes(want)[4 * 13:]
+        elif want.any():
+            self.notes.append(f"{LIGHTS_JSON}: the lights' Hash values are not kept: {SOURCE_PBD} has no hash "
+                              f"section with a list of {k} light hashes to write them into")
 
 
 def _indexed(name: str, rgba: np.ndarray) -> SshImage:
@@ -390,9 +541,13 @@ def read_project(folder) -> Project:
             k = int(np.argmax(bad))
             raise FormatError(jpath, f"patch {k}: LightmapID {int(page[k])} but Lightmaps/ holds {len(pngs)} page(s)",
                               field="LightmapID")
+    lpath = folder / LIGHTS_JSON
+    if lpath.exists() or lpath.is_symlink():
+        proj.lights, proj.light_hashes = lights_from_json(
+            loads_json(read_regular(lpath, MAX_JSON_BYTES, what="lights file"), lpath), lpath)
     if source is not None and len(source) != n:
-        kept = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in source.counts.items()
-                         if v and k not in ("patches", "textures", "lightmap_size"))
+        skip = ("patches", "textures", "lightmap_size") + (("lights",) if proj.lights is not None else ())
+        kept = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in source.counts.items() if v and k not in skip)
         proj.notes.append(f"{SOURCE_PBD} holds {len(source)} patches, Patches.json {n}: the level's other sections "
                           f"({kept or 'none'}) hold absolute offsets piste does not relocate, so the new level has "
                           "the minimal default (empty) for them")

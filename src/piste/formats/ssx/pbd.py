@@ -10,6 +10,14 @@ Facts from ``/work/shared/SSX-FORMATS.md`` (public community documentation; no c
   powers of the parameter, ``P[i][j]`` with ``i`` along ``u``) in *reversed* order: the file holds
   ``C[3][3], C[3][2], ..., C[0][0]``; world units are centimetres.
 
+Light records (92 bytes, :data:`LIGHT_DTYPE`; SSX-Library ``PBDHandler.cs`` ``struct Light`` and
+OpenSlope ``Trailmap/specs/220-level-pbd.md`` "Light record", facts only) are decoded on request
+(:meth:`Pbd.read_lights`), with the light name hashes of the hash section
+(:meth:`Pbd.light_hashes`: a 52-byte header of 13 u32 - total length, then (count, offset relative
+to the section) for five lists: unknown, instances, unknown, lights, unknown, cameras in that
+order, ``HASH_HEADER_FIELDS`` - then (u32 hash, u32 object index) pairs; the Multitool writes each
+list sorted by hash).
+
 Only the patch records are interpreted; every other byte of the file (the header's other fields
 and the sections piste does not interpret: instances, lights, splines, models, ...) is kept as it
 was read, so an unedited :class:`Pbd` is written back byte for byte.  Patches whose control points
@@ -25,6 +33,8 @@ API
 ::
 
     read_pbd(path) -> Pbd / parse_pbd(data, path) -> Pbd
+    Pbd.read_lights() -> (k,) LIGHT_DTYPE; Pbd.light_hashes() -> (k,) int64 or None
+    hash_section_bytes(light_hashes) -> bytes   a hash section holding only a light list
     write_pbd(pbd, path)                 atomic
     bezier_to_power(cp) / power_to_bezier(c)   (n, 4, 4, 3) <-> (n, 16, 3) stored order
     records_from_net(net, ...)           PatchNet (metres) -> (n,) PATCH_DTYPE records (centimetres)
@@ -32,6 +42,7 @@ API
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -48,6 +59,7 @@ __all__ = [
     "Pbd", "read_pbd", "parse_pbd", "write_pbd", "PATCH_DTYPE", "PATCH_SIZE", "HEADER_SIZE", "VERSION",
     "PLATFORMS", "COUNT_NAMES", "OFFSET_NAMES", "bezier_to_power", "power_to_bezier", "records_from_arrays",
     "records_from_net", "default_lightmap_tiles", "UV_TO_NET", "NET_TO_UV", "GAME_SCALE", "PAGE_TILES",
+    "LIGHT_DTYPE", "LIGHT_SIZE", "HASH_HEADER_FIELDS", "hash_section_bytes",
 ]
 
 VERSION = b"\x00\x15\x1b"
@@ -88,6 +100,30 @@ PATCH_DTYPE = np.dtype(
     ]
 )
 assert PATCH_DTYPE.itemsize == PATCH_SIZE
+#: one 92-byte light record (SSX-Library PBDHandler.cs struct Light; OpenSlope 220-level-pbd.md)
+LIGHT_DTYPE = np.dtype(
+    [
+        ("type", "<u4"),  # 0x00 0 directional (sun), 1 point, 2 decorative flare, 3 ambient
+        ("sprite_res", "<u4"),  # 0x04 glow-sprite resolution, 0 = none
+        ("unknown_float1", "<f4"),  # 0x08
+        ("unknown_int1", "<u4"),  # 0x0C
+        ("colour", "<f4", (3,)),  # 0x10 RGB
+        ("direction", "<f4", (3,)),  # 0x1C
+        ("position", "<f4", (3,)),  # 0x28 game units
+        ("lowest", "<f4", (3,)),  # 0x34 influence box min
+        ("highest", "<f4", (3,)),  # 0x40 influence box max
+        ("unknown_float2", "<f4"),  # 0x4C
+        ("unknown_int2", "<u4"),  # 0x50
+        ("unknown_float3", "<f4"),  # 0x54
+        ("unknown_int3", "<u4"),  # 0x58
+    ]
+)
+LIGHT_SIZE = 92
+assert LIGHT_DTYPE.itemsize == LIGHT_SIZE
+#: the hash section's 13-u32 header, in file order
+HASH_HEADER_FIELDS = ("total_length", "count_u1", "offset_u1", "count_instances", "offset_instances", "count_u2",
+                      "offset_u2", "count_lights", "offset_lights", "count_u4", "offset_u4", "count_cameras",
+                      "offset_cameras")
 _HEADER_DTYPE = np.dtype([("version", "u1", (3,)), ("platform", "u1"), ("counts", "<u4", (15,)), ("offsets", "<u4", (18,))])
 assert _HEADER_DTYPE.itemsize == HEADER_SIZE
 
@@ -267,6 +303,51 @@ class Pbd:
             out[name] = self.raw[off:nxt] if off else b""
         return out
 
+    def read_lights(self) -> np.ndarray:
+        """The light records, ``(counts["lights"],)`` :data:`LIGHT_DTYPE` (FormatError when the
+        section runs past the end of the file)."""
+        k, off = self.counts["lights"], self.offsets["lights"]
+        if k and (off < HEADER_SIZE or off + k * LIGHT_SIZE > len(self.raw)):
+            raise FormatError(self.path, f"{k} lights of {LIGHT_SIZE} bytes from offset {off} need "
+                                         f"{off + k * LIGHT_SIZE} bytes, the file has {len(self.raw)}",
+                              field="counts.lights")
+        return np.frombuffer(self.raw, LIGHT_DTYPE, count=k, offset=off if k else 0).copy()
+
+    def hash_header(self) -> dict | None:
+        """The hash section's header (:data:`HASH_HEADER_FIELDS`), or None without a hash section
+        (offset 0, or fewer than its 52 bytes before the next section)."""
+        off = self._hash_span()[0]
+        if off is None:
+            return None
+        return dict(zip(HASH_HEADER_FIELDS, struct.unpack_from(f"<{len(HASH_HEADER_FIELDS)}I", self.raw, off)))
+
+    def _hash_span(self) -> tuple:
+        """``(start, end)`` of the hash section (it ends where the mesh data starts, or at the end
+        of the file), ``(None, None)`` when it is absent or shorter than its header."""
+        off, mesh = self.offsets["hash"], self.offsets["mesh_data"]
+        end = mesh if mesh >= off else len(self.raw)
+        if not off or end - off < 4 * len(HASH_HEADER_FIELDS):
+            return None, None
+        return off, end
+
+    def light_hashes(self) -> np.ndarray | None:
+        """Each light's name hash from the hash section's light list, ``(counts["lights"],)`` int64
+        (signed 32-bit values, as the Multitool's JSON holds them; 0 for a light the list does not
+        name, as the Multitool leaves it), or None without a hash section."""
+        h = self.hash_header()
+        if h is None:
+            return None
+        start, end = self._hash_span()
+        off, k = start + h["offset_lights"], h["count_lights"]
+        if off + 8 * k > end:
+            raise FormatError(self.path, f"the hash section's {k} light hashes from offset {off} run past the end "
+                                         f"of the section ({end})", field="hash.count_lights")
+        pairs = np.frombuffer(self.raw, "<i4", count=2 * k, offset=off).reshape(k, 2).astype(np.int64)
+        out = np.zeros(self.counts["lights"], np.int64)
+        ok = (pairs[:, 1] >= 0) & (pairs[:, 1] < len(out))
+        out[pairs[ok, 1][::-1]] = pairs[ok, 0][::-1]  # the first pair naming a light wins
+        return out
+
     # ------------------------------------------------------------------ encoding
     def edited(self) -> np.ndarray:
         """Patches whose control points differ from what was read, ``(n,)`` bool."""
@@ -338,6 +419,20 @@ class Pbd:
 
     def _name(self) -> str:
         return Path(self.path).name if self.path is not None else "pbd"
+
+
+def hash_section_bytes(light_hashes) -> bytes:
+    """A hash section (the Multitool's layout, ``PBDHandler.cs`` ``SaveNew``) whose only list is
+    the lights': ``(hash, index)`` for each entry of ``light_hashes (k,)`` (signed 32-bit), sorted
+    by hash (signed, as the Multitool sorts); the other lists empty."""
+    h = np.asarray(light_hashes, np.int64).reshape(-1)
+    k = len(h)
+    head = 4 * len(HASH_HEADER_FIELDS)
+    order = np.argsort(h, kind="stable")
+    pairs = np.stack([h[order], order], axis=1).astype("<i4")
+    end = head + 8 * k
+    fields = (end, 0, head, 0, head, 0, head, k, head, 0, end, 0, end)
+    return struct.pack(f"<{len(fields)}I", *fields) + pairs.tobytes()
 
 
 def _weld_candidates(cp) -> list:
