@@ -598,7 +598,7 @@ def render_frames(bundle, camera=None, frames: int = 1, size=None, fps: int = 30
         for i in it:
             chase = camera is None and p.follow
 
-            def cam_at(k):  # k: a frame (k + 0.5: a frame's second field)
+            def cam_at(k, i=i, chase=chase):  # k: a frame (k + 0.5: a frame's second field)
                 if isinstance(camera, (list, tuple)):
                     return camera[i]
                 return camera if isinstance(camera, Camera) else (None if chase else camera_at(bundle, camera, k, frames))
