@@ -11,8 +11,7 @@ API
 ---
 load_terrain(spec) -> PatchNet               a TerrainSpec's net
 load_rider_model(model) -> Model             "builtin:rider" or a glTF file
-add_rider_clips(model, [(file, bone_map)])   clips from other glTF files, retargeted, or an SSX .afl
-                                             bank's clips on an ssx: rider (riders' clips_from)
+add_rider_clips(model, [(file, bone_map)])   clips from glTF files retargeted, or an .afl bank's (clips_from)
 load_object_mesh(model) -> ObjectMesh        "builtin:<kind>" or a glTF file (meshes merged, Z up)
 rider_matrices(net, riders) -> (n, 4, 4)     rider space (Y up, board along +X) -> world
 object_matrices(net, objects, meshes) -> (m, 4, 4)   object space (Z up) -> world
