@@ -210,8 +210,8 @@ def render_dof(args) -> None:
     from piste.render.dof import lens_cameras
 
     focus, aperture, t = 8.0, 0.1, 0.5
-    print(f"render: depth of field, default demo scene 640x448, chase camera; vs the mean of 32 pinhole frames "
-          f"over the lens disc")
+    print("render: depth of field, default demo scene 640x448, chase camera; vs the mean of 32 pinhole frames "
+          "over the lens disc")
     bundle = load_bundle(build_default_scene(0).path, verify=False, warm=True)
     ctx = create_context()
     pin = ScenePreview(bundle, size=(640, 448), ctx=ctx, object_lighting="dynamic")
