@@ -14,7 +14,10 @@ and returns a few numbers.  Two passes:
    stand-in the runtime draws for distant tiles), and per-cell **visibility** bitsets of the tile's
    patches from eyes over the tile (:func:`piste.pipeline.visibility.compute_visibility`, horizon
    method, 180 azimuths, cells of at least a quarter tile; the tile itself is the only occluder, and
-   the streaming renderer does not use them yet: it culls whole tiles by the view frustum).
+   the streaming renderer does not use them yet: it culls whole tiles by the view frustum), and,
+   when the spec names object rules, the tile's **scene objects** (members ``objects_kind``,
+   ``objects_matrix``: :func:`piste.pipeline.tile_objects.place_tile_objects`, placed by slope,
+   altitude and density from per-cell hashes, so tiles agree whatever order or worker bakes them).
 
 Between the two passes one task (:func:`far_heights_task`, after every fit) writes the world's
 **far heights** ``far/t_0000_0000.npz``: the patch-corner heights of the whole world (the exact
@@ -59,6 +62,7 @@ from piste.lighting.shadows import far_field_occluded, ray_offset, shadow_rays, 
 from piste.pipeline.build import scene_lights
 from piste.pipeline.cache import content_key
 from piste.pipeline.sources import load_heightfield
+from piste.pipeline.tile_objects import place_tile_objects, rules_key
 from piste.pipeline.visibility import compute_visibility
 from piste.terrain.bezier import evaluate, grid_params
 from piste.terrain.heightfield import single_threaded
@@ -75,7 +79,8 @@ __all__ = ["TiledSpec", "TiledResult", "ArraySource", "FileSource", "SyntheticSo
 
 #: bumped whenever :func:`lit_task`'s output for the same input changes
 TILE_BAKE_VERSION = "piste.tile-bake/4"  # 2: seam light welded (as the one-bundle bake: weld_seam_light); 3: far_error
-# 4: far-field shadows (sun rays beyond the 3 x 3 neighbourhood marched over the world's far heights)
+# 4: far-field shadows (sun rays beyond the 3 x 3 neighbourhood marched over the world's far heights);
+#    scene objects placed by rules (objects_kind, objects_matrix) when the spec has object rules
 #: bumped whenever :func:`far_heights_task`'s output for the same fits changes
 FAR_HEIGHTS_VERSION = "piste.far-heights/1"
 #: most cells a side of the far heights grid (more patches a side: corners max-pooled in blocks)
@@ -276,6 +281,8 @@ class TiledSpec:
     cell, eye_heights : visibility cells (metres) and eye heights; ``cell = 0`` skips visibility
     far_shadows : with ``shadows``, sun rays leaving the 3 x 3 neighbourhood are tested against the
         world's far heights (False: occluders within one tile only, as before)
+    objects, object_seed : :class:`~piste.pipeline.tile_objects.ObjectRule` s placing scene objects
+        on every tile (``()``: none) and their seed
     """
 
     root: str
@@ -288,6 +295,8 @@ class TiledSpec:
     eye_heights: tuple = (1.7, 9.0)
     name: str = "world"
     far_shadows: bool = True
+    objects: tuple = ()
+    object_seed: int = 0
     _src_key: str = field(default="", repr=False)
 
     @property
@@ -308,7 +317,7 @@ class TiledSpec:
                 for x in range(max(tx - 1, 0), min(tx + 2, g.shape[1]))]
         far = self.far_key() if self.uses_far_heights else ""
         return content_key(TILE_BAKE_VERSION, near, self.lights_toml, self.res, self.shadows, self.cell,
-                           list(self.eye_heights), far)
+                           list(self.eye_heights), far, rules_key(self.objects), int(self.object_seed))
 
     @property
     def uses_far_heights(self) -> bool:
@@ -511,6 +520,10 @@ def _bake_tile(spec: TiledSpec, ty: int, tx: int, halo: int = 1) -> tuple[dict, 
     arrays = {"texels": texels, "far_positions": far, "far_colors": far_rgb,
               "far_error": far_errors(cp.reshape(-1, 4, 4, 3)),
               "meta": np.array([lo[2], hi[2], n], dtype=np.float64)}
+    if spec.objects:
+        kind, matrix = place_tile_objects(cp.reshape(-1, 4, 4, 3), g, ty, tx, spec.objects, spec.object_seed)
+        arrays["objects_kind"], arrays["objects_matrix"] = kind, matrix
+        stats["objects"] = len(kind)
     if spec.cell > 0:
         tile = PatchNet(ring_net.control_points[centre], tol=ring_net.tol, name=f"tile {ty},{tx}")
         vis = compute_visibility(tile, cell=spec.cell, eye_heights=spec.eye_heights, method="horizon", azimuths=180)
@@ -518,7 +531,8 @@ def _bake_tile(spec: TiledSpec, ty: int, tx: int, halo: int = 1) -> tuple[dict, 
         for k, v in va.items():
             arrays[f"vis_{k}"] = v
         arrays["vis_meta"] = np.array(_json(vm))
-    info = {"samples": m * res * res, "rays": int(stats.get("rays", 0)), "far_rays": int(stats.get("far_rays", 0)), "zmin": float(lo[2]), "zmax": float(hi[2]),
+    info = {"samples": m * res * res, "rays": int(stats.get("rays", 0)), "far_rays": int(stats.get("far_rays", 0)),
+            "objects": int(stats.get("objects", 0)), "zmin": float(lo[2]), "zmax": float(hi[2]),
             "patches": n}
     return arrays, info
 

@@ -68,7 +68,8 @@ from piste.terrain.bezier import bernstein
 from piste.terrain.net import PatchNet
 
 __all__ = ["TileGrid", "TileStore", "TileError", "check_index", "tile_entries", "fit_tile", "fit_edge", "tile_net",
-           "neighbourhood_net", "npz_bytes", "TILES_FORMAT", "TILE_FIT_VERSION", "triangulated_heights"]
+           "neighbourhood_net", "npz_bytes", "TILES_FORMAT", "TILE_FIT_VERSION", "triangulated_heights",
+           "read_tile_objects", "TILE_OBJECT_MEMBERS"]
 
 TILES_FORMAT = "piste.TiledNet/1"
 #: bumped whenever :func:`fit_tile`'s output for the same input changes
@@ -629,6 +630,67 @@ def triangulated_heights(z: np.ndarray, t: np.ndarray) -> np.ndarray:
     lower = z00 + fu * (z10 - z00) + fv * (z11 - z10)  # fu >= fv: the triangle (00, 10, 11)
     upper = z00 + fv * (z01 - z00) + fu * (z11 - z01)  # the triangle (00, 11, 01)
     return np.where(fu >= fv, lower, upper)
+
+
+#: the ``lit`` members holding a tile's scene objects (piste.pipeline.tile_objects): kind indices
+#: ``(k,)`` integers and object -> world matrices ``(k, 4, 4)`` floats; both or neither
+TILE_OBJECT_MEMBERS = ("objects_kind", "objects_matrix")
+#: most objects a tile file may hold
+MAX_TILE_OBJECTS = 1_000_000
+
+
+def read_tile_objects(store: TileStore, grid: TileGrid, ty: int, tx: int, n_kinds: int) -> tuple[np.ndarray, np.ndarray]:
+    """A tile's scene objects: ``kind (k,) int64`` in ``0 .. n_kinds - 1`` and ``matrix (k, 4, 4)
+    float64`` (finite, bottom row 0 0 0 1, the translation over the tile's bounds); empty arrays
+    for a tile built without object rules.  TileError naming the file, the tile and the member when
+    only one member is there, a header says another shape or type, or a value is out of range."""
+    p = store.path("lit", ty, tx)
+    names = _member_names(p, (ty, tx))
+    have = [m for m in TILE_OBJECT_MEMBERS if m in names]
+    if not have:
+        return np.zeros(0, np.int64), np.zeros((0, 4, 4))
+    if len(have) == 1:
+        missing = next(m for m in TILE_OBJECT_MEMBERS if m not in have)
+        raise TileError(p, (ty, tx), f"member {have[0]!r} without {missing!r}", field=missing)
+    a = store.read("lit", ty, tx, names=TILE_OBJECT_MEMBERS)
+    kind, mat = a["objects_kind"], a["objects_matrix"]
+
+    def bad(name, msg):
+        return TileError(p, (ty, tx), f"member {name!r}: {msg}", field=name)
+
+    if kind.ndim != 1 or kind.dtype.kind not in "iu":
+        raise bad("objects_kind", f"expected (k,) integers, got {kind.shape} {kind.dtype}")
+    if len(kind) > MAX_TILE_OBJECTS:
+        raise bad("objects_kind", f"{len(kind):,} objects: more than {MAX_TILE_OBJECTS:,}")
+    if mat.shape != (len(kind), 4, 4) or mat.dtype.kind != "f":
+        raise bad("objects_matrix", f"expected ({len(kind)}, 4, 4) floats, got {mat.shape} {mat.dtype}")
+    if len(kind) and (int(kind.min()) < 0 or int(kind.max()) >= n_kinds):
+        raise bad("objects_kind", f"expected kinds 0..{n_kinds - 1}, got {int(kind.min())}..{int(kind.max())}")
+    mat = mat.astype(np.float64, copy=False)
+    if not np.isfinite(mat).all() or np.abs(mat).max(initial=0.0) > MAX_BOUND:
+        raise bad("objects_matrix", f"expected finite values within +-{MAX_BOUND:g}")
+    if len(kind) and not (mat[:, 3] == np.array([0.0, 0.0, 0.0, 1.0])).all():
+        raise bad("objects_matrix", "expected each matrix's bottom row to be 0 0 0 1")
+    x0, y0, x1, y1 = grid.tile_bounds_xy(ty, tx)
+    tol = 1e-6 * max(abs(x1 - x0), abs(y1 - y0), 1.0)
+    t = mat[:, :2, 3]
+    out = (t[:, 0] < x0 - tol) | (t[:, 0] > x1 + tol) | (t[:, 1] < y0 - tol) | (t[:, 1] > y1 + tol)
+    if out.any():
+        i = int(np.flatnonzero(out)[0])
+        raise bad("objects_matrix", f"object {i} stands at ({t[i, 0]:.6g}, {t[i, 1]:.6g}), outside the tile's "
+                                    f"bounds x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g}")
+    return kind.astype(np.int64, copy=False), mat
+
+
+def _member_names(p: Path, tile) -> set:
+    """The member names (without ``.npy``) of tile file ``p`` (TileError when unreadable)."""
+    try:
+        with open_file(p, MAX_TILE_FILE_BYTES, what="tile file") as fh, zipfile.ZipFile(fh) as zf:
+            return {n[:-4] if n.endswith(".npy") else n for n in zf.namelist()}
+    except FormatError as exc:
+        raise TileError(p, tile, getattr(exc, "reason", str(exc))) from None
+    except (zipfile.BadZipFile, OSError, ValueError) as exc:
+        raise TileError(p, tile, f"not a tile file ({type(exc).__name__}: {str(exc)[:100]})") from None
 
 
 def tile_net(store: TileStore, ty: int, tx: int, name: str | None = None) -> PatchNet:

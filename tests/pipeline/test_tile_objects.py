@@ -1,0 +1,161 @@
+"""Scene objects in tiled worlds: placed by rules per tile at build time, stored in the tile's lit
+file, the same whatever the tiling, order or worker, checked when read back."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from piste.errors import ValidationError
+from piste.pipeline.tile_objects import ObjectRule, object_set, place_tile_objects
+from piste.pipeline.tiled_build import ArraySource, TiledSpec, build_tiles, lit_task
+from piste.terrain.tiles import TileError, TileGrid, TileStore, npz_bytes, read_tile_objects
+from piste.world.objects import OBJECT_KINDS
+
+SPP, SP = 3, 10.0
+
+
+def _world(root, tile_patches: int = 4, rules=None, seed: int = 0) -> TiledSpec:
+    """24 x 24 patches (720 m): a plain rising east, a 35-degree-plus wall beyond x = 480 m."""
+    n = 24 * SPP + 1
+    x, y = np.meshgrid(np.arange(n) * SP, np.arange(n) * SP)
+    z = 0.05 * x + 3.0 * np.sin(y / 90.0) + np.where(x > 480.0, (x - 480.0) * 0.9, 0.0)
+    grid = TileGrid((n, n), SPP, tile_patches, (SP, SP))
+    rules = rules if rules is not None else (ObjectRule("tree", 20.0, slope=(0.0, 20.0), altitude=(-1e9, 30.0)),
+                                             ObjectRule("rock", 10.0, slope=(30.0, 60.0)))
+    return TiledSpec(str(root), ArraySource(z, (SP, SP)), grid, "", res=2, shadows=False, objects=rules,
+                     object_seed=seed)
+
+
+def _objects(spec) -> tuple[np.ndarray, np.ndarray]:
+    store = TileStore(spec.root)
+    parts = [read_tile_objects(store, spec.grid, ty, tx, len(OBJECT_KINDS)) for ty, tx in spec.grid.tiles()]
+    kind = np.concatenate([p[0] for p in parts])
+    mat = np.concatenate([p[1] for p in parts])
+    order = np.lexsort((mat[:, 1, 3], mat[:, 0, 3], kind))
+    return kind[order], mat[order]
+
+
+def test_rules_place_objects_by_slope_altitude_and_density(tmp_path):
+    spec = _world(tmp_path / "w")
+    r = build_tiles(spec)
+    kind, mat = _objects(spec)
+    trees, rocks = kind == OBJECT_KINDS.index("tree"), kind == OBJECT_KINDS.index("rock")
+    assert sum(v["objects"] for v in r.lit.values()) == len(kind)
+    xy, z = mat[:, :2, 3], mat[:, 2, 3]
+    # trees on the gentle plain below 30 m, rocks on the wall only
+    assert trees.sum() > 100 and rocks.sum() > 20
+    assert (xy[trees, 0] < 480.0).all() and (z[trees] <= 30.0).all()
+    assert (xy[rocks, 0] > 480.0).all()
+    # density: the plain below 30 m (x < ~560 / 0.05 capped by the wall: x < 480 m, 720 m deep) is
+    # 480 x 720 m = 34.6 ha at 20 a hectare, ~691 candidates, all kept (slope 3 degrees, z < 27 m)
+    assert abs(int(trees.sum()) - 691) <= 40
+    # every object stands on the surface: a tree's base 0.3 m under the terrain at its xy
+    from piste.terrain.net import PatchNet
+    from piste.terrain.query import height_at
+
+    store = TileStore(spec.root)
+    net = PatchNet(np.concatenate([store.read_fit(spec.grid, *t)["control_points"] for t in spec.grid.tiles()]))
+    zs, hit, _, _ = height_at(net, xy[trees])
+    assert hit.all() and np.allclose(z[trees], zs - 0.3, atol=1e-6)
+
+
+def test_placement_is_the_same_whatever_the_tiling_order_or_worker(tmp_path):
+    a = _world(tmp_path / "a", tile_patches=4)
+    build_tiles(a)
+    b = _world(tmp_path / "b", tile_patches=6)  # other tiles: the same objects (cells are global)
+    build_tiles(b)
+    ka, ma = _objects(a)
+    kb, mb = _objects(b)
+    assert np.array_equal(ka, kb) and np.allclose(ma, mb, rtol=0, atol=1e-9)
+    # no object twice along a seam: every (kind, x, y) once
+    keys = np.round(ma[:, :2, 3], 6)
+    assert len(np.unique(np.column_stack([ka, keys]), axis=0)) == len(ka)
+    # a tile baked alone, in reverse order, in a fresh store: the same bytes
+    c = replace(_world(tmp_path / "c", tile_patches=4))
+    from piste.pipeline.tiled_build import fit_task
+
+    for t in reversed(c.grid.tiles()):
+        fit_task(c, *t)
+    for t in reversed(c.grid.tiles()):
+        lit_task(c, *t)
+    for t in a.grid.tiles():
+        assert TileStore(c.root).path("lit", *t).read_bytes() == TileStore(a.root).path("lit", *t).read_bytes()
+    # another seed: other objects
+    d = _world(tmp_path / "d", seed=1)
+    build_tiles(d)
+    assert not np.array_equal(_objects(d)[1], ma)
+
+
+def test_no_rules_no_members_and_rules_change_the_key(tmp_path):
+    spec = _world(tmp_path / "w", rules=())
+    build_tiles(spec)
+    store = TileStore(spec.root)
+    assert "objects_kind" not in store.read("lit", 0, 0)
+    k, m = read_tile_objects(store, spec.grid, 0, 0, len(OBJECT_KINDS))
+    assert k.shape == (0,) and m.shape == (0, 4, 4)
+    assert spec.lit_key(0, 0) != _world(tmp_path / "w").lit_key(0, 0)
+    assert _world(tmp_path / "w").lit_key(0, 0) != _world(tmp_path / "w", seed=3).lit_key(0, 0)
+
+
+def _rewrite(store, t, **members):
+    a = store.read("lit", *t)
+    a.update(members)
+    a = {k: v for k, v in a.items() if v is not None}
+    store.path("lit", *t).write_bytes(npz_bytes({"key": np.array("x"), **a}))
+
+
+@pytest.mark.parametrize("members, field, words", [
+    ({"objects_matrix": None}, "objects_matrix", "without"),
+    ({"objects_kind": np.array([[0]])}, "objects_kind", "(k,) integers"),
+    ({"objects_kind": np.array([7, 0])}, "objects_kind", "kinds 0..3"),
+    ({"objects_matrix": np.zeros((2, 4, 4))}, "objects_matrix", "bottom row"),
+    ({"objects_matrix": np.full((2, 4, 4), np.nan)}, "objects_matrix", "finite"),
+    ({"objects_matrix": np.zeros((3, 4, 4))}, "objects_matrix", "(2, 4, 4)"),
+])
+def test_bad_object_members_are_named(tmp_path, members, field, words):
+    spec = _world(tmp_path / "w")
+    build_tiles(spec)
+    store = TileStore(spec.root)
+    base = {"objects_kind": np.array([0, 2]), "objects_matrix": np.tile(np.eye(4), (2, 1, 1))}
+    base["objects_matrix"][:, :2, 3] = 10.0
+    _rewrite(store, (0, 0), **{**base, **members})
+    with pytest.raises(TileError, match=re.escape(words)) as exc:
+        read_tile_objects(store, spec.grid, 0, 0, len(OBJECT_KINDS))
+    assert exc.value.field == field and "t_0000_0000.npz" in str(exc.value)
+
+
+def test_object_outside_its_tile_is_named(tmp_path):
+    spec = _world(tmp_path / "w")
+    build_tiles(spec)
+    store = TileStore(spec.root)
+    m = np.tile(np.eye(4), (1, 1, 1))
+    m[0, :2, 3] = (500.0, 10.0)  # tile (0, 0) spans 0..120 m
+    _rewrite(store, (0, 0), objects_kind=np.array([0]), objects_matrix=m)
+    with pytest.raises(TileError, match="outside the tile"):
+        read_tile_objects(store, spec.grid, 0, 0, len(OBJECT_KINDS))
+
+
+def test_bad_rules_are_validation_errors():
+    with pytest.raises(ValidationError, match="kind must be one of"):
+        ObjectRule("cactus", 1.0)
+    with pytest.raises(ValidationError, match="density"):
+        ObjectRule("tree", 0.0)
+    with pytest.raises(ValidationError, match="slope"):
+        ObjectRule("tree", 1.0, slope=(40.0, 10.0))
+
+
+def test_object_set_of_tile_objects(tmp_path):
+    spec = _world(tmp_path / "w")
+    build_tiles(spec)
+    kind, mat = _objects(spec)
+    objs = object_set(kind, mat)
+    assert len(objs) == len(kind) and objs.counts["tree"] == int((kind == 0).sum())
+    assert np.all(objs.radius > 0) and np.allclose(objs.center[:, :2], mat[:, :2, 3], atol=3.0)
+    cp = TileStore(spec.root).read_fit(spec.grid, 0, 0)["control_points"]
+    k2, m2 = place_tile_objects(cp, spec.grid, 0, 0, spec.objects, 0)
+    k0, m0 = read_tile_objects(TileStore(spec.root), spec.grid, 0, 0, len(OBJECT_KINDS))
+    assert np.array_equal(k2, k0) and np.array_equal(m2, m0)
