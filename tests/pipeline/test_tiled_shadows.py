@@ -114,3 +114,26 @@ def test_far_field_occluded_marches_only_outside_the_box():
     # a steeper ray clears it
     steep = np.array([[1.0, 0.0, 2.0]]) / np.sqrt(5.0)
     assert not far_field_occluded(h, (0.0, 0.0), (10.0, 10.0), o[:1], steep, (0.0, 0.0, 30.0, 100.0)).any()
+
+
+def test_far_shadows_and_objects_are_byte_identical_on_dask_workers(tmp_path):
+    """The far heights (one task after every fit) and the per-tile objects: a 2-process Dask build
+    writes the bytes of the local one (the far task ran, the valley tile was shadowed from afar)."""
+    distributed = pytest.importorskip("distributed")
+    from piste.pipeline.dask_build import build_tiles_dask
+    from piste.pipeline.tile_objects import DEFAULT_RULES
+
+    local = replace(_ridge_world(tmp_path / "local", 34.8), objects=DEFAULT_RULES)
+    build_tiles(local)
+    spec = replace(_ridge_world(tmp_path / "dask", 34.8), objects=DEFAULT_RULES)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, protocol="tcp://",
+                                  host="127.0.0.1", dashboard_address="127.0.0.1:0") as cluster, \
+            distributed.Client(cluster) as client:
+        r = build_tiles_dask(spec, client)
+    assert r.lit[(1, 1)]["far_rays"] > 0 and sum(v["objects"] for v in r.lit.values()) > 0
+
+    def files(root):
+        return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+    a, b = files(tmp_path / "local"), files(tmp_path / "dask")
+    assert "far/t_0000_0000.npz" in a and a == b
