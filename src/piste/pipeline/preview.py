@@ -289,6 +289,14 @@ def camera_at(bundle, name: str | None = None, i: int = 0, n: int = 1):
     return camera_from_dict(d)
 
 
+def _flag(opt: dict, rman: dict, key: str) -> bool:
+    """An on/off render option: the caller's, else the scene file's ``[render]`` key, else off."""
+    v = opt[key] if opt[key] is not None else rman.get(key, False)
+    if not isinstance(v, bool):
+        raise ConfigError(f"{key} must be true or false, got {v!r}")
+    return v
+
+
 class ScenePreview:
     """The runtime: renders a bundle's scene off-screen with the renderer's passes (see the module
     docstring).  ``piste render``, ``piste view SCENE`` and ``piste demo`` all make their frames
@@ -325,6 +333,8 @@ class ScenePreview:
         trace (:mod:`piste.render.trace`; the CLI's ``--trace``), written by :meth:`release`
     aa : anti-aliasing, "off", "msaa2", "msaa4", "msaa8" or "fxaa" (:mod:`piste.render.aa`; the
         CLI's ``--aa``); default: the scene file's ``render.aa``, else "off"
+    soft_shadows, occlusion : PCSS rider shadows / occlusion culling (issue 27; the CLI's
+        ``--soft-shadows`` / ``--occlusion on|off``); default: the scene file's ``render`` keys, else off
     supersample : draw at N x N the size and box-filter down (the anti-aliasing reference; the
         objects' LOD error scaled by N so the same meshes are drawn); default 1
     dof : depth of field, ``(focus metres, aperture = lens radius metres)`` (:mod:`piste.render.dof`;
@@ -342,7 +352,7 @@ class ScenePreview:
                  lightmap_mode: str | None = None, start: float | None = None, casts=(),
                  terrain_only: bool = False, face: str | None = None, fog=None, object_lod: float | None = None,
                  lod_morph: bool | None = None, stream_wait: bool = True, trace=None, aa: str | None = None,
-                 supersample: int = 1, dof=None):
+                 supersample: int = 1, dof=None, soft_shadows: bool | None = None, occlusion: bool | None = None):
         if not (isinstance(lightmap, str) and lightmap in ("bundle", "placeholder")) and lightmap is not None:
             raise ConfigError(f"lightmap must be 'bundle', 'placeholder' or None, got {lightmap!r}")
         self.ctx = ctx if ctx is not None else create_context()
@@ -357,7 +367,8 @@ class ScenePreview:
                         "shadows": bool(shadows), "specular": bool(specular), "lightmap_mode": lightmap_mode,
                         "start": start, "casts": list(casts), "terrain_only": bool(terrain_only), "face": face,
                         "fog": fog, "object_lod": object_lod, "lod_morph": lod_morph,
-                        "stream_wait": bool(stream_wait), "aa": aa, "dof": dof}
+                        "stream_wait": bool(stream_wait), "aa": aa, "dof": dof, "soft_shadows": soft_shadows,
+                        "occlusion": occlusion}
         self.stats: dict = {}
         self.frame = None
         self.tracer = make_tracer(trace, self.ctx)  # the no-op NULL_TRACER without a trace file
@@ -422,7 +433,8 @@ class ScenePreview:
             self.renderer = SceneRenderer(self.scene, size=self.render_size, ctx=self.ctx, lightmap=atlas,
                                           object_lighting=mode, shadows=opt["shadows"], specular=opt["specular"],
                                           face=None if face == "off" else face, terrain=terrain, sunlight=sunlight,
-                                          object_lod=float(olod), **kw)
+                                          object_lod=float(olod), occlusion=_flag(opt, rman, "occlusion"),
+                                          soft_shadows=_flag(opt, rman, "soft_shadows"), **kw)
             self.terrain = self.renderer.terrain
             self.renderer.tracer = self.tracer
             self.objects = None

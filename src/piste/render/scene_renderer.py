@@ -39,7 +39,8 @@ from piste.render.character_pass import CharacterPass
 from piste.render.context import check_gl_error, flush
 from piste.render.frame import TerrainRenderer
 from piste.render.object_pass import ObjectPass
-from piste.render.shadow_pass import ShadowPass, sun_visibility, shadow_matrices, shadow_patches
+from piste.render.occlusion import occlude_frame
+from piste.render.shadow_pass import SUN_RADIUS, ShadowPass, sun_visibility, shadow_matrices, shadow_patches
 from piste.render.sky_pass import HORIZON
 from piste.render.trace import NULL_TRACER
 from piste.terrain.cull import patch_tree
@@ -81,6 +82,10 @@ class SceneRenderer:
     object_lod : the objects' levels of detail: the simplification error an instance may show, in
         pixels (0: every object drawn with its full mesh; :class:`piste.render.object_pass.ObjectPass`)
     shadows, specular : draw the projected shadows / the riders' specular highlights
+    soft_shadows : the rider shadows' penumbrae from a sun of ``sun_radius`` degrees (PCSS,
+        :class:`piste.render.shadow_pass.ShadowPass`); off: the talk's hard shadows
+    occlusion : cull the terrain patches and objects the near terrain hides (a software
+        hierarchical-Z, :mod:`piste.render.occlusion`; the same pixels); stats count them
     shadow_tile : pixels per rider shadow tile
     casts : more riders with other models: Scene-like objects (``model``, ``lods``, ``skinners``,
         ``riders``, ``update(t, aspect, camera=...)``; e.g. ``Scene(net, line, lights, model=m,
@@ -101,6 +106,7 @@ class SceneRenderer:
     def __init__(self, scene, size=(640, 448), ctx=None, lightmap="placeholder", object_lighting: str = "dynamic",
                  shadows: bool = True, specular: bool = True, shadow_tile: int = 128, casts=(),
                  face: str | None = "morph", terrain=None, sunlight=None, object_lod: float = DEFAULT_LOD_PIXELS,
+                 soft_shadows: bool = False, sun_radius: float = SUN_RADIUS, occlusion: bool = False,
                  **terrain_kw):
         self.scene = scene
         terrain_kw.setdefault("track", scene.line)
@@ -122,7 +128,9 @@ class SceneRenderer:
         self.characters = self.cast_passes[0]
         self.objects = ObjectPass(self.ctx, scene.objects, scene.lights, mode=object_lighting,
                                   lod_pixels=object_lod) if scene.objects is not None else None
-        self.shadows = ShadowPass(self.ctx, n_max=n, tile=shadow_tile) if shadows else None
+        self.shadows = ShadowPass(self.ctx, n_max=n, tile=shadow_tile, soft=soft_shadows,
+                                  sun_radius=sun_radius) if shadows else None
+        self.occlusion = bool(occlusion)
         if self.shadows is not None and scene.sun is not None:
             # riders' shadows darken only terrain that sees the sun (no double darkening)
             # (``sunlight``: the same ``(field, rect)`` pre-computed, e.g. stored in a bundle at build time)
@@ -215,6 +223,13 @@ class SceneRenderer:
         with tr.span("terrain LOD + cull + tessellate"):
             mesh = self.terrain.prepare(cam, lod=lod, timings=tt,
                                         levels=self.terrain.levels(cam, lod) if ssx_ps2 else None)
+        occ = None
+        if self.occlusion:
+            with tr.span("occlusion"):
+                mesh, sf.objects_visible, occ = occlude_frame(
+                    self.terrain, mesh, cam, (w, h), self.patch_lo, self.patch_hi, self.scene.objects,
+                    sf.objects_visible, prepare=lambda: self.terrain.prepare(
+                        cam, lod=lod, levels=self.terrain.levels(cam, lod) if ssx_ps2 else None))
         t2 = time.perf_counter()
         patches = []
         light_vp = None
@@ -227,7 +242,7 @@ class SceneRenderer:
                 patches = shadow_patches(self.patch_lo, self.patch_hi, light_vp, candidates=mesh.patch_ids,
                                          tree=patch_tree(self.scene.net))
         t3 = time.perf_counter()
-        return dict(sf=sf, cam=cam, frames=frames, mesh=mesh, patches=patches, light_vp=light_vp, tt=tt,
+        return dict(sf=sf, cam=cam, frames=frames, mesh=mesh, patches=patches, light_vp=light_vp, tt=tt, occ=occ,
                     ssx_ps2=ssx_ps2, lightmap_mode=lightmap_mode, debug=debug, stamps=[t0, t1, t2, t3])
 
     def _issue(self, plan: dict, fog: float | None = None, light_only: bool = False,
@@ -342,6 +357,8 @@ class SceneRenderer:
         }
         if plan["rider_pixels"] is not None:
             stats["rider_pixels"] = plan["rider_pixels"]
+        if plan.get("occ") is not None:
+            stats.update(plan["occ"])
         frame.image = image
         return SceneImage(image, frame, sf, patches, stats, tm, frames[1:])
 
