@@ -16,6 +16,7 @@ import logging
 import sys
 
 from piste import __version__
+from piste.commands import _numbers as N
 from piste.errors import MissingExtraError, PisteError, describe_os_error
 
 #: exit status of a runtime error (a usage error is argparse's 2)
@@ -45,16 +46,6 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {' '.join(message.split())} ({self.prog} -h: usage)\n")
 
 
-def _dof_type(text: str) -> tuple[float, float]:
-    """``--dof FOCUS_M:APERTURE`` -> ``(focus, aperture)`` metres, each a checked number."""
-    from piste.commands import _numbers as N
-
-    focus, sep, aperture = str(text).partition(":")
-    if not sep:
-        raise argparse.ArgumentTypeError(f"expected FOCUS_M:APERTURE (e.g. 8:0.1), got {str(text)[:40]!r}")
-    return N.real(0.0, 1e5, lo_open=True)(focus), N.real(0.0, 100.0)(aperture)
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="piste", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"piste {__version__}")
@@ -76,7 +67,7 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--aa", choices=("off", "msaa2", "msaa4", "msaa8", "fxaa"), default=None,
                            help="anti-aliasing: multisampling (msaaN, capped at the GL's maximum: 4 on llvmpipe) "
                                 "or the FXAA post pass (default: off, or the scene file's [render] aa)")
-            p.add_argument("--dof", type=_dof_type, default=None, metavar="FOCUS_M:APERTURE",
+            p.add_argument("--dof", type=N.focus_aperture, default=None, metavar="FOCUS_M:APERTURE",
                            help="depth of field: focus distance and lens radius in metres, e.g. 8:0.1 (a post pass; "
                                 "default: none, or the scene file's [render] dof)")
             if name != "view":  # (a window shows the frame at its own size)

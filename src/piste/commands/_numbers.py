@@ -103,3 +103,11 @@ FOV = real(0.0, 180.0, lo_open=True, hi_open=True)
 COORDINATE = real(-MAX_COORDINATE, MAX_COORDINATE)
 #: a duration in seconds (scripted runs: up to a year)
 SECONDS = real(0.0, 365 * 86400.0, lo_open=True)
+
+
+def focus_aperture(text: str) -> tuple[float, float]:
+    """``--dof FOCUS_M:APERTURE`` -> ``(focus, aperture)`` metres, each a checked number."""
+    focus, sep, aperture = str(text).partition(":")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"expected FOCUS_M:APERTURE (e.g. 8:0.1), got {str(text)[:40]!r}")
+    return real(0.0, 1e5, lo_open=True)(focus), real(0.0, 100.0)(aperture)

@@ -155,12 +155,13 @@ def run(args) -> int:
 
         model = load_mpf_rider(args.file, texture=args.texture)
         if args.clips:
-            from piste.formats.ssx.afl import afl_clips, mpf_body_bones, read_afl
+            from piste.formats.ssx.afl import read_afl
+            from piste.pipeline.ssx_rider import afl_rider_clips
 
-            clips, bones = {}, mpf_body_bones(model)
+            clips = {}
             for bank in args.clips:
                 afl = read_afl(bank)
-                for n, c in afl_clips(afl, model.skeleton, bones, fps=args.fps).items():
+                for n, c in afl_rider_clips(model, afl, fps=args.fps).items():
                     key = n if n not in clips else f"{Path(bank).stem}/{n}"
                     c.name = key
                     clips[key] = c

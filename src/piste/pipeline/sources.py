@@ -20,6 +20,7 @@ heading_vector(degrees) -> (2,)              0 = +y, counter-clockwise seen from
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +34,8 @@ from piste.formats.limits import MAX_HEIGHTFIELD_SAMPLES
 from piste.formats.safe_io import open_file
 from piste.pipeline.gltf_import import axis_matrix
 from piste.pipeline.ssx_level import load_level
-from piste.pipeline.ssx_rider import load_mpf_rider
+from piste.formats.ssx.afl import read_afl
+from piste.pipeline.ssx_rider import afl_rider_clips, load_mpf_rider
 from piste.terrain.fit import fit_heightfield
 from piste.terrain.net import PatchNet
 from piste.terrain.query import height_at
@@ -200,40 +202,18 @@ def add_rider_clips(model, sources, allow_paths=()):
 
 def _add_afl_clips(model, file):
     """A copy of ``model`` (an ``.mpf`` rider, :func:`piste.pipeline.ssx_rider.load_mpf_rider`) with
-    the clips of the ``.afl`` bank ``file`` (:func:`piste.formats.ssx.afl.afl_clips`: the body
-    track's channels on the body bones in ``.mpf`` file order, the board track on ``board``); a
-    name the model already has gets the file's stem in front (``"bank:clip_1234abcd"``). The root
-    channels are the file's coordinates: a rider lifted to stand on its origin
-    (:func:`piste.pipeline.ssx_rider.stand_on_origin`) gets the same lift on its root tracks."""
-    from dataclasses import replace
-
-    from piste.character.model import Track
-    from piste.formats.ssx.afl import afl_clips, mpf_body_bones, read_afl
-    from piste.formats.ssx.mpf_model import CM, SSX_TO_PISTE
-
+    the clips of the ``.afl`` bank ``file`` (:func:`piste.pipeline.ssx_rider.afl_rider_clips`, root
+    tracks lifted as the rider is); a name the model already has gets the file's stem in front
+    (``"bank:clip_1234abcd"``)."""
     if not getattr(model, "files", None) or model.skeleton is None:
         raise ConfigError(f"{file}: an .afl bank plays only on an ssx:<RIDER.mpf> model")
     afl = read_afl(file)
-    clips = afl_clips(afl, model.skeleton, mpf_body_bones(model))
+    clips = afl_rider_clips(model, afl)
     if not clips:
         raise ConfigError(f"{file}: clips_from needs an .afl with at least one clip with a body track "
                           f"({len(afl.clips)} clips, none with one)")
-    sk = model.skeleton
-    lift = {}  # root bone -> (3,) metres: its rest translation less the file's bind translation
-    for sub in model.files[0].models:
-        if len(sub.bones):
-            for rec, n in zip(sub.bones, sub.bone_names):
-                j = sk.get(n)
-                if j is not None and sk.parents[j] < 0:
-                    bind = (np.asarray(rec["translation"], np.float64)[:3] @ SSX_TO_PISTE.T) * CM
-                    lift[n] = np.asarray(sk.rest_translation[j], np.float64) - bind
-            break
     new = dict(model.clips)
     for n, c in clips.items():
-        for b, off in lift.items():
-            t = c.tracks.get(b, {}).get("translation")
-            if t is not None and np.any(off != 0):
-                c.tracks[b]["translation"] = Track(t.times, t.values + off)
         key = n if n not in new else f"{Path(file).stem}:{n}"
         c.name = key
         new[key] = c

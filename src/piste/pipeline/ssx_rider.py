@@ -29,7 +29,9 @@ from piste.character.retarget import builtin_bone_map, retarget_clip
 from piste.character.rider import default_rider
 from piste.errors import ConfigError
 from piste.formats.ssx.mpf import read_mpf
-from piste.formats.ssx.mpf_model import mpf_partners, mpf_to_model
+from piste.character.model import Clip, Track
+from piste.formats.ssx.afl import AflFile, afl_clips, mpf_body_bones
+from piste.formats.ssx.mpf_model import CM, SSX_TO_PISTE, mpf_partners, mpf_to_model
 from piste.formats.ssx.ssh import read_ssh
 from piste.pipeline.object_atlas import pack_object_atlas
 from piste.world.riders import merged_mesh
@@ -180,3 +182,30 @@ def load_mpf_rider(path, texture=None) -> object:
     if driven == 0:
         model.notes.append("none of the shared clips' bones are in this model: it stands in its bind pose")
     return model
+
+
+def afl_rider_clips(model, afl: AflFile, fps: float | None = None) -> dict[str, Clip]:
+    """The clips of the ``.afl`` bank ``afl`` (:func:`piste.formats.ssx.afl.afl_clips`: the body
+    track's channels on the body bones in ``.mpf`` file order, the board track on ``board``) for the
+    ``.mpf`` rider ``model`` (:func:`load_mpf_rider`). The root channels are in the file's
+    coordinates: a rider lifted to stand on its origin (:func:`stand_on_origin`) gets the same lift
+    on its root tracks, so the game's clips play at the height the rider is drawn at. ``fps``: the
+    bank's frame rate (None: afl's default)."""
+    kw = {} if fps is None else {"fps": fps}
+    clips = afl_clips(afl, model.skeleton, mpf_body_bones(model), **kw)
+    sk = model.skeleton
+    lift = {}  # root bone -> (3,) metres: its rest translation less the file's bind translation
+    for sub in model.files[0].models:
+        if len(sub.bones):
+            for rec, n in zip(sub.bones, sub.bone_names):
+                j = sk.get(n)
+                if j is not None and sk.parents[j] < 0:
+                    bind = (np.asarray(rec["translation"], np.float64)[:3] @ SSX_TO_PISTE.T) * CM
+                    lift[n] = np.asarray(sk.rest_translation[j], np.float64) - bind
+            break
+    for c in clips.values():
+        for b, off in lift.items():
+            t = c.tracks.get(b, {}).get("translation")
+            if t is not None and np.any(off != 0):
+                c.tracks[b]["translation"] = Track(t.times, t.values + off)
+    return clips

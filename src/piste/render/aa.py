@@ -31,6 +31,7 @@ import numpy as np
 
 from piste.errors import ConfigError
 from piste.render.context import Offscreen
+from piste.render.dof import DofPass
 
 __all__ = ["AA_MODES", "aa_samples", "check_aa", "AATarget", "downsample", "edge_pixels", "edge_error"]
 
@@ -181,8 +182,6 @@ class AATarget(Offscreen):
             if self.camera is None:
                 raise ConfigError("depth of field: the frame's camera was not given (AATarget.camera)")
             if self._dof is None:
-                from piste.render.dof import DofPass
-
                 self._dof = DofPass(ctx, self.size)
             src = out if self.samples > 1 else self.fbo
             self._dof.apply(src, self.fbo if self.mode == "fxaa" else out, self.camera, *self.dof)
