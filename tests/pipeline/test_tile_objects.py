@@ -159,3 +159,24 @@ def test_object_set_of_tile_objects(tmp_path):
     k2, m2 = place_tile_objects(cp, spec.grid, 0, 0, spec.objects, 0)
     k0, m0 = read_tile_objects(TileStore(spec.root), spec.grid, 0, 0, len(OBJECT_KINDS))
     assert np.array_equal(k2, k0) and np.array_equal(m2, m0)
+
+
+def test_open_tiles_holds_the_objects_around_its_local_tile(tmp_path):
+    from piste.pipeline.tiles_source import open_tiles
+
+    spec = _world(tmp_path / "w.tiles", tile_patches=6)  # 4 x 4 tiles
+    build_tiles(spec)
+    b = open_tiles(spec.root)
+    ty, tx = b.manifest["terrain"]["local_tile"]
+    store = TileStore(spec.root)
+    near = [(y, x) for y in range(ty - 1, ty + 2) for x in range(tx - 1, tx + 2)]
+    want = sum(len(read_tile_objects(store, spec.grid, y, x, 4)[0]) for y, x in near)
+    objs = b.objects()
+    assert objs is not None and len(objs) == want > 0
+    assert b.manifest["objects"]["placed"] == "tiles"
+    assert b.arrays["objects/colors/tree"].shape[0] == objs.counts["tree"]  # vertex colours baked
+    # a neighbour whose objects do not read back is left out (as the streamed view leaves it out)
+    y, x = near[0]
+    k = len(read_tile_objects(store, spec.grid, y, x, 4)[0])
+    _rewrite(store, (y, x), objects_matrix=None)
+    assert len(open_tiles(spec.root).objects()) == want - k

@@ -21,6 +21,8 @@ DEFAULT_RULES                                   trees on gentle slopes, rocks on
 rules_key(rules) -> list                        what the build's key hashes
 place_tile_objects(control_points, grid, ty, tx, rules, seed=0) -> (kind (k,) int64, matrix (k, 4, 4) float64)
 object_set(kind, matrix, lights=None) -> ObjectSet   instances for the object pass
+tiles_objects(store, grid, tiles) -> (kind, matrix)  the stored objects of some tiles, checked
+add_tile_objects(bundle, store, grid, tiles) -> Bundle   a runtime scene holding them (vertex colours baked)
 """
 
 from __future__ import annotations
@@ -32,10 +34,11 @@ import numpy as np
 
 from piste.errors import ValidationError
 from piste.terrain.query import eval_points
-from piste.terrain.tiles import TileGrid
+from piste.terrain.tiles import TileGrid, read_tile_objects
 from piste.world.objects import OBJECT_KINDS, ObjectSet, compress_mesh, make_mesh, normal_matrix, object_texture
 
-__all__ = ["ObjectRule", "DEFAULT_RULES", "rules_key", "place_tile_objects", "object_set", "MAX_TILE_OBJECTS"]
+__all__ = ["ObjectRule", "DEFAULT_RULES", "rules_key", "place_tile_objects", "object_set", "MAX_TILE_OBJECTS",
+           "tiles_objects", "add_tile_objects"]
 
 #: most objects one tile may hold (a build refuses rules that would place more)
 MAX_TILE_OBJECTS = 200_000
@@ -222,3 +225,41 @@ def object_set(kind: np.ndarray, matrix: np.ndarray, lights=None, normal_bits: i
     counts = {k: int(np.count_nonzero(kind == i)) for i, k in enumerate(OBJECT_KINDS)}
     return ObjectSet(meshes, OBJECT_KINDS, kind, matrix, normal_matrix(matrix), center, radius, vl, object_texture(),
                      counts)
+
+
+def tiles_objects(store, grid: TileGrid, tiles) -> tuple[np.ndarray, np.ndarray]:
+    """The objects stored in ``tiles`` (``[(ty, tx), ...]``, in that order), concatenated: ``kind
+    (k,) int64``, ``matrix (k, 4, 4) float64`` (:func:`piste.terrain.tiles.read_tile_objects`:
+    TileError naming a bad tile)."""
+    parts = [read_tile_objects(store, grid, ty, tx, len(OBJECT_KINDS)) for ty, tx in tiles]
+    if not parts:
+        return np.zeros(0, np.int64), np.zeros((0, 4, 4))
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
+def add_tile_objects(bundle, store, grid: TileGrid, tiles, skip_bad: bool = False):
+    """A copy of ``bundle`` (a tiled world's runtime scene) holding the objects stored in ``tiles``
+    (their vertex colours baked from the bundle's lights, as a build stores them); ``bundle`` itself
+    when those tiles hold none.  ``skip_bad``: a tile whose objects do not read back (TileError) is
+    left out, as the streamed view leaves a bad tile out (else the TileError propagates)."""
+    from dataclasses import replace
+
+    from piste.pipeline.furnish import object_arrays
+    from piste.terrain.tiles import TileError
+
+    good = []
+    for t in tiles:
+        try:
+            read_tile_objects(store, grid, t[0], t[1], len(OBJECT_KINDS))
+            good.append(t)
+        except TileError:
+            if not skip_bad:
+                raise
+    kind, matrix = tiles_objects(store, grid, good)
+    if len(kind) == 0:
+        return bundle
+    arrays = dict(bundle.arrays)
+    meta = object_arrays(object_set(kind, matrix), bundle.lights, arrays)
+    man = dict(bundle.manifest)
+    man["objects"] = dict(meta, placed="tiles", tiles=[list(t) for t in tiles])
+    return replace(bundle, manifest=man, arrays=arrays, _cache={})

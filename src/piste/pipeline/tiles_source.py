@@ -28,6 +28,7 @@ from piste.formats.bundle import camera_to_dict
 from piste.lighting.lightmap import LightMap
 from piste.lighting.lights import default_lights
 from piste.pipeline.bundle_objects import Bundle, camera_from_dict
+from piste.pipeline.tile_objects import add_tile_objects
 from piste.render.streaming import fly_path
 from piste.terrain.tiles import TileError, TileStore, tile_entries, tile_net
 from piste.world.camera import Camera
@@ -83,7 +84,12 @@ def open_tiles(path, quiet: bool = True, warm: bool = False, budget_mb: float = 
     arrays = {"lightmap/atlas": atlas, "lightmap/rects": rects}
     lightmap = LightMap(atlas=atlas, rects=rects, res=1, gutter=0, manifest={})
     cameras = {d["name"]: camera_from_dict(d) for d in manifest["cameras"]}
-    return Bundle(root, manifest, arrays, net, lightmap, default_lights(), cameras)
+    bundle = Bundle(root, manifest, arrays, net, lightmap, default_lights(), cameras)
+    # the scene objects the build placed (piste.pipeline.tile_objects) on the local tile and its
+    # neighbours (not yet paged with the streamed tiles)
+    near = [(y, x) for y in range(max(ty - 1, 0), min(ty + 2, grid.shape[0]))
+            for x in range(max(tx - 1, 0), min(tx + 2, grid.shape[1])) if (y, x) in entries]
+    return add_tile_objects(bundle, store, grid, near, skip_bad=True)
 
 
 def flight_cameras(bundle: Bundle, frames: int, fps: float = 30.0, speed: float = 100.0) -> list:
