@@ -80,6 +80,12 @@ def build_parser() -> argparse.ArgumentParser:
                 p.add_argument("--flicker-filter", action="store_true",
                                help="with --interlace: each field filtered [1 2 1] / 4 down its columns before weaving "
                                     "(the PS2 games' cure for interlace flicker)")
+            p.add_argument("--soft-shadows", action="store_const", const=True, default=None,
+                           help="soft rider shadows: percentage-closer soft shadows from the real sun's 0.27 degree "
+                                "disc (default: off, the talk's hard shadows, or the scene file's [render] soft_shadows)")
+            p.add_argument("--occlusion", choices=("on", "off"), default=None,
+                           help="cull the terrain patches and objects the near terrain hides (a software "
+                                "hierarchical-Z; the same pixels; default: off, or the scene file's [render] occlusion)")
             p.add_argument("--trace", metavar="FILE.json", default=None,
                            help="write a Chrome / Perfetto trace (ui.perfetto.dev) of every frame: CPU spans per step, "
                                 "GPU spans per pass from GL timer queries")

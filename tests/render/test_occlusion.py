@@ -127,3 +127,54 @@ def test_default_course_culls_and_no_pixel_changes(gl_context, default_bundle):
     finally:
         for p in pv.values():
             p.release()
+
+
+def test_flags_and_scene_keys_reach_the_runtime(tmp_path, monkeypatch, default_bundle):
+    """``--occlusion on|off`` / ``--soft-shadows`` and ``[render] occlusion`` / ``soft_shadows``: parsed
+    by the commands, handed to the runtime as parameters (off by default)."""
+    from piste.cli import build_parser, main
+    from piste.errors import PisteError
+    from piste.world.scene_file import loads_scene
+
+    assert build_parser().parse_args(["render", "x.toml", "--occlusion", "on"]).occlusion == "on"
+    assert build_parser().parse_args(["demo"]).occlusion is None
+    assert build_parser().parse_args(["view", "x.toml", "--soft-shadows"]).soft_shadows is True
+    with pytest.raises(SystemExit) as exc:
+        build_parser().parse_args(["render", "x.toml", "--occlusion", "maybe"])
+    assert exc.value.code == 2
+    spec = loads_scene("[render]\nocclusion = true\nsoft_shadows = true\n", tmp_path / "o.toml").render
+    assert spec.occlusion is True and spec.soft_shadows is True
+    plain = loads_scene("", tmp_path / "p.toml").render
+    assert plain.occlusion is False and plain.soft_shadows is False
+    with pytest.raises(PisteError, match="occlusion") as bad:
+        loads_scene("[render]\nocclusion = \"yes\"\n", tmp_path / "bad.toml")
+    assert "bad.toml" in str(bad.value)
+
+    import piste.pipeline.preview as preview
+
+    seen = {}
+    monkeypatch.setattr(preview, "render_frames", lambda *a, **kw: seen.update(kw) or [{}])
+    assert main(["render", str(default_bundle.path), "--occlusion", "on", "--soft-shadows",
+                 "--out", str(tmp_path / "a.png")]) == 0
+    assert seen["occlusion"] is True and seen["soft_shadows"] is True
+    assert main(["render", str(default_bundle.path), "--out", str(tmp_path / "b.png")]) == 0
+    assert seen["occlusion"] is None and seen["soft_shadows"] is None
+
+
+def test_scene_file_key_turns_it_on(gl_context, default_bundle):
+    from piste.pipeline.preview import ScenePreview
+
+    default_bundle.manifest.setdefault("render", {})
+    saved = dict(default_bundle.manifest["render"])
+    default_bundle.manifest["render"].update(occlusion=True, soft_shadows=True)
+    try:
+        p = ScenePreview(default_bundle, size=(64, 48), ctx=gl_context)
+        q = ScenePreview(default_bundle, size=(64, 48), ctx=gl_context, occlusion=False, soft_shadows=False)
+        try:
+            assert p.renderer.occlusion is True and p.renderer.shadows.soft is True
+            assert q.renderer.occlusion is False and q.renderer.shadows.soft is False
+        finally:
+            p.release()
+            q.release()
+    finally:
+        default_bundle.manifest["render"] = saved

@@ -180,6 +180,11 @@ def _print_flicker(args, meter) -> None:
           f"{meter.pairs} frame pairs): {meter.value:.2f}")
 
 
+def _occlusion(args):
+    """``--occlusion on|off`` as the runtime's ``occlusion`` (None: the scene file's ``[render] occlusion``)."""
+    return None if getattr(args, "occlusion", None) is None else args.occlusion == "on"
+
+
 def _morph(args):
     """``--lod-morph on|off`` as the runtime's ``lod_morph`` (None: the scene file's ``[lod] morph``)."""
     return None if getattr(args, "lod_morph", None) is None else args.lod_morph == "on"
@@ -240,7 +245,8 @@ def run_scene(args, bundle, lightmap, lighting: str, t0: float) -> int:
                            start=args.start, casts=rider_casts(args.rider_model),
                            object_lod=getattr(args, "object_lod", None), lod_morph=_morph(args),
                            aa=getattr(args, "aa", None), supersample=getattr(args, "supersample", 1),
-                           trace=getattr(args, "trace", None), dof=getattr(args, "dof", None))
+                           trace=getattr(args, "trace", None), dof=getattr(args, "dof", None),
+                           soft_shadows=getattr(args, "soft_shadows", None), occlusion=_occlusion(args))
     scene, renderer = preview.scene, preview.renderer
     lod_on = args.lod == "on"
     from piste._jit import warm_up

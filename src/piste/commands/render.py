@@ -54,6 +54,11 @@ def _morph(args):
     return None if getattr(args, "lod_morph", None) is None else args.lod_morph == "on"
 
 
+def _occlusion(args):
+    """``--occlusion on|off`` as the runtime's ``occlusion`` (None: the scene file's ``[render] occlusion``)."""
+    return None if getattr(args, "occlusion", None) is None else args.occlusion == "on"
+
+
 def run(args) -> int:
     import sys
     from pathlib import Path
@@ -99,7 +104,7 @@ def run(args) -> int:
                           first_png=args.out, progress=not args.quiet and sys.stderr.isatty() and args.frames > 1,
                           lod_morph=_morph(args), aa=getattr(args, "aa", None),
                           supersample=getattr(args, "supersample", 1), trace=getattr(args, "trace", None),
-                          dof=getattr(args, "dof", None),
+                          dof=getattr(args, "dof", None), soft_shadows=getattr(args, "soft_shadows", None), occlusion=_occlusion(args),
                           interlace=getattr(args, "interlace", False),
                           flicker_filter=getattr(args, "flicker_filter", False))
     if kind == "tiles":

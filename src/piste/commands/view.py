@@ -86,11 +86,19 @@ def course_preview(args, bundle, ctx=None):
     return ScenePreview(bundle, size=tuple(args.size), ctx=ctx, lightmap=lightmap, object_lighting="dynamic",
                         lightmap_mode=args.lightmap, terrain_only=args.terrain_only, start=start,
                         casts=rider_casts(args.rider_model), face=args.face, lod_morph=_morph(args),
-                        aa=getattr(args, "aa", None), trace=getattr(args, "trace", None), dof=getattr(args, "dof", None))
+                        aa=getattr(args, "aa", None), trace=getattr(args, "trace", None), dof=getattr(args, "dof", None),
+                        **_quality(args))
 
 
 def _morph(args):
     return None if getattr(args, "lod_morph", None) is None else args.lod_morph == "on"
+
+
+def _quality(args) -> dict:
+    """``--soft-shadows`` and ``--occlusion on|off`` as the runtime's ``soft_shadows`` / ``occlusion``
+    (None: the scene file's ``[render]`` keys)."""
+    occ = getattr(args, "occlusion", None)
+    return {"soft_shadows": getattr(args, "soft_shadows", None), "occlusion": None if occ is None else occ == "on"}
 
 
 def _view_scene(args) -> int:
@@ -103,7 +111,7 @@ def _view_scene(args) -> int:
 
     size = tuple(args.size) if getattr(args, "size", None) else None
     kw = {"face": args.face, "lod_morph": _morph(args), "aa": getattr(args, "aa", None), "dof": getattr(args, "dof", None),
-          "trace": getattr(args, "trace", None)}
+          "trace": getattr(args, "trace", None), **_quality(args)}
     if args.headless or not has_display():
         live = LiveScene(args.scene, size=size, camera=args.camera, **kw)
         try:
@@ -155,7 +163,7 @@ def _view_source(args, kind: str) -> int:
     size = tuple(args.size)
     kw = {"lightmap_mode": args.lightmap, "face": args.face, "lod_morph": _morph(args), "aa": getattr(args, "aa", None),
           "dof": getattr(args, "dof", None),
-          "trace": getattr(args, "trace", None)}
+          "trace": getattr(args, "trace", None), **_quality(args)}
     cam = eye_camera(args.eye, args.target) or camera_at(bundle, args.camera)
     if not has_display():
         print("piste view: no display (DISPLAY / WAYLAND_DISPLAY unset), so no window; rendering one frame "

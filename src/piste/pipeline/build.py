@@ -445,7 +445,8 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
             bar.update(1)
     manifest["render"] = {"size": list(scene.render.size), "lightmap_mode": scene.render.lightmap_mode,
                           "fog": scene.render.fog, "face": scene.render.face,
-                          "object_lod": scene.render.object_lod, "aa": scene.render.aa, "dof": scene.render.dof}
+                          "object_lod": scene.render.object_lod, "aa": scene.render.aa, "dof": scene.render.dof,
+                          "soft_shadows": scene.render.soft_shadows, "occlusion": scene.render.occlusion}
     # riders following the track and objects placed along it, made by the runtime (pipeline.preview)
     manifest["pack"] = dict(scene.pack) if scene.pack else None
     manifest["auto_objects"] = dict(scene.auto_objects) if scene.auto_objects else None

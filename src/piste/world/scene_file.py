@@ -65,6 +65,8 @@ scene file.  Every table and key is optional except where noted::
     aa = "off"                    # anti-aliasing: "off", "msaa2|4|8" or "fxaa" (`--aa` overrides)
     dof = [20.0, 0.05]            # depth of field: focus distance and lens radius in metres (default:
                                   #   none, a pinhole; `--dof FOCUS_M:APERTURE` overrides)
+    soft_shadows = false          # rider shadows with the sun's penumbra (PCSS; `--soft-shadows`)
+    occlusion = false             # cull what the near terrain hides (`--occlusion on|off`)
 
     [pack]                        # instead of [[riders]], on the default course: riders following the
     follow = "track"              #   track (piste demo's six, the camera chasing the first)
@@ -377,6 +379,8 @@ class RenderSpec:
     object_lod: float = 0.5  # pixels of simplification error an object may show (0: full meshes)
     aa: str = "off"          # anti-aliasing: "off", "msaa2", "msaa4", "msaa8" or "fxaa"
     dof: object = None       # depth of field: [focus metres, aperture metres] or None (off)
+    soft_shadows: bool = False  # percentage-closer soft rider shadows
+    occlusion: bool = False  # occlusion culling of terrain patches and objects
 
 
 #: [auto_objects] keys and their defaults (piste.world.objects.place_objects' counts)
@@ -669,7 +673,7 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     if scene.visibility.method not in ("auto", "horizon", "rays"):
         raise vi.error("method", f"expected \"auto\", \"horizon\" or \"rays\", got {scene.visibility.method!r}")
     re_ = _table(top, "render")
-    re_.allow({"size", "lightmap_mode", "fog", "face", "object_lod", "aa", "dof"})
+    re_.allow({"size", "lightmap_mode", "fog", "face", "object_lod", "aa", "dof", "soft_shadows", "occlusion"})
     size = re_.get("size", "vec2", (640, 448))
     if not all(float(s).is_integer() and 16 <= s <= 8192 for s in size):
         raise re_.error("size", f"expected [width, height], whole pixels in 16..8192, got {list(size)}")
@@ -697,6 +701,8 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
             raise re_.error("dof", f"expected [focus, aperture]: a focus distance in (0, 100000] m and a lens radius "
                                    f"in [0, 100] m, got {list(dof)}")
         scene.render.dof = [float(dof[0]), float(dof[1])]
+    scene.render.soft_shadows = re_.get("soft_shadows", "bool", False)
+    scene.render.occlusion = re_.get("occlusion", "bool", False)
 
     # the default course's riders following the track and objects placed along it
     pk = _table(top, "pack")
