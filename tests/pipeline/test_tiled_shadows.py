@@ -70,22 +70,27 @@ def test_far_shadows_off_is_the_old_bake_and_changes_the_key(tmp_path):
     assert off.uses_far_heights is False and on.uses_far_heights is True
 
 
-def test_far_heights_are_the_corner_grid_and_max_pooled_beyond_the_limit(tmp_path, monkeypatch):
+@pytest.mark.parametrize("max_cells", [7, 5])  # strides 16 (even) and 23 (odd, nodes beyond the edge)
+def test_far_heights_are_the_surface_grid_and_max_pooled_beyond_the_limit(tmp_path, monkeypatch, max_cells):
     spec = _ridge_world(tmp_path / "w", 30.0)
     build_tiles(spec)
     far = far_heights(spec)
     h, frame = far["heights"], far["frame"]
     z = spec.source.z
-    assert h.shape == (13, 29) and np.allclose(frame, [0.0, 0.0, 30.0, 30.0])
-    assert np.allclose(h, z[::SPP, ::SPP], atol=1.0)  # the fitted corners follow the samples
-    monkeypatch.setattr(tiled_build, "FAR_MAX_CELLS", 7)  # 28 patches a side -> stride 4
+    k = tiled_build.FAR_SUBDIV  # points a patch side - 1: 28 x 12 patches -> 28 k x 12 k cells
+    assert h.shape == (12 * k + 1, 28 * k + 1) and np.allclose(frame, [0.0, 0.0, 30.0 / k, 30.0 / k])
+    assert np.allclose(h[::k, ::k], z[::SPP, ::SPP], atol=1.0)  # the fitted corners follow the samples
+    monkeypatch.setattr(tiled_build, "FAR_MAX_CELLS", max_cells)
     pooled = far_heights(spec)
-    hp = pooled["heights"]
-    assert hp.shape == (4, 8) and np.allclose(pooled["frame"], [0.0, 0.0, 120.0, 120.0])
+    hp, st = pooled["heights"], -(-28 * k // max_cells)
+    assert hp.shape == (-(-12 * k // st) + 1, -(-28 * k // st) + 1)
+    assert np.allclose(pooled["frame"], [0.0, 0.0, 30.0 / k * st, 30.0 / k * st])
+    # each node: the highest point within half a stride of it, the grid edge-padded beyond its end
+    pad = np.pad(h, ((0, (hp.shape[0] - 1) * st + st), (0, (hp.shape[1] - 1) * st + st)), mode="edge")
     for i in range(hp.shape[0]):
-        for j in range(hp.shape[1]):  # each node: the highest corner within half a stride
-            blk = h[max(4 * i - 2, 0):4 * i + 3, max(4 * j - 2, 0):4 * j + 3]
-            assert hp[i, j] == blk.max()
+        for j in range(hp.shape[1]):
+            r0, c0 = max(st * i - st // 2, 0), max(st * j - st // 2, 0)
+            assert hp[i, j] == pad[r0:st * i + st // 2 + 1, c0:st * j + st // 2 + 1].max()
 
 
 def test_far_heights_stale_or_torn_is_a_tile_error(tmp_path):

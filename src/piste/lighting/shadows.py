@@ -20,8 +20,9 @@ hard sun, one ray, bit-identical to before.
 
 Far-field occluders (:func:`far_field_occluded`): a tiled build bakes each tile against the exact
 patches of its 3 x 3 neighbourhood only; beyond it, rays towards a directional light are marched
-over a coarse height grid of the whole world (the patch-corner grid, max-pooled when the world has
-more than ~1,000 patches a side), so a mountain casts its shadow as far as the sun angle says.
+over a coarse height grid of the whole world (the surface every 7.5 m for 30 m patches, max-pooled
+when that grid has more than 2,048 cells a side), so a mountain casts its shadow as far as the sun
+angle says.
 Elementwise arithmetic only (no BLAS): the same bits in any process.
 """
 

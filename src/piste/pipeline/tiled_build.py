@@ -20,10 +20,11 @@ and returns a few numbers.  Two passes:
    altitude and density from per-cell hashes, so tiles agree whatever order or worker bakes them).
 
 Between the two passes one task (:func:`far_heights_task`, after every fit) writes the world's
-**far heights** ``far/t_0000_0000.npz``: the patch-corner heights of the whole world (the exact
-surface at the corners), max-pooled over blocks of patches when the world has more than
-:data:`FAR_MAX_CELLS` patches a side (an upper bound: distant ridges never lose height), a few MB at
-most.  Each bake marches its sun rays over it outside its 3 x 3 neighbourhood
+**far heights** ``far/t_0000_0000.npz``: the heights of the whole world's exact surface at
+:data:`FAR_SUBDIV` + 1 points a patch side (30 m patches give 7.5 m cells; between nodes a crest
+is lower by its chord error, about curvature x cell^2 / 8), max-pooled over blocks when that grid
+would have more than :data:`FAR_MAX_CELLS` cells a side (an upper bound: distant ridges never lose
+height), 32 MB at most.  Each bake marches its sun rays over it outside its 3 x 3 neighbourhood
 (:func:`piste.lighting.shadows.far_field_occluded`).
 
 Every task is a pure function of its inputs: the single-machine build (:func:`build_tiles`) and the
@@ -75,7 +76,7 @@ __all__ = ["TiledSpec", "TiledResult", "ArraySource", "FileSource", "SyntheticSo
            "lit_task",
            "spec_from_scene", "synthetic_spec",
            "build_tiles", "write_index", "TILE_BAKE_VERSION", "far_errors", "far_heights_task", "FAR_HEIGHTS_VERSION",
-           "FAR_MAX_CELLS"]
+           "FAR_MAX_CELLS", "FAR_SUBDIV"]
 
 #: bumped whenever :func:`lit_task`'s output for the same input changes
 TILE_BAKE_VERSION = "piste.tile-bake/4"  # 2: seam light welded (as the one-bundle bake: weld_seam_light); 3: far_error
@@ -83,8 +84,10 @@ TILE_BAKE_VERSION = "piste.tile-bake/4"  # 2: seam light welded (as the one-bund
 #    scene objects placed by rules (objects_kind, objects_matrix) when the spec has object rules
 #: bumped whenever :func:`far_heights_task`'s output for the same fits changes
 FAR_HEIGHTS_VERSION = "piste.far-heights/1"
-#: most cells a side of the far heights grid (more patches a side: corners max-pooled in blocks)
-FAR_MAX_CELLS = 1024
+#: most cells a side of the far heights grid (more: max-pooled in blocks)
+FAR_MAX_CELLS = 2048
+#: far heights cells a patch side (the surface evaluated at FAR_SUBDIV + 1 points a patch side)
+FAR_SUBDIV = 4
 
 
 class TileError(TileFileError):
@@ -327,7 +330,8 @@ class TiledSpec:
 
     def far_key(self) -> str:
         """The key of the far heights (a function of every fit: of the source and the grid)."""
-        return content_key(FAR_HEIGHTS_VERSION, TILE_FIT_VERSION, self.source_key(), self.grid.to_dict(), FAR_MAX_CELLS)
+        return content_key(FAR_HEIGHTS_VERSION, TILE_FIT_VERSION, self.source_key(), self.grid.to_dict(), FAR_MAX_CELLS,
+                           FAR_SUBDIV)
 
     def lights(self):
         return loads_lights(self.lights_toml, "<lights>") if self.lights_toml else _default_lights()
@@ -371,27 +375,60 @@ def _corner_grid(cp: np.ndarray) -> np.ndarray:
 
 def far_heights(spec: TiledSpec) -> dict:
     """The world's far heights from its fits: ``{"heights": (ny, nx) float64 metres, "frame": (4,)
-    float64 (x, y of node [0, 0], node spacing x, y)}``.  Nodes every ``stride`` patch corners
-    (``stride = ceil(patches a side / FAR_MAX_CELLS)``); with ``stride > 1`` a node holds the
-    highest corner within half a stride of it."""
+    float64 (x, y of node [0, 0], node spacing x, y)}``.  The surface at ``FAR_SUBDIV + 1`` points
+    a patch side (exact: the patches evaluated), then nodes every ``stride`` of those (``stride =
+    ceil(cells a side / FAR_MAX_CELLS)``); with ``stride > 1`` a node holds the highest point
+    within half a stride of it."""
     g = spec.grid
-    py, px = g.patches
-    corners = np.empty((py + 1, px + 1))
-    store = spec.store
-    for ty, tx in g.tiles():
-        y0, y1, x0, x1 = g.patch_range(ty, tx)
-        cp = store.read_fit(g, ty, tx)["control_points"].reshape(y1 - y0, x1 - x0, 4, 4, 3)
-        corners[y0:y1 + 1, x0:x1 + 1] = _corner_grid(cp)[..., 2]
+    k = FAR_SUBDIV
+    u, v = grid_params(k + 1)
+    py, px = (n * k for n in g.patches)  # cells a side
     stride = max(1, -(-max(py, px) // FAR_MAX_CELLS))
-    if stride > 1:
-        from scipy.ndimage import maximum_filter
+    half = stride // 2
+    ny, nx = -(-py // stride) + 1, -(-px // stride) + 1
+    heights = np.full((ny, nx), -np.inf)
+    store = spec.store
 
-        ny, nx = -(-py // stride) + 1, -(-px // stride) + 1
-        padded = np.pad(corners, ((0, (ny - 1) * stride - py), (0, (nx - 1) * stride - px)), mode="edge")
-        corners = maximum_filter(padded, size=stride + 1 - stride % 2, mode="nearest")[::stride, ::stride]
-    s = g.samples_per_patch * stride
+    def nodes(c: np.ndarray, last: int, n: int):
+        """The nodes within half a stride of fine indices ``c`` (the last fine index also feeds
+        the nodes beyond it, as an edge-padded grid would): lowest and highest node index."""
+        lo = np.maximum(-((half - c) // stride), 0)
+        hi = np.where(c == last, n - 1, np.minimum((c + half) // stride, n - 1))
+        return lo, hi
+
+    for ty, tx in g.tiles():  # one tile's surface in memory at a time: never the whole fine grid
+        y0, y1, x0, x1 = g.patch_range(ty, tx)
+        cp = store.read_fit(g, ty, tx)["control_points"]
+        z = evaluate(cp, u, v, normals=False)[..., 2].reshape(y1 - y0, x1 - x0, k + 1, k + 1)  # [py, px, j (v), i (u)]
+        fine = _subdiv_grid(z, k)
+        if stride == 1:
+            heights[y0 * k:y1 * k + 1, x0 * k:x1 * k + 1] = fine
+            continue
+        rl, rh = nodes(np.arange(y0 * k, y1 * k + 1), py, ny)
+        cl, ch = nodes(np.arange(x0 * k, x1 * k + 1), px, nx)
+        for a in range(3):  # a fine point feeds at most 3 nodes a side (2, and the edge's padding)
+            rsel = np.flatnonzero(rl + a <= rh)
+            for b in range(3):
+                csel = np.flatnonzero(cl + b <= ch)
+                if len(rsel) and len(csel):
+                    np.maximum.at(heights, ((rl + a)[rsel][:, None], (cl + b)[csel][None, :]),
+                                  fine[np.ix_(rsel, csel)])
+    s = g.samples_per_patch * stride / k
     (dx, dy), (ox, oy) = g.spacing, g.origin
-    return {"heights": np.ascontiguousarray(corners), "frame": np.array([ox, oy, s * dx, s * dy], dtype=np.float64)}
+    return {"heights": heights, "frame": np.array([ox, oy, s * dx, s * dy], dtype=np.float64)}
+
+
+def _subdiv_grid(z: np.ndarray, k: int) -> np.ndarray:
+    """One tile's surface heights ``z (ny, nx, k + 1, k + 1)`` (``[patch row, patch column, j (v),
+    i (u)]``) as a grid ``(ny * k + 1, nx * k + 1)`` (rows along y; shared patch edges from the
+    lower patch, as the fits weld them bit-identically anyway)."""
+    ny, nx = z.shape[:2]
+    out = np.empty((ny * k + 1, nx * k + 1))
+    out[:-1, :-1] = z[:, :, :k, :k].transpose(0, 2, 1, 3).reshape(ny * k, nx * k)
+    out[:-1, -1] = z[:, -1, :k, k].reshape(ny * k)
+    out[-1, :-1] = z[-1, :, k, :k].reshape(nx * k)
+    out[-1, -1] = z[-1, -1, k, k]
+    return out
 
 
 def far_heights_task(spec: TiledSpec, *_deps) -> dict:
@@ -406,7 +443,8 @@ def far_heights_task(spec: TiledSpec, *_deps) -> dict:
     if sha is not None:
         return {"sha256": sha, "skipped": True, "seconds": 0.0}
     try:
-        arrays = far_heights(spec)
+        with single_threaded():  # one BLAS thread: the same bits locally and on any Dask worker
+            arrays = far_heights(spec)
         sha = store.write("far", 0, 0, arrays, key)
     except Exception as exc:
         raise TileError("far heights", 0, 0, exc) from exc
