@@ -180,3 +180,42 @@ def test_open_tiles_holds_the_objects_around_its_local_tile(tmp_path):
     k = len(read_tile_objects(store, spec.grid, y, x, 4)[0])
     _rewrite(store, (y, x), objects_matrix=None)
     assert len(open_tiles(spec.root).objects()) == want - k
+
+
+def _scene(tmp_path, rules: str):
+    from piste.world.scene_file import load_scene
+
+    n = 12 * SPP + 1
+    x = np.arange(n) * SP
+    np.savez(tmp_path / "h.npz", elevation=np.tile(0.05 * x, (n, 1)))
+    (tmp_path / "s.toml").write_text(f'[terrain]\nsource = "h.npz"\nspacing = {SP}\nsamples_per_patch = {SPP}\n'
+                                     f'tiles = "s.tiles"\ntile_patches = 4\n[lightmap]\nres = 2\nshadows = false\n'
+                                     f'[visibility]\nenabled = false\n' + rules)
+    return load_scene(tmp_path / "s.toml")
+
+
+def test_scene_file_tile_objects_reach_the_tiled_build(tmp_path):
+    from piste.pipeline.tiled_build import spec_from_scene
+
+    scene = _scene(tmp_path, '[[tile_objects]]\nkind = "tree"\ndensity = 20.0\nslope = [0.0, 10.0]\n'
+                             '[[tile_objects]]\nkind = "rock"\ndensity = 5\naltitude = [10.0, 100.0]\n')
+    spec = spec_from_scene(scene)
+    assert spec.objects == (ObjectRule("tree", 20.0, slope=(0.0, 10.0)), ObjectRule("rock", 5.0, altitude=(10.0, 100.0)))
+    build_tiles(spec)
+    kind, mat = _objects(spec)
+    assert (kind == 0).sum() > 50 and (mat[kind == 2, 2, 3] >= 9.0).all()
+
+
+@pytest.mark.parametrize("rules, key, words", [
+    ('[[tile_objects]]\nkind = "cactus"\ndensity = 1.0\n', "tile_objects[0].kind", "one of tree"),
+    ('[[tile_objects]]\nkind = "tree"\n', "tile_objects[0].density", "missing"),
+    ('[[tile_objects]]\nkind = "tree"\ndensity = 1.0\nslope = [40.0, 10.0]\n', "tile_objects[0].slope", "min <= max"),
+    ('[[tile_objects]]\nkind = "tree"\ndensity = 1.0\nslope = [0.0, 100.0]\n', "tile_objects[0].slope", "[0, 90]"),
+    ('[[tile_objects]]\nkind = "tree"\ndensity = 1.0\nheight = 3\n', "tile_objects[0].height", "unknown"),
+])
+def test_bad_tile_object_rules_name_the_key(tmp_path, rules, key, words):
+    from piste.world.scene_file import SceneError
+
+    with pytest.raises(SceneError, match=re.escape(words)) as exc:
+        _scene(tmp_path, rules)
+    assert key in str(exc.value) and "s.toml" in str(exc.value)

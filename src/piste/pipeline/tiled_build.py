@@ -63,7 +63,7 @@ from piste.lighting.shadows import far_field_occluded, ray_offset, shadow_rays, 
 from piste.pipeline.build import scene_lights
 from piste.pipeline.cache import content_key
 from piste.pipeline.sources import load_heightfield
-from piste.pipeline.tile_objects import place_tile_objects, rules_key
+from piste.pipeline.tile_objects import ObjectRule, place_tile_objects, rules_key
 from piste.pipeline.visibility import compute_visibility
 from piste.terrain.bezier import evaluate, grid_params
 from piste.terrain.heightfield import single_threaded
@@ -678,7 +678,8 @@ def spec_from_scene(scene, root=None, res: int | None = None) -> TiledSpec:
     cell = max(scene.visibility.cell, tile_m / 4.0) if scene.visibility.enabled else 0.0
     return TiledSpec(str(root), src, grid, dumps_lights(scene_lights(scene)), res=res or scene.lightmap.res,
                      shadows=scene.lightmap.shadows, cell=cell,
-                     eye_heights=tuple(scene.visibility.eye_heights), name=scene.name)
+                     eye_heights=tuple(scene.visibility.eye_heights), name=scene.name,
+                     objects=tuple(ObjectRule(**r) for r in getattr(scene, "tile_objects", ())))
 
 
 def synthetic_spec(root, patches_side: int, samples_per_patch: int = 3, tile_patches: int = 64, spacing: float = 10.0,

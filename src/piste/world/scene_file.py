@@ -107,6 +107,13 @@ scene file.  Every table and key is optional except where noted::
     heading = 0.0
     scale = 1.0
 
+    [[tile_objects]]              # a tiled build (terrain.tiles or --dask): objects placed on every tile
+    kind = "tree"                 #   tree | sign | rock | rail (piste.pipeline.tile_objects)
+    density = 6.0                 #   candidates a hectare
+    slope = [0.0, 30.0]           #   degrees where one is kept
+    altitude = [0.0, 2400.0]      #   metres where one is kept (default: any)
+    scale = [0.7, 1.4]            #   size range
+
     [[lights]]                    # piste.lighting fields; type is the kind
     type = "directional"          # ambient | directional | point | spot
     direction = [0.3, 0.8, -0.5]
@@ -149,6 +156,9 @@ from piste.formats.ssx.mpf_model import mpf_partners
 from piste.formats.safe_io import (MAX_TOML_BYTES, check_regular, confined_file, confined_folder, open_file,
                                    read_regular, resolve_reference, toml_depth, user_allow_paths)
 from piste.lighting.lights import AmbientLight, DirectionalLight, PointLight, SpotLight
+
+#: the kinds [[tile_objects]] may name (piste.world.objects.OBJECT_KINDS)
+TILE_OBJECT_KINDS = ("tree", "sign", "rock", "rail")
 
 __all__ = [
     "SceneFile",
@@ -406,6 +416,7 @@ class SceneFile:
     render: RenderSpec = field(default_factory=RenderSpec)
     pack: dict | None = None          # [pack]: {"follow": "track", "start": fraction}
     auto_objects: dict | None = None  # [auto_objects]: {"seed": int, "trees": n, "signs": n, "rocks": n, "rails": n}
+    tile_objects: list = field(default_factory=list)  # [[tile_objects]]: {"kind", "density", "slope", "altitude", "scale"}
     text: str = ""
     allow_paths: tuple = ()  # folders the user allowed (--allow-path, PISTE_ALLOW_PATHS) when it was loaded
 
@@ -586,7 +597,8 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
     base = path.resolve().parent
     top = _Checker(path, lines, doc, (), "")
     top.allow({"name", "terrain", "lightmap", "lod", "visibility", "render", "gltf", "riders", "objects", "lights",
-               "cameras", "allow_paths", "pack", "auto_objects"})
+               "cameras", "allow_paths", "pack", "auto_objects",
+               "tile_objects"})
     scene = SceneFile(path=path, name=top.get("name", "str", path.stem), text=text)
     _refuse_allow_paths(top)
     scene.allow_paths = user_allow_paths()
@@ -728,6 +740,25 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
         if ts.kind != "default":
             raise ao.error("seed", "objects placed along the track need the default course (terrain.source = \"default\")")
         scene.auto_objects = auto
+    for c in _array(top, "tile_objects"):  # rules for piste.pipeline.tile_objects.ObjectRule
+        c.allow({"kind", "density", "slope", "altitude", "scale"})
+        kind = c.get("kind", "str", required=True)
+        if kind not in TILE_OBJECT_KINDS:
+            raise c.error("kind", f"expected one of {', '.join(TILE_OBJECT_KINDS)}, got {kind!r}")
+        if ts.kind not in ("heightfield", "geotiff"):
+            raise c.error("kind", "objects placed on tiles need a tiled height-field terrain (GeoTIFF, PNG or .npz), "
+                                  f"got terrain kind {ts.kind!r}")
+        rule = {"kind": kind, "density": _bounded(c, "density", c.get("density", "pos", required=True), 0.0, 1e4,
+                                                  "candidates a hectare")}
+        for key, lo, hi, default, what in (("slope", 0.0, 90.0, (0.0, 90.0), "degrees"),
+                                           ("altitude", -1e6, 1e6, None, "metres"),
+                                           ("scale", 1e-3, 1e3, (0.7, 1.4), "a size")):
+            v = _bounded(c, key, c.get(key, "vec2", default), lo, hi, what)
+            if v is not None and v[0] > v[1]:
+                raise c.error(key, f"expected [min, max] with min <= max, got {list(v)}")
+            if v is not None:
+                rule[key] = v
+        scene.tile_objects.append(rule)
 
     # glTF imports
     for g in _array(top, "gltf"):
