@@ -219,3 +219,55 @@ def test_bad_tile_object_rules_name_the_key(tmp_path, rules, key, words):
     with pytest.raises(SceneError, match=re.escape(words)) as exc:
         _scene(tmp_path, rules)
     assert key in str(exc.value) and "s.toml" in str(exc.value)
+
+
+def _long_world(root) -> TiledSpec:
+    """6 x 2 tiles of 120 m: a slope falling along +x with rolls across it."""
+    ny, nx = 2 * 4 * SPP + 1, 6 * 4 * SPP + 1
+    x, y = np.meshgrid(np.arange(nx) * SP, np.arange(ny) * SP)
+    z = 300.0 - 0.3 * x + 4.0 * np.sin(x / 40.0) * np.cos(y / 35.0)
+    return TiledSpec(str(root), ArraySource(z, (SP, SP)), TileGrid((ny, nx), SPP, 4, (SP, SP)), "", res=2,
+                     shadows=False)
+
+
+def test_riders_follow_a_track_across_tiles(tmp_path):
+    from piste.pipeline.tile_objects import track_tiles, world_track
+    from piste.terrain.net import PatchNet
+    from piste.terrain.query import height_at
+    from piste.world.riders import RiderSet
+
+    spec = _long_world(tmp_path / "w")
+    build_tiles(spec)
+    store, g = TileStore(spec.root), spec.grid
+    line, net = world_track(store, g, (15.0, 110.0), (705.0, 130.0))
+    assert len(track_tiles(g, line[:, :2], halo=0)) == 6 and len(net) == 2 * 6 * 16  # every tile, both rows
+    whole = PatchNet(np.concatenate([store.read_fit(g, *t)["control_points"] for t in g.tiles()]))
+    zs, hit, _, _ = height_at(whole, line[:, :2])
+    assert hit.all() and np.allclose(line[:, 2], zs, atol=1e-6)  # the track lies on the world's surface
+    riders = RiderSet(net, line, start=20.0, speed=11.0)
+    tiles_seen = set()
+    for t in np.arange(0.0, 55.0, 2.5):  # 600 m of track at 11 m/s
+        st = riders.state(float(t))
+        z, hit, _, _ = height_at(whole, st.anchor[:, :2])
+        assert hit.all() and np.allclose(st.anchor[:, 2], z, atol=1e-4)  # standing on the exact surface
+        tiles_seen.add(g.tile_of(*st.anchor[0, :2]))
+    assert {tx for _, tx in tiles_seen} >= {0, 1, 2, 3, 4, 5}  # rider 0 rode across every tile column
+
+
+def test_add_track_riders_gives_the_runtime_a_pack_on_the_track(tmp_path):
+    from piste.pipeline.preview import track_scene
+    from piste.pipeline.tile_objects import add_track_riders
+    from piste.pipeline.tiles_source import open_tiles
+    from piste.errors import ConfigError
+
+    spec = _long_world(tmp_path / "w.tiles")
+    build_tiles(spec)
+    b = open_tiles(spec.root)
+    b2 = add_track_riders(b, TileStore(spec.root), spec.grid, (15.0, 110.0), (705.0, 130.0), start=0.1)
+    assert b2.manifest["pack"] == {"follow": "track", "start": 0.1} and b2.centerline.shape[1] == 3
+    assert len(b2.net) == 192 and b2.lightmap.rects.shape[0] == 192 and b.net is not b2.net
+    scene = track_scene(b2)
+    st = scene.riders.state(30.0)
+    assert st.anchor[:, 0].max() > 240.0  # riders 3 tiles from the world's start after 30 s
+    with pytest.raises(ConfigError, match="off the world"):
+        add_track_riders(b, TileStore(spec.root), spec.grid, (15.0, 110.0), (905.0, 130.0))

@@ -23,6 +23,16 @@ place_tile_objects(control_points, grid, ty, tx, rules, seed=0) -> (kind (k,) in
 object_set(kind, matrix, lights=None) -> ObjectSet   instances for the object pass
 tiles_objects(store, grid, tiles) -> (kind, matrix)  the stored objects of some tiles, checked
 add_tile_objects(bundle, store, grid, tiles) -> Bundle   a runtime scene holding them (vertex colours baked)
+
+Riders across tiles
+-------------------
+track_tiles(grid, xy, halo=1) -> [(ty, tx), ...]        the tiles under a track (and around it)
+track_net(store, grid, tiles) -> PatchNet                those tiles' fitted patches as one net
+world_track(store, grid, start_xy, end_xy, step=5) -> (line (k, 3), net)   a straight track across
+    tiles on the exact surface, and the ground its riders need
+add_track_riders(bundle, store, grid, start_xy, end_xy, start=0.12) -> Bundle   a runtime scene whose
+    pack of riders follows that track ([pack] follow = "track": the runtime's track_scene), its
+    ``net`` the track's tiles (riders stand, carve and cast shadows on them while the world streams)
 """
 
 from __future__ import annotations
@@ -32,13 +42,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from piste.errors import ValidationError
+from piste.errors import ConfigError, ValidationError
 from piste.terrain.query import eval_points
 from piste.terrain.tiles import TileGrid, read_tile_objects
 from piste.world.objects import OBJECT_KINDS, ObjectSet, compress_mesh, make_mesh, normal_matrix, object_texture
 
 __all__ = ["ObjectRule", "DEFAULT_RULES", "rules_key", "place_tile_objects", "object_set", "MAX_TILE_OBJECTS",
-           "tiles_objects", "add_tile_objects"]
+           "tiles_objects", "add_tile_objects", "track_tiles", "track_net", "world_track", "add_track_riders",
+           "MAX_TRACK_TILES"]
+
+#: most tiles a track's ground may span (its net is held in memory while riders run on it)
+MAX_TRACK_TILES = 256
 
 #: most objects one tile may hold (a build refuses rules that would place more)
 MAX_TILE_OBJECTS = 200_000
@@ -263,3 +277,82 @@ def add_tile_objects(bundle, store, grid: TileGrid, tiles, skip_bad: bool = Fals
     man = dict(bundle.manifest)
     man["objects"] = dict(meta, placed="tiles", tiles=[list(t) for t in tiles])
     return replace(bundle, manifest=man, arrays=arrays, _cache={})
+
+
+def track_tiles(grid: TileGrid, xy, halo: int = 1) -> list:
+    """The tiles under the polyline ``xy (k, 2)`` metres (sampled every eighth of a tile) and within
+    ``halo`` tiles of them, sorted: ``[(ty, tx), ...]`` (ConfigError: a point off the world, more
+    than :data:`MAX_TRACK_TILES`)."""
+    pts = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    x0, y0, _, _ = grid.tile_bounds_xy(0, 0)
+    _, _, x1, y1 = grid.tile_bounds_xy(grid.shape[0] - 1, grid.shape[1] - 1)
+    off = (pts[:, 0] < x0) | (pts[:, 0] > x1) | (pts[:, 1] < y0) | (pts[:, 1] > y1) | ~np.isfinite(pts).all(1)
+    if off.any():
+        i = int(np.flatnonzero(off)[0])
+        raise ConfigError(f"track: point {i} ({pts[i, 0]:.6g}, {pts[i, 1]:.6g}) lies off the world "
+                          f"(x {x0:.6g}..{x1:.6g}, y {y0:.6g}..{y1:.6g})")
+    tx0, ty0, tx1, ty1 = grid.tile_bounds_xy(0, 0)
+    step = min(tx1 - tx0, ty1 - ty0) / 8.0
+    samples = [pts[:1]]
+    for a, b in zip(pts[:-1], pts[1:]):
+        n = max(int(np.ceil(np.linalg.norm(b - a) / step)), 1)
+        samples.append(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
+    under = {grid.tile_of(float(x), float(y)) for x, y in np.concatenate(samples)}
+    out = sorted({(y, x) for ty, tx in under for y in range(max(ty - halo, 0), min(ty + halo + 1, grid.shape[0]))
+                  for x in range(max(tx - halo, 0), min(tx + halo + 1, grid.shape[1]))})
+    if len(out) > MAX_TRACK_TILES:
+        raise ConfigError(f"track: its ground spans {len(out)} tiles, more than {MAX_TRACK_TILES}")
+    return out
+
+
+def track_net(store, grid: TileGrid, tiles):
+    """The fitted patches of ``tiles`` as one :class:`~piste.terrain.net.PatchNet` (shared tile
+    edges are bit-identical: the riders' ground has no seams)."""
+    from piste.terrain.net import PatchNet
+
+    parts = [store.read_fit(grid, ty, tx) for ty, tx in tiles]
+    return PatchNet(np.concatenate([p["control_points"] for p in parts]), uv=np.concatenate([p["uv"] for p in parts]),
+                    tol=1e-6 * grid.samples_per_patch * min(grid.spacing), name=f"track ({len(tiles)} tiles)")
+
+
+def world_track(store, grid: TileGrid, start_xy, end_xy, step: float = 5.0):
+    """A straight track from ``start_xy`` to ``end_xy`` (metres, on the world) across as many tiles
+    as it crosses: ``line (k, 3)`` float64 points every ``step`` metres on the exact surface, and
+    the net of the tiles under it and around it (:func:`track_tiles`, :func:`track_net`)."""
+    from piste.terrain.query import height_at
+
+    a, b = np.asarray(start_xy, dtype=np.float64), np.asarray(end_xy, dtype=np.float64)
+    if a.shape != (2,) or b.shape != (2,) or not (np.isfinite(a).all() and np.isfinite(b).all()):
+        raise ConfigError(f"track: expected start and end as (x, y) metres, got {start_xy!r}, {end_xy!r}")
+    if not step > 0:
+        raise ConfigError(f"track: step must be > 0 m, got {step}")
+    length = float(np.linalg.norm(b - a))
+    if length < 2.0 * step:
+        raise ConfigError(f"track: {length:.3g} m from start to end, expected at least {2.0 * step:g} m")
+    n = int(np.ceil(length / step)) + 1
+    xy = a + (b - a) * np.linspace(0.0, 1.0, n)[:, None]
+    net = track_net(store, grid, track_tiles(grid, xy))
+    z, hit, _, _ = height_at(net, xy)
+    if not hit.all():
+        raise ConfigError(f"track: {int((~hit).sum())} of its points lie off the terrain")
+    return np.column_stack([xy, z]), net
+
+
+def add_track_riders(bundle, store, grid: TileGrid, start_xy, end_xy, start: float = 0.12):
+    """A copy of ``bundle`` (a tiled world's runtime scene) whose pack of riders follows a straight
+    track from ``start_xy`` to ``end_xy`` across tiles: the centre line (``terrain/centerline``),
+    ``[pack] follow = "track"`` (rider 0 at fraction ``start`` at t = 0) and, as its ``net``, the
+    tiles under the track and around it (:func:`world_track`)."""
+    from dataclasses import replace
+
+    if not 0.0 <= float(start) <= 1.0:
+        raise ConfigError(f"track: start must be a fraction of the track in [0, 1], got {start}")
+    line, net = world_track(store, grid, start_xy, end_xy)
+    man = dict(bundle.manifest)
+    man["pack"] = {"follow": "track", "start": float(start)}
+    arrays = dict(bundle.arrays)
+    arrays["terrain/centerline"] = line
+    rects = np.asarray(net.lightmap_rect, np.float32)  # the local net's placeholder light map, resized
+    arrays["lightmap/rects"] = rects
+    lm = replace(bundle.lightmap, rects=rects)
+    return replace(bundle, manifest=man, arrays=arrays, net=net, lightmap=lm, centerline=line, _cache={})
