@@ -16,23 +16,24 @@ tiles holds the same objects), and no object is placed twice along a seam.
 
 API
 ---
-ObjectRule(kind, density, slope=(0, 90), altitude=(-inf, inf), scale=(0.7, 1.4))
-DEFAULT_RULES                                   trees on gentle slopes, rocks on steep ones
-rules_key(rules) -> list                        what the build's key hashes
-place_tile_objects(control_points, grid, ty, tx, rules, seed=0) -> (kind (k,) int64, matrix (k, 4, 4) float64)
-object_set(kind, matrix, lights=None) -> ObjectSet   instances for the object pass
-tiles_objects(store, grid, tiles) -> (kind, matrix)  the stored objects of some tiles, checked
-add_tile_objects(bundle, store, grid, tiles) -> Bundle   a runtime scene holding them (vertex colours baked)
+::
 
-Riders across tiles
--------------------
-track_tiles(grid, xy, halo=1) -> [(ty, tx), ...]        the tiles under a track (and around it)
-track_net(store, grid, tiles) -> PatchNet                those tiles' fitted patches as one net
-world_track(store, grid, start_xy, end_xy, step=5) -> (line (k, 3), net)   a straight track across
-    tiles on the exact surface, and the ground its riders need
-add_track_riders(bundle, store, grid, start_xy, end_xy, start=0.12) -> Bundle   a runtime scene whose
-    pack of riders follows that track ([pack] follow = "track": the runtime's track_scene), its
-    ``net`` the track's tiles (riders stand, carve and cast shadows on them while the world streams)
+    ObjectRule(kind, density, slope=(0, 90), altitude=(-inf, inf), scale=(0.7, 1.4))
+    DEFAULT_RULES                                   trees on gentle slopes, rocks on steep ones
+    rules_key(rules) -> list                        what the build's key hashes
+    place_tile_objects(control_points, grid, ty, tx, rules, seed=0) -> (kind (k,) int64, matrix (k, 4, 4) float64)
+    object_set(kind, matrix, lights=None) -> ObjectSet   instances for the object pass
+    tiles_objects(store, grid, tiles) -> (kind, matrix)  the stored objects of some tiles, checked
+    add_tile_objects(bundle, store, grid, tiles) -> Bundle   a runtime scene holding them (vertex colours baked)
+
+    # riders across tiles
+    track_tiles(grid, xy, halo=1) -> [(ty, tx), ...]        the tiles under a track (and around it)
+    track_net(store, grid, tiles) -> PatchNet                those tiles' fitted patches as one net
+    world_track(store, grid, start_xy, end_xy, step=5) -> (line (k, 3), net)   a straight track across
+        tiles on the exact surface, and the ground its riders need
+    add_track_riders(bundle, store, grid, start_xy, end_xy, start=0.12) -> Bundle   a runtime scene whose
+        pack of riders follows that track ([pack] follow = "track": the runtime's track_scene), its
+        ``net`` the track's tiles (riders stand, carve and cast shadows on them while the world streams)
 """
 
 from __future__ import annotations
