@@ -39,13 +39,17 @@ API
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from piste.errors import ConfigError, ValidationError
+from piste.lighting.vertex import choose_lights_many
+from piste.pipeline.furnish import object_arrays
+from piste.terrain.net import PatchNet
+from piste.terrain.query import height_at
 from piste.terrain.query import eval_points
-from piste.terrain.tiles import TileGrid, read_tile_objects
+from piste.terrain.tiles import TileError, TileGrid, read_tile_objects
 from piste.world.objects import OBJECT_KINDS, ObjectSet, compress_mesh, make_mesh, normal_matrix, object_texture
 
 __all__ = ["ObjectRule", "DEFAULT_RULES", "rules_key", "place_tile_objects", "object_set", "MAX_TILE_OBJECTS",
@@ -234,8 +238,6 @@ def object_set(kind: np.ndarray, matrix: np.ndarray, lights=None, normal_bits: i
     radius = mesh_r[kind] * np.linalg.norm(matrix[:, :3, :3], axis=1).max(axis=1)
     vl = None
     if lights is not None and len(kind):
-        from piste.lighting.vertex import choose_lights_many
-
         vl = choose_lights_many(lights, center)
     counts = {k: int(np.count_nonzero(kind == i)) for i, k in enumerate(OBJECT_KINDS)}
     return ObjectSet(meshes, OBJECT_KINDS, kind, matrix, normal_matrix(matrix), center, radius, vl, object_texture(),
@@ -257,10 +259,7 @@ def add_tile_objects(bundle, store, grid: TileGrid, tiles, skip_bad: bool = Fals
     (their vertex colours baked from the bundle's lights, as a build stores them); ``bundle`` itself
     when those tiles hold none.  ``skip_bad``: a tile whose objects do not read back (TileError) is
     left out, as the streamed view leaves a bad tile out (else the TileError propagates)."""
-    from dataclasses import replace
 
-    from piste.pipeline.furnish import object_arrays
-    from piste.terrain.tiles import TileError
 
     good = []
     for t in tiles:
@@ -309,7 +308,6 @@ def track_tiles(grid: TileGrid, xy, halo: int = 1) -> list:
 def track_net(store, grid: TileGrid, tiles):
     """The fitted patches of ``tiles`` as one :class:`~piste.terrain.net.PatchNet` (shared tile
     edges are bit-identical: the riders' ground has no seams)."""
-    from piste.terrain.net import PatchNet
 
     parts = [store.read_fit(grid, ty, tx) for ty, tx in tiles]
     return PatchNet(np.concatenate([p["control_points"] for p in parts]), uv=np.concatenate([p["uv"] for p in parts]),
@@ -320,7 +318,6 @@ def world_track(store, grid: TileGrid, start_xy, end_xy, step: float = 5.0):
     """A straight track from ``start_xy`` to ``end_xy`` (metres, on the world) across as many tiles
     as it crosses: ``line (k, 3)`` float64 points every ``step`` metres on the exact surface, and
     the net of the tiles under it and around it (:func:`track_tiles`, :func:`track_net`)."""
-    from piste.terrain.query import height_at
 
     a, b = np.asarray(start_xy, dtype=np.float64), np.asarray(end_xy, dtype=np.float64)
     if a.shape != (2,) or b.shape != (2,) or not (np.isfinite(a).all() and np.isfinite(b).all()):
@@ -344,7 +341,6 @@ def add_track_riders(bundle, store, grid: TileGrid, start_xy, end_xy, start: flo
     track from ``start_xy`` to ``end_xy`` across tiles: the centre line (``terrain/centerline``),
     ``[pack] follow = "track"`` (rider 0 at fraction ``start`` at t = 0) and, as its ``net``, the
     tiles under the track and around it (:func:`world_track`)."""
-    from dataclasses import replace
 
     if not 0.0 <= float(start) <= 1.0:
         raise ConfigError(f"track: start must be a fraction of the track in [0, 1], got {start}")
