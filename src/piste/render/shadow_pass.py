@@ -88,7 +88,8 @@ def area_light_visibility(points, triangles, sun_direction, sun_radius: float = 
     Returns
     -------
     (p,) float64 in 0..1: 1 sees the whole disc.  Every ray against every triangle
-    (Moller-Trumbore), ``chunk`` ray-triangle pairs at a time.
+    (Moller-Trumbore), ``chunk`` ray-triangle pairs at a time, for the points whose cone of rays
+    meets the triangles' bounding sphere (the others see the whole disc).
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     tri = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
@@ -100,9 +101,21 @@ def area_light_visibility(points, triangles, sun_direction, sun_radius: float = 
     hit = np.zeros((len(pts), len(dirs)), dtype=bool)
     if len(tri) == 0 or len(pts) == 0:
         return np.ones(len(pts))
+    # only the points whose cone of rays meets the caster's bounding sphere can be shaded
+    flat = tri.reshape(-1, 3)
+    centre = 0.5 * (flat.min(0) + flat.max(0))
+    rad = float(np.linalg.norm(flat - centre, axis=1).max()) * 1.001 + 1e-9
+    d = -np.asarray(sun_direction, dtype=np.float64)
+    d = d / np.linalg.norm(d)
+    rel = centre - pts
+    along = rel @ d
+    miss = np.linalg.norm(rel - along[:, None] * d, axis=1)
+    spread = np.linalg.norm(rel, axis=1) * np.tan(np.radians(float(sun_radius))) * 1.001
+    near = np.flatnonzero((along > -rad) & (miss <= rad + spread))
     step = max(1, chunk // (len(tri) * len(dirs)))
-    for s in range(0, len(pts), step):
-        o = pts[s:s + step, None, None, :] - v0  # (q, 1, t, 3)
+    for s0 in range(0, len(near), step):
+        s = near[s0:s0 + step]
+        o = pts[s, None, None, :] - v0  # (q, 1, t, 3)
         d = dirs[None, :, None, :]  # (1, k, 1, 3)
         pv = np.cross(d, e2)  # (1, k, t, 3)
         det = np.einsum("...i,...i", pv, e1)  # (1, k, t)
@@ -112,7 +125,7 @@ def area_light_visibility(points, triangles, sun_direction, sun_radius: float = 
         v = np.einsum("...i,...i", d, qv) * inv
         tt = np.einsum("...i,...i", qv, e2) * inv
         ok = (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (tt > 1e-6)
-        hit[s:s + step] = ok.any(axis=2)
+        hit[s] = ok.any(axis=2)
     return 1.0 - hit.mean(axis=1)
 
 
