@@ -238,6 +238,118 @@ def render_dof(args) -> None:
         ctx.release()
 
 
+def render_soft_shadows(args) -> None:
+    """Run-time side, soft rider shadows (issue 27 item 5): the demo's first rider (its low LOD, as
+    the shadow pass draws it, at t = 0) over flat snow, standing on it and 3 m up in a jump, seen
+    from above (128 px over the shadow's 7 m x 7 m square); error: mean ``|V - V_ref|`` of the sun's
+    visibility over the pixels the reference shows in penumbra (``0.02 < V_ref < 0.98``), against
+    :func:`piste.render.shadow_pass.area_light_visibility` (128 rays over the disc per pixel), for
+    the hard pass and ``--soft-shadows`` (PCSS).  Cost: a frame of the default demo scene (640x448,
+    chase frames at t = 0 and 1 s) with ``--soft-shadows`` over without, medians of ``--rounds``
+    interleaved rounds."""
+    from piste.pipeline.bundle_objects import load_bundle
+    from piste.pipeline.default_scene import build_default_scene
+    from piste.pipeline.preview import ScenePreview
+    from piste.render.context import create_context
+    from piste.render.shadow_pass import area_light_visibility, shadow_on_plane
+
+    bundle = load_bundle(build_default_scene(0).path, verify=False, warm=True)
+    ctx = create_context()
+    previews = {k: ScenePreview(bundle, size=(640, 448), ctx=ctx, object_lighting="dynamic", soft_shadows=k)
+                for k in (False, True)}
+    try:
+        r = previews[False].renderer
+        plan = r._plan(0.0)
+        pos = np.asarray(plan["frames"][0].shadow[0][0], np.float64)
+        idx = np.asarray(r.casts[0].lods[-1].mesh.indices)
+        sun = np.asarray(r.scene.sun.direction, np.float64)
+        print(f"render: soft rider shadows, the demo's rider ({len(idx)} low-LOD triangles) over flat snow, "
+              "128 px over 7 m; reference: 128 sun-disc rays per pixel")
+        for lift in (0.0, 3.0):
+            p = pos - [0.0, 0.0, pos[:, 2].min() - lift]
+            c = p.mean(0)
+            d = sun / np.linalg.norm(sun)
+            centre = c[:2] + d[:2] / max(-d[2], 1e-3) * c[2]  # where the sun's ray through the rider lands
+            rect = (centre[0] - 3.5, centre[1] - 3.5, centre[0] + 3.5, centre[1] + 3.5)
+            for radius in (0.27, 1.0, 2.0):
+                t0 = time.perf_counter()
+                v = {k: shadow_on_plane(ctx, p, idx, sun, rect, res=128, soft=k, sun_radius=radius,
+                                        tile=r.shadows.tile)[0] for k in (False, True)}
+                pts = shadow_on_plane(ctx, p, idx, sun, rect, res=128)[1]
+                ref = area_light_visibility(pts.reshape(-1, 3), p[idx], sun, radius, rays=128).reshape(pts.shape[:2])
+                pen = (ref > 0.02) & (ref < 0.98)
+                eh, es = (float(np.abs(v[k] - ref)[pen].mean()) for k in (False, True))
+                flags = f"--soft-shadows, sun {radius:g} deg, rider {lift:g} m up"
+                err = f"penumbra ({int(pen.sum())} px): |dV| {es:.3f} (hard {eh:.3f})"
+                print(f"  {flags:<52} {err:<52} (reference {time.perf_counter() - t0:.1f} s)")
+                if radius == 0.27:
+                    record("quality", f"render --soft-shadows (rider {lift:g} m up): penumbra |dV| vs area light",
+                           "", f"{es:.3f}", f"hard {eh:.3f}", "", None)
+        times = (0.0, 1.0)
+        tm = interleaved({k: (lambda p=p: [p.render(None, t) for t in times]) for k, p in previews.items()}, args.rounds)
+        base, soft = stat(tm[False])[0], stat(tm[True])[0]
+        print(f"  {'--soft-shadows (default scene, 2 chase frames)':<52} {'':<52} {soft / len(times) * 1e3:9.1f} ms  "
+              f"{(soft / base - 1.0) * 100:+.0f} % of the frame ({base / len(times) * 1e3:.1f} ms without)")
+        record("quality", "render --soft-shadows: frame cost", "", f"{(soft / base - 1.0) * 100:+.0f} % frame", "", "", None)
+    finally:
+        for p in previews.values():
+            p.release()
+        ctx.release()
+
+
+def render_occlusion(args) -> None:
+    """Run-time side, occlusion culling (issue 27 item 6): on the default course (``piste demo``'s
+    bundle, 640x448) from the demo's chase camera (t = 0, 2, 4 s), the course's flight camera (5
+    points along it) and examples/scenes/default.toml's ``start`` camera: the terrain patches and
+    objects ``--occlusion on`` culls and the pixels that differ from ``--occlusion off`` (must be 0);
+    cost: the frame's wall time with it over without (chase frames), medians of ``--rounds``."""
+    from piste.pipeline.bundle_objects import load_bundle
+    from piste.pipeline.default_scene import build_default_scene
+    from piste.pipeline.preview import ScenePreview, camera_at
+    from piste.render.context import create_context
+    from piste.world.camera import Camera
+
+    bundle = load_bundle(build_default_scene(0).path, verify=False, warm=True)
+    ctx = create_context()
+    cams = [(f"chase t={t:g}", None, t) for t in (0.0, 2.0, 4.0)]
+    cams += [(f"flight {i}/4", camera_at(bundle, "flight", i, 5), 0.0) for i in range(5)]
+    cams += [("start", Camera(np.array([255.0, 115.0, 356.0]), np.array([236.0, 160.0, 336.0]),
+                              up=np.array([0.0, 0.0, 1.0]), fov_y=55.0, near=0.5, far=4000.0), 0.0)]
+    previews = {k: ScenePreview(bundle, size=(640, 448), ctx=ctx, object_lighting="dynamic", occlusion=k)
+                for k in (False, True)}
+    print("render: occlusion culling, default course 640x448 (software hierarchical-Z of the 256 nearest patches, "
+          "8 px cells)")
+    try:
+        for p in previews.values():
+            p.render(None, 0.0)  # (the first frame of a process waits for the resident blocks)
+        tot = np.zeros(4, np.int64)
+        worst = 0
+        for name, cam, t in cams:
+            a = previews[False].render(cam, t)
+            b = previews[True].render(cam, t)
+            off, on = previews[False].frame.stats, previews[True].frame.stats
+            diff = int(np.any(a != b, axis=-1).sum())
+            worst = max(worst, diff)
+            tot += [on["occluded_patches"], off["terrain_patches"], on["occluded_objects"], off["objects_drawn"]]
+            what = (f"patches {on['occluded_patches']:4d} of {off['terrain_patches']:4d}, objects "
+                    f"{on['occluded_objects']:3d} of {off['objects_drawn']:3d} culled")
+            print(f"  {'--occlusion on, ' + name:<52} {what:<52} {diff} px differ")
+        times = (0.0, 2.0)
+        tm = interleaved({k: (lambda p=p: [p.render(None, t) for t in times]) for k, p in previews.items()}, args.rounds)
+        base, occ = stat(tm[False])[0], stat(tm[True])[0]
+        print(f"  {'--occlusion on (all cameras)':<52} "
+              f"{f'patches {tot[0]} of {tot[1]}, objects {tot[2]} of {tot[3]}; max {worst} px differ':<52} "
+              f"{occ / len(times) * 1e3:9.1f} ms  {(occ / base - 1.0) * 100:+.0f} % of the frame "
+              f"({base / len(times) * 1e3:.1f} ms without, chase t=0, 2)")
+        record("quality", "render --occlusion on: patches / objects culled, pixels differing (9 cameras)", "0 px",
+               f"{tot[0]}/{tot[1]} patches, {tot[2]}/{tot[3]} objects, {worst} px", "",
+               f"{(occ / base - 1.0) * 100:+.0f} % frame", worst == 0)
+    finally:
+        for p in previews.values():
+            p.release()
+        ctx.release()
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="64 points x 1024 paths, 3 rounds")
@@ -252,6 +364,8 @@ def main() -> int:
     bake_soft_sun(args)
     render_aa(args)
     render_dof(args)
+    render_soft_shadows(args)
+    render_occlusion(args)
     return 0
 
 
