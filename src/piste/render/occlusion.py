@@ -107,7 +107,12 @@ def occluder_depth(positions, indices, vp, size, cell: int = CELL) -> np.ndarray
     # 1. the boundary of what these triangles cover: edges only one of them has (vertices matched by
     # position: each patch has its own copy of its border's vertices); every cell such an edge touches
     # may be partly uncovered
-    _, vid = np.unique(np.round(pos / 1e-4).astype(np.int64), axis=0, return_inverse=True)
+    q = np.round(pos / 1e-3).astype(np.int64)  # millimetres
+    q -= q.min(0)
+    if len(q) and q.max() < (1 << 21):  # three 21-bit fields in one int64 (unique of rows sorts ~10x slower)
+        _, vid = np.unique((q[:, 0] << 42) | (q[:, 1] << 21) | q[:, 2], return_inverse=True)
+    else:
+        _, vid = np.unique(q, axis=0, return_inverse=True)
     vid = vid.ravel()
     ev = np.stack([np.stack([a, b], 1), np.stack([b, c], 1), np.stack([c, a], 1)], 1).reshape(-1, 2)
     ea, eb = np.minimum(vid[ev[:, 0]], vid[ev[:, 1]]), np.maximum(vid[ev[:, 0]], vid[ev[:, 1]])
