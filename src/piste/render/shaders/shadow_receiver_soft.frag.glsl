@@ -4,7 +4,7 @@
 // shadow frustum's near plane could hide part of the sun give the mean blocker depth; 2. the
 // penumbra's radius on this point, (receiver - blocker) * tan(sun radius); 3. PCF: the coverage
 // averaged over that disc (bilinear, mip-filtered samples), which is the shadowed fraction of the
-// sun's disc for a caster lying at the blocker depth.  No blocker found: lit; a penumbra within
+// sun's disc for a caster lying at the blocker depth.  No blocker found, or a penumbra within
 // the bilinear sample's own blur: the hard shadow's one sample.  Same outputs as shadow_receiver.frag.glsl.
 uniform sampler2D u_shadow;
 uniform vec4 u_tile;    // x0, y0, width, height of this rider's tile in the shadow texture (0..1)
@@ -33,6 +33,7 @@ vec2 in_tile(vec2 t) {  // tile coordinates -> texture coordinates, kept off the
 
 void main() {
     vec2 t = v_light.xy * 0.5 + 0.5;
+    float foot = max(length(dFdx(t)), length(dFdy(t))) / u_texel;  // the pixel's footprint, texels
     if (any(lessThan(t, vec2(0.0))) || any(greaterThan(t, vec2(1.0))) || v_light.z < -1.0 || v_light.z > 1.0) {
         discard;
     }
@@ -48,7 +49,9 @@ void main() {
             count += 1.0;
         }
     }
-    float s = 0.0;
+    // no blocker among the search's texels: the hard shadow's mip-filtered sample (a distant rider's
+    // thin limbs fall between point samples; lit points read 0 here anyway)
+    float s = texture(u_shadow, in_tile(t)).r;
     if (count > 0.0) {
         float zb = sum / count * u_span.x;                        // the blockers' mean depth, metres
         float pen = max(zr - zb, 0.0) * u_tan / u_span.x;        // penumbra radius, tile units
@@ -58,8 +61,10 @@ void main() {
         if (pen2 <= 0.0) {
             s = texture(u_shadow, in_tile(t)).r;
         } else {
+            // the disc filters what is under it: mip levels only for a pixel wider than the disc
+            float lod = max(0.0, log2(max(foot, 1.0) / max(2.0 * sqrt(pen2) / u_texel, 1.0)));
             for (int i = 0; i < N_PCF; ++i) {
-                s += texture(u_shadow, in_tile(t + sqrt(pen2) * disc(i, N_PCF))).r;
+                s += textureLod(u_shadow, in_tile(t + sqrt(pen2) * disc(i, N_PCF)), lod).r;
             }
             s /= float(N_PCF);
         }
