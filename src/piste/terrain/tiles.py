@@ -640,7 +640,7 @@ MAX_TILE_OBJECTS = 1_000_000
 
 
 def read_tile_objects(store: TileStore, grid: TileGrid, ty: int, tx: int, n_kinds: int) -> tuple[np.ndarray, np.ndarray]:
-    """A tile's scene objects: ``kind (k,) int64`` in ``0 .. n_kinds - 1`` and ``matrix (k, 4, 4)
+    """A tile's scene objects: ``kind (k,) int64`` in ``[0, n_kinds)`` and ``matrix (k, 4, 4)
     float64`` (finite, bottom row 0 0 0 1, the translation over the tile's bounds); empty arrays
     for a tile built without object rules.  TileError naming the file, the tile and the member when
     only one member is there, a header says another shape or type, or a value is out of range."""
