@@ -40,6 +40,7 @@ from __future__ import annotations
 import numpy as np
 
 from piste.errors import RenderError
+from piste.render.shadow_pass import shadow_triangles
 
 __all__ = ["occluder_depth", "HiZ", "near_patches", "occlude_frame", "OCCLUDER_PATCHES", "CELL"]
 
@@ -297,8 +298,6 @@ def occlude_frame(terrain, mesh, camera, size, patch_lo, patch_hi, objects=None,
     patches' triangles are the same), the objects kept, and the counts ``occluded_patches``,
     ``occluded_objects``, ``occluder_cells`` (fraction of cells covered).
     """
-    from piste.render.shadow_pass import shadow_triangles
-
     w, h = int(size[0]), int(size[1])
     vp = camera.with_aspect(w, h).view_projection()
     pid = np.asarray(mesh.patch_ids, dtype=np.int64)

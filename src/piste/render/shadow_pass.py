@@ -44,7 +44,7 @@ from __future__ import annotations
 import numpy as np
 
 from piste.errors import RenderError
-from piste.render.context import load_shader, set_depth_write
+from piste.render.context import Offscreen, load_shader, set_depth_write
 from piste.render.textures import MipLevels
 from piste.terrain.query import height_at
 from piste.world.camera import look_at, orthographic
@@ -556,8 +556,6 @@ def shadow_on_plane(ctx, positions, indices, sun_direction, rect, res: int = 96,
     visibility (res, res) float64 0..1 rows along y, points (res, res, 3) float64 pixel centres.
     """
     from types import SimpleNamespace
-
-    from piste.render.context import Offscreen
 
     pos = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     lo, hi = pos.min(0), pos.max(0)
