@@ -30,7 +30,8 @@ def add_arguments(parser) -> None:
                         help="light-map mode: one pass Cd x CL, or the PS2's two-pass (Cd - Cs) x As blend")
     parser.add_argument("--lighting", choices=("baked", "placeholder", "none"), default="baked",
                         help="light-map atlas: baked with terrain shadows (piste.lighting; baked once, ~2 s, then "
-                             "cached in $PISTE_CACHE_DIR or ~/.cache/piste), a placeholder lit from the normals "
+                             "cached in $PISTE_CACHE_DIR, else $XDG_CACHE_HOME/piste or ~/.cache/piste), a "
+                             "placeholder lit from the normals "
                              "without shadows, or none")
     parser.add_argument("--debug", choices=("lod", "wire", "base", "lightmap"),
                         help="debug view: lod = patches coloured by tessellation (4x4 green, 6x6 yellow, 8x8 red, "
