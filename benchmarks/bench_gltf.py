@@ -78,6 +78,7 @@ def bench_import(rounds: int, quick: bool) -> list:
 
 def _default_scene_parts(quick: bool):
     from piste.formats.gltf_export import CharacterExport, TerrainExport
+    from piste.terrain.tessellate import terrain_mesh
 
     if not quick:
         from piste.commands.export import bundle_parts
@@ -97,7 +98,7 @@ def _default_scene_parts(quick: bool):
         m = np.eye(4)
         m[:3, 3] = (200.0 + 5 * i, 200.0, 300.0)
         chars.append(CharacterExport(rider, m, name=f"r{i}", clips=["ride"], prefix=f"r{i}:"))
-    return {"terrain": TerrainExport(net, atlas, 4, snow_texture()), "characters": chars}, \
+    return {"terrain": TerrainExport(terrain_mesh(net, 4), atlas, snow_texture()), "characters": chars}, \
         f"default course ({len(net)} patches) + 3 riders, no build"
 
 

@@ -4,11 +4,11 @@ largest retail-layout ``.mpf`` rider (target >= 5x a per-record ``struct`` reade
 
 Run: ``.venv/bin/python benchmarks/bench_ssx.py [--quick] [--rounds N] [--patches N] [--jobs N] [--mpf-only]``
 
-The level is piste's own encoder output (:func:`piste.formats.ssx.make_level`: a hilly slope of
+The level is piste's own encoder output (:func:`piste.pipeline.ssx_synth.make_level`: a hilly slope of
 50 x 80 patches with near-equal seams, the size of a big retail level), written to a temporary
 folder.  Timed, interleaved round by round so both see the same machine load:
 
-* read: ``read_pbd`` + ``Pbd.to_net`` (numpy structured records, power basis decoded in float64,
+* read: ``read_pbd`` + ``pipeline.ssx_level.pbd_to_net`` (numpy structured records, power basis decoded in float64,
   welded) against a peer reader that unpacks each 448-byte record with ``struct`` in a Python loop
   (what a record-by-record reader does) and decodes each patch with its own matrix products;
 * bake: :func:`piste.pipeline.ssx_level.bake_level` (8x8 edge-aligned texels per patch, shadow rays,
@@ -41,13 +41,14 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import interleaved, ms, record, stat  # noqa: E402
 
-from piste.formats.ssx import make_level, read_pbd  # noqa: E402
+from piste.formats.ssx import read_pbd  # noqa: E402
+from piste.pipeline.ssx_synth import make_level  # noqa: E402
 from piste.formats.ssx.mpf import mpf_bytes, read_mpf, write_mpf  # noqa: E402
 from piste.formats.ssx.mpf_model import mpf_partners  # noqa: E402
 from piste.formats.ssx.pbd import M_INV  # noqa: E402
 from piste.lighting import bake_lightmap  # noqa: E402
 from piste.lighting.lights import loads_lights  # noqa: E402
-from piste.pipeline.ssx_level import bake_level, load_level  # noqa: E402
+from piste.pipeline.ssx_level import bake_level, load_level, pbd_to_net  # noqa: E402
 from piste.terrain.net import PatchNet  # noqa: E402
 
 READ_TARGET_S = 0.2
@@ -358,8 +359,8 @@ def main(argv=None) -> int:
         print(f"level: {n} patches ({rows} x {cols}), {path.stat().st_size / 1e6:.2f} MB .pbd")
 
         # ---------------------------------------------------------------- read + net
-        t = interleaved({"piste": lambda: read_pbd(path).to_net(), "peer": lambda: peer_read(path)}, rounds)
-        a, b = read_pbd(path).to_net(), peer_read(path)
+        t = interleaved({"piste": lambda: pbd_to_net(read_pbd(path)), "peer": lambda: peer_read(path)}, rounds)
+        a, b = pbd_to_net(read_pbd(path)), peer_read(path)
         assert np.allclose(a.control_points, b.control_points, atol=1e-6) and a.n_edges == b.n_edges
         pm, pp = stat(t["piste"])[0], stat(t["peer"])[0]
         print(f"read + PatchNet  piste {ms(t['piste'])}   peer (struct loop) {ms(t['peer'])}   "

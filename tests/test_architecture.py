@@ -3,7 +3,9 @@
 Every module under ``src/piste`` is parsed with :mod:`ast` (nothing is imported), and its imports
 (top-level *and* inside functions) become edges of a module graph.  The rules (ARCHITECTURE.md):
 
-* ``formats`` imports nothing from ``world``, ``pipeline``, ``render``, ``lighting`` or ``commands``;
+* ``formats`` imports nothing from ``terrain``, ``world``, ``pipeline``, ``render``, ``lighting`` or
+  ``commands``;
+* ``character`` imports nothing from ``formats``, ``terrain`` or ``lighting`` either;
 * ``terrain``, ``character`` and ``lighting`` import nothing from ``world``, ``pipeline``,
   ``render`` or ``commands``;
 * no import cycle between modules.  Importing ``piste.a.b`` first runs ``piste/a/__init__.py``, so
@@ -30,9 +32,9 @@ ROOT = SRC / "piste"
 
 #: package -> packages it must not import (the layers of ARCHITECTURE.md)
 FORBIDDEN = {
-    "formats": ("world", "pipeline", "render", "lighting", "commands"),
+    "formats": ("terrain", "world", "pipeline", "render", "lighting", "commands"),
     "terrain": ("world", "pipeline", "render", "commands"),
-    "character": ("world", "pipeline", "render", "commands"),
+    "character": ("formats", "terrain", "lighting", "world", "pipeline", "render", "commands"),
     "lighting": ("world", "pipeline", "render", "commands"),
 }
 
@@ -427,26 +429,18 @@ def test_the_private_write_and_environment_checks_can_fail():
 
 
 # ----------------------------------------------------------------------------- formats <-> terrain
-#: formats modules that still import terrain while terrain imports formats (a two-way arrow between
-#: the layers: `farm-studio look src/piste` counts it as the one arrow running back up)
-FORMATS_TO_TERRAIN_LEFT = {
-    "piste.formats.ssx.pbd",  # Pbd.to_net builds a PatchNet: belongs with the pipeline's SSX source
-    "piste.formats.ssx.synth",  # synthetic levels from a PatchNet (bezier.evaluate for normals)
-    "piste.formats.gltf_export",  # terrain_mesh tessellates: the glTF writer should take a mesh
-}
-
-
 def test_formats_and_terrain_do_not_import_each_other():
+    """One direction only: the cores read and write through ``formats`` (``PatchNet.from_bpt``, the
+    tiles' safe I/O), so ``formats`` imports no terrain code: a conversion to or from a PatchNet
+    lives above it (``pipeline.ssx_level.pbd_to_net``, ``pipeline.ssx_synth``,
+    ``terrain.tessellate.terrain_mesh`` for the glTF writer)."""
     _, imports, _ = import_graph()
-    up = sorted({i.module for i in imports if i.module.startswith("piste.formats.")
-                 and i.target.startswith("piste.terrain")})
-    down = sorted({i.module for i in imports if i.module.startswith("piste.terrain.")
-                   and i.target.startswith("piste.formats")})
-    assert not (up and down) or set(up) <= FORMATS_TO_TERRAIN_LEFT, (
-        f"formats imports terrain ({up}) while terrain imports formats ({down}): one direction must go")
-    if up and down:
-        pytest.xfail(f"known two-way arrow left: formats {sorted(FORMATS_TO_TERRAIN_LEFT)} -> terrain; "
-                     f"terrain {down} -> formats (issue 25 item 4)")
+    up = sorted(i.where() for i in imports if i.module.startswith("piste.formats")
+                and (i.target == "piste.terrain" or i.target.startswith("piste.terrain.")))
+    down = {i.module for i in imports if i.module.startswith("piste.terrain") and i.target.startswith("piste.formats")}
+    assert down, "the check is moot: terrain no longer reads through formats (turn the rule around)"
+    assert not up, ("formats imports terrain while terrain imports formats (one direction must go):\n  "
+                    + "\n  ".join(up))
 
 
 # ----------------------------------------------------------------------------- the library prints nothing

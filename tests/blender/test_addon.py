@@ -285,7 +285,7 @@ def test_preview_reloads_on_a_change(authored):
 def imported(authored):
     """Blender run 2: a bundle, an SSX level (piste's own encoder) and an SSX rider imported, the
     level's cage edited and written back."""
-    from piste.formats.ssx.synth import make_level
+    from piste.pipeline.ssx_synth import make_level
 
     work, res = authored
     bundle = Path(res["toml"]).with_suffix(".piste")

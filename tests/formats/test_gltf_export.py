@@ -24,9 +24,9 @@ from piste.formats.gltf_export import (  # noqa: E402
     TerrainExport,
     export_gltf,
     lightmap_to_png_array,
-    terrain_mesh,
 )
 from piste.terrain.net import PatchNet  # noqa: E402
+from piste.terrain.tessellate import terrain_mesh  # noqa: E402
 
 DATA = Path("/work/shared/data/gltf")
 if not DATA.is_dir():
@@ -174,7 +174,7 @@ def test_terrain_levels_uv_sets_and_lightmap(tmp_path, level):
     atlas = _atlas(net)
     base = np.full((8, 8, 4), 200, np.uint8)
     out = tmp_path / f"t{level}.glb"
-    rep = export_gltf(out, terrain=TerrainExport(net, atlas, level, base))
+    rep = export_gltf(out, terrain=TerrainExport(terrain_mesh(net, level), atlas, base))
     mesh = terrain_mesh(net, level)
     assert rep.terrain_triangles == mesh.n_triangles == len(net) * 2 * (level - 1) ** 2
     assert_valid(out)
@@ -209,12 +209,12 @@ def test_terrain_per_edge_levels_and_bad_level(tmp_path):
     lv = edge_levels(net, np.array([0.0, 0.0, 3.0]), near=5.0, far=12.0)
     assert len(set(lv.tolist())) > 1
     out = tmp_path / "lod.gltf"
-    rep = export_gltf(out, terrain=TerrainExport(net, None, lv))
+    rep = export_gltf(out, terrain=TerrainExport(terrain_mesh(net, lv)))
     assert (tmp_path / "lod.bin").exists()
     assert_valid(out)
     assert rep.terrain_triangles == terrain_mesh(net, lv).n_triangles
     with pytest.raises(ConfigError, match="between 2 and 64"):
-        export_gltf(tmp_path / "x.glb", terrain=TerrainExport(net, None, 1))
+        terrain_mesh(net, 1)
 
 
 # ----------------------------------------------------------------------------- objects
@@ -310,16 +310,16 @@ def test_lights_and_cameras_round_trip(tmp_path):
 def test_atomic_failed_export_leaves_old_file(tmp_path):
     net = _net()
     out = tmp_path / "t.glb"
-    export_gltf(out, terrain=TerrainExport(net))
+    export_gltf(out, terrain=TerrainExport(terrain_mesh(net)))
     before = out.read_bytes()
     bad = default_rider(seed=0)
     bad.meshes[0].positions[5] = np.nan
     with pytest.raises(ValidationError, match="non-finite"):
-        export_gltf(out, terrain=TerrainExport(net), characters=[CharacterExport(bad)])
+        export_gltf(out, terrain=TerrainExport(terrain_mesh(net)), characters=[CharacterExport(bad)])
     assert out.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.glb"]
     with pytest.raises(ConfigError, match=".glb or .gltf"):
-        export_gltf(tmp_path / "t.obj", terrain=TerrainExport(net))
+        export_gltf(tmp_path / "t.obj", terrain=TerrainExport(terrain_mesh(net)))
     with pytest.raises(ConfigError, match="no clip"):
         export_gltf(tmp_path / "c.glb", characters=[CharacterExport(default_rider(seed=0), clips=["moonwalk"])])
     assert not (tmp_path / "c.glb").exists()
@@ -327,7 +327,7 @@ def test_atomic_failed_export_leaves_old_file(tmp_path):
 
 def test_glb_container_layout(tmp_path):
     out = tmp_path / "t.glb"
-    export_gltf(out, terrain=TerrainExport(_net(), _atlas(_net())))
+    export_gltf(out, terrain=TerrainExport(terrain_mesh(_net()), _atlas(_net())))
     data = out.read_bytes()
     magic, version, length = struct.unpack("<III", data[:12])
     assert (magic, version, length) == (0x46546C67, 2, len(data))

@@ -206,7 +206,7 @@ def test_blender_imports_the_default_scene(tmp_path):
     seen = blender_import(out, tmp_path)
 
     from piste.commands.export import piste_cameras_to_gltf
-    from piste.formats.gltf_export import terrain_mesh
+    from piste.terrain.tessellate import terrain_mesh
 
     tm = terrain_mesh(b.net, 4)
     t = seen["meshes"]["terrain"]

@@ -251,7 +251,7 @@ def test_multitool_linked_textures_folder_not_followed(tmp_path):
 def test_ssx_level_partner_files_are_not_followed_through_links(tmp_path):
     """A level named by the user: its folder is a confinement root, so LEVEL.ssh beside it (found
     by name, not by a path in the file) is refused when it is a link out, and read when it is a file."""
-    from piste.formats.ssx import make_level
+    from piste.pipeline.ssx_synth import make_level
     from piste.formats.ssx.pbd import write_pbd
     from piste.formats.ssx.ssh import write_ssh
     from piste.pipeline.ssx_level import load_level

@@ -20,6 +20,7 @@ from piste.character import Camera, Light, default_rider
 from piste.formats.gltf import load_gltf
 from piste.formats.gltf_export import CharacterExport, ObjectsExport, TerrainExport, export_gltf
 from piste.terrain.net import PatchNet
+from piste.terrain.tessellate import terrain_mesh
 
 
 def _net(n=2):
@@ -52,9 +53,9 @@ def exported(tmp_path_factory):
                     position=np.array([1.0, 2.0, 30.0]), direction=np.array([0.0, 0.1, -1.0]))]
     cams = [Camera("c", np.array([10.0, -20.0, 15.0]), np.array([0.0, 0.8, -0.6]), np.array([0.0, 0.0, 1.0]),
                    yfov=0.9, aspect=1.5, znear=0.5, zfar=900.0)]
-    terrain = TerrainExport(net, atlas, 4, np.full((4, 4, 4), 200, np.uint8))
+    terrain = TerrainExport(terrain_mesh(net, 4), atlas, np.full((4, 4, 4), 200, np.uint8))
     export_gltf(d / "scene.glb", terrain=terrain, objects=_objects(), lights=lights, cameras=cams)
-    export_gltf(d / "nodes.gltf", terrain=TerrainExport(net, None, 4), objects=_objects(), instancing="nodes")
+    export_gltf(d / "nodes.gltf", terrain=TerrainExport(terrain_mesh(net, 4)), objects=_objects(), instancing="nodes")
     rider = default_rider(seed=0)
     export_gltf(d / "rider.gltf", characters=[CharacterExport(rider, name="rider", clips=sorted(rider.clips)[:1])])
     return {p.name: p for p in (d / "scene.glb", d / "nodes.gltf", d / "rider.gltf")}

@@ -21,12 +21,13 @@ from piste.errors import FormatError
 
 ssx = pytest.importorskip("piste.formats.ssx")
 from piste.formats.ssx.multitool import read_project, write_project  # noqa: E402
+from piste.pipeline.ssx_synth import make_level  # noqa: E402
 
 
 @pytest.fixture(scope="session")
 def project(tmp_path_factory):
     d = tmp_path_factory.mktemp("multitool") / "proj"
-    level = ssx.make_level(rows=2, cols=2, seed=3, n_textures=2)
+    level = make_level(rows=2, cols=2, seed=3, n_textures=2)
     write_project(d, level.pbd, level.textures, level.lightmaps)
     return d
 

@@ -17,11 +17,14 @@ from hypothesis import strategies as st
 
 ssx = pytest.importorskip("piste.formats.ssx")
 
+from piste.pipeline.ssx_level import pbd_to_net  # noqa: E402
+from piste.pipeline.ssx_synth import make_level  # noqa: E402
+
 
 @pytest.fixture(scope="module")
 def level(tmp_path_factory):
     d = tmp_path_factory.mktemp("ssx")
-    pbd = ssx.make_level(rows=2, cols=2, n_textures=2).write(d, "SYNTH")
+    pbd = make_level(rows=2, cols=2, n_textures=2).write(d, "SYNTH")
     return {"pbd": pbd, "ssh": d / "SYNTH.ssh", "lightmap": d / "SYNTH_L.ssh"}
 
 
@@ -36,7 +39,7 @@ def mpf_file(tmp_path_factory):
 
 
 def _pbd(path):
-    ssx.read_pbd(path).to_net()
+    pbd_to_net(ssx.read_pbd(path))
 
 
 def _mpf(path):

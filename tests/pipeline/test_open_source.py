@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from piste.errors import ConfigError
-from piste.formats.ssx import make_level
+from piste.pipeline.ssx_synth import make_level
 from piste.pipeline.open_scene import SOURCES, open_source, source_kind
 from piste.pipeline.preview import ScenePreview
 from piste.pipeline.ssx_level import load_level

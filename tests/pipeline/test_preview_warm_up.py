@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from piste import _jit
-from piste.formats.ssx import make_level
+from piste.pipeline.ssx_synth import make_level
 from piste.pipeline import load_bundle
 from piste.pipeline.build import build_scene
 from piste.pipeline.preview import ScenePreview

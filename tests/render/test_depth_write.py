@@ -10,7 +10,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from piste.formats.ssx import make_level
+from piste.pipeline.ssx_synth import make_level
 from piste.pipeline import load_bundle
 from piste.pipeline.build import build_scene
 from piste.pipeline.preview import ScenePreview

@@ -114,7 +114,7 @@ def run(args) -> int:
 
     cmd = args.ssx_command
     if cmd == "make":
-        from piste.formats.ssx.synth import make_level
+        from piste.pipeline.ssx_synth import make_level
 
         net = None
         if args.from_net:
@@ -183,7 +183,9 @@ def run(args) -> int:
         return gltf_pbd(args.level, args.out)
     level = load_level(level_path(args.level))
     if args.to == "npz":
-        level.pbd.to_net().save(args.out)
+        from piste.pipeline.ssx_level import pbd_to_net
+
+        pbd_to_net(level.pbd).save(args.out)
     else:
         from piste.formats.ssx.multitool import write_project
 

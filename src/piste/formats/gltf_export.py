@@ -1,8 +1,9 @@
 """glTF 2.0 export (``.glb`` or ``.gltf`` + ``.bin``) of what piste computes, with pygltflib.
 
-Everything here takes plain arrays and the terrain / character cores, so a scene, a built bundle
-or an SSX level can all be written by the same code (the scene/bundle glue is
-:mod:`piste.commands.export`).
+Everything here takes plain arrays (a tessellated terrain mesh, not a patch net: the terrain is
+tessellated by :func:`piste.terrain.tessellate.terrain_mesh`) and the character data classes, so a
+scene, a built bundle or an SSX level can all be written by the same code (the bundle glue is
+:mod:`piste.pipeline.bundle_gltf`).  This module imports no terrain code.
 
 Conventions
 -----------
@@ -44,7 +45,8 @@ API
 ---
 ::
 
-    TerrainExport(net, lightmap=None, level=4, base_texture=None, lightmap_scale=1.0, name="terrain")
+    TerrainExport(mesh, lightmap=None, base_texture=None, lightmap_scale=1.0, name="terrain")
+    (mesh: piste.terrain.tessellate.terrain_mesh(net, level=4))
     CharacterExport(model, matrix=eye(4), name="character", clips=None, prefix="")
     ObjectsExport(meshes, kinds, kind, matrix, texture=None)
     export_gltf(path, terrain=None, characters=(), objects=None, lights=(), cameras=(), instancing="ext",
@@ -64,10 +66,9 @@ import numpy as np
 
 from piste.errors import ConfigError, ValidationError
 from piste.formats.atomic import atomic_path, write_bytes_atomic
-from piste.terrain.tessellate import tessellate
 from piste.transforms import compose_trs, decompose_trs, look_rotation
 
-__all__ = ["TerrainExport", "CharacterExport", "ObjectsExport", "ExportReport", "export_gltf", "terrain_mesh",
+__all__ = ["TerrainExport", "CharacterExport", "ObjectsExport", "ExportReport", "export_gltf",
            "lightmap_to_png_array", "Y_UP_ROOT_ROTATION"]
 
 #: xyzw rotation of the root node: piste (x, y, z) Z-up -> glTF (x, z, -y) Y-up (-90 degrees about X)
@@ -83,16 +84,17 @@ _TYPES = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4", 16: "MAT4"}
 class TerrainExport:
     """Terrain to export.
 
-    net : piste.terrain.PatchNet (its ``lightmap_rect`` addresses ``lightmap``)
-    lightmap : (H, W, 3|4) float (linear light, 1.0 = white) or uint8 (255 = 1.0) atlas, or None
-    level : 4, 6, 8 (every edge) or ``(edges,)`` per-edge levels (e.g. a camera's ``edge_levels``)
+    mesh : the tessellated terrain (:func:`piste.terrain.tessellate.terrain_mesh`; a
+        :class:`~piste.terrain.tessellate.TerrainMesh`: ``positions (v, 3)``, ``normals (v, 3)``,
+        ``uv (v, 2)``, ``uv_lightmap (v, 2)``, ``indices (t, 3)``, ``patch_ids``, ``patch_levels``)
+    lightmap : (H, W, 3|4) float (linear light, 1.0 = white) or uint8 (255 = 1.0) atlas addressed by
+        the mesh's ``uv_lightmap`` (the net's ``lightmap_rect``), or None
     base_texture : (h, w, 3|4) uint8 or None
     lightmap_scale : light value stored as 255 (float atlases)
     """
 
-    net: object
+    mesh: object
     lightmap: np.ndarray | None = None
-    level: object = 4
     base_texture: np.ndarray | None = None
     lightmap_scale: float = 1.0
     name: str = "terrain"
@@ -146,19 +148,6 @@ class ExportReport:
 
 
 # ---------------------------------------------------------------------------------------------
-def terrain_mesh(net, level=4):
-    """The terrain tessellated for export: every edge at ``level`` (4, 6 or 8, or any level 2..64),
-    or per-edge levels ``(edges,)``.  Returns a :class:`piste.terrain.tessellate.TerrainMesh`."""
-    if np.ndim(level) == 0:
-        lv = int(level)
-        if not 2 <= lv <= 64:
-            raise ConfigError(f"terrain level must be between 2 and 64 vertices per edge (4, 6 or 8), got {level!r}")
-        levels = lv
-    else:
-        levels = np.asarray(level, dtype=np.int64)
-    return tessellate(net, levels, cache=False)
-
-
 def lightmap_to_png_array(atlas, scale: float = 1.0) -> np.ndarray:
     """``(H, W, 3) uint8`` of a light-map atlas: float light -> ``round(255 clamp(light / scale))``;
     uint8 atlases are passed through (RGB)."""
@@ -310,7 +299,7 @@ def _pbr(b: _Builder, base_color=None, tex=None):
 
 # ---------------------------------------------------------------------------------------------
 def _add_terrain(b: _Builder, t: TerrainExport, root_children: list, report: ExportReport) -> None:
-    mesh = terrain_mesh(t.net, t.level)
+    mesh = t.mesh
     nv = mesh.n_vertices
     attrs = b.G.Attributes(POSITION=b.accessor(mesh.positions, target=_ARRAY_BUFFER, minmax=True),
                            NORMAL=b.accessor(_unit_normals(mesh.normals), target=_ARRAY_BUFFER),

@@ -47,6 +47,7 @@ from piste.lighting.lights import AmbientLight, DirectionalLight, PointLight, Sp
 from piste.pipeline.characters import model_from_arrays
 from piste.render.textures import snow_texture
 from piste.terrain.lod import edge_levels
+from piste.terrain.tessellate import terrain_mesh
 
 __all__ = ["WHITE_LUX", "INFINITE_RANGE_MATCH", "piste_lights_to_gltf", "piste_cameras_to_gltf", "terrain_levels",
            "bundle_parts", "export_bundle"]
@@ -141,7 +142,8 @@ def bundle_parts(bundle, level=4, with_base_texture: bool = True) -> dict:
         base = bundle.arrays.get("terrain/base_texture")  # an SSX level's own textures (pipeline.ssx_level)
         if base is None:
             base = snow_texture()
-    parts = {"terrain": TerrainExport(bundle.net, bundle.lightmap.atlas, terrain_levels(bundle, level), base)}
+    mesh = terrain_mesh(bundle.net, terrain_levels(bundle, level))
+    parts = {"terrain": TerrainExport(mesh, bundle.lightmap.atlas, base)}
     info = bundle.manifest.get("characters") or {}
     models: dict = {}
     chars = []

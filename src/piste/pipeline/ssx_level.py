@@ -20,6 +20,7 @@ patch's 8x8-reduced base texture, packed 256 patches a 128x128 page, transposed.
 
 API
 ---
+pbd_to_net(pbd, scale=0.01, tol=None, lightmap_rect=None, name=None) -> PatchNet (metres)
 load_level(path, cell=64) -> SsxLevel
 level_files(path) -> (ssh or None, light-map ssh or None)
 bake_level(level, lights, shadows=True, jobs=1) -> BakedPages
@@ -39,13 +40,15 @@ from pathlib import Path
 
 import numpy as np
 
-from piste.errors import ConfigError
+from piste.errors import ConfigError, FormatError, ValidationError
 from piste.pipeline.cache import content_key
 from piste.formats.ssx.lightmap import base_tiles, light_from_source, reduce_texture, tile_params
 from piste.formats.atomic import write_bytes_atomic
 from piste.formats.safe_io import read_regular
 from piste.formats.ssx.pbd import MAX_FILE_BYTES as MAX_PBD_BYTES
-from piste.formats.ssx.pbd import NET_TO_UV, Pbd, default_lightmap_tiles, read_pbd, write_pbd
+from piste.formats.ssx.pbd import (
+    GAME_SCALE, NET_TO_UV, UV_TO_NET, Pbd, default_lightmap_tiles, read_pbd, weld_candidates, write_pbd,
+)
 from piste.formats.ssx.ssh import MAX_FILE_BYTES as MAX_SSH_BYTES
 from piste.formats.ssx.ssh import (
     SshBank, extract_tiles, lightmap_bank, lightmap_pages, place_tiles, read_ssh, write_ssh,
@@ -55,8 +58,9 @@ from piste.lighting.lights import Lights, default_lights, light_terms, shade
 from piste.lighting.ps2 import ps2_source
 from piste.lighting.shadows import shadow_visibility
 from piste.terrain.bezier import evaluate
+from piste.terrain.net import PatchNet
 
-__all__ = ["SsxLevel", "load_level", "level_files", "bake_level", "BakedPages", "write_baked", "SSX_TRICKY_LOD",
+__all__ = ["SsxLevel", "pbd_to_net", "load_level", "level_files", "bake_level", "BakedPages", "write_baked", "SSX_TRICKY_LOD",
            "texture_atlas", "level_key", "bundle_arrays", "bake_file", "BakeReport", "level_path"]
 
 #: the ``ssx_tricky`` preset: the game's LOD switch distances (3000 / 15000 units) in metres
@@ -166,6 +170,37 @@ def level_light(pbd: Pbd, pages, reduced, pages_path=None):
     return light, source, rects
 
 
+def pbd_to_net(pbd: Pbd, scale: float = GAME_SCALE, tol: float | None = None, lightmap_rect=None,
+               name: str | None = None) -> PatchNet:
+    """The level's patches as a :class:`~piste.terrain.net.PatchNet` in metres.
+
+    Parameters
+    ----------
+    pbd : the level (:func:`piste.formats.ssx.pbd.read_pbd`)
+    scale : metres per game unit
+    tol : weld tolerance in metres.  Default: chosen from 1, 4 and 16 game units, the smallest
+        that welds as many patch corners as 16 units does (the game's shared boundaries are
+        near-equal, float32 at up to ~2e4 units, not bit-equal); should the net's C0 check
+        still fail, the next larger one is tried
+    lightmap_rect : (n, 4) PatchNet-style ``(u0, v0, u1, v1)`` atlas rects (default: piste's
+        own layout; see :func:`load_level` for the game's pages)
+    name : the net's name (default: the file's name)
+
+    A net that cannot be welded raises :class:`~piste.errors.FormatError` naming the file and the
+    ``patches`` field.
+    """
+    cp = np.asarray(pbd.control_points) * scale
+    tols = [tol] if tol is not None else [t * scale for t in weld_candidates(pbd.control_points)]
+    for k, t in enumerate(tols):
+        try:
+            return PatchNet(cp, uv=pbd.uv[:, UV_TO_NET], lightmap_rect=lightmap_rect, tol=t,
+                            name=name or pbd.display_name)
+        except ValidationError as exc:
+            if k == len(tols) - 1 or "C0" not in str(exc):
+                raise FormatError(pbd.path, str(exc), field="patches") from None
+    raise AssertionError("unreachable: the last tolerance returns or raises")
+
+
 def load_level(path, cell: int = 64, tol: float | None = None) -> SsxLevel:
     """Read ``path`` (a .pbd) and the banks beside it; see the module docstring."""
     path = Path(path)
@@ -178,7 +213,7 @@ def load_level(path, cell: int = 64, tol: float | None = None) -> SsxLevel:
     base, origins, size = texture_atlas(textures, cell)
     pages = lightmap_pages(lightmaps, lssh) if lightmaps is not None else None
     light, source, rects = level_light(pbd, pages, reduced, lssh)
-    net = pbd.to_net(tol=tol, lightmap_rect=rects)
+    net = pbd_to_net(pbd, tol=tol, lightmap_rect=rects)
     net.uv = _atlas_uv(pbd, origins, size, cell, n_tex)
     info = {"patches": len(pbd), "textures": n_tex, "lightmap_pages": 0 if pages is None else len(pages),
             "textures_file": ssh.name if ssh else None, "lightmaps_file": lssh.name if lssh else None}

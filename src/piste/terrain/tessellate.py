@@ -32,7 +32,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from piste.errors import ValidationError
+from piste.errors import ConfigError, ValidationError
 from piste.terrain import _kernels
 from piste.terrain.bezier import (
     _limit_normals,
@@ -939,3 +939,17 @@ def open_edges(mesh: TerrainMesh) -> np.ndarray:
     key = np.sort(e_ids, axis=1)
     _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
     return e_vtx[cnt[inv.ravel()] == 1]
+
+
+def terrain_mesh(net: PatchNet, level=4) -> TerrainMesh:
+    """The terrain tessellated for export (:func:`piste.formats.gltf_export.export_gltf`'s
+    ``TerrainExport(mesh)``): every edge at ``level`` (4, 6 or 8, or any level 2..64), or per-edge
+    levels ``(edges,) int`` (e.g. a camera's ``edge_levels``).  Not cached."""
+    if np.ndim(level) == 0:
+        lv = int(level)
+        if not 2 <= lv <= 64:
+            raise ConfigError(f"terrain level must be between 2 and 64 vertices per edge (4, 6 or 8), got {level!r}")
+        levels = lv
+    else:
+        levels = np.asarray(level, dtype=np.int64)
+    return tessellate(net, levels, cache=False)

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from piste.formats.ssx import extract_tiles, gs_blend, lightmap_pages, make_level, read_pbd, read_ssh
+from piste.formats.ssx import extract_tiles, gs_blend, lightmap_pages, read_pbd, read_ssh
+from piste.pipeline.ssx_synth import make_level
 from piste.formats.ssx.lightmap import base_tiles, tile_params
 from piste.lighting.lights import loads_lights
 from piste.pipeline.ssx_level import bake_level, load_level, write_baked

@@ -10,7 +10,7 @@ import pytest
 
 from piste.cli import main
 from piste.errors import FormatError
-from piste.formats.ssx import make_level
+from piste.pipeline.ssx_synth import make_level
 from piste.formats.ssx.pbd import PATCH_SIZE
 from piste.pipeline.ssx_level import load_level
 

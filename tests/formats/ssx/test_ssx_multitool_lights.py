@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from piste.errors import FormatError
-from piste.formats.ssx import make_level, parse_pbd, read_pbd
+from piste.formats.ssx import parse_pbd, read_pbd
+from piste.pipeline.ssx_synth import make_level
 from piste.formats.ssx.multitool import read_project, write_project
 from piste.formats.ssx.pbd import LIGHT_DTYPE, PATCH_SIZE, hash_section_bytes
 from piste.formats.ssx.synth import pbd_bytes

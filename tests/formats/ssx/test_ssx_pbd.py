@@ -12,10 +12,12 @@ from hypothesis.extra.numpy import arrays
 
 from piste.errors import FormatError, ValidationError
 from piste.formats.ssx import (
-    PATCH_DTYPE, bezier_to_power, make_level, parse_pbd, power_to_bezier, read_pbd, records_from_net, write_pbd,
+    PATCH_DTYPE, bezier_to_power, parse_pbd, power_to_bezier, read_pbd, records_from_net, write_pbd,
 )
 from piste.formats.ssx.pbd import CORNER_IJ, M
-from piste.formats.ssx.synth import pbd_bytes, synthetic_net
+from piste.formats.ssx.synth import pbd_bytes
+from piste.pipeline.ssx_synth import make_level, synthetic_net
+from piste.pipeline.ssx_level import pbd_to_net
 
 
 @pytest.fixture(scope="module")
@@ -92,13 +94,13 @@ def test_patch_count_cannot_change(level):
 
 
 def test_to_net_welds_near_equal_seams(level):
-    net = level.pbd.to_net()
+    net = pbd_to_net(level.pbd)
     assert len(net) == 6 and len(net.shared_edges) == 7  # a 2 x 3 grid: 3 + 4 interior edges
     lo, hi = net.bounds
     ref = synthetic_net(2, 3, seed=3)
     np.testing.assert_allclose(lo, ref.bounds[0], atol=1e-3)
     # without a tolerance the jittered seams do not weld
-    bare = level.pbd.to_net(tol=1e-9)
+    bare = pbd_to_net(level.pbd, tol=1e-9)
     assert len(bare.shared_edges) == 0
 
 
@@ -107,7 +109,7 @@ def test_records_from_net_round_trip():
     rec = records_from_net(net)
     p = parse_pbd(pbd_bytes(rec))
     np.testing.assert_allclose(p.control_points * 0.01, net.control_points, atol=2e-4)
-    back = p.to_net()
+    back = pbd_to_net(p)
     np.testing.assert_array_equal(back.uv, net.uv)
     assert back.n_edges == net.n_edges
 
@@ -211,8 +213,8 @@ def test_failed_write_leaves_nothing(level, tmp_path):
 def test_to_net_widens_the_weld_for_looser_seams():
     # seams up to ~3 game units apart: the 1-unit weld would leave them open; 4 units welds them
     lv = make_level(rows=1, cols=2, seed=1, jitter=1.4)
-    net = lv.pbd.to_net()
+    net = pbd_to_net(lv.pbd)
     assert len(net.shared_edges) == 1 and net.tol == pytest.approx(0.04)
-    assert len(lv.pbd.to_net(tol=0.01).shared_edges) == 0  # an explicit tolerance is taken as given
+    assert len(pbd_to_net(lv.pbd, tol=0.01).shared_edges) == 0  # an explicit tolerance is taken as given
     # the usual near-equal seams keep the 1-unit weld
-    assert make_level(rows=1, cols=2, seed=1).pbd.to_net().tol == pytest.approx(0.01)
+    assert pbd_to_net(make_level(rows=1, cols=2, seed=1).pbd).tol == pytest.approx(0.01)

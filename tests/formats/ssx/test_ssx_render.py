@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from piste.formats.ssx import gs_blend, make_level
+from piste.formats.ssx import gs_blend
+from piste.pipeline.ssx_synth import make_level
 from piste.pipeline.ssx_level import load_level
 from piste.world.camera import Camera
 

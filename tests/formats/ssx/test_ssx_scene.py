@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from piste.errors import PisteError
-from piste.formats.ssx import make_level
+from piste.pipeline.ssx_synth import make_level
 from piste.pipeline.build import build_scene
 from piste.world.scene_file import load_scene
 

@@ -3,10 +3,10 @@
 
 Facts: ``/work/shared/SSX-FORMATS.md`` (public community documentation; no code copied).
 
-pbd        read_pbd / write_pbd / Pbd (per-patch arrays, byte-identical round trip, to_net)
+pbd        read_pbd / write_pbd / Pbd (per-patch arrays, byte-identical round trip; as a PatchNet: piste.pipeline.ssx_level.pbd_to_net)
 ssh        read_ssh / write_ssh / SshBank / SshImage; light-map pages and tiles
 lightmap   the game's Cs / As texels against 8x8-reduced base textures (pure numpy)
-synth      make_level: synthetic levels (the tests' golden files)
+synth      pbd_bytes, synthetic_textures: the bytes of a whole .pbd (synthetic levels: piste.pipeline.ssx_synth)
 afl        read_afl / write_afl / encode_afl / afl_clips: rider animation banks (.afl) as piste clips
 """
 
@@ -21,7 +21,6 @@ __all__, __getattr__, __dir__ = _lazy_exports(__name__, {
     "ssh": ("SshBank", "SshImage", "read_ssh", "parse_ssh", "write_ssh", "lightmap_pages", "lightmap_bank",
             "extract_tiles", "place_tiles"),
     "lightmap": ("reduce_texture", "base_tiles", "gs_blend", "light_from_source"),
-    "synth": ("make_level", "SynthLevel"),
     "mpf": ("MpfFile", "SubModel", "read_mpf", "parse_mpf", "write_mpf", "mpf_bytes"),  # SSX Tricky models (.mpf)
     "mpf_model": ("SsxModel", "mpf_to_model"),
     "mpf_encode": ("model_to_mpf",),
@@ -33,7 +32,6 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and the import g
     from piste.formats.ssx.pbd import GAME_SCALE, PATCH_DTYPE, Pbd, bezier_to_power, default_lightmap_tiles, parse_pbd, power_to_bezier, read_pbd, records_from_arrays, records_from_net, write_pbd  # noqa: F401
     from piste.formats.ssx.ssh import SshBank, SshImage, extract_tiles, lightmap_bank, lightmap_pages, parse_ssh, place_tiles, read_ssh, write_ssh  # noqa: F401
     from piste.formats.ssx.lightmap import base_tiles, gs_blend, light_from_source, reduce_texture  # noqa: F401
-    from piste.formats.ssx.synth import SynthLevel, make_level  # noqa: F401
     from piste.formats.ssx.mpf import MpfFile, SubModel, mpf_bytes, parse_mpf, read_mpf, write_mpf  # noqa: F401
     from piste.formats.ssx.mpf_model import SsxModel, mpf_to_model  # noqa: F401
     from piste.formats.ssx.mpf_encode import model_to_mpf  # noqa: F401

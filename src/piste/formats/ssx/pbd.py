@@ -26,7 +26,9 @@ their stored floats (which a float64 -> float32 re-encode would not always repro
 
 The patch count of a file read from disk cannot change: the sections after the patches hold
 absolute pointers piste does not interpret.  To make a level with other patches use
-:func:`piste.formats.ssx.synth.make_level`, which lays the whole file out itself.
+:func:`piste.pipeline.ssx_synth.make_level`, which lays the whole file out itself.  The patches as a
+:class:`~piste.terrain.net.PatchNet` are :func:`piste.pipeline.ssx_level.pbd_to_net` (this module
+reads and writes arrays; it imports no terrain code).
 
 API
 ---
@@ -50,7 +52,6 @@ import numpy as np
 from piste.errors import FormatError, ValidationError
 from piste.formats.atomic import write_bytes_atomic
 from piste.formats.safe_io import read_regular
-from piste.terrain.net import PatchNet
 
 #: the largest file the reader accepts (bytes)
 MAX_FILE_BYTES = 512 << 20  # a big retail level is a few tens of MB
@@ -59,7 +60,7 @@ __all__ = [
     "Pbd", "read_pbd", "parse_pbd", "write_pbd", "PATCH_DTYPE", "PATCH_SIZE", "HEADER_SIZE", "VERSION",
     "PLATFORMS", "COUNT_NAMES", "OFFSET_NAMES", "bezier_to_power", "power_to_bezier", "records_from_arrays",
     "records_from_net", "default_lightmap_tiles", "UV_TO_NET", "NET_TO_UV", "GAME_SCALE", "PAGE_TILES",
-    "LIGHT_DTYPE", "LIGHT_SIZE", "HASH_HEADER_FIELDS", "hash_section_bytes",
+    "LIGHT_DTYPE", "LIGHT_SIZE", "HASH_HEADER_FIELDS", "hash_section_bytes", "weld_candidates",
 ]
 
 VERSION = b"\x00\x15\x1b"
@@ -393,31 +394,12 @@ class Pbd:
         rec = self.to_records()
         return self.raw[:po] + rec.tobytes() + self.raw[po + rec.nbytes:]
 
-    # ------------------------------------------------------------------ nets
-    def to_net(self, scale: float = GAME_SCALE, tol: float | None = None, lightmap_rect=None, name: str | None = None):
-        """The level's patches as a :class:`~piste.terrain.net.PatchNet` in metres.
-
-        Parameters
-        ----------
-        scale : metres per game unit
-        tol : weld tolerance in metres.  Default: chosen from 1, 4 and 16 game units, the smallest
-            that welds as many patch corners as 16 units does (the game's shared boundaries are
-            near-equal, float32 at up to ~2e4 units, not bit-equal); should the net's C0 check
-            still fail, the next larger one is tried
-        lightmap_rect : (n, 4) PatchNet-style ``(u0, v0, u1, v1)`` atlas rects (default: piste's
-            own layout; see :func:`piste.pipeline.ssx_level.load_level` for the game's pages)
-        """
-        cp = np.asarray(self.control_points) * scale
-        tols = [tol] if tol is not None else [t * scale for t in _weld_candidates(self.control_points)]
-        for k, t in enumerate(tols):
-            try:
-                return PatchNet(cp, uv=self.uv[:, UV_TO_NET], lightmap_rect=lightmap_rect, tol=t,
-                                name=name or self._name())
-            except ValidationError as exc:
-                if k == len(tols) - 1 or "C0" not in str(exc):
-                    raise FormatError(self.path, str(exc), field="patches") from None
-
     def _name(self) -> str:
+        return self.display_name
+
+    @property
+    def display_name(self) -> str:
+        """The file's name (``"pbd"`` for bytes without a path): errors and the net's name use it."""
         return Path(self.path).name if self.path is not None else "pbd"
 
 
@@ -435,7 +417,7 @@ def hash_section_bytes(light_hashes) -> bytes:
     return struct.pack(f"<{len(fields)}I", *fields) + pairs.tobytes()
 
 
-def _weld_candidates(cp) -> list:
+def weld_candidates(cp) -> list:
     """Weld tolerances (game units) to try, smallest first: of 1, 4 and 16 units, those from the
     smallest that pairs up as many patch corners as 16 units does."""
     from scipy.spatial import cKDTree
