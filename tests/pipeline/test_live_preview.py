@@ -85,3 +85,16 @@ def test_a_changed_gltf_file_is_watched(small_scene, gl):
         assert live.bundle.lightmap.atlas.mean() < atlas0.mean()
     finally:
         live.release()
+
+
+def test_headless_view_logs_through_the_piste_logger(small_scene, gl, tmp_path, caplog, capsys):
+    """The library prints nothing: without ``log=`` the frames written go to the ``piste`` logger."""
+    live = LiveScene(small_scene(riders=False), size=(32, 24), ctx=gl)
+    try:
+        with caplog.at_level("INFO", logger="piste"):
+            files = run_headless(live, tmp_path / "frames", frames=1, seconds=0)
+    finally:
+        live.release()
+    assert [p.name for p in files] == ["frame_0000.png"]
+    assert any(r.name == "piste.pipeline.live" and "frame_0000.png" in r.getMessage() for r in caplog.records)
+    assert capsys.readouterr().err == ""

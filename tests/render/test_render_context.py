@@ -30,6 +30,23 @@ def test_offscreen_read_is_top_down(gl):
         target.release()
 
 
+def test_offscreen_wrap_releases_only_what_it_owns(gl):
+    """``Offscreen.wrap(..., owned=True)`` frees the framebuffer and the given attachments (the
+    frame's HDR target); a plain wrap (a window's screen) leaves them alive."""
+    color, depth = gl.texture((4, 4), 4), gl.depth_texture((4, 4))
+    fbo = gl.framebuffer(color_attachments=[color], depth_attachment=depth)
+    owned = Offscreen.wrap(gl, fbo, color=color, depth=depth, owned=True)
+    assert owned.color is color and owned.depth is depth and owned.size == (4, 4)
+    owned.release()
+    assert [type(o.mglo).__name__ for o in (fbo, color, depth)] == ["InvalidObject"] * 3
+    color2 = gl.texture((4, 4), 4)
+    fbo2 = gl.framebuffer(color_attachments=[color2])
+    Offscreen.wrap(gl, fbo2).release()
+    assert [type(o.mglo).__name__ for o in (fbo2, color2)] == ["Framebuffer", "Texture"]
+    fbo2.release()
+    color2.release()
+
+
 def test_offscreen_rejects_bad_size(gl):
     with pytest.raises(RenderError, match="between 1x1"):
         Offscreen(gl, (0, 10))

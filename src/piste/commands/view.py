@@ -23,6 +23,19 @@ from __future__ import annotations
 import sys
 
 
+def print_benchmark(st: dict, what: str, size) -> float:
+    """Print the fps of a ``run_window(benchmark=N)`` state (``st["frame_ms"]``: the frame times in
+    ms); returns the median fps."""
+    import numpy as np
+
+    ms = np.asarray(st["frame_ms"], dtype=np.float64)
+    med = float(np.median(ms))
+    print(f"piste view --benchmark {len(ms)} ({what}, {size[0]}x{size[1]}, window, swap included): "
+          f"median {med:.1f} ms = {1e3 / med:.1f} fps (frames {ms.min():.1f}..{ms.max():.1f} ms; "
+          f"mean {1e3 / ms.mean():.1f} fps)")
+    return 1e3 / med
+
+
 def add_arguments(parser) -> None:
     from piste.commands import _numbers as N
 
@@ -107,7 +120,7 @@ def _view_scene(args) -> int:
 
     from piste.pipeline.live import LiveScene, run_headless, run_window
     from piste.pipeline.preview import camera_at
-    from piste.render.window import HELP, ViewOptions, has_display, print_benchmark
+    from piste.render.window import HELP, ViewOptions, has_display
 
     size = tuple(args.size) if getattr(args, "size", None) else None
     kw = {"face": args.face, "lod_morph": _morph(args), "aa": getattr(args, "aa", None), "dof": getattr(args, "dof", None),
@@ -157,7 +170,7 @@ def _view_source(args, kind: str) -> int:
     from piste.pipeline.open_scene import eye_camera, open_source
     from piste.pipeline.preview import ScenePreview, camera_at
     from piste.render import save_png
-    from piste.render.window import ViewOptions, has_display, print_benchmark, run_window
+    from piste.render.window import ViewOptions, has_display, run_window
 
     bundle = open_source(args.scene, warm=True, riders=args.riders, objects=args.add_objects, budget_mb=args.budget)
     size = tuple(args.size)
@@ -209,7 +222,7 @@ def run(args) -> int:
     from piste.pipeline.bundle_objects import load_bundle
     from piste.pipeline.default_scene import build_default_scene
     from piste.pipeline.live import PreviewView
-    from piste.render.window import HELP, ViewOptions, has_display, print_benchmark, run_window
+    from piste.render.window import HELP, ViewOptions, has_display, run_window
     from piste.world.camera import track_camera
 
     require("moderngl", "piste view")

@@ -62,6 +62,7 @@ from pathlib import Path
 import numpy as np
 
 from piste.errors import ConfigError, FormatError
+from piste.extras import environ
 
 __all__ = [
     "resolve_reference",
@@ -150,7 +151,7 @@ def set_user_allow_paths(paths, source: str = "--allow-path") -> tuple:
 def user_allow_paths() -> tuple:
     """Real paths of the folders the user allows: ``--allow-path`` (:func:`set_user_allow_paths`)
     and the ``PISTE_ALLOW_PATHS`` environment variable.  A key inside a file never adds to them."""
-    out = list(_user_allowed) + list(_env_folders(os.environ.get(ALLOW_PATHS_ENV, "")))
+    out = list(_user_allowed) + list(_env_folders(environ(ALLOW_PATHS_ENV) or ""))
     return tuple(Path(p) for p in dict.fromkeys(out))
 
 

@@ -18,7 +18,8 @@ API
 
     LiveScene(path, bundle=None, cache_dir=None, size=None, camera=None, ctx=None, **preview_kw)
         ``.poll() -> bool`` (rebuilt and reloaded?), ``.render(t) -> image``, ``.last_error``, ``.last_build``
-    run_headless(live, out_dir, frames=None, seconds=None, interval=0.1, log=print) -> list of PNG paths
+    run_headless(live, out_dir, frames=None, seconds=None, interval=0.1, log=None) -> list of PNG paths
+    (log: called with each message; default the ``piste.pipeline.live`` logger at INFO)
     PreviewView(preview)           the fly-through window's view of a ScenePreview (piste.render.window)
     LiveView(live)                 the same for a LiveScene, reloaded in place
     run_window(live_factory, camera, size, **window_kw) -> state dict
@@ -28,7 +29,7 @@ API
 
 from __future__ import annotations
 
-import sys
+import logging
 import time
 from pathlib import Path
 
@@ -137,7 +138,7 @@ def run_headless(live: LiveScene, out_dir, frames: int | None = None, seconds: f
     frames were written or ``seconds`` passed (None: until interrupted).  Returns the PNG paths."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    log = log or (lambda msg: print(msg, file=sys.stderr))
+    log = log or logging.getLogger(__name__).info
     written = [save_png(out / "frame_0000.png", live.render())]
     log(f"wrote {written[-1]}")
     t0 = time.perf_counter()

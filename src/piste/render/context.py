@@ -123,15 +123,19 @@ class Offscreen:
         self._buf = np.empty((h, w, 4), dtype=np.uint8)
 
     @classmethod
-    def wrap(cls, ctx, fbo) -> "Offscreen":
-        """Use an existing framebuffer (e.g. a window's ``ctx.screen``) as the target; it is not
-        released by :meth:`release`."""
+    def wrap(cls, ctx, fbo, color=None, depth=None, owned: bool = False) -> "Offscreen":
+        """Use an existing framebuffer (e.g. a window's ``ctx.screen``) as the target.
+
+        ``color``/``depth`` are its attachments when the caller wants them reachable (e.g. textures
+        a later pass samples).  ``owned=False`` (default): :meth:`release` leaves the framebuffer
+        alone; ``owned=True``: :meth:`release` frees it and the given attachments, as for a target
+        this class made itself."""
         self = cls.__new__(cls)
         self.ctx = ctx
         self.size = tuple(fbo.size)
-        self.color = self.depth = None
+        self.color, self.depth = color, depth
         self.fbo = fbo
-        self._owned = False
+        self._owned = bool(owned)
         self._buf = np.empty((self.size[1], self.size[0], 4), dtype=np.uint8)
         return self
 

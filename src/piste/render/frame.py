@@ -310,8 +310,8 @@ class TerrainRenderer:
             color = ctx.texture((w, h), 4, dtype="f2")
             depth = ctx.depth_texture((w, h))
             depth.compare_func = ""  # sampled as plain depth values by the resolve pass
-            t = Offscreen.wrap(ctx, ctx.framebuffer(color_attachments=[color], depth_attachment=depth))
-            t.color, t.depth, t._owned = color, depth, True
+            t = Offscreen.wrap(ctx, ctx.framebuffer(color_attachments=[color], depth_attachment=depth),
+                               color=color, depth=depth, owned=True)
             self._hdr = t
             if self._resolve is None:
                 import moderngl

@@ -42,7 +42,7 @@ from piste.render.overlay import OverlayPass, StatsHistory, overlay_image
 from piste.world.camera import FlyCamera
 
 __all__ = ["has_display", "run_window", "ViewOptions", "ViewFrame", "TerrainView", "SceneView", "HELP",
-           "riders_in_view", "print_benchmark"]
+           "riders_in_view"]
 
 HELP = ("W/S/A/D fly, Q/E down/up, Shift fast, arrows or mouse drag look, F follow a rider, N next rider, "
         "L LOD view, M modulate/ps2, O LOD on/off, V visibility on/off, H overlay, Space pause, P screenshot, Esc quit")
@@ -157,16 +157,6 @@ class SceneView:
 
     def release(self) -> None:
         self.renderer.release()
-
-
-def print_benchmark(st: dict, what: str, size) -> float:
-    """Print the fps of a ``run_window(benchmark=N)`` state; returns the median fps."""
-    ms = np.asarray(st["frame_ms"], dtype=np.float64)
-    med = float(np.median(ms))
-    print(f"piste view --benchmark {len(ms)} ({what}, {size[0]}x{size[1]}, window, swap included): "
-          f"median {med:.1f} ms = {1e3 / med:.1f} fps (frames {ms.min():.1f}..{ms.max():.1f} ms; "
-          f"mean {1e3 / ms.mean():.1f} fps)")
-    return 1e3 / med
 
 
 def _cam_record(cam) -> dict:
