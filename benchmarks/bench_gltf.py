@@ -14,7 +14,7 @@ range over the rounds):
 
 Export: the default scene (``examples/scenes/default.toml`` built with the cache; ``--quick``: the
 default course's terrain at level 4 with a placeholder light map and the default rider, no build)
-written by :func:`piste.formats.gltf_export.export_gltf` to ``.glb``, against ``pygltflib``
+written by :func:`piste.formats.gltf.write.export_gltf` to ``.glb``, against ``pygltflib``
 loading and re-saving that same file (``load`` + ``save_to_bytes``), and ``trimesh`` loading it.
 Ratios are piste / peer (below 1: piste is faster).
 """
@@ -77,7 +77,7 @@ def bench_import(rounds: int, quick: bool) -> list:
 
 
 def _default_scene_parts(quick: bool):
-    from piste.formats.gltf_export import CharacterExport, TerrainExport
+    from piste.formats.gltf.write import CharacterExport, TerrainExport
     from piste.terrain.tessellate import terrain_mesh
 
     if not quick:
@@ -104,7 +104,7 @@ def _default_scene_parts(quick: bool):
 
 def bench_export(rounds: int, quick: bool) -> None:
     from piste.formats import load_gltf
-    from piste.formats.gltf_export import export_gltf
+    from piste.formats.gltf.write import export_gltf
 
     trimesh, pygltflib = _peers()
     parts, what = _default_scene_parts(quick)

@@ -27,7 +27,7 @@ import numpy as np
 
 from piste.character import default_rider
 from piste.formats import load_gltf
-from piste.formats.gltf_export import CharacterExport, export_gltf
+from piste.formats.gltf.write import CharacterExport, export_gltf
 from piste.formats.ssx.mpf import read_mpf, write_mpf
 from piste.formats.ssx.mpf_encode import model_to_mpf
 from piste.formats.ssx.mpf_model import mpf_to_model

@@ -19,7 +19,8 @@ import pytest
 SRC = Path(__file__).resolve().parents[1] / "src"
 
 #: the packages whose ``__init__`` re-exports lazily
-LAZY_PACKAGES = ("piste.pipeline", "piste.render", "piste.formats", "piste.formats.ssx", "piste.character",
+LAZY_PACKAGES = ("piste.pipeline", "piste.render", "piste.formats", "piste.formats.ssx", "piste.formats.gltf",
+                 "piste.character",
                  "piste.lighting", "piste.terrain", "piste.world")
 
 #: what the bundle runtime imports (benchmarks/bench_build.py's fresh process: load_bundle, ScenePreview,
@@ -31,7 +32,8 @@ RUNTIME = ("piste.pipeline.bundle_objects", "piste.pipeline.preview", "piste.ren
 NOT_IMPORTED = ("piste.pipeline.build", "piste.pipeline.cache", "piste.pipeline.gltf_import", "piste.pipeline.live",
                 "piste.pipeline.default_scene", "piste.pipeline.tiled_build", "piste.pipeline.dask_build",
                 "piste.pipeline.ssx_level", "piste.pipeline.ssx_rider", "piste.lighting.baker", "piste.lighting.gi",
-                "piste.formats.ssx", "piste.formats.geotiff", "piste.formats.gltf", "piste.world.scene_file",
+                "piste.formats.ssx", "piste.formats.geotiff", "piste.formats.gltf.read", "piste.formats.gltf.write",
+                "piste.world.scene_file",
                 "piste.render.streaming", "piste.render.ssx_pass", "piste.render.window", "piste.terrain.tiles",
                 "dask", "distributed",
                 "scipy", "tifffile")

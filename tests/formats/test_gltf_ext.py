@@ -235,7 +235,7 @@ def test_document_reads_like_pygltflib():
     """gltf_ext.Document (what load_gltf reads through) gives the same fields and binary chunk as
     pygltflib's own parse on every sample model."""
     from piste.formats.gltf_ext import read_document
-    from piste.formats.limits import precheck_gltf
+    from piste.formats.gltf.schema import precheck_gltf
 
     files = sorted(p for p in DATA.glob("*/*") if p.suffix.lower() in (".glb", ".gltf"))
     assert len(files) >= 8

@@ -150,7 +150,7 @@ def run(args) -> int:
               f"(bind), {report['max_pose_error_m'] * 1000:.1f} mm ({report['pose']})")
         return 0
     if args.mpf_command == "export":
-        from piste.formats.gltf_export import CharacterExport, export_gltf
+        from piste.formats.gltf.write import CharacterExport, export_gltf
         from piste.pipeline.ssx_rider import load_mpf_rider
 
         model = load_mpf_rider(args.file, texture=args.texture)

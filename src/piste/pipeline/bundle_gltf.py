@@ -5,7 +5,7 @@ Writes the terrain (tessellated at ``--level`` 4, 6 or 8 vertices per edge, or a
 camera sees with ``--level camera:NAME``), its light-map atlas (occlusion texture on TEXCOORD_1)
 and base texture, the riders as skinned meshes with their clips, the objects as instanced nodes
 (``--instancing ext|nodes``), the lights (KHR_lights_punctual) and the cameras.  The format's
-conventions are in :mod:`piste.formats.gltf_export`; this module is the glue from a bundle.
+conventions are in :mod:`piste.formats.gltf.write`; this module is the glue from a bundle.
 (:mod:`piste.commands.export` parses the flags and calls :func:`export_bundle`.)
 
 Light units (piste -> KHR_lights_punctual), the inverse of :mod:`piste.pipeline.gltf_import`
@@ -42,7 +42,7 @@ import numpy as np
 from piste.character import Camera as GltfCamera
 from piste.character import Light as GltfLight
 from piste.errors import ConfigError
-from piste.formats.gltf_export import CharacterExport, ObjectsExport, TerrainExport, export_gltf
+from piste.formats.gltf.write import CharacterExport, ObjectsExport, TerrainExport, export_gltf
 from piste.lighting.lights import AmbientLight, DirectionalLight, PointLight, SpotLight
 from piste.pipeline.characters import model_from_arrays
 from piste.render.textures import snow_texture
@@ -135,7 +135,7 @@ def terrain_levels(bundle, level):
 
 
 def bundle_parts(bundle, level=4, with_base_texture: bool = True) -> dict:
-    """Keyword arguments of :func:`piste.formats.gltf_export.export_gltf` for a loaded bundle."""
+    """Keyword arguments of :func:`piste.formats.gltf.write.export_gltf` for a loaded bundle."""
 
     base = None
     if with_base_texture:
@@ -180,5 +180,5 @@ def bundle_parts(bundle, level=4, with_base_texture: bool = True) -> dict:
 
 
 def export_bundle(bundle, path, level=4, instancing: str = "ext", with_base_texture: bool = True):
-    """Write ``bundle`` as glTF (see :func:`piste.formats.gltf_export.export_gltf`); returns its ExportReport."""
+    """Write ``bundle`` as glTF (see :func:`piste.formats.gltf.write.export_gltf`); returns its ExportReport."""
     return export_gltf(path, instancing=instancing, **bundle_parts(bundle, level, with_base_texture))

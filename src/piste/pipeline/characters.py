@@ -32,7 +32,7 @@ from piste.character.lod import LOD
 from piste.character.model import Clip, Model, Skeleton, SkinnedMesh, Track
 from piste.character.palette import Palette
 from piste.errors import ConfigError, FormatError
-from piste.formats.gltf_ext import MaterialInfo
+from piste.formats.gltf.extensions import MaterialInfo
 from piste.pipeline.object_atlas import pack_object_atlas, primitive_images
 from piste.world.riders import merged_mesh as _merged
 
@@ -67,7 +67,7 @@ def merged_mesh(model):
 
 
 def rider_material(prims):
-    """The one material a rider is drawn with (:class:`piste.formats.gltf_ext.MaterialInfo`, or
+    """The one material a rider is drawn with (:class:`piste.formats.gltf.extensions.MaterialInfo`, or
     None when no primitive has a glTF material): ``alpha_mode`` MASK when any primitive is MASK or
     BLEND (riders have no blend pass: BLEND is cut out at 0.5, the texture's alpha holds each
     primitive's cutoff baked to 0 / 255 by :func:`primitive_images`), OPAQUE otherwise;

@@ -6,7 +6,7 @@ Convention: a region is the primitive's image (scaled down to at most ``max_size
 with a ``gutter``-texel border replicating its edge; UVs ``(u, v)`` are clamped to ``[0, 1]`` (a
 repeating texture on an object shows its edge texels beyond the first tile) and mapped to texel
 centres: ``u' = (x0 + 0.5 + u (w - 1)) / W``.  KHR_texture_transform is already in the UVs
-(:mod:`piste.formats.gltf_ext`).  The atlas is RGBA uint8, rows are ``v`` from 0 (no flip), like
+(:mod:`piste.formats.gltf.extensions`).  The atlas is RGBA uint8, rows are ``v`` from 0 (no flip), like
 the built-in one.
 
 Alpha: OPAQUE primitives get alpha 255 (glTF ignores it); MASK keeps texels at or above its

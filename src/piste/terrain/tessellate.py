@@ -942,7 +942,7 @@ def open_edges(mesh: TerrainMesh) -> np.ndarray:
 
 
 def terrain_mesh(net: PatchNet, level=4) -> TerrainMesh:
-    """The terrain tessellated for export (:func:`piste.formats.gltf_export.export_gltf`'s
+    """The terrain tessellated for export (:func:`piste.formats.gltf.write.export_gltf`'s
     ``TerrainExport(mesh)``): every edge at ``level`` (4, 6 or 8, or any level 2..64), or per-edge
     levels ``(edges,) int`` (e.g. a camera's ``edge_levels``).  Not cached."""
     if np.ndim(level) == 0:

@@ -151,7 +151,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from piste.errors import ConfigError, PisteError, ValidationError
-from piste.formats.limits import precheck_gltf
+from piste.formats.gltf.schema import precheck_gltf
 from piste.formats.ssx.mpf_model import mpf_partners
 from piste.formats.safe_io import (MAX_TOML_BYTES, check_regular, confined_file, confined_folder, open_file,
                                    read_regular, resolve_reference, toml_depth, user_allow_paths)

@@ -1,7 +1,7 @@
 """glTF 2.0 import (``.gltf`` + ``.bin`` / data URIs, and ``.glb``) into :class:`piste.character.Model`.
 
-The JSON / GLB container is parsed by :func:`piste.formats.limits.precheck_gltf` and read through
-:class:`piste.formats.gltf_ext.Document` (pygltflib's attribute API, without its slow parse); this
+The JSON / GLB container is parsed by :func:`piste.formats.gltf.schema.precheck_gltf` and read through
+:class:`piste.formats.gltf.extensions.Document` (pygltflib's attribute API, without its slow parse); this
 module turns it into numpy data and
 validates everything it reads (errors raise :class:`piste.errors.FormatError` naming the file and
 the glTF field, e.g. ``accessors[3]``).
@@ -42,7 +42,10 @@ import numpy as np
 from piste.character.model import Camera, Clip, Light, Model, Skeleton, SkinnedMesh, Track
 from piste.character.skeleton import topological_order, world_from_local
 from piste.errors import FormatError
-from piste.formats import gltf_checks, gltf_ext, limits, safe_io
+from piste.formats import safe_io
+from piste.formats.gltf import checks as gltf_checks
+from piste.formats.gltf import extensions as gltf_ext
+from piste.formats.gltf.schema import precheck_gltf
 from piste.transforms import compose_trs, decompose_trs, transform_points, transform_vectors
 
 __all__ = ["load_gltf"]
@@ -357,7 +360,7 @@ def load_gltf(path, allow_paths=()) -> "Model":  # noqa: F821 - forward referenc
     path = Path(path)
     if not path.exists() and not path.is_symlink():
         raise FormatError(path, "no such file")
-    doc = limits.precheck_gltf(path)  # read through safe_io: a pipe, device, folder or link refused by name  # file size, GLB chunks, JSON nesting and array counts
+    doc = precheck_gltf(path)  # read through safe_io: a pipe, device, folder or link refused by name  # file size, GLB chunks, JSON nesting and array counts
     g = gltf_ext.read_document(path, doc)  # pygltflib's reading API over that JSON (its own parse was 70-95 % of the time)
     r = _Reader(path, g, allow_paths)
     gltf_ext.check_required(r)  # every extensionsRequired entry is read or refused by name
