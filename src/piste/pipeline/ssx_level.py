@@ -176,18 +176,25 @@ def pbd_to_net(pbd: Pbd, scale: float = GAME_SCALE, tol: float | None = None, li
 
     Parameters
     ----------
-    pbd : the level (:func:`piste.formats.ssx.pbd.read_pbd`)
-    scale : metres per game unit
-    tol : weld tolerance in metres.  Default: chosen from 1, 4 and 16 game units, the smallest
-        that welds as many patch corners as 16 units does (the game's shared boundaries are
-        near-equal, float32 at up to ~2e4 units, not bit-equal); should the net's C0 check
-        still fail, the next larger one is tried
-    lightmap_rect : (n, 4) PatchNet-style ``(u0, v0, u1, v1)`` atlas rects (default: piste's
-        own layout; see :func:`load_level` for the game's pages)
-    name : the net's name (default: the file's name)
+    pbd : Pbd
+        The level (:func:`piste.formats.ssx.pbd.read_pbd`).
+    scale : float
+        Metres per game unit.
+    tol : float or None
+        Weld tolerance in metres.  Default: chosen from 1, 4 and 16 game units, the smallest that
+        welds as many patch corners as 16 units does (the game's shared boundaries are near-equal,
+        float32 at up to ~2e4 units, not bit-equal); should the net's C0 check still fail, the next
+        larger one is tried.
+    lightmap_rect : ndarray or None
+        ``(n, 4)`` PatchNet-style ``(u0, v0, u1, v1)`` atlas rects (default: piste's own layout;
+        see :func:`load_level` for the game's pages).
+    name : str or None
+        The net's name (default: the file's name).
 
-    A net that cannot be welded raises :class:`~piste.errors.FormatError` naming the file and the
-    ``patches`` field.
+    Raises
+    ------
+    FormatError
+        A net that cannot be welded, naming the file and the ``patches`` field.
     """
     cp = np.asarray(pbd.control_points) * scale
     tols = [tol] if tol is not None else [t * scale for t in weld_candidates(pbd.control_points)]

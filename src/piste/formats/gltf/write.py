@@ -84,13 +84,19 @@ _TYPES = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4", 16: "MAT4"}
 class TerrainExport:
     """Terrain to export.
 
-    mesh : the tessellated terrain (:func:`piste.terrain.tessellate.terrain_mesh`; a
+    Attributes
+    ----------
+    mesh : TerrainMesh
+        The tessellated terrain (:func:`piste.terrain.tessellate.terrain_mesh`; a
         :class:`~piste.terrain.tessellate.TerrainMesh`: ``positions (v, 3)``, ``normals (v, 3)``,
-        ``uv (v, 2)``, ``uv_lightmap (v, 2)``, ``indices (t, 3)``, ``patch_ids``, ``patch_levels``)
-    lightmap : (H, W, 3|4) float (linear light, 1.0 = white) or uint8 (255 = 1.0) atlas addressed by
-        the mesh's ``uv_lightmap`` (the net's ``lightmap_rect``), or None
-    base_texture : (h, w, 3|4) uint8 or None
-    lightmap_scale : light value stored as 255 (float atlases)
+        ``uv (v, 2)``, ``uv_lightmap (v, 2)``, ``indices (t, 3)``, ``patch_ids``, ``patch_levels``).
+    lightmap : ndarray or None
+        ``(H, W, 3|4)`` float (linear light, 1.0 = white) or uint8 (255 = 1.0) atlas addressed by
+        the mesh's ``uv_lightmap`` (the net's ``lightmap_rect``), or None.
+    base_texture : ndarray or None
+        ``(h, w, 3|4)`` uint8, or None.
+    lightmap_scale : float
+        The light value stored as 255 (float atlases).
     """
 
     mesh: object
