@@ -92,7 +92,7 @@ from piste.character.skeleton import world_from_local
 from piste.errors import ConfigError, FormatError, ValidationError
 from piste.formats.atomic import write_bytes_atomic
 from piste.formats.safe_io import read_regular
-from piste.formats.ssx.mpf_model import CM, SSX_TO_PISTE
+from piste.formats.ssx.mpf_model import CM, SSX_TO_PISTE, bone_euler, bone_rotation
 from piste.transforms import compose_trs, decompose_trs, invert_affine, matrix_to_quat, quat_to_matrix
 
 __all__ = [
@@ -163,33 +163,12 @@ def _packed(values) -> np.ndarray:
 
 def afl_rotation(euler) -> np.ndarray:
     """Rotation matrices ``(..., 3, 3)`` of AFL / ``.mpf`` Euler triples ``(..., 3)`` radians:
-    ``Rz(-z) @ Ry(-y) @ Rx(-x)`` (the public convention: angles negated)."""
-    e = -np.asarray(euler, np.float64)
-    cx, cy, cz = np.cos(e[..., 0]), np.cos(e[..., 1]), np.cos(e[..., 2])
-    sx, sy, sz = np.sin(e[..., 0]), np.sin(e[..., 1]), np.sin(e[..., 2])
-    m = np.empty(e.shape[:-1] + (3, 3))
-    m[..., 0, 0] = cz * cy
-    m[..., 0, 1] = cz * sy * sx - sz * cx
-    m[..., 0, 2] = cz * sy * cx + sz * sx
-    m[..., 1, 0] = sz * cy
-    m[..., 1, 1] = sz * sy * sx + cz * cx
-    m[..., 1, 2] = sz * sy * cx - cz * sx
-    m[..., 2, 0] = -sy
-    m[..., 2, 1] = cy * sx
-    m[..., 2, 2] = cy * cx
-    return m
+    ``Rz(-z) @ Ry(-y) @ Rx(-x)`` (the public convention: angles negated), the same as a bone
+    record's (:func:`piste.formats.ssx.mpf_model.bone_rotation`)."""
+    return bone_rotation(euler)
 
 
-def _rotation_euler(m) -> np.ndarray:
-    """Inverse of :func:`afl_rotation`: ``(..., 3, 3)`` -> ``(..., 3)`` radians."""
-    m = np.asarray(m, np.float64)
-    y = np.arcsin(np.clip(-m[..., 2, 0], -1.0, 1.0))
-    x = np.arctan2(m[..., 2, 1], m[..., 2, 2])
-    z = np.arctan2(m[..., 1, 0], m[..., 0, 0])
-    gimbal = np.abs(m[..., 2, 0]) > 1.0 - 1e-9
-    x = np.where(gimbal, np.arctan2(-m[..., 1, 2], m[..., 1, 1]), x)
-    z = np.where(gimbal, 0.0, z)
-    return -np.stack([x, y, z], -1)
+_rotation_euler = bone_euler  # the inverse of afl_rotation: (..., 3, 3) -> (..., 3) radians
 
 
 # ----------------------------------------------------------------------------------- curves
