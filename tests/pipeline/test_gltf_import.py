@@ -99,3 +99,21 @@ def test_wysiwyg_gltf_lights_bake_like_the_same_lights_inline(small_scene):
     b = load_bundle(build_scene(from_gltf).path)
     assert np.array_equal(a.arrays["lightmap/atlas"], b.arrays["lightmap/atlas"])
     assert "cam" in b.cameras and np.allclose(b.cameras["cam"].eye, CAMERAS[0]["eye"])
+
+
+def test_camera_without_zfar_follows_the_terrain(tmp_path):
+    """No ``zfar`` (infinite): 4 km until the terrain is known, then the scene cameras' rule
+    (a far plane reaching the terrain, never under 4 km); a given ``zfar`` / ``znear`` stays."""
+    from piste.world.camera import camera_planes
+
+    open_cam = dict(CAMERAS[0], name="open", zfar=None)
+    path = write_scene_gltf(tmp_path / "s.gltf", [], [open_cam, CAMERAS[0]])
+    _, cams = import_gltf(GltfSpec(file=path))
+    assert cams["open"].far == 4000.0 and cams["open"].near == 0.25
+    lo, hi = np.array([0.0, 0.0, 0.0]), np.array([30000.0, 20000.0, 500.0])
+    fitted = cams.fitted(lo, hi)
+    assert fitted["open"].far == pytest.approx(camera_planes(cams["open"].eye, lo, hi, 0.25)[1])
+    assert fitted["open"].far >= np.linalg.norm(hi - cams["open"].eye) and fitted["open"].near == 0.25
+    assert fitted["cam"].far == 900.0 and fitted["cam"].near == 0.25
+    small = cams.fitted(np.zeros(3), np.array([100.0, 100.0, 10.0]))  # the default course's size: 4 km stays
+    assert small["open"].far == 4000.0

@@ -148,7 +148,10 @@ def scene_cameras(scene, net, centerline, gltf_cache: dict | None = None) -> lis
             imported = import_gltf(g)
             if gltf_cache is not None:
                 gltf_cache[str(g.file)] = imported
-        for name, cam in imported[1].items():
+        cams = imported[1]
+        if hasattr(cams, "fitted"):  # planes the file did not give follow the terrain, as a scene camera's
+            cams = cams.fitted(lo, hi)
+        for name, cam in cams.items():
             d = camera_to_dict(cam)
             d["name"] = name
             d["source"] = Path(g.file).name

@@ -34,8 +34,11 @@ writes a sun of strength 1 W/m^2 as 683 lux, so a strength-1 sun gives piste int
 
 Cameras
 -------
-Perspective: ``yfov`` (radians) -> ``fov_y`` degrees; ``znear`` -> ``near``; ``zfar`` -> ``far`` (4000 m
-when infinite); the aspect ratio is the render's.  The camera looks down its node's -Z with the
+Perspective: ``yfov`` (radians) -> ``fov_y`` degrees; ``znear`` -> ``near``; ``zfar`` -> ``far``.  A
+camera without ``zfar`` (infinite) or ``znear`` gets the planes of a scene camera that names none
+(:func:`piste.world.camera.camera_planes`): 4000 m until the terrain is known, then a far plane
+reaching the whole terrain (never under 4000 m; :meth:`GltfCameras.fitted`, called by the build);
+the aspect ratio is the render's.  The camera looks down its node's -Z with the
 node's +Y as up (roll is kept).  Orthographic: ``ortho_height = 2 * ymag * scale``.
 
 API
@@ -61,9 +64,9 @@ from piste.formats.atomic import write_bytes_atomic
 from piste.formats.gltf import load_gltf
 from piste.lighting.lights import DirectionalLight, PointLight, SpotLight
 from piste.transforms import look_rotation
-from piste.world.camera import Camera
+from piste.world.camera import Camera, camera_planes
 
-__all__ = ["axis_matrix", "import_gltf", "convert_lights", "convert_cameras", "write_scene_gltf", "DEFAULT_WHITE_LUX"]
+__all__ = ["axis_matrix", "import_gltf", "convert_lights", "convert_cameras", "GltfCameras", "write_scene_gltf", "DEFAULT_WHITE_LUX"]
 
 DEFAULT_WHITE_LUX = 683.0
 #: glTF (x, y, z) -> piste (x, -z, y)
@@ -117,25 +120,54 @@ def convert_lights(model_lights, up: str = "y", offset=(0.0, 0.0, 0.0), scale: f
     return out
 
 
-def convert_cameras(model_cameras, up: str = "y", offset=(0.0, 0.0, 0.0), scale: float = 1.0) -> dict:
-    """``{name: piste.world.camera.Camera}`` for :class:`piste.character.Camera` items."""
+class GltfCameras(dict):
+    """``{name: Camera}`` imported from a glTF file, remembering which planes the file gave:
+    ``planes_given[name]`` is ``(znear, zfar)`` in metres, None where the file has none (an
+    infinite ``zfar``).  :meth:`fitted` re-derives the missing planes once the terrain is known."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.planes_given: dict = {}
+
+    def fitted(self, lo=None, hi=None) -> dict:
+        """``{name: Camera}`` with the planes the file did not give following the terrain bounded
+        by ``lo..hi`` (``(3,)`` each; None: unknown) by the scene cameras' rule
+        (:func:`piste.world.camera.camera_planes`); cameras whose file gave both are unchanged."""
+        from dataclasses import replace
+
+        out = {}
+        for name, cam in self.items():
+            near, far = self.planes_given.get(name, (cam.near, cam.far))
+            if near is None or far is None:
+                near, far = camera_planes(cam.eye, lo, hi, near, far)
+                cam = replace(cam, near=near, far=far)
+            out[name] = cam
+        return out
+
+
+def convert_cameras(model_cameras, up: str = "y", offset=(0.0, 0.0, 0.0), scale: float = 1.0) -> GltfCameras:
+    """``{name: piste.world.camera.Camera}`` for :class:`piste.character.Camera` items (a
+    :class:`GltfCameras`: missing planes are 4000 m far / 0.5 m near until :meth:`GltfCameras.fitted`)."""
     a = axis_matrix(up)
     off = np.asarray(offset, dtype=np.float64)
-    out = {}
+    out = GltfCameras()
     for i, c in enumerate(model_cameras):
         name = c.name or f"gltf camera {i}"
         eye = off + scale * (a @ np.asarray(c.position, dtype=np.float64))
         fwd = np.asarray(_unit(a @ np.asarray(c.forward, dtype=np.float64)))
         upv = np.asarray(_unit(a @ np.asarray(c.up, dtype=np.float64)))
-        near = max(float(c.znear or 0.0) * scale, 1e-3)
-        far = float(c.zfar) * scale if c.zfar else 4000.0
-        far = max(far, near * 2.0)
+        given_near = max(float(c.znear) * scale, 1e-3) if c.znear else None
+        given_far = float(c.zfar) * scale if c.zfar else None
+        if given_far is not None and given_near is not None:
+            given_far = max(given_far, given_near * 2.0)
+        near, far = camera_planes(eye, None, None, given_near, given_far)
         if c.type == "orthographic":
             cam = Camera(eye, eye + 10.0 * fwd, up=upv, near=near, far=far,
                          ortho_height=2.0 * float(c.ymag or 1.0) * scale)
         else:
             cam = Camera(eye, eye + 10.0 * fwd, up=upv, fov_y=math.degrees(float(c.yfov)), near=near, far=far)
         out[name] = cam
+        out.planes_given[name] = (given_near, given_far)
     return out
 
 
@@ -143,7 +175,7 @@ def import_gltf(spec) -> tuple[list, dict]:
     """Lights and cameras of a :class:`piste.world.scene_file.GltfSpec`'s file, in piste's terms."""
     model = load_gltf(spec.file, allow_paths=getattr(spec, "allow_paths", ()))
     lights = convert_lights(model.lights, spec.up, spec.offset, spec.scale, spec.white) if spec.lights else []
-    cameras = convert_cameras(model.cameras, spec.up, spec.offset, spec.scale) if spec.cameras else {}
+    cameras = convert_cameras(model.cameras, spec.up, spec.offset, spec.scale) if spec.cameras else GltfCameras()
     return lights, cameras
 
 
