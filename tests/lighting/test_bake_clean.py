@@ -37,10 +37,12 @@ def test_full_disk_when_writing_says_where_the_chunks_are_and_clean_removes_them
     def full(lm, out_dir):
         raise OSError(errno.ENOSPC, "No space left on device", str(out_dir / "lightmap.npz"))
 
-    monkeypatch.setattr(baker_mod, "write_lightmap", full)
     import piste.lighting as lighting
 
+    # piste.lighting's lazy export first: read after baker's is patched, it would save the patched
+    # function as the one to restore, and the next test's bake would still fail
     monkeypatch.setattr(lighting, "write_lightmap", full)
+    monkeypatch.setattr(baker_mod, "write_lightmap", full)
     assert main(args) == 1
     err = capsys.readouterr().err
     part = out / ".partial"
@@ -140,3 +142,57 @@ def test_clean_does_not_follow_links(tmp_path):
     assert partial_usage(out / ".partial") == (0, 0)
     clean_partials(out / ".partial")
     assert (outside / "chunk_00000.npy").read_bytes() == b"x" * 100
+
+
+BUILD_SCENE = """\
+[terrain]
+source = "dem.npz"
+[lightmap]
+res = 4
+shadows = false
+[visibility]
+enabled = false
+"""
+
+
+def test_failed_build_names_piste_build_clean_which_removes_only_the_chunks(tmp_path, capsys, monkeypatch):
+    """``piste build``'s bake keeps its finished chunks in CACHE/bake-partial when it fails; the
+    message names them and ``piste build --clean SCENE``, which removes the baker's files only."""
+    import numpy as np
+
+    n = 65  # 16 x 16 = 256 patches: 4 chunks of 64
+    y, x = np.mgrid[0:n, 0:n] * 10.0
+    np.savez(tmp_path / "dem.npz", z=5.0 * np.sin(x / 70.0) * np.cos(y / 90.0), dx=np.float64(10.0))
+    scene = tmp_path / "s.toml"
+    scene.write_text(BUILD_SCENE)
+    real = baker_mod._save_npy_atomic
+    calls = {"n": 0}
+
+    def flaky(path, arr):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise OutputError(path, "input/output error") from OSError(errno.EIO, "Input/output error")
+        return real(path, arr)
+
+    monkeypatch.setattr(baker_mod, "_save_npy_atomic", flaky)
+    assert main(["build", str(scene), "--quiet"]) == 1
+    monkeypatch.undo()
+    err = capsys.readouterr().err
+    part = tmp_path / ".piste-cache" / "bake-partial"
+    chunks, size = partial_usage(part)
+    assert chunks == 2 and err.count("\n") == 1
+    assert f"its 2 finished chunks ({size:,} bytes) are kept here" in err
+    assert f"`piste build --clean {scene}`" in err and "piste bake --clean" not in err
+
+    (part / "notes.txt").write_text("not the baker's")  # someone else's file stays
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "chunk_00000.npy").write_bytes(b"x" * 100)
+    os.symlink(outside, part / "link")  # a link is not followed
+    assert main(["build", "--clean", str(scene)]) == 0
+    assert capsys.readouterr().out.strip() == f"removed 2 resumable chunks ({size:,} bytes) from {part}"
+    assert partial_usage(part) == (0, len("not the baker's"))
+    assert sorted(p.name for p in part.iterdir()) == ["link", "notes.txt"]
+    assert (outside / "chunk_00000.npy").read_bytes() == b"x" * 100
+    assert main(["build", str(scene), "--clean", "--cache", str(tmp_path / "elsewhere")]) == 0
+    assert capsys.readouterr().out.strip() == f"no resumable chunks in {tmp_path / 'elsewhere' / 'bake-partial'}"

@@ -4,6 +4,9 @@ Validates the scene, fits or reads the terrain, bakes the light map, builds ever
 (palettes, batches, strips), compresses object vertices and bakes their colours, computes the
 per-cell visibility sets, and writes the bundle atomically.  Steps whose inputs did not change come
 from the cache (``.piste-cache/`` beside the scene), and the bundle comes out byte-identical.
+A light-map bake that stops keeps its finished chunks in ``CACHE/bake-partial/`` (the same command
+resumes from them); the failure says where they are and how much they hold, and
+``piste build --clean SCENE [--cache DIR]`` removes them.
 """
 
 from __future__ import annotations
@@ -18,6 +21,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--no-cache", action="store_true", help="recompute every step, store nothing")
     parser.add_argument("--jobs", type=N.JOBS, default=1, help="light-map bake worker processes (default 1; 0 = every core)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.add_argument("--clean", action="store_true",
+                        help="remove the resumable chunks a stopped or failed bake left in CACHE/bake-partial, then exit")
     parser.add_argument("--dask", metavar="local", help="large worlds: build the tiles as Dask tasks on a LocalCluster "
                         "on 127.0.0.1 (implies a tiled build: terrain.tiles, default SCENE.tiles)")
     parser.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="large worlds: build the tiles on the Dask "
@@ -34,6 +39,15 @@ def run(args) -> int:
     from piste.formats.atomic import check_writable_folder
     from piste.pipeline.build import build_scene
 
+    if args.clean:  # the scene need not load (it may be the broken input): only its folder is used
+        from piste.lighting.baker import clean_partials
+        from piste.pipeline.build import bake_partial_dir
+
+        partial = bake_partial_dir(Path(args.scene).resolve(), args.cache)
+        chunks, size = clean_partials(partial)
+        print(f"removed {chunks} resumable chunks ({size:,} bytes) from {partial}" if size
+              else f"no resumable chunks in {partial}")
+        return 0
     if args.jobs < 0:
         raise ConfigError(f"--jobs must be >= 0, got {args.jobs}")
     from piste.world.scene_file import load_scene

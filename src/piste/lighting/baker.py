@@ -135,6 +135,7 @@ def bake_lightmap(
     sun_rays: int = 64,
     seed: int = 0,
     tracer: str = "exact",
+    clean_command: str | None = None,
 ) -> LightMap:
     """Bake a light-map atlas for ``net`` under ``lights``.
 
@@ -164,6 +165,8 @@ def bake_lightmap(
     seed : the rays' jitter
     tracer : the gather rays' tracer, ``"exact"`` (the patches) or ``"embree"`` (a tessellation through
         Embree, the ``bench`` extra; near hits again exactly): see :mod:`piste.lighting.gi`
+    clean_command : the command a failed bake's message names for removing its kept chunks
+        (default ``piste bake --clean``; ``piste build`` names its own)
 
     Returns
     -------
@@ -292,7 +295,7 @@ def bake_lightmap(
             shutil.rmtree(part, ignore_errors=True)
             raise OutputError(part, f"the bake stopped ({_reason(exc)}); its {chunks} finished chunks "
                                     f"({_bytes(size)}) were removed from here to free the space") from exc
-        err = kept_chunks_error(exc, part)
+        err = kept_chunks_error(exc, part, clean_command)
         if err is exc:
             raise
         raise err from exc
@@ -407,16 +410,18 @@ def clean_partials(partial_dir) -> tuple[int, int]:
     return removed_chunks, removed
 
 
-def kept_chunks_error(exc: BaseException, partial_dir) -> BaseException:
+def kept_chunks_error(exc: BaseException, partial_dir, clean_command: str | None = None) -> BaseException:
     """The error to raise for ``exc`` that stopped a bake (or the write after it) while finished
     chunks are kept under ``partial_dir``: an :class:`OutputError` naming the chunks' folder, their
-    count and size, and how to resume or remove them; ``exc`` itself when nothing is kept."""
+    count and size, and how to resume or remove them (``clean_command``, the command that removes
+    them; default: ``piste bake --clean``); ``exc`` itself when nothing is kept."""
     chunks, size = partial_usage(partial_dir)
     if not chunks:
         return exc
+    how = f"`{clean_command}`" if clean_command else "`piste bake --clean` for piste bake's --out"
     return OutputError(partial_dir, f"the bake stopped ({_reason(exc)}); its {chunks} finished chunks "
                                     f"({_bytes(size)}) are kept here: the same command resumes from them, and "
-                                    "deleting this folder (`piste bake --clean` for piste bake's --out) frees them")
+                                    f"deleting this folder ({how}) frees them")
 
 
 def _remove_stale_partials(partial_dir: Path, key: str) -> None:

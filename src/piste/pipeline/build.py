@@ -98,6 +98,20 @@ def default_cache_dir(scene_path) -> Path:
     return Path(scene_path).resolve().parent / ".piste-cache"
 
 
+def bake_partial_dir(scene_path, cache_dir=None) -> Path:
+    """The folder where ``piste build`` keeps a light-map bake's resumable chunks:
+    ``CACHE/bake-partial`` (``cache_dir``, default :func:`default_cache_dir`)."""
+    return (Path(cache_dir) if cache_dir is not None else default_cache_dir(scene_path)) / "bake-partial"
+
+
+def clean_command(scene_path, cache_dir=None) -> str:
+    """The shell command that removes the chunks under :func:`bake_partial_dir` (``piste build --clean``)."""
+    import shlex
+
+    cmd = f"piste build --clean {shlex.quote(str(scene_path))}"
+    return cmd + (f" --cache {shlex.quote(str(cache_dir))}" if cache_dir is not None else "")
+
+
 def _json_lights(lights) -> dict:
     """``Lights.to_dict()`` with infinite ranges as the string "inf" (strict JSON)."""
     out = {}
@@ -272,10 +286,10 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
     def make_lightmap():
         if ts.kind == "ssx_pbd":  # an SSX level brings its own light maps and textures (pipeline.ssx_level)
             return bundle_arrays(ts.path), {"stats": {}}
-        partial = cache.root / "bake-partial" if cache.root is not None else None
+        partial = bake_partial_dir(scene.path, cache.root) if cache.root is not None else None
         lm = bake_lightmap(net, lights, res=lm_spec.res, gutter=lm_spec.gutter, shadows=lm_spec.shadows, jobs=jobs,
                            partial_dir=partial, progress=progress, bounces=lm_spec.bounces,
-                           sun_radius=lm_spec.sun_radius)
+                           sun_radius=lm_spec.sun_radius, clean_command=clean_command(scene.path, cache_dir))
         if partial is not None:
             import shutil
 
