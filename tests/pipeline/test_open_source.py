@@ -13,7 +13,7 @@ from piste.pipeline.preview import ScenePreview
 from piste.pipeline.ssx_level import load_level
 from piste.pipeline.ssx_source import level_camera
 from piste.render.scene_renderer import SceneRenderer
-from piste.render.ssx_pass import SsxTerrainRenderer, render_level
+from piste.render.ssx_pass import SsxTerrainRenderer
 
 SIZE = (128, 96)
 
@@ -42,8 +42,13 @@ def test_ssx_level_through_the_runtime_is_the_level_renderers_picture(level, gl,
         img = p.render()
     finally:
         p.release()
-    lv = load_level(level)
-    ref = render_level(lv, level_camera(lv.net), size=SIZE, lightmap_mode=mode, ctx=gl)
+    lv = load_level(level)  # the level's own renderer alone (what `piste ssx render` drew before issue 25)
+    r = SsxTerrainRenderer(lv.net, lv.source, size=SIZE, ctx=gl, lightmap=lv.light, base_texture=lv.base_atlas,
+                           lod_near=30.0, lod_far=150.0)
+    try:
+        ref = r.render(level_camera(lv.net), lightmap_mode=mode, fog=None).image[..., :3].copy()
+    finally:
+        r.release()
     assert np.array_equal(img, ref)
 
 

@@ -11,7 +11,9 @@
 
 ``piste render LEVEL.pbd``, ``piste view LEVEL.pbd`` and ``piste bake LEVEL.pbd --format ssx-tricky``
 open the same levels.  The command only parses: the work is in :mod:`piste.pipeline.ssx_level`,
-:mod:`piste.formats.ssx` and :mod:`piste.render.ssx_pass`.
+:mod:`piste.formats.ssx`; ``render`` and ``view`` draw through the one runtime
+(:func:`piste.pipeline.open_scene.open_source` + :class:`piste.pipeline.preview.ScenePreview`),
+the same path as ``piste render|view LEVEL.pbd``.
 """
 
 from __future__ import annotations
@@ -68,44 +70,19 @@ def add_arguments(parser) -> None:
     i.add_argument("--out", required=True, help="the new level's .pbd")
 
 
-def default_camera(net):
-    """A camera looking at the whole level from the south-west, above."""
-    import numpy as np
-
-    from piste.world.camera import Camera
-
-    lo, hi = net.bounds
-    c = (lo + hi) / 2.0
-    ext = float(np.linalg.norm(hi - lo))
-    return Camera(c + np.array([-0.35, -0.6, 0.55]) * ext, c, fov_y=50.0, near=max(ext * 1e-3, 0.05), far=ext * 4.0)
-
-
-def _camera(args, net):
-    import numpy as np
-
-    from piste.errors import ConfigError
-    from piste.world.camera import Camera
-
-    if args.eye is None and args.target is None:
-        return default_camera(net)
-    if args.eye is None or args.target is None:
-        raise ConfigError("--eye and --target go together")
-    d = float(np.linalg.norm(np.subtract(args.eye, args.target)))
-    return Camera(np.array(args.eye), np.array(args.target), fov_y=50.0, near=0.1, far=max(d * 20.0, 1000.0))
-
-
 def render_pbd(level, out, size=(640, 448), lightmap_mode="modulate", camera=None) -> str:
-    """Render ``level`` (a loaded :class:`~piste.pipeline.ssx_level.SsxLevel` or a ``.pbd`` path) to
-    ``out`` (PNG); returns the path written."""
-    from piste.pipeline.ssx_level import SsxLevel, level_path, load_level
-    from piste.render.context import save_png
-    from piste.render.ssx_pass import render_level
+    """Render ``level`` (a ``.pbd`` path) to ``out`` (PNG) through the one runtime, as ``piste
+    render LEVEL.pbd`` does (:func:`piste.pipeline.open_scene.open_source` +
+    :func:`piste.pipeline.preview.render_frames`); ``camera``: a
+    :class:`~piste.world.camera.Camera` (default: the level's own, from the south-west, above).
+    Returns the path written."""
+    from piste.pipeline.open_scene import open_source
+    from piste.pipeline.preview import render_frames
+    from piste.pipeline.ssx_level import level_path
 
-    if not isinstance(level, SsxLevel):
-        level = load_level(level_path(level))
-    cam = camera if camera is not None else default_camera(level.net)
-    img = render_level(level, cam, size=tuple(size), lightmap_mode=lightmap_mode)
-    return str(save_png(out, img))
+    bundle = open_source(level_path(level), warm=True)  # (a non-.pbd: "expected an SSX Tricky level")
+    render_frames(bundle, camera, 1, size=tuple(size), first_png=out, lightmap_mode=lightmap_mode)
+    return str(out)
 
 
 def run(args) -> int:
@@ -173,8 +150,10 @@ def run(args) -> int:
         print("counts: " + ", ".join(f"{k} {v}" for k, v in p.counts.items() if v))
         return 0
     if cmd == "render":
-        level = load_level(level_path(args.level))
-        print(f"wrote {render_pbd(level, args.out, args.size, args.lightmap, _camera(args, level.net))}")
+        from piste.pipeline.open_scene import eye_camera
+
+        camera = eye_camera(args.eye, args.target)
+        print(f"wrote {render_pbd(args.level, args.out, args.size, args.lightmap, camera)}")
         return 0
     if cmd == "view":
         return view_pbd(args)
@@ -195,27 +174,31 @@ def run(args) -> int:
 
 
 def view_pbd(args) -> int:
-    """A level in a window; without a display, one off-screen frame to ``--out``."""
+    """A level in a window, drawn by the one runtime as ``piste view LEVEL.pbd`` draws it
+    (:class:`piste.pipeline.preview.ScenePreview` in :class:`piste.pipeline.live.PreviewView`);
+    without a display, one off-screen frame to ``--out``."""
     import sys
 
-    from piste.render.window import has_display
+    from piste.pipeline.live import PreviewView
+    from piste.pipeline.open_scene import open_source
+    from piste.pipeline.preview import ScenePreview, camera_at
+    from piste.render.window import ViewOptions, has_display, run_window
 
     out = args.out or "out/ssx_view.png"
+    size = tuple(args.size)
     if not has_display():
         print("piste view: no display (DISPLAY / WAYLAND_DISPLAY unset), so no window; rendering one frame "
               f"off-screen to {out} instead (run under a desktop or `xvfb-run piste view`)", file=sys.stderr)
-        print(f"wrote {render_pbd(args.level, out, args.size, args.lightmap)}")
+        print(f"wrote {render_pbd(args.level, out, size, args.lightmap)}")
         return 0
-    from piste.pipeline.ssx_level import level_path, load_level
-    from piste.render.ssx_pass import LevelView, level_renderer
-    from piste.render.window import ViewOptions, run_window
+    from piste.pipeline.ssx_level import level_path
 
-    level = load_level(level_path(args.level))
+    bundle = open_source(level_path(args.level), warm=True)
 
     def make_view(ctx):
-        return LevelView(level_renderer(level, tuple(args.size), ctx=ctx))
+        return PreviewView(ScenePreview(bundle, size=size, ctx=ctx, stream_wait=False, lightmap_mode=args.lightmap))
 
-    run_window(make_view, default_camera(level.net), size=tuple(args.size), caption=f"piste view {level.path.name}",
+    run_window(make_view, camera_at(bundle), size=size, caption=f"piste view {bundle.path.name}",
                opts=ViewOptions(lightmap_mode=args.lightmap), frames=args.frames,
                screenshot=out if args.frames else None)
     return 0

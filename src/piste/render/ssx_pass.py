@@ -14,10 +14,12 @@ API
 ::
 
     SourcePass(ctx)                 .set_source((h, w, 4) uint8), .draw(mesh, mvp, stage)
-    render_level(level, camera, size, lightmap_mode, ctx=None, renderer=None) -> (H, W, 3) uint8
     SsxTerrainRenderer(net, source, **TerrainRenderer kwargs)   ps2 mode with the stored Cs/As
-    level_renderer(level, size, ctx=None) -> SsxTerrainRenderer with the level's atlases and LOD preset
-    LevelView(renderer)             the window's view of a level (M toggles modulate / ps2)
+        .render(camera, lightmap_mode=...), .source_frame(camera) -> (H, W, 4) uint8
+
+A level is drawn by the one runtime (:func:`piste.pipeline.open_scene.open_source` +
+:class:`piste.pipeline.preview.ScenePreview`, which picks this renderer for a level's terrain):
+``piste render|view LEVEL.pbd`` and ``piste ssx render|view``.
 """
 
 from __future__ import annotations
@@ -26,16 +28,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from piste.errors import ConfigError, RenderError
+from piste.errors import RenderError
 from piste.render.context import check_gl_error, load_shader, set_depth_write
 from piste.render.frame import TerrainRenderer
-from piste.render.window import TerrainView
 
-__all__ = ["SourcePass", "SsxTerrainRenderer", "render_level", "render_level_rgba", "level_renderer", "LevelView",
-           "SSX_LOD"]
-
-#: the ssx_tricky preset's LOD switch distances in metres (3000 / 15000 game units)
-SSX_LOD = (30.0, 150.0)
+__all__ = ["SourcePass", "SsxTerrainRenderer"]
 
 
 class SourcePass:
@@ -142,8 +139,9 @@ class SsxTerrainRenderer(TerrainRenderer):
     """A :class:`TerrainRenderer` whose ``ps2`` mode blends an SSX level's stored light-map texels
     (``source (h, w, 4) uint8``: RGB = Cs, A = As, laid out by the net's ``lightmap_rect``) over the
     base texture with :class:`SourcePass`, as the GS does; every other mode is the terrain
-    renderer's own.  Used by ``piste render|view LEVEL.pbd`` and, for scene files with an
-    ``ssx_pbd`` terrain, by the preview (bundle member ``lightmap/source``)."""
+    renderer's own.  The runtime's terrain renderer for an SSX level (``piste render|view LEVEL.pbd``,
+    ``piste ssx render|view``) and for scene files with an ``ssx_pbd`` terrain (bundle member
+    ``lightmap/source``; :func:`piste.pipeline.preview.terrain_renderer`)."""
 
     def __init__(self, net, source, **kwargs):
         super().__init__(net, **kwargs)
@@ -183,44 +181,3 @@ class SsxTerrainRenderer(TerrainRenderer):
     def release(self) -> None:
         self.ssx_source.release()
         super().release()
-
-
-def level_renderer(level, size=(640, 448), ctx=None, lod_near: float = SSX_LOD[0], lod_far: float = SSX_LOD[1]):
-    """An :class:`SsxTerrainRenderer` for ``level`` (an :class:`piste.pipeline.ssx_level.SsxLevel`
-    or anything with ``net``, ``base_atlas``, ``light``, ``source``) with the ``ssx_tricky`` LOD
-    preset."""
-    return SsxTerrainRenderer(level.net, level.source, size=size, ctx=ctx, lightmap=level.light,
-                              base_texture=level.base_atlas, lod_near=lod_near, lod_far=lod_far)
-
-
-def render_level(level, camera, size=(640, 448), lightmap_mode: str = "modulate", ctx=None, renderer=None,
-                 lod: bool = True, fog: float | None = None) -> np.ndarray:
-    """One frame of ``level`` seen by ``camera``: ``(H, W, 3) uint8`` (see :func:`render_level_rgba`)."""
-    return render_level_rgba(level, camera, size, lightmap_mode, ctx, renderer, lod, fog)[..., :3]
-
-
-def render_level_rgba(level, camera, size=(640, 448), lightmap_mode: str = "modulate", ctx=None, renderer=None,
-                      lod: bool = True, fog: float | None = None) -> np.ndarray:
-    """One frame ``(H, W, 4) uint8``.  ``lightmap_mode``: "modulate" (base x CL in one pass), "ps2"
-    (base, then the stored Cs/As blended as the GS does), "base" (the base textures alone, on a
-    transparent background) or "source" (the stored Cs/As texels unblended, background alpha 0)."""
-    modes = ("modulate", "ps2", "base", "source")
-    if lightmap_mode not in modes:
-        raise ConfigError(f"lightmap mode must be one of {', '.join(modes)}, got {lightmap_mode!r}")
-    own = renderer is None
-    r = renderer if renderer is not None else level_renderer(level, size, ctx)
-    try:
-        if lightmap_mode == "source":
-            return r.source_frame(camera, lod=lod)
-        if lightmap_mode == "base":
-            cam = replace(camera, aspect=r.size[0] / r.size[1])
-            return r.render(cam, lod=lod, debug="base", sky=False, clear=(0.0, 0.0, 0.0, 0.0)).image.copy()
-        return r.render(camera, lod=lod, lightmap_mode=lightmap_mode, fog=fog).image.copy()
-    finally:
-        if own:
-            r.release()
-
-
-class LevelView(TerrainView):
-    """``piste view LEVEL.pbd``: the level in the window (M toggles modulate / ps2: the stored
-    Cs/As pass of :class:`SsxTerrainRenderer`)."""

@@ -128,3 +128,48 @@ def test_ssx_subcommands(tmp_path, capsys, gl):
     with pytest.raises(SystemExit) as e:
         main(["ssx", "convert", lv, "--out", str(tmp_path / "x.npz")])  # --to is required
     assert e.value.code == 2 and "--to" in capsys.readouterr().err
+
+
+def test_ssx_render_and_view_are_the_runtimes_pictures(tmp_path, monkeypatch, capsys, gl):
+    """Issue 25: `piste ssx render|view` draw through the one runtime, so their pictures are
+    `piste render|view LEVEL.pbd`'s pixel for pixel (the level's camera and --eye/--target), and
+    --lightmap ps2 is the runtime's ps2 picture; a file that is not a .pbd is named in a clear error."""
+    from PIL import Image
+
+    from piste.pipeline.open_scene import eye_camera, open_source
+    from piste.pipeline.preview import ScenePreview
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["ssx", "make", str(tmp_path), "--rows", "2", "--cols", "3", "--name", "LV"]) == 0
+    lv = str(tmp_path / "LV.pbd")
+    size = ["--size", "96", "64"]
+
+    def png(name):
+        return np.asarray(Image.open(tmp_path / name).convert("RGB"))
+
+    lo, hi = (np.asarray(v) for v in pbd_to_net(read_pbd(lv)).bounds)
+    c = (lo + hi) / 2
+    e = c + np.array([-10.0, -40.0, 25.0])
+    eye = ["--eye", *map(str, e), "--target", *map(str, c)]
+    for k, cam in enumerate(([], eye)):  # modulate: `piste render`'s picture
+        assert main(["ssx", "render", lv, "--out", str(tmp_path / f"s{k}.png"), *size, *cam]) == 0
+        assert main(["render", lv, "--out", str(tmp_path / f"r{k}.png"), *size, *cam]) == 0
+        assert png(f"s{k}.png").std() > 5 and np.array_equal(png(f"s{k}.png"), png(f"r{k}.png")), k
+    assert not np.array_equal(png("s0.png"), png("s1.png"))  # --eye/--target reach the runtime
+    assert main(["ssx", "view", lv, "--out", str(tmp_path / "sv.png"), *size]) == 0
+    assert main(["view", lv, "--out", str(tmp_path / "v.png"), *size]) == 0
+    assert np.array_equal(png("sv.png"), png("v.png")) and np.array_equal(png("sv.png"), png("s0.png"))
+    assert main(["ssx", "render", lv, "--lightmap", "ps2", "--out", str(tmp_path / "p.png"), *size, *eye]) == 0
+    p = ScenePreview(open_source(lv), size=(96, 64), ctx=gl, lightmap_mode="ps2")
+    try:
+        want = p.render(eye_camera(e, c))
+    finally:
+        p.release()
+    assert np.array_equal(png("p.png"), want) and not np.array_equal(png("p.png"), png("s1.png"))
+    capsys.readouterr()
+    (tmp_path / "x.obj").write_bytes(b"")
+    assert main(["ssx", "render", str(tmp_path / "x.obj"), "--out", str(tmp_path / "x.png")]) != 0
+    err = capsys.readouterr().err
+    assert "x.obj" in err and "expected an SSX Tricky level (.pbd)" in err and "Traceback" not in err
+    assert not (tmp_path / "x.png").exists()

@@ -29,14 +29,39 @@ def _camera(level):
     return Camera(c + np.array([-4.0, -16.0, 12.0]), c, fov_y=50.0, near=0.5, far=500.0)
 
 
-def _render(level, gl, mode):
-    from piste.render.ssx_pass import level_renderer, render_level_rgba
+def _preview(level, gl, mode):
+    """The one runtime on the level (what ``piste ssx render|view`` and ``piste render|view`` draw
+    with): a :class:`ScenePreview` whose terrain is the level's :class:`SsxTerrainRenderer`."""
+    from piste.pipeline.preview import ScenePreview
+    from piste.pipeline.ssx_source import level_bundle
+    from piste.render.ssx_pass import SsxTerrainRenderer
 
-    r = level_renderer(level, SIZE, ctx=gl)
+    p = ScenePreview(level_bundle(level), size=SIZE, ctx=gl, lightmap_mode=mode if mode in ("modulate", "ps2") else None)
+    assert isinstance(p.terrain, SsxTerrainRenderer) and p.renderer is None
+    return p
+
+
+def _frame(p, camera, mode):
+    """One ``(H, W, 4) uint8`` frame: "modulate" / "ps2" as the runtime draws them (alpha 255),
+    "base" (the base textures alone, transparent background) or "source" (the stored Cs/As texels
+    unblended, background alpha 0) from the runtime's terrain renderer."""
+    from dataclasses import replace
+
+    if mode == "source":
+        return p.terrain.source_frame(replace(camera, aspect=SIZE[0] / SIZE[1]))
+    if mode == "base":
+        cam = replace(camera, aspect=SIZE[0] / SIZE[1])
+        return p.terrain.render(cam, debug="base", sky=False, clear=(0.0, 0.0, 0.0, 0.0)).image.copy()
+    img = p.render(camera)
+    return np.concatenate([img, np.full(img.shape[:2] + (1,), 255, np.uint8)], axis=-1)
+
+
+def _render(level, gl, mode):
+    p = _preview(level, gl, mode)
     try:
-        return render_level_rgba(level, _camera(level), lightmap_mode=mode, renderer=r)
+        return _frame(p, _camera(level), mode)
     finally:
-        r.release()
+        p.release()
 
 
 def test_level_prepared_for_rendering(level):
@@ -105,14 +130,12 @@ def _sky_camera(level):
 @pytest.mark.parametrize("mode", ["modulate", "ps2", "source", "base"])
 def test_nothing_in_view_draws_the_sky(level, gl, mode):
     """Issue 22: a view of only sky (an empty draw) in every light-map mode draws the sky, no GL error."""
-    from piste.render.ssx_pass import level_renderer, render_level_rgba
-
-    r = level_renderer(level, SIZE, ctx=gl)
+    p = _preview(level, gl, mode)
     try:
-        img = render_level_rgba(level, _sky_camera(level), lightmap_mode=mode, renderer=r)
-        seen = render_level_rgba(level, _camera(level), lightmap_mode=mode, renderer=r)  # and it still draws after
+        img = _frame(p, _sky_camera(level), mode)
+        seen = _frame(p, _camera(level), mode)  # and it still draws after
     finally:
-        r.release()
+        p.release()
     assert img.shape == (SIZE[1], SIZE[0], 4)
     if mode in ("modulate", "ps2"):
         rgb = img[..., :3].astype(int)
@@ -123,11 +146,12 @@ def test_nothing_in_view_draws_the_sky(level, gl, mode):
 
 
 def test_window_view_pressing_m_at_the_sky(level, gl):
-    """`piste ssx view`: the window's view draws the sky in both modes (M toggles) without a crash."""
-    from piste.render.ssx_pass import LevelView, level_renderer
+    """`piste ssx view` / `piste view LEVEL.pbd`: the window's view (the runtime's PreviewView) draws
+    the sky in both modes (M toggles) without a crash."""
+    from piste.pipeline.live import PreviewView
     from piste.render.window import ViewOptions
 
-    view = LevelView(level_renderer(level, SIZE, ctx=gl))
+    view = PreviewView(_preview(level, gl, "modulate"))
     try:
         for mode in ("modulate", "ps2", "modulate", "ps2"):
             frame = view.draw(_sky_camera(level), 0.0, ViewOptions(lightmap_mode=mode))

@@ -95,7 +95,8 @@ def test_scene_ps2_mode_blends_the_stored_texels(folder, gl):
     from piste.pipeline import load_bundle
     from piste.pipeline.preview import ScenePreview, camera_at
     from piste.pipeline.ssx_level import load_level
-    from piste.render.ssx_pass import SsxTerrainRenderer, level_renderer, render_level
+    from piste.pipeline.ssx_source import level_bundle
+    from piste.render.ssx_pass import SsxTerrainRenderer
 
     scene = folder / "ps2.toml"
     scene.write_text('terrain = { ssx_pbd = "LV.pbd" }\n\n[render]\nsize = [96, 64]\nlightmap_mode = "ps2"\n')
@@ -108,10 +109,10 @@ def test_scene_ps2_mode_blends_the_stored_texels(folder, gl):
         cam = replace(camera_at(b), aspect=96 / 64)
     finally:
         p.release()
-    level = load_level(folder / "LV.pbd")
-    r = level_renderer(level, (96, 64), ctx=gl)
+    level = load_level(folder / "LV.pbd")  # the level opened directly (`piste ssx render`), not built as a scene
+    r = ScenePreview(level_bundle(level), size=(96, 64), ctx=gl, lightmap_mode="ps2")
     try:
-        want = render_level(level, cam, lightmap_mode="ps2", renderer=r).astype(int)
+        want = r.render(cam).astype(int)
     finally:
         r.release()
     assert np.abs(img - want).mean() < 1.0
