@@ -94,6 +94,14 @@ def test_view_window_under_xvfb(tmp_path, gl_context):
     # the rock texture's dark brown shows below the overlay
     lower = img[70:]
     assert ((lower[..., 0] < 140) & (lower[..., 2] < lower[..., 0]) & (lower[..., 0] > 30)).mean() > 0.03
+    # `piste ssx view` opens the same runtime's window (PreviewView) and draws the same level
+    shot2 = tmp_path / "shot_ssx.png"
+    r = subprocess.run(["xvfb-run", "-a", sys.executable, "-m", "piste.cli", "ssx", "view", str(tmp_path / "LV.pbd"),
+                        "--frames", "3", "--lightmap", "ps2", "--size", "160", "112", "--out", str(shot2)],
+                       env=env, capture_output=True, text=True, timeout=180)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    lower = np.asarray(Image.open(shot2).convert("RGB")).astype(int)[70:]
+    assert ((lower[..., 0] < 140) & (lower[..., 2] < lower[..., 0]) & (lower[..., 0] > 30)).mean() > 0.03
 
 
 def test_ssx_subcommands(tmp_path, capsys, gl):
