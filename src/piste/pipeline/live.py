@@ -41,6 +41,7 @@ from piste.render import window
 from piste.render.context import save_png
 from piste.render.frame import DEFAULT_FOG_DENSITY
 from piste.render.sky_pass import HORIZON
+from piste.render.ssx_pass import SsxTerrainRenderer
 from piste.render.window import SceneView, ViewFrame, _wrap_screen
 from piste.world.scene_file import load_scene
 
@@ -202,10 +203,16 @@ class PreviewView:
             if isinstance(p.scene, BundleScene):
                 p.scene.visibility = bundle.visibility if opts.visibility else None
             return SceneView(p.renderer, fog=p.fog).draw(camera, t, opts)
-        mesh = p.terrain.prepare(camera, lod=opts.lod)
         fog = DEFAULT_FOG_DENSITY if p.fog is None else p.fog
-        frame = p.terrain.draw(camera, mesh, lightmap_mode=opts.lightmap_mode, debug=opts.debug, read=False,
-                               fog="scene" if p.fog is None else p.fog)
+        if opts.lightmap_mode == "ps2" and isinstance(p.terrain, SsxTerrainRenderer):
+            # an SSX level's ps2 picture blends its stored texels (Cs, As) as the GS does: the runtime's
+            # render, not the general terrain draw's ps2 (which blends piste's own light map)
+            frame = p.terrain.render(camera, lod=opts.lod, lightmap_mode="ps2", debug=opts.debug, read=False,
+                                     fog="scene" if p.fog is None else p.fog)
+        else:
+            mesh = p.terrain.prepare(camera, lod=opts.lod)
+            frame = p.terrain.draw(camera, mesh, lightmap_mode=opts.lightmap_mode, debug=opts.debug, read=False,
+                                   fog="scene" if p.fog is None else p.fog)
         extra = {}
         if p.objects is not None:
             vis = p.objects.objects.visible(camera.frustum_planes(), max_distance=camera.far, eye=camera.eye)

@@ -158,3 +158,21 @@ def test_window_view_pressing_m_at_the_sky(level, gl):
             assert frame.terrain is not None
     finally:
         view.release()
+
+
+def test_window_view_ps2_is_the_runtimes_ps2_picture(level, gl):
+    """In the window, an SSX level's ps2 mode blends the level's stored texels as the runtime's render
+    does (it drew the general terrain's ps2 blend of piste's own light map before: up to 5 levels off)."""
+    from piste.pipeline.live import PreviewView
+    from piste.render.window import ViewOptions
+
+    cam = _camera(level)
+    want = _frame(_preview(level, gl, "ps2"), cam, "ps2")[..., :3].astype(int)
+    view = PreviewView(_preview(level, gl, "ps2"))
+    try:
+        view.draw(cam, 0.0, ViewOptions(lightmap_mode="ps2"))
+        got = view.preview.terrain.target.read()[..., :3].astype(int)
+    finally:
+        view.release()
+    assert got.shape == want.shape
+    assert np.abs(got - want).max() == 0
