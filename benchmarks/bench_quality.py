@@ -29,25 +29,11 @@ from pathlib import Path
 import numpy as np
 
 from piste.lighting import bake_lightmap, light_terms, sample_points
-from piste.lighting.gi import path_traced_reference, reference_error, valley_scene
+from piste.lighting.gi import off_fold, path_traced_reference, reference_error, valley_scene
 from piste.lighting.shadows import shadow_visibility
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _timing import interleaved, record, stat  # noqa: E402
-
-
-def off_fold(net, res: int) -> np.ndarray:
-    """Samples not on a fold (where the baker welds two faces' light into one texel), ``(k,)`` bool."""
-    pos, nrm = sample_points(net, res, smooth_seams=False)
-    pos, nrm = pos.reshape(-1, 3), nrm.reshape(-1, 3)
-    _, inv = np.unique(np.round(pos, 6), axis=0, return_inverse=True)
-    inv = inv.ravel()
-    fold = np.zeros(len(pos), dtype=bool)
-    for g in np.unique(inv[np.bincount(inv)[inv] > 1]):
-        members = np.flatnonzero(inv == g)
-        if (nrm[members] @ nrm[members].T).min() < 0.5:
-            fold[members] = True
-    return ~fold
 
 
 def cost(times: dict, plain: str) -> dict:

@@ -11,7 +11,7 @@ from piste.cli import main
 from piste.errors import ValidationError
 from piste.lighting import AmbientLight, DirectionalLight, Lights, bake_lightmap, sample_points, shade
 from piste.lighting.baker import BAKE_VERSION, load_lightmap
-from piste.lighting.gi import (GatherHits, bounce_light, cosine_directions, path_traced_reference, reference_error,
+from piste.lighting.gi import (GatherHits, bounce_light, cosine_directions, off_fold, path_traced_reference, reference_error,
                                tile_lookup, valley_scene)
 from piste.lighting.lightmap import inputs_key
 from piste.terrain import PatchNet
@@ -20,28 +20,13 @@ from piste.world.scene_file import SceneError, loads_scene
 RES = 8
 
 
-def _off_fold(net, res):
-    """Samples not on a fold (the valley's floor-wall corners, where the baker welds the two faces'
-    light into one texel: a convention of the seams, not the light transport): ``(k,)`` bool."""
-    pos, nrm = sample_points(net, res, smooth_seams=False)
-    pos, nrm = pos.reshape(-1, 3), nrm.reshape(-1, 3)
-    _, inv = np.unique(np.round(pos, 6), axis=0, return_inverse=True)
-    inv = inv.ravel()
-    fold = np.zeros(len(pos), dtype=bool)
-    for g in np.unique(inv[np.bincount(inv)[inv] > 1]):
-        members = np.flatnonzero(inv == g)
-        if (nrm[members] @ nrm[members].T).min() < 0.5:
-            fold[members] = True
-    return ~fold
-
-
 @pytest.fixture(scope="module")
 def valley():
     net, lights = valley_scene()
     pos, nrm = sample_points(net, RES)
     pos, nrm = pos.reshape(-1, 3), nrm.reshape(-1, 3)
     rng = np.random.default_rng(7)
-    pick = np.sort(rng.choice(np.flatnonzero(_off_fold(net, RES)), 128, replace=False))
+    pick = np.sort(rng.choice(np.flatnonzero(off_fold(net, RES)), 128, replace=False))
     return net, lights, pos, nrm, pick
 
 
