@@ -30,20 +30,13 @@ from __future__ import annotations
 import numpy as np
 
 from piste.errors import ConfigError
-from piste.render.context import Offscreen
+from piste.render.context import Offscreen, load_shader
 from piste.render.dof import DofPass
 
 __all__ = ["AA_MODES", "aa_samples", "check_aa", "AATarget", "downsample", "edge_pixels", "edge_error"]
 
 AA_MODES = ("off", "msaa2", "msaa4", "msaa8", "fxaa")
 
-_VS = """
-#version 330
-void main() {  // one triangle over the whole viewport
-    vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);
-    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
-}
-"""
 
 # FXAA 3.11, quality variant (Timothy Lottes, NVIDIA 2011), written from the algorithm's description:
 # local contrast test on the 4 neighbours, horizontal or vertical edge from the 3x3 lumas, which side
@@ -153,7 +146,7 @@ class AATarget(Offscreen):
             self.color = ctx.texture((w, h), 4)
             self.color.repeat_x = self.color.repeat_y = False
             self.depth = ctx.depth_renderbuffer((w, h))
-            self._prog = ctx.program(vertex_shader=_VS, fragment_shader=_FXAA_FS)
+            self._prog = ctx.program(vertex_shader=load_shader("fullscreen.vert.glsl"), fragment_shader=_FXAA_FS)
             self._prog["u_color"].value = 0
             self._prog["u_rcp"].value = (1.0 / w, 1.0 / h)
             self._vao = ctx.vertex_array(self._prog, [])

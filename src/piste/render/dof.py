@@ -31,6 +31,7 @@ from dataclasses import replace
 import numpy as np
 
 from piste.errors import ConfigError
+from piste.render.context import load_shader
 
 __all__ = ["parse_dof", "check_dof", "coc_pixels", "DofPass", "lens_cameras", "MAX_COC_FRACTION"]
 
@@ -38,13 +39,6 @@ __all__ = ["parse_dof", "check_dof", "coc_pixels", "DofPass", "lens_cameras", "M
 MAX_COC_FRACTION = 0.025
 SAMPLES = 48
 
-_VS = """
-#version 330
-void main() {
-    vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);
-    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
-}
-"""
 
 _FS = """
 #version 330
@@ -124,7 +118,7 @@ class DofPass:
         for t in (self.color, self.depth):  # whole texels: an in-focus pixel's nearest samples are itself
             t.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.fbo = ctx.framebuffer(color_attachments=[self.color], depth_attachment=self.depth)
-        self.prog = ctx.program(vertex_shader=_VS, fragment_shader=_FS)
+        self.prog = ctx.program(vertex_shader=load_shader("fullscreen.vert.glsl"), fragment_shader=_FS)
         self.prog["u_color"].value, self.prog["u_depth"].value = 0, 1
         self.prog["u_rcp"].value = (1.0 / self.size[0], 1.0 / self.size[1])
         self.vao = ctx.vertex_array(self.prog, [])

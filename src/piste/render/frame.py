@@ -16,7 +16,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from piste.errors import ConfigError
-from piste.render.context import Offscreen, check_gl_error, create_context
+from piste.render.context import Offscreen, check_gl_error, create_context, load_shader
 from piste.render.sky_pass import HORIZON, SkyPass
 from piste.render.terrain_pass import TerrainPass
 from piste.render.textures import placeholder_lightmap, track_field
@@ -28,13 +28,6 @@ from piste.transforms import cull_boxes  # noqa: E402  (re-exported)
 
 __all__ = ["TerrainRenderer", "Frame", "summarize", "cull_boxes", "DEFAULT_FOG_DENSITY", "scene_fog_density"]
 
-_RESOLVE_VS = """
-#version 330
-void main() {  // one triangle over the whole viewport
-    vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);
-    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
-}
-"""
 _RESOLVE_FS = """
 #version 330
 uniform sampler2D u_color;
@@ -316,7 +309,7 @@ class TerrainRenderer:
             if self._resolve is None:
                 import moderngl
 
-                prog = ctx.program(vertex_shader=_RESOLVE_VS, fragment_shader=_RESOLVE_FS)
+                prog = ctx.program(vertex_shader=load_shader("fullscreen.vert.glsl"), fragment_shader=_RESOLVE_FS)
                 prog["u_color"].value, prog["u_depth"].value = 0, 1
                 self._resolve = (prog, ctx.vertex_array(prog, []), moderngl)
         return self._hdr

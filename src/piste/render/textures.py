@@ -373,7 +373,7 @@ class MipLevels:
         for lv in range(1, self.levels + 1):  # allocate the levels (contents undefined until build)
             gl.glTexImage2D(_GL_TEXTURE_2D, lv, internal, *self.sizes[lv], 0, fmt, _GL_UNSIGNED_BYTE, None)
         self._limits(0, self.levels)
-        self.prog = ctx.program(vertex_shader=load_shader("mip_level.vert.glsl"),
+        self.prog = ctx.program(vertex_shader=load_shader("fullscreen.vert.glsl"),
                                 fragment_shader=load_shader("mip_level.frag.glsl"))
         self.vao = ctx.vertex_array(self.prog, [])
         self.fbo = ctx.framebuffer(color_attachments=[texture])
