@@ -85,3 +85,18 @@ def piste_cache(_piste_cache_dir, monkeypatch):
     elsewhere itself."""
     monkeypatch.setenv("PISTE_CACHE_DIR", str(_piste_cache_dir))
     return _piste_cache_dir
+
+
+@pytest.fixture(autouse=True)
+def _numba_warm_up_joined():
+    """A test that started the background numba warm-up (``piste._jit.warm_up_async``, e.g. a
+    preview) waits for it before the next test starts: numba compiles under
+    ``warnings.catch_warnings``, which swaps the process-wide warning filters and is not thread-safe,
+    so a warm-up still compiling could swallow the warnings a later ``pytest.warns`` expects (seen
+    in CI: ``test_scene_file_clips_from_with_bone_map`` "DID NOT WARN")."""
+    yield
+    import threading
+
+    for t in threading.enumerate():
+        if t.name == "piste-numba-warm-up" and t.is_alive():
+            t.join()
