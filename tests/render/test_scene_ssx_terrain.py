@@ -37,3 +37,33 @@ def test_riders_on_an_ssx_level_keep_the_stored_light_maps(tmp_path, gl):
     d = np.abs(with_rider - terrain).max(-1)
     assert (d > 30).sum() >= 5  # the rider is drawn
     assert np.median(d) == 0 and d.mean() < 0.6  # the rest is the level's own ps2 blend (generic shader: ~1.1)
+
+
+def test_frame_mode_is_the_only_place_that_knows_the_ssx_ps2_frame(tmp_path, gl):
+    """SceneRenderer follows a TerrainMode (render.ssx_pass.frame_mode): an SSX level's ps2 frame
+    (base texture + stored texels, explicit levels, no fog) is SourceMode, every other frame the
+    terrain renderer's own pass; SceneRenderer itself has no ps2 branch."""
+    import ast
+    import inspect
+
+    from piste.render import scene_renderer
+    from piste.render.frame import TerrainRenderer
+    from piste.render.ssx_pass import SourceMode, TerrainMode, frame_mode
+
+    make_level(rows=1, cols=2, seed=3).write(tmp_path, "LV")
+    lv = load_level(tmp_path / "LV.pbd")
+    ssx = SsxTerrainRenderer(lv.net, lv.source, size=(32, 24), ctx=gl)
+    plain = TerrainRenderer(lv.net, size=(32, 24), ctx=gl)
+    try:
+        m = frame_mode(ssx, "ps2")
+        assert type(m) is SourceMode and m.fog is False
+        for terrain, mode, debug in ((ssx, "ps2", "lod"), (ssx, "modulate", None), (plain, "ps2", None)):
+            m = frame_mode(terrain, mode, debug)
+            assert type(m) is TerrainMode and m.fog is True and (m.lightmap_mode, m.debug) == (mode, debug)
+    finally:
+        ssx.release()
+        plain.release()
+    tree = ast.parse(inspect.getsource(scene_renderer.SceneRenderer))
+    ps2 = [n.lineno for n in ast.walk(tree) if isinstance(n, ast.Constant) and n.value == "ps2"]
+    assert ps2 == [], f"SceneRenderer compares with 'ps2' at its lines {ps2}: that belongs in a TerrainMode"
+    assert "ssx_source" not in inspect.getsource(scene_renderer.SceneRenderer).split('"""', 2)[2]

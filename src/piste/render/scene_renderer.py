@@ -42,6 +42,7 @@ from piste.render.object_pass import ObjectPass
 from piste.render.occlusion import occlude_frame
 from piste.render.shadow_pass import SUN_RADIUS, ShadowPass, sun_visibility, shadow_matrices, shadow_patches
 from piste.render.sky_pass import HORIZON
+from piste.render.ssx_pass import frame_mode
 from piste.render.trace import NULL_TRACER
 from piste.terrain.cull import patch_tree
 from piste.world.course import TRACK_HALF_WIDTH
@@ -113,8 +114,6 @@ class SceneRenderer:
         terrain_kw.setdefault("track_half_width", TRACK_HALF_WIDTH)
         self.terrain = terrain if terrain is not None else TerrainRenderer(scene.net, size=size, ctx=ctx,
                                                                            lightmap=lightmap, **terrain_kw)
-        # an SSX level's stored light-map texels: ps2 frames draw the base texture, then this pass
-        self.ssx_source = getattr(self.terrain, "ssx_source", None)
         self.terrain.start_resident()  # built while the passes below set up; joined by the first frame
         self.ctx = self.terrain.ctx
         casts = list(casts) or list(getattr(scene, "casts", None) or ())  # a bundle scene lists its own
@@ -218,18 +217,16 @@ class SceneRenderer:
                     self._add_faces(c, f, faces, t, t if face_time is None else face_time)
         t1 = time.perf_counter()
         tt: dict = {}
-        ssx_ps2 = self.ssx_source is not None and lightmap_mode == "ps2" and debug is None
-        # the SSX pass draws a CPU-tessellated mesh: explicit levels (as SsxTerrainRenderer.render)
+        # how this frame draws its terrain (an SSX level's ps2 frame: base texture + stored texels)
+        mode = frame_mode(self.terrain, lightmap_mode, debug)
         with tr.span("terrain LOD + cull + tessellate"):
-            mesh = self.terrain.prepare(cam, lod=lod, timings=tt,
-                                        levels=self.terrain.levels(cam, lod) if ssx_ps2 else None)
+            mesh = mode.prepare(cam, lod=lod, timings=tt)
         occ = None
         if self.occlusion:
             with tr.span("occlusion"):
                 mesh, sf.objects_visible, occ = occlude_frame(
                     self.terrain, mesh, cam, (w, h), self.patch_lo, self.patch_hi, self.scene.objects,
-                    sf.objects_visible, prepare=lambda: self.terrain.prepare(
-                        cam, lod=lod, levels=self.terrain.levels(cam, lod) if ssx_ps2 else None))
+                    sf.objects_visible, prepare=lambda: mode.prepare(cam, lod=lod))
         t2 = time.perf_counter()
         patches = []
         light_vp = None
@@ -243,7 +240,7 @@ class SceneRenderer:
                                          tree=patch_tree(self.scene.net))
         t3 = time.perf_counter()
         return dict(sf=sf, cam=cam, frames=frames, mesh=mesh, patches=patches, light_vp=light_vp, tt=tt, occ=occ,
-                    ssx_ps2=ssx_ps2, lightmap_mode=lightmap_mode, debug=debug, stamps=[t0, t1, t2, t3])
+                    mode=mode, stamps=[t0, t1, t2, t3])
 
     def _issue(self, plan: dict, fog: float | None = None, light_only: bool = False,
                count_rider_pixels: bool = False) -> None:
@@ -252,7 +249,7 @@ class SceneRenderer:
         fog = self.terrain.fog_density if fog is None else fog  # the scene's size (scene_fog_density)
         w, h = self.size
         sf, cam, frames, mesh, tt = plan["sf"], plan["cam"], plan["frames"], plan["mesh"], plan["tt"]
-        ssx_ps2, light_vp, sun = plan["ssx_ps2"], plan["light_vp"], self.scene.sun
+        light_vp, sun = plan["light_vp"], self.scene.sun
         t3 = time.perf_counter()
         tr = self.tracer
         # ---- GPU work (uploads count as CPU time: they are memcpy on the CPU side)
@@ -269,10 +266,11 @@ class SceneRenderer:
                     first += k
         t4 = time.perf_counter()
         with tr.gpu_pass("terrain"):
-            frame = self._draw_terrain(plan, cam, mesh, tt, fog, w, h)
+            # (a ps2 frame resolves here: the 8-bit frame buffer the rest blends on)
+            frame = plan["mode"].draw(cam, mesh, fog=fog, timings=tt)
         t5 = time.perf_counter()
         vp = frame_vp = cam.with_aspect(w, h).view_projection()
-        fog_rgba = (*HORIZON, float(fog)) if fog and not ssx_ps2 else None  # the SSX ps2 frame has no fog
+        fog_rgba = (*HORIZON, float(fog)) if fog and plan["mode"].fog else None  # (the SSX ps2 frame has none)
         if self.shadows is not None and sun is not None:
             with tr.gpu_pass("shadow receivers"):
                 self.shadows.draw_receivers(mesh, plan["patches"], frame_vp)
@@ -287,17 +285,6 @@ class SceneRenderer:
                     rider_triangles=int(sum(cp.triangles for cp in self.cast_passes)),
                     shadow_triangles=self.shadows.triangles if self.shadows is not None else 0)
         plan["stamps"] += [t3, t4, t5]
-
-    def _draw_terrain(self, plan, cam, mesh, tt, fog, w, h):
-        """The terrain (+ sky) of a planned frame, drawn into the target (not read back)."""
-        if plan["ssx_ps2"]:  # the game's way: base texture Cd, then (Cd - Cs) x As with the level's stored texels
-            frame = self.terrain.draw(cam, mesh, debug="base", read=False, timings=tt, sync=False)
-            self.ssx_source.upload(mesh)
-            self.terrain.target.use()
-            self.ssx_source.draw(cam.with_aspect(w, h).view_projection())
-            return frame
-        return self.terrain.draw(cam, mesh, lightmap_mode=plan["lightmap_mode"], fog=fog, read=False, timings=tt,
-                                 debug=plan["debug"], sync=False)  # a ps2 frame resolves here: the 8-bit frame buffer the rest blends on
 
     def _draw_riders(self, plan, vp, cam, fog_rgba, light_only, count_rider_pixels):
         """Every model's riders (base pass, specular); the riders' pixels when counted, else None."""

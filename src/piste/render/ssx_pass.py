@@ -16,6 +16,8 @@ API
     SourcePass(ctx)                 .set_source((h, w, 4) uint8), .draw(mesh, mvp, stage)
     SsxTerrainRenderer(net, source, **TerrainRenderer kwargs)   ps2 mode with the stored Cs/As
         .render(camera, lightmap_mode=...), .source_frame(camera) -> (H, W, 4) uint8
+    frame_mode(terrain, lightmap_mode, debug) -> TerrainMode | SourceMode
+        how a scene frame draws its terrain (SceneRenderer follows it: no per-mode branches there)
 
 A level is drawn by the one runtime (:func:`piste.pipeline.open_scene.open_source` +
 :class:`piste.pipeline.preview.ScenePreview`, which picks this renderer for a level's terrain):
@@ -32,7 +34,7 @@ from piste.errors import RenderError
 from piste.render.context import check_gl_error, load_shader, set_depth_write
 from piste.render.frame import TerrainRenderer
 
-__all__ = ["SourcePass", "SsxTerrainRenderer"]
+__all__ = ["SourcePass", "SsxTerrainRenderer", "TerrainMode", "SourceMode", "frame_mode"]
 
 
 class SourcePass:
@@ -154,12 +156,11 @@ class SsxTerrainRenderer(TerrainRenderer):
             return super().render(camera, lod=lod, lightmap_mode=lightmap_mode, debug=debug, read=read,
                                   levels=levels, **kwargs)
         cam = replace(camera, aspect=self.size[0] / self.size[1])
-        mesh = self.prepare(cam, lod=lod, levels=levels if levels is not None else self.levels(cam, lod))
+        mode = SourceMode(self, lightmap_mode, debug)
+        mesh = self.prepare(cam, lod=lod, levels=levels) if levels is not None else mode.prepare(cam, lod=lod)
         kwargs.pop("fog", None)
-        frame = self.draw(cam, mesh, debug="base", read=False, **kwargs)
-        self.ssx_source.upload(mesh)  # a CPU-tessellated TerrainMesh (explicit levels above)
-        self.target.use()
-        self.ssx_source.draw(cam.view_projection())
+        kwargs.setdefault("sync", True)
+        frame = mode.draw(cam, mesh, **kwargs)
         self.ctx.finish()
         check_gl_error(self.ctx, "drawing the SSX light-map pass")
         if read:
@@ -181,3 +182,59 @@ class SsxTerrainRenderer(TerrainRenderer):
     def release(self) -> None:
         self.ssx_source.release()
         super().release()
+
+
+class TerrainMode:
+    """How one scene frame draws its terrain: the strategy :class:`piste.render.scene_renderer.SceneRenderer`
+    follows, so that it keeps no per-mode branches.  This one is the terrain renderer's own pass in
+    ``lightmap_mode`` (any terrain renderer: :class:`TerrainRenderer`, an SSX level's in modes other
+    than ``ps2``, a tiled world's ``StreamingTerrain``); :func:`frame_mode` picks it or
+    :class:`SourceMode`."""
+
+    #: riders and objects are fogged like the terrain (the SSX ps2 frame has no fog)
+    fog = True
+
+    def __init__(self, terrain, lightmap_mode: str = "modulate", debug: str | None = None):
+        self.terrain = terrain
+        self.lightmap_mode = lightmap_mode
+        self.debug = debug
+
+    def prepare(self, camera, lod: bool = True, timings: dict | None = None):
+        """The frame's terrain mesh for ``camera`` (LOD, culling, tessellation: no GL call)."""
+        return self.terrain.prepare(camera, lod=lod, levels=None, timings=timings)
+
+    def draw(self, camera, mesh, fog=None, timings: dict | None = None):
+        """Draw ``mesh`` (+ sky) into the terrain's target without waiting for the GL or reading
+        back (the scene's passes follow); returns the terrain's ``Frame``."""
+        return self.terrain.draw(camera, mesh, lightmap_mode=self.lightmap_mode, fog=fog, read=False,
+                                 timings=timings, debug=self.debug, sync=False)
+
+
+class SourceMode(TerrainMode):
+    """An SSX level's ``ps2`` frame, the game's way with its stored texels: the base texture ``Cd``,
+    then ``(Cd - Cs) x As`` by the renderer's :class:`SourcePass` (``ssx_source``) over the same,
+    CPU-tessellated triangles (explicit levels); no fog."""
+
+    fog = False
+
+    def prepare(self, camera, lod: bool = True, timings: dict | None = None):
+        return self.terrain.prepare(camera, lod=lod, levels=self.terrain.levels(camera, lod), timings=timings)
+
+    def draw(self, camera, mesh, fog=None, timings: dict | None = None, sync: bool = False, **kwargs):
+        """The base texture, then the stored texels blended over it (``fog`` is ignored: none);
+        ``kwargs`` go to the base pass (``sky``, ``clear``)."""
+        t = self.terrain
+        frame = t.draw(camera, mesh, debug="base", read=False, timings=timings, sync=sync, **kwargs)
+        t.ssx_source.upload(mesh)  # a CPU-tessellated TerrainMesh (explicit levels in prepare)
+        t.target.use()
+        t.ssx_source.draw(camera.with_aspect(*t.size).view_projection())
+        return frame
+
+
+def frame_mode(terrain, lightmap_mode: str = "modulate", debug: str | None = None) -> TerrainMode:
+    """The :class:`TerrainMode` a scene frame draws ``terrain`` in: :class:`SourceMode` for an SSX
+    level's renderer (:class:`SsxTerrainRenderer`) in ``ps2`` mode without a debug view, else the
+    terrain renderer's own pass."""
+    if isinstance(terrain, SsxTerrainRenderer) and lightmap_mode == "ps2" and debug is None:
+        return SourceMode(terrain, lightmap_mode, debug)
+    return TerrainMode(terrain, lightmap_mode, debug)

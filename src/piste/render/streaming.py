@@ -68,8 +68,9 @@ from piste.render.video import VideoWriter
 from piste.terrain.bezier import evaluate, grid_params
 from piste.terrain.cull import patch_tree
 from piste.terrain.tessellate import tessellate
-from piste.terrain.tiles import TileError, TileGrid, TileStore, tile_entries, triangulated_heights
+from piste.terrain.tiles import TileError, TileGrid, TileStore, read_tile_objects, tile_entries, triangulated_heights
 from piste.world.camera import Camera
+from piste.world.objects import OBJECT_KINDS
 
 __all__ = ["TileCache", "StreamingRenderer", "StreamingTerrain", "TileMesh", "near_mesh", "far_mesh", "mesh_bytes", "fly_path",
            "render_flight", "TileSets", "light_grid", "stride_errors", "chord_error", "visible_indices", "world_fog_density"]
@@ -411,6 +412,12 @@ class TileCache:
         self.vis: dict = {}
         #: resident tiles' samples a patch side (``near_samples``, or ``MID_SAMPLES``: the middle level)
         self.near_level: dict = {}
+        #: read the scene objects of tiles as they load (``lit`` members ``objects_kind``,
+        #: ``objects_matrix``): :attr:`objects` ``{tile: (kind (k,) int64, matrix (k, 4, 4))}``,
+        #: paged in and out with the tiles' near and middle meshes (a tile whose objects do not
+        #: read back keeps its terrain and draws no objects)
+        self.load_objects = False
+        self.objects: dict = {}
         self.far: dict = {}
         self.bounds: dict = {t: e["bounds"] for t, e in entries.items()}
         self.patches: dict = {t: e["patches"] for t, e in entries.items()}
@@ -540,6 +547,21 @@ class TileCache:
                             field="vis_ground_min")
         return TileSets(origin, cell, shape, pb, n, None if gm is None else gm.astype(np.float64), band)
 
+    def _read_objects(self, t):
+        """Tile ``t``'s scene objects ``(kind, matrix)`` (:func:`piste.terrain.tiles.read_tile_objects`),
+        None when they do not read back (warned; the tile's terrain is still drawn)."""
+        try:
+            return read_tile_objects(self.store, self.grid, t[0], t[1], len(OBJECT_KINDS))
+        except TileError as exc:
+            _log.warning("%s (the tile's objects are not drawn)", exc)
+            return None
+
+    def resident_objects(self) -> dict:
+        """``{tile: (kind (k,) int64, matrix (k, 4, 4) float64)}``: the objects of the tiles whose
+        near or middle mesh is resident now (empty without :attr:`load_objects`)."""
+        with self._lock:
+            return {t: self.objects[t] for t in self.near if t in self.objects}
+
     def visible_patches(self, t, eye) -> np.ndarray | None:
         """``(n,) bool`` patches of resident near tile ``t`` seen from ``eye`` (:meth:`TileSets.visible`),
         None: draw them all."""
@@ -573,9 +595,12 @@ class TileCache:
                     mesh = near_mesh(self._read("fit", t, ("control_points",)), self._read("lit", t, ("texels",)),
                                      (py1 - py0, px1 - px0), self._depth(t), samples)
                     vis = self._read_vis(t)
+                    objs = self._read_objects(t) if self.load_objects else None
                     with self._lock:
                         if self._wanted.get(t) == samples:  # still wanted and still fits: the budget was reserved
                             self.vis[t] = vis
+                            if objs is not None:
+                                self.objects[t] = objs
                             self.near[t] = mesh
                             self.near_level[t] = samples
                             self.loaded_count += 1
@@ -638,6 +663,7 @@ class TileCache:
             for t in [t for t in self.near if self._wanted.get(t) != self.near_level.get(t)]:
                 del self.near[t]
                 self.vis.pop(t, None)
+                self.objects.pop(t, None)
                 self.near_level.pop(t, None)
             todo = [(d, t) for d, t, _ in want if t not in self.near and t not in self._pending]
             self._pending.update(t for _, t in todo)
@@ -975,8 +1001,6 @@ class StreamingTerrain:
     wait : every frame waits for the tiles it wants (offline frames: the same picture whatever the
         loader's timing); False in a window (far stand-ins while tiles load)
     """
-
-    ssx_source = None
 
     def __init__(self, root, net, size=(640, 448), ctx=None, budget_bytes: int = 256 << 20,
                  near_radius: float | None = None, wait: bool = True):
