@@ -34,9 +34,12 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -64,7 +67,9 @@ from piste.world.objects import ObjectSet, bake_vertex_colors, compress_mesh, no
 from piste.world.scene import sun_light
 from piste.world.scene_file import SceneFile, load_scene
 
-__all__ = ["build_scene", "BuildResult", "default_cache_dir", "BUILD_VERSION", "scene_lights", "scene_cameras"]
+__all__ = ["build_scene", "BuildResult", "default_cache_dir", "BUILD_VERSION", "scene_lights", "scene_cameras",
+           "BuildStep", "BuildContext", "BUILD_STEPS", "register_step", "unregister_step", "bake_partial_dir",
+           "clean_command"]
 
 #: bumped whenever a step's output for the same input changes
 BUILD_VERSION = "piste.build/1"
@@ -201,7 +206,508 @@ def _allow_key(scene) -> tuple:
     return (("allow_paths", [str(p) for p in scene.allow_paths]),) if getattr(scene, "allow_paths", ()) else ()
 
 
-def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: int = 1, use_cache: bool = True) -> BuildResult:
+# ----------------------------------------------------------------------------- the step registry
+#: a step's arrays (``{"name": ndarray}``) and its metadata (JSON-able), as the cache stores them
+Arrays = dict[str, np.ndarray]
+Meta = dict[str, Any]
+StepOutput = tuple[Arrays, Meta]
+
+
+@dataclass
+class BuildContext:
+    """What the steps of one build share: the scene and the build's options, the bundle being made
+    (``arrays``: member name -> array, ``manifest``), and what earlier steps left for later ones.
+
+    The terrain step sets the net (:meth:`set_terrain`); the lights step the scene's lights
+    (:meth:`set_lights`); a step reads them as ``ctx.net``, ``ctx.lights``, ``ctx.centerline``.
+    ``keys`` holds the full content key of every cached step run so far (``keys["terrain"]`` is
+    what every terrain-dependent key includes); ``shared`` anything else a step leaves for a later
+    one (``"visibility"``: the patch sets' arrays and metadata for ``object_visibility``).
+    """
+
+    scene: SceneFile
+    cache: Cache
+    result: BuildResult
+    cache_dir: str | os.PathLike[str] | None = None  # as given (the clean command names it)
+    progress: bool = False
+    jobs: int = 1
+    arrays: Arrays = field(default_factory=dict)
+    manifest: dict[str, Any] = field(default_factory=dict)
+    keys: dict[str, str] = field(default_factory=dict)
+    shared: dict[str, Any] = field(default_factory=dict)
+    gltf_cache: dict[str, Any] = field(default_factory=dict)
+    centerline: np.ndarray | None = None
+    spheres: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))  # (n, 4) objects' bounding spheres
+    _net: PatchNet | None = None
+    _lights: Lights | None = None
+
+    @property
+    def net(self) -> PatchNet:
+        """The terrain net (set by the terrain step)."""
+        if self._net is None:
+            raise RuntimeError("the terrain step has not run: a build step reading ctx.net must come after it")
+        return self._net
+
+    @property
+    def lights(self) -> Lights:
+        """The scene's lights (set by the lights step)."""
+        if self._lights is None:
+            raise RuntimeError("the lights step has not run: a build step reading ctx.lights must come after it")
+        return self._lights
+
+    @property
+    def terrain_key(self) -> str:
+        """The terrain step's content key (part of every key that depends on the terrain)."""
+        return self.keys["terrain"]
+
+    def set_terrain(self, net: PatchNet, centerline: np.ndarray | None) -> None:
+        self._net, self.centerline = net, centerline
+
+    def set_lights(self, lights: Lights) -> None:
+        self._lights = lights
+
+    def cached(self, name: str, key: str, make: Callable[[], StepOutput]) -> StepOutput:
+        """``make()``'s output, from the cache under ``(name, key)`` when it is there (else made and
+        stored); records ``result.steps[name]`` (``cached``, ``seconds``, the key's first 16 digits)."""
+        t0 = time.perf_counter()
+        got = self.cache.get(name, key)
+        hit = got is not None
+        if got is None:
+            got = make()
+            self.cache.put(name, key, *got)
+        self.result.steps[name] = {"cached": hit, "seconds": time.perf_counter() - t0, "key": key[:16]}
+        return got[0], got[1]
+
+    def skipped(self, name: str) -> None:
+        """Record step ``name`` as having nothing to do for this scene (key ``"none"``)."""
+        self.result.steps[name] = {"cached": True, "seconds": 0.0, "key": "none"}
+
+
+@dataclass(frozen=True)
+class BuildStep:
+    """One step of :func:`build_scene`, in the order of :data:`BUILD_STEPS`.
+
+    A **cached** step (``cache=True``, the usual kind) gives
+
+    * ``key(ctx) -> str | None``: the content key of everything the step reads
+      (:func:`piste.pipeline.cache.content_key` of :data:`BUILD_VERSION`, the step's name and version,
+      ``ctx.terrain_key`` when it depends on the terrain, the scene's settings ...), or None when the
+      scene has nothing for it (it is recorded with key ``"none"`` and ``absent(ctx)`` is called);
+    * ``make(ctx) -> (arrays, meta)``: the work, run only when the cache has no entry for the key;
+    * ``store(ctx, (arrays, meta))``: puts the output into ``ctx.arrays`` (bundle members
+      ``<step>/<name>``) and ``ctx.manifest``, and leaves what later steps need on ``ctx``.
+
+    A step with ``cache=False`` is cheap and computed each time (``make`` then ``store``; no key,
+    not in :attr:`BuildResult.steps`).  ``when(ctx)`` False leaves the step out of this build
+    altogether (not recorded).  A step with several cache entries gives ``run(ctx)`` instead and
+    calls :meth:`BuildContext.cached` for each (the characters: one entry per rider model).
+    ``reads`` says in words what the key covers (``piste.pipeline.build`` lists it).
+    """
+
+    name: str
+    reads: str
+    key: Callable[[BuildContext], str | None] | None = None
+    make: Callable[[BuildContext], StepOutput] | None = None
+    store: Callable[[BuildContext, StepOutput], None] | None = None
+    absent: Callable[[BuildContext], None] | None = None
+    when: Callable[[BuildContext], bool] | None = None
+    run: Callable[[BuildContext], None] | None = None
+    cache: bool = True
+
+    def __post_init__(self) -> None:
+        if self.run is None and (self.make is None or self.store is None or (self.cache and self.key is None)):
+            raise ConfigError(f"build step {self.name!r}: give run, or make and store (and key for a cached step)")
+
+    def execute(self, ctx: BuildContext) -> None:
+        """Run this step in ``ctx`` (what :func:`build_scene` does for each step in order)."""
+        if self.when is not None and not self.when(ctx):
+            return
+        if self.run is not None:
+            self.run(ctx)
+            return
+        assert self.make is not None and self.store is not None
+        make = self.make
+        if not self.cache:
+            self.store(ctx, make(ctx))
+            return
+        assert self.key is not None
+        key = self.key(ctx)
+        if key is None:
+            ctx.skipped(self.name)
+            if self.absent is not None:
+                self.absent(ctx)
+            return
+        ctx.keys[self.name] = key
+        self.store(ctx, ctx.cached(self.name, key, lambda: make(ctx)))
+
+
+# -------------------------------------------------------------- terrain
+def _terrain_key(ctx: BuildContext) -> str:
+    ts = ctx.scene.terrain
+    src = _file_key(ts.path) if ts.path is not None else f"seed {ts.seed}"
+    if ts.kind == "ssx_pbd":  # the .pbd and the texture / light-map banks beside it
+        src = level_key(ts.path)
+    return content_key(BUILD_VERSION, "terrain", ts.kind, src, ts.seed, ts.spacing, ts.height_scale,
+                       ts.height_offset, ts.key, ts.samples_per_patch, ts.smooth,
+                       *((ts.nodata, ts.vertical_units) if ts.kind == "geotiff" else ()))
+
+
+def _make_terrain(ctx: BuildContext) -> StepOutput:
+    ts = ctx.scene.terrain
+    net = load_terrain(ts)
+    a = {"control_points": net.control_points, "uv": net.uv}
+    if ts.kind == "default":
+        a["centerline"] = track_centerline(ts.seed)
+    return a, {"name": net.name, "tol": float(net.tol)}
+
+
+def _store_terrain(ctx: BuildContext, out: StepOutput) -> None:
+    ta, tm = out
+    net = PatchNet(ta["control_points"], uv=ta["uv"], tol=tm["tol"], name=tm["name"])
+    centerline = ta.get("centerline")
+    ctx.set_terrain(net, centerline)
+    arrays = ctx.arrays
+    arrays["terrain/control_points"] = net.control_points
+    arrays["terrain/uv"] = net.uv
+    # the welded topology, so a load need not weld and match edges again (~0.1 s of a fresh process)
+    arrays.update({f"terrain/{k}": v for k, v in net.topology().items()})
+    if centerline is not None:
+        arrays["terrain/centerline"] = centerline
+    lo, hi = net.bounds
+    ctx.manifest["terrain"] = {"name": tm["name"], "tol": tm["tol"], "kind": ctx.scene.terrain.kind, "patches": len(net),
+                               "topology": TOPOLOGY_FORMAT, "bounds": [[float(x) for x in lo], [float(x) for x in hi]],
+                               "key": ctx.terrain_key}
+
+
+# -------------------------------------------------------------- lights and cameras (cheap: each time)
+def _run_lights(ctx: BuildContext) -> None:
+    lights = scene_lights(ctx.scene, ctx.gltf_cache)
+    ctx.set_lights(lights)
+    ctx.manifest["lights"] = _json_lights(lights)
+    ctx.manifest["cameras"] = scene_cameras(ctx.scene, ctx.net, ctx.centerline, ctx.gltf_cache)
+
+
+def _store_manifest(ctx: BuildContext, out: StepOutput) -> None:
+    """Metadata straight into the manifest (a step whose output is only manifest entries)."""
+    ctx.manifest.update(out[1])
+
+
+# -------------------------------------------------------------- light map
+def _lightmap_gi(ctx: BuildContext) -> list[float]:
+    """Bounces / sun radius: in the key and the manifest only when set (existing keys stand)."""
+    lm = ctx.scene.lightmap
+    return [lm.bounces, lm.sun_radius] if (lm.bounces or lm.sun_radius) else []
+
+
+def _lightmap_key(ctx: BuildContext) -> str:
+    lm = ctx.scene.lightmap
+    return content_key(BUILD_VERSION, "lightmap", BAKE_VERSION, ctx.terrain_key, ctx.manifest["lights"], lm.res,
+                       lm.gutter, lm.shadows, *_lightmap_gi(ctx))
+
+
+def _make_lightmap(ctx: BuildContext) -> StepOutput:
+    scene, ts, lm_spec = ctx.scene, ctx.scene.terrain, ctx.scene.lightmap
+    if ts.kind == "ssx_pbd":  # an SSX level brings its own light maps and textures (pipeline.ssx_level)
+        return bundle_arrays(ts.path), {"stats": {}}
+    partial = bake_partial_dir(scene.path, ctx.cache.root) if ctx.cache.root is not None else None
+    lm = bake_lightmap(ctx.net, ctx.lights, res=lm_spec.res, gutter=lm_spec.gutter, shadows=lm_spec.shadows,
+                       jobs=ctx.jobs, partial_dir=partial, progress=ctx.progress, bounces=lm_spec.bounces,
+                       sun_radius=lm_spec.sun_radius, clean_command=clean_command(scene.path, ctx.cache_dir))
+    if partial is not None:
+        import shutil
+
+        shutil.rmtree(partial / lm.manifest["key"], ignore_errors=True)
+    st = {k: int(v) for k, v in (getattr(lm, "stats", None) or {}).items()}
+    return {"atlas": lm.atlas.astype(np.float32), "rects": lm.rects.astype(np.float32)}, {"stats": st}
+
+
+def _store_lightmap(ctx: BuildContext, out: StepOutput) -> None:
+    la, lmeta = out
+    lm_spec, arrays = ctx.scene.lightmap, ctx.arrays
+    arrays["lightmap/atlas"] = la["atlas"]
+    arrays["lightmap/rects"] = la["rects"]
+    if "base_texture" in la:
+        arrays["terrain/base_texture"] = la["base_texture"]
+    if "source" in la:  # an SSX level's stored Cs / As texels (ps2 mode, piste.render.ssx_pass)
+        arrays["lightmap/source"] = la["source"]
+    ctx.net.lightmap_rect = la["rects"].copy()
+    ctx.manifest["lightmap"] = {"res": lm_spec.res, "gutter": lm_spec.gutter, "shadows": lm_spec.shadows,
+                                **({"bounces": lm_spec.bounces, "sun_radius": lm_spec.sun_radius}
+                                   if _lightmap_gi(ctx) else {}),
+                                "atlas_size": [int(la["atlas"].shape[1]), int(la["atlas"].shape[0])],
+                                "encoding": "float32 linear light, 1.0 = full", "stats": lmeta.get("stats", {})}
+
+
+# -------------------------------------------------------------- shadow (sun visibility)
+# where the terrain sees the sun, for the riders' shadows: computed here, not at every renderer
+# set-up (~0.2 s of a fresh process's first frame); the sun exactly as the runtime reads it back
+def _sun_direction(ctx: BuildContext) -> list[float] | None:
+    sun = sun_light(lights_from_dict(ctx.manifest["lights"]))
+    if sun is None:
+        return None
+    return [float(x) for x in np.asarray(sun.direction, dtype=np.float64).ravel()]
+
+
+def _shadow_key(ctx: BuildContext) -> str | None:
+    sun_dir = _sun_direction(ctx)
+    return None if sun_dir is None else content_key(BUILD_VERSION, "shadow", SHADOW_VERSION, ctx.terrain_key, sun_dir)
+
+
+def _make_shadow(ctx: BuildContext) -> StepOutput:
+    sun_dir = _sun_direction(ctx)
+    f, rect = sun_visibility(ctx.net, sun_dir)
+    return {"sun_visibility": f, "sun_rect": np.asarray(rect, dtype=np.float64)}, {"sun_direction": sun_dir}
+
+
+def _store_shadow(ctx: BuildContext, out: StepOutput) -> None:
+    sa, smeta = out
+    ctx.arrays["shadow/sun_visibility"] = sa["sun_visibility"]
+    ctx.arrays["shadow/sun_rect"] = sa["sun_rect"]
+    ctx.manifest["shadow"] = {"sun_direction": smeta["sun_direction"], "version": SHADOW_VERSION}
+
+
+# -------------------------------------------------------------- characters (one cache entry per rider model)
+def _run_characters(ctx: BuildContext) -> None:
+    scene, arrays, manifest = ctx.scene, ctx.arrays, ctx.manifest
+    manifest["characters"] = {}
+    manifest["riders"] = []
+    if not scene.riders:
+        ctx.skipped("characters")
+        return
+    # one character per rider model (any number: each its own LODs, palettes, batches, clips);
+    # the first keeps the id "rider", the others "rider2", "rider3", ... in the order of the file
+    models = list(dict.fromkeys(r.model for r in scene.riders))
+    ratios = tuple(scene.lod.ratios)
+    cid_of: dict[str, str] = {}
+    clips_of: dict[str, tuple[Any, Any, list[tuple[str, str]]]] = {}
+    steps_done = []
+    for k, model in enumerate(models):
+        msrc = model if model.startswith("builtin:") else _file_key(model)
+        own = [r for r in scene.riders if r.model == model]
+        clip_srcs = sorted({(r.clips_from, json.dumps(r.bone_map, sort_keys=True)) for r in own if r.clips_from})
+        tex = next((r.texture for r in own if getattr(r, "texture", None)), None)  # an .mpf's .ssh bank
+        partners = mpf_partners(model, tex) if model.lower().endswith(".mpf") else (None, [])
+        ch_key = content_key(BUILD_VERSION, "characters", CHARACTERS_VERSION, "clip-sources/1", msrc, ratios,
+                             [(_file_key(f), b) for f, b in clip_srcs],
+                             [_file_key(f) for f in [partners[0]] + partners[1] if f is not None],
+                             *_allow_key(scene))
+
+        def make_characters(model: str = model, clip_srcs: list[tuple[str, str]] = clip_srcs,
+                            tex: str | None = tex) -> StepOutput:
+            m = load_mpf_rider(model, texture=tex) if tex else load_rider_model(model, allow_paths=scene.allow_paths)
+            own_clips, sources = sorted(m.clips), []  # which clips each rider may default to
+            for f, b in clip_srcs:
+                before = set(m.clips)
+                m = add_rider_clips(m, [(f, json.loads(b))], allow_paths=scene.allow_paths)
+                sources.append(sorted(set(m.clips) - before))  # in clip_srcs' order
+            a, meta = character_arrays(m, ratios=ratios)
+            return a, dict(meta, own_clips=own_clips, clip_sources=sources)
+
+        ca, cmeta = ctx.cached("characters", ch_key, make_characters)
+        steps_done.append(ctx.result.steps["characters"])
+        cid = "rider" if k == 0 else f"rider{k + 1}"
+        cid_of[model] = cid
+        for name, v in ca.items():
+            arrays[f"characters/{cid}/{name}"] = v
+        cmeta = dict(cmeta)
+        clips_of[cid] = (cmeta.pop("own_clips", None), cmeta.pop("clip_sources", None), clip_srcs)  # not in the manifest
+        cmeta["model"] = model if model.startswith("builtin:") else Path(model).name
+        manifest["characters"][cid] = cmeta
+    ctx.result.steps["characters"] = {"cached": all(d["cached"] for d in steps_done),
+                                      "seconds": sum(d["seconds"] for d in steps_done),
+                                      "key": steps_done[0]["key"], "models": len(models)}
+    arrays["riders/matrix"] = rider_matrices(ctx.net, scene.riders)
+    for r in scene.riders:
+        cid = cid_of[r.model]
+        cmeta = manifest["characters"][cid]
+        clip = r.clip or _default_clip(r, cmeta, *clips_of[cid])
+        if clip is not None and clip not in cmeta["clips"]:
+            raise ConfigError(f"{scene.path}, line {r.line}: rider {r.name!r}: no clip {clip!r} in its model; "
+                              f"clips: {', '.join(sorted(cmeta['clips']))}")
+        manifest["riders"].append({"name": r.name, "character": cid, "clip": clip, "phase": r.phase,
+                                   "heading": r.heading, "scale": r.scale})
+
+
+# -------------------------------------------------------------- objects
+def _object_sources(ctx: BuildContext) -> list[str]:
+    return sorted({o.model for o in ctx.scene.objects})
+
+
+def _objects_key(ctx: BuildContext) -> str | None:
+    scene = ctx.scene
+    if not scene.objects:
+        return None
+    srcs = _object_sources(ctx)
+    src_keys = [m if m.startswith("builtin:") else _file_key(m) for m in srcs]
+    placements = [(o.name, o.model, list(o.position), o.heading, o.scale) for o in scene.objects]
+    return content_key(BUILD_VERSION, "objects", "object_atlas/4", ctx.terrain_key, srcs, src_keys, placements,
+                       ctx.manifest["lights"], *_allow_key(scene))
+
+
+def _make_objects(ctx: BuildContext) -> StepOutput:
+    return _objects_arrays(ctx.net, ctx.scene.objects, _object_sources(ctx), ctx.lights, ctx.scene.allow_paths)
+
+
+def _store_objects(ctx: BuildContext, out: StepOutput) -> None:
+    oa, ometa = out
+    for k, v in oa.items():
+        ctx.arrays[f"objects/{k}"] = v
+    ctx.manifest["objects"] = ometa
+    ctx.spheres = np.column_stack([oa["center"], oa["radius"]])
+
+
+def _no_objects(ctx: BuildContext) -> None:
+    ctx.manifest["objects"] = {"kinds": [], "meshes": {}, "instances": []}
+
+
+# -------------------------------------------------------------- visibility
+def _eye_heights(ctx: BuildContext) -> tuple[float, ...]:
+    """The band the scene needs: the file's heights up to its highest camera eye (along its flight)
+    or rider head above the snow (:func:`piste.pipeline.visibility.scene_eye_heights`)."""
+    if "eye_heights" not in ctx.shared:
+        vs = ctx.scene.visibility
+        heads = (np.asarray(ctx.arrays["riders/matrix"])[:, :3, 3] + [0.0, 0.0, 1.7]) if "riders/matrix" in ctx.arrays \
+            else np.zeros((0, 3))
+        eyes = np.concatenate([camera_eyes(ctx.manifest["cameras"], ctx.centerline), heads])
+        ctx.shared["eye_heights"] = scene_eye_heights(ctx.net, vs.eye_heights, eyes, vs.cell)
+    heights: tuple[float, ...] = ctx.shared["eye_heights"]
+    return heights
+
+
+def _visibility_key(ctx: BuildContext) -> str | None:
+    vs = ctx.scene.visibility
+    if not vs.enabled:
+        return None
+    return content_key(BUILD_VERSION, "visibility", ctx.terrain_key, vs.cell, list(_eye_heights(ctx)), vs.method)
+
+
+def _make_visibility(ctx: BuildContext) -> StepOutput:
+    vs = ctx.scene.visibility
+    v = compute_visibility(ctx.net, vs.cell, _eye_heights(ctx), method=vs.method, progress=ctx.progress)
+    arrays, meta = v.to_arrays()
+    return arrays, meta
+
+
+def _store_visibility(ctx: BuildContext, out: StepOutput) -> None:
+    ctx.shared["visibility"] = out  # the objects' bits and the report follow (object_visibility)
+
+
+def _no_visibility(ctx: BuildContext) -> None:
+    ctx.manifest["visibility"] = None
+    ctx.manifest["report"] = {}
+
+
+# the objects' bits on their own: moving an object does not redo the patches
+def _object_method(ctx: BuildContext) -> str:
+    """Exact rays up to :data:`OBJECT_RAYS_MAX` objects, else the patches' method."""
+    method: str = ctx.shared["visibility"][1]["method"]
+    return "rays" if 0 < len(ctx.spheres) <= OBJECT_RAYS_MAX else method
+
+
+def _object_visibility_key(ctx: BuildContext) -> str | None:
+    if not len(ctx.spheres):
+        return None
+    vs = ctx.scene.visibility
+    return content_key(BUILD_VERSION, "object_visibility", ctx.terrain_key, ctx.spheres, vs.cell,
+                       list(_eye_heights(ctx)), _object_method(ctx))
+
+
+def _make_object_visibility(ctx: BuildContext) -> StepOutput:
+    method = _object_method(ctx)
+    v = compute_visibility(ctx.net, ctx.scene.visibility.cell, _eye_heights(ctx), objects=ctx.spheres, method=method,
+                           patches=False)
+    return {"object_bits": v.object_bits}, {"method": method}
+
+
+def _store_object_visibility(ctx: BuildContext, out: StepOutput) -> None:
+    _finish_visibility(ctx, out[0]["object_bits"])
+
+
+def _no_object_visibility(ctx: BuildContext) -> None:
+    va = ctx.shared["visibility"][0]
+    _finish_visibility(ctx, np.zeros((va["patch_bits"].shape[0], 0), np.uint8))
+
+
+def _finish_visibility(ctx: BuildContext, obits: np.ndarray) -> None:
+    """The visibility members, manifest entry and culling report, once the objects' bits are known."""
+    va, vmeta = ctx.shared["visibility"]
+    arrays = ctx.arrays
+    arrays["visibility/patch_bits"] = va["patch_bits"]
+    arrays["visibility/object_bits"] = obits
+    extra = {k: va[k] for k in ("ground_min", "level_bits") if k in va}  # the band (Visibility.in_band)
+    for k, v in extra.items():
+        arrays[f"visibility/{k}"] = v
+    vmeta = dict(vmeta, n_objects=int(len(ctx.spheres)))
+    ctx.manifest["visibility"] = vmeta
+    vis = Visibility.from_arrays({"patch_bits": va["patch_bits"], "object_bits": obits, **extra}, vmeta)
+    ctx.manifest["report"] = {"visibility": _visibility_report(ctx.net, vis, ctx.manifest["cameras"], ctx.centerline)}
+
+
+# -------------------------------------------------------------- settings the runtime reads (each time)
+def _make_settings(ctx: BuildContext) -> StepOutput:
+    scene = ctx.scene
+    lod, render = scene.lod, scene.render
+    return {}, {
+        "lod": {"near": lod.near, "far": lod.far, "character": list(lod.character), "ratios": list(lod.ratios),
+                "morph": bool(lod.morph)},
+        "render": {"size": list(render.size), "lightmap_mode": render.lightmap_mode, "fog": render.fog,
+                   "face": render.face, "object_lod": render.object_lod, "aa": render.aa, "dof": render.dof,
+                   "soft_shadows": render.soft_shadows, "occlusion": render.occlusion},
+        # riders following the track and objects placed along it, made by the runtime (pipeline.preview)
+        "pack": dict(scene.pack) if scene.pack else None,
+        "auto_objects": dict(scene.auto_objects) if scene.auto_objects else None,
+    }
+
+
+#: the steps :func:`build_scene` walks, in order (see :class:`BuildStep`; add one with :func:`register_step`)
+BUILD_STEPS: list[BuildStep] = [
+    BuildStep("terrain", "the terrain source's bytes (or the course seed) and the [terrain] settings",
+              _terrain_key, _make_terrain, _store_terrain),
+    BuildStep("lights", "inline and glTF lights and cameras (cheap: computed each time)",
+              run=_run_lights, cache=False),
+    BuildStep("lightmap", "terrain key, lights, [lightmap] res / gutter / shadows (bounces, sun_radius when set)",
+              _lightmap_key, _make_lightmap, _store_lightmap),
+    BuildStep("shadow", "terrain key, the sun's direction (none without a sun)",
+              _shadow_key, _make_shadow, _store_shadow),
+    BuildStep("characters", "each rider model's bytes (or built-in name), clip sources, LOD ratios",
+              run=_run_characters),
+    BuildStep("objects", "terrain key, object models' bytes and placements, lights",
+              _objects_key, _make_objects, _store_objects, absent=_no_objects),
+    BuildStep("visibility", "terrain key, [visibility] cell, eye heights (the scene's band), method",
+              _visibility_key, _make_visibility, _store_visibility, absent=_no_visibility),
+    BuildStep("object_visibility", "terrain key, object bounds, cell, eye heights, method",
+              _object_visibility_key, _make_object_visibility, _store_object_visibility,
+              absent=_no_object_visibility, when=lambda ctx: ctx.scene.visibility.enabled),
+    BuildStep("settings", "[lod], [render], [pack], [auto_objects] (cheap: computed each time)",
+              make=_make_settings, store=_store_manifest, cache=False),
+]
+
+
+def register_step(step: BuildStep, *, after: str | None = None, before: str | None = None) -> BuildStep:
+    """Add ``step`` to :data:`BUILD_STEPS`: after step ``after``, before step ``before``, or last
+    (before the bundle is written).  Returns ``step``."""
+    names = [s.name for s in BUILD_STEPS]
+    if step.name in names or step.name == "write":
+        raise ConfigError(f"build step {step.name!r} is registered already")
+    for where in (after, before):
+        if where is not None and where not in names:
+            raise ConfigError(f"no build step {where!r} to place {step.name!r} beside: steps are {', '.join(names)}")
+    i = names.index(after) + 1 if after is not None else names.index(before) if before is not None else len(names)
+    BUILD_STEPS.insert(i, step)
+    return step
+
+
+def unregister_step(name: str) -> BuildStep:
+    """Remove the step called ``name`` from :data:`BUILD_STEPS` (and return it)."""
+    for i, s in enumerate(BUILD_STEPS):
+        if s.name == name:
+            return BUILD_STEPS.pop(i)
+    raise ConfigError(f"no build step {name!r}: steps are {', '.join(s.name for s in BUILD_STEPS)}")
+
+
+def build_scene(scene: SceneFile | str | os.PathLike[str], out: str | os.PathLike[str] | None = None,
+                cache_dir: str | os.PathLike[str] | None = None, progress: bool = False, jobs: int = 1,
+                use_cache: bool = True, steps: Sequence[BuildStep] | None = None) -> BuildResult:
     """Build the bundle of ``scene`` (a :class:`~piste.world.scene_file.SceneFile` or a path).
 
     Parameters
@@ -211,277 +717,46 @@ def build_scene(scene, out=None, cache_dir=None, progress: bool = False, jobs: i
     progress : tqdm bars (steps, bake, visibility)
     jobs : light-map bake worker processes (1 = in this process)
     use_cache : False recomputes every step (and stores nothing)
+    steps : the steps to walk, in order (default: :data:`BUILD_STEPS`)
     """
     t_all = time.perf_counter()
     if not isinstance(scene, SceneFile):
         scene = load_scene(scene)
-    out = Path(out) if out is not None else Path(scene.path).with_suffix(".piste")
+    out_path = Path(out) if out is not None else Path(scene.path).with_suffix(".piste")
     cache = Cache((Path(cache_dir) if cache_dir is not None else default_cache_dir(scene.path)) if use_cache else None)
-    result = BuildResult(out)
-    arrays: dict = {}
-    manifest: dict = {"name": scene.name, "scene": Path(scene.path).name, "build": BUILD_VERSION}
-    gltf_cache: dict = {}
+    result = BuildResult(out_path)
+    ctx = BuildContext(scene, cache, result, cache_dir=cache_dir,
+                       progress=progress, jobs=jobs,
+                       manifest={"name": scene.name, "scene": Path(scene.path).name, "build": BUILD_VERSION})
+    walk = tuple(BUILD_STEPS if steps is None else steps)
 
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=8, desc="build", unit="step", leave=False)
-
-    def step(name: str, key: str, make):
-        t0 = time.perf_counter()
-        if bar is not None:
-            bar.set_postfix_str(name)
-        got = cache.get(name, key)
-        cached = got is not None
-        if not cached:
-            got = make()
-            cache.put(name, key, *got)
-        result.steps[name] = {"cached": cached, "seconds": time.perf_counter() - t0, "key": key[:16]}
-        if bar is not None:
+        bar = tqdm(total=sum(s.cache for s in walk) + 1, desc="build", unit="step", leave=False)
+    for step in walk:
+        if bar is not None and step.cache:
+            bar.set_postfix_str(step.name)
+        step.execute(ctx)
+        if bar is not None and step.cache:
             bar.update(1)
-        return got
-
-    # -------------------------------------------------------------- terrain
-    ts = scene.terrain
-    src = _file_key(ts.path) if ts.path is not None else f"seed {ts.seed}"
-    if ts.kind == "ssx_pbd":  # the .pbd and the texture / light-map banks beside it
-        src = level_key(ts.path)
-    terrain_key = content_key(BUILD_VERSION, "terrain", ts.kind, src, ts.seed, ts.spacing, ts.height_scale,
-                              ts.height_offset, ts.key, ts.samples_per_patch, ts.smooth,
-                              *((ts.nodata, ts.vertical_units) if ts.kind == "geotiff" else ()))
-
-    def make_terrain():
-        net = load_terrain(ts)
-        a = {"control_points": net.control_points, "uv": net.uv}
-        if ts.kind == "default":
-            a["centerline"] = track_centerline(ts.seed)
-        return a, {"name": net.name, "tol": float(net.tol)}
-
-    ta, tm = step("terrain", terrain_key, make_terrain)
-    net = PatchNet(ta["control_points"], uv=ta["uv"], tol=tm["tol"], name=tm["name"])
-    centerline = ta.get("centerline")
-    arrays["terrain/control_points"] = net.control_points
-    arrays["terrain/uv"] = net.uv
-    # the welded topology, so a load need not weld and match edges again (~0.1 s of a fresh process)
-    arrays.update({f"terrain/{k}": v for k, v in net.topology().items()})
-    if centerline is not None:
-        arrays["terrain/centerline"] = centerline
-    lo, hi = net.bounds
-    manifest["terrain"] = {"name": tm["name"], "tol": tm["tol"], "kind": ts.kind, "patches": len(net),
-                           "topology": TOPOLOGY_FORMAT, "bounds": [[float(x) for x in lo], [float(x) for x in hi]], "key": terrain_key}
-
-    # -------------------------------------------------------------- lights and cameras
-    lights = scene_lights(scene, gltf_cache)
-    manifest["lights"] = _json_lights(lights)
-    manifest["cameras"] = scene_cameras(scene, net, centerline, gltf_cache)
-
-    # -------------------------------------------------------------- light map
-    lm_spec = scene.lightmap
-    # bounces / sun radius join the key only when set: the keys of existing builds stay as they are
-    lm_gi = [lm_spec.bounces, lm_spec.sun_radius] if (lm_spec.bounces or lm_spec.sun_radius) else []
-    lm_key = content_key(BUILD_VERSION, "lightmap", BAKE_VERSION, terrain_key, manifest["lights"], lm_spec.res,
-                         lm_spec.gutter, lm_spec.shadows, *lm_gi)
-
-    def make_lightmap():
-        if ts.kind == "ssx_pbd":  # an SSX level brings its own light maps and textures (pipeline.ssx_level)
-            return bundle_arrays(ts.path), {"stats": {}}
-        partial = bake_partial_dir(scene.path, cache.root) if cache.root is not None else None
-        lm = bake_lightmap(net, lights, res=lm_spec.res, gutter=lm_spec.gutter, shadows=lm_spec.shadows, jobs=jobs,
-                           partial_dir=partial, progress=progress, bounces=lm_spec.bounces,
-                           sun_radius=lm_spec.sun_radius, clean_command=clean_command(scene.path, cache_dir))
-        if partial is not None:
-            import shutil
-
-            shutil.rmtree(partial / lm.manifest["key"], ignore_errors=True)
-        st = {k: int(v) for k, v in (getattr(lm, "stats", None) or {}).items()}
-        return {"atlas": lm.atlas.astype(np.float32), "rects": lm.rects.astype(np.float32)}, {"stats": st}
-
-    la, lmeta = step("lightmap", lm_key, make_lightmap)
-    arrays["lightmap/atlas"] = la["atlas"]
-    arrays["lightmap/rects"] = la["rects"]
-    if "base_texture" in la:
-        arrays["terrain/base_texture"] = la["base_texture"]
-    if "source" in la:  # an SSX level's stored Cs / As texels (ps2 mode, piste.render.ssx_pass)
-        arrays["lightmap/source"] = la["source"]
-    net.lightmap_rect = la["rects"].copy()
-    manifest["lightmap"] = {"res": lm_spec.res, "gutter": lm_spec.gutter, "shadows": lm_spec.shadows,
-                            **({"bounces": lm_spec.bounces, "sun_radius": lm_spec.sun_radius} if lm_gi else {}),
-                            "atlas_size": [int(la["atlas"].shape[1]), int(la["atlas"].shape[0])],
-                            "encoding": "float32 linear light, 1.0 = full", "stats": lmeta.get("stats", {})}
-
-    # -------------------------------------------------------------- shadow (sun visibility)
-    # where the terrain sees the sun, for the riders' shadows: computed here, not at every renderer
-    # set-up (~0.2 s of a fresh process's first frame); the sun exactly as the runtime reads it back
-    sun = sun_light(lights_from_dict(manifest["lights"]))
-    if sun is not None:
-        sun_dir = [float(x) for x in np.asarray(sun.direction, dtype=np.float64).ravel()]
-        sv_key = content_key(BUILD_VERSION, "shadow", SHADOW_VERSION, terrain_key, sun_dir)
-
-        def make_shadow():
-            f, rect = sun_visibility(net, sun_dir)
-            return {"sun_visibility": f, "sun_rect": np.asarray(rect, dtype=np.float64)}, {"sun_direction": sun_dir}
-
-        sa, smeta = step("shadow", sv_key, make_shadow)
-        arrays["shadow/sun_visibility"] = sa["sun_visibility"]
-        arrays["shadow/sun_rect"] = sa["sun_rect"]
-        manifest["shadow"] = {"sun_direction": smeta["sun_direction"], "version": SHADOW_VERSION}
-    else:
-        result.steps["shadow"] = {"cached": True, "seconds": 0.0, "key": "none"}
-
-    # -------------------------------------------------------------- characters
-    manifest["characters"] = {}
-    manifest["riders"] = []
-    if scene.riders:
-        # one character per rider model (any number: each its own LODs, palettes, batches, clips);
-        # the first keeps the id "rider", the others "rider2", "rider3", ... in the order of the file
-        models = list(dict.fromkeys(r.model for r in scene.riders))
-        ratios = tuple(scene.lod.ratios)
-        cid_of = {}
-        clips_of: dict = {}
-        steps_done = []
-        for k, model in enumerate(models):
-            msrc = model if model.startswith("builtin:") else _file_key(model)
-            own = [r for r in scene.riders if r.model == model]
-            clip_srcs = sorted({(r.clips_from, json.dumps(r.bone_map, sort_keys=True)) for r in own if r.clips_from})
-            tex = next((r.texture for r in own if getattr(r, "texture", None)), None)  # an .mpf's .ssh bank
-            partners = mpf_partners(model, tex) if model.lower().endswith(".mpf") else (None, [])
-            ch_key = content_key(BUILD_VERSION, "characters", CHARACTERS_VERSION, "clip-sources/1", msrc, ratios,
-                                 [(_file_key(f), b) for f, b in clip_srcs],
-                                 [_file_key(f) for f in [partners[0]] + partners[1] if f is not None],
-                                 *_allow_key(scene))
-
-            def make_characters(model=model, clip_srcs=clip_srcs, tex=tex):
-                m = load_mpf_rider(model, texture=tex) if tex else load_rider_model(model, allow_paths=scene.allow_paths)
-                own_clips, sources = sorted(m.clips), []  # which clips each rider may default to
-                for f, b in clip_srcs:
-                    before = set(m.clips)
-                    m = add_rider_clips(m, [(f, json.loads(b))], allow_paths=scene.allow_paths)
-                    sources.append(sorted(set(m.clips) - before))  # in clip_srcs' order
-                a, meta = character_arrays(m, ratios=ratios)
-                return a, dict(meta, own_clips=own_clips, clip_sources=sources)
-
-            ca, cmeta = step("characters", ch_key, make_characters)
-            steps_done.append(result.steps["characters"])
-            cid = "rider" if k == 0 else f"rider{k + 1}"
-            cid_of[model] = cid
-            for name, v in ca.items():
-                arrays[f"characters/{cid}/{name}"] = v
-            cmeta = dict(cmeta)
-            clips_of[cid] = (cmeta.pop("own_clips", None), cmeta.pop("clip_sources", None), clip_srcs)  # not in the manifest
-            cmeta["model"] = model if model.startswith("builtin:") else Path(model).name
-            manifest["characters"][cid] = cmeta
-        result.steps["characters"] = {"cached": all(d["cached"] for d in steps_done),
-                                      "seconds": sum(d["seconds"] for d in steps_done),
-                                      "key": steps_done[0]["key"], "models": len(models)}
-        arrays["riders/matrix"] = rider_matrices(net, scene.riders)
-        for r in scene.riders:
-            cid = cid_of[r.model]
-            cmeta = manifest["characters"][cid]
-            clip = r.clip or _default_clip(r, cmeta, *clips_of[cid])
-            if clip is not None and clip not in cmeta["clips"]:
-                raise ConfigError(f"{scene.path}, line {r.line}: rider {r.name!r}: no clip {clip!r} in its model; "
-                                  f"clips: {', '.join(sorted(cmeta['clips']))}")
-            manifest["riders"].append({"name": r.name, "character": cid, "clip": clip, "phase": r.phase,
-                                       "heading": r.heading, "scale": r.scale})
-    else:
-        result.steps["characters"] = {"cached": True, "seconds": 0.0, "key": "none"}
-        if bar is not None:
-            bar.update(1)
-    manifest["lod"] = {"near": scene.lod.near, "far": scene.lod.far, "character": list(scene.lod.character),
-                       "ratios": list(scene.lod.ratios), "morph": bool(scene.lod.morph)}
-
-    # -------------------------------------------------------------- objects
-    spheres = np.zeros((0, 4))
-    manifest["objects"] = {"kinds": [], "meshes": {}, "instances": []}
-    if scene.objects:
-        srcs = sorted({o.model for o in scene.objects})
-        src_keys = [m if m.startswith("builtin:") else _file_key(m) for m in srcs]
-        placements = [(o.name, o.model, list(o.position), o.heading, o.scale) for o in scene.objects]
-        obj_key = content_key(BUILD_VERSION, "objects", "object_atlas/4", terrain_key, srcs, src_keys, placements,
-                              manifest["lights"], *_allow_key(scene))
-
-        def make_objects():
-            return _objects_arrays(net, scene.objects, srcs, lights, scene.allow_paths)
-
-        oa, ometa = step("objects", obj_key, make_objects)
-        for k, v in oa.items():
-            arrays[f"objects/{k}"] = v
-        manifest["objects"] = ometa
-        spheres = np.column_stack([oa["center"], oa["radius"]])
-    else:
-        result.steps["objects"] = {"cached": True, "seconds": 0.0, "key": "none"}
-        if bar is not None:
-            bar.update(1)
-
-    # -------------------------------------------------------------- visibility
-    vs = scene.visibility
-    if vs.enabled:
-        # the band the scene needs: the file's heights up to its highest camera eye (along its
-        # flight) or rider head above the snow (piste.pipeline.visibility.scene_eye_heights)
-        heads = (np.asarray(arrays["riders/matrix"])[:, :3, 3] + [0.0, 0.0, 1.7]) if "riders/matrix" in arrays \
-            else np.zeros((0, 3))
-        eye_heights = scene_eye_heights(net, vs.eye_heights,
-                                        np.concatenate([camera_eyes(manifest["cameras"], centerline), heads]), vs.cell)
-        vis_key = content_key(BUILD_VERSION, "visibility", terrain_key, vs.cell, list(eye_heights), vs.method)
-
-        def make_visibility():
-            v = compute_visibility(net, vs.cell, eye_heights, method=vs.method, progress=progress)
-            return v.to_arrays()
-
-        va, vmeta = step("visibility", vis_key, make_visibility)
-        # the objects' bits on their own: moving an object does not redo the patches
-        obj_method = "rays" if 0 < len(spheres) <= OBJECT_RAYS_MAX else vmeta["method"]
-        ov_key = content_key(BUILD_VERSION, "object_visibility", terrain_key, spheres, vs.cell, list(eye_heights),
-                             obj_method)
-
-        def make_object_visibility():
-            v = compute_visibility(net, vs.cell, eye_heights, objects=spheres, method=obj_method, patches=False)
-            return {"object_bits": v.object_bits}, {"method": obj_method}
-
-        if len(spheres):
-            oa_, _ = step("object_visibility", ov_key, make_object_visibility)
-            obits = oa_["object_bits"]
-        else:
-            obits = np.zeros((va["patch_bits"].shape[0], 0), np.uint8)
-            result.steps["object_visibility"] = {"cached": True, "seconds": 0.0, "key": "none"}
-        arrays["visibility/patch_bits"] = va["patch_bits"]
-        arrays["visibility/object_bits"] = obits
-        extra = {k: va[k] for k in ("ground_min", "level_bits") if k in va}  # the band (Visibility.in_band)
-        for k, v in extra.items():
-            arrays[f"visibility/{k}"] = v
-        vmeta = dict(vmeta, n_objects=int(len(spheres)))
-        manifest["visibility"] = vmeta
-        vis = Visibility.from_arrays({"patch_bits": va["patch_bits"], "object_bits": obits, **extra}, vmeta)
-        manifest["report"] = {"visibility": _visibility_report(net, vis, manifest["cameras"], centerline)}
-    else:
-        result.steps["visibility"] = {"cached": True, "seconds": 0.0, "key": "none"}
-        manifest["visibility"] = None
-        manifest["report"] = {}
-        if bar is not None:
-            bar.update(1)
-    manifest["render"] = {"size": list(scene.render.size), "lightmap_mode": scene.render.lightmap_mode,
-                          "fog": scene.render.fog, "face": scene.render.face,
-                          "object_lod": scene.render.object_lod, "aa": scene.render.aa, "dof": scene.render.dof,
-                          "soft_shadows": scene.render.soft_shadows, "occlusion": scene.render.occlusion}
-    # riders following the track and objects placed along it, made by the runtime (pipeline.preview)
-    manifest["pack"] = dict(scene.pack) if scene.pack else None
-    manifest["auto_objects"] = dict(scene.auto_objects) if scene.auto_objects else None
+    manifest = ctx.manifest
     manifest["inputs"] = {k: v["key"] for k, v in sorted(result.steps.items())}
 
     # -------------------------------------------------------------- write
     t0 = time.perf_counter()
-    write_bundle(out, manifest, arrays)
+    write_bundle(out_path, manifest, ctx.arrays)
     result.steps["write"] = {"cached": False, "seconds": time.perf_counter() - t0}
     if bar is not None:
         bar.update(1)
         bar.close()
-    result.bytes = out.stat().st_size
+    result.bytes = out_path.stat().st_size
     result.report = dict(manifest.get("report", {}))
-    result.report["patches"] = len(net)
+    result.report["patches"] = len(ctx.net)
     result.report["riders"] = len(scene.riders)
     result.report["objects"] = len(scene.objects)
-    result.report["lights"] = len(lights)
+    result.report["lights"] = len(ctx.lights)
     result.report["cameras"] = [c["name"] for c in manifest["cameras"]]
     result.seconds = time.perf_counter() - t_all
     return result
