@@ -22,6 +22,9 @@ from piste.pipeline.ssx_synth import make_level
 from piste.formats.ssx.multitool import brighten, darken, export_texture, read_project, write_project
 from piste.formats.ssx.pbd import LIGHT_DTYPE, PATCH_SIZE, hash_section_bytes
 from piste.formats.ssx.ssh import SshBank, SshImage, lightmap_bank, lightmap_pages
+from piste.formats.ssx.multitool_objects import (
+    INSTANCE_DTYPE, SEGMENT_DTYPE, SPLINE_DTYPE, compose_rows, segment_records,
+)
 from piste.formats.ssx.synth import pbd_bytes
 
 
@@ -122,8 +125,15 @@ def _level_with_sections():
     unchanged)."""
     lv = make_level(rows=2, cols=3, seed=5)
     rng = np.random.default_rng(9)
-    sec = {"instances": (3, rng.bytes(3 * 112)), "lights": (2, _lights(2).tobytes()), "splines": (1, rng.bytes(48)),
-           "spline_segments": (2, rng.bytes(2 * 112)), "models": (1, rng.bytes(64)),
+    inst = np.frombuffer(rng.bytes(3 * 256), INSTANCE_DTYPE).copy()  # every field made up but the placement
+    inst["matrix"] = compose_rows(rng.uniform(-1e4, 1e4, (3, 3)), [[0, 0, 0.6, 0.8]] * 3, [[1, 2, 1]] * 3)
+    inst["lowest"], inst["highest"] = -50.0, 50.0
+    seg = segment_records(rng.uniform(-1e4, 1e4, (2, 4, 3)), 0, 0)
+    seg["coefficients"] = rng.uniform(-1, 1, (2, 4))  # not the fit piste would make: must come back as stored
+    spl = np.zeros(1, SPLINE_DTYPE)
+    spl[0] = ((-1e4,) * 3, (1e4,) * 3, 7, 2, 0, -1)
+    sec = {"instances": (3, inst.tobytes()), "lights": (2, _lights(2).tobytes()), "splines": (1, spl.tobytes()),
+           "spline_segments": (2, seg.tobytes()), "models": (1, rng.bytes(64)),
            "model_pointers": (None, rng.bytes(16)), "hash": (None, hash_section_bytes([-7, 123456789])),
            "mesh_data": (None, rng.bytes(256))}
     return parse_pbd(pbd_bytes(lv.pbd.records, 3, 1, sec)), lv
@@ -195,11 +205,19 @@ def test_changed_patch_count_gets_the_minimal_default(tmp_path):
     project = read_project(proj)
     out, _, _ = project.to_level()
     assert len(out) == 5 and "6 patches, Patches.json 5" in project.notes[0] and "3 instances" in project.notes[0]
-    assert "lights" not in project.notes[0]  # they come from Lights.json
-    assert {k: v for k, v in out.counts.items() if v} == {"patches": 5, "textures": 3, "lights": 2}
-    # after the patches: the lights and their hash list (each padded to 16 bytes), no filler bytes
+    assert "lights" not in project.notes[0] and "spline" not in project.notes[0]  # from Lights.json, Splines.json
+    assert {k: v for k, v in out.counts.items() if v} == {"patches": 5, "textures": 3, "lights": 2, "splines": 1,
+                                                          "spline_segments": 2}
+    # after the patches: the lights, the splines rebuilt from Splines.json (the Multitool's way), the
+    # hash list (each padded to 16 bytes), no filler bytes
+    seg = np.frombuffer(pbd.sections["spline_segments"][:256], SEGMENT_DTYPE)
+    rebuilt = segment_records(project.splines.points(0), 0, 0)  # the raw points as Splines.json holds them
+    spl = np.zeros(1, SPLINE_DTYPE)
+    spl[0] = (rebuilt["lowest"].min(0), rebuilt["highest"].max(0), 0, 2, 0, -1)
     tail = out.raw[out.patch_offset + 5 * PATCH_SIZE:]
-    assert tail == pbd.read_lights().tobytes() + b"\0" * 8 + hash_section_bytes([-7, 123456789]) + b"\0" * 12
+    assert tail == (pbd.read_lights().tobytes() + b"\0" * 8 + spl.tobytes() + b"\0" * 8 + rebuilt.tobytes()
+                    + hash_section_bytes([-7, 123456789]) + b"\0" * 12)
+    np.testing.assert_allclose(rebuilt["power"], seg["power"], rtol=1e-6, atol=1e-2)  # the points come back
     assert out.light_hashes().tolist() == [-7, 123456789]
 
 
@@ -222,11 +240,13 @@ def test_empty_level_invents_nothing(tmp_path, capsys):
     for f in ("PisteLevel.json", "PisteLevel.pbd"):
         (tmp_path / "mta" / f).unlink()
     (tmp_path / "mta" / "Lights.json").write_text("{}")  # read: no lights
-    (tmp_path / "mta" / "Splines.json").write_text("{}")
+    (tmp_path / "mta" / "Splines.json").write_text("{}")  # read: no splines
+    (tmp_path / "mta" / "Cameras.json").write_text("{}")
     capsys.readouterr()
     assert main(["ssx", "import", str(tmp_path / "mta"), "--out", str(tmp_path / "c" / "C.pbd")]) == 0
     err = capsys.readouterr().err
-    assert "Splines.json: not read by piste" in err and "Lights.json" not in err
+    assert "Cameras.json: not read by piste" in err and "Lights.json" not in err and "Splines.json" not in err
+    assert "Instances.json" not in err  # written from a level without instances: {"Instances": []}
     c = read_pbd(tmp_path / "c" / "C.pbd")
     assert {k: v for k, v in c.counts.items() if v} == {"patches": 4, "textures": 3}
     assert c.raw[c.patch_offset + 4 * PATCH_SIZE:] == b""

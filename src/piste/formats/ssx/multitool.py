@@ -32,9 +32,21 @@ What a project holds, and nothing else, becomes the level (:meth:`Project.to_lev
   splines, models and every other section come back as they were; texture numbering starts from
   the recorded bank order (which the level's materials refer to), then first appearance;
 * otherwise the ``.pbd`` holds the project's patches and the minimal default for every other
-  section (empty, count 0; :func:`piste.formats.ssx.synth.pbd_bytes`) but the lights.  The
-  Multitool's ``Instances.json``, ``Splines.json``, ``Models.json``, ... are not read by piste:
-  each one present is named in :attr:`Project.notes` (what the new level lacks);
+  section (empty, count 0; :func:`piste.formats.ssx.synth.pbd_bytes`) but the lights and the
+  splines.  The Multitool's other files (``Materials.json``, ``Cameras.json``, ...) are not read
+  by piste: each one present is named in :attr:`Project.notes` (what the new level lacks);
+* **instances, splines, models** (``Instances.json``, ``Splines.json``, ``Models.json``;
+  :mod:`piste.formats.ssx.multitool_objects` holds their facts): read and checked into
+  :attr:`Project.instances` / :attr:`Project.splines` / :attr:`Project.models` (typed records
+  that :func:`write_project` writes back field for field).  ``convert --to multitool`` writes
+  ``Instances.json`` and ``Splines.json`` from the ``.pbd``'s sections (never ``Models.json``:
+  piste does not decode the model section).  On import, with the recorded level, instances and
+  spline segments are written over the level's records in place (counts must stay; unchanged
+  ones keep their stored bytes), the instance hashes into the hash section's instance list;
+  without it the new level gets the project's splines (the Multitool's rebuild) but **no
+  instances**: an instance places one of the level's models, and a model is ``Meshes/*.obj``
+  with ``Materials.json`` compiled into the model / material / mesh-data sections, which piste
+  does not encode (named in :attr:`Project.notes`).  ``Models.json`` never changes a level;
 * **lights** (``Lights.json``, ``{"Lights": [...]}``; SSX-Library ``LightJsonHandler.cs`` and the
   export/rebuild in ``TrickyLevelInterface.cs``, facts only): one object per 92-byte light record
   (:data:`~piste.formats.ssx.pbd.LIGHT_DTYPE`), fields ``LightName``, ``Type``, ``SpriteRes``,
@@ -78,6 +90,11 @@ import numpy as np
 from piste.errors import FormatError, PisteError
 from piste.formats.atomic import write_bytes_atomic
 from piste.formats.safe_io import anchor, loads_json, read_regular
+from piste.formats.ssx.multitool_objects import (
+    INSTANCES_JSON, MODELS_JSON, SPLINES_JSON, MtInstances, MtModels, MtSplines, instances_from_json,
+    instances_from_pbd, instances_in_place, instances_json, models_from_json, models_json, spline_sections,
+    splines_from_json, splines_from_pbd, splines_in_place, splines_json,
+)
 from piste.formats.ssx.pbd import (
     COUNT_NAMES, LIGHT_DTYPE, LIGHT_SIZE, MAX_FILE_BYTES as MAX_PBD_BYTES, Pbd, hash_section_bytes, parse_pbd,
     records_from_arrays,
@@ -102,8 +119,8 @@ _NAME = re.compile(r"^[A-Za-z0-9_.\- ]+\.png$")
 SOURCE_PBD = "PisteLevel.pbd"
 SOURCE_JSON = "PisteLevel.json"
 #: the Multitool's other files, which piste does not read (named in Project.notes when present)
-OTHER_JSON = ("Instances.json", "ParticleInstances.json", "Materials.json", "Splines.json",
-              "Models.json", "ParticleModels.json", "Cameras.json", "AIP.json", "SOP.json", "SSFLogic.json")
+OTHER_JSON = ("ParticleInstances.json", "Materials.json", "ParticleModels.json", "Cameras.json", "AIP.json",
+              "SOP.json", "SSFLogic.json")
 #: the Multitool's lights file (read and written)
 LIGHTS_JSON = "Lights.json"
 #: most lights a Lights.json may hold
@@ -250,10 +267,17 @@ def _light_keys(rec: np.ndarray, hashes) -> list:
 
 
 # ----------------------------------------------------------------------------- writing
-def write_project(folder, pbd: Pbd, textures: SshBank | None = None, lightmaps: SshBank | None = None) -> Path:
-    """Write ``Patches.json``, ``Textures/NAME.png`` and ``Lightmaps/NNNN.png`` into ``folder`` the
-    Multitool's way (module docstring), and piste's record of the level (``PisteLevel.pbd``,
-    ``PisteLevel.json``).  Returns the path of ``Patches.json``."""
+def write_project(folder, pbd: Pbd, textures: SshBank | None = None, lightmaps: SshBank | None = None,
+                  instances: MtInstances | None = None, splines: MtSplines | None = None,
+                  models: MtModels | None = None) -> Path:
+    """Write ``Patches.json``, ``Lights.json``, ``Instances.json``, ``Splines.json``,
+    ``Textures/NAME.png`` and ``Lightmaps/NNNN.png`` into ``folder`` the Multitool's way (module
+    docstring), and piste's record of the level (``PisteLevel.pbd``, ``PisteLevel.json``).
+    ``instances`` / ``splines`` (default: the level's own, from its sections) and ``models``
+    (default: no ``Models.json``) are written as given: a project read by :func:`read_project`
+    passes its records here to come back field for field.  Returns the path of ``Patches.json``."""
+    inst = instances if instances is not None else instances_from_pbd(pbd)
+    spl = splines if splines is not None else splines_from_pbd(pbd)
     folder = Path(folder)
     n = len(pbd)
     cp = np.asarray(pbd.control_points, dtype=np.float64).reshape(n, 16, 3)
@@ -278,6 +302,10 @@ def write_project(folder, pbd: Pbd, textures: SshBank | None = None, lightmaps: 
     write_bytes_atomic(folder / "Patches.json", json.dumps({"Patches": patches}, indent=1).encode())
     write_bytes_atomic(folder / LIGHTS_JSON, json.dumps(lights_json(pbd.read_lights(), pbd.light_hashes()),
                                                         indent=1).encode())
+    write_bytes_atomic(folder / INSTANCES_JSON, json.dumps(instances_json(inst), indent=1).encode())
+    write_bytes_atomic(folder / SPLINES_JSON, json.dumps(splines_json(spl), indent=1).encode())
+    if models is not None:
+        write_bytes_atomic(folder / MODELS_JSON, json.dumps(models_json(models), indent=1).encode())
     if textures is not None:
         for name, im in zip(tex_names, textures.images):
             write_bytes_atomic(folder / "Textures" / name, _png_bytes(export_texture(im)))
@@ -317,6 +345,9 @@ class Project:
     notes: list = field(default_factory=list)
     lights: np.ndarray | None = None      # (k,) LIGHT_DTYPE from Lights.json, None without the file
     light_hashes: np.ndarray | None = None  # (k,) int64
+    instances: MtInstances | None = None  # Instances.json, None without the file
+    splines: MtSplines | None = None      # Splines.json
+    models: MtModels | None = None        # Models.json (never changes the level)
 
     def __len__(self) -> int:
         return len(self.control_points)
@@ -351,6 +382,11 @@ class Project:
                 struct.pack_into("<I", data, 4 + 4 * COUNT_NAMES.index("textures"), len(textures))
             if self.lights is not None:
                 self._lights_in_place(pbd, data)
+            base = self.path.parent
+            if self.instances is not None:
+                self.notes += instances_in_place(pbd, data, self.instances, base / INSTANCES_JSON, SOURCE_PBD)
+            if self.splines is not None:
+                splines_in_place(pbd, data, self.splines, base / SPLINES_JSON, SOURCE_PBD)
             return parse_pbd(bytes(data), self.path), textures, lightmaps
         rec = records_from_arrays(self.control_points, self.uv, self.lightmap_rect, self.lightmap_page,
                                   self.texture_index, self.surface_type, self.trick_only)
@@ -359,6 +395,8 @@ class Project:
         if self.lights is not None and len(self.lights):
             sections = {"lights": (len(self.lights), self.lights.tobytes()),
                         "hash": (None, hash_section_bytes(self.light_hashes))}
+        if self.splines is not None and len(self.splines):
+            sections.update(spline_sections(self.splines))
         return parse_pbd(pbd_bytes(rec, n_tex, platform, sections), self.path), textures, lightmaps
 
     def _lights_in_place(self, pbd: Pbd, data: bytearray) -> None:
@@ -545,12 +583,27 @@ def read_project(folder) -> Project:
     if lpath.exists() or lpath.is_symlink():
         proj.lights, proj.light_hashes = lights_from_json(
             loads_json(read_regular(lpath, MAX_JSON_BYTES, what="lights file"), lpath), lpath)
+    for name, parse, attr in ((INSTANCES_JSON, instances_from_json, "instances"),
+                              (SPLINES_JSON, splines_from_json, "splines"), (MODELS_JSON, models_from_json, "models")):
+        opath = folder / name
+        if opath.exists() or opath.is_symlink():
+            setattr(proj, attr, parse(loads_json(read_regular(opath, MAX_JSON_BYTES, what="project file"), opath), opath))
     if source is not None and len(source) != n:
-        skip = ("patches", "textures", "lightmap_size") + (("lights",) if proj.lights is not None else ())
+        skip = ("patches", "textures", "lightmap_size") + (("lights",) if proj.lights is not None else ()) + (
+            ("splines", "spline_segments") if proj.splines is not None else ())
         kept = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in source.counts.items() if v and k not in skip)
         proj.notes.append(f"{SOURCE_PBD} holds {len(source)} patches, Patches.json {n}: the level's other sections "
                           f"({kept or 'none'}) hold absolute offsets piste does not relocate, so the new level has "
                           "the minimal default (empty) for them")
+    recorded = source is not None and len(source) == n
+    if proj.instances is not None and len(proj.instances) and not recorded:
+        proj.notes.append(f"{INSTANCES_JSON}: {len(proj.instances)} instances read but not written into the new level: "
+                          "an instance places one of the level's models, and piste does not encode models (Models.json "
+                          "with Meshes/*.obj and Materials.json compiled into the model, material and mesh-data "
+                          "sections)")
+    if proj.models is not None and len(proj.models):
+        proj.notes.append(f"{MODELS_JSON}: {len(proj.models)} models read and checked, not encoded: "
+                          + (f"the level's models come from {SOURCE_PBD}" if recorded else "the new level has none"))
     for other in OTHER_JSON:
         if (folder / other).exists():
             if source is not None and len(source) == n:
