@@ -146,9 +146,12 @@ SceneFile, TerrainSpec, ActorSpec, GltfSpec, CameraSpec, LightmapSpec, LodSpec, 
 from __future__ import annotations
 
 import math
+import os
 import re
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
 from pathlib import Path
+from typing import Any
 
 from piste.errors import ConfigError, PisteError, ValidationError
 from piste.formats.gltf.schema import precheck_gltf
@@ -175,6 +178,11 @@ __all__ = [
     "key_lines",
     "SceneError",
     "BUILTIN_MODELS",
+    "SceneSection",
+    "SceneTable",
+    "SCENE_SECTIONS",
+    "register_section",
+    "unregister_section",
 ]
 
 BUILTIN_MODELS = ("builtin:rider", "builtin:tree", "builtin:sign", "builtin:rock", "builtin:rail")
@@ -190,6 +198,10 @@ MAX_SEED = 2**32 - 1
 #: a camera's near plane, its far plane (metres) and their largest ratio (1e-300 / 1e300 made the
 #: projection singular: a LinAlgError deep in the renderer)
 MIN_NEAR, MAX_FAR, MAX_FAR_NEAR_RATIO = 1e-4, 1e8, 1e7
+
+
+#: a light given inline (``[[lights]]``)
+_Light = AmbientLight | DirectionalLight | PointLight | SpotLight
 
 
 class SceneError(ConfigError):
@@ -419,6 +431,7 @@ class SceneFile:
     tile_objects: list = field(default_factory=list)  # [[tile_objects]]: {"kind", "density", "slope", "altitude", "scale"}
     text: str = ""
     allow_paths: tuple = ()  # folders the user allowed (--allow-path, PISTE_ALLOW_PATHS) when it was loaded
+    sections: dict = field(default_factory=dict)  # registered sections without a field here: name -> value
 
     def source_files(self) -> list:
         """Every file the scene reads (the TOML, terrain, glTF files and their buffers and images),
@@ -464,7 +477,7 @@ def _gltf_dependencies(path: Path, allow_paths=()) -> list:
 
 
 # ----------------------------------------------------------------------------- the parser
-class _Checker:
+class SceneTable:
     """Typed access to one table of the document, with errors naming file, line and key."""
 
     def __init__(self, path, lines: dict, table: dict, where: tuple, label: str):
@@ -477,6 +490,11 @@ class _Checker:
 
     def name(self, key) -> str:
         return f"{self.label}.{key}" if self.label else key
+
+    @property
+    def base(self) -> Path:
+        """The folder of the scene file (relative paths resolve against it)."""
+        return Path(self.path).resolve().parent
 
     def error(self, key, message) -> SceneError:
         return SceneError(self.path, message, line=self.line(key), key=self.name(key) if key else self.label or None)
@@ -500,7 +518,7 @@ def _type_name(v) -> str:
             dict: "a table"}.get(type(v), type(v).__name__)
 
 
-def _convert(c: _Checker, key, v, kind):
+def _convert(c: SceneTable, key, v, kind):
     if kind == "str":
         if not isinstance(v, str):
             raise c.error(key, f"expected a string, got {_type_name(v)} ({v!r})")
@@ -529,7 +547,7 @@ def _convert(c: _Checker, key, v, kind):
     raise AssertionError(kind)
 
 
-def _bounded(c: _Checker, key: str, v, lo: float, hi: float, what: str = "a number"):
+def _bounded(c: SceneTable, key: str, v, lo: float, hi: float, what: str = "a number"):
     """``v`` (a number, a tuple of numbers or None) after checking ``lo <= x <= hi`` for each."""
     vals = () if v is None else v if isinstance(v, tuple) else (v,)
     if not all(lo <= x <= hi for x in vals):
@@ -537,21 +555,21 @@ def _bounded(c: _Checker, key: str, v, lo: float, hi: float, what: str = "a numb
     return v
 
 
-def _table(c_parent: _Checker, key: str) -> _Checker:
+def _table(c_parent: SceneTable, key: str) -> SceneTable:
     v = c_parent.table.get(key, {})
     if not isinstance(v, dict):
         raise c_parent.error(key, f"expected a table [{key}], got {_type_name(v)}")
-    return _Checker(c_parent.path, c_parent.lines, v, (key,), key)
+    return SceneTable(c_parent.path, c_parent.lines, v, (key,), key)
 
 
-def _array(c_parent: _Checker, key: str) -> list:
+def _array(c_parent: SceneTable, key: str) -> list:
     v = c_parent.table.get(key, [])
     if not isinstance(v, list) or not all(isinstance(x, dict) for x in v):
         raise c_parent.error(key, f"expected an array of tables [[{key}]]")
-    return [_Checker(c_parent.path, c_parent.lines, x, (key, i), f"{key}[{i}]") for i, x in enumerate(v)]
+    return [SceneTable(c_parent.path, c_parent.lines, x, (key, i), f"{key}[{i}]") for i, x in enumerate(v)]
 
 
-def _file(c: _Checker, key: str, base: Path, suffixes=None, value: str | None = None) -> Path:
+def _file(c: SceneTable, key: str, base: Path, suffixes=None, value: str | None = None) -> Path:
     """The regular file scene key ``key`` names, confined to the scene's folder (or a folder the user
     allowed) and reached without symbolic links (:func:`piste.formats.safe_io.confined_file`)."""
     rel = c.get(key, "str", required=True) if value is None else value
@@ -569,7 +587,7 @@ def _file(c: _Checker, key: str, base: Path, suffixes=None, value: str | None = 
     return p
 
 
-def _refuse_allow_paths(top: _Checker) -> None:
+def _refuse_allow_paths(top: SceneTable) -> None:
     """A file never widens its own confinement: the old ``allow_paths`` key is an error that says
     what to do instead (issue 24)."""
     if "allow_paths" in top.table:
@@ -578,33 +596,9 @@ def _refuse_allow_paths(top: _Checker) -> None:
                                        "PISTE_ALLOW_PATHS environment variable instead")
 
 
-def loads_scene(text: str, path="scene.toml") -> SceneFile:
-    """Parse and validate scene TOML ``text``; relative paths resolve against ``path``'s folder."""
-    import tomllib
-
-    path = Path(path)
-    if len(text) > MAX_TOML_BYTES:
-        raise SceneError(path, f"{len(text)} characters: more than the limit of {MAX_TOML_BYTES} for a scene file")
-    if toml_depth(text) > MAX_TOML_DEPTH:  # before tomllib, which recurses (RecursionError)
-        raise SceneError(path, f"arrays or tables nested more than {MAX_TOML_DEPTH} deep")
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        msg = str(exc)
-        m = re.search(r"line (\d+)", msg)
-        raise SceneError(path, f"not valid TOML: {msg}", line=int(m.group(1)) if m else None) from None
-    lines = key_lines(text)
-    base = path.resolve().parent
-    top = _Checker(path, lines, doc, (), "")
-    top.allow({"name", "terrain", "lightmap", "lod", "visibility", "render", "gltf", "riders", "objects", "lights",
-               "cameras", "allow_paths", "pack", "auto_objects",
-               "tile_objects"})
-    scene = SceneFile(path=path, name=top.get("name", "str", path.stem), text=text)
-    _refuse_allow_paths(top)
-    scene.allow_paths = user_allow_paths()
-
-    # terrain
-    t = _table(top, "terrain")
+# ----------------------------------------------------------------------------- the sections
+def _parse_terrain(t: SceneTable, scene: SceneFile) -> TerrainSpec:
+    path, base = t.path, t.base
     t.allow({"source", "seed", "spacing", "height_scale", "height_offset", "key", "samples_per_patch", "smooth",
              "nodata", "vertical_units", "tiles", "tile_patches", "ssx_pbd"})
     source = t.get("source", "str", "default")
@@ -647,107 +641,132 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
         if ts.kind == "heightfield" and ts.spacing is None and suf != ".npz":
             raise SceneError(path, "a height-field image needs 'spacing' (metres between samples)",
                              line=t.line(), key="terrain.spacing")
-    scene.terrain = ts
+    return ts
 
-    # settings
-    lm = _table(top, "lightmap")
+
+def _parse_lightmap(lm: SceneTable, scene: SceneFile) -> LightmapSpec:
     lm.allow({"res", "shadows", "gutter", "bounces", "sun_radius"})
-    scene.lightmap = LightmapSpec(lm.get("res", "int", 8), lm.get("shadows", "bool", True), lm.get("gutter", "int", 1),
-                                  lm.get("bounces", "int", 0), lm.get("sun_radius", "float", 0.0))
-    if not 0 <= scene.lightmap.bounces <= 16:
-        raise lm.error("bounces", f"expected 0 <= bounces <= 16, got {scene.lightmap.bounces}")
-    if not 0.0 <= scene.lightmap.sun_radius <= 10.0:
-        raise lm.error("sun_radius", f"expected 0 <= sun_radius <= 10 degrees, got {scene.lightmap.sun_radius}")
-    if not 2 <= scene.lightmap.res <= 64:
-        raise lm.error("res", f"expected 2 <= res <= 64 texels, got {scene.lightmap.res}")
-    if not 0 <= scene.lightmap.gutter <= 4:
-        raise lm.error("gutter", f"expected 0 <= gutter <= 4, got {scene.lightmap.gutter}")
-    lo = _table(top, "lod")
+    spec = LightmapSpec(lm.get("res", "int", 8), lm.get("shadows", "bool", True), lm.get("gutter", "int", 1),
+                        lm.get("bounces", "int", 0), lm.get("sun_radius", "float", 0.0))
+    if not 0 <= spec.bounces <= 16:
+        raise lm.error("bounces", f"expected 0 <= bounces <= 16, got {spec.bounces}")
+    if not 0.0 <= spec.sun_radius <= 10.0:
+        raise lm.error("sun_radius", f"expected 0 <= sun_radius <= 10 degrees, got {spec.sun_radius}")
+    if not 2 <= spec.res <= 64:
+        raise lm.error("res", f"expected 2 <= res <= 64 texels, got {spec.res}")
+    if not 0 <= spec.gutter <= 4:
+        raise lm.error("gutter", f"expected 0 <= gutter <= 4, got {spec.gutter}")
+    return spec
+
+
+def _parse_lod(lo: SceneTable, scene: SceneFile) -> LodSpec:
     lo.allow({"near", "far", "character", "ratios", "morph", "preset"})
-    preset = lo.get("preset", "str", "ssx_tricky" if ts.kind == "ssx_pbd" else "piste")
+    preset = lo.get("preset", "str", "ssx_tricky" if scene.terrain.kind == "ssx_pbd" else "piste")
     if preset not in LOD_PRESETS:
         raise lo.error("preset", f"expected one of {', '.join(map(repr, LOD_PRESETS))}, got {preset!r}")
-    scene.lod = LodSpec(lo.get("near", "float", LOD_PRESETS[preset][0]), lo.get("far", "float", LOD_PRESETS[preset][1]),
-                        lo.get("character", "vec2", (14.0, 35.0)), lo.get("ratios", "floats", (1.0, 0.5, 0.25)),
-                        lo.get("morph", "bool", True))
-    if not 0 <= scene.lod.near <= scene.lod.far:
-        raise lo.error("far", f"expected 0 <= near <= far, got near={scene.lod.near}, far={scene.lod.far}")
-    _bounded(lo, "far", scene.lod.far, 0.0, MAX_FAR, "metres")
-    _bounded(lo, "character", scene.lod.character, 0.0, 1e5, "metres")
-    if not all(0 < r <= 1 for r in scene.lod.ratios):
-        raise lo.error("ratios", f"expected ratios in (0, 1], got {list(scene.lod.ratios)}")
-    vi = _table(top, "visibility")
+    spec = LodSpec(lo.get("near", "float", LOD_PRESETS[preset][0]), lo.get("far", "float", LOD_PRESETS[preset][1]),
+                   lo.get("character", "vec2", (14.0, 35.0)), lo.get("ratios", "floats", (1.0, 0.5, 0.25)),
+                   lo.get("morph", "bool", True))
+    if not 0 <= spec.near <= spec.far:
+        raise lo.error("far", f"expected 0 <= near <= far, got near={spec.near}, far={spec.far}")
+    _bounded(lo, "far", spec.far, 0.0, MAX_FAR, "metres")
+    _bounded(lo, "character", spec.character, 0.0, 1e5, "metres")
+    if not all(0 < r <= 1 for r in spec.ratios):
+        raise lo.error("ratios", f"expected ratios in (0, 1], got {list(spec.ratios)}")
+    return spec
+
+
+def _parse_visibility(vi: SceneTable, scene: SceneFile) -> VisibilitySpec:
     vi.allow({"enabled", "cell", "eye_heights", "method"})
-    scene.visibility = VisibilitySpec(vi.get("enabled", "bool", True), vi.get("cell", "pos", 50.0),
-                                      vi.get("eye_heights", "floats", (1.7, 9.0)), vi.get("method", "str", "auto"))
-    _bounded(vi, "cell", scene.visibility.cell, 1.0, 1e5, "metres")
-    _bounded(vi, "eye_heights", scene.visibility.eye_heights, -1e4, 1e4, "metres")
-    if scene.visibility.method not in ("auto", "horizon", "rays"):
-        raise vi.error("method", f"expected \"auto\", \"horizon\" or \"rays\", got {scene.visibility.method!r}")
-    re_ = _table(top, "render")
+    spec = VisibilitySpec(vi.get("enabled", "bool", True), vi.get("cell", "pos", 50.0),
+                          vi.get("eye_heights", "floats", (1.7, 9.0)), vi.get("method", "str", "auto"))
+    _bounded(vi, "cell", spec.cell, 1.0, 1e5, "metres")
+    _bounded(vi, "eye_heights", spec.eye_heights, -1e4, 1e4, "metres")
+    if spec.method not in ("auto", "horizon", "rays"):
+        raise vi.error("method", f"expected \"auto\", \"horizon\" or \"rays\", got {spec.method!r}")
+    return spec
+
+
+def _parse_render(re_: SceneTable, scene: SceneFile) -> RenderSpec:
     re_.allow({"size", "lightmap_mode", "fog", "face", "object_lod", "aa", "dof", "soft_shadows", "occlusion"})
     size = re_.get("size", "vec2", (640, 448))
     if not all(float(s).is_integer() and 16 <= s <= 8192 for s in size):
         raise re_.error("size", f"expected [width, height], whole pixels in 16..8192, got {list(size)}")
-    scene.render = RenderSpec((int(size[0]), int(size[1])), re_.get("lightmap_mode", "str", "modulate"))
-    if scene.render.lightmap_mode not in ("modulate", "ps2"):
-        raise re_.error("lightmap_mode", f"expected \"modulate\" or \"ps2\", got {scene.render.lightmap_mode!r}")
+    spec = RenderSpec((int(size[0]), int(size[1])), re_.get("lightmap_mode", "str", "modulate"))
+    if spec.lightmap_mode not in ("modulate", "ps2"):
+        raise re_.error("lightmap_mode", f"expected \"modulate\" or \"ps2\", got {spec.lightmap_mode!r}")
     fog = re_.table.get("fog", "auto")
     if fog != "auto":
         fog = re_.get("fog", "float") if not isinstance(fog, str) else None
         if fog is None or fog < 0:
             raise re_.error("fog", f"expected a density per metre >= 0 or \"auto\", got {re_.table['fog']!r}")
-    scene.render.fog = _bounded(re_, "fog", fog if fog != "auto" else None, 0.0, 10.0, "a density per metre") or fog
-    scene.render.face = re_.get("face", "str", "morph")
-    if scene.render.face not in ("morph", "null_bones", "off"):
-        raise re_.error("face", f"expected \"morph\", \"null_bones\" or \"off\", got {scene.render.face!r}")
-    scene.render.object_lod = re_.get("object_lod", "float", 0.5)
-    if not 0.0 <= scene.render.object_lod <= 64.0:
-        raise re_.error("object_lod", f"expected pixels in 0..64 (0: full meshes), got {scene.render.object_lod!r}")
-    scene.render.aa = re_.get("aa", "str", "off")
-    if scene.render.aa not in ("off", "msaa2", "msaa4", "msaa8", "fxaa"):
-        raise re_.error("aa", f"expected \"off\", \"msaa2\", \"msaa4\", \"msaa8\" or \"fxaa\", got {scene.render.aa!r}")
+    spec.fog = _bounded(re_, "fog", fog if fog != "auto" else None, 0.0, 10.0, "a density per metre") or fog
+    spec.face = re_.get("face", "str", "morph")
+    if spec.face not in ("morph", "null_bones", "off"):
+        raise re_.error("face", f"expected \"morph\", \"null_bones\" or \"off\", got {spec.face!r}")
+    spec.object_lod = re_.get("object_lod", "float", 0.5)
+    if not 0.0 <= spec.object_lod <= 64.0:
+        raise re_.error("object_lod", f"expected pixels in 0..64 (0: full meshes), got {spec.object_lod!r}")
+    spec.aa = re_.get("aa", "str", "off")
+    if spec.aa not in ("off", "msaa2", "msaa4", "msaa8", "fxaa"):
+        raise re_.error("aa", f"expected \"off\", \"msaa2\", \"msaa4\", \"msaa8\" or \"fxaa\", got {spec.aa!r}")
     if "dof" in re_.table:
         dof = re_.get("dof", "vec2")
         if not (0.0 < dof[0] <= 1e5 and 0.0 <= dof[1] <= 100.0):
             raise re_.error("dof", f"expected [focus, aperture]: a focus distance in (0, 100000] m and a lens radius "
                                    f"in [0, 100] m, got {list(dof)}")
-        scene.render.dof = [float(dof[0]), float(dof[1])]
-    scene.render.soft_shadows = re_.get("soft_shadows", "bool", False)
-    scene.render.occlusion = re_.get("occlusion", "bool", False)
+        spec.dof = [float(dof[0]), float(dof[1])]
+    spec.soft_shadows = re_.get("soft_shadows", "bool", False)
+    spec.occlusion = re_.get("occlusion", "bool", False)
+    return spec
 
-    # the default course's riders following the track and objects placed along it
-    pk = _table(top, "pack")
-    if "pack" in top.table:
-        pk.allow({"follow", "start"})
-        follow = pk.get("follow", "str", "track")
-        if follow != "track":
-            raise pk.error("follow", f"expected \"track\", got {follow!r}")
-        start = pk.get("start", "float", 0.12)
-        if not 0.0 <= start <= 1.0:
-            raise pk.error("start", f"expected a fraction of the track in [0, 1], got {start}")
-        if ts.kind != "default":
-            raise pk.error("follow", "riders following the track need the default course (terrain.source = \"default\")")
-        scene.pack = {"follow": follow, "start": start}
-    ao = _table(top, "auto_objects")
-    if "auto_objects" in top.table:
-        ao.allow({"seed", *AUTO_OBJECT_COUNTS})
-        auto = {"seed": _bounded(ao, "seed", ao.get("seed", "int", 0), 0, MAX_SEED, "a seed")}
-        for k, d in AUTO_OBJECT_COUNTS.items():
-            auto[k] = ao.get(k, "int", d)
-            if not 0 <= auto[k] <= 10_000:
-                raise ao.error(k, f"expected 0 <= {k} <= 10000, got {auto[k]}")
-        if ts.kind != "default":
-            raise ao.error("seed", "objects placed along the track need the default course (terrain.source = \"default\")")
-        scene.auto_objects = auto
-    for c in _array(top, "tile_objects"):  # rules for piste.pipeline.tile_objects.ObjectRule
+
+# the default course's riders following the track and objects placed along it
+def _parse_pack(pk: SceneTable, scene: SceneFile) -> dict[str, Any]:
+    pk.allow({"follow", "start"})
+    follow = pk.get("follow", "str", "track")
+    if follow != "track":
+        raise pk.error("follow", f"expected \"track\", got {follow!r}")
+    start = pk.get("start", "float", 0.12)
+    if not 0.0 <= start <= 1.0:
+        raise pk.error("start", f"expected a fraction of the track in [0, 1], got {start}")
+    if scene.terrain.kind != "default":
+        raise pk.error("follow", "riders following the track need the default course (terrain.source = \"default\")")
+    return {"follow": follow, "start": start}
+
+
+def _check_pack(pk: SceneTable, scene: SceneFile) -> None:
+    if scene.pack and scene.riders:
+        raise pk.error(None, "give riders as [pack] (following the track) or as [[riders]], not both")
+
+
+def _parse_auto_objects(ao: SceneTable, scene: SceneFile) -> dict[str, Any]:
+    ao.allow({"seed", *AUTO_OBJECT_COUNTS})
+    auto = {"seed": _bounded(ao, "seed", ao.get("seed", "int", 0), 0, MAX_SEED, "a seed")}
+    for k, d in AUTO_OBJECT_COUNTS.items():
+        auto[k] = ao.get(k, "int", d)
+        if not 0 <= auto[k] <= 10_000:
+            raise ao.error(k, f"expected 0 <= {k} <= 10000, got {auto[k]}")
+    if scene.terrain.kind != "default":
+        raise ao.error("seed", "objects placed along the track need the default course (terrain.source = \"default\")")
+    return auto
+
+
+def _check_auto_objects(ao: SceneTable, scene: SceneFile) -> None:
+    if scene.auto_objects and scene.objects:
+        raise ao.error(None, "give objects as [auto_objects] or as [[objects]], not both")
+
+
+def _parse_tile_objects(items: list[SceneTable], scene: SceneFile) -> list[dict[str, Any]]:
+    rules = []
+    for c in items:  # rules for piste.pipeline.tile_objects.ObjectRule
         c.allow({"kind", "density", "slope", "altitude", "scale"})
         kind = c.get("kind", "str", required=True)
         if kind not in TILE_OBJECT_KINDS:
             raise c.error("kind", f"expected one of {', '.join(TILE_OBJECT_KINDS)}, got {kind!r}")
-        if ts.kind not in ("heightfield", "geotiff"):
+        if scene.terrain.kind not in ("heightfield", "geotiff"):
             raise c.error("kind", "objects placed on tiles need a tiled height-field terrain (GeoTIFF, PNG or .npz), "
-                                  f"got terrain kind {ts.kind!r}")
+                                  f"got terrain kind {scene.terrain.kind!r}")
         rule = {"kind": kind, "density": _bounded(c, "density", c.get("density", "pos", required=True), 0.0, 1e4,
                                                   "candidates a hectare")}
         for key, lo, hi, default, what in (("slope", 0.0, 90.0, (0.0, 90.0), "degrees"),
@@ -758,12 +777,15 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
                 raise c.error(key, f"expected [min, max] with min <= max, got {list(v)}")
             if v is not None:
                 rule[key] = v
-        scene.tile_objects.append(rule)
+        rules.append(rule)
+    return rules
 
-    # glTF imports
-    for g in _array(top, "gltf"):
+
+def _parse_gltf(items: list[SceneTable], scene: SceneFile) -> list[GltfSpec]:
+    out = []
+    for g in items:
         g.allow({"file", "lights", "cameras", "offset", "scale", "up", "white"})
-        spec = GltfSpec(_file(g, "file", base, (".gltf", ".glb")), g.get("lights", "bool", True),
+        spec = GltfSpec(_file(g, "file", g.base, (".gltf", ".glb")), g.get("lights", "bool", True),
                         g.get("cameras", "bool", True), g.get("offset", "vec3", (0.0, 0.0, 0.0)),
                         g.get("scale", "pos", 1.0), g.get("up", "str", "y"), g.get("white", "pos", 683.0),
                         scene.allow_paths)
@@ -772,66 +794,82 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
         _bounded(g, "offset", spec.offset, -MAX_SCENE_COORDINATE, MAX_SCENE_COORDINATE, "metres")
         _bounded(g, "scale", spec.scale, 1e-6, 1e6, "a scale")
         _bounded(g, "white", spec.white, 1e-6, 1e9, "lumens")
-        scene.gltf.append(spec)
+        out.append(spec)
+    return out
 
-    # riders and objects
-    names = set()
-    for kind in ("riders", "objects"):
-        for i, a in enumerate(_array(top, kind)):
-            keys = {"name", "model", "position", "heading", "scale"} | (
-                {"clip", "phase", "clips_from", "bone_map", "texture"} if kind == "riders" else set())
-            a.allow(keys)
-            default_model = "builtin:rider" if kind == "riders" else None
-            model = a.get("model", "str", default_model, required=default_model is None)
-            if model.startswith("builtin:"):
-                allowed = ("builtin:rider",) if kind == "riders" else tuple(m for m in BUILTIN_MODELS if m != "builtin:rider")
-                if model not in allowed:
-                    raise a.error("model", f"unknown built-in model {model!r}: expected one of {', '.join(allowed)} "
-                                           "or a .gltf/.glb file")
-            elif model.startswith("ssx:") and kind == "riders":  # an SSX Tricky .mpf (piste.pipeline.ssx_rider)
-                model = str(_file(a, "model", base, (".mpf",), value=model[4:]))
-            else:
-                model = str(_file(a, "model", base, (".gltf", ".glb")))
-            name = a.get("name", "str", f"{kind[:-1]}{i}")
-            _bounded(a, "position", a.get("position", "vec23", required=True), -MAX_SCENE_COORDINATE,
-                     MAX_SCENE_COORDINATE, "metres")
-            _bounded(a, "heading", a.get("heading", "float", 0.0), -1e6, 1e6, "degrees")
-            _bounded(a, "phase", a.get("phase", "float", 0.0), -1e6, 1e6, "seconds")
-            _bounded(a, "scale", a.get("scale", "pos", 1.0), 1e-6, 1e6, "a scale")
-            if name in names:
-                raise a.error("name", f"duplicate name {name!r}")
-            names.add(name)
-            spec = ActorSpec(name, model, a.get("position", "vec23", required=True), a.get("heading", "float", 0.0),
-                             a.get("clip", "str"), a.get("phase", "float", 0.0), a.get("scale", "pos", 1.0), a.line())
-            cf = a.table.get("clips_from")
-            if isinstance(cf, str) and cf.lower().endswith(".afl"):  # an SSX Tricky bank (piste.formats.ssx.afl)
-                if not model.lower().endswith(".mpf"):
-                    raise a.error("clips_from", "an .afl animation bank plays only on an ssx:<RIDER.mpf> model")
-                if "bone_map" in a.table:
-                    raise a.error("bone_map", "an .afl bank drives the .mpf's body bones in file order: no bone_map")
-                spec.clips_from = str(_file(a, "clips_from", base, (".afl",)))
-            elif "clips_from" in a.table:
-                spec.clips_from = str(_file(a, "clips_from", base, (".gltf", ".glb") + (
-                    (".afl",) if model.lower().endswith(".mpf") else ())))
-                bm = a.table.get("bone_map", "builtin")
-                if not (bm == "builtin" or (isinstance(bm, dict) and all(
-                        isinstance(k, str) and isinstance(v, str) for k, v in bm.items()))):
-                    raise a.error("bone_map", f"expected \"builtin\" or a table of clip bone = \"model bone\", got {bm!r}")
-                spec.bone_map = bm
-            elif "bone_map" in a.table:
-                raise a.error("bone_map", "needs clips_from = \"<a .gltf/.glb with the clips>\"")
-            if "texture" in a.table:  # an SSX texture bank for an ssx: rider (piste.pipeline.ssx_rider)
-                if not model.lower().endswith(".mpf"):
-                    raise a.error("texture", "only an ssx:<RIDER.mpf> model takes a texture bank (.ssh)")
-                spec.texture = str(_file(a, "texture", base, (".ssh",)))
-            (scene.riders if kind == "riders" else scene.objects).append(spec)
 
-    # lights
-    scene.lights = tuple(_light(c) for c in _array(top, "lights"))
+def _parse_actors(kind: str, items: list[SceneTable], scene: SceneFile) -> list[ActorSpec]:
+    """[[riders]] or [[objects]]: names unique across both (riders are parsed first)."""
+    names = {a.name for a in scene.riders} if kind == "objects" else set()
+    out = []
+    for i, a in enumerate(items):
+        base = a.base
+        keys = {"name", "model", "position", "heading", "scale"} | (
+            {"clip", "phase", "clips_from", "bone_map", "texture"} if kind == "riders" else set())
+        a.allow(keys)
+        default_model = "builtin:rider" if kind == "riders" else None
+        model = a.get("model", "str", default_model, required=default_model is None)
+        if model.startswith("builtin:"):
+            allowed = ("builtin:rider",) if kind == "riders" else tuple(m for m in BUILTIN_MODELS if m != "builtin:rider")
+            if model not in allowed:
+                raise a.error("model", f"unknown built-in model {model!r}: expected one of {', '.join(allowed)} "
+                                       "or a .gltf/.glb file")
+        elif model.startswith("ssx:") and kind == "riders":  # an SSX Tricky .mpf (piste.pipeline.ssx_rider)
+            model = str(_file(a, "model", base, (".mpf",), value=model[4:]))
+        else:
+            model = str(_file(a, "model", base, (".gltf", ".glb")))
+        name = a.get("name", "str", f"{kind[:-1]}{i}")
+        _bounded(a, "position", a.get("position", "vec23", required=True), -MAX_SCENE_COORDINATE,
+                 MAX_SCENE_COORDINATE, "metres")
+        _bounded(a, "heading", a.get("heading", "float", 0.0), -1e6, 1e6, "degrees")
+        _bounded(a, "phase", a.get("phase", "float", 0.0), -1e6, 1e6, "seconds")
+        _bounded(a, "scale", a.get("scale", "pos", 1.0), 1e-6, 1e6, "a scale")
+        if name in names:
+            raise a.error("name", f"duplicate name {name!r}")
+        names.add(name)
+        spec = ActorSpec(name, model, a.get("position", "vec23", required=True), a.get("heading", "float", 0.0),
+                         a.get("clip", "str"), a.get("phase", "float", 0.0), a.get("scale", "pos", 1.0), a.line())
+        cf = a.table.get("clips_from")
+        if isinstance(cf, str) and cf.lower().endswith(".afl"):  # an SSX Tricky bank (piste.formats.ssx.afl)
+            if not model.lower().endswith(".mpf"):
+                raise a.error("clips_from", "an .afl animation bank plays only on an ssx:<RIDER.mpf> model")
+            if "bone_map" in a.table:
+                raise a.error("bone_map", "an .afl bank drives the .mpf's body bones in file order: no bone_map")
+            spec.clips_from = str(_file(a, "clips_from", base, (".afl",)))
+        elif "clips_from" in a.table:
+            spec.clips_from = str(_file(a, "clips_from", base, (".gltf", ".glb") + (
+                (".afl",) if model.lower().endswith(".mpf") else ())))
+            bm = a.table.get("bone_map", "builtin")
+            if not (bm == "builtin" or (isinstance(bm, dict) and all(
+                    isinstance(k, str) and isinstance(v, str) for k, v in bm.items()))):
+                raise a.error("bone_map", f"expected \"builtin\" or a table of clip bone = \"model bone\", got {bm!r}")
+            spec.bone_map = bm
+        elif "bone_map" in a.table:
+            raise a.error("bone_map", "needs clips_from = \"<a .gltf/.glb with the clips>\"")
+        if "texture" in a.table:  # an SSX texture bank for an ssx: rider (piste.pipeline.ssx_rider)
+            if not model.lower().endswith(".mpf"):
+                raise a.error("texture", "only an ssx:<RIDER.mpf> model takes a texture bank (.ssh)")
+            spec.texture = str(_file(a, "texture", base, (".ssh",)))
+        out.append(spec)
+    return out
 
-    # cameras
+
+def _parse_riders(items: list[SceneTable], scene: SceneFile) -> list[ActorSpec]:
+    return _parse_actors("riders", items, scene)
+
+
+def _parse_objects(items: list[SceneTable], scene: SceneFile) -> list[ActorSpec]:
+    return _parse_actors("objects", items, scene)
+
+
+def _parse_lights(items: list[SceneTable], scene: SceneFile) -> tuple[_Light, ...]:
+    return tuple(_light(c) for c in items)
+
+
+def _parse_cameras(items: list[SceneTable], scene: SceneFile) -> list[CameraSpec]:
+    out: list[CameraSpec] = []
     cam_names = set()
-    for i, c in enumerate(_array(top, "cameras")):
+    for i, c in enumerate(items):
         c.allow({"name", "eye", "target", "up", "fov", "near", "far", "track", "height"})
         cs = CameraSpec(c.get("name", "str", f"camera{i}"), c.get("eye", "vec3"), c.get("target", "vec3"),
                         c.get("up", "vec3", (0.0, 0.0, 1.0)), c.get("fov", "float", 60.0), c.get("near", "pos"),
@@ -860,19 +898,123 @@ def loads_scene(text: str, path="scene.toml") -> SceneFile:
                                      f"near={cs.near}, far={cs.far} (ratio {cs.far / cs.near:.3g})")
         if cs.eye is not None and cs.target is not None and cs.eye == cs.target:
             raise c.error("target", "eye and target are the same point")
-        scene.cameras.append(cs)
-    if scene.pack and scene.riders:
-        raise SceneError(path, "give riders as [pack] (following the track) or as [[riders]], not both",
-                         line=lines.get(("pack",)), key="pack")
-    if scene.auto_objects and scene.objects:
-        raise SceneError(path, "give objects as [auto_objects] or as [[objects]], not both",
-                         line=lines.get(("auto_objects",)), key="auto_objects")
+        out.append(cs)
+    return out
+
+
+# ----------------------------------------------------------------------------- the section registry
+@dataclass(frozen=True)
+class SceneSection:
+    """One top-level section of a scene file and how it is read.
+
+    ``name`` is the TOML key (``[name]`` or, with ``array=True``, ``[[name]]``).  ``parse(table,
+    scene)`` gets a :class:`SceneTable` (a list of them for an array; every key checked with
+    ``table.allow`` / ``table.get``, errors from ``table.error`` name the file, line and key) and
+    the scene parsed so far (sections earlier in :data:`SCENE_SECTIONS`: ``scene.terrain`` is
+    known to every later one), and returns the typed value: it becomes ``scene.<name>`` when
+    :class:`SceneFile` has that field, else ``scene.sections[name]``.  ``only_if_given``: parse it
+    only when the file has the section (else the field keeps its default).  ``check(table,
+    scene)`` runs once every section is parsed (rules across sections: ``[pack]`` or
+    ``[[riders]]``, not both).
+    """
+
+    name: str
+    parse: Callable[[Any, SceneFile], Any]
+    array: bool = False
+    only_if_given: bool = False
+    check: Callable[[SceneTable, SceneFile], None] | None = None
+
+
+#: the sections a scene file may have, parsed in this order (add one with :func:`register_section`);
+#: besides these the top level takes ``name`` (and refuses ``allow_paths``, naming what to do instead)
+SCENE_SECTIONS: dict[str, SceneSection] = {s.name: s for s in (
+    SceneSection("terrain", _parse_terrain),
+    SceneSection("lightmap", _parse_lightmap),
+    SceneSection("lod", _parse_lod),
+    SceneSection("visibility", _parse_visibility),
+    SceneSection("render", _parse_render),
+    SceneSection("pack", _parse_pack, only_if_given=True, check=_check_pack),
+    SceneSection("auto_objects", _parse_auto_objects, only_if_given=True, check=_check_auto_objects),
+    SceneSection("tile_objects", _parse_tile_objects, array=True),
+    SceneSection("gltf", _parse_gltf, array=True),
+    SceneSection("riders", _parse_riders, array=True),
+    SceneSection("objects", _parse_objects, array=True),
+    SceneSection("lights", _parse_lights, array=True),
+    SceneSection("cameras", _parse_cameras, array=True),
+)}
+#: top-level keys that are not sections
+_TOP_KEYS = ("name", "allow_paths")
+#: SceneFile fields no section may set
+_RESERVED = frozenset({*_TOP_KEYS, "path", "text", "sections"})
+
+
+def register_section(section: SceneSection, *, after: str | None = None) -> SceneSection:
+    """Add ``section`` to :data:`SCENE_SECTIONS`, parsed after section ``after`` (default: last).
+    Returns ``section``."""
+    if section.name in SCENE_SECTIONS or section.name in _RESERVED:
+        raise ConfigError(f"scene section {section.name!r} is registered already (or a reserved name: "
+                          f"{', '.join(sorted(_RESERVED))})")
+    if after is not None and after not in SCENE_SECTIONS:
+        raise ConfigError(f"no scene section {after!r} to place {section.name!r} after: sections are "
+                          f"{', '.join(SCENE_SECTIONS)}")
+    items = list(SCENE_SECTIONS.values())
+    i = [s.name for s in items].index(after) + 1 if after is not None else len(items)
+    items.insert(i, section)
+    SCENE_SECTIONS.clear()
+    SCENE_SECTIONS.update((s.name, s) for s in items)
+    return section
+
+
+def unregister_section(name: str) -> SceneSection:
+    """Remove the section called ``name`` from :data:`SCENE_SECTIONS` (and return it)."""
+    if name not in SCENE_SECTIONS:
+        raise ConfigError(f"no scene section {name!r}: sections are {', '.join(SCENE_SECTIONS)}")
+    return SCENE_SECTIONS.pop(name)
+
+
+_SCENE_FIELDS = frozenset(f.name for f in fields(SceneFile))
+
+
+def loads_scene(text: str, path: str | os.PathLike[str] = "scene.toml") -> SceneFile:
+    """Parse and validate scene TOML ``text``; relative paths resolve against ``path``'s folder."""
+    import tomllib
+
+    path = Path(path)
+    if len(text) > MAX_TOML_BYTES:
+        raise SceneError(path, f"{len(text)} characters: more than the limit of {MAX_TOML_BYTES} for a scene file")
+    if toml_depth(text) > MAX_TOML_DEPTH:  # before tomllib, which recurses (RecursionError)
+        raise SceneError(path, f"arrays or tables nested more than {MAX_TOML_DEPTH} deep")
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        msg = str(exc)
+        m = re.search(r"line (\d+)", msg)
+        raise SceneError(path, f"not valid TOML: {msg}", line=int(m.group(1)) if m else None) from None
+    lines = key_lines(text)
+    top = SceneTable(path, lines, doc, (), "")
+    top.allow({*_TOP_KEYS, *SCENE_SECTIONS})
+    scene = SceneFile(path=path, name=top.get("name", "str", path.stem), text=text)
+    _refuse_allow_paths(top)
+    scene.allow_paths = user_allow_paths()
+    read: list[tuple[SceneSection, SceneTable]] = []
+    for section in list(SCENE_SECTIONS.values()):
+        if section.only_if_given and section.name not in top.table:
+            continue
+        given: Any = _array(top, section.name) if section.array else _table(top, section.name)
+        value = section.parse(given, scene)
+        if section.name in _SCENE_FIELDS:
+            setattr(scene, section.name, value)
+        else:
+            scene.sections[section.name] = value
+        if section.check is not None:  # an array's rules across sections name the array
+            read.append((section, SceneTable(path, lines, {}, (section.name,), section.name) if section.array else given))
+    for section, table in read:
+        assert section.check is not None
+        section.check(table, scene)
     return scene
 
 
-def _light(c: _Checker):
-    from dataclasses import fields
-
+def _light(c: SceneTable) -> _Light:
     kinds = {"ambient": AmbientLight, "directional": DirectionalLight, "point": PointLight, "spot": SpotLight}
     kind = c.get("type", "str", required=True)
     if kind not in kinds:
@@ -900,7 +1042,7 @@ def _light(c: _Checker):
         raise c.error(bad, msg) from None
 
 
-def _large_world_keys(t: _Checker, ts: TerrainSpec, base: Path) -> None:
+def _large_world_keys(t: SceneTable, ts: TerrainSpec, base: Path) -> None:
     """terrain.nodata / vertical_units (GeoTIFF) and tiles / tile_patches (tiled nets)."""
     if "nodata" in t.table:
         v = t.table["nodata"]
