@@ -49,7 +49,7 @@ from piste.formats.gltf import load_gltf
 from piste.formats.ssx.mpf_model import mpf_partners
 from piste.lighting.baker import BAKE_VERSION, bake_lightmap
 from piste.lighting.lights import Lights, default_lights
-from piste.pipeline.bundle_objects import camera_from_dict, lights_from_dict
+from piste.pipeline.bundle_objects import camera_from_dict, lights_from_dict, resident_members
 from piste.pipeline.cache import Cache, content_key
 from piste.pipeline.characters import CHARACTERS_VERSION, character_arrays
 from piste.pipeline.gltf_import import import_gltf
@@ -438,6 +438,22 @@ def _store_lightmap(ctx: BuildContext, out: StepOutput) -> None:
                                 "encoding": "float32 linear light, 1.0 = full", "stats": lmeta.get("stats", {})}
 
 
+# -------------------------------------------------------------- resident vertex blocks
+# the terrain's GPU vertex blocks (pipeline.bundle_objects.resident_members), stored uncompressed so a
+# fresh process's first frame does not wait for them (~0.1 s of `piste render`'s cold start); they
+# need the light-map rects, so this step follows the light map
+def _make_resident(ctx: BuildContext) -> StepOutput:
+    arrays, meta = resident_members(ctx.net)
+    return arrays, meta or {}
+
+
+def _store_resident(ctx: BuildContext, out: StepOutput) -> None:
+    arrays, meta = out
+    ctx.arrays.update(arrays)
+    if meta:
+        ctx.manifest["terrain"]["resident"] = meta
+
+
 # -------------------------------------------------------------- shadow (sun visibility)
 # where the terrain sees the sun, for the riders' shadows: computed here, not at every renderer
 # set-up (~0.2 s of a fresh process's first frame); the sun exactly as the runtime reads it back
@@ -667,6 +683,8 @@ BUILD_STEPS: list[BuildStep] = [
               run=_run_lights, cache=False),
     BuildStep("lightmap", "terrain key, lights, [lightmap] res / gutter / shadows (bounces, sun_radius when set)",
               _lightmap_key, _make_lightmap, _store_lightmap),
+    BuildStep("resident", "the terrain net and its light-map rects (computed each time: ~30 ms)",
+              make=_make_resident, store=_store_resident, cache=False),
     BuildStep("shadow", "terrain key, the sun's direction (none without a sun)",
               _shadow_key, _make_shadow, _store_shadow),
     BuildStep("characters", "each rider model's bytes (or built-in name), clip sources, LOD ratios",

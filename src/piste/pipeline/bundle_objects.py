@@ -16,6 +16,14 @@ API
     bundle_from_data(BundleData) -> Bundle
     lights_from_dict(d) -> Lights          ``Lights.to_dict()`` back (infinite ranges may be "inf")
     camera_from_dict(d) -> Camera          :func:`piste.formats.bundle.camera_to_dict` back
+    resident_members(net) -> (arrays, manifest entry)   the terrain's vertex blocks as the build stores them
+
+The terrain's GPU-resident vertex blocks (:class:`piste.terrain.resident.ResidentTerrain`) are
+stored by the build (:data:`RESIDENT_MEMBER`, uncompressed, for nets up to
+:data:`STORED_BLOCKS_BUDGET`): a load keeps them on the net, so the first frame draws at once (a
+fresh process built them in a background thread and its first frame waited ~0.1 s for them).
+Bundles without them (``piste.bundle/1``, big nets, another block layout) still load: the blocks
+are then built at run time as before.
 """
 
 from __future__ import annotations
@@ -27,18 +35,43 @@ from pathlib import Path
 import numpy as np
 
 from piste.errors import ConfigError, FormatError, PisteError
-from piste.formats.bundle import BundleData, camera_to_dict, read_bundle
+from piste.formats.bundle import RESIDENT_MEMBER, BundleData, camera_to_dict, read_bundle
 from piste.lighting.lightmap import LightMap
 from piste.lighting.lights import AmbientLight, DirectionalLight, Lights, PointLight, SpotLight
 from piste.lighting.vertex import choose_lights_many
 from piste.pipeline.characters import lods_from_arrays, model_from_arrays
 from piste.pipeline.visibility import Visibility
+from piste.terrain.lod import LEVELS
 from piste.terrain.net import TOPOLOGY_ARRAYS, TOPOLOGY_FORMAT, PatchNet
-from piste.terrain.resident import resident_fits, resident_terrain
+from piste.terrain.resident import (RESIDENT_FLOATS, RESIDENT_FORMAT, ResidentTerrain, keep_resident, resident_fits,
+                                    resident_terrain)
 from piste.world.camera import Camera
 from piste.world.objects import CompressedMesh, ObjectSet, normal_matrix
 
-__all__ = ["Bundle", "load_bundle", "bundle_from_data", "lights_from_dict", "camera_from_dict", "camera_to_dict"]
+__all__ = ["Bundle", "load_bundle", "bundle_from_data", "lights_from_dict", "camera_from_dict", "camera_to_dict",
+           "resident_members", "RESIDENT_MEMBER", "STORED_BLOCKS_BUDGET"]
+
+#: the largest vertex blocks a build stores (bytes, uncompressed: 44 B a vertex, 116 vertices a
+#: patch, ~13k patches); bigger nets' blocks are built at run time (they would swell the bundle)
+STORED_BLOCKS_BUDGET = 64 << 20
+
+
+def resident_members(net: PatchNet) -> tuple[dict, dict | None]:
+    """The terrain's resident vertex blocks as the build stores them: ``({RESIDENT_MEMBER: (N B, 11)
+    float32}, manifest entry {"levels", "format"})`` for ``net`` (light-map rects set), or ``({},
+    None)`` when they are not drawn resident or exceed :data:`STORED_BLOCKS_BUDGET`.  Written
+    uncompressed (:data:`piste.formats.bundle.STORED_MEMBERS`: inflating them cost as much as building them)."""
+    if not resident_fits(net) or len(net) * sum(n * n for n in LEVELS) * RESIDENT_FLOATS * 4 > STORED_BLOCKS_BUDGET:
+        return {}, None
+    return {RESIDENT_MEMBER: ResidentTerrain(net, LEVELS).vertices}, {"levels": [int(x) for x in LEVELS],
+                                                                      "format": RESIDENT_FORMAT}
+
+
+def _stored_blocks(man: dict) -> bool:
+    """Whether the bundle stores vertex blocks this piste draws (its levels and block format)."""
+    info = (man.get("terrain") or {}).get("resident")
+    return isinstance(info, dict) and info.get("format") == RESIDENT_FORMAT and \
+        info.get("levels") == [int(x) for x in LEVELS] and RESIDENT_MEMBER in man.get("members", {})
 
 
 def lights_from_dict(d: dict) -> Lights:
@@ -225,6 +258,18 @@ def _terrain_net(path, man: dict, arrays: dict) -> PatchNet:
         raise FormatError(path, f"invalid terrain ({exc})", field=f"terrain/{member}.npy") from None
 
 
+def _keep_blocks(path, man: dict, arrays: dict, net: PatchNet) -> bool:
+    """Keep the bundle's stored vertex blocks on ``net`` (True), or False when it has none this
+    piste draws.  FormatError naming the member when they do not fit the net."""
+    if not _stored_blocks(man) or RESIDENT_MEMBER not in arrays:
+        return False
+    try:
+        keep_resident(net, arrays[RESIDENT_MEMBER], LEVELS)
+    except PisteError as exc:
+        raise FormatError(path, f"invalid resident vertex blocks ({exc})", field=f"{RESIDENT_MEMBER}.npy") from None
+    return True
+
+
 def _warm(net: PatchNet) -> None:
     """Start building the net's GPU-resident vertex blocks in the background (a renderer is about to
     draw it): they overlap the rest of the load and the renderer's set-up."""
@@ -243,8 +288,10 @@ def bundle_from_data(data: BundleData, warm: bool = False, net: PatchNet | None 
     path, man, arrays = data.path, data.manifest, data.arrays
     if net is None:
         net = _terrain_net(path, man, arrays)
-        if warm:
+        if not _keep_blocks(path, man, arrays, net) and warm:
             _warm(net)
+    else:
+        _keep_blocks(path, man, arrays, net)
     lm_info = man.get("lightmap", {})
     lightmap = LightMap(atlas=arrays["lightmap/atlas"].astype(np.float32), rects=arrays["lightmap/rects"],
                         res=int(lm_info.get("res", 8)), gutter=int(lm_info.get("gutter", 1)), manifest=lm_info)
@@ -276,7 +323,7 @@ def load_bundle(path, verify: bool = True, warm: bool = False) -> Bundle:
 
     def terrain_ready(man: dict, arrays: dict) -> None:  # the terrain members are read, the rest not yet
         early["net"] = _terrain_net(path, man, arrays)
-        if warm:
+        if warm and not _stored_blocks(man):  # (stored blocks: kept once read, nothing to build)
             _warm(early["net"])
 
     return bundle_from_data(read_bundle(path, verify, on_terrain=terrain_ready), warm=warm, net=early.get("net"))

@@ -34,7 +34,9 @@ API
 ---
 ::
 
-    ResidentTerrain(net, levels=(4, 6, 8))    the blocks and templates (``vertices (N B, 11) float32``)
+    ResidentTerrain(net, levels=(4, 6, 8), vertices=None)    the blocks and templates (``vertices (N B, 11)
+        float32``; given: blocks built before, e.g. stored in a bundle, checked, not rebuilt)
+    keep_resident(net, vertices, levels)     such stored blocks kept on the net (resident_terrain returns them)
     ResidentTerrain.frame(eye, planes, ...)  -> ResidentMesh (indices, patch list, morph factors)
     shape_templates(levels) -> the 81 shapes' block-local index templates (shipped for 4/6/8:
         shipped_templates / write_templates / TEMPLATES_FILE)
@@ -60,11 +62,16 @@ from piste.terrain.bezier import blend_tables, eval_edges, params
 from piste.terrain.tessellate import (MAX_LEVEL, _bilinear_weights, _cache, _glue_sources, _Snapshot, get_shape,
                                       tessellate)
 
-__all__ = ["ResidentTerrain", "ResidentMesh", "RESIDENT_FLOATS", "MORPH_BAND", "RESIDENT_BUDGET", "BUILD_CHUNK",
-           "resident_terrain", "resident_fits", "morph_setting", "uniform_grids", "edge_points"]
+__all__ = ["ResidentTerrain", "ResidentMesh", "RESIDENT_FLOATS", "RESIDENT_FORMAT", "MORPH_BAND", "RESIDENT_BUDGET",
+           "BUILD_CHUNK", "resident_terrain", "resident_fits", "keep_resident", "morph_setting", "uniform_grids",
+           "edge_points"]
 
 #: floats per resident vertex: position 3, morph target 3, uv 2, light-map uv 2, morph slot 1
 RESIDENT_FLOATS = 11
+#: version of the blocks' layout and arithmetic: blocks stored by a build (a bundle's
+#: ``terrain/resident_blocks``) are used only when it is this one -- bump it when :class:`ResidentTerrain`
+#: would build other bits (``tests/terrain/test_resident_stored.py`` compares stored and built blocks)
+RESIDENT_FORMAT = 1
 #: fraction of each level's distance band over which its vertices morph towards the coarser level
 MORPH_BAND = 0.3
 #: patches per step of the blocks' build (bounds its temporary memory; the result does not depend on it)
@@ -255,7 +262,7 @@ class ResidentTerrain:
         ``{n: offset of level n's grid in a block}``
     """
 
-    def __init__(self, net: PatchNet, levels=LEVELS):
+    def __init__(self, net: PatchNet, levels=LEVELS, vertices: np.ndarray | None = None):
         levels = tuple(int(x) for x in levels)
         if len(levels) != 3 or list(levels) != sorted(set(levels)) or levels[0] < 2 or levels[-1] > MAX_LEVEL:
             raise ConfigError(f"resident terrain levels must be 3 increasing values in 2..{MAX_LEVEL}, got {levels}")
@@ -278,6 +285,25 @@ class ResidentTerrain:
         self.degenerate = np.ascontiguousarray(net.edge_degenerate, dtype=np.bool_)
         slots = net.n_edges + len(net)
         self.factors = np.ones(-(-slots // 1024) * 1024, dtype=np.float32)  # rows of 1024 (the GPU's texture)
+        if vertices is not None:
+            self._vertices = self._checked(vertices)
+
+    def _checked(self, vertices) -> np.ndarray:
+        """Blocks built before (e.g. stored in a bundle): ``(N B, 11) float32`` whose morph slots
+        index this net's factors, else :class:`~piste.errors.ValidationError` (they are used as given)."""
+        v = vertices
+        n, b = len(self.net), self.block
+        if not isinstance(v, np.ndarray) or v.dtype != np.float32 or v.shape != (n * b, RESIDENT_FLOATS):
+            got = f"{v.shape} {v.dtype}" if isinstance(v, np.ndarray) else type(v).__name__
+            raise ValidationError(f"{self.net.name}: resident vertex blocks must be an ({n * b}, {RESIDENT_FLOATS}) "
+                                  f"float32 array for {n} patches at levels {self.levels}, got {got}")
+        if len(v):
+            slot = v[:, 10]
+            lo, hi = float(slot.min()), float(slot.max())
+            if not (lo >= 0.0 and hi < self.net.n_edges + n):  # (False for NaN too)
+                raise ValidationError(f"{self.net.name}: resident vertex blocks' morph slots must be in "
+                                      f"0..{self.net.n_edges + n - 1}, got {lo}..{hi}")
+        return np.ascontiguousarray(v)
 
     # ------------------------------------------------------------------ build (once)
     @property
@@ -530,6 +556,18 @@ def resident_fits(net: PatchNet, levels=LEVELS, budget: int = RESIDENT_BUDGET) -
     Bigger nets are drawn on the CPU path, visible patches evaluated per frame."""
     block = sum(int(n) * int(n) for n in levels)
     return len(net) * block * RESIDENT_FLOATS * 4 <= budget
+
+
+def keep_resident(net: PatchNet, vertices: np.ndarray, levels=LEVELS) -> ResidentTerrain:
+    """Keep blocks built before (a bundle's stored ``terrain/resident_blocks``: the bits
+    :class:`ResidentTerrain` builds for ``net`` at ``levels`` with :data:`RESIDENT_FORMAT`) on ``net``:
+    :func:`resident_terrain` returns them at once (a fresh process's first frame waited ~0.1 s for
+    the background build).  ``vertices`` ``(N B, 11) float32``; checked (shape, dtype, morph slots:
+    :class:`~piste.errors.ValidationError`), not copied when contiguous."""
+    key = tuple(int(x) for x in levels)
+    r = ResidentTerrain(net, key, vertices=vertices)
+    net.__dict__.setdefault("_resident", {})[key] = r
+    return r
 
 
 def morph_setting(explicit: bool | None = None) -> bool:
