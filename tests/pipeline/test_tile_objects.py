@@ -161,25 +161,33 @@ def test_object_set_of_tile_objects(tmp_path):
     assert np.array_equal(k2, k0) and np.array_equal(m2, m0)
 
 
-def test_open_tiles_holds_the_objects_around_its_local_tile(tmp_path):
+def test_open_tiles_streams_the_objects_and_add_tile_objects_holds_some(tmp_path):
+    """open_tiles: an empty set of groups the streamed terrain fills as tiles page in
+    (tests/render/test_streaming_objects.py); a world without objects has none.  add_tile_objects
+    holds the objects of given tiles, a tile whose objects do not read back left out."""
+    from piste.pipeline.tile_objects import add_tile_objects
     from piste.pipeline.tiles_source import open_tiles
+    from piste.render.object_pass import ObjectGroups
 
     spec = _world(tmp_path / "w.tiles", tile_patches=6)  # 4 x 4 tiles
     build_tiles(spec)
     b = open_tiles(spec.root)
-    ty, tx = b.manifest["terrain"]["local_tile"]
-    store = TileStore(spec.root)
-    near = [(y, x) for y in range(ty - 1, ty + 2) for x in range(tx - 1, tx + 2)]
-    want = sum(len(read_tile_objects(store, spec.grid, y, x, 4)[0]) for y, x in near)
     objs = b.objects()
-    assert objs is not None and len(objs) == want > 0
-    assert b.manifest["objects"]["placed"] == "tiles"
-    assert b.arrays["objects/colors/tree"].shape[0] == objs.counts["tree"]  # vertex colours baked
-    # a neighbour whose objects do not read back is left out (as the streamed view leaves it out)
-    y, x = near[0]
-    k = len(read_tile_objects(store, spec.grid, y, x, 4)[0])
-    _rewrite(store, (y, x), objects_matrix=None)
-    assert len(open_tiles(spec.root).objects()) == want - k
+    assert isinstance(objs, ObjectGroups) and len(objs) == 0 and objs.kinds == OBJECT_KINDS
+    assert b.manifest["objects"]["placed"] == "tiles" and b.manifest["objects"]["streamed"]
+    assert b.vertex_colors()["tree"].shape[0] == 0
+    bare = replace(spec, root=str(tmp_path / "bare.tiles"), objects=())
+    build_tiles(bare)
+    assert open_tiles(bare.root).objects() is None
+    store = TileStore(spec.root)
+    near = [(1, 1), (1, 2), (2, 1)]
+    want = sum(len(read_tile_objects(store, spec.grid, y, x, 4)[0]) for y, x in near)
+    held = add_tile_objects(replace(b, _cache={}), store, spec.grid, near)
+    assert len(held.objects()) == want > 0
+    assert held.arrays["objects/colors/tree"].shape[0] == held.objects().counts["tree"]  # vertex colours baked
+    k = len(read_tile_objects(store, spec.grid, 1, 1, 4)[0])
+    _rewrite(store, (1, 1), objects_matrix=None)
+    assert len(add_tile_objects(replace(b, _cache={}), store, spec.grid, near, skip_bad=True).objects()) == want - k
 
 
 def _scene(tmp_path, rules: str):

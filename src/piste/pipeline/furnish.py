@@ -14,6 +14,7 @@ standing_positions(net, n, spacing=3.0) -> (n, 2) float64     points on the terr
 standing_matrices(net, xy) -> (n, 4, 4) float64               rider -> world, facing down the fall line
 add_standing_riders(bundle, n) -> Bundle                      a copy with n default riders
 add_objects(bundle, n, seed=0) -> Bundle                      a copy with n of the course's objects
+keep_streamed_objects(old, new) -> Bundle                     a copy keeping a tiled world's paged objects
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from piste.terrain.query import height_at
 from piste.world.objects import bake_vertex_colors, place_objects
 from piste.world.riders import surface_frame
 
-__all__ = ["standing_positions", "standing_matrices", "add_standing_riders", "add_objects"]
+__all__ = ["standing_positions", "standing_matrices", "add_standing_riders", "add_objects", "keep_streamed_objects"]
 
 #: riders a source may be given (``--riders``)
 MAX_RIDERS = 64
@@ -102,7 +103,18 @@ def add_standing_riders(bundle: Bundle, n: int) -> Bundle:
     new = dict(bundle.arrays)
     new.update({f"characters/rider/{k}": v for k, v in arrays.items()})
     new["riders/matrix"] = mats
-    return replace(bundle, manifest=man, arrays=new, _cache={})
+    return keep_streamed_objects(bundle, replace(bundle, manifest=man, arrays=new, _cache={}))
+
+
+def keep_streamed_objects(old: Bundle, new: Bundle) -> Bundle:
+    """``new`` (a copy of ``old`` made with ``dataclasses.replace(..., _cache={})``) holding ``old``'s
+    streamed objects again (a tiled world's, paged with its tiles:
+    :func:`piste.pipeline.tile_objects.stream_tile_objects`; they live in the bundle's cache, not in
+    its arrays); ``new`` itself otherwise."""
+    objs = old._cache.get("objects") if (old.manifest.get("objects") or {}).get("streamed") else None
+    if objs is not None and "objects" not in new._cache:
+        new._cache["objects"] = objs
+    return new
 
 
 def add_objects(bundle: Bundle, n: int, seed: int = 0) -> Bundle:

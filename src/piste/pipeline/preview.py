@@ -263,7 +263,8 @@ def terrain_renderer(bundle, size, ctx, atlas, lightmap="bundle", stream_wait: b
     t = bundle.manifest.get("terrain") or {}
     if t.get("source") == "tiles":
         return _render.StreamingTerrain(t["root"], bundle.net, size=size, ctx=ctx,
-                                budget_bytes=int(float(t.get("budget_mb", 256.0)) * 2**20), wait=stream_wait)
+                                budget_bytes=int(float(t.get("budget_mb", 256.0)) * 2**20), wait=stream_wait,
+                                objects=bundle.objects())  # a tiled world's objects page with its tiles
     if "lightmap/source" in bundle.arrays and lightmap == "bundle":  # an SSX level: ps2 mode
         return _render.SsxTerrainRenderer(bundle.net, bundle.arrays["lightmap/source"], size=size, ctx=ctx, lightmap=atlas, **kw)
     return None

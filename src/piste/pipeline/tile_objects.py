@@ -25,6 +25,8 @@ API
     object_set(kind, matrix, lights=None) -> ObjectSet   instances for the object pass
     tiles_objects(store, grid, tiles) -> (kind, matrix)  the stored objects of some tiles, checked
     add_tile_objects(bundle, store, grid, tiles) -> Bundle   a runtime scene holding them (vertex colours baked)
+    stream_tile_objects(bundle) -> Bundle           a runtime scene whose objects are paged with the tiles:
+        an empty ObjectGroups the streamed terrain fills with the objects of the tiles it pages in
 
     # riders across tiles
     track_tiles(grid, xy, halo=1) -> [(ty, tx), ...]        the tiles under a track (and around it)
@@ -45,7 +47,8 @@ import numpy as np
 
 from piste.errors import ConfigError, ValidationError
 from piste.lighting.vertex import choose_lights_many
-from piste.pipeline.furnish import object_arrays
+from piste.pipeline.furnish import keep_streamed_objects, object_arrays
+from piste.render.object_pass import ObjectGroups
 from piste.terrain.net import PatchNet
 from piste.terrain.query import height_at
 from piste.terrain.query import eval_points
@@ -53,7 +56,7 @@ from piste.terrain.tiles import TileError, TileGrid, read_tile_objects
 from piste.world.objects import OBJECT_KINDS, ObjectSet, compress_mesh, make_mesh, normal_matrix, object_texture
 
 __all__ = ["ObjectRule", "DEFAULT_RULES", "rules_key", "place_tile_objects", "object_set", "MAX_TILE_OBJECTS",
-           "tiles_objects", "add_tile_objects", "track_tiles", "track_net", "world_track", "add_track_riders",
+           "tiles_objects", "add_tile_objects", "stream_tile_objects", "track_tiles", "track_net", "world_track", "add_track_riders",
            "MAX_TRACK_TILES"]
 
 #: most tiles a track's ground may span (its net is held in memory while riders run on it)
@@ -279,6 +282,25 @@ def add_tile_objects(bundle, store, grid: TileGrid, tiles, skip_bad: bool = Fals
     return replace(bundle, manifest=man, arrays=arrays, _cache={})
 
 
+def stream_tile_objects(bundle):
+    """A copy of ``bundle`` (a tiled world's runtime scene) whose objects are paged with its tiles:
+    ``bundle.objects()`` is an empty :class:`piste.render.object_pass.ObjectGroups` (every kind's
+    mesh, the atlas, vertex lights chosen from the bundle's lights) that the streamed terrain
+    (:class:`piste.render.streaming.StreamingTerrain`, ``objects=``) fills with one group a tile as
+    tiles page in and empties as they leave; the manifest's ``objects`` says ``placed = "tiles"``,
+    ``streamed = true``, and the baked colours start empty (each group's are baked when drawn)."""
+    base = object_set(np.zeros(0, np.int64), np.zeros((0, 4, 4)))
+    groups = ObjectGroups(base.meshes, base.kinds, base.texture, base.blend, world_lights=bundle.lights)
+    arrays = dict(bundle.arrays)
+    for k in base.kinds:
+        arrays[f"objects/colors/{k}"] = np.zeros((0, len(base.meshes[k].positions), 3), np.uint8)
+    man = dict(bundle.manifest)
+    man["objects"] = {"kinds": list(base.kinds), "placed": "tiles", "streamed": True,
+                      "meshes": {k: {"normal_bits": int(base.meshes[k].normal_bits), "radius": float(base.meshes[k].radius),
+                                     "blend": False} for k in base.kinds}}
+    return replace(bundle, manifest=man, arrays=arrays, _cache={"objects": groups})
+
+
 def track_tiles(grid: TileGrid, xy, halo: int = 1) -> list:
     """The tiles under the polyline ``xy (k, 2)`` metres (sampled every eighth of a tile) and within
     ``halo`` tiles of them, sorted: ``[(ty, tx), ...]`` (ConfigError: a point off the world, more
@@ -352,4 +374,5 @@ def add_track_riders(bundle, store, grid: TileGrid, start_xy, end_xy, start: flo
     rects = np.asarray(net.lightmap_rect, np.float32)  # the local net's placeholder light map, resized
     arrays["lightmap/rects"] = rects
     lm = replace(bundle.lightmap, rects=rects)
-    return replace(bundle, manifest=man, arrays=arrays, net=net, lightmap=lm, centerline=line, _cache={})
+    return keep_streamed_objects(bundle, replace(bundle, manifest=man, arrays=arrays, net=net, lightmap=lm,
+                                                 centerline=line, _cache={}))

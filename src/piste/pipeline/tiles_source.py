@@ -8,6 +8,11 @@ patches: where default riders stand, objects sit and shadows fall), its manifest
 :class:`piste.render.streaming.StreamingTerrain` (tiles paged in and out under the budget) and the
 riders, objects and shadows with the same passes as the course.
 
+Objects: a world built with object rules gets, as its objects, an empty
+:class:`piste.render.object_pass.ObjectGroups` (:func:`piste.pipeline.tile_objects.stream_tile_objects`)
+that the streamed terrain fills with the objects of the tiles it pages in and empties of those it
+evicts, so a camera flying across the world sees the objects of the tiles around it.
+
 Cameras: ``flight`` (the first camera of :func:`piste.render.streaming.fly_path`, ``piste render
 WORLD.tiles``' flight start) and ``centre`` (looking at the local tile from the south, above).
 
@@ -28,10 +33,11 @@ from piste.formats.bundle import camera_to_dict
 from piste.lighting.lightmap import LightMap
 from piste.lighting.lights import default_lights
 from piste.pipeline.bundle_objects import Bundle, camera_from_dict
-from piste.pipeline.tile_objects import add_tile_objects
+from piste.pipeline.tile_objects import stream_tile_objects
 from piste.render.streaming import fly_path
-from piste.terrain.tiles import TileError, TileStore, tile_entries, tile_net
+from piste.terrain.tiles import TileError, TileStore, read_tile_objects, tile_entries, tile_net
 from piste.world.camera import Camera
+from piste.world.objects import OBJECT_KINDS
 
 __all__ = ["open_tiles", "flight_cameras"]
 
@@ -85,11 +91,23 @@ def open_tiles(path, quiet: bool = True, warm: bool = False, budget_mb: float = 
     lightmap = LightMap(atlas=atlas, rects=rects, res=1, gutter=0, manifest={})
     cameras = {d["name"]: camera_from_dict(d) for d in manifest["cameras"]}
     bundle = Bundle(root, manifest, arrays, net, lightmap, default_lights(), cameras)
-    # the scene objects the build placed (piste.pipeline.tile_objects) on the local tile and its
-    # neighbours (not yet paged with the streamed tiles)
-    near = [(y, x) for y in range(max(ty - 1, 0), min(ty + 2, grid.shape[0]))
-            for x in range(max(tx - 1, 0), min(tx + 2, grid.shape[1])) if (y, x) in entries]
-    return add_tile_objects(bundle, store, grid, near, skip_bad=True)
+    # the scene objects the build placed (piste.pipeline.tile_objects): paged in and out with the
+    # tiles by the streamed terrain, when the world holds any (the tiles nearest the centre asked)
+    order = sorted(entries, key=lambda t: (float(np.abs(np.array(t) - centre).sum()), t))
+    if any(_has_objects(store, grid, t) for t in order[:OBJECT_PROBE_TILES]):
+        return stream_tile_objects(bundle)
+    return bundle
+
+
+#: tiles (nearest the world's centre first) asked whether the world holds scene objects
+OBJECT_PROBE_TILES = 64
+
+
+def _has_objects(store, grid, t) -> bool:
+    try:
+        return len(read_tile_objects(store, grid, t[0], t[1], len(OBJECT_KINDS))[0]) > 0
+    except TileError:
+        return False
 
 
 def flight_cameras(bundle: Bundle, frames: int, fps: float = 30.0, speed: float = 100.0) -> list:

@@ -28,8 +28,20 @@ vertex: dynamic point and spot lights with attenuation and cone).
 API
 ---
 ObjectPass(ctx, objects, lights, mode="dynamic", lod_pixels=0.5)   ``.draw(vp, eye, visible, fog=None, mode=None)``
+    ``.add_group(key, kind, matrix, colors=None)``, ``.remove_group(key)``   instances that come and go
 instance_rows(objects) -> (n, 16, 4) float32
 light_uniforms(lights) -> dict of the ``points`` mode's uniform arrays
+ObjectGroups(meshes, kinds, texture=None, blend=(), world_lights=None)   an ObjectSet of instance groups
+
+Instance groups (a tiled world's objects, paged in and out with their tiles): an
+:class:`ObjectGroups` is an :class:`~piste.world.objects.ObjectSet` whose instances are the
+concatenation of groups added and removed by key (``.add(key, kind, matrix, colors=None)``,
+``.remove(key)``), changed in place (whoever holds the set, e.g. a scene culling it, sees the same
+instances as the pass) with a ``version`` that counts the changes.  A pass drawing one follows it
+before each draw: only a new group's instance rows are computed (meshes, LOD chains, programs and
+the atlas stay; instance buffers grow by doubling); baked vertex colours are kept per group (given,
+or baked for that group on first use).  ``ObjectPass.add_group`` / ``remove_group`` turn a pass's
+plain set into groups (its own instances the group ``None``).
 """
 
 from __future__ import annotations
@@ -40,10 +52,11 @@ from piste.errors import ConfigError, RenderError
 from piste.lighting.lights import DirectionalLight, SpotLight
 from piste.render.context import load_shader
 from piste.render.textures import mipmapped_texture
+from piste.lighting.vertex import VertexLights, choose_lights_many
 from piste.world.object_lod import DEFAULT_LOD_PIXELS, choose_lods, instance_scale, object_lods
-from piste.world.objects import bake_vertex_colors
+from piste.world.objects import ObjectSet, bake_vertex_colors, normal_matrix
 
-__all__ = ["ObjectPass", "instance_rows", "light_uniforms", "MAX_POINT_LIGHTS"]
+__all__ = ["ObjectPass", "ObjectGroups", "instance_rows", "light_uniforms", "MAX_POINT_LIGHTS"]
 
 MAX_POINT_LIGHTS = 12
 _MODES = {"dynamic": 0, "baked": 1, "points": 2}
@@ -113,6 +126,140 @@ def light_uniforms(lights) -> dict:
             "u_world_ambient": tuple(float(x) for x in lights.ambient_color())}
 
 
+def _concat_lights(parts) -> VertexLights | None:
+    """The vertex lights of ``parts`` (ObjectSets) one after another (a part without: zero slots)."""
+    if all(p.lights is None for p in parts):
+        return None
+    d, c, a = [], [], []
+    for p in parts:
+        n = len(p)
+        vl = p.lights
+        d.append(np.zeros((n, 3, 3), np.float32) if vl is None else vl.directions.reshape(n, 3, 3))
+        c.append(np.zeros((n, 3, 3), np.float32) if vl is None else vl.colors.reshape(n, 3, 3))
+        a.append(np.zeros((n, 3), np.float32) if vl is None else vl.ambient.reshape(n, 3))
+    return VertexLights(np.concatenate(d), np.concatenate(c), np.concatenate(a))
+
+
+class ObjectGroups(ObjectSet):
+    """An :class:`~piste.world.objects.ObjectSet` made of instance groups added and removed by key
+    (see the module docstring): its instance arrays are the groups' in the order they were added.
+
+    Parameters
+    ----------
+    meshes, kinds, texture, blend : as an ObjectSet's (shared by every group)
+    world_lights : the world's :class:`piste.lighting.Lights` each instance's vertex lights are
+        chosen from (None: none)
+
+    Attributes
+    ----------
+    groups : ``{key: ObjectSet}`` the groups, in order;  colors : ``{key: {kind: (k, v, 3) uint8}
+    or None}`` their baked vertex colours;  version : changes made so far
+    on_visible : a callable ``(planes, eye)`` run first by :meth:`visible` (e.g. a streamed
+        terrain paging the groups for that view), or None
+    """
+
+    def __init__(self, meshes, kinds, texture=None, blend=(), world_lights=None):
+        kinds = tuple(kinds)
+        super().__init__(dict(meshes), kinds, np.zeros(0, np.int64), np.zeros((0, 4, 4)), np.zeros((0, 3, 3)),
+                         np.zeros((0, 3)), np.zeros(0), None, texture, {k: 0 for k in kinds}, tuple(blend))
+        self.world_lights = world_lights
+        self.groups: dict = {}
+        self.colors: dict = {}
+        self.version = 0
+        self.on_visible = None
+        # the mesh-space bounding-sphere centres and radii (a group's spheres from its matrices)
+        self._mesh_center = np.stack([np.asarray(meshes[k].pos_offset, np.float64)
+                                      + np.asarray(meshes[k].pos_extent, np.float64) / 2.0 for k in kinds])
+        self._mesh_radius = np.array([float(meshes[k].radius) for k in kinds])
+
+    @classmethod
+    def of(cls, objects, colors=None, world_lights=None) -> "ObjectGroups":
+        """``objects`` (an ObjectSet) as the group ``None`` of a new set (its ``colors``, if any)."""
+        g = cls(objects.meshes, objects.kinds, objects.texture, objects.blend, world_lights)
+        g.groups[None] = objects
+        g.colors[None] = None if colors is None else {k: np.asarray(c) for k, c in colors.items()}
+        g._concat()
+        return g
+
+    def part(self, kind, matrix) -> ObjectSet:
+        """The ObjectSet of instances ``kind (k,) int64`` (into :attr:`kinds`) and ``matrix (k, 4, 4)``
+        object -> world: bounding spheres, normal matrices and vertex lights (from
+        :attr:`world_lights`) computed for them alone (RenderError: bad shapes or kinds)."""
+        kind = np.asarray(kind).reshape(-1)
+        matrix = np.asarray(matrix, dtype=np.float64)
+        if kind.dtype.kind not in "iu" or matrix.shape != (len(kind), 4, 4) or not np.isfinite(matrix).all():
+            raise RenderError(f"object group: expected kind (k,) integers and finite matrix (k, 4, 4), got "
+                              f"{kind.shape} {kind.dtype} and {matrix.shape}")
+        if len(kind) and (kind.min() < 0 or kind.max() >= len(self.kinds)):
+            raise RenderError(f"object group: kinds must index {self.kinds}, got {int(kind.min())}..{int(kind.max())}")
+        kind = kind.astype(np.int64)
+        center = np.einsum("nij,nj->ni", matrix[:, :3, :3], self._mesh_center[kind]) + matrix[:, :3, 3]
+        radius = self._mesh_radius[kind] * np.linalg.norm(matrix[:, :3, :3], axis=1).max(axis=1) if len(kind) \
+            else np.zeros(0)
+        wl = self.world_lights
+        vl = choose_lights_many(wl, center) if wl is not None and len(kind) and (len(wl.direct) or len(wl.ambient)) \
+            else None
+        counts = {k: int(np.count_nonzero(kind == i)) for i, k in enumerate(self.kinds)}
+        return ObjectSet(self.meshes, self.kinds, kind, matrix, normal_matrix(matrix), center, radius, vl,
+                         self.texture, counts, self.blend)
+
+    def add(self, key, kind, matrix, colors=None) -> ObjectSet:
+        """Add (or replace) group ``key``: instances ``kind (k,)``, ``matrix (k, 4, 4)`` (:meth:`part`),
+        their baked vertex colours ``{kind: (k_kind, v, 3) uint8}`` or None (baked when drawn)."""
+        part = self.part(kind, matrix)
+        if colors is not None:
+            colors = {k: np.asarray(c) for k, c in colors.items()}
+            for name in self.kinds:
+                want = (part.counts[name], len(self.meshes[name].positions), 3)
+                c = colors.get(name)
+                if c is None or c.shape != want or c.dtype != np.uint8:
+                    raise RenderError(f"object group {key!r}: baked colours of {name!r}: expected {want} uint8, got "
+                                      f"{None if c is None else (c.shape, str(c.dtype))}")
+        self.groups.pop(key, None)
+        self.groups[key] = part
+        self.colors[key] = colors
+        self._concat()
+        return part
+
+    def remove(self, key) -> bool:
+        """Drop group ``key`` (True if it was there)."""
+        if key not in self.groups:
+            return False
+        del self.groups[key]
+        self.colors.pop(key, None)
+        self._concat()
+        return True
+
+    def slices(self) -> dict:
+        """``{key: slice}`` each group's instances in the set."""
+        out, a = {}, 0
+        for key, p in self.groups.items():
+            out[key] = slice(a, a + len(p))
+            a += len(p)
+        return out
+
+    def _concat(self) -> None:
+        parts = list(self.groups.values())
+        if parts:
+            self.kind = np.concatenate([p.kind for p in parts]).astype(np.int64)
+            self.matrix = np.concatenate([p.matrix for p in parts])
+            self.normal_matrix = np.concatenate([p.normal_matrix for p in parts])
+            self.center = np.concatenate([p.center for p in parts])
+            self.radius = np.concatenate([p.radius for p in parts])
+        else:
+            self.kind, self.matrix, self.normal_matrix = np.zeros(0, np.int64), np.zeros((0, 4, 4)), np.zeros((0, 3, 3))
+            self.center, self.radius = np.zeros((0, 3)), np.zeros(0)
+        self.lights = _concat_lights(parts)
+        self.counts = {k: int(np.count_nonzero(self.kind == i)) for i, k in enumerate(self.kinds)}
+        self.version += 1
+
+    def visible(self, planes, max_distance: float | None = None, eye=None) -> np.ndarray:
+        """As :meth:`ObjectSet.visible`, after :attr:`on_visible` (which may change the groups)."""
+        if self.on_visible is not None:
+            self.on_visible(np.asarray(planes, dtype=np.float64), eye)
+        return super().visible(planes, max_distance=max_distance, eye=eye)
+
+
 class ObjectPass:
     """Draws an :class:`piste.world.objects.ObjectSet`.
 
@@ -180,6 +327,10 @@ class ObjectPass:
         self.lod_counts = np.zeros(n_levels, np.int64)  # instances drawn at each level last frame
         self._points = None
         self.colors = None
+        self._version = None  # the grouped set's version the instance arrays follow (ObjectGroups)
+        self._part_rows: dict = {}  # group key -> (its ObjectSet, its instance rows)
+        self._part_baked: dict = {}  # group key -> (its ObjectSet, its colours baked here)
+        self._follow()
         if colors is not None:
             self.set_vertex_colors(colors)
         self.drawn = 0
@@ -226,12 +377,19 @@ class ObjectPass:
         instances of each kind in the order of ``objects.instances(kind)`` (what
         :func:`piste.world.objects.bake_vertex_colors` returns and a bundle stores)."""
         colors = {k: np.asarray(c) for k, c in colors.items()}
+        self._follow()
         for name in self.objects.kinds:
             c = colors.get(name)
             want = (len(self.objects.instances(name)), len(self.objects.meshes[name].positions), 3)
             if c is None or c.shape != want or c.dtype != np.uint8:
                 got = None if c is None else f"{c.shape} {c.dtype}"
                 raise RenderError(f"baked colours of {name!r}: expected {want} uint8, got {got}")
+        if isinstance(self.objects, ObjectGroups):  # each group's share, in the set's order
+            start = dict.fromkeys(colors, 0)
+            for key, part in self.objects.groups.items():
+                self.objects.colors[key] = {k: colors[k][start[k]:start[k] + part.counts[k]] for k in self.objects.kinds}
+                for k in self.objects.kinds:
+                    start[k] += part.counts[k]
         self.colors = colors
         for info in self.kinds:
             if info["baked"] is not None:
@@ -239,7 +397,9 @@ class ObjectPass:
                 info["baked"] = None
 
     def _baked_textures(self):
-        if self.colors is not None:
+        if isinstance(self.objects, ObjectGroups):
+            baked = self._group_colors()
+        elif self.colors is not None:
             baked = self.colors
         elif self.lights is None:
             raise RenderError("object lighting 'baked' needs the world's lights")
@@ -266,6 +426,7 @@ class ObjectPass:
         mode = self.mode if mode is None else mode
         if mode not in _MODES:
             raise ConfigError(f"object lighting must be one of {', '.join(_MODES)}, got {mode!r}")
+        self._follow()
         objs = self.objects
         vis = np.arange(len(objs)) if visible is None else np.asarray(visible, dtype=np.int64)
         self.drawn = 0
@@ -329,6 +490,91 @@ class ObjectPass:
                 fbo.depth_mask = True
                 ctx.blend_func = moderngl.DEFAULT_BLENDING
                 ctx.disable(moderngl.BLEND)
+
+    # ------------------------------------------------------------------ instance groups
+    def add_group(self, key, kind, matrix, colors=None) -> None:
+        """Add (or replace) the instances ``kind (k,) int64`` (into the set's kinds) with object ->
+        world ``matrix (k, 4, 4)`` as group ``key``, their baked colours ``{kind: (k_kind, v, 3)
+        uint8}`` or None (baked from the world's lights when the baked mode draws them); only their
+        instance rows are computed (:class:`ObjectGroups`).  A plain set becomes the group None."""
+        self._groups().add(key, kind, matrix, colors)
+        self._follow()
+
+    def remove_group(self, key) -> bool:
+        """Drop group ``key``'s instances (True if it was there)."""
+        gone = self._groups().remove(key)
+        self._follow()
+        return gone
+
+    @property
+    def group_keys(self) -> list:
+        """The keys of the groups drawn (a plain set: ``[None]``)."""
+        return list(self.objects.groups) if isinstance(self.objects, ObjectGroups) else [None]
+
+    def _groups(self) -> ObjectGroups:
+        if not isinstance(self.objects, ObjectGroups):
+            self.objects = ObjectGroups.of(self.objects, colors=self.colors, world_lights=self.lights)
+        return self.objects
+
+    def _follow(self) -> None:
+        """Catch up with a grouped set's changes: the instance rows of new groups, the whole set's
+        rows concatenated, instance buffers grown, baked-colour textures redone on next use."""
+        objs = self.objects
+        version = getattr(objs, "version", None)
+        if not isinstance(objs, ObjectGroups) or version == self._version:
+            return
+        self._version = version
+        got = {}
+        for key, part in objs.groups.items():
+            old = self._part_rows.get(key)
+            got[key] = old if old is not None and old[0] is part else (part, instance_rows(part))
+        self._part_rows = got
+        self._part_baked = {k: v for k, v in self._part_baked.items() if k in got and got[k][0] is v[0]}
+        rows = np.concatenate([r for _, r in got.values()]) if got else np.zeros((0, 16, 4), np.float32)
+        for k in range(len(objs.kinds)):  # each instance's row in its kind's baked colours, over the whole set
+            idx = np.flatnonzero(objs.kind == k)
+            rows[idx, 13, 3] = np.arange(len(idx))
+        self.rows, self.packed = rows, _pack_rows(rows)
+        self.scale = instance_scale(objs.matrix) if len(objs) else np.zeros(0)
+        import moderngl
+
+        if len(objs) > self.inst.height:  # the generic program's instance texture
+            self.inst.release()
+            self.inst = self.ctx.texture((16, max(len(objs), 2 * self.inst.height)), 4, dtype="f4")
+            self.inst.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        for k, info in enumerate(self.kinds):
+            cap = info["instances"][0].size // _INSTANCE_BYTES
+            count = objs.counts[objs.kinds[k]]
+            if count > cap:  # grown by doubling; the vertex arrays reading the old buffers go
+                for b in info["instances"]:
+                    b.release()
+                info["instances"] = [self.ctx.buffer(reserve=max(count, 2 * cap) * _INSTANCE_BYTES)
+                                     for _ in info["lods"]]
+                for _, vaos in self._programs.values():
+                    for vk in [vk for vk in vaos if vk[0] == k]:
+                        vaos.pop(vk).release()
+            if info["baked"] is not None:
+                info["baked"].release()
+                info["baked"] = None
+        self.colors = None  # (a grouped set's colours are its groups')
+
+    def _group_colors(self) -> dict:
+        """The baked colours of a grouped set, ``{kind: (k, v, 3) uint8}``: each group's own, or baked
+        here from the world's lights (once per group)."""
+        objs = self.objects
+        parts = []
+        for key, part in objs.groups.items():
+            c = objs.colors.get(key)
+            if c is None:
+                old = self._part_baked.get(key)
+                if old is None or old[0] is not part:
+                    if self.lights is None:
+                        raise RenderError("object lighting 'baked' needs the world's lights")
+                    old = self._part_baked[key] = (part, bake_vertex_colors(part, self.lights))
+                c = old[1]
+            parts.append(c)
+        return {name: np.concatenate([c[name] for c in parts]) if parts else
+                np.zeros((0, len(objs.meshes[name].positions), 3), np.uint8) for name in objs.kinds}
 
     def _uniforms(self, key, blend, vp, eye, fog, mode, light_only):
         """The program of ``key`` (blend pass or not) with this draw's uniforms set."""

@@ -557,10 +557,11 @@ class TileCache:
             return None
 
     def resident_objects(self) -> dict:
-        """``{tile: (kind (k,) int64, matrix (k, 4, 4) float64)}``: the objects of the tiles whose
-        near or middle mesh is resident now (empty without :attr:`load_objects`)."""
+        """``{tile: (kind (k,) int64, matrix (k, 4, 4) float64)}``: the objects of the tiles paged in
+        (their near or middle mesh loaded and still wanted; kept while a tile changes level), empty
+        without :attr:`load_objects`."""
         with self._lock:
-            return {t: self.objects[t] for t in self.near if t in self.objects}
+            return dict(self.objects)
 
     def visible_patches(self, t, eye) -> np.ndarray | None:
         """``(n,) bool`` patches of resident near tile ``t`` seen from ``eye`` (:meth:`TileSets.visible`),
@@ -663,8 +664,9 @@ class TileCache:
             for t in [t for t in self.near if self._wanted.get(t) != self.near_level.get(t)]:
                 del self.near[t]
                 self.vis.pop(t, None)
-                self.objects.pop(t, None)
                 self.near_level.pop(t, None)
+            for t in [t for t in self.objects if t not in self._wanted]:  # (kept while the tile changes level)
+                del self.objects[t]
             todo = [(d, t) for d, t, _ in want if t not in self.near and t not in self._pending]
             self._pending.update(t for _, t in todo)
         for d, t in todo:
@@ -1000,12 +1002,23 @@ class StreamingTerrain:
     size, ctx, budget_bytes, near_radius : see :class:`StreamingRenderer`
     wait : every frame waits for the tiles it wants (offline frames: the same picture whatever the
         loader's timing); False in a window (far stand-ins while tiles load)
+    objects : the scene's objects as a :class:`piste.render.object_pass.ObjectGroups` (a tiled
+        world's, :func:`piste.pipeline.tiles_source.open_tiles`), or None: the objects of the tiles
+        paged in, one group a tile (key ``(ty, tx)``), added when a tile's near or middle mesh loads
+        and removed when it is evicted (:meth:`page_objects`), so the object pass drawing the set
+        draws the objects of the resident tiles.  Paged from the set's ``visible`` (whoever culls the
+        objects pages the tiles for that view first: the culled set and the drawn one agree)
     """
 
     def __init__(self, root, net, size=(640, 448), ctx=None, budget_bytes: int = 256 << 20,
-                 near_radius: float | None = None, wait: bool = True):
+                 near_radius: float | None = None, wait: bool = True, objects=None):
         self.streaming = StreamingRenderer(root, size=size, budget_bytes=budget_bytes, near_radius=near_radius,
                                            ctx=ctx, sky=True)
+        self.objects = objects if objects is not None and hasattr(objects, "groups") else None
+        self._paged_eye = None  # the eye the tiles were last paged for
+        if self.objects is not None:
+            self.streaming.cache.load_objects = True
+            self.objects.on_visible = self._on_visible
         self.ctx = self.streaming.ctx
         self.net = net
         self.wait = bool(wait)
@@ -1038,14 +1051,45 @@ class StreamingTerrain:
     def levels(self, camera, lod: bool = True) -> int:
         return self.level
 
+    def _update(self, cam) -> None:
+        self.streaming.update(cam, wait=self.wait)
+        self._paged_eye = tuple(float(x) for x in cam.eye)
+
+    def _on_visible(self, planes, eye) -> None:
+        """The object set's hook (:attr:`ObjectGroups.on_visible`): page the tiles for a view not
+        paged yet (the eye ``(3,)``, the vertical field of view from the frustum's bottom and top
+        ``planes``), then :meth:`page_objects`."""
+        if eye is not None and tuple(float(x) for x in np.asarray(eye).reshape(3)) != self._paged_eye:
+            cos = float(np.clip(np.dot(planes[2, :3], planes[3, :3]), -1.0, 1.0))
+            fov = 180.0 - float(np.degrees(np.arccos(cos)))  # the inward normals of bottom and top: 180 - fov apart
+            if fov > 1e-6:
+                self._update(_View(np.asarray(eye, dtype=np.float64).reshape(3), fov))
+        self.page_objects()
+
+    def page_objects(self) -> dict:
+        """Make the object set's groups the objects of the tiles paged in now
+        (:meth:`TileCache.resident_objects`): evicted tiles' groups removed, newly resident tiles'
+        added; ``{"added": n, "removed": n, "tiles": n}``."""
+        if self.objects is None:
+            return {"added": 0, "removed": 0, "tiles": 0}
+        res = {t: o for t, o in self.streaming.cache.resident_objects().items() if len(o[0])}
+        gone = [k for k in self.objects.groups if k not in res]
+        for k in gone:
+            self.objects.remove(k)
+        new = [t for t in sorted(res) if t not in self.objects.groups]
+        for t in new:
+            self.objects.add(t, *res[t])
+        self.cull_stats.update(object_tiles=len(self.objects.groups), objects_resident=len(self.objects))
+        return {"added": len(new), "removed": len(gone), "tiles": len(self.objects.groups)}
+
     def prepare(self, camera, lod: bool = True, levels=None, timings: dict | None = None):
         """Page the tiles for ``camera`` and return the local net's patches in view, tessellated at
         the tiles' grid (a :class:`~piste.terrain.TerrainMesh`: the shadow receivers' triangles)."""
         t0 = time.perf_counter()
         cam = camera.with_aspect(*self.size)
-        self.streaming.update(cam, wait=self.wait)
+        self._update(cam)
         pids = patch_tree(self.net).cull(cam.frustum_planes())
-        self.cull_stats = {"frustum_patches": int(len(pids)), "drawn_patches": int(len(pids))}
+        self.cull_stats.update(frustum_patches=int(len(pids)), drawn_patches=int(len(pids)))
         t1 = time.perf_counter()
         mesh = tessellate(self.net, self.level, patches=pids)
         if timings is not None:
@@ -1088,11 +1132,21 @@ class StreamingTerrain:
                fog="scene", read: bool = True, **_ignored):
         """One frame of the tiles alone (:meth:`prepare` + :meth:`draw`)."""
         cam = camera.with_aspect(*self.size)
-        self.streaming.update(cam, wait=self.wait)
+        self._update(cam)
         return self.draw(cam, read=read, fog=fog)
 
     def release(self) -> None:
+        if self.objects is not None and self.objects.on_visible == self._on_visible:
+            self.objects.on_visible = None
         self.streaming.close()
+
+
+@dataclass
+class _View:
+    """What :meth:`StreamingRenderer.update` reads of a camera: its eye ``(3,)`` and ``fov_y`` degrees."""
+
+    eye: np.ndarray
+    fov_y: float
 
 
 def fly_path(index: dict, frames: int, fps: float = 30.0, speed: float = 100.0, height: float = 120.0,
