@@ -136,6 +136,13 @@ def fresh_first_frame(bundle: Path, runs: int) -> None:
     if resident.max() > 0:
         print(f"  the terrain's resident vertex blocks (background thread) ready at {np.median(resident):.2f} s, "
               f"set-up done at {end_setup:.2f} s: the first frame {'waits for them' if np.median(resident) > end_setup else 'does not wait'}")
+    else:
+        from piste.formats.bundle import read_manifest
+
+        man = read_manifest(bundle)
+        stored = bool((man.get("terrain") or {}).get("resident"))
+        print(f"  bundle format {man.get('format')}: the terrain's resident vertex blocks "
+              + ("stored in it (read with the bundle, no background build)" if stored else "not built (not drawn resident)"))
     pm = float(np.median(peer))
     ratio = a[:, 5] / np.asarray(peer)  # per run (the pair ran in the same round)
     print(f"  the peer, a fresh process that opens an EGL context, draws one textured quad at 640x448 and reads it "
