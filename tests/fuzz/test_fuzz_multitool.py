@@ -1,4 +1,5 @@
-"""Fuzz SSX Multitool projects (Patches.json + Textures/ + Lightmaps/): a project written by piste's
+"""Fuzz SSX Multitool projects (Patches.json, Instances.json, Splines.json, Models.json, Textures/,
+Lightmaps/): a project written by piste's
 own write_project from a synthetic level (no retail data) in a session fixture, then Patches.json
 mutated byte-wise and structurally (fields of the wrong type, huge values, hostile TexturePath
 names: ``..``, absolute paths, devices), its PNGs mutated byte-wise, and files swapped for links
@@ -11,6 +12,9 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import struct
+
+import numpy as np
 
 import pytest
 from fuzzlib import HOSTILE, byte_mutations, check, doc_mutations, dump_json, fuzz_settings
@@ -20,15 +24,48 @@ from hypothesis import strategies as st
 from piste.errors import FormatError
 
 ssx = pytest.importorskip("piste.formats.ssx")
+from piste.formats.ssx import parse_pbd  # noqa: E402
 from piste.formats.ssx.multitool import read_project, write_project  # noqa: E402
+from piste.formats.ssx.multitool_objects import (  # noqa: E402
+    INSTANCE_DTYPE, SPLINE_DTYPE, compose_rows, models_from_json, segment_records,
+)
+from piste.formats.ssx.synth import pbd_bytes  # noqa: E402
 from piste.pipeline.ssx_synth import make_level  # noqa: E402
+
+
+def _level_with_objects(level):
+    """The level with 2 instances of 2 models, a spline of 2 segments, their hashes (piste's own
+    encoder: made-up values in the records' documented layout), and a Models.json of 2 models."""
+    rng = np.random.default_rng(4)
+    inst = np.zeros(2, INSTANCE_DTYPE)
+    inst["matrix"] = compose_rows(rng.uniform(-1e3, 1e3, (2, 3)), [[0, 0, 0.6, 0.8], [0, 0, 0, 1]], [[1, 2, 1]] * 2)
+    inst["light_colour"] = rng.uniform(0, 1, (2, 4, 4))
+    inst["model_id"] = inst["model_id2"] = [0, 1]
+    inst["lowest"], inst["highest"] = -10.0, 10.0
+    seg = segment_records(rng.uniform(-1e3, 1e3, (2, 4, 3)), 0, 0)
+    spl = np.zeros(1, SPLINE_DTYPE)
+    spl[0] = (seg["lowest"].min(0), seg["highest"].max(0), 0, 2, 0, -1)
+    head = 52
+    hashes = struct.pack("<13I", head + 16, 0, head, 2, head, 0, head + 16, 0, head + 16, 0, head + 16, 0,
+                         head + 16) + struct.pack("<4i", -5, 1, 8, 0)
+    sec = {"instances": (2, inst.tobytes()), "splines": (1, spl.tobytes()), "spline_segments": (2, seg.tobytes()),
+           "models": (2, bytes(32)), "hash": (None, hashes)}
+    models = {"Models": [{"ModelName": f"m{i}", "Unknown3": 1, "AnimTime": 0.5, "ModelObjects": [
+        {"ObjectName": "o", "ParentID": -1, "Flags": 3, "Animation": {
+            "U1": 1.0, "U2": 0.0, "U3": 0.0, "U4": 0.0, "U5": 0.0, "U6": 0.0, "AnimationAction": 1,
+            "AnimationEntries": [{"AnimationMaths": [{f"Value{v}": 0.5 * v for v in range(1, 7)}]}]},
+         "MeshData": [{"MeshPath": f"{i}.obj", "MaterialID": 0}], "Position": [0.0, 0.0, 1.0],
+         "Rotation": [0.0, 0.0, 0.0, 1.0], "Scale": [1.0, 1.0, 1.0], "IncludeAnimation": True,
+         "IncludeMatrix": True}]} for i in range(2)]}
+    return parse_pbd(pbd_bytes(level.pbd.records, 2, 1, sec)), models_from_json(models, "Models.json")
 
 
 @pytest.fixture(scope="session")
 def project(tmp_path_factory):
     d = tmp_path_factory.mktemp("multitool") / "proj"
     level = make_level(rows=2, cols=2, seed=3, n_textures=2)
-    write_project(d, level.pbd, level.textures, level.lightmaps)
+    pbd, models = _level_with_objects(level)
+    write_project(d, pbd, level.textures, level.lightmaps, models=models)
     return d
 
 
@@ -61,6 +98,32 @@ def test_patches_structure(project, tmp_path_factory, data):
     doc = json.loads((project / "Patches.json").read_text())
     (d / "Patches.json").write_bytes(dump_json(data.draw(doc_mutations(doc))))
     check(_load, d / "Patches.json", "multitool json structural", names="proj")
+
+
+OBJECT_FILES = st.sampled_from(["Instances.json", "Splines.json", "Models.json"])
+
+
+@given(data=st.data())
+@fuzz_settings(30)
+def test_object_files_structure(project, tmp_path_factory, data):
+    """Instances.json, Splines.json, Models.json mutated structurally (the recorded level kept: edits
+    are written in place, counts checked) and without the recorded level (splines built)."""
+    d = _copy(project, tmp_path_factory)
+    name = data.draw(OBJECT_FILES)
+    doc = json.loads((project / name).read_text())
+    (d / name).write_bytes(dump_json(data.draw(doc_mutations(doc))))
+    if data.draw(st.booleans()):
+        (d / "PisteLevel.json").unlink()
+    check(lambda _: _load(d), d / name, "multitool objects structural")
+
+
+@given(data=st.data())
+@fuzz_settings(20)
+def test_object_files_bytes(project, tmp_path_factory, data):
+    d = _copy(project, tmp_path_factory)
+    name = data.draw(OBJECT_FILES)
+    (d / name).write_bytes(data.draw(byte_mutations((project / name).read_bytes())))
+    check(lambda _: _load(d), d / name, "multitool objects byte-wise")
 
 
 PATHS = st.sampled_from([p for p in HOSTILE if isinstance(p, str)] + [
@@ -141,6 +204,24 @@ def test_out_of_range_fields_name_the_field(project, tmp_path_factory, key, valu
     with pytest.raises(FormatError, match="Patches.json") as e:
         read_project(d)
     assert e.value.field == field
+
+
+@pytest.mark.parametrize("name,where,field", [
+    ("Splines.json", ("Splines", 0, "Segments", 1, "Points", 3), 0),  # was TypeError: isfinite of a huge int
+    ("Instances.json", ("Instances", 1), "U0"),
+    ("Models.json", ("Models", 0), "AnimTime"),
+])
+@pytest.mark.parametrize("value", [10**40, -(10**39), 10**400])
+def test_huge_numbers_in_object_files_name_the_field(project, tmp_path_factory, name, where, field, value):
+    d = _copy(project, tmp_path_factory)
+    doc = json.loads((project / name).read_text())
+    obj = doc
+    for k in where:
+        obj = obj[k]
+    obj[field] = value  # past float32's range (and int64's)
+    (d / name).write_text(json.dumps(doc))
+    with pytest.raises(FormatError, match=name):
+        read_project(d)
 
 
 def test_deeply_nested_patches_json_is_refused(project, tmp_path_factory):

@@ -323,7 +323,6 @@ def test_project_without_the_recorded_level_builds_splines_not_instances(level, 
 # ----------------------------------------------------------------------------- refusals
 @pytest.mark.parametrize("name,edit,field", [
     ("Instances.json", lambda d: d["Instances"][0].update(Location=[1.0, 2.0]), "Location"),
-    ("Instances.json", lambda d: d["Instances"][0].update(Location=["NaN", 0.0, 0.0]), "Location"),
     ("Instances.json", lambda d: d["Instances"][0].pop("Rotation"), "Rotation"),
     ("Instances.json", lambda d: d["Instances"][1].update(ModelID="1"), "ModelID"),
     ("Instances.json", lambda d: d["Instances"][1].update(Hash=2**31), "Hash"),
@@ -365,6 +364,12 @@ def test_recorded_level_refuses_count_changes_and_missing_models(tmp_path):
     path.write_text(json.dumps(doc))
     with pytest.raises(FormatError, match="ModelID 2 is not one of the level's 2 models"):
         read_project(tmp_path / "p").to_level()
+    doc = json.loads(good)
+    doc["Instances"][1]["Rotation"] = [0.0, "NaN", 0.0, 1.0]  # read, but no matrix can be built of it
+    path.write_text(json.dumps(doc))
+    with pytest.raises(FormatError, match="instance 1: Rotation must be finite") as e:
+        read_project(tmp_path / "p").to_level()
+    assert e.value.field == "Rotation"
     path.write_text(good)
     spath = tmp_path / "p" / "Splines.json"
     sdoc = json.loads(spath.read_text())
@@ -415,6 +420,18 @@ def test_cli_convert_edit_import(tmp_path, capsys):
     segs = np.frombuffer(q.raw, SEGMENT_DTYPE, count=3, offset=q.offsets["spline_segments"])
     old = np.frombuffer(pbd.raw, SEGMENT_DTYPE, count=3, offset=pbd.offsets["spline_segments"])
     np.testing.assert_allclose(segs["power"], old["power"], rtol=1e-5, atol=0.05)
+
+
+def test_a_levels_own_nan_placement_comes_back(tmp_path):
+    """A .pbd instance matrix holding NaN: exported as "NaN", read back, its record kept as stored."""
+    pbd, lv = _level_with_objects()
+    raw = bytearray(pbd.raw)
+    struct.pack_into("<f", raw, pbd.offsets["instances"] + 256 + 4 * 13, float("nan"))  # M42 of instance 1
+    pbd = parse_pbd(bytes(raw))
+    write_project(tmp_path / "p", pbd)
+    assert "NaN" in json.loads((tmp_path / "p" / "Instances.json").read_text())["Instances"][1]["Location"]
+    out, _, _ = read_project(tmp_path / "p").to_level()
+    assert out.to_bytes() == pbd.to_bytes()
 
 
 def test_hash_section_helper_still_builds_light_lists():

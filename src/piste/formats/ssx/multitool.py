@@ -225,7 +225,8 @@ def _light_number(v, path, where: str, key: str, kind: str):
         return v & 0xFFFFFFFF
     if isinstance(v, str) and v in _NONFINITE:
         return _NONFINITE[v]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or (np.isfinite(v) and abs(v) > _F32_MAX):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or (
+            abs(v) > _F32_MAX and not (isinstance(v, float) and np.isinf(v))):  # a huge int: no isfinite
         raise FormatError(path, f"{where}: {key} must be a number (float32), got {v!r:.40}", field=key)
     return float(v)
 

@@ -192,7 +192,8 @@ class _Reader:
     def number(self, v, where, key) -> float:
         if isinstance(v, str) and v in _NONFINITE:
             return _NONFINITE[v]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or (np.isfinite(v) and abs(v) > _F32_MAX):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or (
+                abs(v) > _F32_MAX and not (isinstance(v, float) and np.isinf(v))):  # a huge int: no isfinite
             self.fail(where, key, f"must be a number (float32), got {v!r:.40}")
         return _f32(v)
 
@@ -465,15 +466,11 @@ class MtModels:
 
 
 def instances_from_json(doc, path) -> MtInstances:
-    """A parsed ``Instances.json`` (``{"Instances": [...]}`` or a bare list) checked; placements must
-    be finite (FormatError naming the instance and the key)."""
-    r = _Reader(path)
-    items = r.top(doc, "Instances", INSTANCE_SCHEMA, "instances")
-    for i, d in enumerate(items):
-        for key in ("Location", "Rotation", "Scale"):
-            if not np.isfinite(d[key]).all():
-                r.fail(f"instance {i}", key, "must be finite numbers")
-    return MtInstances(items)
+    """A parsed ``Instances.json`` (``{"Instances": [...]}`` or a bare list) checked (FormatError
+    naming the instance and the key).  Non-finite placements are read (a ``.pbd``'s own NaNs come
+    back as they were) and refused only where piste must build a matrix of them
+    (:func:`instances_in_place`)."""
+    return MtInstances(_Reader(path).top(doc, "Instances", INSTANCE_SCHEMA, "instances"))
 
 
 def instances_json(inst: MtInstances) -> dict:
@@ -645,6 +642,10 @@ def instances_in_place(pbd: Pbd, data: bytearray, inst: MtInstances, path, sourc
     changed = np.array([not _same(a, b, _PBD_INSTANCE_KEYS) for a, b in zip(inst.items, was)], bool)
     n_models = pbd.counts["models"]
     for i in np.nonzero(changed)[0]:
+        for key in ("Location", "Rotation", "Scale"):
+            if not np.isfinite(inst.items[i][key]).all():
+                raise FormatError(path, f"instance {i}: {key} must be finite numbers to place the instance, got "
+                                        f"{inst.items[i][key]}", field=key)
         m = inst.items[i]["ModelID"]
         if not 0 <= m < n_models:
             raise FormatError(path, f"instance {i}: ModelID {m} is not one of the level's {n_models} models "
