@@ -319,16 +319,23 @@ def scene_section(args, floor_ms: list) -> dict:
     def set_visibility(on):
         r.terrain.set_visibility(bundle.visibility if on else None)
 
+    compute_mips = getattr(r.shadows, "_mips_cs", None)
+
+    def set_compute_mips(on):
+        r.shadows._mips_cs = compute_mips if on else None
+
     changes = [("objects", set_objects, "objects: per-mode programs, instance attributes, no discard",
                 "objects: one program, 14 texelFetch a vertex, u_mode + discard"),
                ("objects", set_object_lod, "objects: levels of detail, <= 0.5 px of error",
                 "objects: every instance with its full mesh"),
                ("terrain", set_cull, "terrain: back faces culled", "terrain: back faces drawn"),
-               ("terrain", set_visibility, "terrain: the bundle's visibility sets", "terrain: frustum culling alone")]
+               ("terrain", set_visibility, "terrain: the bundle's visibility sets", "terrain: frustum culling alone"),
+               ("shadow casters", set_compute_mips, "shadow mips: two levels a compute dispatch",
+                "shadow mips: a framebuffer (and a rasterizer wait) per level")]
     ab_res = []
     acc2, undo2 = _profile(r)
     for label, setter, now_name, before_name in changes:
-        if label == "objects" and r.objects is None:
+        if label == "objects" and r.objects is None or label == "shadow casters" and compute_mips is None:
             continue
         ab = {True: [], False: []}
         ab_frame = {True: [], False: []}
