@@ -155,6 +155,29 @@ def test_placements_are_piste_object_matrices_in_metres(level, tmp_path):
         np.testing.assert_allclose(m[i] @ np.append(p, 1), np.append(world_cm[:3] / 100, 1), atol=1e-9)
 
 
+def test_piste_placements_written_as_instances_and_back(level, tmp_path):
+    """piste's placed objects (column matrices, metres) -> Instances.json -> the same placements."""
+    from piste.formats.ssx.multitool_objects import instances_from_placements, instances_json
+
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(5, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    rows = compose_rows(rng.uniform(-3e4, 3e4, (5, 3)), q, rng.uniform(0.5, 2, (5, 3)))
+    m = rows.transpose(0, 2, 1).copy()
+    m[:, :3, 3] /= 100  # piste's metres
+    colours = rng.uniform(0, 1, (5, 4, 4))
+    inst = instances_from_placements(m, [0, 1, 2, 1, 0], names=[f"rock_{i}" for i in range(5)],
+                                     light_colours=colours)
+    (tmp_path / "Instances.json").write_text(json.dumps(instances_json(inst)))
+    from piste.formats.ssx.multitool_objects import instances_from_json
+
+    back = instances_from_json(json.loads((tmp_path / "Instances.json").read_text()), "Instances.json")
+    pl = back.placements()
+    assert pl["names"][4] == "rock_4" and pl["model"].tolist() == [0, 1, 2, 1, 0]
+    np.testing.assert_allclose(pl["matrix"], m, rtol=1e-5, atol=1e-4)
+    np.testing.assert_allclose(back.items[2]["LightColour3"], colours[2, 2], rtol=1e-6)
+
+
 def test_spline_polyline_is_the_bezier_in_metres(level, tmp_path):
     _multitool_project(tmp_path / "mt", level)
     spl = read_project(tmp_path / "mt").splines

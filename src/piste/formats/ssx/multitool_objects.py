@@ -63,6 +63,8 @@ instances_from_json(doc, path) -> MtInstances;  instances_json(MtInstances) -> d
 splines_from_json(doc, path) -> MtSplines;      splines_json(MtSplines) -> dict
 models_from_json(doc, path) -> MtModels;        models_json(MtModels) -> dict
 instances_from_pbd(pbd) -> MtInstances;          splines_from_pbd(pbd) -> MtSplines
+instances_from_placements(matrix, model) -> MtInstances   piste's placed objects (metres) -> instances
+MtInstances.placements() -> names, model, (k, 4, 4) matrices (metres);  MtSplines.polyline(i)
 instances_in_place(pbd, data, instances, path) / splines_in_place(pbd, data, splines, path)
 spline_sections(splines) -> {"splines": ..., "spline_segments": ...} for synth.pbd_bytes
 """
@@ -82,7 +84,7 @@ __all__ = [
     "MtInstances", "MtSplines", "MtModels", "instances_from_json", "instances_json", "splines_from_json",
     "splines_json", "models_from_json", "models_json", "instances_from_pbd", "splines_from_pbd",
     "instances_in_place", "splines_in_place", "spline_sections", "segment_records", "compose_rows",
-    "decompose_rows", "INSTANCES_JSON", "SPLINES_JSON", "MODELS_JSON",
+    "decompose_rows", "instances_from_placements", "INSTANCES_JSON", "SPLINES_JSON", "MODELS_JSON",
 ]
 
 INSTANCES_JSON = "Instances.json"
@@ -556,6 +558,35 @@ def _instance_items(rec: np.ndarray, hashes: np.ndarray, names=None) -> list:
     return items
 
 
+def instances_from_placements(matrix, model, names=None, light_vectors=None, light_colours=None,
+                              scale: float = GAME_SCALE) -> MtInstances:
+    """piste's placed objects as Multitool instances: ``matrix (k, 4, 4)`` object -> world in
+    piste's column form (metres; :meth:`MtInstances.placements` gives it back), ``model (k,)`` model
+    indices, ``names`` (default ``Instance_<i>``), ``light_vectors`` / ``light_colours`` ``(k, 4,
+    4)`` (rows: the three directional lights and the ambient one; default 0).  The matrix is
+    decomposed into ``Location`` (game units) / ``Rotation`` / ``Scale``: a sheared matrix (piste's
+    sloping rails) loses its shear, as the Multitool's L/R/S cannot hold one."""
+    m = np.asarray(matrix, np.float64).reshape(-1, 4, 4)
+    k = len(m)
+    rows = m.transpose(0, 2, 1).copy()
+    rows[:, 3, :3] /= scale
+    rec = np.zeros(k, INSTANCE_DTYPE)
+    rec["matrix"] = rows
+    if light_vectors is not None:
+        rec["light_matrix"] = np.asarray(light_vectors, np.float64).reshape(k, 4, 4).transpose(0, 2, 1)
+    if light_colours is not None:
+        rec["light_colour"] = np.asarray(light_colours, np.float64).reshape(k, 4, 4)
+    rec["model_id"] = rec["model_id2"] = np.asarray(model, np.int64).reshape(k)
+    rec["prev"] = rec["next"] = -1
+    items = _instance_items(rec, np.zeros(k, np.int64), names)
+    loc, rot, scl = decompose_rows(rows)  # float64, not the float32 record's rounding of the matrix
+    for i, d in enumerate(items):
+        d["Location"] = [_f32(x) for x in loc[i]]
+        d["Rotation"] = [_f32(x) for x in rot[i]]
+        d["Scale"] = [_f32(x) for x in scl[i]]
+    return MtInstances(items)
+
+
 def _defaults(d: dict, schema) -> dict:
     out = {}
     for key, kind, _ in schema:
@@ -681,12 +712,9 @@ def _fit_coefficients(raw: np.ndarray) -> np.ndarray:
     pts = np.einsum("tk,skc->stc", basis, raw)
     s = np.concatenate([np.zeros((len(raw), 1)), np.cumsum(np.linalg.norm(np.diff(pts, axis=1), axis=2), 1)], 1)
     s *= GAME_SCALE
-    out = np.zeros((len(raw), 4))
-    for i in range(len(raw)):  # one 200 x 4 least-squares solve a segment
-        a = np.stack([s[i] ** 3, s[i] ** 2, s[i], np.ones_like(t)], 1)
-        if s[i, -1] > 0:
-            out[i] = np.linalg.lstsq(a, t, rcond=None)[0]
-    return out
+    a = np.stack([s ** 3, s ** 2, s, np.ones_like(s)], 2)  # (segments, samples, 4)
+    out = (np.linalg.pinv(a) @ t[:, None])[..., 0]  # every segment's least-squares solve at once
+    return np.where((s[:, -1] > 0)[:, None], out, 0.0)  # a point segment: no fit (0, as the record's default)
 
 
 def segment_records(raw: np.ndarray, spline: int, first: int) -> np.ndarray:
