@@ -40,25 +40,26 @@ def test_riders_on_an_ssx_level_keep_the_stored_light_maps(tmp_path, gl):
 
 
 def test_frame_mode_is_the_only_place_that_knows_the_ssx_ps2_frame(tmp_path, gl):
-    """SceneRenderer follows a TerrainMode (render.ssx_pass.frame_mode): an SSX level's ps2 frame
-    (base texture + stored texels, explicit levels, no fog) is SourceMode, every other frame the
-    terrain renderer's own pass; SceneRenderer itself has no ps2 branch."""
+    """SceneRenderer follows its terrain renderer's TerrainMode (``frame_mode``): an SSX level's ps2
+    frame (base texture + stored texels, explicit levels, no fog) is SourceMode, every other frame
+    the terrain renderer's own pass; SceneRenderer itself has no ps2 branch."""
     import ast
     import inspect
 
     from piste.render import scene_renderer
     from piste.render.frame import TerrainRenderer
-    from piste.render.ssx_pass import SourceMode, TerrainMode, frame_mode
+    from piste.render.ssx_pass import SourceMode
+    from piste.render.terrain_mode import TerrainMode
 
     make_level(rows=1, cols=2, seed=3).write(tmp_path, "LV")
     lv = load_level(tmp_path / "LV.pbd")
     ssx = SsxTerrainRenderer(lv.net, lv.source, size=(32, 24), ctx=gl)
     plain = TerrainRenderer(lv.net, size=(32, 24), ctx=gl)
     try:
-        m = frame_mode(ssx, "ps2")
+        m = ssx.frame_mode("ps2")
         assert type(m) is SourceMode and m.fog is False
         for terrain, mode, debug in ((ssx, "ps2", "lod"), (ssx, "modulate", None), (plain, "ps2", None)):
-            m = frame_mode(terrain, mode, debug)
+            m = terrain.frame_mode(mode, debug)
             assert type(m) is TerrainMode and m.fog is True and (m.lightmap_mode, m.debug) == (mode, debug)
     finally:
         ssx.release()

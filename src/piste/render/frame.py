@@ -19,6 +19,7 @@ from piste.errors import ConfigError
 from piste.render.context import Offscreen, check_gl_error, create_context, load_shader
 from piste.render.sky_pass import HORIZON, SkyPass
 from piste.render.terrain_pass import TerrainPass
+from piste.render.terrain_mode import TerrainMode
 from piste.render.textures import placeholder_lightmap, track_field
 from piste.terrain.cull import patch_tree
 from piste.terrain.resident import morph_setting, resident_fits, resident_terrain
@@ -251,6 +252,11 @@ class TerrainRenderer:
         mesh = self.prepare(camera, lod=lod, levels=levels, timings=t)
         return self.draw(camera, mesh, lightmap_mode=lightmap_mode, debug=debug, fog=fog, sky=sky, clear=clear,
                          read=read, timings=t)
+
+    def frame_mode(self, lightmap_mode: str = "modulate", debug: str | None = None) -> TerrainMode:
+        """How a scene frame draws this terrain (:class:`piste.render.terrain_mode.TerrainMode`):
+        this renderer's own pass in ``lightmap_mode``."""
+        return TerrainMode(self, lightmap_mode, debug)
 
     def draw(self, camera, mesh, lightmap_mode: str = "modulate", debug: str | None = None,
              fog: float | None | str = "scene", sky: bool = True, clear=(0.0, 0.0, 0.0, 1.0),

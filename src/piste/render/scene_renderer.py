@@ -42,7 +42,6 @@ from piste.render.object_pass import ObjectPass
 from piste.render.occlusion import occlude_frame
 from piste.render.shadow_pass import SUN_RADIUS, ShadowPass, sun_visibility, shadow_matrices, shadow_patches
 from piste.render.sky_pass import HORIZON
-from piste.render.ssx_pass import frame_mode
 from piste.render.trace import NULL_TRACER
 from piste.terrain.cull import patch_tree
 from piste.world.course import TRACK_HALF_WIDTH
@@ -218,7 +217,7 @@ class SceneRenderer:
         t1 = time.perf_counter()
         tt: dict = {}
         # how this frame draws its terrain (an SSX level's ps2 frame: base texture + stored texels)
-        mode = frame_mode(self.terrain, lightmap_mode, debug)
+        mode = self.terrain.frame_mode(lightmap_mode, debug)
         with tr.span("terrain LOD + cull + tessellate"):
             mesh = mode.prepare(cam, lod=lod, timings=tt)
         occ = None

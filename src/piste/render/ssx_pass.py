@@ -16,8 +16,8 @@ API
     SourcePass(ctx)                 .set_source((h, w, 4) uint8), .draw(mesh, mvp, stage)
     SsxTerrainRenderer(net, source, **TerrainRenderer kwargs)   ps2 mode with the stored Cs/As
         .render(camera, lightmap_mode=...), .source_frame(camera) -> (H, W, 4) uint8
-    frame_mode(terrain, lightmap_mode, debug) -> TerrainMode | SourceMode
-        how a scene frame draws its terrain (SceneRenderer follows it: no per-mode branches there)
+    SourceMode(terrain, "ps2")      an SSX level's ps2 frame for SceneRenderer
+                                    (SsxTerrainRenderer.frame_mode("ps2"); render.terrain_mode)
 
 A level is drawn by the one runtime (:func:`piste.pipeline.open_scene.open_source` +
 :class:`piste.pipeline.preview.ScenePreview`, which picks this renderer for a level's terrain):
@@ -33,8 +33,9 @@ import numpy as np
 from piste.errors import RenderError
 from piste.render.context import check_gl_error, load_shader, set_depth_write
 from piste.render.frame import TerrainRenderer
+from piste.render.terrain_mode import TerrainMode
 
-__all__ = ["SourcePass", "SsxTerrainRenderer", "TerrainMode", "SourceMode", "frame_mode"]
+__all__ = ["SourcePass", "SsxTerrainRenderer", "SourceMode"]
 
 
 class SourcePass:
@@ -167,6 +168,13 @@ class SsxTerrainRenderer(TerrainRenderer):
             frame.image = self.target.read().copy()
         return frame
 
+    def frame_mode(self, lightmap_mode: str = "modulate", debug: str | None = None) -> TerrainMode:
+        """How a scene frame draws this level: :class:`SourceMode` in ``ps2`` mode without a debug
+        view (the stored texels), else the terrain renderer's own pass."""
+        if lightmap_mode == "ps2" and debug is None:
+            return SourceMode(self, lightmap_mode, debug)
+        return super().frame_mode(lightmap_mode, debug)
+
     def source_frame(self, camera, lod: bool = True) -> np.ndarray:
         """The stored texels under each pixel, unblended: ``(H, W, 4) uint8`` (RGB = Cs, A = As;
         background alpha 0), for checking the blend against the GS formula."""
@@ -182,32 +190,6 @@ class SsxTerrainRenderer(TerrainRenderer):
     def release(self) -> None:
         self.ssx_source.release()
         super().release()
-
-
-class TerrainMode:
-    """How one scene frame draws its terrain: the strategy :class:`piste.render.scene_renderer.SceneRenderer`
-    follows, so that it keeps no per-mode branches.  This one is the terrain renderer's own pass in
-    ``lightmap_mode`` (any terrain renderer: :class:`TerrainRenderer`, an SSX level's in modes other
-    than ``ps2``, a tiled world's ``StreamingTerrain``); :func:`frame_mode` picks it or
-    :class:`SourceMode`."""
-
-    #: riders and objects are fogged like the terrain (the SSX ps2 frame has no fog)
-    fog = True
-
-    def __init__(self, terrain, lightmap_mode: str = "modulate", debug: str | None = None):
-        self.terrain = terrain
-        self.lightmap_mode = lightmap_mode
-        self.debug = debug
-
-    def prepare(self, camera, lod: bool = True, timings: dict | None = None):
-        """The frame's terrain mesh for ``camera`` (LOD, culling, tessellation: no GL call)."""
-        return self.terrain.prepare(camera, lod=lod, levels=None, timings=timings)
-
-    def draw(self, camera, mesh, fog=None, timings: dict | None = None):
-        """Draw ``mesh`` (+ sky) into the terrain's target without waiting for the GL or reading
-        back (the scene's passes follow); returns the terrain's ``Frame``."""
-        return self.terrain.draw(camera, mesh, lightmap_mode=self.lightmap_mode, fog=fog, read=False,
-                                 timings=timings, debug=self.debug, sync=False)
 
 
 class SourceMode(TerrainMode):
@@ -229,12 +211,3 @@ class SourceMode(TerrainMode):
         t.target.use()
         t.ssx_source.draw(camera.with_aspect(*t.size).view_projection())
         return frame
-
-
-def frame_mode(terrain, lightmap_mode: str = "modulate", debug: str | None = None) -> TerrainMode:
-    """The :class:`TerrainMode` a scene frame draws ``terrain`` in: :class:`SourceMode` for an SSX
-    level's renderer (:class:`SsxTerrainRenderer`) in ``ps2`` mode without a debug view, else the
-    terrain renderer's own pass."""
-    if isinstance(terrain, SsxTerrainRenderer) and lightmap_mode == "ps2" and debug is None:
-        return SourceMode(terrain, lightmap_mode, debug)
-    return TerrainMode(terrain, lightmap_mode, debug)

@@ -63,6 +63,7 @@ from piste.errors import ConfigError, FormatError
 from piste.render.context import Offscreen, create_context, save_png
 from piste.render.frame import DEFAULT_FOG_DENSITY, FOG_REFERENCE_SIZE, Frame
 from piste.render.sky_pass import HORIZON, SkyPass
+from piste.render.terrain_mode import TerrainMode
 from piste.render.textures import mipmapped_texture, snow_texture
 from piste.render.video import VideoWriter
 from piste.terrain.bezier import evaluate, grid_params
@@ -1127,6 +1128,10 @@ class StreamingTerrain:
         kinds = {4: st["far_patches"], 6: 0, 8: st["near_patches"], 0: 0, -1: 0}
         return Frame(image, st["near_patches"] + st["far_patches"], total, kinds, st["triangles"],
                      0, t)
+
+    def frame_mode(self, lightmap_mode: str = "modulate", debug: str | None = None) -> TerrainMode:
+        """How a scene frame draws the streamed tiles: their own pass (see :meth:`draw`)."""
+        return TerrainMode(self, lightmap_mode, debug)
 
     def render(self, camera, lod: bool = True, lightmap_mode: str = "modulate", debug: str | None = None,
                fog="scene", read: bool = True, **_ignored):
