@@ -37,6 +37,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--riders", type=N.integer(0, 64), default=0, metavar="N",
                         help="stand N default riders on the terrain of a source without riders of its own (an SSX "
                              "level); drawn with their shadows by the same runtime as a scene's")
+    parser.add_argument("--track", nargs=4, type=N.COORDINATE, metavar=("X0", "Y0", "X1", "Y1"),
+                        help="tiled worlds: the default pack of riders rides a straight track from (X0, Y0) to "
+                             "(X1, Y1) metres across the tiles, the camera chasing rider 0 (unless --eye/--camera)")
     parser.add_argument("--add-objects", type=N.integer(0, 10_000), default=0, metavar="N",
                         help="place N of the course's objects (trees, rocks, signs, rails) on the terrain of a source "
                              "without objects of its own (an SSX level, a tiled world)")
@@ -73,8 +76,13 @@ def run(args) -> int:
     if cam is not None and args.camera:
         raise ConfigError("--camera names a scene camera; --eye/--target give one: use one or the other")
     size = tuple(args.size) if args.size else None
+    track = getattr(args, "track", None)
+    if track is not None and (kind != "tiles" or args.riders):
+        raise ConfigError("--track runs the default pack across a tiled world (.tiles); --riders stands riders: "
+                          "use one or the other" if kind == "tiles" else f"--track needs a tiled world (.tiles), "
+                          f"got a {kind}")
     b = open_source(args.scene, quiet=args.quiet, warm=True, riders=args.riders, objects=args.add_objects,
-                    budget_mb=args.budget)
+                    budget_mb=args.budget, track=track)
     if args.list:
         for c in b.manifest.get("cameras", []):
             extra = f" track {c['track'][0]:.2f}..{c['track'][1]:.2f}" if c.get("track") else ""
@@ -89,7 +97,7 @@ def run(args) -> int:
     for out in (args.out, args.video, getattr(args, "trace", None)):  # unwritable outputs are reported before rendering
         if out:
             check_writable_folder(Path(out).parent)
-    flight = kind == "tiles" and cam is None and not args.camera  # a tiled world: fly across it at --speed
+    flight = kind == "tiles" and cam is None and not args.camera and track is None  # a tiled world: fly across it
     if flight:
         from piste.pipeline.tiles_source import flight_cameras
 
@@ -111,7 +119,9 @@ def run(args) -> int:
         import numpy as np
 
         ms = np.array([st["ms"] for st in stats])
-        how = f"flying at {args.speed:g} m/s" if flight else f"from {args.camera or 'the camera'}"
+        how = f"flying at {args.speed:g} m/s" if flight else \
+            "chasing rider 0 along the track" if track is not None and cam is None and not args.camera else \
+            f"from {args.camera or 'the camera'}"
         print(f"wrote {args.out}" + (f" and {args.video}" if args.video else "") +
               f": {len(stats)} frame(s) {how}, median {np.median(ms):.1f} ms (max {ms.max():.1f}), resident "
               f"{max(st['resident_bytes'] for st in stats) / 2**20:.1f} MiB of {args.budget:g}, last frame "

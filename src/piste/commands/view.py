@@ -82,6 +82,9 @@ def add_arguments(parser) -> None:
                              "without objects of its own (an SSX level, a tiled world)")
     parser.add_argument("--budget", type=N.real(1.0, float(1 << 20)), default=256.0,
                         help="tiled worlds: streaming memory budget in MiB")
+    parser.add_argument("--track", nargs=4, type=N.COORDINATE, metavar=("X0", "Y0", "X1", "Y1"),
+                        help="tiled worlds: the default pack of riders rides a straight track from (X0, Y0) to "
+                             "(X1, Y1) metres across the tiles (F: chase rider 0)")
 
 
 def course_preview(args, bundle, ctx=None):
@@ -172,7 +175,15 @@ def _view_source(args, kind: str) -> int:
     from piste.render import save_png
     from piste.render.window import ViewOptions, has_display, run_window
 
-    bundle = open_source(args.scene, warm=True, riders=args.riders, objects=args.add_objects, budget_mb=args.budget)
+    track = getattr(args, "track", None)
+    if track is not None and (kind != "tiles" or args.riders):
+        from piste.errors import ConfigError
+
+        raise ConfigError("--track runs the default pack across a tiled world (.tiles); --riders stands riders: "
+                          "use one or the other" if kind == "tiles" else f"--track needs a tiled world (.tiles), "
+                          f"got a {kind}")
+    bundle = open_source(args.scene, warm=True, riders=args.riders, objects=args.add_objects, budget_mb=args.budget,
+                         track=track)
     size = tuple(args.size)
     kw = {"lightmap_mode": args.lightmap, "face": args.face, "lod_morph": _morph(args), "aa": getattr(args, "aa", None),
           "dof": getattr(args, "dof", None),
@@ -182,8 +193,9 @@ def _view_source(args, kind: str) -> int:
         print("piste view: no display (DISPLAY / WAYLAND_DISPLAY unset), so no window; rendering one frame "
               f"off-screen to {args.out} instead (run under a desktop or `xvfb-run piste view`)", file=sys.stderr)
         p = ScenePreview(bundle, size=size, **kw)
-        try:
-            image = p.render(cam, 0.0, debug=args.debug)
+        try:  # (riders on a --track: the chase camera, unless --eye/--camera)
+            chase = track is not None and args.eye is None and not args.camera
+            image = p.render(None if chase else cam, 0.0, debug=args.debug)
         finally:
             p.release()
         print(f"wrote {save_png(args.out, image)}")

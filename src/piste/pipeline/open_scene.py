@@ -24,7 +24,8 @@ API
 
     SOURCES                                       the registry, in matching order
     source_kind(path) -> str                      "bundle", "scene", "ssx", "tiles" (ConfigError otherwise)
-    open_source(path, quiet=True, warm=False, riders=0, objects=0, **options) -> Bundle   (tiles: ``budget_mb``)
+    open_source(path, quiet=True, warm=False, riders=0, objects=0, **options) -> Bundle   (tiles: ``budget_mb``,
+        ``track``: the pack rides (x0, y0, x1, y1) across the tiles)
     load_or_build(scene, quiet=True, warm=False) -> Bundle     (= open_source)
     eye_camera(eye, target, fov_y=50) -> Camera | None            ``--eye``/``--target`` (render, view)
     load_net(path=None) -> PatchNet         a .bpt / .npz patch net, or the default course (``piste bake``, ``piste ssx``)
@@ -90,7 +91,7 @@ SOURCES: list[Source] = [
     Source("bundle", ".piste", _open_bundle),
     Source("scene", ".toml", _open_scene_file),
     Source("ssx", ".pbd", open_ssx_level),
-    Source("tiles", ".tiles", open_tiles, folder=True, options=("budget_mb",)),
+    Source("tiles", ".tiles", open_tiles, folder=True, options=("budget_mb", "track")),
 ]
 
 
@@ -114,7 +115,7 @@ def open_source(path, quiet: bool = True, warm: bool = False, riders: int = 0, o
     resident vertex blocks at load (see :func:`load_bundle`).  ``riders``: add that many default
     riders standing on the terrain when the source has none of its own, ``objects`` that many of
     the course's objects (:mod:`piste.pipeline.furnish`).  ``options``: the source's own
-    (a tiled world's ``budget_mb``); options another kind takes are ignored."""
+    (a tiled world's ``budget_mb`` and ``track``); options another kind takes are ignored."""
     src = _source(path)
     p = Path(str(path).rstrip("/\\")) if src.folder else Path(path)
     bundle = src.open(p, quiet, warm, **{k: v for k, v in options.items() if k in src.options and v is not None})
