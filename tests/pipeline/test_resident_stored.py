@@ -144,3 +144,33 @@ def test_big_nets_store_no_blocks(monkeypatch):
     monkeypatch.setattr(bo, "STORED_BLOCKS_BUDGET", len(net) * 116 * 44 - 1)
     assert bo.resident_members(net) == ({}, None)
     assert STORED_BLOCKS_BUDGET >= 2560 * 116 * 44  # the default course's blocks are stored
+
+
+def test_a_damaged_stored_member_names_it(tmp_path):
+    """The blocks are read (and hashed) in a thread beside the other members: a flipped byte in them
+    (zip CRC) or a wrong SHA-256 still raises a FormatError naming the member, on the caller's thread."""
+    path, _ = _bundle(tmp_path)
+    with zipfile.ZipFile(path) as zf:
+        info = zf.getinfo(RESIDENT_MEMBER + ".npy")
+        offset = info.header_offset + 30 + len(info.filename.encode()) + len(info.extra) + 1000
+    raw = bytearray(path.read_bytes())
+    raw[offset] ^= 0xFF
+    flipped = tmp_path / "flipped.piste"
+    flipped.write_bytes(bytes(raw))
+    with pytest.raises(FormatError) as e:
+        load_bundle(flipped, warm=True)
+    assert e.value.field == RESIDENT_MEMBER + ".npy" and "corrupt member" in str(e.value)
+
+    wrong = tmp_path / "wrong_sha.piste"
+    with zipfile.ZipFile(path) as src, zipfile.ZipFile(wrong, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item.filename)
+            if item.filename == "manifest.json":
+                m = json.loads(data)
+                m["members"][RESIDENT_MEMBER]["sha256"] = "0" * 64
+                data = json.dumps(m).encode()
+            dst.writestr(item, data)
+    with pytest.raises(FormatError) as e:
+        read_bundle(wrong)
+    assert e.value.field == RESIDENT_MEMBER + ".npy" and "checksum mismatch" in str(e.value)
+    assert read_bundle(wrong, verify=False).arrays[RESIDENT_MEMBER].shape == (len(_net()) * 116, 11)
