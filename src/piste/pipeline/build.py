@@ -65,11 +65,13 @@ from piste.world.camera import Camera, camera_planes, track_camera
 from piste.world.course import track_centerline
 from piste.world.objects import ObjectSet, bake_vertex_colors, compress_mesh, normal_matrix, object_texture
 from piste.world.scene import sun_light
-from piste.world.scene_file import SceneFile, load_scene
+from piste.world.scene_file import ActorSpec, SceneFile, load_scene
 
 __all__ = ["build_scene", "BuildResult", "default_cache_dir", "BUILD_VERSION", "scene_lights", "scene_cameras",
            "BuildStep", "BuildContext", "BUILD_STEPS", "register_step", "unregister_step", "bake_partial_dir",
            "clean_command"]
+
+_PathLike = str | os.PathLike[str]
 
 #: bumped whenever a step's output for the same input changes
 BUILD_VERSION = "piste.build/1"
@@ -85,31 +87,31 @@ class BuildResult:
     ``report`` (counts, visibility statistics), ``seconds`` in all, ``bytes`` of the bundle."""
 
     path: Path
-    steps: dict = field(default_factory=dict)
-    report: dict = field(default_factory=dict)
+    steps: dict[str, dict[str, Any]] = field(default_factory=dict)
+    report: dict[str, Any] = field(default_factory=dict)
     seconds: float = 0.0
     bytes: int = 0
 
     @property
-    def cached(self) -> list:
+    def cached(self) -> list[str]:
         return [k for k, v in self.steps.items() if v.get("cached")]
 
     @property
-    def rebuilt(self) -> list:
+    def rebuilt(self) -> list[str]:
         return [k for k, v in self.steps.items() if not v.get("cached")]
 
 
-def default_cache_dir(scene_path) -> Path:
+def default_cache_dir(scene_path: _PathLike) -> Path:
     return Path(scene_path).resolve().parent / ".piste-cache"
 
 
-def bake_partial_dir(scene_path, cache_dir=None) -> Path:
+def bake_partial_dir(scene_path: _PathLike, cache_dir: _PathLike | None = None) -> Path:
     """The folder where ``piste build`` keeps a light-map bake's resumable chunks:
     ``CACHE/bake-partial`` (``cache_dir``, default :func:`default_cache_dir`)."""
     return (Path(cache_dir) if cache_dir is not None else default_cache_dir(scene_path)) / "bake-partial"
 
 
-def clean_command(scene_path, cache_dir=None) -> str:
+def clean_command(scene_path: _PathLike, cache_dir: _PathLike | None = None) -> str:
     """The shell command that removes the chunks under :func:`bake_partial_dir` (``piste build --clean``)."""
     import shlex
 
@@ -117,7 +119,7 @@ def clean_command(scene_path, cache_dir=None) -> str:
     return cmd + (f" --cache {shlex.quote(str(cache_dir))}" if cache_dir is not None else "")
 
 
-def _json_lights(lights) -> dict:
+def _json_lights(lights: Lights) -> dict[str, list[dict[str, Any]]]:
     """``Lights.to_dict()`` with infinite ranges as the string "inf" (strict JSON)."""
     out = {}
     for kind, items in lights.to_dict().items():
@@ -125,7 +127,7 @@ def _json_lights(lights) -> dict:
     return out
 
 
-def scene_lights(scene, gltf_cache: dict | None = None):
+def scene_lights(scene: SceneFile, gltf_cache: dict[str, Any] | None = None) -> Lights:
     """The scene's :class:`piste.lighting.Lights`: inline ``[[lights]]`` plus every ``[[gltf]]``
     file's lights; the default course's lights when the scene gives none."""
     items = list(scene.lights)
@@ -142,7 +144,8 @@ def scene_lights(scene, gltf_cache: dict | None = None):
     return Lights(tuple(items), name=scene.name)
 
 
-def scene_cameras(scene, net, centerline, gltf_cache: dict | None = None) -> list:
+def scene_cameras(scene: SceneFile, net: PatchNet | None, centerline: np.ndarray | None,
+                  gltf_cache: dict[str, Any] | None = None) -> list[dict[str, Any]]:
     """The scene's cameras as manifest dicts (``name``, eye, target, ..., optional ``track``)."""
     out = []
     lo, hi = net.bounds if net is not None else (None, None)  # planes not given follow the terrain's size
@@ -181,6 +184,8 @@ def scene_cameras(scene, net, centerline, gltf_cache: dict | None = None) -> lis
             d = camera_to_dict(cam)
             d.update(name="track", track=[0.12, 0.45], height=9.0, source="default")
         else:
+            if net is None:
+                raise ConfigError(f"{scene.path}: a default camera needs the terrain (no net given)")
             lo, hi = net.bounds
             c = (lo + hi) / 2.0
             ext = float(np.linalg.norm(hi - lo))
@@ -196,11 +201,11 @@ def scene_cameras(scene, net, centerline, gltf_cache: dict | None = None) -> lis
     return out
 
 
-def _file_key(path) -> str:
+def _file_key(path: _PathLike) -> str:
     return content_key(Path(path))
 
 
-def _allow_key(scene) -> tuple:
+def _allow_key(scene: SceneFile) -> tuple[tuple[str, list[str]], ...]:
     """The scene's ``allow_paths`` as cache-key parts (none when empty, so existing keys stand):
     a step built while a folder was allowed is not reused once it no longer is."""
     return (("allow_paths", [str(p) for p in scene.allow_paths]),) if getattr(scene, "allow_paths", ()) else ()
@@ -368,7 +373,7 @@ def _store_terrain(ctx: BuildContext, out: StepOutput) -> None:
     ctx.set_terrain(net, centerline)
     arrays = ctx.arrays
     arrays["terrain/control_points"] = net.control_points
-    arrays["terrain/uv"] = net.uv
+    arrays["terrain/uv"] = ta["uv"] if net.uv is None else net.uv  # (a net built with uv keeps it)
     # the welded topology, so a load need not weld and match edges again (~0.1 s of a fresh process)
     arrays.update({f"terrain/{k}": v for k, v in net.topology().items()})
     if centerline is not None:
@@ -510,7 +515,7 @@ def _run_characters(ctx: BuildContext) -> None:
 
         def make_characters(model: str = model, clip_srcs: list[tuple[str, str]] = clip_srcs,
                             tex: str | None = tex) -> StepOutput:
-            m = load_mpf_rider(model, texture=tex) if tex else load_rider_model(model, allow_paths=scene.allow_paths)
+            m: Any = load_mpf_rider(model, texture=tex) if tex else load_rider_model(model, allow_paths=scene.allow_paths)
             own_clips, sources = sorted(m.clips), []  # which clips each rider may default to
             for f, b in clip_srcs:
                 before = set(m.clips)
@@ -780,16 +785,17 @@ def build_scene(scene: SceneFile | str | os.PathLike[str], out: str | os.PathLik
     return result
 
 
-def _objects_arrays(net, objects, sources, lights, allow_paths=()):
+def _objects_arrays(net: PatchNet, objects: Sequence[ActorSpec], sources: Sequence[str], lights: Lights,
+                    allow_paths: tuple[Path, ...] = ()) -> StepOutput:
     """Compressed meshes per model, instance arrays and baked vertex colours of the placed objects."""
-    kinds = []
-    meshes = {}
+    kinds: list[str] = []
+    meshes: dict[str, Any] = {}
     for s in sources:
         mesh = load_object_mesh(s, allow_paths=allow_paths)
-        kind = s.split(":", 1)[1] if s.startswith("builtin:") else "gltf_" + "".join(
+        kname = s.split(":", 1)[1] if s.startswith("builtin:") else "gltf_" + "".join(
             ch if ch.isalnum() else "_" for ch in Path(s).stem)
-        kinds.append(kind)
-        meshes[kind] = mesh
+        kinds.append(kname)
+        meshes[kname] = mesh
     # glTF objects keep their own base colours (regions of the objects' atlas) and double-sided
     # materials (back faces added): pipeline.object_atlas
     # and alphaMode BLEND (drawn blended, sorted: ObjectSet.blend)
@@ -819,8 +825,9 @@ def _objects_arrays(net, objects, sources, lights, allow_paths=()):
     objs = ObjectSet(meshes, tuple(kinds), kind, matrix, normal_matrix(matrix), center, radius, None, texture,
                      {k: int(np.count_nonzero(kind == i)) for i, k in enumerate(kinds)}, tuple(blend))
     colors = bake_vertex_colors(objs, lights)
-    a = {"kind": kind, "matrix": matrix, "center": center, "radius": radius, "texture": objs.texture}
-    meta = {"kinds": list(kinds), "meshes": {}, "instances": [o.name for o in objects],
+    a: Arrays = {"kind": kind, "matrix": matrix, "center": center, "radius": radius,
+                 "texture": np.asarray(objs.texture)}
+    meta: Meta = {"kinds": list(kinds), "meshes": {}, "instances": [o.name for o in objects],
             "vertex_colors": "half-bright RGB8 per instance vertex (128 = 1.0), full lighting equation, no shadows"}
     for k in kinds:
         cm = meshes[k]
@@ -836,7 +843,8 @@ def _objects_arrays(net, objects, sources, lights, allow_paths=()):
     return a, meta
 
 
-def _default_clip(rider, cmeta: dict, own_clips, sources, clip_srcs):
+def _default_clip(rider: ActorSpec, cmeta: dict[str, Any], own_clips: list[str] | None, sources: list[list[str]] | None,
+                  clip_srcs: Sequence[tuple[str, str]]) -> str | None:
     """The clip a rider without ``clip`` plays: the first of its own clips, i.e. of its
     ``clips_from`` file's when it has one, else of its model's own (not the clips another rider of
     the same model brought with its ``clips_from``); the first of all with a character step cached
@@ -851,10 +859,11 @@ def _default_clip(rider, cmeta: dict, own_clips, sources, clip_srcs):
     return next(iter(sorted(cmeta["clips"])), None)
 
 
-def _visibility_report(net, vis, cameras, centerline) -> dict:
+def _visibility_report(net: PatchNet, vis: Visibility, cameras: list[dict[str, Any]],
+                       centerline: np.ndarray | None) -> dict[str, Any]:
     """% of patches drawn, frustum alone vs frustum + visibility: along the track (default course)
     and from the scene's cameras."""
-    out = {}
+    out: dict[str, Any] = {}
     if centerline is not None:
         cams = [track_camera(centerline, float(t), height=9.0) for t in np.linspace(0.02, 0.98, 49)]
         out["track"] = culling_report(net, vis, cams)

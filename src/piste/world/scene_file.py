@@ -148,7 +148,7 @@ from __future__ import annotations
 import math
 import os
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -207,7 +207,8 @@ _Light = AmbientLight | DirectionalLight | PointLight | SpotLight
 class SceneError(ConfigError):
     """A mistake in a scene file: ``path``, ``line`` (1-based or None) and ``key`` (dotted)."""
 
-    def __init__(self, path, message: str, line: int | None = None, key: str | None = None):
+    def __init__(self, path: str | os.PathLike[str] | None, message: str, line: int | None = None,
+                 key: str | None = None) -> None:
         self.path = str(path) if path is not None else None
         self.line = line
         self.key = key
@@ -225,12 +226,12 @@ _TABLE_HEADER = re.compile(r"^\s*\[\s*([^\[\]]+?)\s*\]\s*(#.*)?$")
 _KEY = re.compile(r"""^\s*((?:[A-Za-z0-9_\-]+|"[^"]*"|'[^']*')(?:\s*\.\s*(?:[A-Za-z0-9_\-]+|"[^"]*"|'[^']*'))*)\s*=""")
 
 
-def _split_key(text: str) -> tuple:
+def _split_key(text: str) -> tuple[str, ...]:
     parts = re.findall(r"""[A-Za-z0-9_\-]+|"[^"]*"|'[^']*'""", text)
     return tuple(p[1:-1] if p[:1] in "\"'" else p for p in parts)
 
 
-def key_lines(text: str) -> dict:
+def key_lines(text: str) -> dict[tuple[str | int, ...], int]:
     """Line number (1-based) of every table header and key of a TOML document.
 
     Keys are paths: ``("terrain",)`` for a ``[terrain]`` header, ``("terrain", "seed")`` for a key
@@ -279,7 +280,7 @@ def key_lines(text: str) -> dict:
     return out
 
 
-def _indexed(name: tuple, counts: dict) -> tuple:
+def _indexed(name: tuple[str, ...], counts: dict[tuple[str | int, ...], int]) -> tuple[str | int, ...]:
     """``("riders", "x")`` -> ``("riders", 3, "x")`` when riders is an array of tables (its last element)."""
     out: tuple = ()
     for part in name:
@@ -304,13 +305,13 @@ class TerrainSpec:
     kind: str = "default"
     path: Path | None = None
     seed: int = 0
-    spacing: tuple | None = None
+    spacing: tuple[float, float] | None = None
     height_scale: float = 1.0
     height_offset: float = 0.0
     key: str | None = None
     samples_per_patch: int = 4
     smooth: bool = False
-    nodata: object = "nearest"
+    nodata: float | str = "nearest"
     vertical_units: str | None = None
     tiles: Path | None = None
     tile_patches: int = 64
@@ -322,14 +323,14 @@ class ActorSpec:
 
     name: str
     model: str
-    position: tuple
+    position: tuple[float, ...]
     heading: float = 0.0
     clip: str | None = None
     phase: float = 0.0
     scale: float = 1.0
     line: int | None = None
     clips_from: str | None = None     # riders: a glTF file whose clips are retargeted onto the model (or an .afl)
-    bone_map: object = None           # riders: "builtin" or {clip bone: model bone} (piste.character.retarget)
+    bone_map: str | dict[str, str] | None = None           # riders: "builtin" or {clip bone: model bone} (piste.character.retarget)
     texture: str | None = None        # ssx: riders: the .ssh texture bank given (None: found beside the .mpf)
 
     @property
@@ -344,11 +345,11 @@ class GltfSpec:
     file: Path
     lights: bool = True
     cameras: bool = True
-    offset: tuple = (0.0, 0.0, 0.0)
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     scale: float = 1.0
     up: str = "y"
     white: float = 683.0
-    allow_paths: tuple = ()  # folders the user allowed besides the model's own (--allow-path, PISTE_ALLOW_PATHS)
+    allow_paths: tuple[Path, ...] = ()  # folders the user allowed besides the model's own (--allow-path, PISTE_ALLOW_PATHS)
 
 
 @dataclass
@@ -379,8 +380,8 @@ class LightmapSpec:
 class LodSpec:
     near: float = 60.0
     far: float = 180.0
-    character: tuple = (14.0, 35.0)
-    ratios: tuple = (1.0, 0.5, 0.25)
+    character: tuple[float, float] = (14.0, 35.0)
+    ratios: tuple[float, ...] = (1.0, 0.5, 0.25)
     morph: bool = True  # geomorph terrain vertices between levels (False: the talk's exact popping)
 
 
@@ -388,19 +389,19 @@ class LodSpec:
 class VisibilitySpec:
     enabled: bool = True
     cell: float = 50.0
-    eye_heights: tuple = (1.7, 9.0)
+    eye_heights: tuple[float, ...] = (1.7, 9.0)
     method: str = "auto"
 
 
 @dataclass
 class RenderSpec:
-    size: tuple = (640, 448)
+    size: tuple[int, int] = (640, 448)
     lightmap_mode: str = "modulate"
-    fog: object = "auto"     # density per metre, or "auto" (scaled to the scene's size)
+    fog: float | str = "auto"     # density per metre, or "auto" (scaled to the scene's size)
     face: str = "morph"      # "morph", "null_bones" or "off"
     object_lod: float = 0.5  # pixels of simplification error an object may show (0: full meshes)
     aa: str = "off"          # anti-aliasing: "off", "msaa2", "msaa4", "msaa8" or "fxaa"
-    dof: object = None       # depth of field: [focus metres, aperture metres] or None (off)
+    dof: list[float] | None = None       # depth of field: [focus metres, aperture metres] or None (off)
     soft_shadows: bool = False  # percentage-closer soft rider shadows
     occlusion: bool = False  # occlusion culling of terrain patches and objects
 
@@ -417,23 +418,23 @@ class SceneFile:
     path: Path
     name: str
     terrain: TerrainSpec = field(default_factory=TerrainSpec)
-    riders: list = field(default_factory=list)
-    objects: list = field(default_factory=list)
-    lights: tuple = ()
-    gltf: list = field(default_factory=list)
-    cameras: list = field(default_factory=list)
+    riders: list[ActorSpec] = field(default_factory=list)
+    objects: list[ActorSpec] = field(default_factory=list)
+    lights: tuple[_Light, ...] = ()
+    gltf: list[GltfSpec] = field(default_factory=list)
+    cameras: list[CameraSpec] = field(default_factory=list)
     lightmap: LightmapSpec = field(default_factory=LightmapSpec)
     lod: LodSpec = field(default_factory=LodSpec)
     visibility: VisibilitySpec = field(default_factory=VisibilitySpec)
     render: RenderSpec = field(default_factory=RenderSpec)
-    pack: dict | None = None          # [pack]: {"follow": "track", "start": fraction}
-    auto_objects: dict | None = None  # [auto_objects]: {"seed": int, "trees": n, "signs": n, "rocks": n, "rails": n}
-    tile_objects: list = field(default_factory=list)  # [[tile_objects]]: {"kind", "density", "slope", "altitude", "scale"}
+    pack: dict[str, Any] | None = None          # [pack]: {"follow": "track", "start": fraction}
+    auto_objects: dict[str, Any] | None = None  # [auto_objects]: {"seed": int, "trees": n, "signs": n, "rocks": n, "rails": n}
+    tile_objects: list[dict[str, Any]] = field(default_factory=list)  # [[tile_objects]]: {"kind", "density", "slope", "altitude", "scale"}
     text: str = ""
-    allow_paths: tuple = ()  # folders the user allowed (--allow-path, PISTE_ALLOW_PATHS) when it was loaded
-    sections: dict = field(default_factory=dict)  # registered sections without a field here: name -> value
+    allow_paths: tuple[Path, ...] = ()  # folders the user allowed (--allow-path, PISTE_ALLOW_PATHS) when it was loaded
+    sections: dict[str, Any] = field(default_factory=dict)  # registered sections without a field here: name -> value
 
-    def source_files(self) -> list:
+    def source_files(self) -> list[Path]:
         """Every file the scene reads (the TOML, terrain, glTF files and their buffers and images),
         absolute, sorted: what a watcher polls and what the build cache hashes."""
         files = {Path(self.path).resolve()}
@@ -451,7 +452,7 @@ class SceneFile:
         return sorted(files)
 
 
-def _gltf_dependencies(path: Path, allow_paths=()) -> list:
+def _gltf_dependencies(path: Path, allow_paths: tuple[Path, ...] = ()) -> list[Path]:
     """Buffers and images a ``.gltf`` references by relative URI (``.glb`` files embed theirs).
 
     Only references the loader would read (regular files inside the model's folder or
@@ -480,15 +481,16 @@ def _gltf_dependencies(path: Path, allow_paths=()) -> list:
 class SceneTable:
     """Typed access to one table of the document, with errors naming file, line and key."""
 
-    def __init__(self, path, lines: dict, table: dict, where: tuple, label: str):
+    def __init__(self, path: Path, lines: dict[tuple[str | int, ...], int], table: dict[str, Any],
+                 where: tuple[str | int, ...], label: str) -> None:
         self.path, self.lines, self.table, self.where, self.label = path, lines, table, where, label
 
-    def line(self, key=None) -> int | None:
+    def line(self, key: str | None = None) -> int | None:
         if key is not None and self.where + (key,) in self.lines:
             return self.lines[self.where + (key,)]
         return self.lines.get(self.where)
 
-    def name(self, key) -> str:
+    def name(self, key: str) -> str:
         return f"{self.label}.{key}" if self.label else key
 
     @property
@@ -496,15 +498,15 @@ class SceneTable:
         """The folder of the scene file (relative paths resolve against it)."""
         return Path(self.path).resolve().parent
 
-    def error(self, key, message) -> SceneError:
+    def error(self, key: str | None, message: str) -> SceneError:
         return SceneError(self.path, message, line=self.line(key), key=self.name(key) if key else self.label or None)
 
-    def allow(self, keys) -> None:
+    def allow(self, keys: Collection[str]) -> None:
         for k in self.table:
             if k not in keys:
                 raise self.error(k, f"unknown key {k!r}: expected one of {', '.join(sorted(keys))}")
 
-    def get(self, key, kind, default=None, required: bool = False):
+    def get(self, key: str, kind: str, default: Any = None, required: bool = False) -> Any:
         if key not in self.table:
             if required:
                 raise SceneError(self.path, f"missing key {key!r}", line=self.line(), key=self.name(key))
@@ -513,12 +515,12 @@ class SceneTable:
         return _convert(self, key, v, kind)
 
 
-def _type_name(v) -> str:
+def _type_name(v: object) -> str:
     return {bool: "a boolean", int: "an integer", float: "a number", str: "a string", list: "an array",
             dict: "a table"}.get(type(v), type(v).__name__)
 
 
-def _convert(c: SceneTable, key, v, kind):
+def _convert(c: SceneTable, key: str, v: Any, kind: str) -> Any:
     if kind == "str":
         if not isinstance(v, str):
             raise c.error(key, f"expected a string, got {_type_name(v)} ({v!r})")
@@ -547,7 +549,7 @@ def _convert(c: SceneTable, key, v, kind):
     raise AssertionError(kind)
 
 
-def _bounded(c: SceneTable, key: str, v, lo: float, hi: float, what: str = "a number"):
+def _bounded(c: SceneTable, key: str, v: Any, lo: float, hi: float, what: str = "a number") -> Any:
     """``v`` (a number, a tuple of numbers or None) after checking ``lo <= x <= hi`` for each."""
     vals = () if v is None else v if isinstance(v, tuple) else (v,)
     if not all(lo <= x <= hi for x in vals):
@@ -569,7 +571,7 @@ def _array(c_parent: SceneTable, key: str) -> list:
     return [SceneTable(c_parent.path, c_parent.lines, x, (key, i), f"{key}[{i}]") for i, x in enumerate(v)]
 
 
-def _file(c: SceneTable, key: str, base: Path, suffixes=None, value: str | None = None) -> Path:
+def _file(c: SceneTable, key: str, base: Path, suffixes: Sequence[str] | None = None, value: str | None = None) -> Path:
     """The regular file scene key ``key`` names, confined to the scene's folder (or a folder the user
     allowed) and reached without symbolic links (:func:`piste.formats.safe_io.confined_file`)."""
     rel = c.get(key, "str", required=True) if value is None else value
@@ -1015,14 +1017,15 @@ def loads_scene(text: str, path: str | os.PathLike[str] = "scene.toml") -> Scene
 
 
 def _light(c: SceneTable) -> _Light:
-    kinds = {"ambient": AmbientLight, "directional": DirectionalLight, "point": PointLight, "spot": SpotLight}
+    kinds: dict[str, type[_Light]] = {"ambient": AmbientLight, "directional": DirectionalLight, "point": PointLight,
+                                      "spot": SpotLight}
     kind = c.get("type", "str", required=True)
     if kind not in kinds:
         raise c.error("type", f"unknown light type {kind!r}: expected one of {', '.join(kinds)}")
     cls = kinds[kind]
     allowed = {f.name for f in fields(cls)}
     c.allow(allowed | {"type"})
-    kw = {}
+    kw: dict[str, Any] = {}
     for f in fields(cls):
         if f.name not in c.table:
             continue
@@ -1070,7 +1073,7 @@ def _tiff_is_geotiff(path: Path) -> bool:
         return False
     try:
         with open_file(path) as fh, tifffile.TiffFile(fh) as tf:
-            tags = tf.pages[0].tags
+            tags = tf.pages[0].tags  # type: ignore[union-attr]  # the first page is a TiffPage
             return 33550 in tags or 34264 in tags
     except Exception:
         return False
@@ -1086,7 +1089,7 @@ def _npz_is_net(path: Path) -> bool:
         return False
 
 
-def load_scene(path) -> SceneFile:
+def load_scene(path: str | os.PathLike[str]) -> SceneFile:
     """Read and validate the scene file at ``path`` (see the module docstring)."""
     path = Path(path)
     try:  # regular files only, opened without blocking (a pipe or device is refused, never read)
