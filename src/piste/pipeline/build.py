@@ -25,9 +25,11 @@ The bundle holds no timestamps or absolute paths: rebuilding unchanged inputs gi
 
 API
 ---
-build_scene(scene, out=None, cache_dir=None, progress=False, jobs=1) -> BuildResult
+build_scene(scene, out=None, cache_dir=None, progress=False, jobs=1, steps=None) -> BuildResult
 default_cache_dir(scene_path) -> Path        ``<scene folder>/.piste-cache``
 BUILD_VERSION
+BUILD_STEPS                                  the steps above, in order: :class:`BuildStep` rows
+register_step(step, after=) / unregister_step(name)    add a step (ARCHITECTURE.md: how to add one)
 """
 
 from __future__ import annotations

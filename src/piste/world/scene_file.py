@@ -141,6 +141,9 @@ load_scene(path) -> SceneFile      read and validate a scene file
 loads_scene(text, path) -> SceneFile
 key_lines(text) -> dict            ('riders', 0, 'clip') -> line number
 SceneFile, TerrainSpec, ActorSpec, GltfSpec, CameraSpec, LightmapSpec, LodSpec, VisibilitySpec, RenderSpec
+SCENE_SECTIONS                     top-level key -> SceneSection(parse -> typed value), parsed in order
+register_section(section, after=) / unregister_section(name)   (ARCHITECTURE.md: how to add one)
+SceneTable                         what a section's parse reads: allow, get, error (file, line, key)
 """
 
 from __future__ import annotations
