@@ -173,12 +173,21 @@ def _f32(v) -> float:
     return float(str(x)) if np.isfinite(x) else float(x)
 
 
+def _f32s(a) -> np.ndarray:
+    """:func:`_f32` of a whole array at once, ``(...)`` float64 (numpy's shortest float32 strings,
+    parsed back: both in C)."""
+    return np.asarray(a, np.float32).astype(str).astype(np.float64)
+
+
 def _out_float(v: float):
-    if np.isnan(v):
+    if v != v:
         return "NaN"
-    if np.isinf(v):
+    if v in (_INF, -_INF):
         return "Infinity" if v > 0 else "-Infinity"
     return v
+
+
+_INF = float("inf")
 
 
 class _Reader:
@@ -187,6 +196,8 @@ class _Reader:
     def __init__(self, path):
         self.path = path
         self.count = 0
+        self.pending = []  # (dict, key) of floats still to round to float32, done at once in top()
+        self.lists = []  # lists of floats still to round
 
     def fail(self, where: str, key: str, msg: str):
         raise FormatError(self.path, f"{where}: {key} {msg}", field=key)
@@ -195,9 +206,18 @@ class _Reader:
         if isinstance(v, str) and v in _NONFINITE:
             return _NONFINITE[v]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or (
-                abs(v) > _F32_MAX and not (isinstance(v, float) and np.isinf(v))):  # a huge int: no isfinite
+                abs(v) > _F32_MAX and not (isinstance(v, float) and v in (_INF, -_INF))):  # a huge int: no isfinite
             self.fail(where, key, f"must be a number (float32), got {v!r:.40}")
-        return _f32(v)
+        return float(v)
+
+    def numbers(self, v, where, key) -> list:
+        """A list of float32 values (rounded later, in top())."""
+        if all(type(x) is float and -_F32_MAX <= x <= _F32_MAX for x in v):  # the usual case, at C speed
+            out = list(v)
+        else:
+            out = [self.number(x, where, key) for x in v]
+        self.lists.append(out)
+        return out
 
     def integer(self, v, where, key) -> int:
         if isinstance(v, bool) or not isinstance(v, int) or not -2**31 <= v < 2**31:
@@ -220,7 +240,7 @@ class _Reader:
                 return v
             self.fail(where, key, f"must be a string, got {type(v).__name__}")
         if kind == "f":
-            return self.number(v, where, key)
+            return self.number(v, where, key)  # rounded in obj()
         if kind == "i":
             return self.integer(v, where, key)
         if kind == "b":
@@ -240,12 +260,12 @@ class _Reader:
                 return None
             if not isinstance(v, list) or len(v) != kind[1]:
                 self.fail(where, key, f"must be a list of {kind[1]} numbers, got {v!r:.60}")
-            return [self.number(x, where, key) for x in v]
+            return self.numbers(v, where, key)
         if tag == "m":
             r, c = kind[1], kind[2]
             if not isinstance(v, list) or len(v) != r or not all(isinstance(row, list) and len(row) == c for row in v):
                 self.fail(where, key, f"must be {r} lists of {c} numbers, got {v!r:.60}")
-            return [[self.number(x, where, key) for x in row] for row in v]
+            return [self.numbers(row, where, key) for row in v]
         if tag == "o":
             if v is None:
                 return None
@@ -270,6 +290,8 @@ class _Reader:
             elif v is None and kind == "b":
                 v = False
             out[key] = self.value(v, kind, where, key, required)
+            if kind == "f":
+                self.pending.append((out, key))
         return out
 
     def top(self, doc, key: str, schema, what: str) -> list:
@@ -280,7 +302,24 @@ class _Reader:
             raise FormatError(self.path, f"expected a list of {what} (or {{\"{key}\": [...]}})", field=key)
         if len(items) > MAX_ITEMS:
             raise FormatError(self.path, f"{len(items)} {what}: more than the limit of {MAX_ITEMS}", field=key)
-        return [self.obj(d, schema, f"{what[:-1]} {i}") for i, d in enumerate(items)]
+        out = [self.obj(d, schema, f"{what[:-1]} {i}") for i, d in enumerate(items)]
+        # every float rounded to float32 (its shortest form) at once
+        flat = [c[k] for c, k in self.pending]
+        for lst in self.lists:
+            flat.extend(lst)
+        vals = _f32s(flat).tolist() if flat else []
+        for (c, k), v in zip(self.pending, vals):
+            c[k] = v
+        pos = len(self.pending)
+        for lst in self.lists:
+            lst[:] = vals[pos:pos + len(lst)]
+            pos += len(lst)
+        self.pending, self.lists = [], []
+        return out
+
+
+def _finite(v: list) -> bool:
+    return all(-_F32_MAX <= x <= _F32_MAX for x in v)
 
 
 def _write(items, schema) -> list:
@@ -292,9 +331,9 @@ def _write(items, schema) -> list:
             return _out_float(v)
         if isinstance(kind, tuple):
             if kind[0] == "v":
-                return [_out_float(x) for x in v]
+                return v if _finite(v) else [_out_float(x) for x in v]
             if kind[0] == "m":
-                return [[_out_float(x) for x in row] for row in v]
+                return [row if _finite(row) else [_out_float(x) for x in row] for row in v]
             if kind[0] == "o":
                 return obj(v, kind[1])
             if kind[0] == "l":
@@ -535,25 +574,27 @@ def _instance_hashes(pbd: Pbd, k: int) -> np.ndarray:
 def _instance_items(rec: np.ndarray, hashes: np.ndarray, names=None) -> list:
     """Instances.json objects of instance records ``(k,) INSTANCE_DTYPE`` (what a .pbd holds; the
     .ltg/.adl/.ssf fields at their defaults)."""
-    loc, rot, scl = decompose_rows(rec["matrix"])
-    lm = rec["light_matrix"].astype(np.float64)
-    col = rec["light_colour"].astype(np.float64)
+    loc, rot, scl = (_f32s(a).tolist() for a in decompose_rows(rec["matrix"]))
+    lm = _f32s(rec["light_matrix"].transpose(0, 2, 1)).tolist()  # [i][j] = light vector j
+    col = _f32s(rec["light_colour"]).tolist()
     vec_keys = ("LightVector1", "LightVector2", "LightVector3", "AmbentLightVector")
     col_keys = ("LightColour1", "LightColour2", "LightColour3", "AmbentLightColour")
+    ints = {key: rec[f].tolist() for key, f in (("ModelID", "model_id"), ("PrevInstance", "prev"),
+                                                 ("NextInstance", "next"))}
+    ints.update({f"UnknownInt{n}": rec[f"unknown{n}"].tolist() for n in (26, 27, 28, 30, 31, 32)})
+    hashes = np.asarray(hashes, np.int64).tolist()
     items = []
     for i in range(len(rec)):
         d = {"InstanceName": names[i] if names is not None else f"Instance_{i}",
-             "Location": [_f32(x) for x in loc[i]], "Rotation": [_f32(x) for x in rot[i]],
-             "Scale": [_f32(x) for x in scl[i]]}
+             "Location": loc[i], "Rotation": rot[i], "Scale": scl[i]}
         for j, key in enumerate(vec_keys):
-            d[key] = [_f32(x) for x in lm[i, :, j]]
+            d[key] = lm[i][j]
         for j, key in enumerate(col_keys):
-            d[key] = [_f32(x) for x in col[i, j]]
-        d.update(ModelID=int(rec["model_id"][i]), PrevInstance=int(rec["prev"][i]), NextInstance=int(rec["next"][i]))
-        for n in (26, 27, 28, 30, 31, 32):
-            d[f"UnknownInt{n}"] = int(rec[f"unknown{n}"][i])
+            d[key] = col[i][j]
+        for key, v in ints.items():
+            d[key] = v[i]
         d["LTGState"] = 0
-        d["Hash"] = int(hashes[i])
+        d["Hash"] = hashes[i]
         items.append(_defaults(d, INSTANCE_SCHEMA))
     return items
 
@@ -579,11 +620,9 @@ def instances_from_placements(matrix, model, names=None, light_vectors=None, lig
     rec["model_id"] = rec["model_id2"] = np.asarray(model, np.int64).reshape(k)
     rec["prev"] = rec["next"] = -1
     items = _instance_items(rec, np.zeros(k, np.int64), names)
-    loc, rot, scl = decompose_rows(rows)  # float64, not the float32 record's rounding of the matrix
+    loc, rot, scl = (_f32s(a).tolist() for a in decompose_rows(rows))  # float64, not the record's float32
     for i, d in enumerate(items):
-        d["Location"] = [_f32(x) for x in loc[i]]
-        d["Rotation"] = [_f32(x) for x in rot[i]]
-        d["Scale"] = [_f32(x) for x in scl[i]]
+        d["Location"], d["Rotation"], d["Scale"] = loc[i], rot[i], scl[i]
     return MtInstances(items)
 
 
@@ -607,6 +646,8 @@ _PBD_INSTANCE_KEYS = ("Location", "Rotation", "Scale", "LightVector1", "LightVec
 
 
 def _same(a: dict, b: dict, keys) -> bool:
+    if all(a[k] == b[k] for k in keys):  # the fast path (a NaN never compares equal)
+        return True
     return json.dumps([_out_nested(a[k]) for k in keys]) == json.dumps([_out_nested(b[k]) for k in keys])
 
 
@@ -778,11 +819,11 @@ def splines_from_pbd(pbd: Pbd) -> MtSplines:
     """The level's splines as the Multitool exports them: raw points of each segment's stored power
     basis, ``U0``/``U1``/``SplineStyle`` 0 (they live in the ``.ssf``), names ``Spline_<i>``."""
     spl, seg = _spline_parts(pbd)
-    raw = _raw_of(seg)
+    raw = _f32s(_raw_of(seg)).tolist()
     items = []
     for i, s in enumerate(spl):
         a, n = int(s["segment_start"]), int(s["segment_count"])
-        segs = [{"Points": [[_f32(x) for x in row] for row in raw[j]]} for j in range(a, a + n)]
+        segs = [{"Points": raw[j]} for j in range(a, a + n)]
         items.append({"SplineName": f"Spline_{i}", "U0": 0, "U1": 0, "SplineStyle": 0, "Segments": segs})
     return MtSplines(items)
 
