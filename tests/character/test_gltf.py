@@ -292,12 +292,17 @@ def test_synthetic_skin_rigid_light_camera(tmp_path):
     hat_top = s[sk.bone_index("hat")] @ np.r_[hat.positions[3], 1.0]
     assert np.allclose(hat_top[:3], [0, 1 - 5, 0], atol=1e-5)
     assert np.allclose(quad.weights[2], [0.5, 0.5, 0, 0])
+    # lights and cameras as piste's own (piste.scene_data), Z up: glTF (x, y, z) is piste (x, -z, y)
+    from piste.scene_data import SpotLight
+
     (light,) = m.lights
-    assert light.type == "spot" and light.intensity == 3.0 and light.outer_cone == 0.5
-    assert np.allclose(light.position, [0, 5, 0]) and np.allclose(light.direction, [0, 0, -1])
+    assert isinstance(light, SpotLight) and light.name == "lamp" and light.outer_angle == pytest.approx(np.degrees(0.5))
+    assert light.intensity == pytest.approx(1 / 9)  # 3 cd without a range: the range where I/d^2 falls to white/256
+    assert np.allclose(light.position, [0, 0, 5]) and np.allclose(light.direction, [0, 1, 0])
     (cam,) = m.cameras
-    assert cam.yfov == 0.7 and cam.aspect == 1.5 and np.allclose(cam.position, [0, 1, 10])
-    assert np.allclose(cam.target, [0, 1, 9]) and np.allclose(cam.up, [0, 1, 0])
+    assert cam.name == "eye" and cam.fov_y == pytest.approx(np.degrees(0.7)) and cam.aspect == 1.5
+    assert np.allclose(cam.eye, [0, -10, 1]) and np.allclose(cam.forward, [0, 1, 0]) and np.allclose(cam.up, [0, 0, 1])
+    assert (cam.near, cam.far) == (pytest.approx(0.1), pytest.approx(100.0))
 
 
 def test_step_interpolation(tmp_path):

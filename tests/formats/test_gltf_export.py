@@ -15,9 +15,10 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))  # for `from gltf_tools import ...`
 from gltf_tools import assert_valid  # noqa: E402
 
-from piste.character import Camera, Light, default_rider  # noqa: E402
+from piste.character import default_rider  # noqa: E402
 from piste.errors import ConfigError, ValidationError  # noqa: E402
 from piste.formats.gltf import load_gltf  # noqa: E402
+from piste.scene_data import AmbientLight, Camera, DirectionalLight, PointLight, SpotLight  # noqa: E402
 from piste.formats.gltf_export import (  # noqa: E402
     CharacterExport,
     ObjectsExport,
@@ -281,29 +282,37 @@ def test_objects_instancing_ext_and_nodes_agree(tmp_path):
 
 # ----------------------------------------------------------------------------- lights, cameras
 def test_lights_and_cameras_round_trip(tmp_path):
-    lights = [Light("sun", "directional", np.array([1.0, 0.9, 0.8]), 800.0, direction=np.array([0.3, 0.4, -0.8])),
-              Light("lamp", "point", np.array([1.0, 0.5, 0.2]), 300.0, range=40.0, position=np.array([5.0, 6.0, 7.0])),
-              Light("spot", "spot", np.array([0.2, 0.5, 1.0]), 900.0, range=60.0, inner_cone=0.2, outer_cone=0.5,
-                    position=np.array([1.0, 2.0, 30.0]), direction=np.array([0.0, 0.1, -1.0]))]
-    cams = [Camera("c", np.array([10.0, -20.0, 15.0]), np.array([0.0, 0.8, -0.6]), np.array([0.0, 0.0, 1.0]),
-                   yfov=0.9, aspect=1.5, znear=0.5, zfar=900.0)]
+    """piste's own lights and cameras (scene_data) written as KHR_lights_punctual / glTF cameras
+    and read back as the same (axes and units both ways, piste.formats.gltf.units)."""
+    lights = [DirectionalLight(direction=(0.3, 0.4, -0.8), color=(1.0, 0.9, 0.8), intensity=1.2, name="sun"),
+              PointLight(position=(5.0, 6.0, 7.0), color=(1.0, 0.5, 0.2), intensity=0.7, range=40.0, falloff=2.0,
+                         name="lamp"),
+              SpotLight(position=(1.0, 2.0, 30.0), direction=(0.0, 0.1, -1.0), color=(0.2, 0.5, 1.0), intensity=0.9,
+                        range=60.0, inner_angle=10.0, outer_angle=28.0, falloff=2.0, name="spot"),
+              AmbientLight(color=(0.5, 0.5, 0.5), intensity=0.3, name="sky"),  # no glTF form: left out
+              PointLight(position=(0.0, 0.0, 5.0), intensity=-0.5, range=10.0, name="dark")]  # likewise
+    cams = [Camera(np.array([10.0, -20.0, 15.0]), np.array([10.0, -19.2, 14.4]), fov_y=50.0, aspect=1.5, near=0.5,
+                   far=900.0, name="c"),
+            Camera(np.array([0.0, 0.0, 100.0]), np.array([0.0, 1.0, 0.0]), near=1.0, far=500.0, aspect=2.0,
+                   ortho_height=80.0, name="top")]
     out = tmp_path / "lc.glb"
-    export_gltf(out, lights=lights, cameras=cams)
+    report = export_gltf(out, lights=lights, cameras=cams)
     assert_valid(out)
+    assert (report.lights, report.cameras) == (3, 2)
     back = load_gltf(out)
+    assert [x.name for x in back.lights] == ["sun", "lamp", "spot"]
     for a, b in zip(lights, back.lights):
-        assert (a.name, a.type) == (b.name, b.type) and np.isclose(a.intensity, b.intensity)
-        d = a.direction / np.linalg.norm(a.direction)
-        if a.type != "point":
-            assert np.allclose(b.direction, TO_GLTF @ d, atol=1e-6)
-        if a.type != "directional":
-            assert np.allclose(b.position, TO_GLTF @ a.position, atol=1e-5) and b.range == a.range
-    c = back.cameras[0]
-    f = cams[0].forward / np.linalg.norm(cams[0].forward)
-    assert np.allclose(c.position, TO_GLTF @ cams[0].position, atol=1e-5)
-    assert np.allclose(c.forward, TO_GLTF @ f, atol=1e-6) and np.isclose(c.yfov, 0.9)
-    with pytest.raises(ValidationError, match=">= 0"):
-        export_gltf(tmp_path / "neg.glb", lights=[Light("neg", "point", np.ones(3), -5.0)])
+        assert type(a) is type(b) and np.isclose(a.intensity, b.intensity, rtol=1e-6)
+        if not isinstance(a, PointLight):
+            assert np.allclose(b.direction, np.asarray(a.direction), atol=1e-6)
+        if not isinstance(a, DirectionalLight):
+            assert np.allclose(b.position, a.position, atol=1e-5) and np.isclose(b.range, a.range)
+    assert np.isclose(back.lights[2].outer_angle, 28.0) and np.isclose(back.lights[2].inner_angle, 10.0)
+    c, top = back.cameras
+    assert c.name == "c" and np.allclose(c.eye, cams[0].eye, atol=1e-5) and np.isclose(c.fov_y, 50.0)
+    assert np.allclose(c.forward, cams[0].forward, atol=1e-6) and (c.near, c.far, c.aspect) == (0.5, 900.0, 1.5)
+    assert top.ortho_height == pytest.approx(80.0) and top.aspect == pytest.approx(2.0)
+    assert np.allclose(top.forward, cams[1].forward, atol=1e-6)
 
 
 # ----------------------------------------------------------------------------- bad input, atomic

@@ -15,7 +15,7 @@ sys.path.insert(0, str(Path(__file__).parent))  # for `from gltf_tools import ..
 from gltf_tools import assert_valid, blender_import  # noqa: E402
 
 from piste.cli import main  # noqa: E402
-from piste.commands.export import WHITE_LUX, piste_lights_to_gltf  # noqa: E402
+from piste.formats.gltf.units import light_to_gltf, lights_without_gltf_form  # noqa: E402
 from piste.commands.render import load_or_build  # noqa: E402
 from piste.formats.gltf import load_gltf  # noqa: E402
 
@@ -130,7 +130,7 @@ def test_cli_export_forms_validate(small_bundle, tmp_path, capsys):
 def test_reimport_matches_the_bundle(small_bundle, tmp_path):
     """load_gltf on the export: riders' bind-space meshes, skins and clips as float32, objects,
     lights back to piste's units, cameras."""
-    from piste.pipeline.gltf_import import convert_cameras, convert_lights
+    from piste.pipeline.gltf_import import GltfCameras
 
     b = load_or_build(small_bundle)
     out = tmp_path / "s.glb"
@@ -161,8 +161,8 @@ def test_reimport_matches_the_bundle(small_bundle, tmp_path):
     # objects: one node each (plain-node fallback)
     objs = b.objects()
     assert sum(1 for x in back.meshes if x.group in objs.kinds) == len(objs.kind)
-    # lights: through the importer's conversion we get piste's lights back (negative one left out)
-    lights = convert_lights(back.lights, white=WHITE_LUX)
+    # lights: the reader gives piste's lights back (the negative one left out)
+    lights = back.lights
     direct = [x for x in b.lights.direct if x.intensity >= 0]
     assert len(lights) == len(direct) == 3
     for a, c in zip(direct, lights):
@@ -175,9 +175,9 @@ def test_reimport_matches_the_bundle(small_bundle, tmp_path):
             assert np.allclose(d, c.direction, atol=1e-6)
         if hasattr(a, "outer_angle"):
             assert math.isclose(a.outer_angle, c.outer_angle, rel_tol=1e-6)
-    _, other = piste_lights_to_gltf(b.lights)
+    other = lights_without_gltf_form(b.lights)
     assert len(other["ambient"]) == 1 and len(other["negative"]) == 1
-    cams = convert_cameras(back.cameras)
+    cams = GltfCameras.from_file(back.cameras)
     c0 = b.camera("main")
     assert np.allclose(cams["main"].eye, c0.eye, atol=1e-4) and math.isclose(cams["main"].fov_y, c0.fov_y, rel_tol=1e-6)
     f0 = (c0.target - c0.eye) / np.linalg.norm(c0.target - c0.eye)
@@ -205,7 +205,7 @@ def test_blender_imports_the_default_scene(tmp_path):
     b = load_or_build(r.path)
     seen = blender_import(out, tmp_path)
 
-    from piste.commands.export import piste_cameras_to_gltf
+    from piste.formats.gltf.units import camera_to_gltf
     from piste.terrain.tessellate import terrain_mesh
 
     tm = terrain_mesh(b.net, 4)
@@ -234,21 +234,21 @@ def test_blender_imports_the_default_scene(tmp_path):
         assert math.isclose(a["frame_range"][1] / 24.0, clip.duration, rel_tol=0.05)
     objs = b.objects()
     assert sum(1 for k in seen["meshes"] if k not in ("terrain",) and ":" not in k) == len(objs.kind)
-    lights, _ = piste_lights_to_gltf(b.lights)
-    assert set(seen["lights"]) == {x.name for x in lights}
+    lights = [d for d in (light_to_gltf(x, 683.0, i) for i, x in enumerate(b.lights)) if d is not None]
+    assert set(seen["lights"]) == {x["name"] for x in lights}
     for x in lights:
-        s = seen["lights"][x.name]
-        assert s["type"] == {"directional": "SUN", "point": "POINT", "spot": "SPOT"}[x.type]
-        want = x.intensity / 683.0 * (1.0 if x.type == "directional" else 4 * math.pi)
+        s = seen["lights"][x["name"]]
+        assert s["type"] == {"directional": "SUN", "point": "POINT", "spot": "SPOT"}[x["type"]]
+        want = x["intensity"] / 683.0 * (1.0 if x["type"] == "directional" else 4 * math.pi)
         assert math.isclose(s["energy"], want, rel_tol=1e-4)
-        if x.type != "directional":
-            assert np.allclose(s["location"], x.position, atol=1e-3)
-        if x.type != "point":
-            assert np.allclose(s["direction"], x.direction / np.linalg.norm(x.direction), atol=1e-4)
-    cams = piste_cameras_to_gltf(b.cameras)
-    assert set(seen["cameras"]) == {c.name for c in cams}
-    for c in cams:
-        s = seen["cameras"][c.name]
-        assert np.allclose(s["location"], c.position, atol=1e-3)
-        assert np.allclose(s["direction"], c.forward, atol=1e-4)
-        assert math.isclose(s["clip_start"], c.znear, rel_tol=1e-5)
+        if x["type"] != "directional":
+            assert np.allclose(s["location"], x["position"], atol=1e-3)
+        if x["type"] != "point":
+            assert np.allclose(s["direction"], x["direction"] / np.linalg.norm(x["direction"]), atol=1e-4)
+    cams = {name: camera_to_gltf(c) for name, c in b.cameras.items()}
+    assert set(seen["cameras"]) == set(cams)
+    for name, c in cams.items():
+        s = seen["cameras"][name]
+        assert np.allclose(s["location"], c["position"], atol=1e-3)
+        assert np.allclose(s["direction"], c["forward"], atol=1e-4)
+        assert math.isclose(s["clip_start"], c["znear"], rel_tol=1e-5)

@@ -50,8 +50,13 @@ def _load(tmp_path, doc, name="m.gltf"):
 
 def test_valid_document_loads(tmp_path):
     m = _load(tmp_path, base_doc())
-    assert len(m.lights) == 1 and m.lights[0].type == "spot" and m.lights[0].intensity == 20
-    assert len(m.cameras) == 1 and m.cameras[0].yfov == pytest.approx(0.8)
+    from piste.scene_data import Camera, SpotLight
+
+    # lights and cameras come as piste's own (scene_data), placed Z up: glTF (0, 5, 0) is piste (0, 0, 5)
+    assert len(m.lights) == 1 and isinstance(m.lights[0], SpotLight) and m.lights[0].position == (0.0, 0.0, 5.0)
+    assert m.lights[0].outer_angle == pytest.approx(np.degrees(0.5))
+    assert len(m.cameras) == 1 and isinstance(m.cameras[0], Camera) and m.cameras[0].fov_y == pytest.approx(np.degrees(0.8))
+    assert m.cameras[0].name == "cam" and m.cameras[0].near == pytest.approx(0.1) and m.cameras[0].far == pytest.approx(100)
 
 
 def test_morph_targets_without_mesh_weights_load_with_zero_weights(tmp_path):

@@ -16,7 +16,8 @@ from fuzzlib import byte_mutations, check, doc_mutations, dump_json, fuzz_settin
 from hypothesis import given
 from hypothesis import strategies as st
 
-from piste.character import Camera, Light, default_rider
+from piste.character import default_rider
+from piste.scene_data import Camera, DirectionalLight, SpotLight
 from piste.formats.gltf import load_gltf
 from piste.formats.gltf_export import CharacterExport, ObjectsExport, TerrainExport, export_gltf
 from piste.terrain.net import PatchNet
@@ -48,11 +49,11 @@ def exported(tmp_path_factory):
     net = _net()
     w, h = lightmap_atlas_size(net, 4)
     atlas = np.random.default_rng(1).uniform(0.0, 1.2, (h, w, 3)).astype(np.float32)
-    lights = [Light("sun", "directional", np.array([1.0, 0.9, 0.8]), 800.0, direction=np.array([0.3, 0.4, -0.8])),
-              Light("spot", "spot", np.array([0.2, 0.5, 1.0]), 900.0, range=60.0, inner_cone=0.2, outer_cone=0.5,
-                    position=np.array([1.0, 2.0, 30.0]), direction=np.array([0.0, 0.1, -1.0]))]
-    cams = [Camera("c", np.array([10.0, -20.0, 15.0]), np.array([0.0, 0.8, -0.6]), np.array([0.0, 0.0, 1.0]),
-                   yfov=0.9, aspect=1.5, znear=0.5, zfar=900.0)]
+    lights = [DirectionalLight(direction=(0.3, 0.4, -0.8), color=(1.0, 0.9, 0.8), intensity=1.2, name="sun"),
+              SpotLight(position=(1.0, 2.0, 30.0), direction=(0.0, 0.1, -1.0), color=(0.2, 0.5, 1.0), intensity=0.9,
+                        range=60.0, inner_angle=11.5, outer_angle=28.6, name="spot")]
+    cams = [Camera(np.array([10.0, -20.0, 15.0]), np.array([10.0, -19.2, 14.4]), fov_y=51.6, aspect=1.5, near=0.5,
+                   far=900.0, name="c")]
     terrain = TerrainExport(terrain_mesh(net, 4), atlas, np.full((4, 4, 4), 200, np.uint8))
     export_gltf(d / "scene.glb", terrain=terrain, objects=_objects(), lights=lights, cameras=cams)
     export_gltf(d / "nodes.gltf", terrain=TerrainExport(terrain_mesh(net, 4)), objects=_objects(), instancing="nodes")

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from piste.lighting.lights import DirectionalLight, PointLight, SpotLight
-from piste.pipeline.gltf_import import axis_matrix, convert_lights, import_gltf, write_scene_gltf
+from piste.formats.gltf.units import GltfFrame, light_from_gltf
+from piste.pipeline.gltf_import import axis_matrix, import_gltf, write_scene_gltf
 from piste.world.scene_file import GltfSpec
 
 LIGHTS = [
@@ -61,20 +62,17 @@ def test_offset_and_scale(tmp_path):
 
 
 def test_photometric_conversion():
-    from piste.character.model import Light
-
     white = 683.0
     cd = 2000.0
-    lamp = Light("lamp", "point", np.ones(3), intensity=cd, position=np.zeros(3), direction=np.array([0, 0, -1.0]))
-    (p,) = convert_lights([lamp], up="z", white=white)
+    lamp = {"name": "lamp", "type": "point", "color": np.ones(3), "intensity": cd, "range": None}
+    p = light_from_gltf(lamp, np.zeros(3), np.array([0, 0, -1.0]), GltfFrame(up="z", white=white))
     # no glTF range: piste's range is where I/d^2 falls to white/256
     assert p.range == pytest.approx(math.sqrt(256 * cd / white))
     # piste's (1 - d/r)^2 ramp matches the inverse-square illuminance at a quarter of the range
     d = p.range / 4
     assert p.intensity * (1 - d / p.range) ** 2 == pytest.approx(cd / d**2 / white)
-    ranged = Light("lamp", "point", np.ones(3), intensity=cd, range=30.0, position=np.zeros(3),
-                   direction=np.array([0, 0, -1.0]))
-    assert convert_lights([ranged], up="z")[0].range == 30.0
+    ranged = dict(lamp, range=30.0)
+    assert light_from_gltf(ranged, np.zeros(3), np.array([0, 0, -1.0]), GltfFrame(up="z")).range == 30.0
 
 
 def test_wysiwyg_gltf_lights_bake_like_the_same_lights_inline(small_scene):

@@ -32,7 +32,7 @@ from piste.character.palette import palette
 
 # every other name is imported when first asked for (PEP 562; tests/test_lazy_imports.py)
 __all__, __getattr__, __dir__ = _lazy_exports(__name__, {
-    "model": ("Camera", "Clip", "Light", "Model", "Pose", "Skeleton", "SkinnedMesh", "Track"),
+    "model": ("Clip", "Model", "Pose", "Skeleton", "SkinnedMesh", "Track"),
     "compress": ("CompressedClip", "clip_error", "compress_clip", "compression_report"),
     "morph": ("NullBoneRig", "blend_morphs", "morph_report", "morphs_to_null_bones", "vertex_normals"),
     "skinning": ("skin", "skinning_report", "PostTransformMesh", "BlendedMesh"),
@@ -46,7 +46,7 @@ __all__, __getattr__, __dir__ = _lazy_exports(__name__, {
 __all__ += ["palette"]
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and the import graph
-    from piste.character.model import Camera, Clip, Light, Model, Pose, Skeleton, SkinnedMesh, Track  # noqa: F401
+    from piste.character.model import Clip, Model, Pose, Skeleton, SkinnedMesh, Track  # noqa: F401
     from piste.character.compress import CompressedClip, clip_error, compress_clip, compression_report  # noqa: F401
     from piste.character.morph import NullBoneRig, blend_morphs, morph_report, morphs_to_null_bones, vertex_normals  # noqa: F401
     from piste.character.skinning import BlendedMesh, PostTransformMesh, skin, skinning_report  # noqa: F401

@@ -1,4 +1,4 @@
-"""Character data: Skeleton, Pose, Track, Clip, SkinnedMesh, Light, Camera, Model.
+"""Character data: Skeleton, Pose, Track, Clip, SkinnedMesh, Model.
 
 Conventions (shared by the whole character package)
 ---------------------------------------------------
@@ -43,7 +43,7 @@ from piste.character.skeleton import depth_levels, topological_order, world_from
 from piste.errors import ValidationError
 from piste.transforms import compose_trs, invert_affine, quat_normalize
 
-__all__ = ["Skeleton", "Pose", "Track", "Clip", "SkinnedMesh", "Light", "Camera", "Model", "INTERPOLATIONS"]
+__all__ = ["Skeleton", "Pose", "Track", "Clip", "SkinnedMesh", "Model", "INTERPOLATIONS"]
 
 INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
 
@@ -380,57 +380,13 @@ class SkinnedMesh:
 
 
 @dataclass
-class Light:
-    """A punctual light (KHR_lights_punctual) placed by its node's world transform.
-
-    ``type`` 'directional' | 'point' | 'spot'; ``color (3,)`` linear RGB; ``intensity``;
-    ``range`` (None = infinite); cone angles in radians; ``position (3,)``; ``direction (3,)``
-    unit (the node's -Z axis in world space).
-    """
-
-    name: str
-    type: str
-    color: np.ndarray
-    intensity: float = 1.0
-    range: float | None = None
-    inner_cone: float = 0.0
-    outer_cone: float = np.pi / 4
-    position: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    direction: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, -1.0]))
-
-
-@dataclass
-class Camera:
-    """A perspective (or orthographic) camera placed by its node's world transform.
-
-    ``position (3,)``, ``forward (3,)`` unit (node -Z), ``target (3,)`` = position + forward,
-    ``up (3,)`` unit (node +Y), ``yfov`` radians, ``aspect`` (None = use the viewport's),
-    ``znear``, ``zfar`` (None = infinite); ``type`` 'perspective' | 'orthographic' (then ``xmag``,
-    ``ymag``).
-    """
-
-    name: str
-    position: np.ndarray
-    forward: np.ndarray
-    up: np.ndarray
-    yfov: float = 0.8
-    aspect: float | None = None
-    znear: float = 0.01
-    zfar: float | None = None
-    type: str = "perspective"
-    xmag: float | None = None
-    ymag: float | None = None
-
-    @property
-    def target(self) -> np.ndarray:
-        return np.asarray(self.position) + np.asarray(self.forward)
-
-
-@dataclass
 class Model:
     """A loaded character or scene: skeleton (or None), meshes, clips, lights, cameras.
 
     ``clips`` is keyed by clip name (unnamed glTF animations become "animation0", ...).
+    ``lights`` and ``cameras``: a glTF file's, as piste's own (:mod:`piste.scene_data` lights and
+    :class:`~piste.scene_data.Camera`, placed in piste's world by the reader's frame: see
+    :mod:`piste.formats.gltf.units`).
     ``meshes``: one SkinnedMesh per glTF primitive (primitives are kept separate because each can
     carry its own material and texture); their ``group`` is the glTF mesh name.
     """

@@ -6,8 +6,7 @@ glTF (units, what is written) is :mod:`piste.pipeline.bundle_gltf`.
 from __future__ import annotations
 
 #: names that moved to :mod:`piste.pipeline.bundle_gltf` (still importable from here)
-_MOVED = ("WHITE_LUX", "INFINITE_RANGE_MATCH", "piste_lights_to_gltf", "piste_cameras_to_gltf", "terrain_levels",
-          "bundle_parts", "export_bundle")
+_MOVED = ("WHITE_LUX", "INFINITE_RANGE_MATCH", "terrain_levels", "bundle_parts", "export_bundle")
 
 
 def __getattr__(name: str):

@@ -65,13 +65,15 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
 
 from piste.errors import FormatError, ValidationError
 from piste.formats.safe_io import MAX_TOML_BYTES, toml_depth
+from piste.scene_data import (KIND_OF_LIGHT, LIGHT_KINDS, AmbientLight, DirectionalLight, Lights, PointLight,  # noqa: F401
+                              SpotLight)  # (the light family lives in the foundation; re-exported here)
 
 __all__ = [
     "AmbientLight",
@@ -86,215 +88,6 @@ __all__ = [
     "light_terms",
     "shade",
 ]
-
-
-#: largest magnitude of a light's intensity or colour component, and of a position coordinate:
-#: far beyond any real light (the sun is ~1e5 lux), far below what overflows a float32 light map
-MAX_LIGHT_VALUE = 1e6
-MAX_COORDINATE = 1e9
-
-
-def _vec3(value, what: str, limit: float = MAX_COORDINATE) -> tuple[float, float, float]:
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        arr = None
-    if arr is None or arr.shape != (3,) or not np.isfinite(arr).all():
-        raise ValidationError(f"{what}: expected 3 finite numbers, got {value!r}")
-    if np.abs(arr).max() > limit:
-        raise ValidationError(f"{what}: expected numbers within +-{limit:g}, got {value!r}")
-    return (float(arr[0]), float(arr[1]), float(arr[2]))
-
-
-def _unit(value, what: str) -> tuple[float, float, float]:
-    v = np.asarray(_vec3(value, what))
-    length = float(np.sqrt(v @ v))
-    if length <= 0.0:
-        raise ValidationError(f"{what}: expected a non-zero direction, got {value!r}")
-    if abs(length - 1.0) > 1e-12:  # leave unit vectors bit for bit (TOML round trips exactly)
-        v = v / length
-    return (float(v[0]), float(v[1]), float(v[2]))
-
-
-def _finite(value, what: str, limit: float = math.inf) -> float:
-    if isinstance(value, (str, bytes)):  # float("1e3") would pass: a light file gives numbers
-        raise ValidationError(f"{what}: expected a number, got {value!r}")
-    try:
-        x = float(value)
-    except (TypeError, ValueError, OverflowError):
-        raise ValidationError(f"{what}: expected a number, got {value!r}") from None
-    if not math.isfinite(x):
-        raise ValidationError(f"{what}: expected a finite number, got {value!r}")
-    if abs(x) > limit:
-        raise ValidationError(f"{what}: expected a number within +-{limit:g}, got {value!r}")
-    return x
-
-
-def _range(value, what: str) -> float:
-    x = float(value) if isinstance(value, (int, float)) else _finite(value, what)
-    if not x > 0.0:  # also rejects NaN
-        raise ValidationError(f"{what}: expected range > 0 (inf for none), got {value!r}")
-    return x
-
-
-def _falloff(value, what: str) -> float:
-    x = _finite(value, what)
-    if x < 0.0:
-        raise ValidationError(f"{what}: expected falloff >= 0, got {value!r}")
-    return x
-
-
-@dataclass(frozen=True)
-class AmbientLight:
-    """Light from everywhere: adds ``intensity * color`` to every point.  ``color (3,)`` linear RGB."""
-
-    color: tuple = (1.0, 1.0, 1.0)
-    intensity: float = 1.0
-    name: str = ""
-
-    def __post_init__(self):
-        object.__setattr__(self, "color", _vec3(self.color, f"ambient light {self.name!r} color", MAX_LIGHT_VALUE))
-        object.__setattr__(self, "intensity", _finite(self.intensity, f"ambient light {self.name!r} intensity",
-                                                      MAX_LIGHT_VALUE))
-
-
-@dataclass(frozen=True)
-class DirectionalLight:
-    """A light at infinity (the sun).  ``direction (3,)``: the way the light travels (unit on
-    construction); ``shadows``: whether the baker casts shadow rays for it."""
-
-    direction: tuple = (0.0, 0.0, -1.0)
-    color: tuple = (1.0, 1.0, 1.0)
-    intensity: float = 1.0
-    shadows: bool = True
-    name: str = ""
-
-    def __post_init__(self):
-        w = f"directional light {self.name!r}"
-        object.__setattr__(self, "direction", _unit(self.direction, f"{w} direction"))
-        object.__setattr__(self, "color", _vec3(self.color, f"{w} color", MAX_LIGHT_VALUE))
-        object.__setattr__(self, "intensity", _finite(self.intensity, f"{w} intensity", MAX_LIGHT_VALUE))
-        object.__setattr__(self, "shadows", bool(self.shadows))
-
-
-@dataclass(frozen=True)
-class PointLight:
-    """A light at ``position (3,)`` reaching ``range`` model units with attenuation
-    ``(1 - d/range) ** falloff``."""
-
-    position: tuple = (0.0, 0.0, 0.0)
-    color: tuple = (1.0, 1.0, 1.0)
-    intensity: float = 1.0
-    range: float = math.inf
-    falloff: float = 1.0
-    shadows: bool = True
-    name: str = ""
-
-    def __post_init__(self):
-        w = f"point light {self.name!r}"
-        object.__setattr__(self, "position", _vec3(self.position, f"{w} position"))
-        object.__setattr__(self, "color", _vec3(self.color, f"{w} color", MAX_LIGHT_VALUE))
-        object.__setattr__(self, "intensity", _finite(self.intensity, f"{w} intensity", MAX_LIGHT_VALUE))
-        object.__setattr__(self, "range", _range(self.range, f"{w} range"))
-        object.__setattr__(self, "falloff", _falloff(self.falloff, f"{w} falloff"))
-        object.__setattr__(self, "shadows", bool(self.shadows))
-
-
-@dataclass(frozen=True)
-class SpotLight:
-    """A point light restricted to a cone around ``direction (3,)`` (unit on construction).
-
-    ``inner_angle`` / ``outer_angle``: half-angles of the full-intensity cone and of the cone
-    outside which it is dark, degrees, ``0 <= inner <= outer <= 180``."""
-
-    position: tuple = (0.0, 0.0, 0.0)
-    direction: tuple = (0.0, 0.0, -1.0)
-    color: tuple = (1.0, 1.0, 1.0)
-    intensity: float = 1.0
-    range: float = math.inf
-    inner_angle: float = 20.0
-    outer_angle: float = 30.0
-    falloff: float = 1.0
-    shadows: bool = True
-    name: str = ""
-
-    def __post_init__(self):
-        w = f"spot light {self.name!r}"
-        object.__setattr__(self, "position", _vec3(self.position, f"{w} position"))
-        object.__setattr__(self, "direction", _unit(self.direction, f"{w} direction"))
-        object.__setattr__(self, "color", _vec3(self.color, f"{w} color", MAX_LIGHT_VALUE))
-        object.__setattr__(self, "intensity", _finite(self.intensity, f"{w} intensity", MAX_LIGHT_VALUE))
-        object.__setattr__(self, "range", _range(self.range, f"{w} range"))
-        object.__setattr__(self, "falloff", _falloff(self.falloff, f"{w} falloff"))
-        inner = _finite(self.inner_angle, f"{w} inner_angle")
-        outer = _finite(self.outer_angle, f"{w} outer_angle")
-        if not (0.0 <= inner <= outer <= 180.0):
-            raise ValidationError(
-                f"{w}: expected 0 <= inner_angle <= outer_angle <= 180 degrees, got {inner} and {outer}"
-            )
-        object.__setattr__(self, "inner_angle", inner)
-        object.__setattr__(self, "outer_angle", outer)
-        object.__setattr__(self, "shadows", bool(self.shadows))
-
-
-_KINDS = {"ambient": AmbientLight, "directional": DirectionalLight, "point": PointLight, "spot": SpotLight}
-_KIND_OF = {cls: kind for kind, cls in _KINDS.items()}
-
-
-@dataclass(frozen=True)
-class Lights:
-    """An ordered collection of lights, kept in canonical order: ambient, directional, point, spot
-    lights, each kind in the order given (the order of a TOML file).
-
-    ``ambient``: the ambient lights; ``direct``: every other light, in order (the columns of
-    :func:`light_terms` and of the ``shadow`` argument of :func:`shade`).
-    """
-
-    lights: tuple = field(default_factory=tuple)
-    name: str = "lights"
-
-    def __post_init__(self):
-        lights = tuple(self.lights)
-        for i, light in enumerate(lights):
-            if type(light) not in _KIND_OF:
-                raise ValidationError(f"{self.name}: item {i} is {type(light).__name__}, expected a light")
-        # canonical order: by kind (ambient, directional, point, spot), then as given
-        rank = {cls: r for r, cls in enumerate(_KINDS.values())}
-        lights = tuple(sorted(lights, key=lambda x: rank[type(x)]))
-        object.__setattr__(self, "lights", lights)
-
-    def __iter__(self):
-        return iter(self.lights)
-
-    def __len__(self) -> int:
-        return len(self.lights)
-
-    @property
-    def ambient(self) -> tuple:
-        return tuple(x for x in self.lights if isinstance(x, AmbientLight))
-
-    @property
-    def direct(self) -> tuple:
-        return tuple(x for x in self.lights if not isinstance(x, AmbientLight))
-
-    def ambient_color(self) -> np.ndarray:
-        """Sum of the ambient terms, ``(3,)`` float64."""
-        out = np.zeros(3)
-        for a in self.ambient:
-            out = out + a.intensity * np.asarray(a.color)
-        return out
-
-    def to_dict(self) -> dict:
-        """A plain, canonical description: ``{kind: [fields, ...]}`` (used for hashing and TOML)."""
-        out: dict = {kind: [] for kind in _KINDS}
-        for light in self.lights:
-            d = asdict(light)
-            d = {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
-            out[_KIND_OF[type(light)]].append(d)
-        return {k: v for k, v in out.items() if v}
-
-    def __add__(self, other: "Lights") -> "Lights":
-        return Lights(self.lights + tuple(other.lights), self.name)
 
 
 # --------------------------------------------------------------------------- TOML I/O
@@ -351,7 +144,7 @@ def loads_lights(text: str, path="<string>") -> Lights:
     lights = []
     name = doc.pop("name", Path(str(path)).name)
     for kind, items in doc.items():
-        if kind not in _KINDS:
+        if kind not in LIGHT_KINDS:
             raise FormatError(
                 path,
                 f"unknown light kind {kind!r}: expected [[ambient]], [[directional]], [[point]] or [[spot]]",
@@ -362,7 +155,7 @@ def loads_lights(text: str, path="<string>") -> Lights:
             raise FormatError(
                 path, f"expected an array of tables [[{kind}]]", line=_find_line(text, "", None, kind), field=kind
             )
-        cls = _KINDS[kind]
+        cls = LIGHT_KINDS[kind]
         allowed = {f.name for f in fields(cls)}
         for i, item in enumerate(items):
             for key in item:
@@ -429,7 +222,7 @@ def dumps_lights(lights: Lights) -> str:
     lines = [f"name = {_toml_value(lights.name)}"]
     for light in lights:
         lines.append("")
-        lines.append(f"[[{_KIND_OF[type(light)]}]]")
+        lines.append(f"[[{KIND_OF_LIGHT[type(light)]}]]")
         for f in fields(light):
             lines.append(f"{f.name} = {_toml_value(getattr(light, f.name))}")
     return "\n".join(lines) + "\n"

@@ -11,7 +11,7 @@ Public API
         validation, terrain, baked light map, character LODs/palettes/batches/strips, compressed objects
         with baked vertex colours, per-cell visibility; content-hash cache, byte-identical bundles
     Cache, content_key                      the step cache (cache.py)
-    import_gltf, convert_lights, convert_cameras, axis_matrix, write_scene_gltf
+    import_gltf, axis_matrix, write_scene_gltf
                                             glTF lights (KHR_lights_punctual) and cameras (gltf_import.py)
     Visibility, compute_visibility, culling_report
                                             per-cell patch/object bitsets (visibility.py)
@@ -42,7 +42,7 @@ __all__, __getattr__, __dir__ = _lazy_exports(__name__, {
     "default_scene": ("build_default_scene",),
     "cache": ("Cache", "content_key"),
     "characters": ("character_arrays",),
-    "gltf_import": ("import_gltf", "convert_lights", "convert_cameras", "axis_matrix", "write_scene_gltf"),
+    "gltf_import": ("import_gltf", "axis_matrix", "write_scene_gltf"),
     "visibility": ("Visibility", "compute_visibility", "culling_report"),
     "sources": ("load_terrain", "load_rider_model", "load_object_mesh"),
     "preview": ("ScenePreview", "render_image", "render_frames", "camera_at"),
@@ -55,7 +55,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and the import g
     from piste.pipeline.cache import Cache, content_key  # noqa: F401
     from piste.pipeline.default_scene import build_default_scene  # noqa: F401
     from piste.pipeline.characters import character_arrays  # noqa: F401
-    from piste.pipeline.gltf_import import axis_matrix, convert_cameras, convert_lights, import_gltf, write_scene_gltf  # noqa: F401
+    from piste.pipeline.gltf_import import axis_matrix, import_gltf, write_scene_gltf  # noqa: F401
     from piste.pipeline.live import LiveScene, run_headless  # noqa: F401
     from piste.pipeline.preview import ScenePreview, camera_at, render_frames, render_image  # noqa: F401
     from piste.pipeline.sources import load_object_mesh, load_rider_model, load_terrain  # noqa: F401

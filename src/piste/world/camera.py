@@ -5,7 +5,8 @@ camera looks down its local -Z).  Pure numpy; the renderer turns these into unif
 
 API
 ---
-Camera                    eye, target, up, fov_y, near, far, aspect (+ matrices, frustum planes)
+Camera                    eye, target, up, fov_y, near, far, aspect, ortho_height, name (+ matrices, frustum
+                          planes): :class:`piste.scene_data.Camera`, the one camera type, re-exported
 look_at, perspective, orthographic   4x4 float64 matrices
 frustum_planes            (6, 4) planes of a view-projection matrix, normals pointing inside
 track_camera              a Camera riding down a centre line (k, 3) at fraction t
@@ -20,13 +21,13 @@ DEFAULT_FAR, MAX_DEPTH_RATIO
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from piste.errors import ConfigError
-
-from piste.transforms import frustum_planes, look_at, orthographic, perspective  # noqa: E402  (re-exported)
+from piste.scene_data import Camera  # (the one camera type, in the foundation; re-exported here)
+from piste.transforms import frustum_planes, look_at, orthographic, perspective  # noqa: F401  (re-exported)
 
 __all__ = ["DEFAULT_FAR", "MAX_DEPTH_RATIO", "Camera", "FlyCamera", "camera_planes", "far_for_extent", "frustum_planes", "look_at",
            "orthographic", "perspective", "terrain_view_problem", "track_camera", "warn_if_no_terrain"]
@@ -38,62 +39,6 @@ DEFAULT_FAR = 4000.0
 #: largest far / near ratio a scene camera may ask for: beyond it a 24-bit depth buffer has no
 #: precision left and the projection's inverse is singular in float64 (1e300 / 1e-300: LinAlgError)
 MAX_DEPTH_RATIO = 1e7
-
-
-@dataclass
-class Camera:
-    """A pinhole camera (or an orthographic one when ``ortho_height`` is set).
-
-    Attributes
-    ----------
-    eye, target : (3,) float64 world positions
-    up : (3,) float64, the world's up (Z)
-    fov_y : vertical field of view in degrees
-    near, far : clip distances in metres
-    aspect : width / height
-    ortho_height : height of the view volume in metres for an orthographic camera, else None
-    """
-
-    eye: np.ndarray
-    target: np.ndarray
-    up: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
-    fov_y: float = 60.0
-    near: float = 0.5
-    far: float = 4000.0
-    aspect: float = 640.0 / 448.0
-    ortho_height: float | None = None
-
-    def __post_init__(self):
-        self.eye = np.asarray(self.eye, dtype=np.float64).reshape(3)
-        self.target = np.asarray(self.target, dtype=np.float64).reshape(3)
-        self.up = np.asarray(self.up, dtype=np.float64).reshape(3)
-
-    @property
-    def forward(self) -> np.ndarray:
-        """Unit view direction ``(3,)``."""
-        d = self.target - self.eye
-        return d / np.linalg.norm(d)
-
-    def view_matrix(self) -> np.ndarray:
-        return look_at(self.eye, self.target, self.up)
-
-    def projection_matrix(self) -> np.ndarray:
-        if self.ortho_height is not None:
-            h = self.ortho_height / 2.0
-            w = h * self.aspect
-            return orthographic(-w, w, -h, h, self.near, self.far)
-        return perspective(self.fov_y, self.aspect, self.near, self.far)
-
-    def view_projection(self) -> np.ndarray:
-        """``P @ V``, ``(4, 4) float64``."""
-        return self.projection_matrix() @ self.view_matrix()
-
-    def frustum_planes(self) -> np.ndarray:
-        """``(6, 4) float64`` inward planes, see :func:`frustum_planes`."""
-        return frustum_planes(self.view_projection())
-
-    def with_aspect(self, width: int, height: int) -> "Camera":
-        return replace(self, aspect=float(width) / float(height))
 
 
 def _arc_length_point(points: np.ndarray, s) -> np.ndarray:

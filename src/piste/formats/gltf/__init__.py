@@ -3,16 +3,18 @@ before anything is allocated.
 
 Modules::
 
-    read        load_gltf(path) -> piste.character.Model (meshes, skeleton, clips, lights, cameras)
+    read        load_gltf(path, frame=GltfFrame()) -> piste.character.Model (meshes, skeleton, clips,
+                lights and cameras as piste.scene_data's)
     write       export_gltf(path, terrain=TerrainExport(mesh), characters=..., objects=...) -> ExportReport
     extensions  the extensions piste reads (KHR_texture_transform, KHR_mesh_quantization, Draco, ...)
                 and MaterialInfo, the material a mesh was imported with
     schema      precheck_gltf(path): size, GLB chunks, nesting, counts and the JSON types of every field read
     checks      number / vector / light and camera fields, rest inverses and normal matrices
+    units       glTF's axes, cameras and light units <-> piste's one Camera and light family
+                (GltfFrame, light_from_gltf, camera_from_gltf, light_to_gltf, camera_to_gltf)
 
-The unit conversion from piste's relative light units to glTF's lux / candela is
-:func:`piste.commands.export.piste_lights_to_gltf`; a bundle's export is
-:mod:`piste.pipeline.bundle_gltf`.  The old module names (``piste.formats.gltf_export``,
+The conversion between piste's relative light units and glTF's lux / candela (and Z up / Y up) is
+:mod:`piste.formats.gltf.units`; a bundle's export is :mod:`piste.pipeline.bundle_gltf`.  The old module names (``piste.formats.gltf_export``,
 ``gltf_ext``, ``gltf_schema``, ``gltf_checks``) re-export these modules' names.
 """
 
@@ -27,6 +29,7 @@ __all__, __getattr__, __dir__ = _lazy_exports(__name__, {
     "write": ("TerrainExport", "CharacterExport", "ObjectsExport", "ExportReport", "export_gltf"),
     "extensions": ("MaterialInfo",),
     "schema": ("precheck_gltf", "check_gltf_types"),
+    "units": ("GltfFrame",),
 })
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and the import graph
@@ -34,3 +37,4 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and the import g
     from piste.formats.gltf.write import CharacterExport, ExportReport, ObjectsExport, TerrainExport, export_gltf  # noqa: F401
     from piste.formats.gltf.extensions import MaterialInfo  # noqa: F401
     from piste.formats.gltf.schema import check_gltf_types, precheck_gltf  # noqa: F401
+    from piste.formats.gltf.units import GltfFrame  # noqa: F401

@@ -28,7 +28,9 @@ What is imported
 - **Morph targets**: POSITION and NORMAL deltas, names from ``extras.targetNames``, default
   weights from the node or mesh ``weights``.
 - **Materials**: base-colour factor and base-colour texture (decoded with Pillow to RGBA uint8).
-- **Lights** (KHR_lights_punctual) and **cameras** placed with their nodes' rest world transforms.
+- **Lights** (KHR_lights_punctual) and **cameras** placed with their nodes' rest world transforms, as
+  piste's own (:mod:`piste.scene_data`: Z up, relative light units) by the conventions of
+  :mod:`piste.formats.gltf.units` in the ``frame`` given (default: glTF's Y up, 1 m, 683 lux white).
 - Accessors: any byte stride, normalized integers, sparse accessors.
 """
 
@@ -39,10 +41,11 @@ from pathlib import Path
 
 import numpy as np
 
-from piste.character.model import Camera, Clip, Light, Model, Skeleton, SkinnedMesh, Track
+from piste.character.model import Clip, Model, Skeleton, SkinnedMesh, Track
 from piste.character.skeleton import topological_order, world_from_local
-from piste.errors import FormatError
+from piste.errors import FormatError, ValidationError
 from piste.formats import safe_io
+from piste.formats.gltf.units import GltfFrame, camera_from_gltf, light_from_gltf
 from piste.formats.gltf import checks as gltf_checks
 from piste.formats.gltf import extensions as gltf_ext
 from piste.formats.gltf.schema import precheck_gltf
@@ -348,16 +351,19 @@ def _skin_attributes(r: _Reader, attrs, nv: int, n_joints: int, field: str):
     return j, w
 
 
-def load_gltf(path, allow_paths=()) -> "Model":  # noqa: F821 - forward reference
+def load_gltf(path, allow_paths=(), frame: GltfFrame | None = None) -> "Model":  # noqa: F821 - forward reference
     """Load a glTF 2.0 file (``.gltf`` with external/embedded buffers, or ``.glb``) as a Model.
 
     Buffer and image URIs are read only inside the model's folder, or inside one of the folders
     ``allow_paths`` names (see :mod:`piste.formats.safe_io`); sizes and counts are capped
-    (:mod:`piste.formats.limits`) before anything is allocated.
-    Raises FormatError naming the file and the glTF field on malformed input.
+    (:mod:`piste.formats.limits`) before anything is allocated.  ``frame``
+    (:class:`piste.formats.gltf.units.GltfFrame`) places the file's lights and cameras in piste's
+    world (``Model.lights``, ``Model.cameras``: :mod:`piste.scene_data` objects); the meshes keep
+    the file's axes.  Raises FormatError naming the file and the glTF field on malformed input.
     See the module docstring for what is imported and how.
     """
     path = Path(path)
+    frame = GltfFrame() if frame is None else frame
     if not path.exists() and not path.is_symlink():
         raise FormatError(path, "no such file")
     doc = precheck_gltf(path)  # read through safe_io: a pipe, device, folder or link refused by name  # file size, GLB chunks, JSON nesting and array counts
@@ -735,33 +741,34 @@ def load_gltf(path, allow_paths=()) -> "Model":  # noqa: F821 - forward referenc
                 raise r.err(f"nodes[{i}].extensions.KHR_lights_punctual.light",
                             f"refers to light {li!r} but the file has {len(light_defs)}")
             lf = gltf_checks.light_fields(path, f"extensions.KHR_lights_punctual.lights[{li}]", light_defs[li])
-            lights.append(Light(
-                name=lf["name"] or node_names[i], type=lf["type"], color=lf["color"], intensity=lf["intensity"],
-                range=lf["range"], inner_cone=lf["inner_cone"], outer_cone=lf["outer_cone"], position=pos,
-                direction=fwd))
+            lf["name"] = lf["name"] or node_names[i]
+            try:
+                lights.append(light_from_gltf(lf, pos, fwd, frame, len(lights)))
+            except ValidationError as exc:  # e.g. a candela value no piste light can hold at that range
+                raise r.err(f"extensions.KHR_lights_punctual.lights[{li}]", str(exc)) from None
         if n.camera is not None:
             c = r.item("cameras", n.camera, f"nodes[{i}].camera")
             cf, num = f"cameras[{n.camera}]", gltf_checks.number
             if c.type == "orthographic" and c.orthographic is not None:
                 o, of = c.orthographic, cf + ".orthographic"
                 znear = num(path, of + ".znear", o.znear, 0.0, 0.0)
-                cameras.append(Camera(name=c.name or node_names[i], position=pos, forward=fwd, up=up, yfov=0.0,
-                                      znear=znear, zfar=num(path, of + ".zfar", o.zfar, lo=znear, lo_open=True),
-                                      type="orthographic", xmag=num(path, of + ".xmag", o.xmag),
-                                      ymag=num(path, of + ".ymag", o.ymag)))
+                cf = {"name": c.name or node_names[i], "type": "orthographic", "znear": znear,
+                      "zfar": num(path, of + ".zfar", o.zfar, lo=znear, lo_open=True),
+                      "xmag": num(path, of + ".xmag", o.xmag), "ymag": num(path, of + ".ymag", o.ymag)}
+                cameras.append(camera_from_gltf(cf, pos, fwd, up, frame, len(cameras)))
             else:
                 p = c.perspective
                 if p is None:
                     raise r.err(f"cameras[{n.camera}].perspective", "is missing")
                 pf = cf + ".perspective"
                 znear = num(path, pf + ".znear", p.znear, lo=0.0, lo_open=True)
-                cameras.append(Camera(
-                    name=c.name or node_names[i], position=pos, forward=fwd, up=up,
-                    yfov=num(path, pf + ".yfov", p.yfov, lo=0.0, hi=np.pi, lo_open=True, hi_open=True),
-                    aspect=None if p.aspectRatio is None else num(path, pf + ".aspectRatio", p.aspectRatio, lo=0.0,
-                                                                  lo_open=True),
-                    znear=znear,
-                    zfar=None if p.zfar is None else num(path, pf + ".zfar", p.zfar, lo=znear, lo_open=True)))
+                cf = {"name": c.name or node_names[i], "type": "perspective",
+                      "yfov": num(path, pf + ".yfov", p.yfov, lo=0.0, hi=np.pi, lo_open=True, hi_open=True),
+                      "aspect": None if p.aspectRatio is None else num(path, pf + ".aspectRatio", p.aspectRatio,
+                                                                       lo=0.0, lo_open=True),
+                      "znear": znear,
+                      "zfar": None if p.zfar is None else num(path, pf + ".zfar", p.zfar, lo=znear, lo_open=True)}
+                cameras.append(camera_from_gltf(cf, pos, fwd, up, frame, len(cameras)))
 
     return Model(name=path.stem, skeleton=skeleton, meshes=meshes, clips=clips, lights=lights, cameras=cameras,
                  path=str(path))

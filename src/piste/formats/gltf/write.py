@@ -35,9 +35,11 @@ Conventions
   not *required*: a viewer without it draws one instance); ``"nodes"`` writes one plain node per
   instance sharing the mesh (the fallback every viewer reads).  An instance matrix that is not a
   TRS (shear) cannot be expressed by either: its geometry is baked into a mesh of its own.
-- **Lights** (``KHR_lights_punctual``) and **cameras** are :class:`piste.character.Light` /
-  :class:`piste.character.Camera` in piste's world coordinates and glTF units (lux, candela,
-  radians); :mod:`piste.commands.export` documents the conversion from piste's relative units.
+- **Lights** (``KHR_lights_punctual``) and **cameras** are piste's own (:mod:`piste.scene_data`:
+  lights in relative units, :class:`~piste.scene_data.Camera`) in piste's world coordinates;
+  :mod:`piste.formats.gltf.units` converts them to glTF's (lux, candela, radians; ``white`` lux
+  is 1.0).  Ambient and negative lights have no glTF form and are left out
+  (:func:`piste.formats.gltf.units.lights_without_gltf_form` lists them for the scene's extras).
 - Output is written atomically (a ``.gltf``'s ``.bin`` first, then the JSON): a failed export
   leaves no partial file.
 
@@ -50,7 +52,7 @@ API
     CharacterExport(model, matrix=eye(4), name="character", clips=None, prefix="")
     ObjectsExport(meshes, kinds, kind, matrix, texture=None)
     export_gltf(path, terrain=None, characters=(), objects=None, lights=(), cameras=(), instancing="ext",
-                extras=None) -> ExportReport
+                extras=None, up="y", white=683.0) -> ExportReport
 """
 
 from __future__ import annotations
@@ -66,6 +68,7 @@ import numpy as np
 
 from piste.errors import ConfigError, ValidationError
 from piste.formats.atomic import atomic_path, write_bytes_atomic
+from piste.formats.gltf import units as gltf_units
 from piste.transforms import compose_trs, decompose_trs, look_rotation
 
 __all__ = ["TerrainExport", "CharacterExport", "ObjectsExport", "ExportReport", "export_gltf",
@@ -486,29 +489,20 @@ def _add_objects(b: _Builder, o: ObjectsExport, instancing: str, root_children: 
     report.objects += int(len(kind))
 
 
-def _add_lights(b: _Builder, lights, root_children: list, report: ExportReport) -> None:
+def _add_lights(b: _Builder, lights, root_children: list, report: ExportReport, white: float) -> None:
     defs = []
     for i, li in enumerate(lights):
-        if li.type not in ("directional", "point", "spot"):
-            raise ValidationError(f"light {li.name!r}: type must be directional, point or spot, got {li.type!r}")
-        if not float(li.intensity) >= 0:
-            raise ValidationError(f"light {li.name!r}: KHR_lights_punctual intensities must be >= 0, got {li.intensity}")
-        d = {"type": li.type, "name": li.name or f"light{i}",
-             "color": [float(np.clip(x, 0.0, None)) for x in np.asarray(li.color).reshape(3)],
-             "intensity": float(li.intensity)}
-        if li.range is not None and li.type != "directional" and math.isfinite(float(li.range)) and li.range > 0:
-            d["range"] = float(li.range)
-        if li.type == "spot":
-            outer = float(np.clip(li.outer_cone, 1e-4, math.pi / 2))
-            d["spot"] = {"innerConeAngle": float(np.clip(li.inner_cone, 0.0, outer - 1e-6)), "outerConeAngle": outer}
-        defs.append(d)
-        direction = np.asarray(li.direction, dtype=np.float64)
+        d = gltf_units.light_to_gltf(li, white, i)  # piste's units -> lux / candela (None: ambient or negative)
+        if d is None:
+            continue
+        position, direction = d.pop("position", None), d.pop("direction")
         up = (0.0, 0.0, 1.0) if abs(direction[2]) < 0.99 * np.linalg.norm(direction) else (0.0, 1.0, 0.0)
-        kw = {"name": d["name"], "extensions": {"KHR_lights_punctual": {"light": i}}}
-        if li.type != "point":
+        kw = {"name": d["name"], "extensions": {"KHR_lights_punctual": {"light": len(defs)}}}
+        defs.append(d)
+        if d["type"] != "point":
             kw["rotation"] = _quat_looking(direction, up)
-        if li.type != "directional":
-            kw["translation"] = [float(x) for x in np.asarray(li.position).reshape(3)]
+        if d["type"] != "directional":
+            kw["translation"] = [float(x) for x in np.asarray(position).reshape(3)]
         root_children.append(b.node(**kw))
     if defs:
         b.used.add("KHR_lights_punctual")
@@ -518,34 +512,35 @@ def _add_lights(b: _Builder, lights, root_children: list, report: ExportReport) 
 
 
 def _add_cameras(b: _Builder, cameras, root_children: list, report: ExportReport) -> None:
-    for i, c in enumerate(cameras):
-        zfar = None if c.zfar is None or not math.isfinite(float(c.zfar)) else float(c.zfar)
-        if c.type == "orthographic":
-            ymag = float(c.ymag or 1.0)
-            xmag = float(c.xmag or ymag * (c.aspect or 1.0))
-            cam = b.G.Camera(name=c.name, type="orthographic",
-                             orthographic=b.G.Orthographic(xmag=xmag, ymag=ymag, znear=float(c.znear),
+    for c in cameras:
+        f = gltf_units.camera_to_gltf(c)
+        zfar = f["zfar"]
+        if f["type"] == "orthographic":
+            ymag = float(f["ymag"] or 1.0)
+            xmag = float(f["xmag"] or ymag * (f["aspect"] or 1.0))
+            cam = b.G.Camera(name=f["name"], type="orthographic",
+                             orthographic=b.G.Orthographic(xmag=xmag, ymag=ymag, znear=float(f["znear"]),
                                                            zfar=zfar if zfar is not None else 4000.0))
         else:
-            cam = b.G.Camera(name=c.name, type="perspective",
-                             perspective=b.G.Perspective(yfov=float(c.yfov), znear=max(float(c.znear), 1e-6), zfar=zfar,
-                                                         aspectRatio=None if c.aspect is None else float(c.aspect)))
+            cam = b.G.Camera(name=f["name"], type="perspective",
+                             perspective=b.G.Perspective(yfov=float(f["yfov"]), znear=max(float(f["znear"]), 1e-6),
+                                                         zfar=zfar, aspectRatio=float(f["aspect"])))
         b.g.cameras.append(cam)
-        root_children.append(b.node(name=c.name, camera=len(b.g.cameras) - 1,
-                                    translation=[float(x) for x in np.asarray(c.position).reshape(3)],
-                                    rotation=_quat_looking(c.forward, c.up)))
+        root_children.append(b.node(name=f["name"], camera=len(b.g.cameras) - 1,
+                                    translation=[float(x) for x in f["position"]],
+                                    rotation=_quat_looking(f["forward"], f["up"])))
         report.cameras += 1
 
 
 # ---------------------------------------------------------------------------------------------
 def export_gltf(path, terrain: TerrainExport | None = None, characters=(), objects: ObjectsExport | None = None,
                 lights=(), cameras=(), instancing: str = "ext", extras: dict | None = None,
-                up: str = "y") -> ExportReport:
+                up: str = "y", white: float = gltf_units.DEFAULT_WHITE_LUX) -> ExportReport:
     """Write a glTF 2.0 file: ``.glb`` (one file) or ``.gltf`` (JSON + ``<stem>.bin``), atomically.
 
     ``terrain``, ``characters`` (CharacterExport list), ``objects`` (ObjectsExport), ``lights``
-    (:class:`piste.character.Light` list, glTF units) and ``cameras`` (:class:`piste.character.Camera`
-    list), all in piste's world coordinates.  ``instancing`` "ext" (EXT_mesh_gpu_instancing) or
+    (piste lights, any iterable: a :class:`piste.scene_data.Lights` or a list; ``white`` lux is 1.0)
+    and ``cameras`` (:class:`piste.scene_data.Camera` list, named), all in piste's world coordinates.  ``instancing`` "ext" (EXT_mesh_gpu_instancing) or
     "nodes"; ``up`` "y" (the root node turns piste's Z up into glTF's Y up) or "z" (no turn).
     ``extras`` are stored on the glTF scene.  See the module docstring for the conventions.
     """
@@ -568,7 +563,7 @@ def export_gltf(path, terrain: TerrainExport | None = None, characters=(), objec
         _add_character(b, c, root_children, scene_roots, report)
     if objects is not None and len(objects.kind):
         _add_objects(b, objects, instancing, root_children, report)
-    _add_lights(b, list(lights), root_children, report)
+    _add_lights(b, list(lights), root_children, report, float(white))
     _add_cameras(b, list(cameras), root_children, report)
     b.g.nodes[root].children = root_children or None
     b.g.scenes = [b.G.Scene(name="piste", nodes=[root] + scene_roots, extras=extras or {})]
