@@ -64,3 +64,12 @@ def test_lights_are_normalised_on_construction():
     assert s.direction == (0.0, 0.0, -1.0) and s.shadows is False and isinstance(s.color, tuple)
     d = scene_data.DirectionalLight(direction=(0.0, 0.6, -0.8))
     assert d.direction == (0.0, 0.6, -0.8)  # a unit vector is kept bit for bit
+
+
+def test_a_bundle_camera_keeps_its_name():
+    from piste.formats.bundle import camera_to_dict
+    from piste.pipeline.bundle_objects import camera_from_dict
+
+    d = dict(camera_to_dict(scene_data.Camera([0, -10, 5], [0, 0, 0], near=1.0, far=100.0)), name="main")
+    c = camera_from_dict(d)
+    assert isinstance(c, scene_data.Camera) and c.name == "main" and (c.near, c.far) == (1.0, 100.0)

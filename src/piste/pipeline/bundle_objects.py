@@ -91,7 +91,7 @@ def lights_from_dict(d: dict) -> Lights:
 def camera_from_dict(d: dict) -> Camera:
     """The :class:`piste.world.camera.Camera` of a manifest entry (:func:`camera_to_dict`)."""
     return Camera(np.array(d["eye"]), np.array(d["target"]), up=np.array(d["up"]), fov_y=d["fov_y"], near=d["near"],
-                  far=d["far"], ortho_height=d.get("ortho_height"))
+                  far=d["far"], ortho_height=d.get("ortho_height"), name=str(d.get("name") or ""))
 
 
 def _manifest_errors(fn):

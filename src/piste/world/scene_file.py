@@ -357,7 +357,10 @@ class GltfSpec:
 
 @dataclass
 class CameraSpec:
-    """An inline camera: fixed (``eye``, ``target``) or flying down the track (``track = (a, b)``)."""
+    """An inline camera as the scene file describes it: fixed (``eye``, ``target``) or flying down
+    the track (``track = (a, b)``), planes left open as None.  A description, not a second camera
+    type: the build (:func:`piste.pipeline.build.scene_cameras`) turns it into the one
+    :class:`piste.scene_data.Camera` once the terrain (and so the open planes) is known."""
 
     name: str
     eye: tuple | None = None
