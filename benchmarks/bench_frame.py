@@ -257,6 +257,25 @@ def _profile(r):
     return acc, undo
 
 
+def _track_programs(tp):
+    """``(key, now, before)``: the terrain's modulate program (the track's distance looked up per
+    vertex) and the same shader with the look-up per pixel (what it replaced), or None without a
+    track."""
+    from piste.render.terrain_pass import _MODE_ID, _with_defines
+
+    key = tp._key(_MODE_ID["modulate"])
+    if key[1] != 1:
+        return None
+    now = tp._program(_MODE_ID["modulate"])
+    vs = tp._vs.replace("out float v_track_d;", "out float v_track_d;\nout vec2 v_trk;").replace(
+        "    v_kind = in_kind;", "    v_kind = in_kind;\n    v_trk = (p.xy - u_track_rect.xy) * u_track_rect.zw;")
+    fs = tp._fs.replace("in float v_track_d;", "in vec2 v_trk;\nuniform sampler2D u_track;").replace(
+        "base_color(v_uv, v_track_d)", "base_color(v_uv, texture(u_track, v_trk).r)")
+    before = tp.ctx.program(vertex_shader=_with_defines(vs, TERRAIN_TRACK=1),
+                            fragment_shader=_with_defines(fs, TERRAIN_MODE=0, TERRAIN_TRACK=1))
+    return key, now, before
+
+
 def scene_section(args, floor_ms: list) -> dict:
     from piste.render.scene_renderer import SceneRenderer, summarize_scene
 
@@ -320,6 +339,12 @@ def scene_section(args, floor_ms: list) -> dict:
         r.terrain.set_visibility(bundle.visibility if on else None)
 
     compute_mips = getattr(r.shadows, "_mips_cs", None)
+    track_progs = _track_programs(r.terrain.terrain)
+
+    def set_track_per_vertex(on):
+        if track_progs is not None:
+            key, now, before = track_progs
+            r.terrain.terrain._programs[key] = now if on else r.terrain.terrain._apply(before)
 
     def set_compute_mips(on):
         r.shadows._mips_cs = compute_mips if on else None
@@ -331,11 +356,14 @@ def scene_section(args, floor_ms: list) -> dict:
                ("terrain", set_cull, "terrain: back faces culled", "terrain: back faces drawn"),
                ("terrain", set_visibility, "terrain: the bundle's visibility sets", "terrain: frustum culling alone"),
                ("shadow casters", set_compute_mips, "shadow mips: two levels a compute dispatch",
-                "shadow mips: a framebuffer (and a rasterizer wait) per level")]
+                "shadow mips: a framebuffer (and a rasterizer wait) per level"),
+               ("terrain", set_track_per_vertex, "terrain: track distance looked up per vertex",
+                "terrain: track distance looked up per pixel")]
     ab_res = []
     acc2, undo2 = _profile(r)
     for label, setter, now_name, before_name in changes:
-        if label == "objects" and r.objects is None or label == "shadow casters" and compute_mips is None:
+        if label == "objects" and r.objects is None or label == "shadow casters" and compute_mips is None \
+                or setter is set_track_per_vertex and track_progs is None:
             continue
         ab = {True: [], False: []}
         ab_frame = {True: [], False: []}

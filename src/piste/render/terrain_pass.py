@@ -147,7 +147,8 @@ class TerrainPass:
                 fs = _with_defines(load_shader("ps2_lightmap.frag.glsl"), TERRAIN_TRACK=key[1])
             else:
                 fs = _with_defines(self._fs, TERRAIN_MODE=mode, TERRAIN_TRACK=key[1])
-            p = self.ctx.program(vertex_shader=self._vs, fragment_shader=fs)
+            # (the vertex shader looks the track's distance up when the track is on: TERRAIN_TRACK)
+            p = self.ctx.program(vertex_shader=_with_defines(self._vs, TERRAIN_TRACK=key[1]), fragment_shader=fs)
             self._programs[key] = p
         return self._apply(p)
 

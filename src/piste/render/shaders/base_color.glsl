@@ -1,10 +1,9 @@
 // The terrain's base colour Cd: the tiled snow texture, plus (when a track is given) a groomed
 // piste: slightly cooler snow on the track and blue dye lines on its lips.  The track is a
 // projected texture (the talk's third UV set): a signed distance across the track in metres,
-// looked up by world x-y (``track_uv``: the field's coordinates, from the vertex shader).  Shared by the first pass and the PS2 light-map pass (which must see
-// the same Cd).
+// looked up by world x-y per vertex (``track_d``: terrain.vert.glsl's v_track_d, interpolated).
+// Shared by the first pass and the PS2 light-map pass (which must see the same Cd).
 uniform sampler2D u_base;
-uniform sampler2D u_track;
 #ifdef TERRAIN_TRACK
 const int u_track_on = TERRAIN_TRACK;  // compiled per track on / off (a run-time branch costs llvmpipe)
 #else
@@ -12,10 +11,10 @@ uniform int u_track_on;
 #endif
 uniform float u_track_half;  // half width of the groomed track in metres
 
-vec3 base_color(vec2 uv, vec2 track_uv) {
+vec3 base_color(vec2 uv, float track_d) {
     vec3 c = texture(u_base, uv).rgb;
     if (u_track_on == 1) {
-        float d = texture(u_track, track_uv).r;
+        float d = track_d;
         float ad = abs(d);
         float w = max(fwidth(d), 1e-4);
         float groomed = 1.0 - smoothstep(u_track_half - 1.0, u_track_half, ad);

@@ -10,10 +10,10 @@
 uniform sampler2D u_light;
 in vec2 v_uv;
 in vec2 v_uvl;
-in vec2 v_track;
+in float v_track_d;
 out vec4 f_color;
 void main() {
-    vec3 cd = base_color(v_uv, v_track);
+    vec3 cd = base_color(v_uv, v_track_d);
     vec3 cl = texture(u_light, v_uvl).rgb;
     float as_ = max(cl.r, max(cl.g, cl.b));
     vec3 cs = as_ > 0.0 ? cd - cd * cl / as_ : vec3(0.0);

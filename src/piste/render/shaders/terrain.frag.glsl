@@ -14,16 +14,16 @@ uniform vec3 u_color;
 uniform vec3 u_lod_colors[4];  // glue, 4x4, 6x6, 8x8
 in vec2 v_uv;
 in vec2 v_uvl;
-in vec2 v_track;
+in float v_track_d;
 in float v_fog;
 flat in float v_kind;
 out vec4 f_color;
 void main() {
     vec3 c;
     if (u_mode == 0) {
-        c = base_color(v_uv, v_track) * texture(u_light, v_uvl).rgb;
+        c = base_color(v_uv, v_track_d) * texture(u_light, v_uvl).rgb;
     } else if (u_mode == 1) {
-        c = base_color(v_uv, v_track);
+        c = base_color(v_uv, v_track_d);
     } else if (u_mode == 2) {
         c = texture(u_light, v_uvl).rgb;
     } else if (u_mode == 3 || u_mode == 5) {
