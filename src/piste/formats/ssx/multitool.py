@@ -370,7 +370,7 @@ class Project:
             lightmaps = lightmap_bank(pages)
         n_tex = len(textures) if textures is not None else (len(self.texture_files) if self.texture_files else 0)
         if self.source is not None and len(self.source) == n:
-            pbd = parse_pbd(self.source.raw, self.path)
+            pbd = parse_pbd(self.source.raw, self.source.path)  # its errors name PisteLevel.pbd
             pbd.control_points = np.asarray(self.control_points, np.float64).copy()
             pbd.uv = self.uv.copy()
             pbd.lightmap_rect = self.lightmap_rect.copy()
