@@ -127,3 +127,25 @@ def test_register_refuses_duplicates_reserved_names_and_unknown_places():
 def test_the_built_in_sections_and_their_order():
     assert list(SCENE_SECTIONS) == ["terrain", "lightmap", "lod", "visibility", "render", "pack", "auto_objects",
                                     "tile_objects", "gltf", "riders", "objects", "lights", "cameras"]
+
+
+def test_a_section_reads_files_and_ranges_through_the_table(tmp_path):
+    """SceneTable.file confines a path as every scene path is; SceneTable.bounded checks a range."""
+
+    def parse(t: SceneTable, scene: SceneFile) -> tuple:
+        t.allow({"map", "depth"})
+        return (t.file("map", (".png",)) if "map" in t.table else None), t.bounded("depth", 0.0, 10.0, 0.1)
+
+    (tmp_path / "snow.png").write_bytes(b"\x89PNG")
+    (tmp_path.parent / "outside.png").write_bytes(b"\x89PNG")
+    register_section(SceneSection("snow", parse))
+    try:
+        s = loads_scene('[snow]\nmap = "snow.png"\ndepth = 2\n', tmp_path / "s.toml")
+        assert s.sections["snow"] == (tmp_path / "snow.png", 2.0)
+        for bad, key, what in (('map = "../outside.png"', "snow.map", "leaves the scene's folder"), ('map = "snow.jpg"', "snow.map", "no such file"),
+                               ('depth = 11', "snow.depth", "in [0, 10]"), ('depth = "x"', "snow.depth", "finite number")):
+            with pytest.raises(SceneError) as info:
+                loads_scene(f"[snow]\n{bad}\n", tmp_path / "s.toml")
+            assert info.value.key == key and info.value.line == 2 and what in str(info.value), str(info.value)
+    finally:
+        unregister_section("snow")

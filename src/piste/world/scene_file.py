@@ -504,6 +504,16 @@ class SceneTable:
         """The folder of the scene file (relative paths resolve against it)."""
         return Path(self.path).resolve().parent
 
+    def file(self, key: str, suffixes: Sequence[str] | None = None) -> Path:
+        """The regular file ``key`` names (required), confined to the scene's folder or a folder the
+        user allowed, no symbolic links (:mod:`piste.formats.safe_io`); ``suffixes``: the ones taken."""
+        return _file(self, key, self.base, suffixes)
+
+    def bounded(self, key: str, lo: float, hi: float, default: Any = None, kind: str = "float",
+                what: str = "a number") -> Any:
+        """``get(key, kind, default)`` (a number or a vector of them) checked to lie in ``[lo, hi]``."""
+        return _bounded(self, key, self.get(key, kind, default), lo, hi, what)
+
     def error(self, key: str | None, message: str) -> SceneError:
         return SceneError(self.path, message, line=self.line(key), key=self.name(key) if key else self.label or None)
 
