@@ -54,7 +54,8 @@ def add_arguments(parser) -> None:
     c = sub.add_parser("convert", help="the level as a PatchNet .npz, a Multitool project or glTF")
     level(c)
     c.add_argument("--to", choices=("npz", "multitool", "gltf"), required=True,
-                   help="npz: the welded PatchNet (metres); multitool: a Multitool project folder; gltf (.glb/.gltf): "
+                   help="npz: the welded PatchNet (metres); multitool: a Multitool project folder (Patches, Lights, "
+                        "Instances, Splines .json, Textures/, Lightmaps/); gltf (.glb/.gltf): "
                         "the terrain with the level's textures and light map, as `piste export` writes it")
     c.add_argument("--out", required=True, help="the .npz, project folder or .glb/.gltf to write")
     m = sub.add_parser("make", help="a level from piste's own encoder (a synthetic slope or any piste patch net)")
@@ -65,7 +66,8 @@ def add_arguments(parser) -> None:
     m.add_argument("--from", dest="from_net", metavar="NET",
                    help="the patches of a saved PatchNet (.npz), a .bpt, or 'default' (the default course) instead "
                         "of a synthetic slope; placeholder textures and light maps (bake next)")
-    i = sub.add_parser("import", help="a Multitool project as a level (.pbd, and .ssh / _L.ssh when it has them)")
+    i = sub.add_parser("import", help="a Multitool project as a level (.pbd, and .ssh / _L.ssh when it has them); "
+                                      "notes on stderr name what the new level lacks")
     i.add_argument("level", metavar="PROJECT_DIR", help="the Multitool project folder (or its Patches.json)")
     i.add_argument("--out", required=True, help="the new level's .pbd")
 
