@@ -40,9 +40,10 @@ field for field equal (:func:`instances_json` of :func:`instances_from_json`, an
   polygon's* (``LineStrip.Distance``), ``Unknown32`` = 4311823, a spline's ``Unknown1`` = 0 and
   ``Unknown2`` = -1, and the four coefficients are the least-squares cubic ``t(s)`` of the curve
   parameter against the arc length ``s`` in **metres** over 200 samples, highest power first
-  (``BezierUtil.CalcCoefficients``; the Multitool solves its normal equations in float32, piste in
-  float64 by ``lstsq``: the two agree to a few float32 ulps on well-conditioned segments, not
-  bit for bit).  piste writes a segment's record only where its points changed (unchanged
+  (``BezierUtil.CalcCoefficients``).  The Multitool solves the normal equations in float32 by
+  Gaussian elimination, piste the least-squares problem in float64 (a pseudo-inverse): on random
+  segments of 5-80 m the coefficients differ by 0.1 % (median) to 7 % (worst), the fitted
+  ``t(s)`` by at most 1.2e-4, so piste's bytes are not the Multitool's.  piste writes a segment's record only where its points changed (unchanged
   segments keep their stored bytes, so a retail level's own coefficients survive a round trip).
   :meth:`MtSplines.polyline` evaluates a spline as piste's centreline points (metres).
 * **Models.json** ``{"Models": [...]}``: a model is ``ModelName``, ``Unknown3``, ``AnimTime`` and
