@@ -67,6 +67,8 @@ FORMATS = [
     ("SSX Tricky levels (.pbd)", "piste.formats.ssx.pbd"),
     ("SSX texture banks (.ssh)", "piste.formats.ssx.ssh"),
     ("SSX Multitool projects (Patches.json)", "piste.formats.ssx.multitool"),
+    ("SSX Multitool instances, splines, models (Instances/Splines/Models.json)",
+     "piste.formats.ssx.multitool_objects"),
     ("SSX Tricky rider models (.mpf)", "piste.formats.ssx.mpf"),
 ]
 
