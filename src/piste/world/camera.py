@@ -5,8 +5,7 @@ camera looks down its local -Z).  Pure numpy; the renderer turns these into unif
 
 API
 ---
-Camera                    eye, target, up, fov_y, near, far, aspect, ortho_height, name (+ matrices, frustum
-                          planes): :class:`piste.scene_data.Camera`, the one camera type, re-exported
+Camera                    piste.scene_data.Camera (the one camera type), re-exported
 look_at, perspective, orthographic   4x4 float64 matrices
 frustum_planes            (6, 4) planes of a view-projection matrix, normals pointing inside
 track_camera              a Camera riding down a centre line (k, 3) at fraction t
