@@ -153,11 +153,11 @@ class SsxTerrainRenderer(TerrainRenderer):
 
     def render(self, camera, lod: bool = True, lightmap_mode: str = "modulate", debug: str | None = None,
                read: bool = True, levels=None, **kwargs):
-        if lightmap_mode != "ps2" or debug is not None:
+        mode = self.frame_mode(lightmap_mode, debug)
+        if not isinstance(mode, SourceMode):  # every mode but ps2 is the terrain renderer's own
             return super().render(camera, lod=lod, lightmap_mode=lightmap_mode, debug=debug, read=read,
                                   levels=levels, **kwargs)
         cam = replace(camera, aspect=self.size[0] / self.size[1])
-        mode = SourceMode(self, lightmap_mode, debug)
         mesh = self.prepare(cam, lod=lod, levels=levels) if levels is not None else mode.prepare(cam, lod=lod)
         kwargs.pop("fog", None)
         kwargs.setdefault("sync", True)
