@@ -308,7 +308,8 @@ class BuildStep:
     not in :attr:`BuildResult.steps`).  ``when(ctx)`` False leaves the step out of this build
     altogether (not recorded).  A step with several cache entries gives ``run(ctx)`` instead and
     calls :meth:`BuildContext.cached` for each (the characters: one entry per rider model).
-    ``reads`` says in words what the key covers (``piste.pipeline.build`` lists it).
+    ``reads`` says in words what the key covers, for a reader of :data:`BUILD_STEPS` (the table
+    at the top of this module).
     """
 
     name: str
