@@ -11,10 +11,15 @@ and returns a few numbers.  Two passes:
    shadow rays against the neighbourhood (a halo of one tile, exact patches) and, beyond it, against
    the world's **far heights** (see below: a mountain several tiles away shadows this tile as far as the
    sun angle says), the **far field** (the tile's patch-corner grid with colours: a coarse
-   stand-in the runtime draws for distant tiles), and per-cell **visibility** bitsets of the tile's
-   patches from eyes over the tile (:func:`piste.pipeline.visibility.compute_visibility`, horizon
-   method, 180 azimuths, cells of at least a quarter tile; the tile itself is the only occluder, and
-   the streaming renderer does not use them yet: it culls whole tiles by the view frustum), and,
+   stand-in the runtime draws for distant tiles), and per-cell **visibility** bitsets of the patches
+   of the tile and its 3 x 3 neighbours seen from eyes over the tile
+   (:func:`piste.pipeline.visibility.compute_visibility` with ``region`` the tile, horizon method,
+   180 azimuths, cells of at least a quarter tile; the 3 x 3 tiles are the occluders, lowered to the
+   lowest of the meshes the streaming renderer may draw for them: near, middle and corner grid,
+   ``vis_meta`` ``levels``; ``vis_meta`` ``tiles`` lists the tiles in bit order: the renderer culls
+   the near tiles around the eye's tile by them while those tiles are drawn at one of the levels;
+   eyes are also sampled at the base height plus the steepest cell's ground rise, ``cover_ground``,
+   with a set per sampled height, so eyes on steep ground keep sets), and,
    when the spec names object rules, the tile's **scene objects** (members ``objects_kind``,
    ``objects_matrix``: :func:`piste.pipeline.tile_objects.place_tile_objects`, placed by slope,
    altitude and density from per-cell hashes, so tiles agree whatever order or worker bakes them).
@@ -65,6 +70,7 @@ from piste.pipeline.cache import content_key
 from piste.pipeline.sources import load_heightfield
 from piste.pipeline.tile_objects import ObjectRule, place_tile_objects, rules_key
 from piste.pipeline.visibility import compute_visibility
+from piste.render.streaming import MID_SAMPLES, NEAR_SAMPLES
 from piste.terrain.bezier import evaluate, grid_params
 from piste.terrain.heightfield import single_threaded
 from piste.terrain.net import PatchNet
@@ -79,9 +85,11 @@ __all__ = ["TiledSpec", "TiledResult", "ArraySource", "FileSource", "SyntheticSo
            "FAR_MAX_CELLS", "FAR_SUBDIV"]
 
 #: bumped whenever :func:`lit_task`'s output for the same input changes
-TILE_BAKE_VERSION = "piste.tile-bake/4"  # 2: seam light welded (as the one-bundle bake: weld_seam_light); 3: far_error
+TILE_BAKE_VERSION = "piste.tile-bake/5"  # 2: seam light welded (as the one-bundle bake: weld_seam_light); 3: far_error
 # 4: far-field shadows (sun rays beyond the 3 x 3 neighbourhood marched over the world's far heights);
 #    scene objects placed by rules (objects_kind, objects_matrix) when the spec has object rules
+# 5: visibility sets over the 3 x 3 tiles' patches (vis_meta "tiles"), seen from eyes over the tile, the
+#    occluders lowered to the drawn meshes (vis_meta "levels"), eye heights covering steep cells
 #: bumped whenever :func:`far_heights_task`'s output for the same fits changes
 FAR_HEIGHTS_VERSION = "piste.far-heights/1"
 #: most cells a side of the far heights grid (more: max-pooled in blocks)
@@ -563,11 +571,24 @@ def _bake_tile(spec: TiledSpec, ty: int, tx: int, halo: int = 1) -> tuple[dict, 
         arrays["objects_kind"], arrays["objects_matrix"] = kind, matrix
         stats["objects"] = len(kind)
     if spec.cell > 0:
-        tile = PatchNet(ring_net.control_points[centre], tol=ring_net.tol, name=f"tile {ty},{tx}")
-        vis = compute_visibility(tile, cell=spec.cell, eye_heights=spec.eye_heights, method="horizon", azimuths=180)
+        # eyes over this tile, targets and occluders the tile and its neighbours (every patch of the
+        # 3 x 3 tiles, in row-major tile order: vis_meta "tiles" lists them with their patch counts)
+        # the occluders no higher than the meshes the streaming renderer may draw for these tiles
+        # (near, middle and the full corner grid: it uses the sets only while the tiles are drawn so)
+        ring3, _ = neighbourhood_net(store, g, ty, tx, halo=1)
+        x0, y0, x1, y1 = g.tile_bounds_xy(ty, tx)
+        levels = sorted({max(res, NEAR_SAMPLES), MID_SAMPLES, 2})
+        vis = compute_visibility(ring3, cell=spec.cell, eye_heights=spec.eye_heights, method="horizon", azimuths=180,
+                                 region=(x0, y0, x1, y1), levels=levels, cover_ground=True)
         va, vm = vis.to_arrays()
+        vm["levels"] = levels
         for k, v in va.items():
             arrays[f"vis_{k}"] = v
+        vm["tiles"] = []
+        for y in range(max(ty - 1, 0), min(ty + 2, g.shape[0])):
+            for x in range(max(tx - 1, 0), min(tx + 2, g.shape[1])):
+                qy0, qy1, qx0, qx1 = g.patch_range(y, x)
+                vm["tiles"].append([y, x, (qy1 - qy0) * (qx1 - qx0)])
         arrays["vis_meta"] = np.array(_json(vm))
     info = {"samples": m * res * res, "rays": int(stats.get("rays", 0)), "far_rays": int(stats.get("far_rays", 0)),
             "objects": int(stats.get("objects", 0)), "zmin": float(lo[2]), "zmax": float(hi[2]),

@@ -28,7 +28,8 @@ centre and top.  Eye points are samples: an eye between them may (rarely) see a 
 API
 ---
 Visibility                                   grid + bitsets; ``patches_at(eye)``, ``objects_at(eye)``
-compute_visibility(net, cell, eye_heights, objects=None, method="auto") -> Visibility
+compute_visibility(net, cell, eye_heights, objects=None, method="auto", region=None, levels=()) -> Visibility
+drawn_floor(net, patch, uv, levels) -> (k,)    the lowest of the triangulated m x m meshes at (patch, uv)
 culling_report(net, vis, cameras) -> dict    % of patches drawn: frustum alone vs frustum + visibility
 scene_eye_heights(net, base, eyes) -> heights  the band a scene needs (its cameras' and riders' eyes)
 band_warnings(net, vis, cameras) -> messages   cameras above the band (their frames draw without the sets)
@@ -47,13 +48,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from piste.errors import ConfigError, FormatError
-from piste.terrain.bezier import evaluate
+from piste.terrain.bezier import evaluate, grid_params
 from piste.terrain.query import height_at, ray_intersect
 from piste.transforms import cull_boxes
 from piste.world.camera import track_camera
 
 __all__ = ["Visibility", "compute_visibility", "culling_report", "patch_targets", "is_heightfield", "height_above",
-           "scene_eye_heights", "band_warnings", "camera_eyes"]
+           "scene_eye_heights", "band_warnings", "camera_eyes", "drawn_floor"]
 
 #: most eye-point x target tests one visibility computation may allocate (bytes of booleans)
 MAX_VISIBILITY_WORK = 2 << 30
@@ -194,18 +195,23 @@ def is_heightfield(net, samples: int = 64) -> bool:
     return bool(area <= 1.05 * np.prod(bhi[:2] - blo[:2]) + 1e-9)
 
 
-def _grid_for(net, cell: float):
+def _grid_for(net, cell: float, region=None):
     lo, hi = net.bounds
+    if region is not None:  # the eyes' cells over part of the net (e.g. a tile of its neighbourhood)
+        lo = np.array([region[0], region[1], lo[2]], dtype=np.float64)
+        hi = np.array([region[2], region[3], hi[2]], dtype=np.float64)
     origin = lo[:2].copy()
     cols = max(1, int(np.ceil((hi[0] - lo[0]) / cell - 1e-9)))
     rows = max(1, int(np.ceil((hi[1] - lo[1]) / cell - 1e-9)))
     return origin, (rows, cols)
 
 
-def _eye_points(net, origin, shape, cell, eye_heights):
+def _eye_points(net, origin, shape, cell, eye_heights, region=None):
     """Eye points and which cells they serve: ``eyes (k, 3)``, ``owner`` list of (cell, eye) pairs."""
     rows, cols = shape
     lo, hi = net.bounds
+    if region is not None:
+        lo, hi = np.asarray(region[:2], dtype=np.float64), np.asarray(region[2:], dtype=np.float64)
     inset = 1e-3 * cell
     gx = np.clip(origin[0] + cell * np.arange(cols + 1), lo[0] + inset, hi[0] - inset)
     gy = np.clip(origin[1] + cell * np.arange(rows + 1), lo[1] + inset, hi[1] - inset)
@@ -222,10 +228,36 @@ def _eye_points(net, origin, shape, cell, eye_heights):
 
 
 # ----------------------------------------------------------------------------- the horizon test
-class _HeightGrid:
-    """The terrain's lower envelope on a regular grid (occluder heights), -inf off the terrain."""
+def drawn_floor(net, patch: np.ndarray, uv: np.ndarray, levels) -> np.ndarray:
+    """The lowest of the triangulated meshes a renderer may draw for ``net``'s patches: at points
+    ``(patch (k,), uv (k, 2))``, the minimum over ``levels`` (samples a patch side, e.g. 2: the
+    patch-corner grid) of the patch evaluated on an ``m x m`` grid, each cell split along its
+    (0, 0)-(1, 1) diagonal (as :func:`piste.terrain.tiles.triangulated_heights` and the streamed
+    tile meshes are), ``(k,)`` float64 (+inf without levels)."""
+    patch = np.asarray(patch, dtype=np.int64)
+    u, v = np.asarray(uv, dtype=np.float64)[:, 0], np.asarray(uv, dtype=np.float64)[:, 1]
+    out = np.full(len(patch), np.inf)
+    cp = np.asarray(net.control_points, dtype=np.float64)
+    for m in sorted({int(x) for x in levels}):
+        gu, gv = grid_params(m)
+        z = evaluate(cp, gu, gv, normals=False)[..., 2].reshape(len(cp), m, m)  # [patch, j (v), i (u)]
+        s, t = np.clip(u, 0.0, 1.0) * (m - 1), np.clip(v, 0.0, 1.0) * (m - 1)
+        i = np.minimum(np.floor(s).astype(np.int64), m - 2)
+        j = np.minimum(np.floor(t).astype(np.int64), m - 2)
+        fu, fv = s - i, t - j
+        z00, z10 = z[patch, j, i], z[patch, j, i + 1]
+        z01, z11 = z[patch, j + 1, i], z[patch, j + 1, i + 1]
+        lower = z00 + fu * (z10 - z00) + fv * (z11 - z10)  # fu >= fv: the triangle (00, 10, 11)
+        upper = z00 + fv * (z01 - z00) + fu * (z11 - z01)  # the triangle (00, 11, 01)
+        out = np.minimum(out, np.where(fu >= fv, lower, upper))
+    return out
 
-    def __init__(self, net, spacing: float, margin: float):
+
+class _HeightGrid:
+    """The terrain's lower envelope on a regular grid (occluder heights), -inf off the terrain;
+    with ``levels``, also no higher than the coarser meshes drawn for it (:func:`drawn_floor`)."""
+
+    def __init__(self, net, spacing: float, margin: float, levels=()):
         from scipy.ndimage import minimum_filter
 
         lo, hi = net.bounds
@@ -236,7 +268,10 @@ class _HeightGrid:
         x = lo[0] + spacing * np.arange(nx)
         y = lo[1] + spacing * np.arange(ny)
         xy = np.stack(np.meshgrid(np.minimum(x, hi[0]), np.minimum(y, hi[1]), indexing="xy"), -1).reshape(-1, 2)
-        z, hit, _, _ = height_at(net, xy)
+        z, hit, patch, uv = height_at(net, xy)
+        if len(levels) and hit.any():
+            z = z.copy()
+            z[hit] = np.minimum(z[hit], drawn_floor(net, patch[hit], uv[hit], levels))
         z = np.where(hit, z, np.inf).reshape(ny, nx)
         z = minimum_filter(z, size=3, mode="nearest") - margin
         self.h = np.where(np.isfinite(z), z, -np.inf)
@@ -298,7 +333,8 @@ def _rays_visible(net, eyes: np.ndarray, targets: np.ndarray, margin: float) -> 
 # ----------------------------------------------------------------------------- the step
 def compute_visibility(net, cell: float = 50.0, eye_heights=(1.7, 9.0), objects=None, method: str = "auto",
                        azimuths: int = 720, step: float | None = None, margin: float = 0.25,
-                       progress: bool = False, patches: bool = True) -> Visibility:
+                       progress: bool = False, patches: bool = True, region=None, levels=(),
+                       cover_ground: bool = False) -> Visibility:
     """Visibility bitsets of ``net``'s patches (and objects) for a grid of ``cell``-metre cells.
 
     Parameters
@@ -314,6 +350,16 @@ def compute_visibility(net, cell: float = 50.0, eye_heights=(1.7, 9.0), objects=
     progress : tqdm bar over eye batches
     patches : test the patches (False: only the objects; every patch bit is set), so that moving an
         object recomputes only the objects' bits (with ``method="rays"`` that is cheap for a few objects)
+    region : ``(x0, y0, x1, y1)`` metres inside the net's bounds: the cells (the eyes) cover only
+        this rectangle while every patch of the net is a target and an occluder (a tiled world's
+        tile, its sets saying what it sees of its neighbours too); default: the net's bounds
+    levels : samples a patch side of coarser meshes a renderer draws instead of the exact surface
+        (horizon method): occluders are lowered to the lowest of them (:func:`drawn_floor`), so a
+        target hidden by the exact surface but not by a coarse mesh that sags below it stays visible
+    cover_ground : also sample eyes at the highest of ``eye_heights`` plus the largest rise of
+        sampled ground within a cell (metres, rounded up), so the band (measured from a cell's lowest
+        sampled ground) reaches an eye at that height over the cell's highest sampled ground: on
+        steep ground the sets still hold there (with ``level_bits``, low eyes keep the tighter sets)
     """
     if not cell > 0:
         raise ConfigError(f"visibility: cell must be > 0 metres, got {cell}")
@@ -327,19 +373,40 @@ def compute_visibility(net, cell: float = 50.0, eye_heights=(1.7, 9.0), objects=
     n = len(net)
     spheres = np.zeros((0, 4)) if objects is None else np.asarray(objects, dtype=np.float64).reshape(-1, 4)
     m = len(spheres)
-    origin, shape = _grid_for(net, cell)
+    if region is not None:
+        region = np.asarray(region, dtype=np.float64).reshape(-1)
+        lo, hi = net.bounds
+        if region.shape != (4,) or not np.isfinite(region).all() or not (region[0] < region[2] and region[1] < region[3]) \
+                or region[0] < lo[0] - 1e-6 or region[1] < lo[1] - 1e-6 or region[2] > hi[0] + 1e-6 \
+                or region[3] > hi[1] + 1e-6:
+            raise ConfigError(f"visibility: region must be (x0, y0, x1, y1) inside the terrain's bounds "
+                              f"{lo[:2].tolist()} .. {hi[:2].tolist()}, got {region.tolist()}")
+    origin, shape = _grid_for(net, cell, region)
     rows, cols = shape
     # bound the work before allocating: (eye points x targets) booleans (a tiny cell asked for TiBs)
-    work = ((rows + 1) * (cols + 1) + rows * cols) * len(heights) * (n * (9 if patches else 0) + 2 * m)
-    if work > MAX_VISIBILITY_WORK:
-        raise ConfigError(f"visibility: a cell of {cell:g} m cuts the course into {rows} x {cols} cells, "
-                          f"{work / 2**30:.1f} GiB of eye-target tests (limit {MAX_VISIBILITY_WORK / 2**30:.0f} GiB): "
-                          "use a larger visibility.cell")
+    def check_work(heights):
+        work = ((rows + 1) * (cols + 1) + rows * cols) * len(heights) * (n * (9 if patches else 0) + 2 * m)
+        if work > MAX_VISIBILITY_WORK:
+            raise ConfigError(f"visibility: a cell of {cell:g} m cuts the course into {rows} x {cols} cells, "
+                              f"{work / 2**30:.1f} GiB of eye-target tests (limit {MAX_VISIBILITY_WORK / 2**30:.0f} "
+                              "GiB): use a larger visibility.cell")
+
+    check_work(heights)
+    xy, zg, hit, nodes = _eye_points(net, origin, shape, cell, heights, region)
+    if cover_ground:
+        g5 = np.where(hit, zg, np.nan)[nodes]  # (cells, 5) sampled ground
+        ok = np.isfinite(g5).any(axis=1)
+        if ok.any():
+            rise = float((np.nanmax(g5[ok], axis=1) - np.nanmin(g5[ok], axis=1)).max())
+            extra = [float(np.ceil(max(heights) + rise))]
+            while extra[-1] / 2.0 > 2.0 * max(heights):  # and halving down: eyes between get tighter sets
+                extra.append(float(np.ceil(extra[-1] / 2.0)))
+            heights = tuple(sorted(set(heights) | {h for h in extra if h > max(heights)}))
+            check_work(heights)
     ptargets = patch_targets(net) if patches else np.zeros((n, 0, 3))  # (n, 9, 3)
     k = ptargets.shape[1]
     otargets = np.concatenate([spheres[:, :3], spheres[:, :3] + np.stack([np.zeros(m), np.zeros(m), spheres[:, 3]], 1)])
     targets = np.concatenate([ptargets.reshape(-1, 3), otargets])
-    xy, zg, hit, nodes = _eye_points(net, origin, shape, cell, heights)
     eyes = np.concatenate([np.column_stack([xy, zg + h]) for h in heights])  # (g * H, 3)
     valid = np.tile(hit, len(heights))
     vis_eye = np.zeros((len(eyes), len(targets)), dtype=bool)
@@ -348,7 +415,7 @@ def compute_visibility(net, cell: float = 50.0, eye_heights=(1.7, 9.0), objects=
         lo, hi = net.bounds
         size = float(np.median(net.patch_size))
         st = float(step) if step is not None else max(size / 4.0, 0.25)
-        grid = _HeightGrid(net, st, margin)
+        grid = _HeightGrid(net, st, margin, levels)
         rmax = float(np.hypot(*(hi[:2] - lo[:2])))
         chunks = [idx[i:i + 4] for i in range(0, len(idx), 4)]
         it = chunks

@@ -21,8 +21,10 @@ a tile is drawn at the coarsest level whose error projects to at most ``pixel_er
 (``FAR_PIXEL_ERROR``), nearest tiles first under the budget (and near within ``near_radius``).
 Near and middle meshes geomorph: each vertex carries its height on the next coarser level and is
 drawn between the two by the tile's error (:meth:`TileCache.morph_factors`), fully on the coarser
-level where the tile switches, so a switch does not pop.  Near tiles draw through the build's
-per-tile visibility sets when the eye is over them (:class:`TileSets`).
+level where the tile switches, so a switch does not pop.  Near, middle and full-corner-grid tiles
+draw through the build's visibility sets of the tile under the eye, which say what eyes over it see
+of its own patches and of its eight neighbours' (:class:`TileSets`), while every tile of theirs in
+view is drawn at a level their occluders were lowered to (:meth:`TileCache.sets_hold`).
 
 Where a near tile meets a far one, the near tile's border follows the patch edge curves and the
 far tile's border their chords.  Both lie in the same vertical plane (patch edges are straight in
@@ -196,7 +198,8 @@ def _stride_index(n: int, stride: int) -> np.ndarray:
 
 def far_mesh(lit: dict, depth: float, stride: int = 1) -> TileMesh:
     """The far stand-in of a tile: its corner grid ``(ny+1, nx+1)`` (every ``stride``-th corner, the
-    border rows always kept) plus skirts."""
+    border rows always kept) plus skirts.  At stride 1 (a cell a patch) the triangles are
+    patch-major (``patch_triangles`` 2: visibility sets cull it per patch like a near mesh)."""
     g = np.asarray(lit["far_positions"], dtype=np.float64)
     c = np.asarray(lit["far_colors"])
     ri, ci = _stride_index(g.shape[0], stride), _stride_index(g.shape[1], stride)
@@ -204,7 +207,13 @@ def far_mesh(lit: dict, depth: float, stride: int = 1) -> TileMesh:
     rows, cols = g.shape[:2]
     idx = np.arange(rows * cols).reshape(rows, cols)
     sides = [idx[0], idx[:, -1], idx[-1], idx[:, 0]]
-    return _with_skirts(g.reshape(-1, 3), c.reshape(-1, 3), _grid_triangles(rows, cols), sides, depth)
+    tris = _grid_triangles(rows, cols)
+    if stride == 1:  # cell k's two triangles are k and k + cells: together, cell by cell
+        cells = (rows - 1) * (cols - 1)
+        tris = tris.reshape(2, cells, 3).transpose(1, 0, 2).reshape(-1, 3)
+    mesh = _with_skirts(g.reshape(-1, 3), c.reshape(-1, 3), tris, sides, depth)
+    mesh.patch_triangles = 2 if stride == 1 else 0
+    return mesh
 
 
 def light_grid(texels: np.ndarray, grid_shape: tuple) -> np.ndarray:
@@ -341,7 +350,9 @@ def mesh_bytes(rows: int, cols: int, morph: bool = False) -> int:
 class TileSets:
     """A tile's visibility sets at run time (what :class:`piste.pipeline.visibility.Visibility`
     wrote: ``origin (2,)``, ``cell`` metres, ``shape (rows, cols)``, ``patch_bits (cells, ceil(n/8))``
-    uint8 little bit order, ``n`` patches, ``ground_min (cells,)`` or None, ``band`` metres)."""
+    uint8 little bit order, ``n`` patches, ``ground_min (cells,)`` or None, ``band`` metres;
+    ``tiles`` ``{(ty, tx): (first bit, patches)}``: whose patches the bits are, the tile's own and,
+    in worlds built since the sets cover the 3 x 3 neighbourhood, its neighbours')."""
 
     origin: np.ndarray
     cell: float
@@ -350,6 +361,29 @@ class TileSets:
     n: int
     ground_min: np.ndarray | None
     band: float
+    tiles: dict | None = None
+    #: samples a patch side of the meshes the occluders were lowered to (the build's ``levels``:
+    #: the sets hold while every tile of theirs in view is drawn at one of them); None: sets of the
+    #: tile's own patches with only the tile as occluder (worlds built before), always used
+    levels: tuple | None = None
+    #: ``(levels - 1, cells, ceil(n/8))`` uint8: the patches seen from eyes up to each lower sampled
+    #: height (``heights``, sorted; the top level is ``patch_bits``), or None
+    level_bits: np.ndarray | None = None
+    heights: tuple = ()
+
+    def visible_tile(self, t, eye) -> np.ndarray | None:
+        """``(n_t,) bool`` patches of tile ``t`` an eye ``(3,)`` over this set's tile may see
+        (:meth:`visible`), or None: ``t`` is not in the sets, or the eye is outside the grid or above
+        the band (draw all)."""
+        span = (self.tiles or {}).get(tuple(t))
+        if span is None:
+            return None
+        key = tuple(float(x) for x in np.asarray(eye, dtype=np.float64).reshape(-1)[:3])
+        got = self.__dict__.get("_last")
+        if got is None or got[0] != key:  # one union of cells a frame, whatever the tiles drawn
+            got = self.__dict__["_last"] = (key, self.visible(eye))
+        bits = got[1]
+        return None if bits is None else bits[span[0]:span[0] + span[1]]
 
     def visible(self, eye) -> np.ndarray | None:
         """``(n,) bool`` patches an eye ``(3,)`` over the tile may see, or None (outside the grid,
@@ -366,7 +400,14 @@ class TileSets:
             return None
         cells = [r * cols + q for r in range(max(r0 - 1, 0), min(r0 + 2, rows))
                  for q in range(max(q0 - 1, 0), min(q0 + 2, cols))]
-        bits = np.bitwise_or.reduce(self.patch_bits[cells], axis=0)
+        if self.level_bits is not None and self.ground_min is not None and len(self.level_bits):
+            # the sets of the lowest sampled height at or above the eye's over its cell's lowest ground
+            k = int(np.searchsorted(np.asarray(self.heights, dtype=np.float64),
+                                    e[2] - self.ground_min[r0 * cols + q0] - 1e-9))
+            level = self.level_bits[k] if k < len(self.level_bits) else self.patch_bits
+            bits = np.bitwise_or.reduce(level[cells], axis=0)
+        else:
+            bits = np.bitwise_or.reduce(self.patch_bits[cells], axis=0)
         return np.unpackbits(bits, count=self.n, bitorder="little").astype(bool)
 
 
@@ -532,12 +573,24 @@ class TileCache:
             n, cell = int(meta["n_patches"]), float(meta["cell"])
             origin = np.asarray(meta["origin"], dtype=np.float64).reshape(2)
             band = max((float(h) for h in meta.get("eye_heights", ())), default=0.0)
+            listed = [(int(y), int(x), int(k)) for y, x, k in meta["tiles"]] if "tiles" in meta else [(*t, n)]
+            heights = tuple(sorted(float(h) for h in meta.get("eye_heights", ())))
+            levels = tuple(int(m) for m in meta["levels"]) if "levels" in meta else None
         except (ValueError, TypeError, KeyError) as exc:
             raise TileError(path, t, f"unreadable visibility metadata ({str(exc)[:80]})", field="vis_meta") from None
+        tiles, first = {}, 0
+        for y, x, k in listed:  # the tiles whose patches the bits are, in bit order
+            if self.patches.get((y, x)) != k or (y, x) in tiles or max(abs(y - t[0]), abs(x - t[1])) > 1:
+                raise TileError(path, t, f"visibility sets list tile ({y}, {x}) with {k} patches: expected this tile "
+                                         "and its neighbours, each once with its patch count", field="vis_meta")
+            tiles[(y, x)] = (first, k)
+            first += k
         cells = int(np.prod(shape)) if len(shape) == 2 else 0
-        if n != self.patches[t] or cells < 1 or not (cell > 0 and np.isfinite(cell)) or not np.isfinite(origin).all():
+        if n != first or t not in tiles or cells < 1 or not (cell > 0 and np.isfinite(cell)) \
+                or not np.isfinite(origin).all():
             raise TileError(path, t, f"visibility sets for {n} patches in {cells} cells of {cell} m, expected "
-                                     f"{self.patches[t]} patches in at least one cell", field="vis_meta")
+                                     f"{first} patches (this tile's {self.patches[t]} among them) in at least one "
+                                     "cell", field="vis_meta")
         pb = a.get("vis_patch_bits")
         if pb is None or pb.dtype != np.uint8 or pb.shape != (cells, (n + 7) // 8):
             raise TileError(path, t, f"expected ({cells}, {(n + 7) // 8}) uint8 patch bits, got "
@@ -546,7 +599,13 @@ class TileCache:
         if gm is not None and (gm.shape != (cells,) or gm.dtype.kind != "f" or not np.isfinite(gm).all()):
             raise TileError(path, t, f"expected ({cells},) finite ground heights, got {gm.shape} {gm.dtype}",
                             field="vis_ground_min")
-        return TileSets(origin, cell, shape, pb, n, None if gm is None else gm.astype(np.float64), band)
+        lb = a.get("vis_level_bits")
+        if lb is not None and (lb.dtype != np.uint8 or lb.ndim != 3 or lb.shape[1:] != pb.shape
+                               or not 0 < lb.shape[0] < max(len(heights), 1)):
+            raise TileError(path, t, f"expected (levels < {len(heights)}, {cells}, {(n + 7) // 8}) uint8 level bits, got "
+                                     f"{lb.shape} {lb.dtype}", field="vis_level_bits")
+        return TileSets(origin, cell, shape, pb, n, None if gm is None else gm.astype(np.float64), band, tiles, levels,
+                        lb, heights)
 
     def _read_objects(self, t):
         """Tile ``t``'s scene objects ``(kind, matrix)`` (:func:`piste.terrain.tiles.read_tile_objects`),
@@ -564,12 +623,34 @@ class TileCache:
         with self._lock:
             return dict(self.objects)
 
-    def visible_patches(self, t, eye) -> np.ndarray | None:
-        """``(n,) bool`` patches of resident near tile ``t`` seen from ``eye`` (:meth:`TileSets.visible`),
-        None: draw them all."""
+    def sets_hold(self, eye, drawn: dict) -> bool:
+        """Whether the sets of the tile under ``eye`` may cull this frame: every tile of theirs among
+        ``drawn`` (``{tile: level}``, :meth:`draw_list`'s) is drawn at a level their occluders were
+        lowered to (:attr:`TileSets.levels`: a coarser mesh sags below the surface and may show what
+        the surface hides).  True without such sets (nothing to check, or sets of an older build)."""
+        e = np.asarray(eye, dtype=np.float64).reshape(-1)
+        under = self.grid.tile_of(float(e[0]), float(e[1]))
         with self._lock:
-            vis = self.vis.get(t) if t in self.near else None
-        return None if vis is None else vis.visible(eye)
+            vis = self.vis.get(under) if under in self.near else None
+            samples = dict(self.near_level)
+        if vis is None or vis.levels is None:
+            return True
+        for t, level in drawn.items():
+            if t in vis.tiles:
+                m = samples.get(t) if level in ("near", "mid") else (2 if level == "far1" else None)
+                if m not in vis.levels:
+                    return False
+        return True
+
+    def visible_patches(self, t, eye) -> np.ndarray | None:
+        """``(n,) bool`` patches of tile ``t`` seen from ``eye``, by the sets of the resident tile under
+        the eye (:meth:`TileSets.visible_tile`: its own patches and its neighbours'), None: draw them
+        all (no sets there, ``t`` not in them, the eye outside their grid or above their band)."""
+        e = np.asarray(eye, dtype=np.float64).reshape(-1)
+        under = self.grid.tile_of(float(e[0]), float(e[1]))
+        with self._lock:
+            vis = self.vis.get(under) if under in self.near else None
+        return None if vis is None else vis.visible_tile(t, e)
 
     def _bad_tile(self, t, exc: TileError) -> None:
         """Remember a tile that cannot be read; the first one is a warning, the rest debug lines."""
@@ -942,7 +1023,10 @@ class StreamingRenderer:
         drawn["culled"] = int((~visible).sum())
         pixel_scale = self.size[1] / (2.0 * np.tan(np.radians(cam.fov_y) / 2.0))
         morph = self.cache.morph_factors(cam.eye, pixel_scale, self.pixel_error)
-        for t, level, mesh in self.cache.draw_list(cam.eye, visible, pixel_scale=pixel_scale):
+        todo = self.cache.draw_list(cam.eye, visible, pixel_scale=pixel_scale)
+        sets = self.visibility and self.cache.sets_hold(cam.eye, {t: level for t, level, _ in todo})
+        drawn["vis_off"] = int(self.visibility and not sets)  # the sets' tiles drawn too coarse this frame
+        for t, level, mesh in todo:
             key = (t, level)
             live.add(key)
             tex, origin, luv = self._light(t)
@@ -952,7 +1036,7 @@ class StreamingRenderer:
             kind = "far" if level.startswith("far") else "near"  # near and mid: evaluated patches
             self.prog["u_morph"].value = 1.0 if kind == "far" or mesh.targets is None else morph.get(t, 1.0)
             drawn["mid"] += level == "mid"
-            seen = self.cache.visible_patches(t, cam.eye) if kind == "near" and self.visibility else None
+            seen = self.cache.visible_patches(t, cam.eye) if sets and (kind == "near" or level == "far1") else None
             if seen is not None and mesh.patch_triangles and not seen.all():
                 vao, ntri = self._vis_vao(key, mesh, seen)
                 vao.render(moderngl.TRIANGLES)
