@@ -126,6 +126,20 @@ def test_object_files_bytes(project, tmp_path_factory, data):
     check(lambda _: _load(d), d / name, "multitool objects byte-wise")
 
 
+@given(data=st.data())
+@fuzz_settings(25)
+def test_convert_of_a_mutated_level(project, tmp_path_factory, data):
+    """A level with instances and splines mutated byte-wise, converted (write_project decodes its
+    instance, spline and segment records and the hash section's instance list): a project, or a
+    PisteError naming the level."""
+    from piste.formats.ssx import read_pbd
+
+    d = tmp_path_factory.mktemp("c")
+    src = d / "L.pbd"
+    src.write_bytes(data.draw(byte_mutations((project / "PisteLevel.pbd").read_bytes())))
+    check(lambda p: write_project(d / "out", read_pbd(p)), src, "multitool convert byte-wise")
+
+
 PATHS = st.sampled_from([p for p in HOSTILE if isinstance(p, str)] + [
     "../0000.png", "..\\0000.png", "/etc/passwd", "Textures/0000.png", "0000.png/..", "..png", "0000.PNG",
     "99999999999999999999.png", "-1.png", "65536.png", "32768.png", "0001.png", "x.png", "\x00.png", "CON.png"])

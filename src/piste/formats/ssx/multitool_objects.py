@@ -177,7 +177,8 @@ def _f32(v) -> float:
 def _f32s(a) -> np.ndarray:
     """:func:`_f32` of a whole array at once, ``(...)`` float64 (numpy's shortest float32 strings,
     parsed back: both in C)."""
-    return np.asarray(a, np.float32).astype(str).astype(np.float64)
+    with np.errstate(over="ignore"):  # past float32's range: inf, as a float32 record would hold it
+        return np.asarray(a, np.float32).astype(str).astype(np.float64)
 
 
 def _out_float(v: float):
@@ -379,6 +380,12 @@ def decompose_rows(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     4)``, float64: scale the rows' lengths (all three negated for a mirroring matrix, so the rest
     is a proper rotation), the rotation's quaternion by the trace / largest-diagonal branches of
     ``CreateFromRotationMatrix``; ``compose_rows`` of the result gives the matrix back (to rounding)."""
+    with np.errstate(all="ignore"):  # a NaN / huge matrix decomposes into NaN / inf, silently
+        return _decompose_rows(matrix)
+
+
+def _decompose_rows(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The body of :func:`decompose_rows`."""
     m = np.asarray(matrix, np.float64).reshape(-1, 4, 4)
     lin = m[:, :3, :3]
     s = np.linalg.norm(lin, axis=2)
@@ -659,6 +666,11 @@ def _out_nested(v):
 
 
 def _instance_records(items: list, old: np.ndarray) -> np.ndarray:
+    with np.errstate(all="ignore"):  # an old matrix of NaN / inf: its box is carried by translation
+        return _instance_records_of(items, old)
+
+
+def _instance_records_of(items: list, old: np.ndarray) -> np.ndarray:
     """Instance records of Instances.json objects, the Multitool's rebuild: the composed matrix,
     the light matrix's columns, colours, ids, ``model_id2`` = ``ModelID``; the bounds are the old
     record's box carried by the new placement (the Multitool computes them from the model's mesh,
