@@ -1,5 +1,6 @@
-"""The SSX modding community's Multitool project: ``Patches.json`` with ``Textures/`` and
-``Lightmaps/`` beside it (read by Blender's bxtools and Unity's IceSaw).
+"""The SSX modding community's Multitool project: ``Patches.json`` with ``Lights.json``,
+``Instances.json``, ``Splines.json``, ``Models.json``, ``Textures/`` and ``Lightmaps/`` beside it
+(read by Blender's bxtools and Unity's IceSaw).
 
 Facts (``/work/shared/SSX-FORMATS.md``; the Multitool's own conventions checked in SSX-Library's
 ``TrickyLevelInterface.cs`` and ``OldShapeHandler.cs``, facts only): per patch ``PatchName``,
@@ -70,7 +71,8 @@ Reading and writing are deterministic: the same input gives the same bytes.
 
 API
 ---
-write_project(folder, pbd, textures=None, lightmaps=None)       atomic per file
+write_project(folder, pbd, textures=None, lightmaps=None, instances=None, splines=None, models=None)
+                                                                 atomic per file
 read_project(folder) -> Project
 Project.to_level() -> (Pbd, SshBank textures or None, SshBank light maps or None)
 brighten(rgb) / darken(rgb)                                      the Multitool's RGB conventions
