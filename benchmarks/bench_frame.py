@@ -276,6 +276,22 @@ def _track_programs(tp):
     return key, now, before
 
 
+def _receiver_programs(shadows):
+    """``[now, before, {program id: its vertex array}]``: the hard shadows' receiver program (triangles cut to the
+    frustum by clip distances, no discard) and the one it replaced (whole triangles, discard
+    outside the frustum), for the A/B; None without shadows."""
+    if shadows is None:
+        return None
+    from piste.render.context import load_shader
+
+    vs = "\n".join(line for line in load_shader("shadow_receiver.vert.glsl").splitlines() if "gl_ClipDistance" not in line)
+    fs = load_shader("shadow_receiver.frag.glsl").replace(" * (inside ? 1.0 : 0.0);", ";\n    if (!inside) discard;")
+    before = shadows.ctx.program(vertex_shader=vs, fragment_shader=fs)
+    for name in ("u_shadow", "u_sunlit", "u_sun_rect"):
+        before[name].value = shadows.receiver[name].value
+    return [shadows.receiver, before, {}]
+
+
 def scene_section(args, floor_ms: list) -> dict:
     from piste.render.scene_renderer import SceneRenderer, summarize_scene
 
@@ -339,6 +355,14 @@ def scene_section(args, floor_ms: list) -> dict:
         r.terrain.set_visibility(bundle.visibility if on else None)
 
     compute_mips = getattr(r.shadows, "_mips_cs", None)
+    receivers = _receiver_programs(r.shadows)
+
+    def set_receiver_clip(on):
+        prog, cur = receivers[0] if on else receivers[1], r.shadows.receiver
+        if prog is not cur:  # (each program its own vertex array)
+            receivers[2][id(cur)] = r.shadows._recv
+            r.shadows._recv = receivers[2].get(id(prog), {"pos": None, "idx": None, "vao": None})
+            r.shadows.receiver = prog
     track_progs = _track_programs(r.terrain.terrain)
 
     def set_track_per_vertex(on):
@@ -358,12 +382,15 @@ def scene_section(args, floor_ms: list) -> dict:
                ("shadow casters", set_compute_mips, "shadow mips: two levels a compute dispatch",
                 "shadow mips: a framebuffer (and a rasterizer wait) per level"),
                ("terrain", set_track_per_vertex, "terrain: track distance looked up per vertex",
-                "terrain: track distance looked up per pixel")]
+                "terrain: track distance looked up per pixel"),
+               ("shadow receivers", set_receiver_clip, "receivers cut to the shadow frustum (clip distances)",
+                "receivers: whole triangles, discard outside the frustum")]
     ab_res = []
     acc2, undo2 = _profile(r)
     for label, setter, now_name, before_name in changes:
         if label == "objects" and r.objects is None or label == "shadow casters" and compute_mips is None \
-                or setter is set_track_per_vertex and track_progs is None:
+                or setter is set_track_per_vertex and track_progs is None or label == "shadow receivers" and \
+                (r.shadows is None or r.shadows.soft):
             continue
         ab = {True: [], False: []}
         ab_frame = {True: [], False: []}

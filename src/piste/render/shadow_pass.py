@@ -58,6 +58,8 @@ SHADE = (0.55, 0.6, 0.75)
 #: the real sun's angular radius, degrees (the soft shadows' default)
 SUN_RADIUS = 0.27
 
+_GL_CLIP_DISTANCE0 = 0x3000
+
 
 def sun_disc_directions(sun_direction, sun_radius: float, rays: int) -> np.ndarray:
     """``rays`` unit directions ``(rays, 3) float64`` *towards* the sun, spread evenly over its disc
@@ -570,6 +572,8 @@ class ShadowPass:
         ctx.blend_equation = moderngl.FUNC_ADD
         ctx.blend_func = (moderngl.DST_COLOR, moderngl.ZERO, moderngl.ZERO, moderngl.ONE)
         w = 1.0 / self.n_max
+        for k in range(6):  # the triangles cut to each shadow frustum (shadow_receiver.vert.glsl)
+            ctx.enable_direct(_GL_CLIP_DISTANCE0 + k)
         try:
             for i, (first, count) in enumerate(ranges):
                 if count == 0:
@@ -580,6 +584,8 @@ class ShadowPass:
                     p["u_span"].value = _light_spans(self.light_vp[i])
                 r["vao"].render(moderngl.TRIANGLES, vertices=int(3 * count), first=int(3 * first))
         finally:
+            for k in range(6):
+                ctx.disable_direct(_GL_CLIP_DISTANCE0 + k)
             ctx.disable(moderngl.BLEND)
             ctx.blend_func = moderngl.DEFAULT_BLENDING
             set_depth_write(ctx, True)
