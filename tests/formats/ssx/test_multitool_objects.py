@@ -356,6 +356,7 @@ def test_project_without_the_recorded_level_builds_splines_not_instances(level, 
     ("Splines.json", lambda d: d["Splines"][0].update(Segments=[]), "Segments"),
     ("Splines.json", lambda d: d["Splines"][0]["Segments"][0].update(Points=[[0, 0, 0]] * 3), "Points"),
     ("Splines.json", lambda d: d["Splines"][1]["Segments"][0]["Points"][1].__setitem__(2, "Infinity"), "Points"),
+    ("Splines.json", lambda d: d["Splines"][1]["Segments"][0]["Points"][1].__setitem__(2, "x"), "Points"),
     ("Splines.json", lambda d: d["Splines"][0].update(SplineStyle=1.5), "SplineStyle"),
     ("Models.json", lambda d: d["Models"][0]["ModelObjects"][0].pop("MeshData"), "MeshData"),
     ("Models.json", lambda d: d["Models"][1]["ModelObjects"][0]["Animation"].update(U1=1e39), "U1"),
@@ -367,7 +368,7 @@ def test_bad_fields_name_the_file_and_the_field(level, tmp_path, name, edit, fie
     edit(doc)
     (tmp_path / "mt" / name).write_text(json.dumps(doc))
     with pytest.raises(FormatError, match=name) as e:
-        read_project(tmp_path / "mt")
+        read_project(tmp_path / "mt").to_level()  # refused on reading, or where a record must be built
     assert e.value.field == field
 
 
@@ -443,6 +444,20 @@ def test_cli_convert_edit_import(tmp_path, capsys):
     segs = np.frombuffer(q.raw, SEGMENT_DTYPE, count=3, offset=q.offsets["spline_segments"])
     old = np.frombuffer(pbd.raw, SEGMENT_DTYPE, count=3, offset=pbd.offsets["spline_segments"])
     np.testing.assert_allclose(segs["power"], old["power"], rtol=1e-5, atol=0.05)
+
+
+def test_a_levels_own_nan_spline_point_comes_back(tmp_path):
+    pbd, lv = _level_with_objects()
+    raw = bytearray(pbd.raw)
+    struct.pack_into("<f", raw, pbd.offsets["spline_segments"] + 128 * 2 + 4, float("nan"))  # P3.y, segment 2
+    pbd = parse_pbd(bytes(raw))
+    write_project(tmp_path / "p", pbd)
+    out, _, _ = read_project(tmp_path / "p").to_level()
+    assert out.to_bytes() == pbd.to_bytes()
+    (tmp_path / "p" / "PisteLevel.json").unlink()  # no recorded level: the segment cannot be built
+    with pytest.raises(FormatError, match="spline 1: segment 0: Points must be finite") as e:
+        read_project(tmp_path / "p").to_level()
+    assert e.value.field == "Points" and "Splines.json" in str(e.value)
 
 
 def test_a_levels_own_nan_placement_comes_back(tmp_path):

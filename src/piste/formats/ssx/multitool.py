@@ -399,7 +399,7 @@ class Project:
             sections = {"lights": (len(self.lights), self.lights.tobytes()),
                         "hash": (None, hash_section_bytes(self.light_hashes))}
         if self.splines is not None and len(self.splines):
-            sections.update(spline_sections(self.splines))
+            sections.update(spline_sections(self.splines, self.path.parent / SPLINES_JSON))
         return parse_pbd(pbd_bytes(rec, n_tex, platform, sections), self.path), textures, lightmaps
 
     def _lights_in_place(self, pbd: Pbd, data: bytearray) -> None:

@@ -528,15 +528,24 @@ def instances_json(inst: MtInstances) -> dict:
 
 def splines_from_json(doc, path) -> MtSplines:
     """A parsed ``Splines.json`` checked: every spline needs at least one segment (the Multitool's
-    rebuild reads segment 0), finite points."""
+    rebuild reads segment 0).  Non-finite points are read (a level's own come back as stored) and
+    refused where piste must build a segment of them (:func:`spline_sections`,
+    :func:`splines_in_place`)."""
     r = _Reader(path)
     items = r.top(doc, "Splines", SPLINE_SCHEMA, "splines")
     for i, d in enumerate(items):
         if not d["Segments"]:
             r.fail(f"spline {i}", "Segments", "must hold at least one segment")
-        if not all(np.isfinite(s["Points"]).all() for s in d["Segments"]):
-            r.fail(f"spline {i}", "Points", "must be finite numbers")
     return MtSplines(items)
+
+
+def _finite_points(raw: np.ndarray, path, i: int, which=None) -> None:
+    bad = ~np.isfinite(raw).reshape(len(raw), -1).all(1)
+    if which is not None:
+        bad &= which
+    if bad.any():
+        raise FormatError(path, f"spline {i}: segment {int(np.argmax(bad))}: Points must be finite numbers to build "
+                                "the segment", field="Points")
 
 
 def splines_json(spl: MtSplines) -> dict:
@@ -795,14 +804,16 @@ def segment_records(raw: np.ndarray, spline: int, first: int) -> np.ndarray:
     return rec
 
 
-def spline_sections(spl: MtSplines) -> dict:
+def spline_sections(spl: MtSplines, path=None) -> dict:
     """The spline and segment sections of a new level (the Multitool's rebuild), as
-    :func:`piste.formats.ssx.synth.pbd_bytes` takes them."""
+    :func:`piste.formats.ssx.synth.pbd_bytes` takes them (FormatError naming ``path`` for
+    non-finite points)."""
     splines = np.zeros(len(spl), SPLINE_DTYPE)
     segs = []
     first = 0
     for i in range(len(spl)):
         raw = spl.points(i)
+        _finite_points(raw, path, i)
         seg = segment_records(raw, i, first)
         splines[i] = (raw.reshape(-1, 3).min(0), raw.reshape(-1, 3).max(0), 0, len(raw), first, -1)
         segs.append(seg)
@@ -858,11 +869,12 @@ def splines_in_place(pbd: Pbd, data: bytearray, spl: MtSplines, path, source_nam
             raise FormatError(path, f"spline {i}: {len(s['Segments'])} segments, but {source_name} holds "
                                     f"{len(w['Segments'])}: the segment count of a recorded level's spline cannot "
                                     "change", field="Segments")
-        changed = [a["Points"] != b["Points"] for a, b in zip(s["Segments"], w["Segments"])]
+        changed = [not _same(a, b, ("Points",)) for a, b in zip(s["Segments"], w["Segments"])]
         if not any(changed):
             continue
         a = int(old_spl[i]["segment_start"])
         raw = spl.points(i)
+        _finite_points(raw, path, i, np.array(changed))
         built = segment_records(raw, i, a)
         for j, c in enumerate(changed):
             if c:
