@@ -379,7 +379,9 @@ def decompose_rows(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(location (k, 3), rotation (k, 4) x, y, z, w, scale (k, 3))`` of row-form matrices ``(k, 4,
     4)``, float64: scale the rows' lengths (all three negated for a mirroring matrix, so the rest
     is a proper rotation), the rotation's quaternion by the trace / largest-diagonal branches of
-    ``CreateFromRotationMatrix``; ``compose_rows`` of the result gives the matrix back (to rounding)."""
+    ``CreateFromRotationMatrix``; ``compose_rows`` of the result gives the matrix back (to rounding).
+    For a mirroring matrix ``Matrix4x4.Decompose`` may split the signs between scale and rotation
+    another way (the same matrix, other JSON numbers); rotations and positive scales agree."""
     with np.errstate(all="ignore"):  # a NaN / huge matrix decomposes into NaN / inf, silently
         return _decompose_rows(matrix)
 
