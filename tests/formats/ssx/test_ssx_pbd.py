@@ -218,3 +218,14 @@ def test_to_net_widens_the_weld_for_looser_seams():
     assert len(pbd_to_net(lv.pbd, tol=0.01).shared_edges) == 0  # an explicit tolerance is taken as given
     # the usual near-equal seams keep the 1-unit weld
     assert pbd_to_net(make_level(rows=1, cols=2, seed=1).pbd).tol == pytest.approx(0.01)
+
+
+def test_a_level_with_no_patches_parses():
+    """A ``.pbd`` whose patch count is 0 parses to an empty patch table (the fuzz run found
+    ``reshape(0, -1)`` raising a raw ValueError), and ``records_from_arrays`` takes 0 patches."""
+    from piste.formats.ssx.pbd import records_from_arrays
+
+    empty = records_from_arrays(np.zeros((0, 4, 4, 3)))
+    assert empty.shape == (0,) and empty.dtype == PATCH_DTYPE
+    p = parse_pbd(pbd_bytes(empty))
+    assert len(p.records) == 0 and p.control_points.shape == (0, 4, 4, 3)

@@ -216,7 +216,7 @@ def records_from_arrays(control_points, uv=None, lightmap_rect=None, lightmap_pa
     if cp.ndim != 4 or cp.shape[1:] != (4, 4, 3):
         raise ValidationError(f"control_points must have shape (n, 4, 4, 3), got {cp.shape}")
     n = len(cp)
-    bad = ~np.isfinite(cp).reshape(n, -1).all(axis=1)
+    bad = ~np.isfinite(cp).reshape(n, 48).all(axis=1)
     if bad.any():
         raise ValidationError(f"patch {int(np.argmax(bad))}: control points must be finite")
     rec = np.zeros(n, PATCH_DTYPE)
@@ -469,7 +469,7 @@ def parse_pbd(data: bytes, path=None) -> Pbd:
         _fail(path, f"patch {p}: power-basis coefficient {k // 3} ({'xyz'[k % 3]}) is {coef[p, k]}: expected a "
                     "finite number", "patches.power")
     for fld in ("lightmap_rect", "uv"):
-        vals = rec[fld].reshape(n, -1)
+        vals = rec[fld].reshape(n, int(np.prod(PATCH_DTYPE[fld].shape)))  # (n, k): also for n = 0
         bad = ~np.isfinite(vals)
         if bad.any():
             p = int(np.argwhere(bad)[0][0])
