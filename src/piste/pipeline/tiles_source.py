@@ -18,10 +18,12 @@ WORLD.tiles``' flight start) and ``centre`` (looking at the local tile from the 
 
 API
 ---
-open_tiles(path, quiet=True, warm=False, budget_mb=256.0, track=None) -> Bundle
-    track (x0, y0, x1, y1) metres: the default pack of riders rides a straight track across the
-    tiles (``piste render|view WORLD.tiles --track X0 Y0 X1 Y1``), chased by the camera
-flight_cameras(bundle, frames, fps=30, speed=100) -> list[Camera]    the flight across the world
+::
+
+    open_tiles(path, quiet=True, warm=False, budget_mb=256.0, track=None) -> Bundle
+        track (x0, y0, x1, y1) metres: the default pack of riders rides a straight track across
+        the tiles (piste render|view WORLD.tiles --track X0 Y0 X1 Y1), chased by the camera
+    flight_cameras(bundle, frames, fps=30, speed=100) -> list[Camera]    the flight across the world
 """
 
 from __future__ import annotations

@@ -27,8 +27,9 @@ vertex: dynamic point and spot lights with attenuation and cone).
 
 API
 ---
-ObjectPass(ctx, objects, lights, mode="dynamic", lod_pixels=0.5)   ``.draw(vp, eye, visible, fog=None, mode=None)``
-    ``.add_group(key, kind, matrix, colors=None)``, ``.remove_group(key)``   instances that come and go
+ObjectPass(ctx, objects, lights, mode="dynamic", lod_pixels=0.5)   ``.draw(vp, eye, visible, fog=None, mode=None)``,
+``.add_group(key, kind, matrix, colors=None)``, ``.remove_group(key)`` (instances that come and go)
+
 instance_rows(objects) -> (n, 16, 4) float32
 light_uniforms(lights) -> dict of the ``points`` mode's uniform arrays
 ObjectGroups(meshes, kinds, texture=None, blend=(), world_lights=None)   an ObjectSet of instance groups
@@ -152,8 +153,9 @@ class ObjectGroups(ObjectSet):
 
     Attributes
     ----------
-    groups : ``{key: ObjectSet}`` the groups, in order;  colors : ``{key: {kind: (k, v, 3) uint8}
-    or None}`` their baked vertex colours;  version : changes made so far
+    groups : ``{key: ObjectSet}`` the groups, in order
+    colors : ``{key: {kind: (k, v, 3) uint8} or None}`` their baked vertex colours
+    version : changes made so far
     on_visible : a callable ``(planes, eye)`` run first by :meth:`visible` (e.g. a streamed
         terrain paging the groups for that view), or None
     """
