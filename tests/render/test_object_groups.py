@@ -132,3 +132,29 @@ def test_group_vertex_lights_are_chosen_per_instance(gl):
     v = g.version
     g.remove("x")
     assert g.version == v + 1 and len(g) == 0 and g.lights is None
+
+
+def test_a_group_change_rebuilds_only_instance_data(gl, target, monkeypatch):
+    """Adding or removing a group computes only that group's rows: the meshes' buffers, LOD chains,
+    programs and the atlas stay; rows of groups already there are not computed again."""
+    import piste.render.object_pass as OP
+
+    kind, mats = _instances(40, seed=5)
+    op = OP.ObjectPass(gl, _empty(), LIGHTS, mode="dynamic")
+    try:
+        op.add_group("a", kind[:20], mats[:20])
+        _draw(gl, op, target)  # (programs and vertex arrays made)
+        keep = ([id(b) for info in op.kinds for b in info["buffers"]], id(op.texture), [id(info["lods"]) for info in op.kinds],
+                {k: id(p) for k, (p, _) in op._programs.items()})
+        rows_of = []
+        real = OP.instance_rows
+        monkeypatch.setattr(OP, "instance_rows", lambda objs: rows_of.append(len(objs)) or real(objs))
+        op.add_group("b", kind[20:], mats[20:])
+        op.remove_group("a")
+        _draw(gl, op, target)
+        assert rows_of == [20]  # the new group's rows alone
+        assert keep == ([id(b) for info in op.kinds for b in info["buffers"]], id(op.texture),
+                        [id(info["lods"]) for info in op.kinds], {k: id(p) for k, (p, _) in op._programs.items()})
+        assert len(op.rows) == 20 and np.array_equal(op.rows[:, 0:4, :], np.swapaxes(mats[20:], 1, 2).astype(np.float32))
+    finally:
+        op.release()
