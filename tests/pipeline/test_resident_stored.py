@@ -147,8 +147,8 @@ def test_big_nets_store_no_blocks(monkeypatch):
 
 
 def test_a_damaged_stored_member_names_it(tmp_path):
-    """The blocks are read (and hashed) in a thread beside the other members: a flipped byte in them
-    (zip CRC) or a wrong SHA-256 still raises a FormatError naming the member, on the caller's thread."""
+    """The blocks are stored uncompressed and read as a view of their bytes: a flipped byte in them
+    (zip CRC) or a wrong SHA-256 still raises a FormatError naming the member."""
     path, _ = _bundle(tmp_path)
     with zipfile.ZipFile(path) as zf:
         info = zf.getinfo(RESIDENT_MEMBER + ".npy")

@@ -44,7 +44,6 @@ import contextlib
 import hashlib
 import io
 import json
-import threading
 import warnings
 import zipfile
 import zlib
@@ -181,10 +180,6 @@ def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool, o
     # blocks, in the background) while the light map, characters and objects are read
     first = [n for n in members if n in TERRAIN_MEMBERS]
     order = first + [n for n in members if n not in TERRAIN_MEMBERS]
-    # the big uncompressed members (the terrain's vertex blocks) read, CRC-checked and hashed in a
-    # thread while the others are inflated here: file reads, zlib and hashlib release the GIL
-    ahead = {n: _Prefetch(zf, f"{n}.npy", verify) for n in order if n in STORED_MEMBERS and f"{n}.npy" in names
-             and zf.getinfo(f"{n}.npy").file_size <= MAX_MEMBER_BYTES}
     for k, name in enumerate(order):
         if on_terrain is not None and k == len(first):
             on_terrain(out)
@@ -196,10 +191,10 @@ def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool, o
             raise FormatError(path, f"member of {zf.getinfo(member).file_size} bytes is larger than the limit of "
                                     f"{MAX_MEMBER_BYTES}", field=member)
         try:
-            data, digest = ahead.pop(name).result() if name in ahead else (zf.read(member), None)
+            data = zf.read(member)
         except (zipfile.BadZipFile, zlib.error, OSError) as exc:
             raise FormatError(path, f"corrupt member ({exc})", field=member) from None
-        if verify and (digest or hashlib.sha256(data).hexdigest()) != info.get("sha256"):
+        if verify and hashlib.sha256(data).hexdigest() != info.get("sha256"):
             raise FormatError(path, "checksum mismatch (the file is corrupt)", field=member)
         try:
             a = _view_array(data) if name in STORED_MEMBERS else np.lib.format.read_array(io.BytesIO(data),
@@ -213,30 +208,6 @@ def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool, o
     if on_terrain is not None and len(first) == len(order):
         on_terrain(out)
     return out
-
-
-class _Prefetch:
-    """One member read (zip CRC checked) and, with ``verify``, hashed (SHA-256) in a thread;
-    :meth:`result` joins it: ``(bytes, hex digest or None)``, or raises what the read raised."""
-
-    def __init__(self, zf: zipfile.ZipFile, member: str, verify: bool):
-        self._out: dict = {}
-
-        def run() -> None:
-            try:
-                data = zf.read(member)
-                self._out["value"] = (data, hashlib.sha256(data).hexdigest() if verify else None)
-            except BaseException as exc:  # noqa: BLE001 - re-raised on the reading thread by result()
-                self._out["error"] = exc
-
-        self._thread = threading.Thread(target=run, name="piste-bundle-read", daemon=True)
-        self._thread.start()
-
-    def result(self) -> tuple[bytes, str | None]:
-        self._thread.join()
-        if "error" in self._out:
-            raise self._out["error"]
-        return self._out["value"]
 
 
 def _view_array(data: bytes) -> np.ndarray:
@@ -283,8 +254,8 @@ def read_bundle(path, verify: bool = True, on_terrain=None) -> BundleData:
     ``verify`` checks each member's SHA-256 against the manifest (the zip CRC is always checked).
     Raises :class:`~piste.errors.FormatError` on a missing file, a wrong format version, a missing
     or corrupt member, or a missing required member (:data:`REQUIRED_MEMBERS`).  The arrays of
-    :data:`STORED_MEMBERS` are read-only views of the member's bytes (read in a thread beside the
-    others); every other array is its own writable copy.
+    :data:`STORED_MEMBERS` are read-only views of the member's bytes (no copy); every other array is
+    its own writable copy.
 
     ``on_terrain(man, arrays)``: called once the :data:`TERRAIN_MEMBERS` the bundle has are read and
     checked (the manifest and those arrays; the topology members' dtypes and shapes are checked
