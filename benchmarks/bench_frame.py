@@ -14,7 +14,9 @@ Sections (every configuration interleaved frame by frame in one process; medians
 3. **Completed scene**: six riders chased by the camera, objects, projected shadows, specular: the
    full scene, without shadows / specular, and a per-pass profile (``glFinish`` around each pass:
    what llvmpipe spends in each); then each scene change A/B on its own pass (the objects' per-mode
-   programs with per-instance attributes; the terrain's back-face culling), with the pixels changed.
+   programs with per-instance attributes and levels of detail; the terrain's back-face culling,
+   visibility sets and per-vertex track distance; the shadow mips by compute dispatches; the shadow
+   receivers cut to their frusta by clip distances), with the pixels changed.
 4. **Scaling**: frame time and CPU side against the number of patches (2,560 / 10k / 40k; the
    camera's far plane at 1 km caps the visible set; ``bench_terrain.py`` takes the CPU side to 160k)
    and riders (6 / 24 / 96), with the fitted exponent ``t ~ n^k``.
