@@ -351,7 +351,7 @@ def _light_spans(light_vp) -> tuple[float, float]:
 
 
 class ComputeMips:
-    """Mip levels ``1 .. levels`` of an RGBA8 texture redrawn from level 0 by a compute shader
+    """Mip levels ``1`` to ``levels`` of an RGBA8 texture redrawn from level 0 by a compute shader
     (``mip_levels.comp.glsl``), two levels a dispatch: the same levels as
     :class:`piste.render.textures.MipLevels` (and :func:`piste.render.textures.mip_chain`).
 

@@ -71,11 +71,13 @@ Reading and writing are deterministic: the same input gives the same bytes.
 
 API
 ---
-write_project(folder, pbd, textures=None, lightmaps=None, instances=None, splines=None, models=None)
-                                                                 atomic per file
-read_project(folder) -> Project
-Project.to_level() -> (Pbd, SshBank textures or None, SshBank light maps or None)
-brighten(rgb) / darken(rgb)                                      the Multitool's RGB conventions
+::
+
+    write_project(folder, pbd, textures=None, lightmaps=None, instances=None, splines=None, models=None)
+                                                                     atomic per file
+    read_project(folder) -> Project
+    Project.to_level() -> (Pbd, SshBank textures or None, SshBank light maps or None)
+    brighten(rgb) / darken(rgb)                                      the Multitool's RGB conventions
 """
 
 from __future__ import annotations
