@@ -126,3 +126,23 @@ def test_bpt_errors_name_the_line(tmp_path, text, line, what):
     p.write_text(text)
     with pytest.raises(FormatError, match=rf"bad\.bpt, line {line}: .*{what}"):
         read_bpt(p)
+
+
+def test_bounds_and_patch_bounds_are_the_control_points_extremes():
+    """``bounds`` / ``patch_bounds`` (reduced over contiguous rows and halves, not numpy's strided
+    3-wide reduction) give exactly the min/max of the control points, and follow edits in place
+    (nothing cached that could go stale)."""
+    net = PatchNet.from_bpt(TEAPOT)
+    for _ in range(2):
+        cp = net.control_points
+        pts = cp.reshape(len(net), 16, 3)
+        lo, hi = net.patch_bounds
+        assert lo.shape == hi.shape == (len(net), 3) and lo.dtype == np.float64
+        assert np.array_equal(lo, pts.min(1)) and np.array_equal(hi, pts.max(1))
+        blo, bhi = net.bounds
+        assert blo.shape == bhi.shape == (3,)
+        assert np.array_equal(blo, cp.reshape(-1, 3).min(0)) and np.array_equal(bhi, cp.reshape(-1, 3).max(0))
+        # every one of the 16 points and 3 axes can be the extreme: move one interior point of patch 5 far out
+        net.control_points[5, 2, 1] += [-40.0, 50.0, 60.0]
+    assert net.patch_bounds[0][5, 0] == net.control_points[5, 2, 1, 0] == net.bounds[0][0]
+    assert net.patch_bounds[1][5, 2] == net.control_points[5, 2, 1, 2] == net.bounds[1][2]

@@ -203,11 +203,12 @@ class CharacterPass:
             fs = head + "\n#define CHARACTER_ALPHA_TEST 1\n" + rest
         self._vs, self._fs = vs, fs
         self.fold_specular = True
-        self._prog_lit = None  # the base pass with the specular added (compiled on first use)
-        self.prog = ctx.program(vertex_shader=vs, fragment_shader=fs)
-        self.prog_spec = ctx.program(vertex_shader=vs, fragment_shader=load_shader("character_specular.frag.glsl"))
-        self.prog["u_tex"].value = 0
-        self.prog_spec["u_spec"].value = 1
+        # the programs are compiled on first use: a frame with the specular folded in (the default)
+        # draws with the lit program only (the plain base and the separate specular pass cost a fresh
+        # process ~4 ms of llvmpipe compiling each, with an empty shader cache, for nothing)
+        self._prog_lit = None  # the base pass with the specular added
+        self._prog = None  # the base pass without it (light_only, no sun, or specular off)
+        self._prog_spec = None  # the talk's separate additive specular pass (fold_specular False)
         tex = np.asarray(texture)
         if tex.dtype != np.uint8 or tex.ndim != 3 or tex.shape[2] != 4:
             raise RenderError(f"character texture: expected (H, W, 4) uint8, got {tex.shape} {tex.dtype}")
@@ -222,8 +223,7 @@ class CharacterPass:
         self.spec = self._tex(spec)
         for t in self.textures + [self.spec]:
             t.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
-        progs = {"base": self.prog, "spec": self.prog_spec}
-        self.lods = [_LodBuffers(ctx, lod.mesh, max_riders, progs) for lod in lods]
+        self.lods = [_LodBuffers(ctx, lod.mesh, max_riders, {}) for lod in lods]  # vertex arrays: on first use
         self.riders = [np.zeros(0, np.int64) for _ in lods]
 
     def _tex(self, img):
@@ -279,21 +279,18 @@ class CharacterPass:
         fog = (0.0, 0.0, 0.0, 0.0) if fog is None else tuple(float(x) for x in fog)
         eye = tuple(float(x) for x in eye)
         shiny = specular and sun is not None and not light_only
-        if base and shiny and self.fold_specular:  # one pass: the lit texture plus the highlights
-            p = self._lit_program()
-            self._sun_uniforms(p, sun)
-            self.spec.use(1)
-        else:
-            p = self.prog
-        p["u_mvp"].write(vp_bytes)
-        p["u_eye"].value = eye
-        p["u_fog"].value = fog
-        p["u_mode"].value = 1 if light_only else 0
+        lit = base and shiny and self.fold_specular  # one pass: the lit texture plus the highlights
         if base:
-            self._draw_all("lit" if p is not self.prog else "base", p, lights)
-            if p is not self.prog:
-                return
-        if not shiny:
+            p = self._lit_program() if lit else self.prog
+            if lit:
+                self._sun_uniforms(p, sun)
+                self.spec.use(1)
+            p["u_mvp"].write(vp_bytes)
+            p["u_eye"].value = eye
+            p["u_fog"].value = fog
+            p["u_mode"].value = 1 if light_only else 0
+            self._draw_all("lit" if lit else "base", p, lights)
+        if lit or not shiny:
             return
         q = self.prog_spec
         q["u_mvp"].write(vp_bytes)
@@ -313,6 +310,23 @@ class CharacterPass:
             ctx.blend_func = moderngl.DEFAULT_BLENDING
             set_depth_write(ctx, True)
             ctx.depth_func = "<"
+
+    @property
+    def prog(self):
+        """The base pass's program (the texture lit per vertex; compiled on first use)."""
+        if self._prog is None:
+            self._prog = self.ctx.program(vertex_shader=self._vs, fragment_shader=self._fs)
+            self._prog["u_tex"].value = 0
+        return self._prog
+
+    @property
+    def prog_spec(self):
+        """The separate additive specular pass's program (compiled on first use)."""
+        if self._prog_spec is None:
+            self._prog_spec = self.ctx.program(vertex_shader=self._vs,
+                                               fragment_shader=load_shader("character_specular.frag.glsl"))
+            self._prog_spec["u_spec"].value = 1
+        return self._prog_spec
 
     def _lit_program(self):
         """The base pass compiled with the specular term (``CHARACTER_SPECULAR``)."""
@@ -349,7 +363,8 @@ class CharacterPass:
     def release(self) -> None:
         for b in self.lods:
             b.release()
-        for obj in self.textures + [self.spec, self.prog, self.prog_spec]:
+        for obj in self.textures + [self.spec]:
             obj.release()
-        if self._prog_lit is not None:
-            self._prog_lit.release()
+        for prog in (self._prog, self._prog_spec, self._prog_lit):
+            if prog is not None:
+                prog.release()

@@ -296,8 +296,7 @@ class ObjectPass:
         # True: a program compiled per (lighting mode, light_only) with constants instead of the
         # run-time if-chains (the same pictures); False: the one program with uniforms (benchmarks' A/B)
         self.specialised = True
-        self._programs: dict = {}  # key -> (program, {kind index: vertex array})
-        self.prog = self._program(None)[0]  # the generic program (run-time uniforms)
+        self._programs: dict = {}  # key -> (program, {kind index: vertex array}), each compiled on first use
         self.texture = mipmapped_texture(ctx, tex)  # levels computed on the CPU: no GPU mipmap blit to compile
         self.texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self.rows = instance_rows(objects)
@@ -337,6 +336,13 @@ class ObjectPass:
             self.set_vertex_colors(colors)
         self.drawn = 0
         self.triangles = 0
+
+    @property
+    def prog(self):
+        """The generic program (run-time uniforms; drawn with when :attr:`specialised` is False),
+        compiled on first use: a specialised frame never uses it (~4 ms of llvmpipe compiling in a
+        fresh process with an empty shader cache)."""
+        return self._program(None)[0]
 
     def _program(self, key, blend: bool = False):
         """``(program, vertex arrays by kind)`` for ``key = (mode id, light_only)`` (None: the

@@ -373,13 +373,28 @@ class MipLevels:
         for lv in range(1, self.levels + 1):  # allocate the levels (contents undefined until build)
             gl.glTexImage2D(_GL_TEXTURE_2D, lv, internal, *self.sizes[lv], 0, fmt, _GL_UNSIGNED_BYTE, None)
         self._limits(0, self.levels)
-        self.prog = ctx.program(vertex_shader=load_shader("fullscreen.vert.glsl"),
-                                fragment_shader=load_shader("mip_level.frag.glsl"))
-        self.vao = ctx.vertex_array(self.prog, [])
+        # the program is compiled at the first build (where ComputeMips draws the levels this one
+        # never builds: ~3 ms of llvmpipe compiling in a fresh process with an empty shader cache)
+        self._prog = self._vao = None
         self.fbo = ctx.framebuffer(color_attachments=[texture])
         err = ctx.error
         if err != "GL_NO_ERROR":
             raise RenderError(f"MipLevels: allocating {self.levels} levels of a {w}x{h} texture: OpenGL error {err}")
+
+    @property
+    def prog(self):
+        """The program that draws a level from the one above (compiled on first use)."""
+        if self._prog is None:
+            self._prog = self.ctx.program(vertex_shader=load_shader("fullscreen.vert.glsl"),
+                                          fragment_shader=load_shader("mip_level.frag.glsl"))
+        return self._prog
+
+    @property
+    def vao(self):
+        """Its vertex array (no buffers: a full-screen triangle from gl_VertexID)."""
+        if self._vao is None:
+            self._vao = self.ctx.vertex_array(self.prog, [])
+        return self._vao
 
     @staticmethod
     def supported(ctx, texture, levels: int) -> bool:
@@ -422,5 +437,6 @@ class MipLevels:
             ctx.viewport = viewport
 
     def release(self) -> None:
-        for obj in (self.fbo, self.vao, self.prog):
-            obj.release()
+        for obj in (self.fbo, self._vao, self._prog):
+            if obj is not None:
+                obj.release()
