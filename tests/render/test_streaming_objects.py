@@ -38,6 +38,12 @@ def _camera(x: float) -> Camera:
     return Camera(np.array([x, 60.0, 120.0]), np.array([x, 260.0, 0.0]), fov_y=60, near=1.0, far=3000.0)
 
 
+def _within(cache, eye, r: float) -> set:
+    """The tiles whose box (skirts included) lies within ``r`` metres of ``eye``."""
+    d = np.maximum(np.maximum(cache.lo - eye, eye - cache.hi), 0.0)
+    return {t for t, x in zip(cache.tiles, np.sqrt((d * d).sum(1))) if x <= r}
+
+
 def _stored(spec, tiles) -> int:
     store = TileStore(spec.root)
     return sum(len(read_tile_objects(store, spec.grid, *t, 4)[0]) for t in tiles)
@@ -53,12 +59,12 @@ def test_objects_follow_the_resident_tiles_across_the_world(gl, world):
     p = ScenePreview(b, size=SIZE, ctx=gl)
     try:
         cache = p.terrain.streaming.cache
+        cache.object_distance = 200.0  # (by size on screen every tile of this small world would stay)
         seen, left, drawn = set(), set(), 0
         for x in np.linspace(30.0, 690.0, 9):  # west to east across all four tile columns
             before = set(objs.groups)
             p.render(_camera(float(x)))
-            with cache._lock:
-                paged = {t for t in cache.near}
+            paged = _within(cache, _camera(float(x)).eye, 200.0)
             with_objects = {t for t in paged if _stored(world, [t])}
             assert set(objs.groups) == with_objects  # exactly the paged tiles' objects
             assert len(objs) == _stored(world, with_objects) > 0
@@ -139,3 +145,147 @@ def test_a_tile_whose_objects_do_not_read_back_keeps_its_terrain(gl, world, tmp_
         assert "objects_matrix" in caplog.text
     finally:
         p.release()
+
+
+# ------------------------------------------------------------------ objects beyond the terrain's mesh ring
+def _far_camera() -> Camera:
+    """Low in the south-west corner looking across the world to the north-east: one near tile, the
+    rest far stand-ins."""
+    return Camera(np.array([20.0, 20.0, 30.0]), np.array([700.0, 700.0, 0.0]), fov_y=60, near=1.0, far=3000.0)
+
+
+def test_objects_of_tiles_beyond_the_middle_ring_are_paged_and_drawn_coarsest(gl, world):
+    from piste.pipeline.preview import ScenePreview
+    from piste.pipeline.tiles_source import open_tiles
+    from piste.render.streaming import OBJECT_MIN_PIXELS
+
+    b = open_tiles(world.root)
+    objs = b.objects()
+    p = ScenePreview(b, size=SIZE, ctx=gl)
+    try:
+        cam = _far_camera()
+        p.render(cam)
+        cache = p.terrain.streaming.cache
+        scale = SIZE[1] / (2.0 * np.tan(np.radians(cam.fov_y) / 2.0))
+        beyond = set(objs.groups) - set(cache.near)
+        assert len(cache.near) <= 2 and len(beyond) >= 8  # trees out where the terrain is far stand-ins
+        # exactly the tiles whose tallest object stands >= OBJECT_MIN_PIXELS tall at their nearest point
+        want = set()
+        for t in cache.tiles:
+            k, m = read_tile_objects(TileStore(world.root), world.grid, *t, 4)
+            if len(k) and t in _within(cache, cam.eye, cache.object_height[t] * scale / OBJECT_MIN_PIXELS):
+                want.add(t)
+        assert set(objs.groups) == want and (0, 3) not in want  # (the rocks' column: too small that far)
+        # instances in view over far stand-ins draw through their kind's LOD chain: the coarsest level far away
+        sl = objs.slices()
+        far_idx = np.concatenate([np.arange(len(objs))[sl[t]] for t in beyond])
+        planes = cam.with_aspect(*SIZE).frustum_planes()
+        vis = np.intersect1d(far_idx, objs.visible(planes, max_distance=cam.far, eye=cam.eye))
+        po = p.objects
+        coarsest = np.isfinite(po.lod_errors).sum(1) - 1
+        from piste.world.object_lod import choose_lods
+        lv = choose_lods(po.lod_errors[objs.kind[vis]], objs.center[vis], objs.radius[vis], po.scale[vis],
+                         cam.with_aspect(*SIZE).view_projection(), SIZE[1], po.lod_pixels)
+        far_away = np.linalg.norm(objs.center[vis] - cam.eye, axis=1) > 600.0
+        assert far_away.sum() > 50 and (lv[far_away] == coarsest[objs.kind[vis][far_away]]).all()
+        assert (lv > 0).all()  # (the nearer ones at finer levels of the same chain, by their error)
+    finally:
+        p.release()
+
+
+def test_far_objects_in_the_picture_equal_one_set_of_the_same_objects(gl, world):
+    """The picture: the trees over the far stand-ins are drawn (many pixels more than with only
+    the near tile's objects), as a scene holding those tiles' objects as one set draws them."""
+    from piste.pipeline.preview import ScenePreview
+    from piste.pipeline.tiles_source import open_tiles
+
+    cam = _far_camera()
+    b = open_tiles(world.root)
+    p = ScenePreview(b, size=SIZE, ctx=gl)
+    try:
+        img = p.render(cam)
+        tiles = sorted(b.objects().groups)
+        near = set(p.terrain.streaming.cache.near)
+        p.terrain.streaming.cache.object_distance = 0.0  # only the tile under the eye keeps its objects
+        p.render(Camera(cam.eye + 1.0, cam.target, fov_y=60, near=1.0, far=3000.0))  # (re-paged)
+        ring = p.render(cam)
+        assert set(b.objects().groups) <= near
+    finally:
+        p.release()
+    plain = add_tile_objects(replace(b, _cache={}), TileStore(world.root), world.grid, tiles)
+    q = ScenePreview(plain, size=SIZE, ctx=gl)
+    try:
+        ref = q.render(cam)
+    finally:
+        q.release()
+    assert (np.abs(img.astype(int) - ref.astype(int)).max(2) > 0).sum() == 0
+    more = (np.abs(img.astype(int) - ring.astype(int)).max(2) > 24).sum()
+    assert more > 150, f"{more} pixels of far objects"
+
+
+# ------------------------------------------------------------------ object bytes in the budget
+def test_object_instance_bytes_are_what_a_paged_tile_holds(world):
+    """:func:`object_instance_bytes` is the bytes the cache, the object set and the pass hold for
+    one instance of each kind (measured on a tile's real objects)."""
+    from piste.lighting.lights import default_lights
+    from piste.render.object_pass import ObjectGroups, _pack_rows, instance_rows
+    from piste.render.streaming import TileCache, object_instance_bytes
+    from piste.pipeline.tile_objects import object_set
+    from piste.world.objects import bake_vertex_colors
+
+    store = TileStore(world.root)
+    kind, matrix = read_tile_objects(store, world.grid, 1, 1, 4)
+    assert len(kind) > 20
+    base = object_set(np.zeros(0, np.int64), np.zeros((0, 4, 4)))
+    lights = default_lights()
+    g = ObjectGroups(base.meshes, base.kinds, base.texture, base.blend, world_lights=lights)
+    part = g.add((1, 1), kind, matrix)
+
+    def arrays(s):
+        vl = s.lights
+        return sum(a.nbytes for a in (s.kind, s.matrix, s.normal_matrix, s.center, s.radius, vl.directions,
+                                      vl.colors, vl.ambient))
+
+    rows = instance_rows(part)
+    baked = sum(c.nbytes for c in bake_vertex_colors(part, lights).values())
+    measured = kind.nbytes + matrix.nbytes + arrays(part) + arrays(g) + 2 * rows.nbytes + _pack_rows(rows).nbytes \
+        + 2 * baked
+    counts = np.bincount(kind, minlength=4)
+    assert int((counts * object_instance_bytes()).sum()) == measured
+    cache = TileCache(world.root)
+    try:
+        assert cache.object_bytes[(1, 1)] == measured and np.array_equal(cache.object_counts[(1, 1)], counts)
+    finally:
+        cache.close()
+
+
+def test_object_bytes_count_in_the_streaming_budget(world):
+    from piste.render.streaming import TileCache
+
+    eye = np.array([20.0, 20.0, 30.0])
+    scale = 97.0  # pixels a radian
+    probe = TileCache(world.root)
+    try:
+        far = probe._far_bytes
+        order = sorted(probe.object_bytes, key=lambda t: probe.distance(eye, t))
+        assert len(order) == 16 and all(v > 0 for v in probe.object_bytes.values())
+    finally:
+        probe.close()
+    got = []
+    for extra in (0, 200_000, 800_000, 2_000_000, 64 << 20):
+        cache = TileCache(world.root, budget_bytes=far + extra, near_radius=0.0, object_distance=1e4)
+        cache.load_objects = True
+        try:
+            cache.update(eye, scale, far=3000.0)
+            cache.wait_idle()
+            with cache._lock:
+                meshes = sum(m.nbytes for m in cache.near.values())
+                paged = set(cache.objects)
+            objects = sum(cache.object_bytes[t] for t in paged)
+            assert cache.resident_bytes == far + meshes + objects <= far + extra  # counted, and under the budget
+            n = len(paged)
+            assert paged == set(order[:n]) or paged == {t for t in order[:n + 1]} - {order[n]}  # nearest first
+            got.append(n)
+        finally:
+            cache.close()
+    assert got[0] == 0 and got == sorted(got) and got[-1] >= 12 and len(set(got)) >= 3

@@ -41,6 +41,16 @@ the meshes, the renderer uploads finished ones and releases evicted ones.  ``res
 (far + paged meshes and light maps, the CPU copies; the GPU holds the same arrays) never exceeds
 the budget.
 
+Scene objects (a world built with object rules, :mod:`piste.pipeline.tile_objects`) page by their
+own distance, not with the terrain's level: a tile's objects are resident while the tallest of them
+would stand at least ``OBJECT_MIN_PIXELS`` tall at the tile's nearest point (and before the fog has
+swallowed them and the far plane cut them off), so trees do not stop where the terrain switches to
+far stand-ins; the object pass draws the far ones at the coarsest level of their LOD chains
+(:mod:`piste.world.object_lod`: their error is far below a pixel there).  Their bytes (what the
+cache reads and what the object set and pass derive per instance, :func:`object_instance_bytes`)
+count in ``resident_bytes`` and the budget: terrain and objects are reserved together, nearest tile
+first, a tile's mesh before its objects.
+
 :class:`StreamingRenderer` draws a frame: far tiles not covered by a resident near tile, near
 tiles, frustum-culled per tile, fogged like the course (and faded out over the last fifth of
 the far plane), the sky gradient behind.
@@ -52,6 +62,7 @@ the far plane), the sky gradient behind.
 
 from __future__ import annotations
 
+import functools
 import logging
 import queue
 import threading
@@ -76,7 +87,8 @@ from piste.world.camera import Camera
 from piste.world.objects import OBJECT_KINDS
 
 __all__ = ["TileCache", "StreamingRenderer", "StreamingTerrain", "TileMesh", "near_mesh", "far_mesh", "mesh_bytes", "fly_path",
-           "render_flight", "TileSets", "light_grid", "stride_errors", "chord_error", "visible_indices", "world_fog_density"]
+           "render_flight", "TileSets", "light_grid", "stride_errors", "chord_error", "visible_indices", "world_fog_density",
+           "object_instance_bytes", "object_kind_heights", "OBJECT_MIN_PIXELS"]
 
 _log = logging.getLogger(__name__)
 
@@ -93,6 +105,11 @@ NEAR_SAMPLES = 4
 #: quarter of the corner grid's chord error) for tiles too far for near meshes but whose
 #: corner grid would show, about a sixth of a near mesh's bytes at res 8
 MID_SAMPLES = 3
+#: a tile's scene objects stay paged in while its tallest one would be at least this many pixels
+#: tall at the tile's nearest point (:meth:`TileCache.object_distances`)
+OBJECT_MIN_PIXELS = 1.5
+#: ... and while the fog leaves at least this fraction of an object's own colour (1 grey level)
+OBJECT_FOG_FLOOR = 1.0 / 255.0
 
 # The tiles are drawn like the course's terrain (terrain.frag.glsl, modulate mode): the base
 # texture (repeated once a patch) times the light map, fogged per vertex.  A heightfield patch is
@@ -346,6 +363,43 @@ def mesh_bytes(rows: int, cols: int, morph: bool = False) -> int:
     return verts * (19 if morph else 15) + tris * 12
 
 
+@functools.lru_cache(maxsize=1)
+def _kind_meshes() -> tuple:
+    """``(heights (kinds,) float64, vertices (kinds,) int64)``: each object kind's mesh height (its
+    extent along its own up axis, model units) and vertex count."""
+    from piste.world.objects import make_mesh
+
+    meshes = [make_mesh(k) for k in OBJECT_KINDS]
+    h = np.array([float(np.ptp(np.asarray(m.positions)[:, 2])) for m in meshes])
+    v = np.array([len(m.positions) for m in meshes], dtype=np.int64)
+    return h, v
+
+
+def object_kind_heights() -> np.ndarray:
+    """Each object kind's mesh height ``(kinds,)`` float64 (model units, in the order of
+    :data:`piste.world.objects.OBJECT_KINDS`)."""
+    return _kind_meshes()[0].copy()
+
+
+def object_instance_bytes() -> np.ndarray:
+    """The bytes one paged-in object instance of each kind holds on the CPU, ``(kinds,)`` int64
+    (the GPU holds copies of the instance rows as it does of the tile meshes):
+
+    * the cache's copy as read: kind (int64) and matrix (4 x 4 float64): 136;
+    * the object set's group (:meth:`piste.render.object_pass.ObjectGroups.part`) and the set's
+      concatenation of its groups, each: kind, matrix, normal matrix (3 x 3 float64), bounding
+      centre (3 float64) and radius, vertex lights (3 directions, 3 colours, an ambient, float32):
+      324, twice;
+    * the object pass's instance rows (16 x 4 float32) of the group and of the whole set, and their
+      packed attributes (13 x 4 float32): 720;
+    * baked vertex colours (3 uint8 a vertex), the group's and the set's: 6 a vertex of the kind.
+    """
+    read = 8 + 16 * 8
+    group = 8 + 16 * 8 + 9 * 8 + 3 * 8 + 8 + (9 + 9 + 3) * 4
+    rows = 2 * 16 * 4 * 4 + 13 * 4 * 4
+    return read + 2 * group + rows + 6 * _kind_meshes()[1]
+
+
 @dataclass
 class TileSets:
     """A tile's visibility sets at run time (what :class:`piste.pipeline.visibility.Visibility`
@@ -425,10 +479,15 @@ class TileCache:
         :meth:`update`)
     view_distance : far tiles beyond this are not loaded (default: the whole world)
     near_samples : samples a patch side of the near meshes (default max(res, ``NEAR_SAMPLES``))
+    object_distance : with :attr:`load_objects`, metres (from the eye to a tile's box) within which a
+        tile's scene objects are paged in, whatever its terrain level; None (default): each tile's
+        own distance from the camera (:meth:`object_distances`: its tallest object at least
+        ``OBJECT_MIN_PIXELS`` tall, short of the fog's end and the far plane)
     """
 
     def __init__(self, root, budget_bytes: int = 256 << 20, near_radius: float | None = None,
-                 view_distance: float | None = None, near_samples: int | None = None):
+                 view_distance: float | None = None, near_samples: int | None = None,
+                 object_distance: float | None = None):
         self.store = TileStore(root)
         self.index = self.store.read_index()  # schema-checked (piste.terrain.tiles.check_index)
         self.grid = self.store.grid()
@@ -454,12 +513,24 @@ class TileCache:
         self.vis: dict = {}
         #: resident tiles' samples a patch side (``near_samples``, or ``MID_SAMPLES``: the middle level)
         self.near_level: dict = {}
-        #: read the scene objects of tiles as they load (``lit`` members ``objects_kind``,
-        #: ``objects_matrix``): :attr:`objects` ``{tile: (kind (k,) int64, matrix (k, 4, 4))}``,
-        #: paged in and out with the tiles' near and middle meshes (a tile whose objects do not
-        #: read back keeps its terrain and draws no objects)
+        #: page the scene objects of tiles (``lit`` members ``objects_kind``, ``objects_matrix``):
+        #: :attr:`objects` ``{tile: (kind (k,) int64, matrix (k, 4, 4))}``, paged in and out by
+        #: their own distance (``object_distance``, :meth:`object_distances`), whatever the tile's
+        #: terrain level (a tile whose objects do not read back keeps its terrain and draws no objects)
         self.load_objects = False
         self.objects: dict = {}
+        if object_distance is not None and not (float(object_distance) >= 0.0):
+            raise ConfigError(f"object distance must be >= 0 metres, got {object_distance}")
+        self.object_distance = None if object_distance is None else float(object_distance)
+        #: per tile with objects: how many of each kind ``(kinds,)`` int64 (from the build's members'
+        #: headers; a tile without objects is not listed), the tallest one's height (metres) and
+        #: the bytes they hold paged in (:func:`object_instance_bytes`)
+        self.object_counts: dict = {}
+        self.object_height: dict = {}
+        self.object_bytes: dict = {}
+        self._objects_wanted: set = set()
+        self._objects_pending: set = set()
+        self._objects_bad: set = set()  # tiles whose objects did not read back (not asked again)
         self.far: dict = {}
         self.bounds: dict = {t: e["bounds"] for t, e in entries.items()}
         self.patches: dict = {t: e["patches"] for t, e in entries.items()}
@@ -505,6 +576,7 @@ class TileCache:
                 self.chord_error[t] = chord_error(lit["far_positions"])
                 self.mid_error[t] = self.chord_error[t] / 4.0
             self._far_bytes += sum(m.nbytes for m in self.far[t].values()) + self.light[t].nbytes
+            self._note_objects(t, lit)
         if self.bad:  # only tiles with a far stand-in are drawn
             keep = [i for i, t in enumerate(self.tiles) if t not in self.bad]
             self.tiles = [self.tiles[i] for i in keep]
@@ -521,6 +593,29 @@ class TileCache:
         self._thread.start()
 
     # ---------------------------------------------------------------- sizes
+    def _note_objects(self, t, lit: dict) -> None:
+        """Remember how many objects tile ``t``'s ``lit`` members hold, their tallest height and
+        bytes (the members are checked when they page in: :func:`read_tile_objects`)."""
+        kind, mat = lit.get("objects_kind"), lit.get("objects_matrix")
+        if kind is None or np.ndim(kind) != 1 or len(kind) == 0:
+            return
+        k = np.asarray(kind)
+        n = len(OBJECT_KINDS)
+        ok = k.dtype.kind in "iu" and ((k >= 0) & (k < n)).all()
+        counts = np.bincount(k.astype(np.int64), minlength=n)[:n] if ok else np.array([len(k)] + [0] * (n - 1))
+        heights, _ = _kind_meshes()
+        h = 0.0
+        if ok and mat is not None and np.shape(mat) == (len(k), 4, 4) and np.asarray(mat).dtype.kind in "fiu":
+            with np.errstate(all="ignore"):
+                up = heights[k.astype(np.int64)] * np.linalg.norm(np.asarray(mat, dtype=np.float64)[:, :3, 2], axis=1)
+            up = up[np.isfinite(up)]
+            h = float(up.max()) if len(up) else 0.0
+        if not h > 0.0:  # members that will not read back (warned when they page in): as tall as a mesh
+            h = float(heights.max())
+        self.object_counts[t] = counts.astype(np.int64)
+        self.object_height[t] = min(h, 1e4)
+        self.object_bytes[t] = int((counts * object_instance_bytes()).sum())
+
     def _near_bytes(self, n: int, t, samples: int | None = None) -> int:
         py0, py1, px0, px1 = self.grid.patch_range(*t)
         r = (self.near_samples if samples is None else samples) - 1
@@ -532,8 +627,11 @@ class TileCache:
 
     @property
     def resident_bytes(self) -> int:
+        """Bytes resident now: the far field, the paged meshes and the paged objects
+        (:attr:`object_bytes` of the tiles in :attr:`objects`)."""
         with self._lock:
-            return self._far_bytes + sum(m.nbytes for m in self.near.values())
+            return (self._far_bytes + sum(m.nbytes for m in self.near.values())
+                    + sum(self.object_bytes.get(t, 0) for t in self.objects))
 
     # ---------------------------------------------------------------- loading
     def _expect(self, t) -> dict:
@@ -617,9 +715,9 @@ class TileCache:
             return None
 
     def resident_objects(self) -> dict:
-        """``{tile: (kind (k,) int64, matrix (k, 4, 4) float64)}``: the objects of the tiles paged in
-        (their near or middle mesh loaded and still wanted; kept while a tile changes level), empty
-        without :attr:`load_objects`."""
+        """``{tile: (kind (k,) int64, matrix (k, 4, 4) float64)}``: the objects paged in (their tile
+        within its object distance, :meth:`update`, whatever its terrain level), empty without
+        :attr:`load_objects`."""
         with self._lock:
             return dict(self.objects)
 
@@ -665,12 +763,15 @@ class TileCache:
     def _run(self) -> None:
         while not self._stop:
             try:
-                _, t = self._queue.get(timeout=0.05)
+                _, what, t = self._queue.get(timeout=0.05)  # what: 0 a tile's mesh, 1 its objects
             except queue.Empty:
                 continue
             if t is None:
                 break
             try:
+                if what == 1:
+                    self._load_objects(t)
+                    continue
                 with self._lock:
                     samples = self._wanted.get(t)
                 if samples is not None:
@@ -678,12 +779,9 @@ class TileCache:
                     mesh = near_mesh(self._read("fit", t, ("control_points",)), self._read("lit", t, ("texels",)),
                                      (py1 - py0, px1 - px0), self._depth(t), samples)
                     vis = self._read_vis(t)
-                    objs = self._read_objects(t) if self.load_objects else None
                     with self._lock:
                         if self._wanted.get(t) == samples:  # still wanted and still fits: the budget was reserved
                             self.vis[t] = vis
-                            if objs is not None:
-                                self.objects[t] = objs
                             self.near[t] = mesh
                             self.near_level[t] = samples
                             self.loaded_count += 1
@@ -693,8 +791,21 @@ class TileCache:
                 self.errors.append(exc)
             finally:
                 with self._lock:
-                    self._pending.discard(t)
+                    (self._objects_pending if what == 1 else self._pending).discard(t)
                 self._queue.task_done()
+
+    def _load_objects(self, t) -> None:
+        """Read tile ``t``'s objects (the loader thread) and keep them while still wanted (their
+        bytes were reserved); objects that do not read back are warned once and not asked again."""
+        with self._lock:
+            if t not in self._objects_wanted:
+                return
+        objs = self._read_objects(t)
+        with self._lock:
+            if objs is None:
+                self._objects_bad.add(t)
+            elif t in self._objects_wanted:
+                self.objects[t] = objs
 
     def distance(self, eye, t) -> float:
         """Metres from ``eye`` (x, y) to tile ``t``'s rectangle."""
@@ -709,57 +820,107 @@ class TileCache:
         d = np.maximum(np.maximum(self.lo[:, :2] - eye, eye - self.hi[:, :2]), 0.0)
         return np.hypot(d[:, 0], d[:, 1])
 
-    def update(self, eye, pixel_scale: float | None = None, pixel_error: float = FAR_PIXEL_ERROR) -> None:
+    def object_distances(self, eye, pixel_scale: float | None = None, far: float | None = None,
+                         fog_density: float | None = None) -> np.ndarray:
+        """How far from the eye each tile of :attr:`tiles` keeps its objects paged in, ``(n,)``
+        metres (compared with the distance from the eye ``(3,)`` to the tile's box): ``object_distance``
+        when one was given; else the distance at which the tile's tallest object
+        (:attr:`object_height`) is ``OBJECT_MIN_PIXELS`` tall at ``pixel_scale`` pixels a radian
+        (without one: ``near_radius``), at most where fog of ``fog_density`` per metre leaves
+        ``OBJECT_FOG_FLOOR`` of its colour and at most ``far`` (the far plane)."""
+        n = len(self.tiles)
+        if self.object_distance is not None:
+            return np.full(n, self.object_distance)
+        if pixel_scale is None:
+            out = np.full(n, self.near_radius)
+        else:
+            h = np.array([self.object_height.get(t, 0.0) for t in self.tiles])
+            out = h * float(pixel_scale) / OBJECT_MIN_PIXELS
+        if fog_density is not None and float(fog_density) > 0.0:
+            out = np.minimum(out, -np.log(OBJECT_FOG_FLOOR) / float(fog_density))
+        if far is not None and np.isfinite(far):
+            out = np.minimum(out, float(far))
+        return out
+
+    def update(self, eye, pixel_scale: float | None = None, pixel_error: float = FAR_PIXEL_ERROR,
+               far: float | None = None, fog_density: float | None = None, object_scale: float | None = None) -> None:
         """Choose the paged meshes for ``eye``: nearest tiles first, while the budget allows, get
         near meshes (``near_samples`` a patch side) within ``near_radius`` and, with
         ``pixel_scale`` (pixels a radian), wherever the middle level's error (:attr:`mid_error`)
         would show as more than ``pixel_error`` pixels; the
         middle level (``MID_SAMPLES``) where only the corner grid's would (or where a near mesh no
-        longer fits).  Evict the others at once, queue the missing ones for the loader."""
+        longer fits).  With :attr:`load_objects`, the objects of the tiles within their object
+        distance (:meth:`object_distances` of ``object_scale``, default ``pixel_scale``, ``far`` and
+        ``fog_density``) are
+        paged too, reserved in the same nearest-first pass (a tile's mesh, then its objects; once
+        one kind no longer fits, no farther tile gets that kind).  Evict the others at once, queue
+        the missing ones for the loader."""
         dist = self.distances(eye)
         level = np.where(dist <= self.near_radius, self.near_samples, 0)
         mid = min(MID_SAMPLES, self.near_samples)
-        if pixel_scale is not None and len(self.tiles):
-            e = np.asarray(eye, dtype=np.float64)
+        e = np.asarray(eye, dtype=np.float64).reshape(-1)[:3]
+        d3 = None
+        if len(self.tiles) and (pixel_scale is not None or (self.load_objects and self.object_counts)):
             d = np.maximum(np.maximum(self.lo - e, e - self.hi), 0.0)
-            allowed = pixel_error * np.maximum(np.sqrt((d * d).sum(1)), 1e-9) / float(pixel_scale)  # metres
+            d3 = np.sqrt((d * d).sum(1))  # metres from the eye to each tile's box
+        if pixel_scale is not None and len(self.tiles):
+            allowed = pixel_error * np.maximum(d3, 1e-9) / float(pixel_scale)  # metres
             chord = np.array([self.chord_error.get(t, 0.0) for t in self.tiles])
             mid_err = np.array([self.mid_error.get(t, 0.0) for t in self.tiles])
             level = np.where(level > 0, level, np.where(mid_err > allowed, self.near_samples,
                                                         np.where(chord > allowed, mid, 0)))
-        close = np.nonzero(level > 0)[0]
-        order = [(float(dist[i]), self.tiles[i], int(level[i])) for i in close[np.argsort(dist[close], kind="stable")]]
+        has_obj = np.zeros(len(self.tiles), bool)
+        if self.load_objects and self.object_counts and d3 is not None:
+            has_obj = np.array([t in self.object_counts and t not in self._objects_bad for t in self.tiles])
+            scale = pixel_scale if object_scale is None else object_scale
+            has_obj &= d3 <= self.object_distances(e, scale, far, fog_density)
+        close = np.nonzero((level > 0) | has_obj)[0]
+        order = [(float(dist[i]), self.tiles[i], int(level[i]), bool(has_obj[i]))
+                 for i in close[np.argsort(dist[close], kind="stable")]]
         room = self.budget - self._far_bytes
-        want = []
-        for d, t, k in order:
+        want, objs_want = [], []
+        mesh_full = objs_full = False
+        for d, t, k, obj in order:
             if t in self.bad:
                 continue
-            cost = self._near_estimate[t] if k == self.near_samples else self._near_bytes(0, t, k)
-            if cost > room and k != mid:  # no room for a near mesh: the middle level, if that fits
-                k, cost = mid, self._near_bytes(0, t, mid)
-            if cost > room:
-                break
-            room -= cost
-            want.append((d, t, k))
+            if k and not mesh_full:
+                cost = self._near_estimate[t] if k == self.near_samples else self._near_bytes(0, t, k)
+                if cost > room and k != mid:  # no room for a near mesh: the middle level, if that fits
+                    k, cost = mid, self._near_bytes(0, t, mid)
+                if cost > room:
+                    mesh_full = True
+                else:
+                    room -= cost
+                    want.append((d, t, k))
+            if obj and not objs_full:
+                cost = self.object_bytes[t]
+                if cost > room:
+                    objs_full = True
+                else:
+                    room -= cost
+                    objs_want.append((d, t))
         with self._lock:
             self._wanted = {t: k for _, t, k in want}
+            self._objects_wanted = {t for _, t in objs_want}
             for t in [t for t in self.near if self._wanted.get(t) != self.near_level.get(t)]:
                 del self.near[t]
                 self.vis.pop(t, None)
                 self.near_level.pop(t, None)
-            for t in [t for t in self.objects if t not in self._wanted]:  # (kept while the tile changes level)
+            for t in [t for t in self.objects if t not in self._objects_wanted]:
                 del self.objects[t]
-            todo = [(d, t) for d, t, _ in want if t not in self.near and t not in self._pending]
-            self._pending.update(t for _, t in todo)
-        for d, t in todo:
-            self._queue.put((d, t))
+            todo = [(d, 0, t) for d, t, _ in want if t not in self.near and t not in self._pending]
+            todo += [(d, 1, t) for d, t in objs_want if t not in self.objects and t not in self._objects_pending]
+            self._pending.update(t for _, what, t in todo if what == 0)
+            self._objects_pending.update(t for _, what, t in todo if what == 1)
+        for item in todo:
+            self._queue.put(item)
 
     def wait_idle(self, timeout: float = 60.0) -> None:
         """Block until the loader has nothing queued (tests, offline rendering)."""
         t0 = time.perf_counter()
         while True:
             with self._lock:
-                busy = bool(self._pending)
+                busy = bool(self._pending or self._objects_pending)
             if not busy:
                 break
             if time.perf_counter() - t0 > timeout:
@@ -842,7 +1003,7 @@ class TileCache:
 
     def close(self) -> None:
         self._stop = True
-        self._queue.put((-1.0, None))
+        self._queue.put((-1.0, -1, None))
         self._thread.join(timeout=5)
 
 
@@ -867,7 +1028,7 @@ class StreamingRenderer:
     ----------
     root : the tiled world folder
     size : (width, height)
-    budget_bytes, near_radius, near_samples : see :class:`TileCache`
+    budget_bytes, near_radius, near_samples, object_distance : see :class:`TileCache`
     background : clear colour (RGB 0..1); the sky colour by default
     fog_density : per metre, towards the sky's horizon colour, per vertex like the course
         (default: :func:`piste.render.frame.scene_fog_density` of the world's extent, what a bundle of
@@ -881,8 +1042,10 @@ class StreamingRenderer:
 
     def __init__(self, root, size=(640, 448), budget_bytes: int = 256 << 20, near_radius: float | None = None,
                  ctx=None, background=SKY, fog_density: float | None = None, sky: bool = True,
-                 pixel_error: float | None = FAR_PIXEL_ERROR, visibility: bool = True, near_samples: int | None = None):
-        self.cache = TileCache(root, budget_bytes=budget_bytes, near_radius=near_radius, near_samples=near_samples)
+                 pixel_error: float | None = FAR_PIXEL_ERROR, visibility: bool = True, near_samples: int | None = None,
+                 object_distance: float | None = None):
+        self.cache = TileCache(root, budget_bytes=budget_bytes, near_radius=near_radius, near_samples=near_samples,
+                               object_distance=object_distance)
         self.ctx = ctx or create_context()
         self.size = (int(size[0]), int(size[1]))
         self.fbo = Offscreen(self.ctx, self.size)
@@ -984,12 +1147,14 @@ class StreamingRenderer:
         return self.draw(cam, read, t0)
 
     def update(self, camera, wait: bool = False) -> None:
-        """Page tiles for ``camera`` (nearest first under the budget); ``wait``: until loaded."""
+        """Page tiles for ``camera`` (nearest first under the budget; scene objects by their own
+        distance for this view, its far plane and the world's fog); ``wait``: until loaded."""
+        far = getattr(camera, "far", None)
+        scale = self.size[1] / (2.0 * np.tan(np.radians(camera.fov_y) / 2.0))
         if self.pixel_error is None:
-            self.cache.update(camera.eye)
+            self.cache.update(camera.eye, far=far, fog_density=self.fog_density, object_scale=scale)
         else:
-            self.cache.update(camera.eye, self.size[1] / (2.0 * np.tan(np.radians(camera.fov_y) / 2.0)),
-                              self.pixel_error)
+            self.cache.update(camera.eye, scale, self.pixel_error, far=far, fog_density=self.fog_density)
         if wait:
             self.cache.wait_idle()
         elif self.cache.errors:
@@ -1089,16 +1254,21 @@ class StreamingTerrain:
         loader's timing); False in a window (far stand-ins while tiles load)
     objects : the scene's objects as a :class:`piste.render.object_pass.ObjectGroups` (a tiled
         world's, :func:`piste.pipeline.tiles_source.open_tiles`), or None: the objects of the tiles
-        paged in, one group a tile (key ``(ty, tx)``), added when a tile's near or middle mesh loads
-        and removed when it is evicted (:meth:`page_objects`), so the object pass drawing the set
-        draws the objects of the resident tiles.  Paged from the set's ``visible`` (whoever culls the
-        objects pages the tiles for that view first: the culled set and the drawn one agree)
+        paged in, one group a tile (key ``(ty, tx)``), added when a tile comes within its object
+        distance (:meth:`TileCache.object_distances`: beyond the near and middle meshes, out to where
+        its objects would be a pixel or two tall) and removed when it leaves (:meth:`page_objects`),
+        so the object pass drawing the set draws the objects of the resident tiles.  Paged from the
+        set's ``visible`` (whoever culls the objects pages the tiles for that view first: the culled
+        set and the drawn one agree)
+    object_distance : metres within which tiles' objects are paged (None: by their size on screen,
+        :class:`TileCache`)
     """
 
     def __init__(self, root, net, size=(640, 448), ctx=None, budget_bytes: int = 256 << 20,
-                 near_radius: float | None = None, wait: bool = True, objects=None):
+                 near_radius: float | None = None, wait: bool = True, objects=None,
+                 object_distance: float | None = None):
         self.streaming = StreamingRenderer(root, size=size, budget_bytes=budget_bytes, near_radius=near_radius,
-                                           ctx=ctx, sky=True)
+                                           ctx=ctx, sky=True, object_distance=object_distance)
         self.objects = objects if objects is not None and hasattr(objects, "groups") else None
         self._paged_eye = None  # the eye the tiles were last paged for
         if self.objects is not None:
@@ -1147,8 +1317,10 @@ class StreamingTerrain:
         if eye is not None and tuple(float(x) for x in np.asarray(eye).reshape(3)) != self._paged_eye:
             cos = float(np.clip(np.dot(planes[2, :3], planes[3, :3]), -1.0, 1.0))
             fov = 180.0 - float(np.degrees(np.arccos(cos)))  # the inward normals of bottom and top: 180 - fov apart
+            e = np.asarray(eye, dtype=np.float64).reshape(3)
+            far = float(np.dot(planes[5, :3], e) + planes[5, 3])  # the eye's distance to the far plane
             if fov > 1e-6:
-                self._update(_View(np.asarray(eye, dtype=np.float64).reshape(3), fov))
+                self._update(_View(e, fov, far if far > 0.0 else None))
         self.page_objects()
 
     def page_objects(self) -> dict:
@@ -1236,6 +1408,7 @@ class _View:
 
     eye: np.ndarray
     fov_y: float
+    far: float | None = None
 
 
 def fly_path(index: dict, frames: int, fps: float = 30.0, speed: float = 100.0, height: float = 120.0,
