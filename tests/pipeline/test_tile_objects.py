@@ -272,10 +272,49 @@ def test_add_track_riders_gives_the_runtime_a_pack_on_the_track(tmp_path):
     build_tiles(spec)
     b = open_tiles(spec.root)
     b2 = add_track_riders(b, TileStore(spec.root), spec.grid, (15.0, 110.0), (705.0, 130.0), start=0.1)
-    assert b2.manifest["pack"] == {"follow": "track", "start": 0.1} and b2.centerline.shape[1] == 3
+    assert b2.manifest["pack"] == {"follow": "track", "start": 0.1, "riders": 6} and b2.centerline.shape[1] == 3
     assert len(b2.net) == 192 and b2.lightmap.rects.shape[0] == 192 and b.net is not b2.net
     scene = track_scene(b2)
     st = scene.riders.state(30.0)
     assert st.anchor[:, 0].max() > 240.0  # riders 3 tiles from the world's start after 30 s
     with pytest.raises(ConfigError, match="off the world"):
         add_track_riders(b, TileStore(spec.root), spec.grid, (15.0, 110.0), (905.0, 130.0))
+
+
+def test_track_pack_of_n_riders(tmp_path):
+    """A pack of N riders on a tiled world's track (``--riders N`` with ``--track``): the default six's
+    rows first, then again 48 m further ahead; the track it needs grows with it; bad counts named."""
+    from dataclasses import replace
+
+    from piste.errors import ConfigError, FormatError
+    from piste.pipeline.preview import PACK_TRACK_AHEAD, pack_track_ahead, track_pack, track_scene
+    from piste.pipeline.tile_objects import add_track_riders
+    from piste.pipeline.tiles_source import open_tiles
+    from piste.world.riders import DEFAULT_PACK
+
+    assert track_pack(6) == DEFAULT_PACK and track_pack(2) == DEFAULT_PACK[:2]
+    rows = track_pack(20)
+    ahead = np.array([r[2] for r in rows])
+    assert len(rows) == 20 and len(np.unique(ahead)) == 20 and np.diff(np.sort(ahead)).max() <= 9.0
+    assert pack_track_ahead(1) == pack_track_ahead(6) == PACK_TRACK_AHEAD
+    assert pack_track_ahead(20) == PACK_TRACK_AHEAD + ahead.max() - 41.0
+    for bad in (0, 65):
+        with pytest.raises(ConfigError, match="1..64"):
+            track_pack(bad)
+    spec = _long_world(tmp_path / "w.tiles")
+    build_tiles(spec)
+    b = open_tiles(spec.root, track=(15.0, 110.0, 705.0, 130.0), track_riders=11)
+    assert b.manifest["pack"]["riders"] == 11
+    scene = track_scene(b)
+    assert len(scene.riders) == 11 and scene.riders.state(5.0).anchor.shape == (11, 3)
+    assert len(track_scene(open_tiles(spec.root, track=(15.0, 110.0, 705.0, 130.0))).riders) == 6
+    with pytest.raises(ConfigError, match="1..64"):
+        add_track_riders(b, TileStore(spec.root), spec.grid, (15.0, 110.0), (705.0, 130.0), riders=0)
+    with pytest.raises(ConfigError, match="needs a track"):
+        open_tiles(spec.root, track_riders=3)
+    with pytest.raises(ConfigError, match="a pack of 40 riders needs more than"):
+        open_tiles(spec.root, track=(15.0, 110.0, 405.0, 130.0), track_riders=40)
+    for bad in (0, 2.5, "6", True):
+        man = dict(b.manifest, pack={**b.manifest["pack"], "riders": bad})
+        with pytest.raises(FormatError, match="pack.riders"):
+            track_scene(replace(b, manifest=man))

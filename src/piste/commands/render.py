@@ -36,10 +36,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--fov", type=N.FOV, default=50.0, help="--eye's vertical field of view in degrees (default 50)")
     parser.add_argument("--riders", type=N.integer(0, 64), default=0, metavar="N",
                         help="stand N default riders on the terrain of a source without riders of its own (an SSX "
-                             "level); drawn with their shadows by the same runtime as a scene's")
+                             "level); drawn with their shadows by the same runtime as a scene's. With --track: the "
+                             "pack riding the track has N riders (1..64, default 6)")
     parser.add_argument("--track", nargs=4, type=N.COORDINATE, metavar=("X0", "Y0", "X1", "Y1"),
-                        help="tiled worlds: the default pack of riders rides a straight track from (X0, Y0) to "
-                             "(X1, Y1) metres across the tiles, the camera chasing rider 0 (unless --eye/--camera)")
+                        help="tiled worlds: a pack of riders (six, or --riders N) rides a straight track from "
+                             "(X0, Y0) to (X1, Y1) metres across the tiles, the camera chasing rider 0 (unless "
+                             "--eye/--camera)")
     parser.add_argument("--add-objects", type=N.integer(0, 10_000), default=0, metavar="N",
                         help="place N of the course's objects (trees, rocks, signs, rails) on the terrain of a source "
                              "without objects of its own (an SSX level, a tiled world)")
@@ -77,10 +79,8 @@ def run(args) -> int:
         raise ConfigError("--camera names a scene camera; --eye/--target give one: use one or the other")
     size = tuple(args.size) if args.size else None
     track = getattr(args, "track", None)
-    if track is not None and (kind != "tiles" or args.riders):
-        raise ConfigError("--track runs the default pack across a tiled world (.tiles); --riders stands riders: "
-                          "use one or the other" if kind == "tiles" else f"--track needs a tiled world (.tiles), "
-                          f"got a {kind}")
+    if track is not None and kind != "tiles":
+        raise ConfigError(f"--track needs a tiled world (.tiles), got a {kind}")
     b = open_source(args.scene, quiet=args.quiet, warm=True, riders=args.riders, objects=args.add_objects,
                     budget_mb=args.budget, track=track)
     if args.list:

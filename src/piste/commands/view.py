@@ -76,15 +76,16 @@ def add_arguments(parser) -> None:
     parser.add_argument("--target", nargs=3, type=N.COORDINATE, metavar=("X", "Y", "Z"),
                         help="the point --eye looks at (metres)")
     parser.add_argument("--riders", type=N.integer(0, 64), default=0, metavar="N",
-                        help="with an SSX level or a tiled world: stand N default riders on its terrain")
+                        help="with an SSX level or a tiled world: stand N default riders on its terrain (with "
+                             "--track: the pack riding the track has N riders, 1..64, default 6)")
     parser.add_argument("--add-objects", type=N.integer(0, 10_000), default=0, metavar="N",
                         help="place N of the course's objects (trees, rocks, signs, rails) on the terrain of a source "
                              "without objects of its own (an SSX level, a tiled world)")
     parser.add_argument("--budget", type=N.real(1.0, float(1 << 20)), default=256.0,
                         help="tiled worlds: streaming memory budget in MiB")
     parser.add_argument("--track", nargs=4, type=N.COORDINATE, metavar=("X0", "Y0", "X1", "Y1"),
-                        help="tiled worlds: the default pack of riders rides a straight track from (X0, Y0) to "
-                             "(X1, Y1) metres across the tiles (F: chase rider 0)")
+                        help="tiled worlds: a pack of riders (six, or --riders N) rides a straight track from "
+                             "(X0, Y0) to (X1, Y1) metres across the tiles (F: chase rider 0)")
 
 
 def course_preview(args, bundle, ctx=None):
@@ -176,12 +177,10 @@ def _view_source(args, kind: str) -> int:
     from piste.render.window import ViewOptions, has_display, run_window
 
     track = getattr(args, "track", None)
-    if track is not None and (kind != "tiles" or args.riders):
+    if track is not None and kind != "tiles":
         from piste.errors import ConfigError
 
-        raise ConfigError("--track runs the default pack across a tiled world (.tiles); --riders stands riders: "
-                          "use one or the other" if kind == "tiles" else f"--track needs a tiled world (.tiles), "
-                          f"got a {kind}")
+        raise ConfigError(f"--track needs a tiled world (.tiles), got a {kind}")
     bundle = open_source(args.scene, warm=True, riders=args.riders, objects=args.add_objects, budget_mb=args.budget,
                          track=track)
     size = tuple(args.size)

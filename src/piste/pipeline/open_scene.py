@@ -25,7 +25,7 @@ API
     SOURCES                                       the registry, in matching order
     source_kind(path) -> str                      "bundle", "scene", "ssx", "tiles" (ConfigError otherwise)
     open_source(path, quiet=True, warm=False, riders=0, objects=0, **options) -> Bundle   (tiles: ``budget_mb``,
-        ``track``: the pack rides (x0, y0, x1, y1) across the tiles)
+        ``track``: a pack of ``riders`` riders, default six, rides (x0, y0, x1, y1) across the tiles)
     load_or_build(scene, quiet=True, warm=False) -> Bundle     (= open_source)
     eye_camera(eye, target, fov_y=50) -> Camera | None            ``--eye``/``--target`` (render, view)
     load_net(path=None) -> PatchNet         a .bpt / .npz patch net, or the default course (``piste bake``, ``piste ssx``)
@@ -91,7 +91,7 @@ SOURCES: list[Source] = [
     Source("bundle", ".piste", _open_bundle),
     Source("scene", ".toml", _open_scene_file),
     Source("ssx", ".pbd", open_ssx_level),
-    Source("tiles", ".tiles", open_tiles, folder=True, options=("budget_mb", "track")),
+    Source("tiles", ".tiles", open_tiles, folder=True, options=("budget_mb", "track", "track_riders")),
 ]
 
 
@@ -114,10 +114,13 @@ def open_source(path, quiet: bool = True, warm: bool = False, riders: int = 0, o
     """The runtime scene of ``path`` (any kind in :data:`SOURCES`).  ``warm``: start the terrain's
     resident vertex blocks at load (see :func:`load_bundle`).  ``riders``: add that many default
     riders standing on the terrain when the source has none of its own, ``objects`` that many of
-    the course's objects (:mod:`piste.pipeline.furnish`).  ``options``: the source's own
-    (a tiled world's ``budget_mb`` and ``track``); options another kind takes are ignored."""
+    the course's objects (:mod:`piste.pipeline.furnish`); on a tiled world with a ``track``,
+    ``riders`` is the size of the pack riding it instead.  ``options``: the source's own (a tiled
+    world's ``budget_mb`` and ``track``); options another kind takes are ignored."""
     src = _source(path)
     p = Path(str(path).rstrip("/\\")) if src.folder else Path(path)
+    if riders and src.kind == "tiles" and options.get("track") is not None:  # the pack riding the track: N riders
+        options = {**options, "track_riders": int(riders)}
     bundle = src.open(p, quiet, warm, **{k: v for k, v in options.items() if k in src.options and v is not None})
     if riders and not bundle.manifest.get("riders") and not bundle.manifest.get("pack"):
         bundle = add_standing_riders(bundle, int(riders))

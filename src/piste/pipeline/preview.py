@@ -26,6 +26,7 @@ API
     ScenePreview(bundle, size=None, ctx=None, visibility=True)   ``.render(camera, t) -> (H, W, 3) uint8``,
                                                                   ``.stats`` of the last frame, ``.reload(bundle)``
     track_scene(bundle, start=None, casts=()) -> Scene            the [pack] riders + [auto_objects] of a bundle
+    track_pack(n=6) -> rows;  pack_track_ahead(n=6) -> metres     a pack of n riders, the track it needs ahead
     rider_casts(["FILE[:N]", ...]) -> [(model, pack rows)]        other rider models beside the pack
     cast_model(model) -> Model                                    a glTF rider as drawn (materials kept)
     camera_at(bundle, name, i, n) -> Camera                       a scene camera at frame i of n (track cameras fly)
@@ -64,10 +65,11 @@ from piste.world.camera import Camera, track_camera, warn_if_no_terrain
 from piste.world.course import TRACK_HALF_WIDTH
 from piste.world.object_lod import DEFAULT_LOD_PIXELS
 from piste.world.objects import place_objects
-from piste.world.riders import ClipTable, RiderState, pack_for, rider_model
+from piste.world.riders import DEFAULT_PACK, ClipTable, RiderState, pack_for, rider_model
 from piste.world.scene import LOD_DISTANCES, Scene, sun_light
 
-__all__ = ["PlacedRiders", "BundleScene", "clip_table", "cast_model", "rider_casts", "track_scene", "ScenePreview", "camera_at", "render_image", "render_frames"]
+__all__ = ["PlacedRiders", "BundleScene", "clip_table", "cast_model", "rider_casts", "track_scene", "track_pack",
+           "pack_track_ahead", "ScenePreview", "camera_at", "render_image", "render_frames"]
 
 
 class PlacedRiders:
@@ -178,6 +180,35 @@ class BundleScene(Scene):
 
 #: metres of track the pack needs ahead of its first rider's start
 PACK_TRACK_AHEAD = 120.0
+#: most riders a [pack] runs (``riders``; default the six of :data:`piste.world.riders.DEFAULT_PACK`)
+MAX_PACK_RIDERS = 64
+#: metres between one six of a larger pack and the next (the default six span 41 m, 8 m apart)
+_PACK_PERIOD = 48.0
+
+
+def track_pack(n: int = len(DEFAULT_PACK)) -> tuple:
+    """The rows (:data:`piste.world.riders.DEFAULT_PACK`'s) of a pack of ``n`` riders running down
+    the track: the default pack's first ``n``, and beyond six the default six again every
+    ``_PACK_PERIOD`` metres further ahead (their carving phases shifted), so riders keep about 8 m
+    apart."""
+    n = int(n)
+    if not 1 <= n <= MAX_PACK_RIDERS:
+        raise ConfigError(f"a pack runs 1..{MAX_PACK_RIDERS} riders, got {n}")
+    six = len(DEFAULT_PACK)
+    out = []
+    for i in range(n):
+        clip, phase, ahead, across, amp, period = DEFAULT_PACK[i % six]
+        k = i // six
+        out.append((clip, (phase + 0.37 * k) % 1.0, ahead + _PACK_PERIOD * k, across, amp, period))
+    return tuple(out)
+
+
+def pack_track_ahead(n: int = len(DEFAULT_PACK)) -> float:
+    """Metres of track a pack of ``n`` riders (:func:`track_pack`) needs ahead of rider 0's start:
+    :data:`PACK_TRACK_AHEAD`, plus how much farther ahead its leading rider runs than the default
+    pack's."""
+    lead = max(r[2] for r in track_pack(n))
+    return PACK_TRACK_AHEAD + max(lead - max(r[2] for r in DEFAULT_PACK), 0.0)
 #: [auto_objects] count keys -> place_objects' keywords
 _AUTO_COUNTS = {"trees": "n_trees", "signs": "n_signs", "rocks": "n_rocks", "rails": "n_rails"}
 
@@ -227,27 +258,34 @@ def rider_casts(specs) -> list:
 
 
 def track_scene(bundle, start: float | None = None, casts=()):
-    """The :class:`piste.world.scene.Scene` of a bundle built with ``[pack] follow = "track"``: the
-    default pack of riders running down the track (rider 0 at fraction ``start`` of it at t = 0;
-    default: the scene file's ``pack.start``), the camera chasing rider 0, and the ``[auto_objects]``
-    (else the bundle's own objects).  ``casts``: ``[(rider model, pack rows)]`` of other models to
-    run beside the pack (``piste demo --rider-model``)."""
+    """The :class:`piste.world.scene.Scene` of a bundle built with ``[pack] follow = "track"``: a
+    pack of ``pack.riders`` riders (default the six of the default pack; :func:`track_pack`)
+    running down the track (rider 0 at fraction ``start`` of it at t = 0; default: the scene file's
+    ``pack.start``), the camera chasing rider 0, and the ``[auto_objects]`` (else the bundle's own
+    objects).  ``casts``: ``[(rider model, pack rows)]`` of other models to run beside the pack
+    (``piste demo --rider-model``)."""
     pack = bundle.manifest.get("pack") or {}
     line = bundle.centerline
     if line is None:
         raise FormatError(bundle.path, "a [pack] following the track needs the default course's centre line",
                           field="pack")
+    n = pack.get("riders", len(DEFAULT_PACK))
+    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_PACK_RIDERS:
+        raise FormatError(bundle.path, f"manifest.json: pack.riders: expected an integer in 1..{MAX_PACK_RIDERS}, "
+                                       f"got {n!r}", field="pack.riders")
+    rows = track_pack(n)
     frac = float(pack.get("start", 0.12)) if start is None else float(start)
     length = float(np.linalg.norm(np.diff(line[:, :2], axis=0), axis=1).sum())
     at = frac * length
-    if at > length - PACK_TRACK_AHEAD:
-        raise ConfigError(f"--start {frac}: the riders need {PACK_TRACK_AHEAD:.0f} m of track ahead; use at most "
-                          f"{(length - PACK_TRACK_AHEAD) / length:.2f}")
+    ahead = pack_track_ahead(n)
+    if at > length - ahead:
+        raise ConfigError(f"--start {frac}: the {n} riders need {ahead:.0f} m of track ahead; use at most "
+                          f"{max(length - ahead, 0.0) / length:.2f}")
     objs = auto_objects(bundle)
     if objs is None:
         objs = bundle.objects()
     net, lights = bundle.net, bundle.lights
-    scene = Scene(net, line, lights, objects=objs, start=at)
+    scene = Scene(net, line, lights, objects=objs, start=at, pack=rows)
     scene.casts = [Scene(net, line, lights, model=m, pack=rows, start=at) for m, rows in casts]
     scene.lod_distances = tuple(bundle.manifest.get("lod", {}).get("character", scene.lod_distances))
     return scene

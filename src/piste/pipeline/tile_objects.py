@@ -33,8 +33,8 @@ API
     track_net(store, grid, tiles) -> PatchNet                those tiles' fitted patches as one net
     world_track(store, grid, start_xy, end_xy, step=5) -> (line (k, 3), net)   a straight track across
         tiles on the exact surface, and the ground its riders need
-    add_track_riders(bundle, store, grid, start_xy, end_xy, start=0.12) -> Bundle   a runtime scene whose
-        pack of riders follows that track ([pack] follow = "track": the runtime's track_scene), its
+    add_track_riders(bundle, store, grid, start_xy, end_xy, start=0.12, riders=6) -> Bundle   a runtime scene
+        whose pack of ``riders`` riders follows that track ([pack] follow = "track": the runtime's track_scene), its
         ``net`` the track's tiles (riders stand, carve and cast shadows on them while the world streams)
 """
 
@@ -358,17 +358,20 @@ def world_track(store, grid: TileGrid, start_xy, end_xy, step: float = 5.0):
     return np.column_stack([xy, z]), net
 
 
-def add_track_riders(bundle, store, grid: TileGrid, start_xy, end_xy, start: float = 0.12):
-    """A copy of ``bundle`` (a tiled world's runtime scene) whose pack of riders follows a straight
-    track from ``start_xy`` to ``end_xy`` across tiles: the centre line (``terrain/centerline``),
-    ``[pack] follow = "track"`` (rider 0 at fraction ``start`` at t = 0) and, as its ``net``, the
-    tiles under the track and around it (:func:`world_track`)."""
+def add_track_riders(bundle, store, grid: TileGrid, start_xy, end_xy, start: float = 0.12, riders: int = 6):
+    """A copy of ``bundle`` (a tiled world's runtime scene) whose pack of ``riders`` riders (1..64,
+    :func:`piste.pipeline.preview.track_pack`) follows a straight track from ``start_xy`` to
+    ``end_xy`` across tiles: the centre line (``terrain/centerline``), ``[pack] follow = "track"``
+    (rider 0 at fraction ``start`` at t = 0, ``riders``) and, as its ``net``, the tiles under the
+    track and around it (:func:`world_track`)."""
 
     if not 0.0 <= float(start) <= 1.0:
         raise ConfigError(f"track: start must be a fraction of the track in [0, 1], got {start}")
+    if isinstance(riders, bool) or not isinstance(riders, (int, np.integer)) or not 1 <= int(riders) <= 64:
+        raise ConfigError(f"track: the pack runs 1..64 riders, got {riders!r}")
     line, net = world_track(store, grid, start_xy, end_xy)
     man = dict(bundle.manifest)
-    man["pack"] = {"follow": "track", "start": float(start)}
+    man["pack"] = {"follow": "track", "start": float(start), "riders": int(riders)}
     arrays = dict(bundle.arrays)
     arrays["terrain/centerline"] = line
     rects = np.asarray(net.lightmap_rect, np.float32)  # the local net's placeholder light map, resized

@@ -20,9 +20,10 @@ API
 ---
 ::
 
-    open_tiles(path, quiet=True, warm=False, budget_mb=256.0, track=None) -> Bundle
-        track (x0, y0, x1, y1) metres: the default pack of riders rides a straight track across
-        the tiles (piste render|view WORLD.tiles --track X0 Y0 X1 Y1), chased by the camera
+    open_tiles(path, quiet=True, warm=False, budget_mb=256.0, track=None, track_riders=None) -> Bundle
+        track (x0, y0, x1, y1) metres: a pack of track_riders riders (default six) rides a straight
+        track across the tiles (piste render|view WORLD.tiles --track X0 Y0 X1 Y1 [--riders N]),
+        chased by the camera
     flight_cameras(bundle, frames, fps=30, speed=100) -> list[Camera]    the flight across the world
 """
 
@@ -37,7 +38,7 @@ from piste.formats.bundle import camera_to_dict
 from piste.lighting.lightmap import LightMap
 from piste.lighting.lights import default_lights
 from piste.pipeline.bundle_objects import Bundle, camera_from_dict
-from piste.pipeline.preview import PACK_TRACK_AHEAD
+from piste.pipeline.preview import pack_track_ahead
 from piste.pipeline.tile_objects import add_track_riders, stream_tile_objects
 from piste.render.streaming import fly_path
 from piste.terrain.tiles import TileError, TileStore, read_tile_objects, tile_entries, tile_net
@@ -55,12 +56,14 @@ def _centre_camera(net) -> Camera:
     return Camera(eye, c, fov_y=50.0, near=1.0, far=max(8.0 * ext, 3000.0))
 
 
-def open_tiles(path, quiet: bool = True, warm: bool = False, budget_mb: float = 256.0, track=None) -> Bundle:
+def open_tiles(path, quiet: bool = True, warm: bool = False, budget_mb: float = 256.0, track=None,
+               track_riders: int | None = None) -> Bundle:
     """The runtime scene of a tiled world (see the module docstring).  ``track``: ``(x0, y0, x1, y1)``
-    metres, a straight track the default pack of riders follows across the tiles
-    (:func:`piste.pipeline.tile_objects.add_track_riders`; rider 0 starts 12 % along it, or where
-    the pack still has :data:`piste.pipeline.preview.PACK_TRACK_AHEAD` metres ahead), the runtime's
-    camera chasing rider 0 (ConfigError: a track off the world or too short for the pack)."""
+    metres, a straight track a pack of ``track_riders`` riders (None: the default six; 1..64)
+    follows across the tiles (:func:`piste.pipeline.tile_objects.add_track_riders`; rider 0 starts
+    12 % along it, or where the pack still has :func:`piste.pipeline.preview.pack_track_ahead`
+    metres ahead), the runtime's camera chasing rider 0 (ConfigError: a track off the world or too
+    short for the pack, ``track_riders`` without a track or out of range)."""
     root = Path(path)
     if not root.is_dir():
         raise ConfigError(f"{root}: no such tiled world (build one: piste build SCENE with terrain.tiles)")
@@ -105,25 +108,31 @@ def open_tiles(path, quiet: bool = True, warm: bool = False, budget_mb: float = 
     order = sorted(entries, key=lambda t: (float(np.abs(np.array(t) - centre).sum()), t))
     if any(_has_objects(store, grid, t) for t in order[:OBJECT_PROBE_TILES]):
         bundle = stream_tile_objects(bundle)
+    if track_riders is not None and track is None:
+        raise ConfigError("a pack's rider count (--riders with --track) needs a track")
     if track is not None:
-        bundle = _track_riders(bundle, store, grid, track)
+        bundle = _track_riders(bundle, store, grid, track, 6 if track_riders is None else track_riders)
     return bundle
 
 
-def _track_riders(bundle: Bundle, store, grid, track) -> Bundle:
-    """``bundle`` whose pack rides the straight track ``(x0, y0, x1, y1)`` (see :func:`open_tiles`)."""
+def _track_riders(bundle: Bundle, store, grid, track, riders: int = 6) -> Bundle:
+    """``bundle`` whose pack of ``riders`` rides the straight track ``(x0, y0, x1, y1)`` (see
+    :func:`open_tiles`)."""
     try:
         t = np.asarray(track, dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):
         t = np.zeros(0)
     if t.shape != (4,) or not np.isfinite(t).all():
         raise ConfigError(f"--track: expected X0 Y0 X1 Y1 (metres, finite), got {track!r}")
+    if isinstance(riders, bool) or not isinstance(riders, (int, np.integer)) or not 1 <= int(riders) <= 64:
+        raise ConfigError(f"--riders with --track: the pack runs 1..64 riders, got {riders!r}")
+    ahead = pack_track_ahead(int(riders))
     length = float(np.hypot(t[2] - t[0], t[3] - t[1]))
-    if length <= PACK_TRACK_AHEAD + 10.0:
-        raise ConfigError(f"--track: {length:.0f} m long; the pack of riders needs more than "
-                          f"{PACK_TRACK_AHEAD + 10.0:.0f} m (its first rider rides {PACK_TRACK_AHEAD:.0f} m ahead)")
-    start = min(0.12, (length - PACK_TRACK_AHEAD - 5.0) / length)
-    return add_track_riders(bundle, store, grid, t[:2], t[2:], start=start)
+    if length <= ahead + 10.0:
+        raise ConfigError(f"--track: {length:.0f} m long; a pack of {int(riders)} riders needs more than "
+                          f"{ahead + 10.0:.0f} m (its first rider rides {ahead:.0f} m ahead)")
+    start = min(0.12, (length - ahead - 5.0) / length)
+    return add_track_riders(bundle, store, grid, t[:2], t[2:], start=start, riders=int(riders))
 
 
 #: tiles (nearest the world's centre first) asked whether the world holds scene objects
