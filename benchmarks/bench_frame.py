@@ -14,8 +14,8 @@ Sections (every configuration interleaved frame by frame in one process; medians
 3. **Completed scene**: six riders chased by the camera, objects, projected shadows, specular: the
    full scene, without shadows / specular, and a per-pass profile (``glFinish`` around each pass:
    what llvmpipe spends in each); then each scene change A/B on its own pass (the objects' per-mode
-   programs with per-instance attributes and levels of detail; the terrain's back-face culling,
-   visibility sets and per-vertex track distance; the shadow mips by compute dispatches; the shadow
+   programs with per-instance attributes and levels of detail; the terrain's back-face culling, flat
+   far edges (2 corners, under 0.5 px), visibility sets and per-vertex track distance; the shadow mips by compute dispatches; the shadow
    receivers cut to their frusta by clip distances), with the pixels changed.
 4. **Scaling**: frame time and CPU side against the number of patches (2,560 / 10k / 40k; the
    camera's far plane at 1 km caps the visible set; ``bench_terrain.py`` takes the CPU side to 160k)
@@ -375,11 +375,19 @@ def scene_section(args, floor_ms: list) -> dict:
     def set_compute_mips(on):
         r.shadows._mips_cs = compute_mips if on else None
 
+    def set_flat(on):
+        if on:
+            r.terrain.lod_kwargs.pop("flat_error", None)
+        else:
+            r.terrain.lod_kwargs["flat_error"] = None
+
     changes = [("objects", set_objects, "objects: per-mode programs, instance attributes, no discard",
                 "objects: one program, 14 texelFetch a vertex, u_mode + discard"),
                ("objects", set_object_lod, "objects: levels of detail, <= 0.5 px of error",
                 "objects: every instance with its full mesh"),
                ("terrain", set_cull, "terrain: back faces culled", "terrain: back faces drawn"),
+               ("terrain", set_flat, "terrain: far coarse edges flat (2 corners) under 0.5 px",
+                "terrain: the coarsest level (4 a side) beyond far"),
                ("terrain", set_visibility, "terrain: the bundle's visibility sets", "terrain: frustum culling alone"),
                ("shadow casters", set_compute_mips, "shadow mips: two levels a compute dispatch",
                 "shadow mips: a framebuffer (and a rasterizer wait) per level"),

@@ -7,13 +7,16 @@ The talk's per-edge LOD with uniform and glue patches, without re-assembling ver
   at ``p B`` holding its uniform grids at every LOD level ``n`` (4, 6, 8: ``B = 116``), in the
   :func:`piste.terrain.get_shape` layout.  Corners and edge vertices are the canonical ones of the
   vertex cache (bit-identical in both patches of an edge), so any mix of levels is crack-free.
-* **Shape templates** (built once): for every combination of side levels (``3^4 = 81``), the
-  triangles of that uniform or glue shape as block-local vertex indices: a glue patch's side ``s``
-  at level ``n`` takes its vertices from the level-``n`` grid, its inner mesh from the level-``m``
-  grid, all inside the patch's own block.
+* **Shape templates** (built once): for every combination of side levels (``4^4 = 256``: the
+  flat level, 2 vertices a side, and the three levels), the triangles of that uniform or glue shape
+  as block-local vertex indices: a glue patch's side ``s`` at level ``n`` takes its vertices from the
+  level-``n`` grid, its inner mesh from the level-``m`` grid, all inside the patch's own block.  The
+  flat level needs no vertices of its own: its corners are the coarsest grid's (the block layout is
+  unchanged by it).
 * **Per frame**: hierarchical frustum culling (:class:`piste.terrain.cull.PatchTree`), the level
-  of each visible side (its edge midpoint's distance; the same arithmetic on the same inputs in
-  both patches), and the index list ``template + p B`` (:func:`piste.terrain._kernels.frame_indices`).
+  of each visible side (its edge midpoint's distance; coarse edges flat when their patches' error
+  seen from the eye is below ``flat_error``, :mod:`piste.terrain.lod`; the same arithmetic on the
+  same inputs in both patches), and the index list ``template + p B`` (:func:`piste.terrain._kernels.frame_indices`).
   No vertex is written on the CPU.
 
 Geomorphing
@@ -27,7 +30,8 @@ every visible slot a factor ``f`` in [0, 1] (:meth:`ResidentTerrain.frame`): 1 d
 level's distance band, falling to 0 at the band's far end, where the edge switches to the coarser
 level; the drawn position is ``target + f (position - target)``.  An edge vertex gets its edge's
 factor in both patches, so shared edges stay bit-identical at every factor; an inner grid at level
-``m`` takes the largest factor of the patch's level-``m`` sides.  ``morph=False`` draws the
+``m`` takes the largest factor of the patch's level-``m`` sides.  The coarsest level does not morph
+towards the flat one: an edge goes flat only where its error is below ``flat_error`` on screen.  ``morph=False`` draws the
 positions themselves (the talk's exact behaviour, pictures identical to the CPU path's).
 
 API
@@ -38,7 +42,7 @@ API
         float32``; given: blocks built before, e.g. stored in a bundle, checked, not rebuilt)
     keep_resident(net, vertices, levels)     such stored blocks kept on the net (resident_terrain returns them)
     ResidentTerrain.frame(eye, planes, ...)  -> ResidentMesh (indices, patch list, morph factors)
-    shape_templates(levels) -> the 81 shapes' block-local index templates (shipped for 4/6/8:
+    shape_templates(levels) -> the 256 shapes' block-local index templates (shipped for 4/6/8:
         shipped_templates / write_templates / TEMPLATES_FILE)
     ResidentMesh.morphed_positions(rows)     CPU twin of the vertex shader's morph (tests, shadows)
     ResidentMesh.to_mesh()                   the same frame as a classic TerrainMesh (debug views, export)
@@ -56,7 +60,7 @@ from piste.errors import ConfigError, ValidationError
 from piste.terrain import _kernels
 from piste.terrain._kernels import frame_indices
 from piste.terrain.cull import patch_tree
-from piste.terrain.lod import DEFAULT_FAR, DEFAULT_NEAR, LEVELS
+from piste.terrain.lod import DEFAULT_FAR, DEFAULT_NEAR, FLAT_ERROR, FLAT_LEVEL, LEVELS, flat_bounds, flat_edges
 from piste.terrain.net import SIDE_CORNERS, PatchNet
 from piste.terrain.bezier import blend_tables, eval_edges, params
 from piste.terrain.tessellate import (MAX_LEVEL, _bilinear_weights, _cache, _glue_sources, _Snapshot, get_shape,
@@ -192,7 +196,7 @@ class ResidentMesh:
     indices : (t, 3) uint32, into the resident vertex blocks
     patch_ids : (p,) int64, the patches drawn (ascending)
     patch_levels : (p, 4) int16, vertices per side
-    patch_kind : (p,) int8, the level of uniform patches, 0 for glue patches
+    patch_kind : (p,) int8, the level of uniform patches (2: flat), 0 for glue patches
     tri_start : (p + 1,) int64, triangles of the k-th drawn patch
     vertex_first : (p,) int64, first vertex of each drawn patch's block; vertex_count : (p,) block size
     factors : (s,) float32, the morph factor of every slot (``n_edges + n_patches`` used, padded to
@@ -274,6 +278,8 @@ class ResidentTerrain:
             self.level_offset[n] = o
             o += n * n
         self.block = o
+        # the flat level's corners: the coarsest grid's (its first 4 vertices)
+        self.level_offset.setdefault(FLAT_LEVEL, self.level_offset[levels[0]])
         # compared every frame (resident_terrain): one compiled pass over the raw bytes (0.14 ms for a
         # 160k-patch net's UVs and rects, where np.array_equal took 0.2-0.7 ms)
         self._snapshot = (_Snapshot(net.uv), _Snapshot(net.lightmap_rect))
@@ -383,9 +389,11 @@ class ResidentTerrain:
         self.tmpl, self.tmpl_start, self.tmpl_count = t["tmpl"], t["tmpl_start"], t["tmpl_count"]
         self.shape_kind, self.shape_verts = t["shape_kind"], t["shape_verts"]
         self.level_array = np.array(self.levels, dtype=np.int16)
-        keys = np.arange(81)
-        #: (81, 4) int16: the vertices per side of each shape key ((l0 * 3 + l1) * 3 + l2) * 3 + l3
-        self.key_levels = self.level_array[np.stack([(keys // 3 ** (3 - s)) % 3 for s in range(4)], axis=1)]
+        keys = np.arange(256)
+        #: (256, 4) int16: the vertices per side of each shape key ((d0 * 4 + d1) * 4 + d2) * 4 + d3,
+        #: digit d = level index + 1 (0: the flat level)
+        shape_levels = np.array((FLAT_LEVEL,) + self.levels, dtype=np.int16)
+        self.key_levels = shape_levels[np.stack([(keys // 4 ** (3 - s)) % 4 for s in range(4)], axis=1)]
 
     def stale(self) -> bool:
         """True when the net's corner UVs or light-map rects changed since the blocks were built."""
@@ -400,7 +408,7 @@ class ResidentTerrain:
     # ------------------------------------------------------------------ per frame
     def frame(self, eye, planes=None, near: float = DEFAULT_NEAR, far: float = DEFAULT_FAR, lod: bool = True,
               morph: bool = True, patches=None, side_levels=None, morph_band: float = MORPH_BAND,
-              use_numba: bool | None = None) -> ResidentMesh:
+              use_numba: bool | None = None, flat_error: float | None = FLAT_ERROR) -> ResidentMesh:
         """Levels, culling and the index list for a camera at ``eye``.
 
         Parameters
@@ -412,8 +420,10 @@ class ResidentTerrain:
         lod : False draws every patch at the fine level
         morph : geomorph between levels (False: the talk's exact positions)
         patches : (p,) explicit patch ids (overrides ``planes``)
-        side_levels : (p, 4) explicit level indices 0..2 per side of ``patches`` (tests);
-            with ``morph``, the factors must then be set by the caller in :attr:`factors`
+        side_levels : (p, 4) explicit level indices 0..2 per side of ``patches``, or -1 for the flat
+            level (tests); with ``morph``, the factors must then be set by the caller in :attr:`factors`
+        flat_error : coarse edges whose patches' error seen from the eye is below this angle (radians)
+            are drawn flat (2 vertices; :func:`piste.terrain.lod.edge_levels`); None or 0: never
         use_numba : None (compiled when numba is installed), False (numpy; the same result)
         """
         net = self.net
@@ -422,6 +432,9 @@ class ResidentTerrain:
             raise ConfigError(f"eye must be finite, got {eye.tolist()}")
         if not (0 <= near <= far):
             raise ConfigError(f"LOD thresholds must satisfy 0 <= near <= far, got near={near}, far={far}")
+        if flat_error and not (np.isfinite(flat_error) and flat_error > 0):
+            raise ConfigError(f"flat_error must be a positive angle in radians or None, got {flat_error}")
+        tol = float(flat_error) if (flat_error and lod) else 0.0
         if patches is not None:
             pids = np.asarray(patches, dtype=np.int64).ravel()
             if len(pids) and (pids.min() < 0 or pids.max() >= len(net)):
@@ -432,14 +445,15 @@ class ResidentTerrain:
             pids = patch_tree(net).cull(planes)
         fac = self.factors
         if side_levels is None and (use_numba or (use_numba is None and _kernels.side_lod_ready())):
+            ferr, flo, fhi = flat_bounds(net) if tol else self._no_flat()
             key = _kernels.side_lod(pids, self.side_edge, self.edge_mid, self.degenerate, eye, near, far, morph_band,
-                                    lod, morph or not lod, fac)
+                                    lod, morph or not lod, fac, ferr, flo, fhi, tol)
             return self._mesh(pids, key, morph, use_numba)
         se = net.side_edge[pids]  # (p, 4)
         if side_levels is not None:
             li = np.asarray(side_levels, dtype=np.int64).reshape(len(pids), 4)
-            if li.size and (li.min() < 0 or li.max() > 2):
-                raise ValidationError("side_levels must be level indices 0..2")
+            if li.size and (li.min() < -1 or li.max() > 2):
+                raise ValidationError("side_levels must be level indices 0..2 or -1 (flat)")
         elif not lod:
             li = np.full((len(pids), 4), 2, dtype=np.int64)
             fac[se] = 1.0
@@ -450,6 +464,10 @@ class ResidentTerrain:
             dist = np.sqrt(d2)
             li = np.where(dist < near, 2, np.where(dist < far, 1, 0))
             li[net.edge_degenerate[se]] = 0
+            if tol:
+                co = np.nonzero(li.ravel() == 0)[0]
+                flat = flat_edges(net, eye, se.ravel()[co], tol)
+                li.ravel()[co[flat]] = -1  # (li is a fresh array: ravel is a view)
             if morph:
                 w = float(morph_band)
                 f_fine = (near - dist) / max(w * near, 1e-12)
@@ -459,8 +477,14 @@ class ResidentTerrain:
                 mx = li.max(axis=1) if len(li) else np.zeros(0, np.int64)
                 fin = np.where(li == mx[:, None], f, np.float32(0.0)).max(axis=1) if len(li) else np.zeros(0, np.float32)
                 fac[net.n_edges + pids] = fin
-        key = ((li[:, 0] * 3 + li[:, 1]) * 3 + li[:, 2]) * 3 + li[:, 3]
+        d = li + 1  # key digits: 0 flat, 1..3 the levels
+        key = ((d[:, 0] * 4 + d[:, 1]) * 4 + d[:, 2]) * 4 + d[:, 3]
         return self._mesh(pids, key, morph, use_numba)
+
+    def _no_flat(self):
+        """Empty stand-ins for :func:`piste.terrain.lod.flat_bounds` (the compiled LOD with the flat level off)."""
+        z = np.zeros(1, np.float64)
+        return z, np.zeros((1, 3), np.float64), np.zeros((1, 3), np.float64)
 
     def _mesh(self, pids: np.ndarray, key: np.ndarray, morph: bool, use_numba=None) -> ResidentMesh:
         base = pids * self.block
@@ -481,16 +505,20 @@ class ResidentTerrain:
 
 
 def shape_templates(levels=LEVELS) -> dict:
-    """The index templates of every patch shape (``3^4`` side-level combinations) over a resident
-    block of ``levels``: ``tmpl`` (concatenated uint32 block-local indices), ``tmpl_start``,
-    ``tmpl_count`` (int64 per shape), ``shape_kind`` (int8: the level of uniform shapes, 0 for glue),
-    ``shape_verts`` (int64 distinct vertices).  Shape key ``((l0 * 3 + l1) * 3 + l2) * 3 + l3``."""
-    L = tuple(int(x) for x in levels)
-    k = len(L)
+    """The index templates of every patch shape (``4^4`` side-level combinations: the flat level,
+    :data:`piste.terrain.lod.FLAT_LEVEL`, then ``levels``) over a resident block of ``levels``: ``tmpl``
+    (concatenated uint32 block-local indices), ``tmpl_start``, ``tmpl_count`` (int64 per shape),
+    ``shape_kind`` (int8: the level of uniform shapes, 0 for glue), ``shape_verts`` (int64 distinct
+    vertices).  Shape key ``((d0 * 4 + d1) * 4 + d2) * 4 + d3``, digit 0 the flat level, ``i + 1`` level
+    ``levels[i]``.  The flat level's corners are the coarsest grid's (every grid's corners are the
+    same canonical points)."""
     offset, o = {}, 0
-    for n in L:
+    for n in (int(x) for x in levels):
         offset[n] = o
         o += n * n
+    offset.setdefault(FLAT_LEVEL, offset[int(levels[0])])
+    L = (FLAT_LEVEL,) + tuple(int(x) for x in levels)
+    k = len(L)
     tm, start, count, kind, nverts = [], [], [], [], []
     o = 0
     for key in range(k ** 4):
@@ -527,7 +555,7 @@ def shipped_templates(levels) -> dict | None:
             out = {k: z[k] for k in ("tmpl", "tmpl_start", "tmpl_count", "shape_kind", "shape_verts")}
     except Exception:  # noqa: BLE001 - any unreadable file (OSError, EOFError, ValueError, a pickle refused): compute
         return None
-    n = len(levels) ** 4
+    n = (len(levels) + 1) ** 4
     if any(len(out[k]) != n for k in ("tmpl_start", "tmpl_count", "shape_kind", "shape_verts")) or \
             int(out["tmpl_count"].sum()) != len(out["tmpl"]):
         return None
