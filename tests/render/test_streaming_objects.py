@@ -289,3 +289,53 @@ def test_object_bytes_count_in_the_streaming_budget(world):
         finally:
             cache.close()
     assert got[0] == 0 and got == sorted(got) and got[-1] >= 12 and len(set(got)) >= 3
+
+
+# ------------------------------------------------------------------ objects with the tiles' visibility sets
+@pytest.fixture(scope="module")
+def rough(tmp_path_factory):
+    """18 x 18 patches of 600 m relief in 3 x 3 tiles of 6 x 6 patches, visibility sets in 60 m
+    cells, trees on the gentler slopes and rocks on the steep ones."""
+    from piste.pipeline.tiled_build import SyntheticSource, synthetic_spec
+
+    root = tmp_path_factory.mktemp("roughobj") / "w.tiles"
+    spec = synthetic_spec(root, 18, tile_patches=6, res=2, spacing=20.0, shadows=False, cell=60.0)
+    spec.source = SyntheticSource(spec.source.shape, spec.source.spacing, 0, relief=600.0, wavelength=400.0)
+    spec.objects = (ObjectRule("tree", 30.0, slope=(0.0, 35.0)), ObjectRule("rock", 15.0, slope=(35.0, 80.0)))
+    build_tiles(spec)
+    return spec
+
+
+def test_objects_with_visibility_sets_draw_what_they_draw_without(gl, rough):
+    """``piste render|view`` on a tiled world with objects and visibility sets: the sets cull hidden
+    patches and the frames (objects included) are those drawn without the sets, pixel for pixel."""
+    from piste.pipeline.preview import ScenePreview
+    from piste.pipeline.tiles_source import open_tiles
+    from piste.terrain.net import PatchNet
+    from piste.terrain.query import height_at
+
+    store, g = TileStore(rough.root), rough.grid
+    whole = PatchNet(np.concatenate([store.read_fit(g, *t)["control_points"] for t in g.tiles()]))
+    rng = np.random.default_rng(5)
+    xy = rng.uniform(60.0, 1020.0, (12, 2))
+    z, hit, _, _ = height_at(whole, xy)
+    assert hit.all()
+    b = open_tiles(rough.root)
+    assert hasattr(b.objects(), "groups")
+    p = ScenePreview(b, size=SIZE, ctx=gl)
+    culled = drawn = 0
+    try:
+        for (x, y), h, a in zip(xy, z, rng.uniform(0.0, 2.0 * np.pi, len(xy))):
+            eye = np.array([x, y, h + 2.0])
+            cam = Camera(eye, eye + np.array([np.cos(a), np.sin(a), -0.07]) * 300.0, fov_y=60, near=0.5, far=3000.0)
+            p.terrain.streaming.visibility = True
+            img = p.render(cam)
+            culled += p.terrain.cull_stats["vis_culled"]
+            drawn += p.stats["objects_drawn"]
+            p.terrain.streaming.visibility = False
+            ref = p.render(cam)
+            diff = (np.abs(img.astype(int) - ref.astype(int)).max(2) > 0).sum()
+            assert diff == 0, f"{diff} pixels differ at {eye}"
+    finally:
+        p.release()
+    assert culled > 5 and drawn > 1000
