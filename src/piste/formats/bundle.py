@@ -21,7 +21,11 @@ same content gives the same bytes.  The file is written atomically (temp file + 
 
 :func:`read_bundle` checks the format version and every member (zip CRC, shape, dtype, and the
 manifest's SHA-256) and raises :class:`~piste.errors.FormatError` naming the file and member on a
-wrong version or a corrupt file.
+wrong version or a corrupt file.  A member's bytes are checked once: the uncompressed members by
+their SHA-256 alone when verifying (the zip's CRC-32 only where the hash fails, to tell a corrupt
+member from a wrong checksum), the others by zipfile's CRC and the hash.  A ``.npy`` header that is
+byte for byte the one :func:`write_bundle` writes for the manifest's shape and dtype is matched, not
+parsed (numpy parses any other).
 
 This module only reads and writes arrays and metadata (:class:`BundleData`); it imports nothing
 from the layers above.  Turning them into the scene's objects (terrain net, light map, lights,
@@ -78,9 +82,11 @@ TOPOLOGY_MEMBERS = {"terrain/side_edge": ("<i4", 2, 4), "terrain/side_flip": ("|
 TERRAIN_MEMBERS = frozenset(_NET_MEMBERS) | frozenset(TOPOLOGY_MEMBERS)
 #: the terrain's GPU-resident vertex blocks (format 2; :mod:`piste.pipeline.bundle_objects` makes and reads them)
 RESIDENT_MEMBER = "terrain/resident_blocks"
-#: members written without compression: read at every start, and inflating them cost a fresh process
-#: about as much as computing them (13 MB of blocks: 46 ms to inflate, 2 ms to CRC, 6 ms to hash)
-STORED_MEMBERS = frozenset({RESIDENT_MEMBER})
+#: members written without compression: big, read at every start, and inflating them cost a fresh
+#: process about as much as computing them (13 MB of blocks: 46 ms to inflate, 2 ms to CRC, 6 ms to
+#: hash); the light-map atlas (3.1 MB of float32, deflated only to 45 %: 10 ms to inflate) and the
+#: control points (1 MB, deflated to 32 %: 2.5 ms) likewise, for 2.3 MB more file at the default course
+STORED_MEMBERS = frozenset({RESIDENT_MEMBER, "lightmap/atlas", "terrain/control_points"})
 
 
 def _npy_bytes(arr: np.ndarray) -> bytes:
@@ -175,7 +181,7 @@ def read_manifest(path) -> dict:
 
 def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool, on_terrain=None) -> dict:
     out = {}
-    names = set(zf.namelist())
+    infos = {i.filename: i for i in zf.infolist()}  # the zip's index, read once
     # the terrain's members first: ``on_terrain(out)`` can start on the net (e.g. the renderer's vertex
     # blocks, in the background) while the light map, characters and objects are read
     first = [n for n in members if n in TERRAIN_MEMBERS]
@@ -185,20 +191,32 @@ def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool, o
             on_terrain(out)
         info = members[name]
         member = f"{name}.npy"
-        if member not in names:
+        zi = infos.get(member)
+        if zi is None:
             raise FormatError(path, "member listed in the manifest is missing", field=member)
-        if zf.getinfo(member).file_size > MAX_MEMBER_BYTES:  # a zip bomb: checked before inflating
-            raise FormatError(path, f"member of {zf.getinfo(member).file_size} bytes is larger than the limit of "
+        if zi.file_size > MAX_MEMBER_BYTES:  # a zip bomb: checked before inflating
+            raise FormatError(path, f"member of {zi.file_size} bytes is larger than the limit of "
                                     f"{MAX_MEMBER_BYTES}", field=member)
         try:
-            data = zf.read(member)
-        except (zipfile.BadZipFile, zlib.error, OSError) as exc:
+            with zf.open(zi) as fh:
+                if verify and zi.compress_type == zipfile.ZIP_STORED and hasattr(fh, "_expected_crc"):
+                    # stored bytes about to be hashed: the SHA-256 below covers them, the zip's CRC-32
+                    # of the same bytes is not computed as well (2.4 ms for the default course's 17 MB)
+                    fh._expected_crc = None
+                data = fh.read()
+        except (zipfile.BadZipFile, zlib.error, OSError, EOFError) as exc:
             raise FormatError(path, f"corrupt member ({exc})", field=member) from None
+        if len(data) != zi.file_size:
+            raise FormatError(path, f"corrupt member ({len(data)} bytes, the zip says {zi.file_size})", field=member)
         if verify and hashlib.sha256(data).hexdigest() != info.get("sha256"):
+            if zlib.crc32(data) != zi.CRC:  # (the CRC-32 left out above: the same error as zipfile's)
+                raise FormatError(path, f"corrupt member (Bad CRC-32 for file {member!r})", field=member)
             raise FormatError(path, "checksum mismatch (the file is corrupt)", field=member)
         try:
-            a = _view_array(data) if name in STORED_MEMBERS else np.lib.format.read_array(io.BytesIO(data),
-                                                                                          allow_pickle=False)
+            a = _known_array(data, info, copy=name not in STORED_MEMBERS)
+            if a is None:  # not the header piste writes for that shape and dtype: numpy parses it
+                a = _view_array(data) if name in STORED_MEMBERS else np.lib.format.read_array(io.BytesIO(data),
+                                                                                              allow_pickle=False)
         except Exception as exc:
             raise FormatError(path, f"not a valid .npy array ({exc})", field=member) from None
         if list(a.shape) != list(info.get("shape", [])) or a.dtype.str != info.get("dtype"):
@@ -208,6 +226,33 @@ def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool, o
     if on_terrain is not None and len(first) == len(order):
         on_terrain(out)
     return out
+
+
+def _known_array(data: bytes, info: dict, copy: bool) -> np.ndarray | None:
+    """The array of ``.npy`` bytes whose header is exactly the one :func:`write_bundle` writes for
+    the manifest's shape and dtype (``np.lib.format``'s version 1.0 header of a C-order array),
+    without parsing it (``read_array`` evaluates each header as a Python literal: ~20 us a member);
+    a copy (writable) or, ``copy=False``, a read-only view of ``data``.  None when the header is
+    another (another writer, padding or version; a manifest that does not match): the caller parses it."""
+    shape, dtype = info.get("shape"), info.get("dtype")
+    if not isinstance(shape, list) or not isinstance(dtype, str) or \
+            not all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in shape):
+        return None
+    try:
+        dt = np.dtype(dtype)
+        if dt.hasobject or dt.str != dtype:
+            return None
+        head = io.BytesIO()
+        np.lib.format.write_array_header_1_0(head, {"descr": np.lib.format.dtype_to_descr(dt),
+                                                    "fortran_order": False, "shape": tuple(shape)})
+    except (TypeError, ValueError):
+        return None
+    head = head.getvalue()
+    count = int(np.prod(shape, dtype=np.int64))
+    if not data.startswith(head) or len(data) - len(head) != count * dt.itemsize:
+        return None
+    a = np.frombuffer(data, dtype=dt, count=count, offset=len(head)).reshape(shape)
+    return a.copy() if copy else a
 
 
 def _view_array(data: bytes) -> np.ndarray:

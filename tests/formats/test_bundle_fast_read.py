@@ -1,0 +1,157 @@
+"""How a bundle is read at every start: the big members stored uncompressed, headers matched instead
+of parsed, the stored bytes checked once (by the manifest's SHA-256 when verifying, else by the
+zip's CRC-32) -- the same arrays and the same errors as numpy's own reader."""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+
+import numpy as np
+import pytest
+
+from piste.errors import FormatError
+from piste.formats.bundle import RESIDENT_MEMBER, STORED_MEMBERS, read_bundle, write_bundle
+
+
+def _bundle(tmp_path, name="b.piste"):
+    rng = np.random.default_rng(3)
+    arrays = {
+        "terrain/control_points": rng.normal(size=(4, 4, 4, 3)),
+        "terrain/uv": rng.random((4, 4, 2), dtype=np.float32),
+        "lightmap/atlas": rng.random((20, 20, 3), dtype=np.float32),
+        "lightmap/rects": rng.random((4, 4), dtype=np.float32),
+        "a/flags": rng.random(7) > 0.5,
+        "a/scalar": np.array(3.5),
+        "a/empty": np.zeros((0, 3), np.int16),
+        "a/big_endian": np.arange(6, dtype=">u4").reshape(2, 3),
+        RESIDENT_MEMBER: rng.random((10, 11), dtype=np.float32),
+    }
+    return write_bundle(tmp_path / name, {"name": "x"}, arrays), arrays
+
+
+def _rewrite(src, dst, edit):
+    """Copy bundle ``src`` to ``dst`` with ``edit(name, data, manifest) -> data`` applied to each member."""
+    with zipfile.ZipFile(src) as zf:
+        man = json.loads(zf.read("manifest.json"))
+        items = [(i, zf.read(i.filename)) for i in zf.infolist()]
+    out = [(i, edit(i.filename, d, man)) for i, d in items if i.filename != "manifest.json"]
+    with zipfile.ZipFile(dst, "w") as zf:
+        zf.writestr("manifest.json", json.dumps(man))
+        for info, data in out:
+            zf.writestr(info, data)
+    return dst
+
+
+def test_big_members_stored_the_rest_deflated(tmp_path):
+    path, arrays = _bundle(tmp_path)
+    assert {"lightmap/atlas", "terrain/control_points", RESIDENT_MEMBER} <= STORED_MEMBERS
+    with zipfile.ZipFile(path) as zf:
+        kinds = {i.filename[:-4]: i.compress_type for i in zf.infolist() if i.filename.endswith(".npy")}
+    assert {n for n, c in kinds.items() if c == zipfile.ZIP_STORED} == STORED_MEMBERS & set(arrays)
+    assert all(c == zipfile.ZIP_DEFLATED for n, c in kinds.items() if n not in STORED_MEMBERS)
+
+
+@pytest.mark.parametrize("verify", [True, False])
+def test_arrays_as_numpy_reads_them(tmp_path, verify):
+    """Every member equals ``np.lib.format.read_array`` of its bytes (dtype, shape, values); the
+    stored ones are read-only views, the others writable copies of their own."""
+    path, arrays = _bundle(tmp_path)
+    got = read_bundle(path, verify=verify).arrays
+    with zipfile.ZipFile(path) as zf:
+        for name in arrays:
+            ref = np.lib.format.read_array(io.BytesIO(zf.read(name + ".npy")))
+            a = got[name]
+            assert a.dtype == ref.dtype and a.shape == ref.shape and np.array_equal(a, ref), name
+            assert a.flags.writeable == (name not in STORED_MEMBERS), name
+            if name not in STORED_MEMBERS:
+                assert a.flags.owndata or a.base is not None and a.base.flags.owndata
+
+
+@pytest.mark.parametrize("version", [(1, 0), (2, 0), (3, 0)])
+def test_other_headers_parsed(tmp_path, version):
+    """A member whose .npy header is not byte for byte the one piste writes (another version, Fortran
+    order) is parsed as numpy parses it: the same array (a stored member's too, as a view)."""
+    path, arrays = _bundle(tmp_path)
+    import hashlib
+
+    def edit(name, data, man):
+        if name not in ("a/big_endian.npy", "lightmap/atlas.npy"):
+            return data
+        a = arrays[name[:-4]]
+        buf = io.BytesIO()
+        fortran = version == (1, 0) and name == "a/big_endian.npy"  # (stored members must be C order)
+        np.lib.format.write_array(buf, np.asfortranarray(a) if fortran else a, version=version)
+        man["members"][name[:-4]]["sha256"] = hashlib.sha256(buf.getvalue()).hexdigest()
+        return buf.getvalue()
+
+    other = _rewrite(path, tmp_path / "other.piste", edit)
+    got = read_bundle(other).arrays
+    for name in ("a/big_endian", "lightmap/atlas"):
+        assert np.array_equal(got[name], arrays[name]) and got[name].dtype == arrays[name].dtype
+
+
+def test_a_manifest_that_lies_about_a_member(tmp_path):
+    """A shape or dtype in the manifest that is not the member's: the header does not match, numpy
+    parses it, and the check names the member."""
+    path, _ = _bundle(tmp_path)
+    for field, value in (("shape", [5, 2]), ("dtype", "<i4")):
+        def edit(name, data, man, field=field, value=value):
+            man["members"]["a/big_endian"][field] = value
+            return data
+
+        bad = _rewrite(path, tmp_path / f"lie_{field}.piste", edit)
+        with pytest.raises(FormatError, match="expected shape") as e:
+            read_bundle(bad, verify=False)
+        assert e.value.field == "a/big_endian.npy"
+
+
+@pytest.mark.parametrize("member", ["lightmap/atlas", RESIDENT_MEMBER, "lightmap/rects"])
+def test_a_flipped_byte_is_a_corrupt_member_whether_verifying_or_not(tmp_path, member):
+    """A byte flipped in a member's data: "corrupt member" (the CRC-32: computed by zipfile, or for a
+    stored member whose SHA-256 failed, by the reader), verified or not; a right CRC with a wrong
+    SHA-256: "checksum mismatch"."""
+    path, _ = _bundle(tmp_path)
+    with zipfile.ZipFile(path) as zf:
+        info = zf.getinfo(member + ".npy")
+        offset = info.header_offset + 30 + len(info.filename.encode()) + len(info.extra) + info.compress_size - 3
+    raw = bytearray(path.read_bytes())
+    raw[offset] ^= 0x10
+    flipped = tmp_path / "flipped.piste"
+    flipped.write_bytes(bytes(raw))
+    for verify in (True, False):
+        with pytest.raises(FormatError, match="corrupt member") as e:
+            read_bundle(flipped, verify=verify)
+        assert e.value.field == member + ".npy"
+
+    def edit(name, data, man):
+        man["members"][member]["sha256"] = "f" * 64
+        return data
+
+    wrong = _rewrite(path, tmp_path / "wrong.piste", edit)
+    with pytest.raises(FormatError, match="checksum mismatch") as e:
+        read_bundle(wrong)
+    assert e.value.field == member + ".npy"
+    read_bundle(wrong, verify=False)  # not verified: read
+
+
+def test_a_truncated_member_names_it(tmp_path):
+    """A member shorter than the zip says (its sizes edited in the index): a FormatError naming it."""
+    path, _ = _bundle(tmp_path)
+    raw = bytearray(path.read_bytes())
+    with zipfile.ZipFile(path) as zf:
+        info = zf.getinfo("lightmap/atlas.npy")
+    # the central directory entry of the member: its compressed and uncompressed sizes one byte more
+    name = info.filename.encode()
+    at = raw.index(name, raw.index(b"PK\x01\x02")) - 46
+    assert raw[at:at + 4] == b"PK\x01\x02"
+    for off in (20, 24):
+        size = int.from_bytes(raw[at + off:at + off + 4], "little")
+        raw[at + off:at + off + 4] = (size + 1).to_bytes(4, "little")
+    bad = tmp_path / "short.piste"
+    bad.write_bytes(bytes(raw))
+    for verify in (True, False):
+        with pytest.raises(FormatError) as e:
+            read_bundle(bad, verify=verify)
+        assert e.value.field == "lightmap/atlas.npy"
