@@ -158,3 +158,25 @@ def test_a_group_change_rebuilds_only_instance_data(gl, target, monkeypatch):
         assert len(op.rows) == 20 and np.array_equal(op.rows[:, 0:4, :], np.swapaxes(mats[20:], 1, 2).astype(np.float32))
     finally:
         op.release()
+
+
+def test_change_adds_and_removes_many_groups_at_once():
+    """``change`` is the same set as adds and removes one by one, concatenated once."""
+    a, b = _empty(), _empty()
+    groups = {k: _instances(6 + k, seed=k) for k in range(5)}
+    for k in (0, 1, 2):
+        a.add(k, *groups[k])
+        b.add(k, *groups[k])
+    v = b.version
+    assert b.change({3: groups[3], 4: groups[4], 0: groups[0]}, remove=[1, 7]) == 4  # 7: not there
+    assert b.version == v + 1
+    a.remove(1)
+    a.remove(0)
+    a.add(3, *groups[3])
+    a.add(4, *groups[4])
+    a.add(0, *groups[0])
+    assert list(a.groups) == list(b.groups) == [2, 3, 4, 0] and b.colors[0] is None
+    for name in ("kind", "matrix", "normal_matrix", "center", "radius"):
+        assert np.array_equal(getattr(a, name), getattr(b, name))
+    assert np.array_equal(a.lights.directions, b.lights.directions) and a.counts == b.counts
+    assert b.change({}, remove=[9]) == 0 and b.version == v + 1  # nothing changed: no new version

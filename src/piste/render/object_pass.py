@@ -37,8 +37,9 @@ ObjectGroups(meshes, kinds, texture=None, blend=(), world_lights=None)   an Obje
 Instance groups (a tiled world's objects, paged in and out with their tiles): an
 :class:`ObjectGroups` is an :class:`~piste.world.objects.ObjectSet` whose instances are the
 concatenation of groups added and removed by key (``.add(key, kind, matrix, colors=None)``,
-``.remove(key)``), changed in place (whoever holds the set, e.g. a scene culling it, sees the same
-instances as the pass) with a ``version`` that counts the changes.  A pass drawing one follows it
+``.remove(key)``, many at once: ``.change(add={key: (kind, matrix)}, remove=keys)``), changed in
+place (whoever holds the set, e.g. a scene culling it, sees the same instances as the pass) with a
+``version`` that counts the changes.  A pass drawing one follows it
 before each draw: only a new group's instance rows are computed (meshes, LOD chains, programs and
 the atlas stay; instance buffers grow by doubling); baked vertex colours are kept per group (given,
 or baked for that group on first use).  ``ObjectPass.add_group`` / ``remove_group`` turn a pass's
@@ -231,6 +232,24 @@ class ObjectGroups(ObjectSet):
         self.colors.pop(key, None)
         self._concat()
         return True
+
+    def change(self, add=None, remove=()) -> int:
+        """Drop the groups ``remove`` (keys; absent ones ignored), then add (or replace) ``add``
+        ``{key: (kind, matrix)}`` (:meth:`add`, colours baked when drawn), the set's arrays
+        concatenated once (many tiles paging in at once); the number of groups changed."""
+        gone = [k for k in remove if k in self.groups]
+        parts = {key: self.part(kind, matrix) for key, (kind, matrix) in (add or {}).items()}
+        if not gone and not parts:
+            return 0
+        for k in gone:
+            del self.groups[k]
+            self.colors.pop(k, None)
+        for key, part in parts.items():
+            self.groups.pop(key, None)
+            self.groups[key] = part
+            self.colors[key] = None
+        self._concat()
+        return len(gone) + len(parts)
 
     def slices(self) -> dict:
         """``{key: slice}`` each group's instances in the set."""

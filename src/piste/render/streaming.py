@@ -1331,11 +1331,8 @@ class StreamingTerrain:
             return {"added": 0, "removed": 0, "tiles": 0}
         res = {t: o for t, o in self.streaming.cache.resident_objects().items() if len(o[0])}
         gone = [k for k in self.objects.groups if k not in res]
-        for k in gone:
-            self.objects.remove(k)
         new = [t for t in sorted(res) if t not in self.objects.groups]
-        for t in new:
-            self.objects.add(t, *res[t])
+        self.objects.change({t: res[t] for t in new}, gone)  # (the set's arrays concatenated once)
         self.cull_stats.update(object_tiles=len(self.objects.groups), objects_resident=len(self.objects))
         return {"added": len(new), "removed": len(gone), "tiles": len(self.objects.groups)}
 
