@@ -155,3 +155,26 @@ def test_a_truncated_member_names_it(tmp_path):
         with pytest.raises(FormatError) as e:
             read_bundle(bad, verify=verify)
         assert e.value.field == "lightmap/atlas.npy"
+
+
+def test_stored_members_are_views_of_the_mapped_file(tmp_path):
+    """The uncompressed members are read-only views of the bundle's mapped bytes (no copy), and keep
+    their values when a rebuild replaces the file (written to a temporary file and renamed)."""
+    import mmap
+    import os
+
+    path, arrays = _bundle(tmp_path)
+    got = read_bundle(path).arrays
+    for name in STORED_MEMBERS & set(arrays):
+        a = got[name]
+        assert not a.flags.writeable and np.array_equal(a, arrays[name])
+        base = a
+        while getattr(base, "base", None) is not None and not isinstance(base, (memoryview, mmap.mmap)):
+            base = base.base
+        if os.name == "posix":
+            assert isinstance(base, memoryview) and isinstance(base.obj, mmap.mmap), name
+    other = {k: (v + 1 if v.dtype.kind == "f" else v) for k, v in arrays.items()}
+    write_bundle(path, {"name": "x"}, other)  # atomic: a new file renamed over the old one
+    for name in STORED_MEMBERS & set(arrays):
+        assert np.array_equal(got[name], arrays[name])
+    assert np.array_equal(read_bundle(path).arrays["lightmap/atlas"], arrays["lightmap/atlas"] + 1)
