@@ -339,3 +339,33 @@ def test_objects_with_visibility_sets_draw_what_they_draw_without(gl, rough):
     finally:
         p.release()
     assert culled > 5 and drawn > 1000
+
+
+@pytest.mark.parametrize("members", [
+    {"objects_kind": np.zeros((3, 2), np.int64)},                      # not (k,)
+    {"objects_kind": np.array([0, 9]), "objects_matrix": np.tile(np.eye(4), (2, 1, 1))},  # a kind out of range
+    {"objects_matrix": np.tile(np.eye(4), (2, 1, 1))},                  # a matrix without kinds
+])
+def test_object_members_that_do_not_read_back_are_warned_once_and_cost_nothing(world, tmp_path, caplog, members):
+    import shutil
+
+    from piste.render.streaming import TileCache
+
+    root = tmp_path / "w.tiles"
+    shutil.copytree(world.root, root)
+    store = TileStore(root)
+    a = {k: v for k, v in store.read("lit", 0, 1).items() if not k.startswith("objects_")}
+    store.path("lit", 0, 1).write_bytes(npz_bytes({**a, **members}))
+    cache = TileCache(root, object_distance=1e4)
+    cache.load_objects = True
+    try:
+        with caplog.at_level("WARNING"):
+            for _ in range(3):
+                cache.update(np.array([200.0, 60.0, 50.0]), 97.0)
+                cache.wait_idle()
+        assert (0, 1) not in cache.objects and (0, 1) not in cache.bad and len(cache.objects) == 15
+        assert caplog.text.count("tile (0, 1)") == 1 and "objects_" in caplog.text  # asked once, named
+        assert cache.resident_bytes == cache._far_bytes + sum(m.nbytes for m in cache.near.values()) \
+            + sum(cache.object_bytes[t] for t in cache.objects)
+    finally:
+        cache.close()

@@ -82,7 +82,8 @@ from piste.render.video import VideoWriter
 from piste.terrain.bezier import evaluate, grid_params
 from piste.terrain.cull import patch_tree
 from piste.terrain.tessellate import tessellate
-from piste.terrain.tiles import TileError, TileGrid, TileStore, read_tile_objects, tile_entries, triangulated_heights
+from piste.terrain.tiles import (MAX_TILE_OBJECTS, TileError, TileGrid, TileStore, read_tile_objects, tile_entries,
+                                 triangulated_heights)
 from piste.world.camera import Camera
 from piste.world.objects import OBJECT_KINDS
 
@@ -597,12 +598,16 @@ class TileCache:
         """Remember how many objects tile ``t``'s ``lit`` members hold, their tallest height and
         bytes (the members are checked when they page in: :func:`read_tile_objects`)."""
         kind, mat = lit.get("objects_kind"), lit.get("objects_matrix")
-        if kind is None or np.ndim(kind) != 1 or len(kind) == 0:
+        if kind is None and mat is None:
             return
-        k = np.asarray(kind)
+        k = np.asarray(kind if kind is not None else np.zeros(0, np.int64))
+        if kind is not None and mat is not None and k.ndim == 1 and len(k) == 0:
+            return  # none placed on this tile
         n = len(OBJECT_KINDS)
-        ok = k.dtype.kind in "iu" and ((k >= 0) & (k < n)).all()
-        counts = np.bincount(k.astype(np.int64), minlength=n)[:n] if ok else np.array([len(k)] + [0] * (n - 1))
+        ok = (mat is not None and k.ndim == 1 and k.dtype.kind in "iu" and len(k) <= MAX_TILE_OBJECTS
+              and bool(((k >= 0) & (k < n)).all()))
+        # (members that will not read back: one instance's worth, so they are asked for, warned and dropped)
+        counts = np.bincount(k.astype(np.int64), minlength=n)[:n] if ok else np.array([1] + [0] * (n - 1))
         heights, _ = _kind_meshes()
         h = 0.0
         if ok and mat is not None and np.shape(mat) == (len(k), 4, 4) and np.asarray(mat).dtype.kind in "fiu":
