@@ -11,7 +11,9 @@ riders, objects and shadows with the same passes as the course.
 Objects: a world built with object rules gets, as its objects, an empty
 :class:`piste.render.object_pass.ObjectGroups` (:func:`piste.pipeline.tile_objects.stream_tile_objects`)
 that the streamed terrain fills with the objects of the tiles it pages in and empties of those it
-evicts, so a camera flying across the world sees the objects of the tiles around it.
+evicts, so a camera flying across the world sees the objects of the tiles around it: out to where
+they would be a pixel or two tall (:meth:`piste.render.streaming.TileCache.object_distances`),
+beyond the tiles drawn with near or middle meshes, their bytes within the streaming budget.
 
 Cameras: ``flight`` (the first camera of :func:`piste.render.streaming.fly_path`, ``piste render
 WORLD.tiles``' flight start) and ``centre`` (looking at the local tile from the south, above).
