@@ -193,26 +193,37 @@ def _mapped(zf: zipfile.ZipFile):
         return None
 
 
-def _stored_view(mm, zi: zipfile.ZipInfo):
-    """The bytes of uncompressed member ``zi`` as a view of the mapped file ``mm`` (no copy: reading
-    the 13 MB of vertex blocks into a fresh process's new memory cost ~10 ms more than mapping them),
-    or None where its local header is not a plain one (zipfile then reads it and reports what is wrong)."""
+def _mapped_member(mm, zi: zipfile.ZipInfo):
+    """Member ``zi`` of the mapped file ``mm``: an uncompressed one as a view of the mapping (no copy:
+    reading the 13 MB of vertex blocks into a fresh process's new memory cost ~10 ms more than
+    mapping them; its CRC-32 not computed here), a deflated one inflated (at most its declared size)
+    and its CRC-32 checked -- zipfile's per-member open/seek/read cost ~60 us a member.  None where
+    its local header is not a plain one or another compression (zipfile then reads it and reports what
+    is wrong); zlib.error / BadZipFile when the data is corrupt."""
     at = zi.header_offset
     head = mm[at:at + 30]
     if len(head) != 30 or head[:4] != b"PK\x03\x04" or zi.flag_bits & 1:
         return None
     n, extra = struct.unpack("<HH", head[26:30])
     start = at + 30 + n + extra
-    if mm[at + 30:at + 30 + n] != zi.filename.encode() or start + zi.file_size > len(mm) or \
-            zi.compress_size != zi.file_size:
+    if mm[at + 30:at + 30 + n] != zi.filename.encode() or start + zi.compress_size > len(mm):
         return None
-    return memoryview(mm)[start:start + zi.file_size]
+    raw = memoryview(mm)[start:start + zi.compress_size]
+    if zi.compress_type == zipfile.ZIP_STORED:
+        return raw if zi.compress_size == zi.file_size else None
+    if zi.compress_type != zipfile.ZIP_DEFLATED:
+        return None
+    inflate = zlib.decompressobj(-15)
+    data = inflate.decompress(raw, zi.file_size + 1)  # bounded: a member inflating past its size is corrupt
+    if len(data) != zi.file_size or not inflate.eof or zlib.crc32(data) != zi.CRC:
+        raise zipfile.BadZipFile(f"Bad CRC-32 or size for file {zi.filename!r}")
+    return data
 
 
 def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool, on_terrain=None) -> dict:
     out = {}
     infos = {i.filename: i for i in zf.infolist()}  # the zip's index, read once
-    mm = _mapped(zf) if any(i.compress_type == zipfile.ZIP_STORED for i in infos.values()) else None
+    mm = _mapped(zf)
     # the terrain's members first: ``on_terrain(out)`` can start on the net (e.g. the renderer's vertex
     # blocks, in the background) while the light map, characters and objects are read
     first = [n for n in members if n in TERRAIN_MEMBERS]
@@ -229,15 +240,15 @@ def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool, o
             raise FormatError(path, f"member of {zi.file_size} bytes is larger than the limit of "
                                     f"{MAX_MEMBER_BYTES}", field=member)
         # uncompressed members: a view of the mapped file, checked once (by the SHA-256 when verifying,
-        # else by the zip's CRC-32); the others read by zipfile (CRC-32 checked as they inflate)
-        data = _stored_view(mm, zi) if mm is not None and zi.compress_type == zipfile.ZIP_STORED else None
-        crc_checked = data is None
-        if data is None:
-            try:
+        # else by the zip's CRC-32); deflated ones: CRC-32 checked as they are inflated
+        try:
+            data = _mapped_member(mm, zi) if mm is not None else None
+            crc_checked = data is None or zi.compress_type != zipfile.ZIP_STORED
+            if data is None:
                 with zf.open(zi) as fh:
                     data = fh.read()
-            except (zipfile.BadZipFile, zlib.error, OSError, EOFError) as exc:
-                raise FormatError(path, f"corrupt member ({exc})", field=member) from None
+        except (zipfile.BadZipFile, zlib.error, OSError, EOFError) as exc:
+            raise FormatError(path, f"corrupt member ({exc})", field=member) from None
         if len(data) != zi.file_size:
             raise FormatError(path, f"corrupt member ({len(data)} bytes, the zip says {zi.file_size})", field=member)
         if verify and hashlib.sha256(data).hexdigest() != info.get("sha256"):
