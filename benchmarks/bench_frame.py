@@ -14,8 +14,9 @@ Sections (every configuration interleaved frame by frame in one process; medians
 3. **Completed scene**: six riders chased by the camera, objects, projected shadows, specular: the
    full scene, without shadows / specular, and a per-pass profile (``glFinish`` around each pass:
    what llvmpipe spends in each); then each scene change A/B on its own pass (the objects' per-mode
-   programs with per-instance attributes and levels of detail; the terrain's back-face culling, flat
-   far edges (2 corners, under 0.5 px), visibility sets and per-vertex track distance; the shadow mips by compute dispatches; the shadow
+   programs with per-instance attributes and levels of detail; the terrain's back-face culling, whole
+   back-facing patches left out by normal cones (off by default: no gain measured), flat far edges
+   (2 corners, under 0.5 px), visibility sets and per-vertex track distance; the shadow mips by compute dispatches; the shadow
    receivers cut to their frusta by clip distances), with the pixels changed.
 4. **Scaling**: frame time and CPU side against the number of patches (2,560 / 10k / 40k; the
    camera's far plane at 1 km caps the visible set; ``bench_terrain.py`` takes the CPU side to 160k)
@@ -375,6 +376,9 @@ def scene_section(args, floor_ms: list) -> dict:
     def set_compute_mips(on):
         r.shadows._mips_cs = compute_mips if on else None
 
+    def set_cone_cull(on):  # (on: the default, every patch sent)
+        r.terrain.terrain.cull_back_patches = not on
+
     def set_flat(on):
         if on:
             r.terrain.lod_kwargs.pop("flat_error", None)
@@ -386,6 +390,8 @@ def scene_section(args, floor_ms: list) -> dict:
                ("objects", set_object_lod, "objects: levels of detail, <= 0.5 px of error",
                 "objects: every instance with its full mesh"),
                ("terrain", set_cull, "terrain: back faces culled", "terrain: back faces drawn"),
+               ("terrain", set_cone_cull, "terrain: every visible patch sent (the default)",
+                "terrain: wholly back-facing patches left out (normal cones, off)"),
                ("terrain", set_flat, "terrain: far coarse edges flat (2 corners) under 0.5 px",
                 "terrain: the coarsest level (4 a side) beyond far"),
                ("terrain", set_visibility, "terrain: the bundle's visibility sets", "terrain: frustum culling alone"),

@@ -451,12 +451,15 @@ def _scaling_row(n: int, rounds: int) -> tuple:
         d = np.linalg.norm(mids - cam.eye, axis=1)
         return vis, np.where(d < 60, 8, np.where(d < 180, 6, 4))
 
-    t = interleaved({"after": lambda: after.prepare(cam), "before": lambda: before.prepare(cam), "flat": flat},
-                    rounds, warmup=2)
+    # the same renderer without the flat level below the coarsest (the resident path as it was before it)
+    three = renderer_cpu_side(net)
+    three.lod_kwargs = {"flat_error": None}
+    t = interleaved({"after": lambda: after.prepare(cam), "before": lambda: before.prepare(cam), "flat": flat,
+                     "three": lambda: three.prepare(cam)}, rounds, warmup=2)
     print(f"{len(net):8d} {len(m_after.patch_ids):8d} {path:>9s} {first:10.2f}s | {ms(t['after']):>26s} | "
-          f"{ms(t['before']):>26s} | {ms(t['flat']):>26s}")
+          f"{ms(t['before']):>26s} | {ms(t['flat']):>26s} | {ms(t['three']):>26s}")
     return (len(net), len(m_after.patch_ids), path, first, stat(t["after"])[0], stat(t["before"])[0],
-            stat(t["flat"])[0])
+            stat(t["flat"])[0], stat(t["three"])[0])
 
 
 def scaling_section(sizes, rounds: int) -> None:
@@ -467,9 +470,10 @@ def scaling_section(sizes, rounds: int) -> None:
           f"60 deg, far plane {FAR:.0f} m; resident budget {RESIDENT_BUDGET / 2**20:.0f} MiB ==")
     print("  after: the renderer as it is (resident blocks up to the budget); before: the same renderer with "
           "resident=False, the CPU path it took above ~46k patches before (vertex cache under 512 MB, else "
-          "evaluated); flat: flat box cull + LOD of every edge with the boxes and midpoints cached (no index list)")
+          "evaluated); flat: flat box cull + LOD of every edge with the boxes and midpoints cached (no index list); "
+          "3 levels: the renderer as it is without the flat level below the coarsest (lod flat_error=None)")
     print(f"{'patches':>8s} {'visible':>8s} {'path':>9s} {'first frame':>11s} | {'after':>26s} | {'before':>26s} | "
-          f"{'flat cull + LOD (cached)':>26s}")
+          f"{'flat cull + LOD (cached)':>26s} | {'3 levels (no flat edges)':>26s}")
     rows = [_scaling_row(n, rounds) for n in sizes]
     ns = [r[0] for r in rows]
     k_after = fit_exponent(ns, [r[4] for r in rows])
@@ -478,7 +482,8 @@ def scaling_section(sizes, rounds: int) -> None:
           f"{k_after:.2f} (before: {k_before:.2f}); the far plane caps the visible set")
     big = rows[-1]
     print(f"largest net ({big[0]:,} patches, {big[2]} path): the renderer's CPU side {big[4] * 1e3:.3f} ms "
-          f"(target <= 2 ms at 160k: {'met' if big[4] <= 2e-3 else 'missed'}), before {big[5] * 1e3:.2f} ms; "
+          f"(target <= 2 ms at 160k: {'met' if big[4] <= 2e-3 else 'missed'}), before {big[5] * 1e3:.2f} ms, "
+          f"without the flat level {big[7] * 1e3:.3f} ms; "
           f"the first frame {big[3]:.1f} s (builds the resident blocks once; the renderer starts that in the background)")
     for r in rows:
         record("terrain", f"renderer CPU side, {r[0]:,} patches ({r[2]}, far {FAR:.0f} m)",

@@ -82,3 +82,28 @@ def test_faces_up_equals_the_tessellated_corner_quads(grid_net):
     got = [faces_up(n) for n in nets]
     assert got == [by_tessellation(n) for n in nets]
     assert got[0] and not got[1] and not got[2] and got[4]
+
+
+def test_back_facing_patches_left_out_keep_the_picture(gl, grid_net):
+    """Whole back-facing patches left out of the index list on the CPU (normal cones): the same
+    picture as the GPU culling them triangle by triangle, fewer indices sent; the debug views, which
+    draw back faces, get every patch again."""
+    net = grid_net(6, 6, size=10.0, relief=12.0, wave=2.0)
+    r = TerrainRenderer(net, size=(160, 112), ctx=gl, lod_near=14.0, lod_far=30.0)
+    r.resident_wait = True
+    try:
+        for eye, target in (([-10.0, -10.0, 20.0], [40.0, 40.0, 0.0]), ([30.0, 30.0, 40.0], [30.0, 31.0, 0.0]),
+                            ([30.0, -20.0, 3.0], [30.0, 60.0, 5.0])):
+            cam = Camera(eye, target, fov_y=60)
+            img, sent = {}, {}
+            for on in (False, True):
+                r.terrain.cull_back_patches = on
+                img[on] = r.render(cam, sky=False, fog=0).image
+                sent[on] = r.terrain.n_indices
+            assert np.array_equal(img[True], img[False])
+            assert sent[True] <= sent[False] == r.mesh.indices.size
+        assert sent[True] < sent[False]  # (the last view looks across the hill: its far side is left out)
+        base = r.render(cam, sky=False, fog=0, debug="base")
+        assert r.terrain.n_indices == r.mesh.indices.size and base.image is not None
+    finally:
+        r.release()

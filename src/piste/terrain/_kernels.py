@@ -13,6 +13,7 @@ tess_frame         the CPU tessellation path in one call: patches sorted by shap
                    cache checked, vertices copied from it and indices offset per patch,
                    straight into the outputs
 side_lod           per-side level, shape key and morph factors of the visible patches
+front_indices      the index list without the patches wholly facing away (normal cones)
 cull_tree          depth-first frustum walk of a :class:`piste.terrain.cull.PatchTree`
 """
 
@@ -23,7 +24,7 @@ import numpy as np
 from piste._jit import HAVE_NUMBA, lazy_njit
 
 __all__ = ["HAVE_NUMBA", "frame_indices", "tess_frame", "same_bytes", "ragged_arange", "side_lod",
-           "cull_tree"]
+           "cull_tree", "front_indices"]
 
 
 _jit = lazy_njit  # compiled on first call (numba is imported then, not when piste is)
@@ -521,6 +522,66 @@ def side_lod(pids, side_edge, edge_mid, degenerate, eye, near, far, band, lod, m
                  float(band), bool(lod), bool(morph), edge_mid.shape[0], factors, flat_err, flat_lo, flat_hi,
                  float(flat_tol), key)
     return key
+
+
+# ------------------------------------------------------------------------------ back-facing patches
+def _front_py(pids, key, family, base, tmpl, tstart, tcount, axis, cos, sin, done, centre, radius, eye, out):
+    """Indices of the patches not wholly facing away from ``eye`` into ``out``; their count, or -1
+    when a patch's cone is not computed yet (nothing written then)."""
+    n = pids.shape[0]
+    for i in range(n):
+        if not done[family[key[i]], pids[i]]:
+            return -1
+    ex, ey, ez = eye[0], eye[1], eye[2]
+    o = 0
+    for i in range(n):
+        p = pids[i]
+        j = family[key[i]]
+        c = cos[j, p]
+        if c > 0.0:
+            vx = centre[p, 0] - ex
+            vy = centre[p, 1] - ey
+            vz = centre[p, 2] - ez
+            va = vx * axis[j, p, 0] + vy * axis[j, p, 1] + vz * axis[j, p, 2]
+            vv = vx * vx + vy * vy + vz * vz
+            q = vv - va * va
+            vp = np.sqrt(q) if q > 0.0 else 0.0
+            if va * c - vp * sin[j, p] > radius[p] * (1.0 + 1e-6) + 1e-6 * np.sqrt(vv):
+                continue
+        k = key[i]
+        st = tstart[k]
+        b = np.uint32(base[i])
+        for t in range(tcount[k]):
+            out[o + t] = tmpl[st + t] + b
+        o += tcount[k]
+    return o
+
+
+def _ex_front():
+    i8 = np.zeros(1, np.int64)
+    return (i8, i8.copy(), np.zeros(1, np.int64), i8.copy(), np.zeros(3, np.uint32), i8.copy(), np.full(1, 3, np.int64),
+            np.zeros((4, 1, 3)), np.zeros((4, 1)), np.zeros((4, 1)), np.ones((4, 1), np.bool_), np.zeros((1, 3)),
+            np.zeros(1), np.zeros(3), np.zeros(3, np.uint32))
+
+
+_front_nb = _jit(_front_py, _ex_front)
+
+
+def front_ready() -> bool:
+    return ready(_front_nb)
+
+
+def front_indices(pids, key, family, base, tmpl, tstart, tcount, axis, cos, sin, done, centre, radius, eye,
+                  total: int) -> np.ndarray | None:
+    """Compiled: the frame's index list (as :func:`frame_indices`) without the patches whose family
+    cone (``axis (4, N, 3)``, ``cos``, ``sin (4, N)``, ``done (4, N)`` bool) and box sphere (``centre
+    (N, 3)``, ``radius (N,)``) put every triangle behind the eye (see
+    :meth:`piste.terrain.resident.ResidentTerrain.facing`); ``(t',)`` uint32, or None when a cone is
+    missing.  ``total``: the full list's length.  Needs numba."""
+    out = np.empty(total, dtype=np.uint32)
+    k = _front_nb(pids, key, family, base, tmpl, tstart, tcount, axis, cos, sin, done, centre, radius,
+                  np.asarray(eye, dtype=np.float64), out)
+    return None if k < 0 else out[:k]
 
 
 # ------------------------------------------------------------------------------ tree culling

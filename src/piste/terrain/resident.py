@@ -203,6 +203,8 @@ class ResidentMesh:
         rows of 1024; valid at the drawn ones; the live array, overwritten by the next frame)
     morph : bool, whether the factors apply (False: positions drawn as they are)
     n_vertices : distinct vertices drawn (the shapes' vertex counts summed)
+    eye : (3,) float64, the eye the frame was made for (None: unknown)
+    shape_key : (p,) int64, each drawn patch's shape (row of the templates; None: unknown)
     """
 
     resident: "ResidentTerrain"
@@ -216,10 +218,34 @@ class ResidentMesh:
     factors: np.ndarray
     morph: bool
     n_vertices: int
+    eye: np.ndarray | None = None
+    shape_key: np.ndarray | None = None
 
     @property
     def n_triangles(self) -> int:
         return len(self.indices)
+
+    def front_indices(self) -> np.ndarray:
+        """:attr:`indices` without the patches whose every triangle faces away from :attr:`eye`
+        (:meth:`ResidentTerrain.facing`: what back-face culling would drop whole), ``(t', 3)`` uint32;
+        :attr:`indices` itself when none does or the eye is unknown."""
+        if self.eye is None or self.shape_key is None or not len(self.patch_ids):
+            return self.indices
+        r = self.resident
+        if _kernels.front_ready():
+            st = r._cone_state()
+            args = (self.patch_ids, self.shape_key, st[7], self.vertex_first, r.tmpl, r.tmpl_start, r.tmpl_count,
+                    st[1], st[2], st[3], st[4], st[5], st[6], self.eye, self.indices.size)
+            out = _kernels.front_indices(*args)
+            if out is None:  # cones not computed yet for some patches: compute them, then again
+                r.facing(self.patch_ids, self.shape_key, self.eye)
+                out = _kernels.front_indices(*args)
+            return self.indices if out.size == self.indices.size else out.reshape(-1, 3)
+        keep = r.facing(self.patch_ids, self.shape_key, self.eye)
+        if keep.all():
+            return self.indices
+        flat, _ = frame_indices(self.shape_key[keep], self.vertex_first[keep], r.tmpl, r.tmpl_start, r.tmpl_count)
+        return flat.reshape(-1, 3)
 
     def edge_levels(self) -> np.ndarray:
         """Per-edge levels ``(e,)`` int16 of this frame (edges of undrawn patches: the coarse level)."""
@@ -448,7 +474,7 @@ class ResidentTerrain:
             ferr, flo, fhi = flat_bounds(net) if tol else self._no_flat()
             key = _kernels.side_lod(pids, self.side_edge, self.edge_mid, self.degenerate, eye, near, far, morph_band,
                                     lod, morph or not lod, fac, ferr, flo, fhi, tol)
-            return self._mesh(pids, key, morph, use_numba)
+            return self._mesh(pids, key, morph, use_numba, eye)
         se = net.side_edge[pids]  # (p, 4)
         if side_levels is not None:
             li = np.asarray(side_levels, dtype=np.int64).reshape(len(pids), 4)
@@ -479,14 +505,101 @@ class ResidentTerrain:
                 fac[net.n_edges + pids] = fin
         d = li + 1  # key digits: 0 flat, 1..3 the levels
         key = ((d[:, 0] * 4 + d[:, 1]) * 4 + d[:, 2]) * 4 + d[:, 3]
-        return self._mesh(pids, key, morph, use_numba)
+        return self._mesh(pids, key, morph, use_numba, eye)
 
     def _no_flat(self):
         """Empty stand-ins for :func:`piste.terrain.lod.flat_bounds` (the compiled LOD with the flat level off)."""
         z = np.zeros(1, np.float64)
         return z, np.zeros((1, 3), np.float64), np.zeros((1, 3), np.float64)
 
-    def _mesh(self, pids: np.ndarray, key: np.ndarray, morph: bool, use_numba=None) -> ResidentMesh:
+    # ------------------------------------------------------------------ back-facing patches
+    def _cone_state(self):
+        """Lazily filled per-patch normal cones, one per shape family ``j`` (shapes whose side digits
+        are all ``<= j``: 0 the flat patch, 1 flat or coarsest sides, 2 up to the medium level, 3 all):
+        ``(family triangles [(T_j, 3) block-local], axis (4, N, 3), cos (4, N), sin (4, N),
+        done (4, N) bool, centre (N, 3), radius (N,))``."""
+        c = self.__dict__.get("_cone_state_")
+        if c is None:
+            tris = []
+            digits = np.stack([(np.arange(256) // 4 ** (3 - s)) % 4 for s in range(4)], axis=1).max(axis=1)
+            for j in range(4):
+                t = np.concatenate([self.tmpl[self.tmpl_start[k]:self.tmpl_start[k] + self.tmpl_count[k]]
+                                    for k in np.nonzero(digits <= j)[0]])
+                tris.append(np.unique(t.reshape(-1, 3).astype(np.int64), axis=0))  # orientation kept
+            N = len(self.net)
+            lo, hi = self.net.patch_bounds  # holds the surface, so every vertex and morph target
+            centre = np.ascontiguousarray((lo + hi) * 0.5, dtype=np.float64)
+            radius = np.ascontiguousarray(np.sqrt((((hi - lo) * 0.5) ** 2).sum(-1)), dtype=np.float64)
+            c = (tris, np.zeros((4, N, 3)), np.full((4, N), -1.0), np.zeros((4, N)), np.zeros((4, N), dtype=bool),
+                 centre, radius, np.ascontiguousarray(digits, dtype=np.int64))
+            self.__dict__["_cone_state_"] = c
+        return c
+
+    def _fill_cones(self, j: int, pids: np.ndarray, chunk: int = 512) -> None:
+        """Compute family ``j``'s cones of ``pids``: the normals of its every triangle at each of the
+        8 ends of its vertices' morphs (a morphed triangle's normal is multilinear in its three morph
+        factors, so a convex combination of those 8), their mean direction and the widest angle to it."""
+        tris, axis, cos, sin, done = self._cone_state()[:5]
+        t = tris[j]
+        B = self.block
+        v_all = self.vertices.reshape(len(self.net), B, RESIDENT_FLOATS)
+        for a in range(0, len(pids), chunk):
+            p = pids[a:a + chunk]
+            v = v_all[p].astype(np.float64)
+            ends = (v[..., 0:3], v[..., 3:6])
+            ns = []
+            for sa in (0, 1):
+                x0 = ends[sa][:, t[:, 0]]
+                for sb in (0, 1):
+                    e1 = ends[sb][:, t[:, 1]] - x0
+                    for sc in (0, 1):
+                        ns.append(np.cross(e1, ends[sc][:, t[:, 2]] - x0))
+                    if j <= 1:  # the flat and coarsest levels never morph: one end is all
+                        break
+                if j <= 1:
+                    break
+            n = np.concatenate(ns, axis=1)  # (k, 8 T, 3)
+            ln = np.sqrt((n * n).sum(-1))
+            unit = n / np.where(ln > 0, ln, 1.0)[..., None]
+            sm = unit.sum(axis=1)
+            ls = np.sqrt((sm * sm).sum(-1))
+            ax = sm / np.where(ls > 0, ls, 1.0)[:, None]
+            cmin = np.where(ln > 0, (unit * ax[:, None]).sum(-1), 1.0).min(axis=1)
+            ok = (ls > 0) & (cmin > 0.01)
+            axis[j, p] = ax
+            cos[j, p] = np.where(ok, cmin, -1.0)
+            sin[j, p] = np.sqrt(np.maximum(1.0 - cos[j, p] ** 2, 0.0))
+            done[j, p] = True
+
+    def facing(self, pids: np.ndarray, key: np.ndarray, eye) -> np.ndarray:
+        """``(p,)`` bool: False where patch ``pids[i]`` drawn as shape ``key[i]`` faces wholly away from
+        ``eye`` (every triangle's plane has the eye behind it, at any morph factor), True otherwise.
+
+        Each patch is tested against the cone of its shape's family (:meth:`_cone_state`; computed
+        for a patch the first time it is asked): with ``v`` from the eye to the centre of the patch's
+        box, ``a`` the cone's axis and ``theta`` its half-angle, every normal ``n`` in the cone has
+        ``v . n >= (v . a) cos theta - |v x a| sin theta``; above the box's radius (plus a margin),
+        every point of every triangle lies in front of the eye along its normal: back-facing.
+        Conservative: a patch with one triangle the GPU would draw is kept."""
+        pids = np.asarray(pids, dtype=np.int64)
+        tris, axis, cos, sin, done, centre, radius, digits = self._cone_state()
+        fam = digits[np.asarray(key, dtype=np.int64)]
+        for j in np.unique(fam):
+            p = pids[fam == j]
+            p = p[~done[j, p]]
+            if len(p):
+                self._fill_cones(int(j), p)
+        eye = np.asarray(eye, dtype=np.float64).reshape(3)
+        v = centre[pids] - eye
+        ax = axis[fam, pids]
+        va = (v * ax).sum(-1)
+        vv = (v * v).sum(-1)
+        vp = np.sqrt(np.maximum(vv - va * va, 0.0))
+        c = cos[fam, pids]
+        back = (c > 0) & (va * c - vp * sin[fam, pids] > radius[pids] * (1.0 + 1e-6) + 1e-6 * np.sqrt(vv))
+        return ~back
+
+    def _mesh(self, pids: np.ndarray, key: np.ndarray, morph: bool, use_numba=None, eye=None) -> ResidentMesh:
         base = pids * self.block
         flat, start = frame_indices(key, base, self.tmpl, self.tmpl_start, self.tmpl_count, use_numba=use_numba)
         return ResidentMesh(
@@ -501,6 +614,8 @@ class ResidentTerrain:
             factors=self.factors,
             morph=bool(morph),
             n_vertices=int(self.shape_verts[key].sum()),
+            eye=None if eye is None else np.array(eye, dtype=np.float64),
+            shape_key=key,
         )
 
 

@@ -28,7 +28,9 @@ void main() {
         c = texture(u_light, v_uvl).rgb;
     } else if (u_mode == 3 || u_mode == 5) {
         int k = int(v_kind + 0.5);
-        vec3 lod = k == 4 ? u_lod_colors[1] : k == 6 ? u_lod_colors[2] : k == 8 ? u_lod_colors[3] : u_lod_colors[0];
+        // (flat patches, 2 vertices a side, in the coarsest level's colour)
+        vec3 lod = (k == 4 || k == 2) ? u_lod_colors[1] : k == 6 ? u_lod_colors[2] : k == 8 ? u_lod_colors[3]
+                 : u_lod_colors[0];
         // mode 5: the wireframe over the LOD view, a darker shade of the patch's colour (so that
         // dense far-away lines still show the colour)
         c = u_mode == 5 ? lod * 0.35 : lod * (0.35 + 0.65 * texture(u_light, v_uvl).rgb);
