@@ -146,3 +146,26 @@ def test_bounds_and_patch_bounds_are_the_control_points_extremes():
         net.control_points[5, 2, 1] += [-40.0, 50.0, 60.0]
     assert net.patch_bounds[0][5, 0] == net.control_points[5, 2, 1, 0] == net.bounds[0][0]
     assert net.patch_bounds[1][5, 2] == net.control_points[5, 2, 1, 2] == net.bounds[1][2]
+
+
+@pytest.mark.parametrize("side", [0, 1, 2, 3])
+def test_from_topology_sees_a_moved_point_on_each_side(side):
+    """The stored-topology check reads each side's points (rows and columns of the 4x4 grid, taken as
+    slices): a middle control point of any side of an inner patch moved breaks the shared edge."""
+    from piste.terrain.net import SIDE_INDEX
+
+    net = grid_net(3, 3, seed=1)
+    topo = {k: v.copy() for k, v in net.topology().items()}
+    again = PatchNet.from_topology(net.control_points.copy(), topo, uv=net.uv, lightmap_rect=net.lightmap_rect)
+    assert np.array_equal(again.edge_cp, net.edge_cp) and again.tol == net.tol
+    cp = net.control_points.copy()
+    i, j = SIDE_INDEX[side][1]
+    cp[4, i, j] += [0.0, 0.0, 0.25]  # patch 4: the middle one, every side shared
+    with pytest.raises(ValidationError, match="two sides of a shared edge differ"):
+        PatchNet.from_topology(cp, topo, uv=net.uv, lightmap_rect=net.lightmap_rect)
+
+
+def test_default_tolerance_from_the_extent():
+    net = PatchNet.from_bpt(TEAPOT)
+    pts = net.control_points.reshape(-1, 3)
+    assert net.tol == max(float(np.linalg.norm(pts.max(0) - pts.min(0))), 1.0) * 1e-6

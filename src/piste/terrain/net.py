@@ -186,8 +186,8 @@ class PatchNet:
             raise ValidationError(f"{self.name}: control_points must have shape (n, 4, 4, 3), got {cp.shape}")
         if len(cp) == 0:
             raise ValidationError(f"{self.name}: a patch net needs at least one patch")
-        bad = ~np.isfinite(cp).all(axis=-1)
-        if bad.any():
+        if not np.isfinite(cp).all():  # (the point named only when one is bad: the per-point test is slower)
+            bad = ~np.isfinite(cp).all(axis=-1)
             p, i, j = (int(x) for x in np.argwhere(bad)[0])
             sides = [s for s in range(4) if any((i, j) == tuple(ij) for ij in SIDE_INDEX[s])]
             where = f"edge {sides[0]} ({SIDE_NAMES[sides[0]]}), " if sides else "interior, "
@@ -197,7 +197,7 @@ class PatchNet:
             )
         n = len(cp)
         if self.tol is None:
-            diag = float(np.linalg.norm(cp.reshape(-1, 3).max(0) - cp.reshape(-1, 3).min(0)))
+            diag = float(np.linalg.norm(_extent(cp, np.maximum) - _extent(cp, np.minimum)))
             self.tol = max(diag, 1.0) * 1e-6
         self.tol = float(self.tol)
         if self.uv is None:
@@ -281,11 +281,20 @@ class PatchNet:
         open_side = ends[..., 0] != ends[..., 1]  # the canonical direction runs from the lower id
         if (flip[open_side] != (ends[..., 0] > ends[..., 1])[open_side]).any():
             raise bad("side_flip", "does not run each edge from its lower to its higher corner id")
-        pts = cp[:, SIDE_INDEX[..., 0], SIDE_INDEX[..., 1]].reshape(n * 4, 4, 3)  # (4n, 4, 3) in each side's direction
-        canon = np.where(flip.reshape(-1)[:, None, None], pts[:, ::-1], pts)
-        first = canon[ep[:, 0] * 4 + es[:, 0]]  # (e, 4, 3)
+        # (4n, 4, 3) in each side's direction: the rows / columns of SIDE_INDEX as slices (a fancy-index
+        # gather of the same points cost ~2.5 ms at 2.5k patches)
+        pts = np.stack([cp[:, :, 0], cp[:, 3, :], cp[:, :, 3], cp[:, 0, :]], axis=1).reshape(n * 4, 4, 3)
+        flat_flip = flip.reshape(-1)
+
+        def canonical(sides):  # the sides' points in their edges' direction, (k, 4, 3)
+            out = pts[sides]
+            f = flat_flip[sides]
+            out[f] = out[f, ::-1]
+            return out
+
+        first = canonical(ep[:, 0] * 4 + es[:, 0])  # (e, 4, 3)
         two = used[:, 1]
-        if (canon[(ep[two, 1] * 4 + es[two, 1])] != first[two]).any():
+        if (canonical(ep[two, 1] * 4 + es[two, 1]) != first[two]).any():
             raise bad("edge_patches", "the two sides of a shared edge differ (not the welded control points)")
         deg = a["edge_degenerate"]
         if (deg & two).any() or (deg & ~(first == first[:, :1]).all(axis=(1, 2))).any():
@@ -413,9 +422,7 @@ class PatchNet:
         float64.  Reduced over rows of 48 contiguous values (one patch) and then the 16 points: ~20x
         faster than ``reshape(-1, 3).min(0)`` (numpy's strided 3-wide reduction), computed at each call
         (no cache to go stale when the control points are edited in place)."""
-        rows = self.control_points.reshape(-1, 48)
-        return (np.minimum.reduce(rows, axis=0).reshape(16, 3).min(0),
-                np.maximum.reduce(rows, axis=0).reshape(16, 3).max(0))
+        return _extent(self.control_points, np.minimum), _extent(self.control_points, np.maximum)
 
     @property
     def patch_bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -541,6 +548,12 @@ class PatchNet:
         return PatchNet(
             self.control_points[patches], self.uv[patches], self.lightmap_rect[patches], self.tol, self.name
         )
+
+
+def _extent(cp: np.ndarray, op) -> np.ndarray:
+    """``op`` (np.minimum / np.maximum) over every control point of ``cp`` (n, 4, 4, 3) -> (3,): over
+    rows of 48 contiguous values (one patch) first, then the 16 points."""
+    return op.reduce(op.reduce(cp.reshape(-1, 48), axis=0).reshape(16, 3), axis=0)
 
 
 def _fold(cp: np.ndarray, op) -> np.ndarray:
