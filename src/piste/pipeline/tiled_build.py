@@ -73,7 +73,6 @@ from piste.pipeline.visibility import compute_visibility
 from piste.render.streaming import MID_SAMPLES, NEAR_SAMPLES
 from piste.terrain.bezier import evaluate, grid_params
 from piste.terrain.heightfield import single_threaded
-from piste.terrain.net import PatchNet
 from piste.terrain.tiles import (TILE_FIT_VERSION, TILES_FORMAT, TileGrid, TileStore, fit_tile, neighbourhood_net,
                                  triangulated_heights)
 from piste.terrain.tiles import TileError as TileFileError
