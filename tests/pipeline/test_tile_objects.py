@@ -204,9 +204,12 @@ def _scene(tmp_path, rules: str):
 
 def test_scene_file_tile_objects_reach_the_tiled_build(tmp_path):
     from piste.pipeline.tiled_build import spec_from_scene
+    from piste.world.scene_file import TileObjectSpec
 
     scene = _scene(tmp_path, '[[tile_objects]]\nkind = "tree"\ndensity = 20.0\nslope = [0.0, 10.0]\n'
                              '[[tile_objects]]\nkind = "rock"\ndensity = 5\naltitude = [10.0, 100.0]\n')
+    assert scene.tile_objects == [TileObjectSpec("tree", 20.0, slope=(0.0, 10.0)),
+                                  TileObjectSpec("rock", 5.0, altitude=(10.0, 100.0))]
     spec = spec_from_scene(scene)
     assert spec.objects == (ObjectRule("tree", 20.0, slope=(0.0, 10.0)), ObjectRule("rock", 5.0, altitude=(10.0, 100.0)))
     build_tiles(spec)

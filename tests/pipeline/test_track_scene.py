@@ -13,7 +13,7 @@ from piste.pipeline.build import build_scene
 from piste.pipeline.bundle_objects import load_bundle
 from piste.pipeline.preview import ScenePreview, auto_objects, camera_at
 from piste.world.objects import place_objects
-from piste.world.scene_file import loads_scene
+from piste.world.scene_file import AutoObjectsSpec, PackSpec, loads_scene
 
 SCENE = """\
 name = "pack"
@@ -51,13 +51,15 @@ def _build(tmp_path, fog="0.004", face="null_bones"):
 
 def test_keys_parse_with_defaults_and_errors(tmp_path):
     s = loads_scene(SCENE.format(fog='"auto"', face="morph"), tmp_path / "a.toml")
-    assert s.pack == {"follow": "track", "start": 0.2}
-    assert s.auto_objects == {"seed": 3, "trees": 12, "signs": 2, "rocks": 3, "rails": 1}
+    assert s.pack == PackSpec("track", 0.2) and s.pack.as_dict() == {"follow": "track", "start": 0.2}
+    assert s.auto_objects == AutoObjectsSpec(seed=3, trees=12, signs=2, rocks=3, rails=1)
+    assert s.auto_objects.as_dict() == {"seed": 3, "trees": 12, "signs": 2, "rocks": 3, "rails": 1}
     assert s.render.fog == "auto" and s.render.face == "morph" and s.render.object_lod == 2.0
     assert loads_scene("", tmp_path / "e.toml").render.object_lod == 0.5
     d = loads_scene("[pack]\n[auto_objects]\n", tmp_path / "b.toml")
-    assert d.pack == {"follow": "track", "start": 0.12}
-    assert d.auto_objects == {"seed": 0, "trees": 220, "signs": 16, "rocks": 40, "rails": 6}
+    assert d.pack == PackSpec() and d.pack.as_dict() == {"follow": "track", "start": 0.12}
+    assert d.auto_objects == AutoObjectsSpec()
+    assert d.auto_objects.as_dict() == {"seed": 0, "trees": 220, "signs": 16, "rocks": 40, "rails": 6}
     assert loads_scene("", tmp_path / "c.toml").pack is None
     bad = [("[pack]\nfollow = 'rails'\n", "pack.follow"), ("[pack]\nstart = 1.5\n", "pack.start"),
            ("[auto_objects]\ntrees = -1\n", "auto_objects.trees"), ("[auto_objects]\nwho = 1\n", "who"),

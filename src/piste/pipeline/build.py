@@ -678,8 +678,8 @@ def _make_settings(ctx: BuildContext) -> StepOutput:
                    "face": render.face, "object_lod": render.object_lod, "aa": render.aa, "dof": render.dof,
                    "soft_shadows": render.soft_shadows, "occlusion": render.occlusion},
         # riders following the track and objects placed along it, made by the runtime (pipeline.preview)
-        "pack": dict(scene.pack) if scene.pack else None,
-        "auto_objects": dict(scene.auto_objects) if scene.auto_objects else None,
+        "pack": scene.pack.as_dict() if scene.pack else None,
+        "auto_objects": scene.auto_objects.as_dict() if scene.auto_objects else None,
     }
 
 

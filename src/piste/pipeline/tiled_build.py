@@ -699,7 +699,7 @@ def spec_from_scene(scene, root=None, res: int | None = None) -> TiledSpec:
     return TiledSpec(str(root), src, grid, dumps_lights(scene_lights(scene)), res=res or scene.lightmap.res,
                      shadows=scene.lightmap.shadows, cell=cell,
                      eye_heights=tuple(scene.visibility.eye_heights), name=scene.name,
-                     objects=tuple(ObjectRule(**r) for r in getattr(scene, "tile_objects", ())))
+                     objects=tuple(ObjectRule(**r.rule_fields()) for r in getattr(scene, "tile_objects", ())))
 
 
 def synthetic_spec(root, patches_side: int, samples_per_patch: int = 3, tile_patches: int = 64, spacing: float = 10.0,

@@ -176,6 +176,9 @@ __all__ = [
     "LodSpec",
     "VisibilitySpec",
     "RenderSpec",
+    "PackSpec",
+    "AutoObjectsSpec",
+    "TileObjectSpec",
     "load_scene",
     "loads_scene",
     "key_lines",
@@ -416,6 +419,55 @@ class RenderSpec:
 AUTO_OBJECT_COUNTS = {"trees": 220, "signs": 16, "rocks": 40, "rails": 6}
 
 
+@dataclass(frozen=True)
+class PackSpec:
+    """``[pack]``: the default course's riders following the track (``start``: fraction of the
+    track where the first rider is at t = 0)."""
+
+    follow: str = "track"
+    start: float = 0.12
+
+    def as_dict(self) -> dict[str, Any]:
+        """The manifest's ``pack`` entry: ``{"follow", "start"}``."""
+        return {"follow": self.follow, "start": self.start}
+
+
+@dataclass(frozen=True)
+class AutoObjectsSpec:
+    """``[auto_objects]``: the course's objects placed along the track (a seed and a count of each
+    kind, :data:`AUTO_OBJECT_COUNTS` by default)."""
+
+    seed: int = 0
+    trees: int = AUTO_OBJECT_COUNTS["trees"]
+    signs: int = AUTO_OBJECT_COUNTS["signs"]
+    rocks: int = AUTO_OBJECT_COUNTS["rocks"]
+    rails: int = AUTO_OBJECT_COUNTS["rails"]
+
+    def as_dict(self) -> dict[str, int]:
+        """The manifest's ``auto_objects`` entry: ``{"seed", "trees", "signs", "rocks", "rails"}``."""
+        return {"seed": self.seed, "trees": self.trees, "signs": self.signs, "rocks": self.rocks, "rails": self.rails}
+
+
+@dataclass(frozen=True)
+class TileObjectSpec:
+    """One ``[[tile_objects]]`` rule (:class:`piste.pipeline.tile_objects.ObjectRule`'s fields):
+    a kind, candidates a hectare, and the (min, max) slope in degrees, altitude in metres (None:
+    any) and scale where one is kept."""
+
+    kind: str
+    density: float
+    slope: tuple[float, float] = (0.0, 90.0)
+    altitude: tuple[float, float] | None = None
+    scale: tuple[float, float] = (0.7, 1.4)
+
+    def rule_fields(self) -> dict[str, Any]:
+        """The keyword arguments of ``ObjectRule`` (``altitude`` only when given)."""
+        out: dict[str, Any] = {"kind": self.kind, "density": self.density, "slope": self.slope, "scale": self.scale}
+        if self.altitude is not None:
+            out["altitude"] = self.altitude
+        return out
+
+
 @dataclass
 class SceneFile:
     """A parsed, validated scene (see the module docstring).  ``lights`` holds piste light
@@ -433,9 +485,9 @@ class SceneFile:
     lod: LodSpec = field(default_factory=LodSpec)
     visibility: VisibilitySpec = field(default_factory=VisibilitySpec)
     render: RenderSpec = field(default_factory=RenderSpec)
-    pack: dict[str, Any] | None = None          # [pack]: {"follow": "track", "start": fraction}
-    auto_objects: dict[str, Any] | None = None  # [auto_objects]: {"seed": int, "trees": n, "signs": n, "rocks": n, "rails": n}
-    tile_objects: list[dict[str, Any]] = field(default_factory=list)  # [[tile_objects]]: {"kind", "density", "slope", "altitude", "scale"}
+    pack: PackSpec | None = None                  # [pack]
+    auto_objects: AutoObjectsSpec | None = None   # [auto_objects]
+    tile_objects: list[TileObjectSpec] = field(default_factory=list)  # [[tile_objects]]
     text: str = ""
     allow_paths: tuple[Path, ...] = ()  # folders the user allowed (--allow-path, PISTE_ALLOW_PATHS) when it was loaded
     sections: dict[str, Any] = field(default_factory=dict)  # registered sections without a field here: name -> value
@@ -740,7 +792,7 @@ def _parse_render(re_: SceneTable, scene: SceneFile) -> RenderSpec:
 
 
 # the default course's riders following the track and objects placed along it
-def _parse_pack(pk: SceneTable, scene: SceneFile) -> dict[str, Any]:
+def _parse_pack(pk: SceneTable, scene: SceneFile) -> PackSpec:
     pk.allow({"follow", "start"})
     follow = pk.get("follow", "str", "track")
     if follow != "track":
@@ -750,7 +802,7 @@ def _parse_pack(pk: SceneTable, scene: SceneFile) -> dict[str, Any]:
         raise pk.error("start", f"expected a fraction of the track in [0, 1], got {start}")
     if scene.terrain.kind != "default":
         raise pk.error("follow", "riders following the track need the default course (terrain.source = \"default\")")
-    return {"follow": follow, "start": start}
+    return PackSpec(follow=follow, start=start)
 
 
 def _check_pack(pk: SceneTable, scene: SceneFile) -> None:
@@ -758,16 +810,17 @@ def _check_pack(pk: SceneTable, scene: SceneFile) -> None:
         raise pk.error(None, "give riders as [pack] (following the track) or as [[riders]], not both")
 
 
-def _parse_auto_objects(ao: SceneTable, scene: SceneFile) -> dict[str, Any]:
+def _parse_auto_objects(ao: SceneTable, scene: SceneFile) -> AutoObjectsSpec:
     ao.allow({"seed", *AUTO_OBJECT_COUNTS})
-    auto = {"seed": _bounded(ao, "seed", ao.get("seed", "int", 0), 0, MAX_SEED, "a seed")}
+    seed = _bounded(ao, "seed", ao.get("seed", "int", 0), 0, MAX_SEED, "a seed")
+    counts: dict[str, int] = {}
     for k, d in AUTO_OBJECT_COUNTS.items():
-        auto[k] = ao.get(k, "int", d)
-        if not 0 <= auto[k] <= 10_000:
-            raise ao.error(k, f"expected 0 <= {k} <= 10000, got {auto[k]}")
+        counts[k] = ao.get(k, "int", d)
+        if not 0 <= counts[k] <= 10_000:
+            raise ao.error(k, f"expected 0 <= {k} <= 10000, got {counts[k]}")
     if scene.terrain.kind != "default":
         raise ao.error("seed", "objects placed along the track need the default course (terrain.source = \"default\")")
-    return auto
+    return AutoObjectsSpec(seed=seed, **counts)
 
 
 def _check_auto_objects(ao: SceneTable, scene: SceneFile) -> None:
@@ -775,7 +828,7 @@ def _check_auto_objects(ao: SceneTable, scene: SceneFile) -> None:
         raise ao.error(None, "give objects as [auto_objects] or as [[objects]], not both")
 
 
-def _parse_tile_objects(items: list[SceneTable], scene: SceneFile) -> list[dict[str, Any]]:
+def _parse_tile_objects(items: list[SceneTable], scene: SceneFile) -> list[TileObjectSpec]:
     rules = []
     for c in items:  # rules for piste.pipeline.tile_objects.ObjectRule
         c.allow({"kind", "density", "slope", "altitude", "scale"})
@@ -785,8 +838,8 @@ def _parse_tile_objects(items: list[SceneTable], scene: SceneFile) -> list[dict[
         if scene.terrain.kind not in ("heightfield", "geotiff"):
             raise c.error("kind", "objects placed on tiles need a tiled height-field terrain (GeoTIFF, PNG or .npz), "
                                   f"got terrain kind {scene.terrain.kind!r}")
-        rule = {"kind": kind, "density": _bounded(c, "density", c.get("density", "pos", required=True), 0.0, 1e4,
-                                                  "candidates a hectare")}
+        rule: dict[str, Any] = {"kind": kind, "density": _bounded(c, "density", c.get("density", "pos", required=True),
+                                                                  0.0, 1e4, "candidates a hectare")}
         for key, lo, hi, default, what in (("slope", 0.0, 90.0, (0.0, 90.0), "degrees"),
                                            ("altitude", -1e6, 1e6, None, "metres"),
                                            ("scale", 1e-3, 1e3, (0.7, 1.4), "a size")):
@@ -795,7 +848,7 @@ def _parse_tile_objects(items: list[SceneTable], scene: SceneFile) -> list[dict[
                 raise c.error(key, f"expected [min, max] with min <= max, got {list(v)}")
             if v is not None:
                 rule[key] = v
-        rules.append(rule)
+        rules.append(TileObjectSpec(**rule))
     return rules
 
 
