@@ -76,3 +76,14 @@ def test_warm_load_starts_the_resident_blocks(tmp_path):
     next(iter(jobs.values()))["thread"].join(30)
     r = resident_terrain(warm.net, wait=False)  # built: returned at once, not started again
     assert r is not None and r.vertices.shape == (len(warm.net) * r.block, 11)
+
+
+def test_the_light_map_atlas_is_the_stored_member_not_a_copy(tmp_path):
+    """The light map's atlas is the bundle's float32 member as read (a read-only view of the mapped
+    file, no copy a start); the net's control points are its own writable copy."""
+    path, arrays = _minimal(tmp_path)
+    b = load_bundle(path)
+    assert b.lightmap.atlas is b.arrays["lightmap/atlas"] or np.shares_memory(b.lightmap.atlas, b.arrays["lightmap/atlas"])
+    assert np.array_equal(b.lightmap.atlas, arrays["lightmap/atlas"]) and not b.lightmap.atlas.flags.writeable
+    assert b.net.control_points.flags.writeable and not np.shares_memory(b.net.control_points,
+                                                                         b.arrays["terrain/control_points"])

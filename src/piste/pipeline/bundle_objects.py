@@ -123,7 +123,8 @@ class Bundle:
     Attributes
     ----------
     path : Path;  manifest : dict;  arrays : {name: ndarray}
-    net : piste.terrain.PatchNet (light-map rects set);  lightmap : piste.lighting.LightMap
+    net : piste.terrain.PatchNet (light-map rects set);  lightmap : piste.lighting.LightMap (its atlas
+    read-only when the bundle stores it uncompressed: copy it to edit it)
     lights : piste.lighting.Lights;  cameras : {name: piste.world.camera.Camera} (in scene order)
     visibility : piste.pipeline.visibility.Visibility or None
     centerline : (k, 3) track centre line (the default course) or None
@@ -293,7 +294,8 @@ def bundle_from_data(data: BundleData, warm: bool = False, net: PatchNet | None 
     else:
         _keep_blocks(path, man, arrays, net)
     lm_info = man.get("lightmap", {})
-    lightmap = LightMap(atlas=arrays["lightmap/atlas"].astype(np.float32), rects=arrays["lightmap/rects"],
+    # the atlas as read (a read-only view of the bundle's mapped bytes: no 3 MB copy a start) when float32
+    lightmap = LightMap(atlas=np.asarray(arrays["lightmap/atlas"], dtype=np.float32), rects=arrays["lightmap/rects"],
                         res=int(lm_info.get("res", 8)), gutter=int(lm_info.get("gutter", 1)), manifest=lm_info)
     try:
         lights = lights_from_dict(man.get("lights", {}))
