@@ -15,8 +15,8 @@ Sections (every configuration interleaved frame by frame in one process; medians
    full scene, without shadows / specular, and a per-pass profile (``glFinish`` around each pass:
    what llvmpipe spends in each); then each scene change A/B on its own pass (the objects' per-mode
    programs with per-instance attributes and levels of detail; the terrain's back-face culling, whole
-   back-facing patches left out by normal cones (off by default: no gain measured), flat far edges
-   (2 corners, under 0.5 px), visibility sets and per-vertex track distance; the shadow mips by compute dispatches; the shadow
+   back-facing patches left out by normal cones (off by default: no gain measured), error-driven
+   edges (flat, 2 corners, or coarsest where under 0.5 px), visibility sets and per-vertex track distance; the shadow mips by compute dispatches; the shadow
    receivers cut to their frusta by clip distances), with the pixels changed.
 4. **Scaling**: frame time and CPU side against the number of patches (2,560 / 10k / 40k; the
    camera's far plane at 1 km caps the visible set; ``bench_terrain.py`` takes the CPU side to 160k)
@@ -392,8 +392,8 @@ def scene_section(args, floor_ms: list) -> dict:
                ("terrain", set_cull, "terrain: back faces culled", "terrain: back faces drawn"),
                ("terrain", set_cone_cull, "terrain: every visible patch sent (the default)",
                 "terrain: wholly back-facing patches left out (normal cones, off)"),
-               ("terrain", set_flat, "terrain: far coarse edges flat (2 corners) under 0.5 px",
-                "terrain: the coarsest level (4 a side) beyond far"),
+               ("terrain", set_flat, "terrain: edges flat (2 corners) or coarsest where under 0.5 px",
+                "terrain: levels by distance alone (4 a side at the coarsest)"),
                ("terrain", set_visibility, "terrain: the bundle's visibility sets", "terrain: frustum culling alone"),
                ("shadow casters", set_compute_mips, "shadow mips: two levels a compute dispatch",
                 "shadow mips: a framebuffer (and a rasterizer wait) per level"),

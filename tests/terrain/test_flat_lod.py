@@ -90,9 +90,17 @@ def test_flat_needs_the_error_under_the_angle():
         lv = lod.edge_levels(net, eye, near=0.0, far=0.0, flat_error=tol)
         assert np.array_equal(lv == 2, err < tol * d)
     assert 0 < (lod.edge_levels(net, eye, near=0.0, far=0.0, flat_error=0.05) == 2).sum() < net.n_edges
-    # only coarse edges go flat
-    lv = lod.edge_levels(net, eye, near=1e4, far=1e4, flat_error=10.0)
-    assert (lv == 8).all()
+    # fine and medium edges too: flat under the angle, else the coarse level when its mesh is within
+    # it, else what the distance says
+    e4 = lod.level_errors(net, 4)
+    assert (e4 <= err + 1e-9).all()  # (the finer mesh is the closer one here)
+    for tol in (1e-3, 0.02, 0.05, 0.2):
+        for near, far, by_distance in ((1e4, 1e4, 8), (0.0, 1e4, 6)):
+            lv = lod.edge_levels(net, eye, near=near, far=far, flat_error=tol)
+            want = np.where(err < tol * d, 2, np.where(e4 < tol * d, 4, by_distance))
+            assert np.array_equal(lv, want)
+    assert {2, 4, 8} <= {int(x) for tol in (0.01, 0.05) for x in
+                         lod.edge_levels(net, eye, near=1e4, far=1e4, flat_error=tol)}
     for bad in (-1.0, float("nan"), float("inf")):
         with pytest.raises(ConfigError):
             lod.edge_levels(net, eye, flat_error=bad)

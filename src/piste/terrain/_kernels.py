@@ -435,11 +435,12 @@ def tess_frame(lv, side_edge, pids, n_patches, max_level, registry, level_row, g
 
 # ------------------------------------------------------------------------------ LOD per visible side
 def _side_lod_py(pids, side_edge, edge_mid, degenerate, eye, near, far, band, lod, morph, n_edges, factors, flat_err,
-                 flat_lo, flat_hi, flat_tol, key):
+                 coarse_err, flat_lo, flat_hi, flat_tol, key):
     """Level index (-1 flat, 0 coarse, 1 medium, 2 fine) of every side of ``pids``, the shape key
     (digits level index + 1, base 4), and the morph factors of their edges and inner grids (written
-    into ``factors``).  A coarse side goes flat when ``flat_err[e] < flat_tol * d``, ``d`` the eye's
-    distance to the edge's box ``flat_lo[e], flat_hi[e]`` (``flat_tol`` 0: never)."""
+    into ``factors``).  With ``lim = flat_tol * d``, ``d`` the eye's distance to the edge's box
+    ``flat_lo[e], flat_hi[e]``: a side goes flat when ``flat_err[e] < lim``, else coarse when
+    ``coarse_err[e] < lim`` (``flat_tol`` 0: by distance alone)."""
     ex, ey, ez = eye[0], eye[1], eye[2]
     bf = band * near
     if bf < 1e-12:
@@ -470,12 +471,15 @@ def _side_lod_py(pids, side_edge, edge_mid, degenerate, eye, near, far, band, lo
                     li = 1
                 else:
                     li = 0
-                if li == 0 and flat_tol > 0.0:
+                if flat_tol > 0.0:
                     gx = max(max(flat_lo[e, 0] - ex, ex - flat_hi[e, 0]), 0.0)
                     gy = max(max(flat_lo[e, 1] - ey, ey - flat_hi[e, 1]), 0.0)
                     gz = max(max(flat_lo[e, 2] - ez, ez - flat_hi[e, 2]), 0.0)
-                    if flat_err[e] < flat_tol * np.sqrt(gx * gx + gy * gy + gz * gz):
+                    lim = flat_tol * np.sqrt(gx * gx + gy * gy + gz * gz)
+                    if flat_err[e] < lim:
                         li = -1
+                    elif li > 0 and coarse_err[e] < lim:
+                        li = 0
                 if li == 2:
                     f = (near - d) / bf
                 elif li == 1:
@@ -498,7 +502,7 @@ def _side_lod_py(pids, side_edge, edge_mid, degenerate, eye, near, far, band, lo
 
 def _ex_side_lod():
     return (np.zeros(1, np.int64), np.zeros((1, 4), np.int64), np.zeros((1, 3)), np.zeros(1, np.bool_), np.zeros(3),
-            60.0, 180.0, 0.3, True, True, 1, np.ones(1024, np.float32), np.zeros(1), np.zeros((1, 3)),
+            60.0, 180.0, 0.3, True, True, 1, np.ones(1024, np.float32), np.zeros(1), np.zeros(1), np.zeros((1, 3)),
             np.zeros((1, 3)), 0.0, np.zeros(1, np.int64))
 
 
@@ -510,17 +514,20 @@ def side_lod_ready() -> bool:
 
 
 def side_lod(pids, side_edge, edge_mid, degenerate, eye, near, far, band, lod, morph, factors, flat_err=None,
-             flat_lo=None, flat_hi=None, flat_tol: float = 0.0) -> np.ndarray:
+             flat_lo=None, flat_hi=None, flat_tol: float = 0.0, coarse_err=None) -> np.ndarray:
     """Compiled per-side LOD (see :meth:`piste.terrain.resident.ResidentTerrain.frame`): returns the
     shape key ``(p,)`` int64 and fills ``factors`` when ``morph``.  ``flat_err (e,)``, ``flat_lo``,
-    ``flat_hi (e, 3)`` float64 (:func:`piste.terrain.lod.flat_bounds`) with ``flat_tol > 0``: coarse
-    sides go flat where the error seen from the eye allows.  Needs numba."""
+    ``flat_hi (e, 3)`` float64 (:func:`piste.terrain.lod.flat_bounds`), ``coarse_err (e,)``
+    (:func:`piste.terrain.lod.level_errors` of the coarse level) with ``flat_tol > 0``: sides go flat,
+    or coarse, where the error seen from the eye allows.  Needs numba."""
     key = np.empty(len(pids), dtype=np.int64)
     if flat_err is None or not flat_tol:
         flat_err, flat_lo, flat_hi, flat_tol = np.zeros(1), np.zeros((1, 3)), np.zeros((1, 3)), 0.0
+    if coarse_err is None:  # (never coarser than the distance says)
+        coarse_err = np.full(len(flat_err), np.inf)
     _side_lod_nb(pids, side_edge, edge_mid, degenerate, np.asarray(eye, dtype=np.float64), float(near), float(far),
-                 float(band), bool(lod), bool(morph), edge_mid.shape[0], factors, flat_err, flat_lo, flat_hi,
-                 float(flat_tol), key)
+                 float(band), bool(lod), bool(morph), edge_mid.shape[0], factors, flat_err, coarse_err, flat_lo,
+                 flat_hi, float(flat_tol), key)
     return key
 
 

@@ -4,19 +4,21 @@ The talk: "Distance based heuristic applied to each edge, evaluated to 4, 6 or 8
 edge".  The level is a function of the edge alone (its midpoint's distance to the eye), so the
 two patches on a shared edge always agree: crack-freedom needs nothing more.
 
-Flat level (below the coarsest)
--------------------------------
-A coarse edge (beyond ``far``) is drawn with **2 vertices** (its corners alone) when the patches on
-both its sides are flat enough *as seen from the eye*: every patch has a precomputed error ``err``
-(:func:`flat_bounds`: the largest distance between the surface at the level-4 and level-8 grid
-points and the patch's corner quad, triangles ``(0, 1, 2)``, ``(0, 2, 3)``, at the same ``(u, v)``),
-and each edge the larger error of its (up to two) patches and the union of their control-point
-boxes.  The edge goes flat when ``err < flat_error * d``, ``d`` the eye's distance to that box
-(the nearest any point of either patch can be): the on-screen error is under ``flat_error``
-radians (:data:`FLAT_ERROR`: 0.5 px at 640x448 with a 60-degree field of view).  A patch whose four
-sides are flat is drawn as its 2 corner triangles; a patch with some flat sides is a glue patch
+Error-driven levels: flat (below the coarsest) and coarse
+--------------------------------------------------------
+Every patch has precomputed errors (:func:`_patch_errors`: the largest distance between the surface
+and its uniform level-``n`` mesh at the same ``(u, v)``, over the level-4/6/8 grid parameters) for
+the **flat level** (2 vertices a side: the corner quad, triangles ``(0, 1, 2)``, ``(0, 2, 3)``) and the
+coarsest level, and each edge the larger error of its (up to two) patches and the union of their
+control-point boxes (:func:`flat_bounds`, :func:`level_errors`).  With ``lim = flat_error * d``, ``d``
+the eye's distance to that box (the nearest any point of either patch can be), an edge is drawn
+flat when its flat error is under ``lim``, else at the coarsest level when that level's error is
+(whatever its distance band), else as the distance says: the on-screen error stays under
+``flat_error`` radians (:data:`FLAT_ERROR`: 0.5 px at 640x448 with a 60-degree field of view).  A
+patch whose four sides are flat is its 2 corner triangles; one with some flat sides is a glue patch
 whose strips on those sides zip to the straight edge.  Still a function of the edge alone (the same
-arithmetic on the same per-edge inputs in both patches): crack-free as before.
+arithmetic on the same per-edge inputs in both patches): crack-free as before.  An edge made
+coarser by its error does not morph to it (the step is under ``flat_error`` on screen).
 """
 
 from __future__ import annotations
@@ -38,34 +40,72 @@ FLAT_LEVEL = 2
 FLAT_ERROR = 0.5 / (448 / (2.0 * np.tan(np.radians(30.0))))
 
 
-def _flat_patch_errors(net, chunk: int = 8192) -> np.ndarray:
-    """Per patch, the largest distance between the surface and its corner quad (triangles (0, 1, 2),
-    (0, 2, 3) in the corners' (u, v) = (0, 0), (1, 0), (1, 1), (0, 1)) at the same parameter, over the
-    union of the level-4 and level-8 grid parameters: ``(n,)`` float64 (model units)."""
-    from piste.terrain.bezier import blend_tables, pack_control_points, params
-    from piste.terrain.net import CORNER_INDEX
+def _grid_weights(c: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``(k, c^2)``: the points ``(u, v)`` as barycentric blends of the uniform level-``c`` grid's
+    points (column ``j c + i`` at ``(i, j) / (c - 1)``), in the triangle of the grid that holds each
+    (cells split along ``(i, j)-(i+1, j+1)``, the tessellator's uniform triangulation)."""
+    x, y = u * (c - 1), v * (c - 1)
+    ci = np.minimum(np.floor(x).astype(np.int64), c - 2)
+    cj = np.minimum(np.floor(y).astype(np.int64), c - 2)
+    fx, fy = x - ci, y - cj
+    lower = fx >= fy
+    w = np.zeros((len(u), c * c))
+    r = np.arange(len(u))
+    np.add.at(w, (r, cj * c + ci), np.where(lower, 1 - fx, 1 - fy))
+    np.add.at(w, (r, cj * c + ci + 1), np.where(lower, fx - fy, 0.0))
+    np.add.at(w, (r, (cj + 1) * c + ci + 1), np.where(lower, fy, fx))
+    np.add.at(w, (r, (cj + 1) * c + ci), np.where(lower, 0.0, fy - fx))
+    return w
 
-    t1 = np.unique(np.concatenate([params(4), params(8)]))
+
+def _patch_errors(net, n: int, chunk: int = 8192) -> np.ndarray:
+    """Per patch, the largest distance between the surface and its uniform level-``n`` mesh (for
+    ``n = 2`` the corner quad, triangles (0, 1, 2), (0, 2, 3)) at the same parameter, over the union of
+    the level-4, 6 and 8 grid parameters: ``(N,)`` float64 (model units).  Both are linear in the
+    control points, so the difference is one table ``(16, k)`` (its columns sum to 0: no offset of the
+    net matters) and the errors one product."""
+    from piste.terrain.bezier import blend_tables, pack_control_points, params
+
+    t1 = np.unique(np.concatenate([params(4), params(6), params(8)]))
     vv, uu = np.meshgrid(t1, t1, indexing="ij")
     u, v = uu.ravel(), vv.ravel()
     t, _, _ = blend_tables(tuple(u), tuple(v), "float64")  # (16, k): the surface at (u, v)
-    # minus the corner quad at (u, v): both linear in the control points, so the difference is one
-    # table ``d (16, k)`` (its columns sum to 0: no offset of the net matters)
-    lower = u >= v
-    w = np.stack([1.0 - np.where(lower, u, v), np.where(lower, u - v, 0.0), np.where(lower, v, u),
-                  np.where(lower, 0.0, v - u)])  # (4, k) weights of corners 0..3
-    d = t.copy()
-    for c in range(4):
-        d[CORNER_INDEX[c, 0] * 4 + CORNER_INDEX[c, 1]] -= w[c]
+    g = params(n)
+    gv, gu = np.meshgrid(g, g, indexing="ij")
+    tg, _, _ = blend_tables(tuple(gu.ravel()), tuple(gv.ravel()), "float64")  # (16, n^2): the grid points
+    d = t - tg @ _grid_weights(n, u, v).T  # minus the level-n mesh at (u, v)
     cp_all = np.asarray(net.control_points)
-    n = len(net)
-    out = np.empty(n, dtype=np.float64)
-    for a in range(0, n, chunk):
-        b = min(a + chunk, n)
+    N = len(net)
+    out = np.empty(N, dtype=np.float64)
+    for a in range(0, N, chunk):
+        b = min(a + chunk, N)
         k = b - a
         diff = (pack_control_points(cp_all[a:b], np.float64).reshape(k * 3, 16) @ d).reshape(k, 3, -1)
         out[a:b] = np.sqrt((diff * diff).sum(axis=1).max(axis=1))
     return out
+
+
+def _flat_patch_errors(net) -> np.ndarray:
+    """Per patch, the largest distance between the surface and its corner quad: ``(N,)`` float64."""
+    return _patch_errors(net, FLAT_LEVEL)
+
+
+def _edge_max(net, per_patch: np.ndarray) -> np.ndarray:
+    """The larger of an edge's (up to two) patches' values, ``(e,)``."""
+    ep = np.asarray(net.edge_patches, dtype=np.int64)
+    other = np.where(ep[:, 1] >= 0, ep[:, 1], ep[:, 0])
+    return np.ascontiguousarray(np.maximum(per_patch[ep[:, 0]], per_patch[other]))
+
+
+def level_errors(net, n: int) -> np.ndarray:
+    """Per edge, the larger error of its patches' uniform level-``n`` meshes (:func:`_patch_errors`),
+    ``(e,)`` float64; computed once per level and kept on the net."""
+    store = net.__dict__.setdefault("_level_errors", {})
+    e = store.get(int(n))
+    if e is None:
+        e = _edge_max(net, _patch_errors(net, int(n)))
+        store[int(n)] = e
+    return e
 
 
 def flat_bounds(net) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -74,10 +114,9 @@ def flat_bounds(net) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     edge's patches (:func:`_flat_patch_errors`) and the union of their control-point boxes."""
     fb = net.__dict__.get("_flat_bounds")
     if fb is None:
-        perr = _flat_patch_errors(net)
+        err = level_errors(net, FLAT_LEVEL)
         ep = np.asarray(net.edge_patches, dtype=np.int64)
         other = np.where(ep[:, 1] >= 0, ep[:, 1], ep[:, 0])
-        err = np.maximum(perr[ep[:, 0]], perr[other])
         plo, phi = net.patch_bounds
         lo = np.ascontiguousarray(np.minimum(plo[ep[:, 0]], plo[other]), dtype=np.float64)
         hi = np.ascontiguousarray(np.maximum(phi[ep[:, 0]], phi[other]), dtype=np.float64)
@@ -86,17 +125,31 @@ def flat_bounds(net) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return fb
 
 
-def flat_edges(net, eye, edges=None, flat_error: float = FLAT_ERROR) -> np.ndarray:
-    """Whether each edge (all, or ``edges (k,)``) may be drawn flat from ``eye``: ``err < flat_error * d``
-    with ``d`` the eye's distance to the edge's box (see the module docstring); ``(k,)`` bool.
-    The same float64 arithmetic as the resident path's compiled LOD."""
-    err, lo, hi = flat_bounds(net)
+def error_limit(net, eye, edges=None, flat_error: float = FLAT_ERROR) -> np.ndarray:
+    """The largest error each edge's patches (all edges, or ``edges``, any shape) may have to be drawn
+    coarser from ``eye``: ``flat_error * d``, ``d`` the eye's distance to the edge's box, ``(e,)`` or
+    ``edges``' shape, float64 (the same arithmetic as the resident path's compiled LOD)."""
+    _, lo, hi = flat_bounds(net)
     if edges is not None:
-        err, lo, hi = err[edges], lo[edges], hi[edges]
+        lo, hi = lo[edges], hi[edges]
     eye = np.asarray(eye, dtype=np.float64).reshape(3)
     g = np.maximum(np.maximum(lo - eye, eye - hi), 0.0)
-    d = np.sqrt(g[:, 0] * g[:, 0] + g[:, 1] * g[:, 1] + g[:, 2] * g[:, 2])
-    return err < float(flat_error) * d
+    d = np.sqrt(g[..., 0] * g[..., 0] + g[..., 1] * g[..., 1] + g[..., 2] * g[..., 2])
+    return float(flat_error) * d
+
+
+def flat_edges(net, eye, edges=None, flat_error: float = FLAT_ERROR) -> np.ndarray:
+    """Whether each edge (all, or ``edges (k,)``) may be drawn flat from ``eye``: its patches' corner
+    quads within :func:`error_limit`; ``(k,)`` bool."""
+    err = flat_bounds(net)[0]
+    return (err if edges is None else err[edges]) < error_limit(net, eye, edges, flat_error)
+
+
+def coarse_edges(net, eye, edges=None, flat_error: float = FLAT_ERROR, coarse: int = LEVELS[0]) -> np.ndarray:
+    """Whether each edge may be drawn at the ``coarse`` level from ``eye`` whatever its distance: its
+    patches' uniform ``coarse`` meshes within :func:`error_limit`; ``(k,)`` bool."""
+    err = level_errors(net, coarse)
+    return (err if edges is None else err[edges]) < error_limit(net, eye, edges, flat_error)
 
 
 def edge_levels(net, eye, near: float = DEFAULT_NEAR, far: float = DEFAULT_FAR, levels=LEVELS,
@@ -110,8 +163,9 @@ def edge_levels(net, eye, near: float = DEFAULT_NEAR, far: float = DEFAULT_FAR, 
     near, far : distance thresholds (model units): ``d < near`` -> ``levels[2]``,
         ``d < far`` -> ``levels[1]``, else ``levels[0]``
     levels : (coarse, medium, fine) vertices per edge
-    flat_error : largest on-screen error (radians) of a coarse edge drawn flat (2 vertices, see the
-        module docstring); None or 0: never flat (the talk's three levels)
+    flat_error : largest on-screen error (radians) of an edge drawn coarser than its distance says:
+        flat (2 vertices) or at ``levels[0]`` (see the module docstring); None or 0: the talk's three
+        levels by distance alone
 
     Returns
     -------
@@ -130,8 +184,9 @@ def edge_levels(net, eye, near: float = DEFAULT_NEAR, far: float = DEFAULT_FAR, 
     if flat_error:
         if not (np.isfinite(flat_error) and flat_error > 0):
             raise ConfigError(f"flat_error must be a positive angle in radians or None, got {flat_error}")
-        coarse = np.nonzero(out == levels[0])[0]
-        out[coarse[flat_edges(net, eye, coarse, flat_error)]] = FLAT_LEVEL
+        lim = error_limit(net, eye, None, flat_error)
+        out[(out != levels[0]) & (level_errors(net, levels[0]) < lim)] = levels[0]
+        out[flat_bounds(net)[0] < lim] = FLAT_LEVEL
     return out
 
 

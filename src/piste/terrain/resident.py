@@ -14,9 +14,9 @@ The talk's per-edge LOD with uniform and glue patches, without re-assembling ver
   flat level needs no vertices of its own: its corners are the coarsest grid's (the block layout is
   unchanged by it).
 * **Per frame**: hierarchical frustum culling (:class:`piste.terrain.cull.PatchTree`), the level
-  of each visible side (its edge midpoint's distance; coarse edges flat when their patches' error
-  seen from the eye is below ``flat_error``, :mod:`piste.terrain.lod`; the same arithmetic on the
-  same inputs in both patches), and the index list ``template + p B`` (:func:`piste.terrain._kernels.frame_indices`).
+  of each visible side (its edge midpoint's distance; flat or coarsest where the error of its
+  patches' meshes seen from the eye is below ``flat_error``, :mod:`piste.terrain.lod`; the same
+  arithmetic on the same inputs in both patches), and the index list ``template + p B`` (:func:`piste.terrain._kernels.frame_indices`).
   No vertex is written on the CPU.
 
 Geomorphing
@@ -60,7 +60,8 @@ from piste.errors import ConfigError, ValidationError
 from piste.terrain import _kernels
 from piste.terrain._kernels import frame_indices
 from piste.terrain.cull import patch_tree
-from piste.terrain.lod import DEFAULT_FAR, DEFAULT_NEAR, FLAT_ERROR, FLAT_LEVEL, LEVELS, flat_bounds, flat_edges
+from piste.terrain.lod import (DEFAULT_FAR, DEFAULT_NEAR, FLAT_ERROR, FLAT_LEVEL, LEVELS, error_limit, flat_bounds,
+                              level_errors)
 from piste.terrain.net import SIDE_CORNERS, PatchNet
 from piste.terrain.bezier import blend_tables, eval_edges, params
 from piste.terrain.tessellate import (MAX_LEVEL, _bilinear_weights, _cache, _glue_sources, _Snapshot, get_shape,
@@ -448,8 +449,9 @@ class ResidentTerrain:
         patches : (p,) explicit patch ids (overrides ``planes``)
         side_levels : (p, 4) explicit level indices 0..2 per side of ``patches``, or -1 for the flat
             level (tests); with ``morph``, the factors must then be set by the caller in :attr:`factors`
-        flat_error : coarse edges whose patches' error seen from the eye is below this angle (radians)
-            are drawn flat (2 vertices; :func:`piste.terrain.lod.edge_levels`); None or 0: never
+        flat_error : edges whose patches' flat (2 vertices) or coarsest meshes are within this angle
+            (radians) seen from the eye are drawn so (:func:`piste.terrain.lod.edge_levels`); None or
+            0: the levels by distance alone
         use_numba : None (compiled when numba is installed), False (numpy; the same result)
         """
         net = self.net
@@ -472,8 +474,9 @@ class ResidentTerrain:
         fac = self.factors
         if side_levels is None and (use_numba or (use_numba is None and _kernels.side_lod_ready())):
             ferr, flo, fhi = flat_bounds(net) if tol else self._no_flat()
+            cerr = level_errors(net, self.levels[0]) if tol else ferr
             key = _kernels.side_lod(pids, self.side_edge, self.edge_mid, self.degenerate, eye, near, far, morph_band,
-                                    lod, morph or not lod, fac, ferr, flo, fhi, tol)
+                                    lod, morph or not lod, fac, ferr, flo, fhi, tol, cerr)
             return self._mesh(pids, key, morph, use_numba, eye)
         se = net.side_edge[pids]  # (p, 4)
         if side_levels is not None:
@@ -491,9 +494,9 @@ class ResidentTerrain:
             li = np.where(dist < near, 2, np.where(dist < far, 1, 0))
             li[net.edge_degenerate[se]] = 0
             if tol:
-                co = np.nonzero(li.ravel() == 0)[0]
-                flat = flat_edges(net, eye, se.ravel()[co], tol)
-                li.ravel()[co[flat]] = -1  # (li is a fresh array: ravel is a view)
+                lim = error_limit(net, eye, se, tol)
+                li[(li > 0) & (level_errors(net, self.levels[0])[se] < lim)] = 0
+                li[flat_bounds(net)[0][se] < lim] = -1
             if morph:
                 w = float(morph_band)
                 f_fine = (near - dist) / max(w * near, 1e-12)
