@@ -110,8 +110,11 @@ def rider_textures(texture, n: int) -> list:
     if not mask.any():
         return out * n
     rgb = tex[..., :3].astype(np.int32)
-    cols, counts = np.unique(rgb[mask].reshape(-1, 3), axis=0, return_counts=True)
-    base = cols[counts.argmax()]
+    # the most common colour under the mask (the first in (r, g, b) order on a tie): one int a texel
+    # (r, g, b ordered as the rows np.unique(axis=0) sorts) instead of a unique over rows (~3 ms)
+    keys, counts = np.unique(rgb[mask] @ np.array([1 << 16, 1 << 8, 1]), return_counts=True)
+    key = int(keys[counts.argmax()])
+    base = np.array([key >> 16, (key >> 8) & 255, key & 255])
     body = mask & (np.abs(rgb - base).max(-1) <= 2)
     zip_ = mask & (np.abs(rgb - (base * 0.6).astype(np.int32)).max(-1) <= 2)
     for i in range(1, n):

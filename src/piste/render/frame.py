@@ -89,8 +89,8 @@ def faces_up(net) -> bool:
     # a Bezier patch passes through its corner control points: the level-2 tessellation's vertices
     # (0, 0), (1, 0), (1, 1), (0, 1) in (u, v), triangles (0, 1, 2) and (0, 2, 3), without tessellating
     # (a fresh process's first tessellate cost ~40 ms); float32 as the tessellator writes them
-    cp = np.asarray(net.control_points, dtype=np.float32).astype(np.float64)
-    q = np.stack([cp[:, 0, 0], cp[:, 3, 0], cp[:, 3, 3], cp[:, 0, 3]], axis=1)  # (n, 4, 3)
+    cp = net.control_points  # the corners rounded to float32 (after taking them: 1/4 of the points)
+    q = np.stack([cp[:, 0, 0], cp[:, 3, 0], cp[:, 3, 3], cp[:, 0, 3]], axis=1).astype(np.float32).astype(np.float64)
     p = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])  # (2 n, 3, 3)
     a, b = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
     return bool(np.all(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0] > 0.0))
