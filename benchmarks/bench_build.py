@@ -87,6 +87,10 @@ print(t1 - t0)
 """
 
 
+#: appended to both processes' scripts: their CPU time (user + sys, every thread) on the last line
+_CPU = "\nimport resource as _r\n_u = _r.getrusage(_r.RUSAGE_SELF)\nprint(_u.ru_utime + _u.ru_stime)\n"
+
+
 def fresh_first_frame(bundle: Path, runs: int) -> None:
     """Bundle to first frame in a fresh Python process (after the interpreter starts).
 
@@ -99,14 +103,22 @@ def fresh_first_frame(bundle: Path, runs: int) -> None:
 
     import numpy as np
 
-    def times(env):
-        out = subprocess.run([sys.executable, "-c", _FRESH, str(bundle)], capture_output=True, text=True, check=True,
-                             env=env)
-        return [float(x) for x in out.stdout.split()[-7:]]
+    cpu: dict = {"piste": [], "peer": []}  # the processes' CPU time (every thread), cached runs
 
-    def bare(env):
-        out = subprocess.run([sys.executable, "-c", _BARE], capture_output=True, text=True, check=True, env=env)
-        return float(out.stdout.split()[-1])
+    def times(env, kind=None):
+        out = subprocess.run([sys.executable, "-c", _FRESH + _CPU, str(bundle)], capture_output=True, text=True,
+                             check=True, env=env)
+        v = [float(x) for x in out.stdout.split()[-8:]]
+        if kind:
+            cpu[kind].append(v[-1])
+        return v[:-1]
+
+    def bare(env, kind=None):
+        out = subprocess.run([sys.executable, "-c", _BARE + _CPU], capture_output=True, text=True, check=True, env=env)
+        v = [float(x) for x in out.stdout.split()[-2:]]
+        if kind:
+            cpu[kind].append(v[-1])
+        return v[0]
 
     with tempfile.TemporaryDirectory() as pyc, tempfile.TemporaryDirectory() as shaders:
         cached = {k: v for k, v in os.environ.items() if k not in ("PYTHONDONTWRITEBYTECODE", "MESA_SHADER_CACHE_DIR")}
@@ -117,7 +129,7 @@ def fresh_first_frame(bundle: Path, runs: int) -> None:
         bare(cached)
         res, src, cold, peer = [], [], [], []
         for i in range(runs):  # interleaved, the order rotated
-            jobs = [lambda: res.append(times(cached)), lambda: peer.append(bare(cached)),
+            jobs = [lambda: res.append(times(cached, "piste")), lambda: peer.append(bare(cached, "peer")),
                     lambda: src.append(times(source)[6]),
                     lambda i=i: cold.append(times({**cached, "MESA_SHADER_CACHE_DIR": str(Path(shaders) / str(i))})[6])]
             k = i % len(jobs)
@@ -149,6 +161,10 @@ def fresh_first_frame(bundle: Path, runs: int) -> None:
           f"back (timed the same way, from the script's first line): {pm:.2f} s [{min(peer):.2f}-{max(peer):.2f}]; "
           f"piste is {m[5] / pm:.2f}x it [{ratio.min():.2f}-{ratio.max():.2f} per run] (target <= 1.5x: "
           f"{'met' if m[5] / pm <= 1.5 else 'missed'})")
+    cp, cq = float(np.median(cpu["piste"])), float(np.median(cpu["peer"]))
+    print(f"  CPU time of each whole process (user + sys, every thread: llvmpipe's too; the interpreter's start "
+          f"included; less swayed by other processes than the wall times): piste {cp:.2f} s, the peer {cq:.2f} s "
+          f"({cp / cq:.2f}x)")
     print(f"  (load average {os.getloadavg()[0]:.1f}; another process on the machine slows every figure)")
     record("build", f"bundle -> first frame, fresh process ({bundle.name}, {runs} runs)", "<= 1.5x bare GL",
            f"{m[5]:.2f} s", f"bare EGL quad process {pm:.2f} s", f"{m[5] / pm:.2f}x", m[5] / pm <= 1.5)
