@@ -105,3 +105,26 @@ def test_track_field_signed_distance():
     hook = np.concatenate([line, line[-1] + np.array([[10.0, -5.0, 0.0], [20.0, -10.0, 0.0]])])
     general, _ = track_field(hook, bounds, texel=1.0)
     assert np.allclose(general[20:80][np.abs(field[20:80]) < 8], field[20:80][np.abs(field[20:80]) < 8], atol=0.3)
+
+
+@pytest.mark.parametrize("down", [True, False])
+def test_track_field_bits_of_the_whole_field_computed_at_once(down):
+    """The field computed a band of rows at a time is, bit for bit, the whole (h, w) float64 field
+    ``(x - x_c(y)) / sqrt(1 + x_c'(y)^2)`` (negated for a line running down y) rounded to float32,
+    for a field of many bands (the default course's size)."""
+    from piste.render.textures import track_field
+
+    ys = np.linspace(400.0, -400.0, 90) if down else np.linspace(-400.0, 400.0, 90)
+    line = np.stack([60.0 * np.sin(ys / 90.0), ys, np.zeros_like(ys)], axis=1)
+    bounds = (np.array([-500.0, -200.0, 0.0]), np.array([500.0, 200.0, 10.0]))
+    field, rect = track_field(line, bounds, texel=0.75)
+    w, h = int(np.ceil(1000.0 / 0.75)), int(np.ceil(400.0 / 0.75))
+    assert field.shape == (h, w) and field.dtype == np.float32 and (1 << 16) // w < h  # several bands
+    xs, gy = -500.0 + (np.arange(w) + 0.5) * 0.75, -200.0 + (np.arange(h) + 0.5) * 0.75
+    order = np.argsort(line[:, 1])
+    xc = np.interp(gy, line[order, 1], line[order, 0])
+    slope = np.gradient(xc, gy)
+    ref = (xs[None, :] - xc[:, None]) / np.sqrt(1.0 + slope * slope)[:, None]
+    ref = (-ref if down else ref).astype(np.float32)
+    assert np.array_equal(field.view(np.uint32), ref.view(np.uint32))
+    assert np.array_equal(rect, [-500.0, -200.0, -500.0 + w * 0.75, -200.0 + h * 0.75])
