@@ -51,3 +51,76 @@ def test_the_checks_can_fail(tmp_path):
     assert r.returncode == 1 and "F401" in r.stdout and "B023" in r.stdout, r.stdout + r.stderr
     r = _run([*_tool("mypy"), "--config-file", str(PYPROJECT), "--no-incremental", str(bad)])
     assert r.returncode == 1 and "[call-arg]" in r.stdout, r.stdout + r.stderr
+
+
+#: the packages and modules whose every function is annotated and checked strictly (pyproject.toml's
+#: [[tool.mypy.overrides]] with disallow_untyped_defs): the list may grow, never shrink
+STRICT_REQUIRED = (
+    "piste.errors", "piste.scene_data", "piste.transforms", "piste.lighting", "piste.world",
+    "piste.pipeline.build", "piste.pipeline.open_scene",
+    "piste.formats.atomic", "piste.formats.bpt", "piste.formats.bundle_schema", "piste.formats.limits",
+    "piste.formats.ssx.lightmap", "piste.formats.ssx.mpf_layout",
+    "piste.terrain.bezier", "piste.terrain.fit", "piste.terrain.heightfield", "piste.terrain.stats",
+    "piste.character.lod", "piste.character.palette", "piste.character.pose", "piste.character.skeleton",
+    "piste.character.strips",
+)
+
+
+def _strict_patterns() -> list[str]:
+    import tomllib
+
+    conf = tomllib.loads(PYPROJECT.read_text())["tool"]["mypy"]
+    out = []
+    for o in conf.get("overrides", []):
+        if o.get("disallow_untyped_defs") and o.get("check_untyped_defs") and "arg-type" in o.get("enable_error_code", ()):
+            mods = o["module"]
+            out += [mods] if isinstance(mods, str) else list(mods)
+    return out
+
+
+def _is_strict(module: str, patterns: list[str]) -> bool:
+    # mypy's rules: "a.b" names one module, "a.b.*" the package a.b and everything under it
+    return any(module == p or (p.endswith(".*") and (module == p[:-2] or module.startswith(p[:-1])))
+               for p in patterns)
+
+
+def test_the_strict_list_covers_the_typed_packages():
+    """Every module of the typed packages is under the strict mypy settings (so the list cannot
+    silently shrink, and a new module in a typed package is checked from its first commit)."""
+    patterns = _strict_patterns()
+    src = ROOT / "src"
+    missing = []
+    for name in STRICT_REQUIRED:
+        base = src / name.replace(".", "/")
+        files = sorted(base.rglob("*.py")) if base.is_dir() else [base.with_suffix(".py")]
+        assert files and files[0].exists(), f"{name}: no such module or package under src/"
+        for f in files:
+            mod = ".".join(f.relative_to(src).with_suffix("").parts).removesuffix(".__init__")
+            if not _is_strict(mod, patterns):
+                missing.append(mod)
+    assert not missing, ("modules of the typed packages left out of pyproject.toml's strict [[tool.mypy.overrides]] "
+                         f"(disallow_untyped_defs, check_untyped_defs, the codes re-enabled): {missing}")
+
+
+def test_the_strict_settings_can_fail(tmp_path):
+    """An unannotated function is reported under the strict override (the same settings as a module
+    of the typed API), and passes under the lenient global ones."""
+    import tomllib
+
+    conf = tomllib.loads(PYPROJECT.read_text())["tool"]["mypy"]
+    strict = next(o for o in conf["overrides"] if "piste.world.*" in o["module"])
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "pkg" / "__init__.py").write_text("")
+    (tmp_path / "pkg" / "mod.py").write_text("def f(a, b=1):\n    return a + b\n")
+    lines = ["[mypy]", "ignore_missing_imports = True",
+             f"disable_error_code = {', '.join(conf['disable_error_code'])}", "", "[mypy-pkg.*]"]
+    for k, v in strict.items():
+        if k != "module":
+            lines.append(f"{k} = {', '.join(v) if isinstance(v, list) else str(v)}")
+    cfg = tmp_path / "mypy.ini"
+    cfg.write_text("\n".join(lines) + "\n")
+    r = _run([*_tool("mypy"), "--config-file", str(cfg), "--no-incremental", str(tmp_path / "pkg")])
+    assert r.returncode == 1 and "[no-untyped-def]" in r.stdout, r.stdout + r.stderr
+    cfg.write_text("\n".join(lines[:3]) + "\n")
+    r = _run([*_tool("mypy"), "--config-file", str(cfg), "--no-incremental", str(tmp_path / "pkg")])
+    assert r.returncode == 0, r.stdout + r.stderr

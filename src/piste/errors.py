@@ -7,6 +7,7 @@ message names the file, the field and what was expected.
 from __future__ import annotations
 
 import errno
+import os
 
 
 class PisteError(Exception):
@@ -16,7 +17,8 @@ class PisteError(Exception):
 class FormatError(PisteError):
     """A file could not be read: names the file, the line or field, and what was expected."""
 
-    def __init__(self, path, message: str, line: int | None = None, field: str | None = None):
+    def __init__(self, path: str | os.PathLike[str] | None, message: str, line: int | None = None,
+                 field: str | None = None) -> None:
         self.path = str(path) if path is not None else None
         self.line = line
         self.field = field
@@ -46,7 +48,7 @@ class MissingExtraError(PisteError):
     The CLI prints ``piste demo needs the 'gl' extra: pip install 'piste[gl]'``.
     """
 
-    def __init__(self, extra: str, feature: str, module: str):
+    def __init__(self, extra: str, feature: str, module: str) -> None:
         self.extra = extra
         self.feature = feature
         self.module = module
@@ -58,12 +60,12 @@ class OutputError(PisteError):
 
     Partial files are removed before it is raised (see :mod:`piste.formats.atomic`)."""
 
-    def __init__(self, path, message: str):
+    def __init__(self, path: str | os.PathLike[str] | None, message: str) -> None:
         self.path = str(path) if path is not None else None
         super().__init__(f"{self.path or '<output>'}: {message}")
 
 
-def describe_os_error(exc: OSError, path=None) -> str:
+def describe_os_error(exc: OSError, path: str | os.PathLike[str] | None = None) -> str:
     """One line for an OSError: the path it concerns and the system's reason (no traceback)."""
     where = path if path is not None else exc.filename
     reason = exc.strerror or str(exc) or type(exc).__name__

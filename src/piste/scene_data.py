@@ -26,7 +26,9 @@ API
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field, fields, replace
+from typing import Any
 
 import numpy as np
 
@@ -62,7 +64,7 @@ class Camera:
     ortho_height: float | None = None
     name: str = ""
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.eye = np.asarray(self.eye, dtype=np.float64).reshape(3)
         self.target = np.asarray(self.target, dtype=np.float64).reshape(3)
         self.up = np.asarray(self.up, dtype=np.float64).reshape(3)
@@ -101,7 +103,7 @@ MAX_LIGHT_VALUE = 1e6
 MAX_COORDINATE = 1e9
 
 
-def _vec3(value, what: str, limit: float = MAX_COORDINATE) -> tuple[float, float, float]:
+def _vec3(value: Any, what: str, limit: float = MAX_COORDINATE) -> tuple[float, float, float]:
     try:
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
@@ -113,7 +115,7 @@ def _vec3(value, what: str, limit: float = MAX_COORDINATE) -> tuple[float, float
     return (float(arr[0]), float(arr[1]), float(arr[2]))
 
 
-def _unit(value, what: str) -> tuple[float, float, float]:
+def _unit(value: Any, what: str) -> tuple[float, float, float]:
     v = np.asarray(_vec3(value, what))
     length = float(np.sqrt(v @ v))
     if length <= 0.0:
@@ -123,7 +125,7 @@ def _unit(value, what: str) -> tuple[float, float, float]:
     return (float(v[0]), float(v[1]), float(v[2]))
 
 
-def _finite(value, what: str, limit: float = math.inf) -> float:
+def _finite(value: Any, what: str, limit: float = math.inf) -> float:
     if isinstance(value, (str, bytes)):  # float("1e3") would pass: a light file gives numbers
         raise ValidationError(f"{what}: expected a number, got {value!r}")
     try:
@@ -137,14 +139,14 @@ def _finite(value, what: str, limit: float = math.inf) -> float:
     return x
 
 
-def _range(value, what: str) -> float:
+def _range(value: Any, what: str) -> float:
     x = float(value) if isinstance(value, (int, float)) else _finite(value, what)
     if not x > 0.0:  # also rejects NaN
         raise ValidationError(f"{what}: expected range > 0 (inf for none), got {value!r}")
     return x
 
 
-def _falloff(value, what: str) -> float:
+def _falloff(value: Any, what: str) -> float:
     x = _finite(value, what)
     if x < 0.0:
         raise ValidationError(f"{what}: expected falloff >= 0, got {value!r}")
@@ -163,7 +165,7 @@ _FIELD_CHECKS = (
 )
 
 
-def _check_fields(light, kind: str) -> str:
+def _check_fields(light: Any, kind: str) -> str:
     """Check and normalise the fields ``light`` (a frozen light) has, naming ``"<kind> light 'name'
     <field>"`` in a ValidationError; returns that ``"<kind> light 'name'"`` prefix."""
     w = f"{kind} light {light.name!r}"
@@ -182,7 +184,7 @@ class AmbientLight:
     intensity: float = 1.0
     name: str = ""
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         _check_fields(self, "ambient")
 
 
@@ -197,7 +199,7 @@ class DirectionalLight:
     shadows: bool = True
     name: str = ""
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         _check_fields(self, "directional")
 
 
@@ -214,7 +216,7 @@ class PointLight:
     shadows: bool = True
     name: str = ""
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         _check_fields(self, "point")
 
 
@@ -236,7 +238,7 @@ class SpotLight:
     shadows: bool = True
     name: str = ""
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         w = _check_fields(self, "spot")
         inner = _finite(self.inner_angle, f"{w} inner_angle")
         outer = _finite(self.outer_angle, f"{w} outer_angle")
@@ -250,6 +252,8 @@ class SpotLight:
 
 LIGHT_KINDS = {"ambient": AmbientLight, "directional": DirectionalLight, "point": PointLight, "spot": SpotLight}
 KIND_OF_LIGHT = {cls: kind for kind, cls in LIGHT_KINDS.items()}
+#: any one light of the family
+AnyLight = AmbientLight | DirectionalLight | PointLight | SpotLight
 
 
 @dataclass(frozen=True)
@@ -264,7 +268,7 @@ class Lights:
     lights: tuple = field(default_factory=tuple)
     name: str = "lights"
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         lights = tuple(self.lights)
         for i, light in enumerate(lights):
             if type(light) not in KIND_OF_LIGHT:
@@ -274,7 +278,7 @@ class Lights:
         lights = tuple(sorted(lights, key=lambda x: rank[type(x)]))
         object.__setattr__(self, "lights", lights)
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[AnyLight]:
         return iter(self.lights)
 
     def __len__(self) -> int:

@@ -17,6 +17,7 @@ compose_trs, decompose_trs, invert_affine, transform_points, transform_vectors, 
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ConfigError
 
@@ -45,7 +46,7 @@ __all__ = [
 ]
 
 
-def quat_identity(shape=()) -> np.ndarray:
+def quat_identity(shape: int | tuple[int, ...] = ()) -> np.ndarray:
     """Identity quaternions ``(*shape, 4) float64`` = (0, 0, 0, 1)."""
     shape = (shape,) if isinstance(shape, (int, np.integer)) else tuple(shape)
     q = np.zeros(shape + (4,), dtype=np.float64)
@@ -53,7 +54,7 @@ def quat_identity(shape=()) -> np.ndarray:
     return q
 
 
-def quat_normalize(q) -> np.ndarray:
+def quat_normalize(q: npt.ArrayLike) -> np.ndarray:
     """Unit quaternions ``(..., 4)``; zero quaternions become the identity."""
     q = np.asarray(q, dtype=np.float64)
     n = np.linalg.norm(q, axis=-1, keepdims=True)
@@ -64,7 +65,7 @@ def quat_normalize(q) -> np.ndarray:
     return out
 
 
-def quat_multiply(a, b) -> np.ndarray:
+def quat_multiply(a: npt.ArrayLike, b: npt.ArrayLike) -> np.ndarray:
     """Hamilton product ``a * b`` ``(..., 4)`` (applies ``b`` first, then ``a``)."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
@@ -81,14 +82,14 @@ def quat_multiply(a, b) -> np.ndarray:
     )
 
 
-def quat_conjugate(q) -> np.ndarray:
+def quat_conjugate(q: npt.ArrayLike) -> np.ndarray:
     """Conjugate (= inverse for unit quaternions) ``(..., 4)``."""
     q = np.array(q, dtype=np.float64, copy=True)
     q[..., :3] *= -1.0
     return q
 
 
-def quat_rotate(q, v) -> np.ndarray:
+def quat_rotate(q: npt.ArrayLike, v: npt.ArrayLike) -> np.ndarray:
     """Rotate vectors ``v (..., 3)`` by unit quaternions ``q (..., 4)``."""
     q = np.asarray(q, dtype=np.float64)
     v = np.asarray(v, dtype=np.float64)
@@ -98,13 +99,13 @@ def quat_rotate(q, v) -> np.ndarray:
     return v + w * t + np.cross(u, t)
 
 
-def quat_angle(a, b) -> np.ndarray:
+def quat_angle(a: npt.ArrayLike, b: npt.ArrayLike) -> np.ndarray:
     """Rotation angle in radians ``(...,)`` between unit quaternions ``a`` and ``b``."""
     d = np.abs(np.sum(np.asarray(a, np.float64) * np.asarray(b, np.float64), axis=-1))
     return 2.0 * np.arccos(np.clip(d, 0.0, 1.0))
 
 
-def quat_nlerp(a, b, t) -> np.ndarray:
+def quat_nlerp(a: npt.ArrayLike, b: npt.ArrayLike, t: npt.ArrayLike) -> np.ndarray:
     """Normalised linear interpolation along the shortest arc; ``t`` broadcasts as ``(...,)``."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
@@ -113,7 +114,7 @@ def quat_nlerp(a, b, t) -> np.ndarray:
     return quat_normalize(a * (1.0 - t) + b * sign * t)
 
 
-def quat_slerp(a, b, t) -> np.ndarray:
+def quat_slerp(a: npt.ArrayLike, b: npt.ArrayLike, t: npt.ArrayLike) -> np.ndarray:
     """Spherical linear interpolation along the shortest arc.
 
     ``a, b (..., 4)`` unit quaternions, ``t`` broadcastable to ``(...,)``. Falls back to nlerp for
@@ -134,7 +135,7 @@ def quat_slerp(a, b, t) -> np.ndarray:
     return quat_normalize(wa * a + wb * b)
 
 
-def quat_to_matrix(q) -> np.ndarray:
+def quat_to_matrix(q: npt.ArrayLike) -> np.ndarray:
     """Rotation matrices ``(..., 3, 3) float64`` of quaternions ``(..., 4)`` (normalised first)."""
     q = quat_normalize(q)
     x, y, z, w = np.moveaxis(q, -1, 0)
@@ -154,7 +155,7 @@ def quat_to_matrix(q) -> np.ndarray:
     return m
 
 
-def matrix_to_quat(m) -> np.ndarray:
+def matrix_to_quat(m: npt.ArrayLike) -> np.ndarray:
     """Unit quaternions ``(..., 4)`` (w >= 0) of rotation matrices ``(..., 3, 3)`` (or 4x4).
 
     Uses the numerically stable branch on the largest of (trace, diagonal) per matrix, vectorised.
@@ -185,12 +186,12 @@ def matrix_to_quat(m) -> np.ndarray:
 
 
 
-def look_rotation(forward, up, fallback=(1.0, 0.0, 0.0)) -> list:
+def look_rotation(forward: npt.ArrayLike, up: npt.ArrayLike, fallback: tuple[float, float, float] = (1.0, 0.0, 0.0)) -> list[float]:
     """Rotation ``[x, y, z, w]`` (unit) whose -Z axis is ``forward`` and +Y is (nearly) ``up``: the
     orientation glTF gives cameras and lights.  Where ``forward`` is parallel to ``up``, the right
     axis comes from ``forward`` x ``fallback`` instead (or x +X when ``forward`` is near +-X)."""
     f = np.asarray(forward, dtype=np.float64)
-    f = f / max(np.linalg.norm(f), 1e-300)
+    f = f / max(float(np.linalg.norm(f)), 1e-300)
     r = np.cross(f, np.asarray(up, dtype=np.float64))
     if np.linalg.norm(r) < 1e-9:
         r = np.cross(f, [1.0, 0.0, 0.0] if abs(f[0]) < 0.9 else list(fallback))
@@ -200,7 +201,7 @@ def look_rotation(forward, up, fallback=(1.0, 0.0, 0.0)) -> list:
     q = matrix_to_quat(m)
     return [float(x) for x in q / np.linalg.norm(q)]
 
-def translation_matrix(t) -> np.ndarray:
+def translation_matrix(t: npt.ArrayLike) -> np.ndarray:
     """``(..., 4, 4)`` translation matrices of ``t (..., 3)``."""
     t = np.asarray(t, dtype=np.float64)
     m = np.zeros(t.shape[:-1] + (4, 4), dtype=np.float64)
@@ -209,7 +210,7 @@ def translation_matrix(t) -> np.ndarray:
     return m
 
 
-def compose_trs(t, r, s) -> np.ndarray:
+def compose_trs(t: npt.ArrayLike, r: npt.ArrayLike, s: npt.ArrayLike) -> np.ndarray:
     """``T @ R @ S`` as ``(..., 4, 4) float64`` from ``t (..., 3)``, ``r (..., 4)`` xyzw, ``s (..., 3)``."""
     t = np.asarray(t, dtype=np.float64)
     s = np.asarray(s, dtype=np.float64)
@@ -222,7 +223,7 @@ def compose_trs(t, r, s) -> np.ndarray:
     return m
 
 
-def decompose_trs(m):
+def decompose_trs(m: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Split affine matrices ``(..., 4, 4)`` into ``(t (...,3), r (...,4) xyzw, s (...,3))``.
 
     Shear is dropped; a negative determinant flips the sign of the x scale.
@@ -238,7 +239,7 @@ def decompose_trs(m):
     return t, r, s
 
 
-def invert_affine(m) -> np.ndarray:
+def invert_affine(m: npt.ArrayLike) -> np.ndarray:
     """Inverse of affine matrices ``(..., 4, 4)`` (general 3x3 part, last row 0 0 0 1)."""
     m = np.asarray(m, dtype=np.float64)
     a = np.linalg.inv(m[..., :3, :3])
@@ -249,7 +250,7 @@ def invert_affine(m) -> np.ndarray:
     return out
 
 
-def transform_points(m, p) -> np.ndarray:
+def transform_points(m: npt.ArrayLike, p: npt.ArrayLike) -> np.ndarray:
     """Apply ``m (4, 4)`` (or ``(..., 4, 4)`` broadcasting against ``p``) to points ``p (..., 3)``."""
     m = np.asarray(m)
     p = np.asarray(p)
@@ -258,7 +259,7 @@ def transform_points(m, p) -> np.ndarray:
     return np.einsum("...ij,...j->...i", m[..., :3, :3], p) + m[..., :3, 3]
 
 
-def transform_vectors(m, v) -> np.ndarray:
+def transform_vectors(m: npt.ArrayLike, v: npt.ArrayLike) -> np.ndarray:
     """Apply the 3x3 part of ``m`` to direction vectors ``v (..., 3)`` (no translation)."""
     m = np.asarray(m)
     v = np.asarray(v)
@@ -268,7 +269,7 @@ def transform_vectors(m, v) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ cameras and frusta
-def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+def look_at(eye: npt.ArrayLike, target: npt.ArrayLike, up: npt.ArrayLike = (0.0, 0.0, 1.0)) -> np.ndarray:
     """View matrix ``(4, 4) float64`` of a camera at ``eye`` looking at ``target``."""
     eye = np.asarray(eye, dtype=np.float64)
     f = np.asarray(target, dtype=np.float64) - eye
@@ -304,7 +305,7 @@ def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.
     return m
 
 
-def orthographic(left, right, bottom, top, near, far) -> np.ndarray:
+def orthographic(left: float, right: float, bottom: float, top: float, near: float, far: float) -> np.ndarray:
     """OpenGL orthographic projection ``(4, 4) float64``."""
     m = np.eye(4)
     m[0, 0] = 2.0 / (right - left)
@@ -316,7 +317,7 @@ def orthographic(left, right, bottom, top, near, far) -> np.ndarray:
     return m
 
 
-def frustum_planes(view_projection) -> np.ndarray:
+def frustum_planes(view_projection: npt.ArrayLike) -> np.ndarray:
     """The six planes (left, right, bottom, top, near, far) of a view frustum.
 
     Returns ``(6, 4) float64`` rows ``(a, b, c, d)`` with unit normals pointing into the frustum:

@@ -16,10 +16,13 @@ API
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+import numpy.typing as npt
 
+from piste.character.model import SkinnedMesh
 from piste.character.palette import Palette, palette as make_palette
 from piste.errors import ConfigError
 
@@ -34,7 +37,7 @@ class LOD:
     the weight ``step`` of its palette and meshoptimizer's relative ``error`` (0 for the original)."""
 
     name: str
-    mesh: object
+    mesh: SkinnedMesh
     palette: Palette
     ratio: float
     step: float
@@ -49,13 +52,16 @@ class LOD:
         return self.palette.size
 
 
-def compact_mesh(mesh, indices):
+def compact_mesh(mesh: SkinnedMesh, indices: npt.ArrayLike) -> SkinnedMesh:
     """A copy of ``mesh`` with triangles ``indices (t, 3)`` and only the vertices they use (all
     per-vertex attributes, including morph deltas, follow their vertex)."""
     idx = np.asarray(indices, dtype=np.int64).reshape(-1, 3)
     used = np.unique(idx)
     remap = np.full(mesh.n_vertices, -1, np.int64)
     remap[used] = np.arange(used.size)
+    # SkinnedMesh.__post_init__ fills every optional per-vertex array
+    assert mesh.normals is not None and mesh.uv is not None and mesh.joints is not None and mesh.weights is not None
+    assert mesh.morph_positions is not None and mesh.morph_normals is not None
     return replace(
         mesh,
         positions=mesh.positions[used],
@@ -70,8 +76,8 @@ def compact_mesh(mesh, indices):
     )
 
 
-def simplify_mesh(mesh, target_triangles: int, target_error: float = 0.05, lock_border: bool = False,
-                  weld: bool = True):
+def simplify_mesh(mesh: SkinnedMesh, target_triangles: int, target_error: float = 0.05, lock_border: bool = False,
+                  weld: bool = True) -> tuple[SkinnedMesh, float]:
     """Simplify ``mesh`` to about ``target_triangles`` with meshoptimizer (indices only), then
     compact the vertices. Returns ``(mesh, error)`` where ``error`` is meshoptimizer's relative
     error (fraction of the mesh extent).
@@ -106,14 +112,12 @@ def simplify_mesh(mesh, target_triangles: int, target_error: float = 0.05, lock_
     return compact_mesh(mesh, tris), float(err[0])
 
 
-def make_lods(mesh, ratios=(1.0, 0.5, 0.25), steps=(0.1, 0.2, 0.25), max_bones: int = 3,
-              target_error: float = 0.05, names=LOD_NAMES) -> list:
+def make_lods(mesh: SkinnedMesh, ratios: Sequence[float] = (1.0, 0.5, 0.25), steps: float | Sequence[float] = (0.1, 0.2, 0.25),
+              max_bones: int = 3, target_error: float = 0.05, names: Sequence[str] = LOD_NAMES) -> list[LOD]:
     """High / medium / low levels of ``mesh``: triangle ``ratios`` of the original, each with its
     own palette at the matching weight ``step`` (a float applies to every level)."""
     ratios = list(ratios)
-    if np.isscalar(steps):
-        steps = [float(steps)] * len(ratios)
-    steps = list(steps)
+    steps = [float(steps)] * len(ratios) if isinstance(steps, (int, float)) else list(steps)
     if len(steps) != len(ratios):
         raise ConfigError(f"need one weight step per LOD ratio, got {len(steps)} steps for {len(ratios)} ratios")
     names = list(names) + [f"lod{i}" for i in range(len(names), len(ratios))]

@@ -28,9 +28,12 @@ Quantization rule (largest remainder)
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
+from piste.character.model import SkinnedMesh
 from piste.errors import ConfigError, ValidationError
 
 __all__ = ["Palette", "palette", "quantize_weights", "step_units"]
@@ -50,13 +53,13 @@ def step_units(step: float) -> int:
     return n
 
 
-def _check_max_bones(max_bones) -> int:
+def _check_max_bones(max_bones: Any) -> int:
     if int(max_bones) != max_bones or int(max_bones) < 1:
         raise ConfigError(f"max_bones must be a positive integer, got {max_bones!r}")
     return int(max_bones)
 
 
-def _top_weights(joints, weights, max_bones):
+def _top_weights(joints: npt.ArrayLike, weights: npt.ArrayLike, max_bones: int) -> tuple[np.ndarray, np.ndarray]:
     """Merge duplicate joints, keep the ``max_bones`` largest, renormalise.
 
     Returns ``bones (v,k) int32`` and ``w (v,k) float64`` sorted by weight, descending, with
@@ -91,7 +94,8 @@ def _top_weights(joints, weights, max_bones):
     return bones, w
 
 
-def quantize_weights(joints, weights, step: float = 0.25, max_bones: int = 3):
+def quantize_weights(joints: npt.ArrayLike, weights: npt.ArrayLike, step: float = 0.25,
+                     max_bones: int = 3) -> tuple[np.ndarray, np.ndarray]:
     """Quantize skin weights to multiples of ``step`` with at most ``max_bones`` bones.
 
     Parameters
@@ -160,11 +164,11 @@ class Palette:
         """Bones actually used by each entry ``(p,) int32``."""
         return (self.units > 0).sum(1).astype(np.int32)
 
-    def vertex_weights(self):
+    def vertex_weights(self) -> tuple[np.ndarray, np.ndarray]:
         """Per-vertex quantized influences: ``bones (v,k) int32``, ``weights (v,k) float32``."""
         return self.bones[self.index], self.weights[self.index]
 
-    def matrices(self, bone_matrices, out=None) -> np.ndarray:
+    def matrices(self, bone_matrices: npt.ArrayLike, out: np.ndarray | None = None) -> np.ndarray:
         """Blend the palette for one frame: ``(p, 3, 4) float32``, the top three rows of
         ``sum_i w_i * bone_matrices[bone_i]``.
 
@@ -186,7 +190,7 @@ class Palette:
         return out
 
 
-def palette(mesh, step: float = 0.25, max_bones: int = 3) -> Palette:
+def palette(mesh: SkinnedMesh, step: float = 0.25, max_bones: int = 3) -> Palette:
     """Build the blended-matrix palette of a skinned mesh.
 
     ``mesh`` needs ``joints (v,4)`` and ``weights (v,4)`` (a :class:`SkinnedMesh`); see the module
@@ -194,6 +198,7 @@ def palette(mesh, step: float = 0.25, max_bones: int = 3) -> Palette:
     per frame (CesiumMan: 269 / 130 / 94 at step 0.1 / 0.2 / 0.25 with 3 bones).
     """
     n = step_units(step)
+    assert mesh.joints is not None and mesh.weights is not None  # SkinnedMesh.__post_init__ fills both
     bones, units = quantize_weights(mesh.joints, mesh.weights, step, max_bones)
     v, k = bones.shape
     used = units > 0

@@ -22,7 +22,7 @@ class Pose:
     rotation: np.ndarray
     scale: np.ndarray
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.translation = np.asarray(self.translation, dtype=np.float64).reshape(-1, 3)
         self.rotation = np.asarray(self.rotation, dtype=np.float64).reshape(-1, 4)
         self.scale = np.asarray(self.scale, dtype=np.float64).reshape(-1, 3)

@@ -11,13 +11,14 @@ code (compression, retargeting) share them.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ValidationError
 
 __all__ = ["topological_order", "depth_levels", "world_from_local", "bone_depths"]
 
 
-def bone_depths(parents) -> np.ndarray:
+def bone_depths(parents: npt.ArrayLike) -> np.ndarray:
     """Depth of each bone ``(b,) int32`` (roots 0). Raises ValidationError on cycles."""
     parents = np.asarray(parents, dtype=np.int64)
     b = parents.shape[0]
@@ -32,7 +33,7 @@ def bone_depths(parents) -> np.ndarray:
     raise ValidationError("bone hierarchy has a cycle (a bone is its own ancestor)")
 
 
-def topological_order(parents) -> np.ndarray:
+def topological_order(parents: np.ndarray) -> np.ndarray:
     """Permutation ``(b,) int64`` listing bones so that every parent precedes its children.
 
     Stable: bones of equal depth keep their relative order.
@@ -40,7 +41,7 @@ def topological_order(parents) -> np.ndarray:
     return np.argsort(bone_depths(parents), kind="stable")
 
 
-def depth_levels(parents) -> list[np.ndarray]:
+def depth_levels(parents: np.ndarray) -> list[np.ndarray]:
     """Bone indices per depth level, ``[(n_0,), (n_1,), ...] int64``, roots first."""
     d = bone_depths(parents)
     if d.size == 0:
@@ -48,7 +49,7 @@ def depth_levels(parents) -> list[np.ndarray]:
     return [np.flatnonzero(d == k) for k in range(int(d.max()) + 1)]
 
 
-def world_from_local(local, parents, levels=None) -> np.ndarray:
+def world_from_local(local: npt.ArrayLike, parents: npt.ArrayLike, levels: list[np.ndarray] | None = None) -> np.ndarray:
     """World matrices ``(..., b, 4, 4)`` from local matrices ``(..., b, 4, 4)``.
 
     ``world[i] = world[parents[i]] @ local[i]`` for all bones of one depth level in one batched

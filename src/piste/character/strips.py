@@ -22,7 +22,11 @@ API
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ConfigError, ValidationError
 
@@ -33,7 +37,7 @@ JOINS = ("restart", "degenerate", None)
 METHODS = ("greedy", "meshopt")
 
 
-def _as_triangles(triangles) -> np.ndarray:
+def _as_triangles(triangles: npt.ArrayLike) -> np.ndarray:
     t = np.asarray(triangles)
     if t.ndim != 2 or t.shape[1] != 3:
         t = t.reshape(-1, 3)
@@ -57,20 +61,20 @@ def _greedy_strips(tris: np.ndarray) -> list:
     odd one). Construction-time code: a Python loop over triangles of one batch or mesh.
     """
     n = tris.shape[0]
-    edge = {}
+    edge: dict[tuple[int, int], list[int]] = {}
     for t in range(n):
         a, b, c = (int(x) for x in tris[t])
         for e in ((a, b), (b, c), (c, a)):
             edge.setdefault(e, []).append(t)
     used = np.zeros(n, bool)
 
-    def find(a, b):
+    def find(a: int, b: int) -> int:
         for t in edge.get((a, b), ()):
             if not used[t]:
                 return t
         return -1
 
-    def grow(seq, taken):
+    def grow(seq: list[int], taken: set[int]) -> tuple[list[int], set[int]]:
         # seq: list of vertices; taken: triangles claimed by this trial (set)
         while True:
             i = len(seq) - 3 + 1  # index of the next triangle
@@ -93,11 +97,12 @@ def _greedy_strips(tris: np.ndarray) -> list:
         if used[start]:
             continue
         a, b, c = (int(x) for x in tris[start])
-        best = None
+        best: tuple[list[int], set[int]] | None = None
         for rot in ((a, b, c), (b, c, a), (c, a, b)):
             seq, taken = grow(list(rot), {start})
             if best is None or len(seq) > len(best[0]):
                 best = (seq, taken)
+        assert best is not None
         seq, taken = best
         used[list(taken)] = True
         strips.append(np.array(seq, dtype=np.int64))
@@ -158,7 +163,8 @@ def _join(strips: list, join: str) -> np.ndarray:
     return np.concatenate(parts)
 
 
-def stripify(triangles, join: str | None = "restart", method: str = "greedy"):
+def stripify(triangles: npt.ArrayLike, join: str | None = "restart",
+             method: str = "greedy") -> np.ndarray | list[np.ndarray]:
     """Turn ``triangles (t, 3)`` into triangle strips that keep every triangle's winding.
 
     Parameters
@@ -192,7 +198,7 @@ def stripify(triangles, join: str | None = "restart", method: str = "greedy"):
     return _join(strips, join)
 
 
-def unstripify(strip) -> np.ndarray:
+def unstripify(strip: npt.ArrayLike | Sequence[npt.ArrayLike]) -> np.ndarray:
     """Triangles ``(t, 3) int64`` of a strip (``RESTART`` markers split it; parity restarts after
     each; triangles with a repeated index are dropped). Accepts a list of strips too."""
     if isinstance(strip, (list, tuple)) and strip and not np.isscalar(strip[0]):
@@ -213,7 +219,7 @@ def unstripify(strip) -> np.ndarray:
     return _nondegenerate(tri)
 
 
-def canonical_triangles(triangles) -> np.ndarray:
+def canonical_triangles(triangles: np.ndarray) -> np.ndarray:
     """Triangles rotated so the smallest index comes first (winding kept), sorted: two lists
     describe the same oriented triangles iff their canonical forms are equal."""
     t = _nondegenerate(_as_triangles(triangles))
@@ -225,7 +231,7 @@ def canonical_triangles(triangles) -> np.ndarray:
     return t[np.lexsort(t.T[::-1])]
 
 
-def strip_stats(triangles, strip) -> dict:
+def strip_stats(triangles: np.ndarray, strip: npt.ArrayLike | Sequence[npt.ArrayLike]) -> dict[str, Any]:
     """Figures for one strip sequence of ``triangles``.
 
     Returns a dict with ``triangles``, ``strips`` (runs between restart markers; 1 for a

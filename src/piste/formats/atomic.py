@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 from piste.errors import OutputError, describe_os_error
@@ -26,7 +27,7 @@ def _output_error(path: Path, exc: OSError) -> OutputError:
 
 
 @contextlib.contextmanager
-def atomic_path(path):
+def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary path in the target's folder; on success rename it over ``path``.
 
     On an exception the temporary file is removed and ``path`` is left untouched, so a reader
@@ -62,13 +63,13 @@ def atomic_path(path):
         raise
 
 
-def write_bytes_atomic(path, data: bytes) -> None:
+def write_bytes_atomic(path: str | os.PathLike[str], data: bytes) -> None:
     """Write ``data`` to ``path`` atomically (OutputError naming ``path`` on failure)."""
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
 
 
-def check_writable_folder(folder) -> Path:
+def check_writable_folder(folder: str | os.PathLike[str]) -> Path:
     """Create ``folder`` (and its parents) and check a file can be made in it, before a long
     computation whose result would go there; OutputError naming the folder otherwise."""
     folder = Path(folder)

@@ -10,9 +10,13 @@ Layout::
 
 from __future__ import annotations
 
+import os
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import FormatError
 from piste.formats import limits, safe_io
@@ -27,7 +31,7 @@ _MIN_PATCH_BYTES = 4 + 16 * 6  # "3 3\n" and 16 lines of "0 0 0\n"
 MAX_BPT_COORDINATE = 1e8
 
 
-def read_bpt(path) -> np.ndarray:
+def read_bpt(path: str | os.PathLike[str]) -> np.ndarray:
     """Read a ``.bpt`` file.
 
     Returns
@@ -51,7 +55,8 @@ def read_bpt(path) -> np.ndarray:
         raise FormatError(path, "empty file: expected a patch count", line=1)
     it = iter(lines)
 
-    def numbers(expected: int, what: str, conv=float, limit: float | None = None):
+    def numbers(expected: int, what: str, conv: Callable[[str], Any] = float,
+                limit: float | None = None) -> tuple[int, list[Any]]:
         try:
             no, parts = next(it)
         except StopIteration:
@@ -89,7 +94,7 @@ def read_bpt(path) -> np.ndarray:
     return cp.reshape(count, 4, 4, 3)
 
 
-def write_bpt(path, control_points) -> None:
+def write_bpt(path: str | os.PathLike[str], control_points: npt.ArrayLike) -> None:
     """Write ``(n, 4, 4, 3)`` control points as a ``.bpt`` file (atomically)."""
     cp = np.asarray(control_points, dtype=np.float64).reshape(-1, 16, 3)
     out = [str(len(cp))]

@@ -16,6 +16,8 @@ MAX_MEMBER_BYTES, MAX_BUNDLE_BYTES
 from __future__ import annotations
 
 import math
+import os
+from typing import Any
 
 from piste.errors import FormatError
 
@@ -31,15 +33,19 @@ NUM, POSNUM, UINT, POS, STR, BOOL, ANY = "number", "number > 0", "integer >= 0",
 NUM_OR_NULL, STR_OR_NULL = "number or null", "string or null"
 
 
-def arr(item, n=None):
+#: a schema: a kind name (NUM, STR, ...) or a nested ("array" | "object" | "map", ...) tuple
+Schema = Any
+
+
+def arr(item: Schema, n: int | None = None) -> tuple[str, Schema, int | None]:
     return ("array", item, n)
 
 
-def obj(**fields):
+def obj(**fields: Schema) -> tuple[str, dict[str, Schema]]:
     return ("object", fields)
 
 
-def mapping(item):
+def mapping(item: Schema) -> tuple[str, Schema]:
     return ("map", item)
 
 
@@ -65,12 +71,12 @@ SCHEMA = obj(
 )
 
 
-def _short(v) -> str:
+def _short(v: Any) -> str:
     s = repr(v)
     return s if len(s) <= 60 else s[:50] + "...'"
 
 
-def _ok(kind, v) -> bool:
+def _ok(kind: str, v: Any) -> bool:
     if kind == ANY:
         return True
     if kind == STR:
@@ -90,10 +96,10 @@ def _ok(kind, v) -> bool:
     return isinstance(v, int) and (v >= 0 if kind == UINT else v >= 1) and v <= MAX_COUNT
 
 
-def check_manifest(man, path) -> None:
+def check_manifest(man: Any, path: str | os.PathLike[str]) -> None:
     """Raise FormatError (naming ``path`` and the manifest field) on the first field of the wrong
     type or an absurd size; also bounds each member's and the total declared array bytes."""
-    stack = [(SCHEMA, man, "")]
+    stack: list[tuple[Schema, Any, str]] = [(SCHEMA, man, "")]
     while stack:  # iterative and linear in the manifest's size
         schema, v, fld = stack.pop()
         where = f"manifest.json: {fld}" if fld else "manifest.json"

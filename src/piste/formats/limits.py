@@ -15,6 +15,9 @@ MAX_GLTF_ITEMS, MAX_GLTF_NODES, MAX_GLTF_OBJECTS, MAX_GLTF_VALUES, MAX_GLTF_JSON
 
 from __future__ import annotations
 
+import os
+from typing import Any
+
 from piste.errors import FormatError
 
 __all__ = ["check_count", "MAX_GLTF_ITEMS", "MAX_GLTF_NODES", "MAX_GLTF_OBJECTS", "MAX_GLTF_VALUES",
@@ -38,7 +41,7 @@ MAX_PATCHES = 1 << 20
 MAX_HEIGHTFIELD_SAMPLES = 1 << 24
 
 
-def check_count(path, field: str, n, limit: int, min_bytes_each: int = 0, available: int | None = None) -> int:
+def check_count(path: str | os.PathLike[str], field: str, n: Any, limit: int, min_bytes_each: int = 0, available: int | None = None) -> int:
     """``n`` as an int after checking ``0 <= n <= limit`` and, when ``available`` bytes remain in the
     file, that ``n`` records of at least ``min_bytes_each`` bytes fit in them."""
     if isinstance(n, bool) or not isinstance(n, int) or n < 0:

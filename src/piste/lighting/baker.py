@@ -33,7 +33,9 @@ import os
 import shutil
 import stat
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -48,6 +50,7 @@ from piste.lighting.gi import (DEFAULT_ALBEDO, DEFAULT_GATHER_RAYS, TRACERS, Emb
 from piste.lighting.lights import Lights, default_lights, light_terms, shade
 from piste.lighting.sampling import strata_side
 from piste.lighting.shadows import shadow_visibility
+from piste.terrain.net import PatchNet
 from piste.workers import die_with_parent, kill_pool
 
 __all__ = [
@@ -117,16 +120,16 @@ def _bake_chunk(chunk: int) -> tuple[int, np.ndarray, dict]:
 
 # --------------------------------------------------------------------------- the bake
 def bake_lightmap(
-    net,
+    net: PatchNet,
     lights: Lights,
     res: int = 8,
     gutter: int = 1,
     shadows: bool = True,
     jobs: int = 1,
     chunk_size: int = 64,
-    partial_dir=None,
+    partial_dir: str | os.PathLike[str] | None = None,
     progress: bool = False,
-    on_chunk=None,
+    on_chunk: Callable[[int, int, int], None] | None = None,
     bounces: int = 0,
     sun_radius: float = 0.0,
     *,
@@ -364,7 +367,7 @@ def _reason(exc: BaseException) -> str:
     return str(exc) or type(exc).__name__
 
 
-def partial_usage(partial_dir) -> tuple[int, int]:
+def partial_usage(partial_dir: str | os.PathLike[str]) -> tuple[int, int]:
     """``(chunks, bytes)`` kept under ``partial_dir`` (a bake's ``.partial`` folder, every input's
     sub-folder): finished chunks (``chunk_NNNNN.npy``) and the bytes of every file there.  Links
     are not followed; a missing folder holds ``(0, 0)``."""
@@ -384,7 +387,7 @@ def partial_usage(partial_dir) -> tuple[int, int]:
     return chunks, size
 
 
-def clean_partials(partial_dir) -> tuple[int, int]:
+def clean_partials(partial_dir: str | os.PathLike[str]) -> tuple[int, int]:
     """Remove the resumable chunks under ``partial_dir`` (see :func:`partial_usage`); returns the
     ``(chunks, bytes)`` removed.  Only the baker's own files go (``chunk_*.npy`` / ``.json`` and
     their temporary files, then the emptied folders); anything else there is left, and a link
@@ -410,7 +413,7 @@ def clean_partials(partial_dir) -> tuple[int, int]:
     return removed_chunks, removed
 
 
-def kept_chunks_error(exc: BaseException, partial_dir, clean_command: str | None = None) -> BaseException:
+def kept_chunks_error(exc: BaseException, partial_dir: str | os.PathLike[str], clean_command: str | None = None) -> BaseException:
     """The error to raise for ``exc`` that stopped a bake (or the write after it) while finished
     chunks are kept under ``partial_dir``: an :class:`OutputError` naming the chunks' folder, their
     count and size, and how to resume or remove them (``clean_command``, the command that removes
@@ -434,7 +437,7 @@ def _remove_stale_partials(partial_dir: Path, key: str) -> None:
             shutil.rmtree(d, ignore_errors=True)
 
 
-def _json_safe(x):
+def _json_safe(x: Any) -> Any:
     """``inf`` (a light's unlimited range) as the string "inf", so the manifest is strict JSON."""
     if isinstance(x, dict):
         return {k: _json_safe(v) for k, v in x.items()}
@@ -475,7 +478,7 @@ def _png_bytes(image: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def write_lightmap(lm: LightMap, out_dir) -> dict:
+def write_lightmap(lm: LightMap, out_dir: str | os.PathLike[str]) -> dict:
     """Write ``lightmap.png`` (half-bright 8-bit), ``lightmap.npz`` (``atlas`` float32, ``rects``,
     ``res``, ``gutter``) and ``manifest.json`` into ``out_dir``, each atomically.
 
@@ -539,7 +542,7 @@ def _verify_sums(out: Path, mpath: Path, manifest: dict) -> None:
                                  "two bakes (an interrupted bake?); bake again")
 
 
-def load_lightmap(out_dir, verify: bool = True) -> LightMap:
+def load_lightmap(out_dir: str | os.PathLike[str], verify: bool = True) -> LightMap:
     """Read a light map written by :func:`write_lightmap` (float atlas from the .npz).
 
     ``verify``: check both files against the manifest's SHA-256 sums first (a folder whose bake
@@ -576,7 +579,7 @@ def load_lightmap(out_dir, verify: bool = True) -> LightMap:
 
 
 def load_or_bake_default_lightmap(
-    net, lights: Lights | None = None, res: int = 8, shadows: bool = True, *, cache_dir: str | os.PathLike,
+    net: PatchNet, lights: Lights | None = None, res: int = 8, shadows: bool = True, *, cache_dir: str | os.PathLike[str],
     jobs: int = 0, progress: bool = False,
 ) -> LightMap:
     """The light map of ``net`` (e.g. :func:`piste.world.course.default_course`) under ``lights`` (default:

@@ -47,9 +47,12 @@ penumbra: :mod:`piste.lighting.shadows`), visibility = the unoccluded fraction.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import MissingExtraError, ValidationError
 from piste.lighting.lightmap import sample_points
@@ -93,7 +96,7 @@ REAL_SUN_RADIUS = 0.27
 #: most bounces accepted
 MAX_BOUNCES = 16
 
-def direct_light(lights: Lights, positions, normals, shadow=None) -> np.ndarray:
+def direct_light(lights: Lights, positions: np.ndarray, normals: np.ndarray, shadow: npt.ArrayLike | None = None) -> np.ndarray:
     """The direct lights' part of the lighting equation (no ambient term, not clamped).
 
     positions, normals (k, 3); shadow None or (k, m) visibility -> (k, 3) float64."""
@@ -118,7 +121,7 @@ class EmbreeGather:
     :attr:`patch_chord`: how far each patch's triangles stray from it (callers lift ray origins by
     twice that: a ray leaving a concave surface would otherwise meet the chords above its origin)."""
 
-    def __init__(self, net, level: int = 16):
+    def __init__(self, net: PatchNet, level: int = 16) -> None:
         try:
             from embreex.mesh_construction import TriangleMesh
             from embreex.rtcore_scene import EmbreeScene
@@ -140,7 +143,7 @@ class EmbreeGather:
         self.scene = EmbreeScene()
         TriangleMesh(self.scene, np.ascontiguousarray(pos, dtype=np.float32), np.ascontiguousarray(self.tris, dtype=np.int32))
 
-    def hits(self, origins, directions):
+    def hits(self, origins: npt.ArrayLike, directions: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         o = np.ascontiguousarray(origins, dtype=np.float32)
         d = np.ascontiguousarray(directions, dtype=np.float32)
         r = self.scene.run(o, d, output=1)
@@ -155,11 +158,11 @@ class EmbreeGather:
         return patch, np.clip(par[:, 0], 0.0, 1.0), np.clip(par[:, 1], 0.0, 1.0), front
 
 
-def _eval_at(net, patch, u, v) -> np.ndarray:
+def _eval_at(net: PatchNet, patch: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Exact surface points of ``patch (k,)`` at ``(u, v) (k,)``: ``(k, 3)`` float64 (cubic Bernstein)."""
     cp = np.asarray(net.control_points, dtype=np.float64)[patch]  # (k, 4, 4, 3): [i (u), j (v)]
 
-    def bern(t):
+    def bern(t: np.ndarray) -> np.ndarray:
         s = 1.0 - t
         return np.stack([s * s * s, 3 * s * s * t, 3 * s * t * t, t * t * t], -1)
 
@@ -181,9 +184,9 @@ class GatherHits:
         return (self.patch == -1).mean(axis=1)
 
 
-def gather_hits(net, positions, normals, ids, rays: int = DEFAULT_GATHER_RAYS, seed: int = 0,
-                batch: int = 4096, stats: dict | None = None, tracer: EmbreeGather | None = None,
-                patches=None) -> GatherHits:
+def gather_hits(net: PatchNet, positions: npt.ArrayLike, normals: npt.ArrayLike, ids: npt.ArrayLike, rays: int = DEFAULT_GATHER_RAYS, seed: int = 0,
+                batch: int = 4096, stats: dict[str, Any] | None = None, tracer: EmbreeGather | None = None,
+                patches: npt.ArrayLike | None = None) -> GatherHits:
     """Cast every sample's cosine-weighted gather rays against the exact surface (or through
     ``tracer``, an :class:`EmbreeGather` of the net: origins lifted by twice their patch's chord
     error, ``patches (k,)`` each sample's patch).
@@ -219,7 +222,7 @@ def gather_hits(net, positions, normals, ids, rays: int = DEFAULT_GATHER_RAYS, s
     return GatherHits(patch, u, v)
 
 
-def _exact_hits(net, o, d, eps: float):
+def _exact_hits(net: PatchNet, o: np.ndarray, d: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``patch (k,)`` (-1 none), ``u, v (k,)``, ``front (k,) bool`` of rays on the exact surface."""
     h = ray_intersect(net, o, d, t_min=eps)
     p = np.where(h.hit, h.patch, -1)
@@ -227,7 +230,7 @@ def _exact_hits(net, o, d, eps: float):
     return p, np.nan_to_num(h.u), np.nan_to_num(h.v), front
 
 
-def tile_lookup(tiles, patch, u, v) -> np.ndarray:
+def tile_lookup(tiles: np.ndarray, patch: npt.ArrayLike, u: npt.ArrayLike, v: npt.ArrayLike) -> np.ndarray:
     """Bilinear light of ``tiles (n, res, res, C)`` at patch parameters: ``patch, u, v (...)`` ->
     ``(..., C)`` float64 (texel ``[p, j, i]`` sits at ``(i / (res-1), j / (res-1))``).  Entries with
     ``patch < 0`` give 0."""
@@ -246,8 +249,9 @@ def tile_lookup(tiles, patch, u, v) -> np.ndarray:
     return np.where(ok[..., None], out, 0.0)
 
 
-def bounce_light(direct, hits: GatherHits, sky, bounces: int, albedo=DEFAULT_ALBEDO, batch: int = 8192,
-                 weld=None) -> np.ndarray:
+def bounce_light(direct: npt.ArrayLike, hits: GatherHits, sky: npt.ArrayLike, bounces: int,
+                 albedo: npt.ArrayLike = DEFAULT_ALBEDO, batch: int = 8192,
+                 weld: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
     """Iterate the bounces (module docstring) over whole tiles.
 
     Parameters
@@ -283,8 +287,8 @@ def bounce_light(direct, hits: GatherHits, sky, bounces: int, albedo=DEFAULT_ALB
     return L.reshape(shape)
 
 
-def path_traced_reference(net, lights: Lights, positions, normals, bounces: int, paths: int = 1024,
-                          albedo=DEFAULT_ALBEDO, seed: int = 0, batch: int = 1 << 16) -> np.ndarray:
+def path_traced_reference(net: PatchNet, lights: Lights, positions: npt.ArrayLike, normals: npt.ArrayLike, bounces: int, paths: int = 1024,
+                          albedo: npt.ArrayLike = DEFAULT_ALBEDO, seed: int = 0, batch: int = 1 << 16) -> np.ndarray:
     """Monte Carlo path-traced light-map values at points: the reference for :func:`bounce_light`.
 
     Independent (not stratified) cosine-weighted paths of up to ``bounces + 1`` segments from each
@@ -301,7 +305,7 @@ def path_traced_reference(net, lights: Lights, positions, normals, bounces: int,
     eps = ray_offset(net)
     rng = np.random.default_rng(seed)
 
-    def direct(p, n):
+    def direct(p: np.ndarray, n: np.ndarray) -> np.ndarray:
         terms = light_terms(lights, p, n)
         vis = shadow_visibility(net, lights, p, n, terms)
         return direct_light(lights, p, n, vis)
@@ -338,14 +342,14 @@ def path_traced_reference(net, lights: Lights, positions, normals, bounces: int,
     return out + acc / paths
 
 
-def check_bounces(bounces) -> int:
+def check_bounces(bounces: Any) -> int:
     """``bounces`` as an int in [0, MAX_BOUNCES], else a ValidationError."""
     if isinstance(bounces, bool) or not isinstance(bounces, (int, np.integer)) or not 0 <= int(bounces) <= MAX_BOUNCES:
         raise ValidationError(f"bake: bounces must be an integer in [0, {MAX_BOUNCES}], got {bounces!r}")
     return int(bounces)
 
 
-def check_sun_radius(radius) -> float:
+def check_sun_radius(radius: Any) -> float:
     """``radius`` degrees as a float in [0, 10], else a ValidationError."""
     try:
         r = float(radius)
@@ -356,7 +360,7 @@ def check_sun_radius(radius) -> float:
     return r
 
 
-def _flat_patches(p00, du, dv, nu: int, nv: int) -> np.ndarray:
+def _flat_patches(p00: npt.ArrayLike, du: npt.ArrayLike, dv: npt.ArrayLike, nu: int, nv: int) -> np.ndarray:
     """``nu x nv`` flat bicubic patches spanning the parallelogram ``p00 + a du + b dv``:
     control points ``(nu * nv, 4, 4, 3)``; normal ``du x dv``."""
     s = np.linspace(0.0, 1.0, 3 * nu + 1)
@@ -389,7 +393,7 @@ def valley_scene(width: float = 12.0, length: float = 24.0, height: float = 10.0
 _LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
-def off_fold(net, res: int) -> np.ndarray:
+def off_fold(net: PatchNet, res: int) -> np.ndarray:
     """Light-map samples not on a fold, ``(k,)`` bool over ``sample_points(net, res)``'s samples: on
     a fold (the valley's floor-wall corners) the baker welds the two faces' light into one texel, a
     convention of the seams, not of the light transport, so comparisons with the path-traced
@@ -406,7 +410,7 @@ def off_fold(net, res: int) -> np.ndarray:
     return ~fold
 
 
-def reference_error(values, reference) -> np.ndarray:
+def reference_error(values: npt.ArrayLike, reference: npt.ArrayLike) -> np.ndarray:
     """Relative error of luminance, ``|Y(values) - Y(reference)| / Y(reference)``: ``(k, 3)`` each
     -> ``(k,)`` float64 (reference luminance must be > 0)."""
     y = np.asarray(values, dtype=np.float64) @ _LUMA

@@ -39,11 +39,15 @@ import hashlib
 import json
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ValidationError
+from piste.scene_data import Lights
 from piste.terrain.bezier import eval_edges, grid_params
+from piste.terrain.net import PatchNet
 
 __all__ = [
     "weld_seam_light",
@@ -126,7 +130,7 @@ def atlas_layout(n: int, res: int = 8, gutter: int = 1) -> AtlasLayout:
     return AtlasLayout(n, res, gutter, cols, rows)
 
 
-def with_lightmap_layout(net, res: int = 8, gutter: int = 1, inplace: bool = False):
+def with_lightmap_layout(net: PatchNet, res: int = 8, gutter: int = 1, inplace: bool = False) -> PatchNet:
     """``net`` (or a shallow copy of it) with ``lightmap_rect`` pointing at tiles of ``res``."""
     rects = atlas_layout(len(net), res, gutter).rects()
     target = net if inplace else copy.copy(net)
@@ -159,14 +163,14 @@ def _normalize(v: np.ndarray) -> np.ndarray:
 SEAM_FULL, SEAM_NONE = float(np.cos(np.radians(60.0))), 0.0
 
 
-def seam_weight(cos_angle) -> np.ndarray:
+def seam_weight(cos_angle: npt.ArrayLike) -> np.ndarray:
     """How much of a neighbour's normal a seam sample takes: 1 while the normals are within 60
     degrees (``cos >= SEAM_FULL``), 0 beyond 90 degrees, a smoothstep between."""
     x = np.clip((np.asarray(cos_angle, dtype=np.float64) - SEAM_NONE) / (SEAM_FULL - SEAM_NONE), 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
 
 
-def sample_points(net, res: int, smooth_seams: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def sample_points(net: PatchNet, res: int, smooth_seams: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Light-map sample points of every patch on the exact surface, with normals.
 
     Parameters
@@ -242,7 +246,7 @@ def sample_points(net, res: int, smooth_seams: bool = True) -> tuple[np.ndarray,
     return pos, nrm
 
 
-def weld_seam_light(net, tiles) -> np.ndarray:
+def weld_seam_light(net: PatchNet, tiles: npt.ArrayLike) -> np.ndarray:
     """Light ``tiles (n, res, res, C)`` with every shared edge's samples set to the mean of both
     patches' values and every welded corner's to the mean over its patches, so the two tiles of a
     seam hold the same light even across a fold (where the normals are not averaged and each side
@@ -276,7 +280,7 @@ def weld_seam_light(net, tiles) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- atlas sampling
-def lightmap_uv(rects, patch, u, v) -> np.ndarray:
+def lightmap_uv(rects: npt.ArrayLike, patch: npt.ArrayLike, u: npt.ArrayLike, v: npt.ArrayLike) -> np.ndarray:
     """Atlas UV of patch parameters: ``rects (n, 4)``, ``patch (k,)`` int, ``u, v (k,)`` ->
     ``(k, 2)`` float64."""
     r = np.asarray(rects, dtype=np.float64)[np.asarray(patch)]
@@ -285,7 +289,7 @@ def lightmap_uv(rects, patch, u, v) -> np.ndarray:
     return np.stack([r[..., 0] + u * (r[..., 2] - r[..., 0]), r[..., 1] + v * (r[..., 3] - r[..., 1])], -1)
 
 
-def sample_atlas(atlas, uv, mode: str = "bilinear") -> np.ndarray:
+def sample_atlas(atlas: npt.ArrayLike, uv: npt.ArrayLike, mode: str = "bilinear") -> np.ndarray:
     """Sample an atlas like a GPU texture unit with clamp-to-edge addressing.
 
     Parameters
@@ -331,7 +335,7 @@ def sample_atlas(atlas, uv, mode: str = "bilinear") -> np.ndarray:
     return out[..., 0] if flat else out
 
 
-def assemble_atlas(tiles, layout: AtlasLayout, fill=0.0) -> np.ndarray:
+def assemble_atlas(tiles: npt.ArrayLike, layout: AtlasLayout, fill: float = 0.0) -> np.ndarray:
     """Place tiles into an atlas and replicate each tile's edge texels into its gutter.
 
     Parameters
@@ -357,14 +361,14 @@ def assemble_atlas(tiles, layout: AtlasLayout, fill=0.0) -> np.ndarray:
     )
 
 
-def encode_half_bright(colors) -> np.ndarray:
+def encode_half_bright(colors: npt.ArrayLike) -> np.ndarray:
     """Linear light (1.0 = full) to the PS2's half-bright 8 bits: ``round(128 c)`` clamped to
     [0, 255] (over-bright up to 255/128 ~ 1.99 survives)."""
     c = np.asarray(colors, dtype=np.float64)
     return np.clip(np.rint(c * 128.0), 0, 255).astype(np.uint8)
 
 
-def decode_half_bright(texels) -> np.ndarray:
+def decode_half_bright(texels: npt.ArrayLike) -> np.ndarray:
     """Half-bright 8-bit texels to linear light (``texel / 128``), float32."""
     return (np.asarray(texels, dtype=np.float32) / np.float32(128.0)).astype(np.float32)
 
@@ -403,11 +407,11 @@ class LightMap:
         r = np.arange(self.res)
         return self.atlas[o[:, 1, None, None] + r[None, :, None], o[:, 0, None, None] + r[None, None, :]]
 
-    def sample(self, patch, u, v, mode: str = "bilinear") -> np.ndarray:
+    def sample(self, patch: npt.ArrayLike, u: np.ndarray, v: np.ndarray, mode: str = "bilinear") -> np.ndarray:
         """Lighting at patch parameters from the atlas: ``patch, u, v (k,)`` -> ``(k, 3)`` float64."""
         return sample_atlas(self.atlas, lightmap_uv(self.rects, patch, u, v), mode)
 
-    def apply(self, net, inplace: bool = False):
+    def apply(self, net: PatchNet, inplace: bool = False) -> PatchNet:
         """``net`` (or a shallow copy) with ``lightmap_rect`` set to this atlas's tiles."""
         if len(net) != len(self.rects):
             raise ValidationError(f"light map has {len(self.rects)} tiles, the net {len(net)} patches")
@@ -416,8 +420,8 @@ class LightMap:
         return target
 
 
-def inputs_key(net, lights, res: int, gutter: int, shadows: bool, chunk_size: int, version: str,
-               extra: dict | None = None) -> str:
+def inputs_key(net: PatchNet, lights: Lights, res: int, gutter: int, shadows: bool, chunk_size: int, version: str,
+               extra: dict[str, Any] | None = None) -> str:
     """SHA-256 over everything that determines a bake's output (hex).  ``extra``: further settings
     (bounces, the area sun), hashed only when given, so the keys of plain bakes do not change."""
     h = hashlib.sha256()

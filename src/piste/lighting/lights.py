@@ -64,15 +64,18 @@ TOML lights files (:func:`load_lights`)::
 from __future__ import annotations
 
 import math
+import os
 import re
 from dataclasses import fields
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import FormatError, ValidationError
 from piste.formats.safe_io import MAX_TOML_BYTES, toml_depth
-from piste.scene_data import (KIND_OF_LIGHT, LIGHT_KINDS, AmbientLight, DirectionalLight, Lights, PointLight,  # noqa: F401
+from piste.scene_data import (KIND_OF_LIGHT, LIGHT_KINDS, AmbientLight, AnyLight, DirectionalLight, Lights, PointLight,  # noqa: F401
                               SpotLight)  # (the light family lives in the foundation; re-exported here)
 
 __all__ = [
@@ -124,7 +127,7 @@ def _find_line(text: str, kind: str, index: int | None = None, key: str | None =
     return header_line if key is None else header_line
 
 
-def loads_lights(text: str, path="<string>") -> Lights:
+def loads_lights(text: str, path: str | os.PathLike[str] = "<string>") -> Lights:
     """Parse a TOML lights description (see the module docstring).
 
     Raises :class:`~piste.errors.FormatError` naming the file, line and key on any mistake.
@@ -188,7 +191,7 @@ def loads_lights(text: str, path="<string>") -> Lights:
     return Lights(tuple(lights), name=str(name))
 
 
-def load_lights(path) -> Lights:
+def load_lights(path: str | os.PathLike[str]) -> Lights:
     """Read a TOML lights file (see the module docstring for the format)."""
     path = Path(path)
     if path.exists() and not path.is_file():  # a folder, device or pipe (which would hang the read)
@@ -204,7 +207,7 @@ def load_lights(path) -> Lights:
     return loads_lights(text, path)
 
 
-def _toml_value(v) -> str:
+def _toml_value(v: Any) -> str:
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, (list, tuple)):
@@ -242,7 +245,7 @@ def _dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
 
 
-def light_vectors(light, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def light_vectors(light: DirectionalLight | PointLight | SpotLight, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit vectors from each point towards ``light`` and the distances to it.
 
     Parameters
@@ -265,7 +268,7 @@ def light_vectors(light, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return L, d
 
 
-def light_terms(lights: Lights, positions, normals) -> np.ndarray:
+def light_terms(lights: Lights, positions: npt.ArrayLike, normals: npt.ArrayLike) -> np.ndarray:
     """Per-light scalar factor ``max(0, n.L) * A(d) * S`` of every direct light (no colour, no
     intensity, no shadow).
 
@@ -310,7 +313,7 @@ def light_terms(lights: Lights, positions, normals) -> np.ndarray:
     return out
 
 
-def shade(lights: Lights, positions, normals, shadow=None) -> np.ndarray:
+def shade(lights: Lights, positions: npt.ArrayLike, normals: npt.ArrayLike, shadow: npt.ArrayLike | None = None) -> np.ndarray:
     """The lighting equation (module docstring) at ``k`` points.
 
     Parameters

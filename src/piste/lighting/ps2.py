@@ -36,14 +36,17 @@ product; for ``As <= 128`` it is a faithful rounding (the floor or the nearest i
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ValidationError
 
 __all__ = ["ps2_source", "ps2_blend", "modulate", "ps2_error_report"]
 
 
-def _u8(x, what: str) -> np.ndarray:
+def _u8(x: npt.ArrayLike, what: str) -> np.ndarray:
     a = np.asarray(x)
     if a.dtype != np.uint8:
         if not np.issubdtype(a.dtype, np.integer) or (a.size and (a.min() < 0 or a.max() > 255)):
@@ -54,7 +57,7 @@ def _u8(x, what: str) -> np.ndarray:
     return a
 
 
-def modulate(cd, cl, rounding: str = "nearest") -> np.ndarray:
+def modulate(cd: npt.ArrayLike, cl: npt.ArrayLike, rounding: str = "nearest") -> np.ndarray:
     """True multiplication of a colour by a half-bright light map in 8 bits: ``Cd x CL / 128``
     rounded to the nearest integer (``rounding="nearest"``, the reference) or truncated
     (``"floor"``: the GS's own MODULATE texture function, ``(Cd x CL) >> 7``), clamped to 255.
@@ -76,7 +79,7 @@ def modulate(cd, cl, rounding: str = "nearest") -> np.ndarray:
     raise ValidationError(f"modulate: rounding must be 'nearest' or 'floor', got {rounding!r}")
 
 
-def ps2_blend(cd, cs, as_) -> np.ndarray:
+def ps2_blend(cd: npt.ArrayLike, cs: npt.ArrayLike, as_: npt.ArrayLike) -> np.ndarray:
     """What the GS computes for ``(Cd - Cs) x As``: ``((Cd - Cs) * As) >> 7`` clamped to 0..255.
 
     Parameters
@@ -94,7 +97,7 @@ def ps2_blend(cd, cs, as_) -> np.ndarray:
     return np.clip(((cd - cs) * a) >> 7, 0, 255).astype(np.uint8)
 
 
-def ps2_source(cd, cl, method: str = "exact") -> tuple[np.ndarray, np.ndarray]:
+def ps2_source(cd: npt.ArrayLike, cl: npt.ArrayLike, method: str = "exact") -> tuple[np.ndarray, np.ndarray]:
     """Source colour and alpha for the second pass, so that ``ps2_blend(cd, cs, as) ~ cd x cl``.
 
     Parameters
@@ -143,7 +146,8 @@ def ps2_source(cd, cl, method: str = "exact") -> tuple[np.ndarray, np.ndarray]:
     return cs, a.astype(np.uint8)
 
 
-def _best_d(cd, cl, a, target=None):
+def _best_d(cd: np.ndarray, cl: np.ndarray, a: npt.ArrayLike,
+            target: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per channel, the ``d = Cd - Cs`` in ``[0, Cd]`` whose GS result ``(d a) >> 7`` is nearest
     the rounded product; returns ``(d, abs error)``, int64 arrays like ``cd``."""
     if target is None:
@@ -158,7 +162,7 @@ def _best_d(cd, cl, a, target=None):
     return np.where(use_lo, lo, hi), np.where(use_lo, err_lo, err_hi)
 
 
-def ps2_error_report(base, lightmap, method: str = "exact") -> dict:
+def ps2_error_report(base: npt.ArrayLike, lightmap: npt.ArrayLike, method: str = "exact") -> dict[str, Any]:
     """How far the PS2 trick is from true multiplication over a whole scene.
 
     Parameters
@@ -192,7 +196,7 @@ def ps2_error_report(base, lightmap, method: str = "exact") -> dict:
     need_negative = ((need_d > cd) & (cl.max(1) > 0)[:, None]).any(axis=1)
     per_px = err.max(axis=1)
 
-    def summary(mask) -> dict:
+    def summary(mask: np.ndarray) -> dict:
         if not mask.any():
             return {"pixels": 0, "mean_abs": 0.0, "max_abs": 0}
         e = err[mask]

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ValidationError
 
@@ -20,14 +21,14 @@ _M2 = np.uint64(0x94D049BB133111EB)
 _GOLD = np.uint64(0x9E3779B97F4A7C15)
 
 
-def _mix(x: np.ndarray) -> np.ndarray:
+def _mix(x: npt.NDArray[np.uint64] | np.uint64) -> npt.NDArray[np.uint64] | np.uint64:
     """splitmix64's finaliser on uint64 arrays (wrapping arithmetic)."""
     x = (x ^ (x >> np.uint64(30))) * _M1
     x = (x ^ (x >> np.uint64(27))) * _M2
     return x ^ (x >> np.uint64(31))
 
 
-def hash_uniform(seed: int, a, b, stream: int) -> np.ndarray:
+def hash_uniform(seed: int, a: npt.ArrayLike, b: npt.ArrayLike, stream: int) -> np.ndarray:
     """Deterministic uniforms in [0, 1) from integer counters: ``a (k, 1)`` and ``b (1, r)`` (any
     broadcastable uint64-able shapes) -> ``broadcast shape`` float64.  The same ``(seed, a, b,
     stream)`` always gives the same number, wherever it sits in a batch."""
@@ -35,7 +36,7 @@ def hash_uniform(seed: int, a, b, stream: int) -> np.ndarray:
         s = _mix(np.uint64(seed & 0xFFFFFFFFFFFFFFFF) * _GOLD + np.uint64(stream))
         x = _mix(np.asarray(a, dtype=np.uint64) * _GOLD ^ s)
         x = _mix(x + np.asarray(b, dtype=np.uint64) * _M2 + s)
-    return (x >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0)
+    return np.asarray((x >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0))
 
 
 def strata_side(rays: int, what: str = "rays") -> int:
@@ -69,7 +70,7 @@ def _strata(seed: int, ids: np.ndarray, rays: int, stream: int) -> tuple[np.ndar
     return u1, u2
 
 
-def cosine_directions(normals, ids, rays: int, seed: int = 0) -> np.ndarray:
+def cosine_directions(normals: npt.ArrayLike, ids: npt.ArrayLike, rays: int, seed: int = 0) -> np.ndarray:
     """Cosine-weighted directions about each normal, ``rays`` (``s x s`` strata) per point.
 
     Parameters
@@ -91,7 +92,7 @@ def cosine_directions(normals, ids, rays: int, seed: int = 0) -> np.ndarray:
     return x[..., None] * t[:, None] + y[..., None] * b[:, None] + z[..., None] * n[:, None]
 
 
-def disc_directions(axis, ids, rays: int, radius_deg: float, seed: int = 0, stream: int = 10) -> np.ndarray:
+def disc_directions(axis: npt.ArrayLike, ids: npt.ArrayLike, rays: int, radius_deg: float, seed: int = 0, stream: int = 10) -> np.ndarray:
     """Directions to points of a disc of angular radius ``radius_deg`` about ``axis``: ``axis (k, 3)``
     unit (or (3,)), ``ids (k,)`` -> ``(k, rays, 3)`` unit (``s x s`` jittered strata mapped to the
     disc by the concentric map: uniform over the disc)."""

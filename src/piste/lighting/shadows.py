@@ -28,23 +28,28 @@ Elementwise arithmetic only (no BLAS): the same bits in any process.
 
 from __future__ import annotations
 
-import numpy as np
+from collections.abc import Sequence
 
-from piste.lighting.lights import DirectionalLight, Lights, light_vectors
+import numpy as np
+import numpy.typing as npt
+
+from piste.lighting.lights import DirectionalLight, Lights, PointLight, SpotLight, light_vectors
 from piste.lighting.sampling import disc_directions, strata_side
+from piste.terrain.net import PatchNet
 from piste.terrain.query import ray_intersect
 
 __all__ = ["shadow_rays", "shadow_visibility", "ray_offset", "far_field_occluded"]
 
 
-def ray_offset(net) -> float:
+def ray_offset(net: PatchNet) -> float:
     """Distance shadow-ray origins are lifted off the surface: 1e-5 of the net's diagonal,
     at least 1e-6 (model units)."""
     lo, hi = net.bounds
     return max(float(np.linalg.norm(hi - lo)) * 1e-5, 1e-6)
 
 
-def shadow_rays(light, positions, normals, eps: float):
+def shadow_rays(light: DirectionalLight | PointLight | SpotLight, positions: np.ndarray, normals: np.ndarray,
+                eps: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Shadow rays from surface points towards ``light``.
 
     Parameters
@@ -66,15 +71,17 @@ def shadow_rays(light, positions, normals, eps: float):
     return origins, np.ascontiguousarray(L), t_max
 
 
-def _exact_occluded(net, origins, directions, t_max) -> np.ndarray:
+def _exact_occluded(net: PatchNet, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray) -> np.ndarray:
     if len(origins) == 0:
         return np.zeros(0, dtype=bool)
     hits = ray_intersect(net, origins, directions, t_max=t_max, any_hit=True)
     return np.asarray(hits.hit, dtype=bool)
 
 
-def shadow_visibility(net, lights: Lights, positions, normals, terms, stats=None, sun_radius: float = 0.0,
-                      sun_rays: int = 64, ids=None, seed: int = 0, sun_adaptive: bool = True):
+def shadow_visibility(net: PatchNet, lights: Lights, positions: npt.ArrayLike, normals: npt.ArrayLike, terms: np.ndarray,
+                      stats: dict[str, int] | None = None, sun_radius: float = 0.0,
+                      sun_rays: int = 64, ids: npt.ArrayLike | None = None, seed: int = 0,
+                      sun_adaptive: bool = True) -> np.ndarray:
     """Visibility of every direct light at every point, 1 = lit, 0 = shadowed (fractions under an
     area sun).
 
@@ -124,8 +131,8 @@ def shadow_visibility(net, lights: Lights, positions, normals, terms, stats=None
     return vis
 
 
-def _soft_visibility(net, light, positions, normals, ids, eps: float, radius: float, rays: int, seed: int,
-                     adaptive: bool = True, batch: int = 65536):
+def _soft_visibility(net: PatchNet, light: DirectionalLight, positions: np.ndarray, normals: np.ndarray, ids: np.ndarray, eps: float, radius: float, rays: int, seed: int,
+                     adaptive: bool = True, batch: int = 65536) -> tuple[np.ndarray, int, int]:
     """Unoccluded fraction of ``rays`` rays per point to the disc of ``light`` (radius degrees):
     ``(k,)`` float64, the rays cast and how many were occluded.  ``adaptive``: eight rim strata
     first, the rest only where those disagree."""
@@ -141,7 +148,7 @@ def _soft_visibility(net, light, positions, normals, ids, eps: float, radius: fl
     rest = np.setdiff1d(np.arange(rays), first)
     step = max(1, batch // rays)
 
-    def occluded(p, n, d):
+    def occluded(p: np.ndarray, n: np.ndarray, d: np.ndarray) -> np.ndarray:
         o = np.repeat(p + eps * n, d.shape[1], axis=0) + eps * d.reshape(-1, 3)
         dd = np.ascontiguousarray(d.reshape(-1, 3))
         return _exact_occluded(net, o, dd, np.full(len(dd), np.inf)).reshape(d.shape[:2])
@@ -151,8 +158,8 @@ def _soft_visibility(net, light, positions, normals, ids, eps: float, radius: fl
         d = disc_directions(axis, ids[lo:hi], rays, radius, seed)  # (b, rays, 3)
         occ = np.zeros(d.shape[:2], dtype=bool)
         occ[:, first] = occluded(positions[lo:hi], normals[lo:hi], d[:, first])
-        n_rays += occ.shape[0] * len(first)
-        mixed = np.flatnonzero(occ[:, first].any(axis=1) & ~occ[:, first].all(axis=1)) if len(rest) else []
+        n_rays += len(occ) * len(first)
+        mixed = np.flatnonzero(occ[:, first].any(axis=1) & ~occ[:, first].all(axis=1)) if len(rest) else np.zeros(0, np.int64)
         if len(mixed):
             occ[np.ix_(mixed, rest)] = occluded(positions[lo:hi][mixed], normals[lo:hi][mixed], d[mixed][:, rest])
             n_rays += len(mixed) * len(rest)
@@ -165,7 +172,8 @@ def _soft_visibility(net, light, positions, normals, ids, eps: float, radius: fl
     return frac, n_rays, n_occ
 
 
-def far_field_occluded(heights, origin, cell, origins, directions, box, batch: int = 1 << 22) -> np.ndarray:
+def far_field_occluded(heights: npt.ArrayLike, origin: Sequence[float] | np.ndarray, cell: Sequence[float] | np.ndarray,
+                       origins: npt.ArrayLike, directions: npt.ArrayLike, box: Sequence[float] | np.ndarray, batch: int = 1 << 22) -> np.ndarray:
     """Which rays pass below a coarse height grid outside an excluded box (the far-field shadow test).
 
     The grid's nodes are at ``(origin[0] + j * cell[0], origin[1] + i * cell[1])`` holding
@@ -199,7 +207,7 @@ def far_field_occluded(heights, origin, cell, origins, directions, box, batch: i
     gx1, gy1 = gx0 + (nx - 1) * cx, gy0 + (ny - 1) * cy
     zmax = float(h.max())
 
-    def leave(lo, hi, p, v):  # the ray parameter where p + t v leaves [lo, hi] (inf when v == 0)
+    def leave(lo: float, hi: float, p: np.ndarray, v: np.ndarray) -> np.ndarray:  # the ray parameter where p + t v leaves [lo, hi] (inf when v == 0)
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.where(v > 0, (hi - p) / v, np.where(v < 0, (lo - p) / v, np.inf))
         return np.maximum(t, 0.0)

@@ -39,9 +39,11 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ValidationError
 from piste.lighting.lights import Lights, light_terms, light_vectors
+from piste.scene_data import AnyLight
 
 __all__ = ["VertexLights", "choose_lights", "choose_lights_many", "vertex_light", "light_strengths", "LUMA"]
 
@@ -67,7 +69,7 @@ class VertexLights:
     ambient: np.ndarray
     chosen: np.ndarray | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.directions = np.asarray(self.directions, dtype=np.float32)
         self.colors = np.asarray(self.colors, dtype=np.float32)
         self.ambient = np.asarray(self.ambient, dtype=np.float32)
@@ -80,12 +82,12 @@ class VertexLights:
     def __len__(self) -> int:
         return 1 if self.directions.ndim == 2 else len(self.directions)
 
-    def __getitem__(self, i) -> "VertexLights":
+    def __getitem__(self, i: int | slice | np.ndarray) -> "VertexLights":
         """The light set of item ``i`` of a batch."""
         ch = None if self.chosen is None else self.chosen[i]
         return VertexLights(self.directions[i], self.colors[i], self.ambient[i], ch)
 
-    def to_object_space(self, rotation) -> "VertexLights":
+    def to_object_space(self, rotation: npt.ArrayLike) -> "VertexLights":
         """The same lights with directions in the object space of a rigid ``rotation (3, 3)``
         (object -> world): ``D_obj = D_world @ R`` (so ``D_obj @ n_obj = D_world @ R n_obj``).
         For objects with non-uniform scale light in world space with inverse-transpose normals
@@ -107,12 +109,12 @@ class VertexLights:
 
 
 @lru_cache(maxsize=512)
-def _single(light):
+def _single(light: AnyLight) -> Lights:
     """A one-light :class:`Lights` (cached: lights are immutable and hashable)."""
     return Lights((light,))
 
 
-def light_strengths(lights, positions):
+def light_strengths(lights: Lights, positions: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every direct light of ``lights`` seen from ``m`` positions as a directional light.
 
     Parameters
@@ -145,7 +147,7 @@ def light_strengths(lights, positions):
     return strength, dirs, cols
 
 
-def choose_lights_many(lights, positions, k: int = 3) -> VertexLights:
+def choose_lights_many(lights: Lights, positions: npt.ArrayLike, k: int = 3) -> VertexLights:
     """The ``k`` strongest direct lights at each of ``m`` positions (see the module docstring).
 
     Parameters
@@ -181,13 +183,13 @@ def choose_lights_many(lights, positions, k: int = 3) -> VertexLights:
     return VertexLights(D, C, amb, chosen)
 
 
-def choose_lights(lights, position, k: int = 3) -> VertexLights:
+def choose_lights(lights: Lights, position: npt.ArrayLike, k: int = 3) -> VertexLights:
     """The ``k`` (<= 3) strongest direct lights at one ``position (3,)``: a single light set
     (``directions (3, 3)``, ``colors (3, 3)``, ``ambient (3,)``)."""
     return choose_lights_many(lights, np.asarray(position, dtype=np.float64).reshape(1, 3), k)[0]
 
 
-def vertex_light(normals, vlights: VertexLights) -> np.ndarray:
+def vertex_light(normals: npt.ArrayLike, vlights: VertexLights) -> np.ndarray:
     """``ambient + C @ max(0, D @ n)`` for every normal, clamped at 0.
 
     Parameters

@@ -153,6 +153,8 @@ def scene_cameras(scene: SceneFile, net: PatchNet | None, centerline: np.ndarray
     lo, hi = net.bounds if net is not None else (None, None)  # planes not given follow the terrain's size
     for c in scene.cameras:
         if c.track is not None:
+            if centerline is None:  # loads_scene refuses track cameras off the default course
+                raise ConfigError(f"{scene.path}: camera {c.name!r}: a track camera needs the default course's track")
             cam = track_camera(centerline, c.track[0], height=c.height, fov_y=c.fov)
             near, far = camera_planes(cam.eye, lo, hi, c.near, c.far)
             d = camera_to_dict(replace(cam, near=near, far=far))

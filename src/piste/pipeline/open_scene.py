@@ -33,12 +33,15 @@ API
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ConfigError
 from piste.pipeline.build import build_scene
@@ -53,7 +56,7 @@ from piste.world.course import default_course
 __all__ = ["Source", "SOURCES", "source_kind", "open_source", "load_or_build", "load_net", "eye_camera"]
 
 
-def load_net(path=None) -> PatchNet:
+def load_net(path: str | os.PathLike[str] | None = None) -> PatchNet:
     """The patch net in ``path`` (``.bpt`` or a saved ``.npz`` net), or the default course when None."""
     if path is None:
         return default_course()
@@ -95,7 +98,7 @@ SOURCES: list[Source] = [
 ]
 
 
-def _source(path) -> Source:
+def _source(path: str | os.PathLike[str]) -> Source:
     name = str(path).rstrip("/\\").lower()
     for s in SOURCES:
         if name.endswith(s.suffix):
@@ -104,13 +107,13 @@ def _source(path) -> Source:
     raise ConfigError(f"{path}: not a source piste opens; expected one of: {kinds}")
 
 
-def source_kind(path) -> str:
+def source_kind(path: str | os.PathLike[str]) -> str:
     """The kind of source ``path`` is (:data:`SOURCES`): "bundle", "scene", "ssx" or "tiles"."""
     return _source(path).kind
 
 
-def open_source(path, quiet: bool = True, warm: bool = False, riders: int = 0, objects: int = 0,
-                **options) -> Bundle:
+def open_source(path: str | os.PathLike[str], quiet: bool = True, warm: bool = False, riders: int = 0, objects: int = 0,
+                **options: Any) -> Bundle:
     """The runtime scene of ``path`` (any kind in :data:`SOURCES`).  ``warm``: start the terrain's
     resident vertex blocks at load (see :func:`load_bundle`).  ``riders``: add that many default
     riders standing on the terrain when the source has none of its own, ``objects`` that many of
@@ -129,7 +132,7 @@ def open_source(path, quiet: bool = True, warm: bool = False, riders: int = 0, o
     return bundle
 
 
-def eye_camera(eye, target, fov_y: float = 50.0) -> Camera | None:
+def eye_camera(eye: npt.ArrayLike | None, target: npt.ArrayLike | None, fov_y: float = 50.0) -> Camera | None:
     """A camera of one's own at ``eye (3,)`` looking at ``target (3,)`` (metres; ``fov_y`` degrees;
     the far plane 20 times their distance, at least 1 km), None when both are None."""
     if eye is None and target is None:
@@ -143,7 +146,7 @@ def eye_camera(eye, target, fov_y: float = 50.0) -> Camera | None:
     return Camera(e, t, fov_y=float(fov_y), near=0.1, far=max(d * 20.0, 1000.0))
 
 
-def load_or_build(scene, quiet: bool = True, warm: bool = False) -> Bundle:
+def load_or_build(scene: str | os.PathLike[str], quiet: bool = True, warm: bool = False) -> Bundle:
     """A loaded bundle for ``scene``: a ``.piste`` file, a ``.toml`` scene built (cached) beside it,
     or an SSX level (:func:`open_source`)."""
     return open_source(scene, quiet=quiet, warm=warm)

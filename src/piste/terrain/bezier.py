@@ -21,6 +21,7 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
+import numpy.typing as npt
 
 #: The Bézier basis matrix of the talk: ``b(t) = [t^3, t^2, t, 1] @ BEZIER_M``.
 BEZIER_M = np.array(
@@ -28,7 +29,7 @@ BEZIER_M = np.array(
 )
 
 
-def bernstein(t) -> np.ndarray:
+def bernstein(t: npt.ArrayLike) -> np.ndarray:
     """Cubic Bernstein basis at parameters ``t``.
 
     Parameters
@@ -44,14 +45,14 @@ def bernstein(t) -> np.ndarray:
     return np.stack([s * s * s, 3.0 * t * s * s, 3.0 * t * t * s, t * t * t], axis=-1)
 
 
-def bernstein_derivative(t) -> np.ndarray:
+def bernstein_derivative(t: npt.ArrayLike) -> np.ndarray:
     """Derivative of :func:`bernstein` with respect to ``t``, ``(s, 4)`` float64."""
     t = np.asarray(t, dtype=np.float64)
     s = 1.0 - t
     return np.stack([-3.0 * s * s, 3.0 * s * s - 6.0 * t * s, 6.0 * t * s - 3.0 * t * t, 3.0 * t * t], axis=-1)
 
 
-def power_basis(t) -> np.ndarray:
+def power_basis(t: npt.ArrayLike) -> np.ndarray:
     """``[t^3, t^2, t, 1]`` at parameters ``t``, ``(s, 4)`` float64 (the talk's row vector)."""
     t = np.asarray(t, dtype=np.float64)
     return np.stack([t**3, t**2, t, np.ones_like(t)], axis=-1)
@@ -85,20 +86,20 @@ def _kron_table(bu: np.ndarray, bv: np.ndarray) -> np.ndarray:
 
 
 @lru_cache(maxsize=None)
-def blend_tables(u: tuple, v: tuple, dtype: str = "float32") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def blend_tables(u: tuple[float, ...], v: tuple[float, ...], dtype: str = "float32") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Blend tables for the parameter points ``(u[s], v[s])``.
 
     Returns ``(T, Tu, Tv)``, each ``(16, s)``: position, d/du and d/dv weights, such that for
     packed control points ``X (k*3, 16)`` the product ``X @ T`` is ``(k*3, s)`` positions.
     """
-    u = np.asarray(u, dtype=np.float64)
-    v = np.asarray(v, dtype=np.float64)
-    bu, bv = bernstein(u), bernstein(v)
-    du, dv = bernstein_derivative(u), bernstein_derivative(v)
-    tables = tuple(np.ascontiguousarray(_kron_table(a, b), dtype=dtype) for a, b in ((bu, bv), (du, bv), (bu, dv)))
-    for t in tables:
-        t.setflags(write=False)
-    return tables
+    ua = np.asarray(u, dtype=np.float64)
+    va = np.asarray(v, dtype=np.float64)
+    bu, bv = bernstein(ua), bernstein(va)
+    du, dv = bernstein_derivative(ua), bernstein_derivative(va)
+    t, tu, tv = (np.ascontiguousarray(_kron_table(a, b), dtype=dtype) for a, b in ((bu, bv), (du, bv), (bu, dv)))
+    for table in (t, tu, tv):
+        table.setflags(write=False)
+    return t, tu, tv
 
 
 def grid_params(n: int, inner: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -114,7 +115,7 @@ def grid_params(n: int, inner: bool = False) -> tuple[np.ndarray, np.ndarray]:
     return u.ravel(), v.ravel()
 
 
-def pack_control_points(cp: np.ndarray, dtype=np.float32) -> np.ndarray:
+def pack_control_points(cp: np.ndarray, dtype: npt.DTypeLike = np.float32) -> np.ndarray:
     """Pack control points for blend-table products.
 
     Parameters
@@ -163,7 +164,8 @@ def unit_normals(du: np.ndarray, dv: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return n, ok
 
 
-def evaluate(cp: np.ndarray, u, v, normals: bool = True, dtype=np.float64):
+def evaluate(cp: np.ndarray, u: npt.ArrayLike, v: npt.ArrayLike, normals: bool = True,
+             dtype: npt.DTypeLike = np.float64) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Evaluate every patch at the same parameter points (the reference path, float64).
 
     Parameters
@@ -190,7 +192,8 @@ def evaluate(cp: np.ndarray, u, v, normals: bool = True, dtype=np.float64):
     return pos, nrm
 
 
-def _limit_normals(packed, u, v, nrm, ok, dtype: str, steps=(1e-4, 1e-3, 1e-2, 1e-1)):
+def _limit_normals(packed: np.ndarray, u: np.ndarray, v: np.ndarray, nrm: np.ndarray, ok: np.ndarray, dtype: npt.DTypeLike,
+                   steps: tuple[float, ...] = (1e-4, 1e-3, 1e-2, 1e-1)) -> np.ndarray:
     """Replace degenerate normals by the normal a little way towards the patch centre.
 
     At a collapsed edge (the teapot's lid apex) ``du x dv`` vanishes; the limit of the normal as
@@ -240,7 +243,7 @@ def eval_edges(edge_cp: np.ndarray, n: int, interior: bool = True) -> np.ndarray
     return np.moveaxis(out, 0, 1)
 
 
-def eval_power_form(cp: np.ndarray, u, v) -> np.ndarray:
+def eval_power_form(cp: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """The talk's literal matrix form ``U M P M^T V^T`` (float64), for checks and comparison.
 
     Parameters

@@ -12,6 +12,7 @@ Measured on matplotlib's ``jacksboro_fault_dem.npz`` (344 x 403 samples, ~75 x 9
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.terrain.heightfield import (  # noqa: F401 - re-exported
     FittedGrid,
@@ -28,7 +29,8 @@ from piste.terrain.query import height_at
 __all__ = ["fit_heightfield", "fit_error", "bezier_basis_matrix", "c1_to_bezier", "bspline_to_bezier"]
 
 
-def fit_heightfield(z, spacing, samples_per_patch: int = 4, origin=(0.0, 0.0), uv_scale=None, smooth: bool = False,
+def fit_heightfield(z: npt.ArrayLike, spacing: float | tuple[float, float], samples_per_patch: int = 4, origin: npt.ArrayLike = (0.0, 0.0),
+                    uv_scale: float | tuple[float, float] | None = None, smooth: bool = False,
                     edge: str = "crop", method: str = "separable", progress: bool = False, name: str = "heightfield",
                     tol: float | None = None) -> PatchNet:
     """Fit a C0 (or, with ``smooth``, C1/C2) bicubic Bézier net to a height field.
@@ -46,7 +48,7 @@ def fit_heightfield(z, spacing, samples_per_patch: int = 4, origin=(0.0, 0.0), u
                                      name=name, tol=tol)
 
 
-def fit_error(net: PatchNet, z, spacing, origin=(0.0, 0.0)) -> tuple[float, float, int]:
+def fit_error(net: PatchNet, z: npt.ArrayLike, spacing: float | tuple[float, float], origin: npt.ArrayLike = (0.0, 0.0)) -> tuple[float, float, int]:
     """Error of a net against the height-field samples it covers, evaluated on the exact surface.
 
     Samples are located with :func:`piste.terrain.query.height_at` (independent of the fit's own

@@ -45,10 +45,13 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ValidationError
 from piste.terrain.bezier import bernstein
@@ -63,7 +66,7 @@ _PIN_STATE: dict = {"depth": 0, "limiter": None}
 
 
 @contextmanager
-def single_threaded():
+def single_threaded() -> Iterator[None]:
     """Run the enclosed numeric work with every BLAS / OpenMP pool of this process at one thread.
 
     A multi-threaded OpenBLAS splits a matrix product or a factorisation into blocks whose partial
@@ -91,7 +94,7 @@ def single_threaded():
                 limiter.restore_original_limits()
 
 
-def _pair(value, what: str) -> tuple[float, float]:
+def _pair(value: Any, what: str) -> tuple[float, float]:
     arr = np.asarray(value, dtype=np.float64).ravel()
     if arr.size == 1:
         arr = np.repeat(arr, 2)
@@ -100,7 +103,7 @@ def _pair(value, what: str) -> tuple[float, float]:
     return float(arr[0]), float(arr[1])
 
 
-def bezier_basis_matrix(n_patches: int, s: int):
+def bezier_basis_matrix(n_patches: int, s: int) -> Any:
     """Sample matrix of a C0 piecewise-cubic Bézier curve (1-D), sparse CSR ``(n_patches*s + 1, 3*n_patches + 1)``.
 
     Row ``k`` holds the Bernstein weights of sample ``k`` (at global parameter ``k / s``) on the four
@@ -118,7 +121,7 @@ def bezier_basis_matrix(n_patches: int, s: int):
     return csr_matrix((w.ravel(), (rows, cols.ravel())), shape=(len(k), 3 * n_patches + 1))
 
 
-def c1_to_bezier(n_patches: int):
+def c1_to_bezier(n_patches: int) -> Any:
     """C1 piecewise-cubic Bézier coefficients to all Bézier control points (uniform segments).
 
     Unknowns (``2*n_patches + 2``): the ``n_patches + 1`` node points ``b[3p]``, then the outgoing
@@ -138,7 +141,7 @@ def c1_to_bezier(n_patches: int):
     return csr_matrix((vals, (rows, cols)), shape=(3 * p_ + 1, 2 * p_ + 2))
 
 
-def bspline_to_bezier(n_patches: int):
+def bspline_to_bezier(n_patches: int) -> Any:
     """Exact conversion of uniform cubic B-spline coefficients to C0 Bézier control points.
 
     Returns a sparse ``(3*n_patches + 1, n_patches + 3)`` matrix ``C``: segment ``p`` with B-spline
@@ -160,7 +163,7 @@ def bspline_to_bezier(n_patches: int):
     return csr_matrix((vals, (rows, cols)), shape=(3 * n_patches + 1, n_patches + 3))
 
 
-def _continuity_map(n_patches: int, continuity: str):
+def _continuity_map(n_patches: int, continuity: str) -> Any:
     """Sparse map from the free coefficients to the ``3*n_patches + 1`` Bézier control points (None for C0)."""
     if continuity == "c1":
         return c1_to_bezier(n_patches)
@@ -169,14 +172,14 @@ def _continuity_map(n_patches: int, continuity: str):
     return None
 
 
-def _normal_solve(a, rhs: np.ndarray) -> np.ndarray:
+def _normal_solve(a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """Solve ``(aᵀ a) x = rhs`` for a sparse ``a`` and a dense ``(m, k)`` right-hand side."""
     from scipy.sparse.linalg import splu
 
     return splu((a.T @ a).tocsc()).solve(np.ascontiguousarray(rhs))
 
 
-def _check_field(z) -> np.ndarray:
+def _check_field(z: npt.ArrayLike) -> np.ndarray:
     try:
         z = np.asarray(z, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -208,11 +211,11 @@ class FittedGrid:
 
 
 def fit_control_points(
-    z,
-    spacing,
+    z: npt.ArrayLike,
+    spacing: float | tuple[float, float],
     samples_per_patch: int = 4,
-    origin=(0.0, 0.0),
-    uv_scale=None,
+    origin: npt.ArrayLike = (0.0, 0.0),
+    uv_scale: float | tuple[float, float] | None = None,
     smooth: bool = False,
     edge: str = "crop",
     method: str = "separable",
@@ -252,7 +255,7 @@ def fit_control_points(
     """
     t0 = time.perf_counter()
 
-    def stage(msg):
+    def stage(msg: str) -> None:
         log.log(logging.INFO if progress else logging.DEBUG, "fit_heightfield: %s (%.2f s)", msg,
                 time.perf_counter() - t0)
 

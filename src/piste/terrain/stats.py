@@ -12,10 +12,13 @@
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.terrain.lod import DEFAULT_FAR, DEFAULT_NEAR, edge_levels, visible_patches
+from piste.terrain.net import PatchNet
 from piste.terrain.tessellate import tessellate
 
 #: the talk's figures, for comparison columns
@@ -23,7 +26,7 @@ TALK = {"pct_4": 77.0, "pct_6": 14.0, "pct_8": 3.0, "pct_nonuniform": 6.0, "avg_
         "mpolys_per_s": 5.9, "no_lod_polys_per_patch": 98.0, "no_lod_ratio": 3.30}
 
 
-def default_view(net) -> tuple[np.ndarray, np.ndarray]:
+def default_view(net: PatchNet) -> tuple[np.ndarray, np.ndarray]:
     """A generic oblique view of a net: ``(eye (3,), target (3,))``."""
     lo, hi = net.bounds
     centre = (lo + hi) / 2
@@ -31,8 +34,8 @@ def default_view(net) -> tuple[np.ndarray, np.ndarray]:
     return centre + np.array([0.0, -0.9 * ext, 0.6 * ext]), centre
 
 
-def stats(net, eye=None, target=None, near: float = DEFAULT_NEAR, far: float = DEFAULT_FAR, fov_y: float = 60.0,
-          aspect: float = 640 / 448, cull: bool = True, repeat: int = 3) -> dict:
+def stats(net: PatchNet, eye: npt.ArrayLike | None = None, target: npt.ArrayLike | None = None, near: float = DEFAULT_NEAR, far: float = DEFAULT_FAR, fov_y: float = 60.0,
+          aspect: float = 640 / 448, cull: bool = True, repeat: int = 3) -> dict[str, Any]:
     """The talk's statistics for one view of ``net``.
 
     Parameters
@@ -66,6 +69,7 @@ def stats(net, eye=None, target=None, near: float = DEFAULT_NEAR, far: float = D
         mesh = tessellate(net, levels, patches=pids)
         best = min(best, time.perf_counter() - t0)
     p = len(pids)
+    assert mesh is not None  # repeat >= 1 tessellation
     kind = mesh.patch_kind
     polys = mesh.n_triangles
     no_lod = p * 98

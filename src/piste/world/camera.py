@@ -21,8 +21,10 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ConfigError
 from piste.scene_data import Camera  # (the one camera type, in the foundation; re-exported here)
@@ -40,7 +42,7 @@ DEFAULT_FAR = 4000.0
 MAX_DEPTH_RATIO = 1e7
 
 
-def _arc_length_point(points: np.ndarray, s) -> np.ndarray:
+def _arc_length_point(points: np.ndarray, s: npt.ArrayLike) -> np.ndarray:
     """Points at arc lengths ``s`` (clamped) along a polyline ``(k, 3)``."""
     seg = np.linalg.norm(np.diff(points, axis=0), axis=1)
     cum = np.concatenate([[0.0], np.cumsum(seg)])
@@ -49,7 +51,7 @@ def _arc_length_point(points: np.ndarray, s) -> np.ndarray:
 
 
 def track_camera(
-    centerline,
+    centerline: npt.ArrayLike,
     t: float,
     height: float = 12.0,
     behind: float = 14.0,
@@ -89,14 +91,14 @@ def track_camera(
     return Camera(eye, target, fov_y=fov_y, aspect=aspect, near=near, far=far)
 
 
-def _box_corners(lo, hi) -> np.ndarray:
+def _box_corners(lo: npt.ArrayLike, hi: npt.ArrayLike) -> np.ndarray:
     """The 8 corners ``(8, 3) float64`` of the box ``lo..hi``."""
     lo, hi = np.asarray(lo, dtype=np.float64).reshape(3), np.asarray(hi, dtype=np.float64).reshape(3)
     sel = (np.arange(8)[:, None] >> np.arange(3)) & 1  # (8, 3) 0/1
     return np.where(sel == 1, hi, lo)
 
 
-def far_for_extent(eye, lo, hi, minimum: float = DEFAULT_FAR, margin: float = 1.05) -> float:
+def far_for_extent(eye: npt.ArrayLike, lo: npt.ArrayLike, hi: npt.ArrayLike, minimum: float = DEFAULT_FAR, margin: float = 1.05) -> float:
     """A far plane (metres) that reaches every corner of the box ``lo..hi`` (``(3,)`` each: the
     terrain's bounds) from ``eye`` (``(3,)``), with ``margin``; at least ``minimum``, so worlds
     smaller than :data:`DEFAULT_FAR` keep it and bigger ones (a 50 km DEM) are never cut off."""
@@ -104,7 +106,8 @@ def far_for_extent(eye, lo, hi, minimum: float = DEFAULT_FAR, margin: float = 1.
     return float(max(minimum, d * margin))
 
 
-def camera_planes(eye, lo=None, hi=None, near: float | None = None, far: float | None = None) -> tuple[float, float]:
+def camera_planes(eye: npt.ArrayLike, lo: npt.ArrayLike | None = None, hi: npt.ArrayLike | None = None,
+                  near: float | None = None, far: float | None = None) -> tuple[float, float]:
     """``(near, far)`` in metres for a camera at ``eye`` (``(3,)``) over terrain bounded by
     ``lo..hi`` (``(3,)`` each; None: unknown): the given planes where given, else a far plane
     reaching the whole terrain (:func:`far_for_extent`, at least :data:`DEFAULT_FAR`) and a near
@@ -119,7 +122,7 @@ def camera_planes(eye, lo=None, hi=None, near: float | None = None, far: float |
     return float(near), float(far)
 
 
-def terrain_view_problem(camera: Camera, lo, hi) -> str | None:
+def terrain_view_problem(camera: Camera, lo: npt.ArrayLike, hi: npt.ArrayLike) -> str | None:
     """Why ``camera`` can see none of the terrain whose bounds are ``lo..hi`` (``(3,)`` each), or
     None when some of it may be in view (the box meets the view frustum; conservative).
 
@@ -149,7 +152,7 @@ def terrain_view_problem(camera: Camera, lo, hi) -> str | None:
 _warned: set = set()
 
 
-def warn_if_no_terrain(camera: Camera, lo, hi, name: str = "the camera", seen: set | None = None) -> str | None:
+def warn_if_no_terrain(camera: Camera, lo: np.ndarray, hi: np.ndarray, name: str = "the camera", seen: set | None = None) -> str | None:
     """Log at WARNING on the ``piste`` logger (``piste: the camera sees no terrain: REASON``) when
     ``camera`` sees none of the terrain ``lo..hi`` (see :func:`terrain_view_problem`); returns the
     reason or None.  Each kind of reason is logged once per ``name`` and ``seen`` set (default: once
@@ -182,11 +185,11 @@ class FlyCamera:
     near: float = 0.5
     far: float = 4000.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.position = np.asarray(self.position, dtype=np.float64).reshape(3).copy()
 
     @classmethod
-    def from_camera(cls, cam: Camera, **kwargs) -> "FlyCamera":
+    def from_camera(cls, cam: Camera, **kwargs: Any) -> "FlyCamera":
         f = cam.forward
         return cls(cam.eye, yaw=float(np.arctan2(f[0], f[1])), pitch=float(np.arcsin(np.clip(f[2], -1, 1))),
                    fov_y=cam.fov_y, near=cam.near, far=cam.far, **kwargs)

@@ -28,6 +28,7 @@ import numpy as np
 
 from piste.errors import ValidationError
 from piste.terrain.fit import fit_heightfield
+from piste.terrain.net import PatchNet
 from piste.terrain.query import height_at
 
 __all__ = ["default_course", "track_centerline", "course_heightfield", "COURSE_WIDTH", "COURSE_LENGTH"]
@@ -44,7 +45,7 @@ TRACK_HALF_WIDTH = 16.0  # wall tops
 TRACK_DEPTH = 5.0
 
 
-def _smoothstep(e0, e1, x):
+def _smoothstep(e0: float, e1: float, x: np.ndarray) -> np.ndarray:
     """Quintic smoothstep (C2), 0 below ``e0`` and 1 above ``e1``."""
     t = np.clip((x - e0) / (e1 - e0), 0.0, 1.0)
     return t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
@@ -53,7 +54,7 @@ def _smoothstep(e0, e1, x):
 class _Params:
     """Every random number of a course, drawn once from the seed (so the field is a pure function)."""
 
-    def __init__(self, seed: int):
+    def __init__(self, seed: int) -> None:
         rng = np.random.default_rng(seed)
         self.steep_phase = rng.uniform(0, 2 * np.pi)
         # track centreline: two sines
@@ -78,7 +79,7 @@ class _Params:
         self.roller_l = rng.uniform(28.0, 40.0)
         self.roller_p = rng.uniform(0, 2 * np.pi)
         # rocky outcrops off the track
-        rocks = []
+        rocks: list[tuple[float, ...]] = []
         while len(rocks) < 14:
             x, y = rng.uniform(20.0, COURSE_WIDTH - 20.0), rng.uniform(30.0, COURSE_LENGTH - 30.0)
             r, h = rng.uniform(6.0, 15.0), rng.uniform(4.0, 12.0)
@@ -141,13 +142,13 @@ def course_heightfield(seed: int = 0) -> tuple[np.ndarray, float, tuple[float, f
 
 
 @lru_cache(maxsize=8)
-def _course(seed: int):
+def _course(seed: int) -> PatchNet:
     z, spacing, origin = course_heightfield(seed)
     net = fit_heightfield(z, spacing, samples_per_patch=SAMPLES_PER_PATCH, origin=origin, name=f"default course (seed {seed})")
     return net
 
 
-def default_course(seed: int = 0):
+def default_course(seed: int = 0) -> PatchNet:
     """The default snowboard course for ``seed``: a :class:`piste.terrain.PatchNet` of 32 x 80 = 2,560
     patches (400 m x 1000 m, Z up, descending along +y).
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ConfigError
 
@@ -45,7 +46,7 @@ class ObjectLOD:
         return len(self.indices)
 
 
-def object_lods(positions, indices, ratio: float = 0.5, min_triangles: int = 8, max_levels: int = 4) -> list:
+def object_lods(positions: npt.ArrayLike, indices: npt.ArrayLike, ratio: float = 0.5, min_triangles: int = 8, max_levels: int = 4) -> list:
     """The level chain of one mesh, level 0 the mesh itself.
 
     Parameters
@@ -93,14 +94,15 @@ def object_lods(positions, indices, ratio: float = 0.5, min_triangles: int = 8, 
     return levels
 
 
-def instance_scale(matrix) -> np.ndarray:
+def instance_scale(matrix: npt.ArrayLike) -> np.ndarray:
     """The largest axis scale ``(n,)`` of object matrices ``(n, 4, 4)`` (how much a model-unit
     error grows in the world)."""
     m = np.asarray(matrix, dtype=np.float64).reshape(-1, 4, 4)
     return np.linalg.norm(m[:, :3, :3], axis=1).max(axis=1)
 
 
-def choose_lods(errors, centers, radius, scale, view_projection, height_px: float,
+def choose_lods(errors: npt.ArrayLike, centers: npt.ArrayLike, radius: npt.ArrayLike, scale: npt.ArrayLike,
+                view_projection: npt.ArrayLike, height_px: float,
                 max_pixels: float = DEFAULT_LOD_PIXELS) -> np.ndarray:
     """The level ``(n,) int64`` each instance draws at: the coarsest whose projected error is at most
     ``max_pixels``.

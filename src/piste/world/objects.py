@@ -55,14 +55,17 @@ Lighting options (:class:`ObjectSet`)
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.character.morph import vertex_normals
 from piste.errors import ConfigError, ValidationError
 from piste.lighting.lights import Lights, shade
-from piste.lighting.vertex import choose_lights_many, vertex_light
+from piste.lighting.vertex import VertexLights, choose_lights_many, vertex_light
+from piste.terrain.net import PatchNet
 from piste.terrain.query import eval_points, height_at
 
 __all__ = [
@@ -115,7 +118,7 @@ class ObjectMesh:
     uv: np.ndarray
     indices: np.ndarray
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.positions = np.ascontiguousarray(self.positions, dtype=np.float32).reshape(-1, 3)
         self.normals = np.ascontiguousarray(self.normals, dtype=np.float32).reshape(-1, 3)
         self.uv = np.ascontiguousarray(self.uv, dtype=np.float32).reshape(-1, 2)
@@ -137,8 +140,12 @@ def _tile_uv(uv01: np.ndarray, tile: str) -> np.ndarray:
     return np.stack([u0 + uv[:, 0] * (u1 - u0), v0 + uv[:, 1] * (v1 - v0)], 1)
 
 
-def _concat(name, parts) -> ObjectMesh:
-    pos, nrm, uv, tri, off = [], [], [], [], 0
+def _concat(name: str, parts: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) -> ObjectMesh:
+    pos: list[np.ndarray] = []
+    nrm: list[np.ndarray] = []
+    uv: list[np.ndarray] = []
+    tri: list[np.ndarray] = []
+    off = 0
     for p, n, t, i in parts:
         pos.append(p)
         nrm.append(n)
@@ -148,16 +155,19 @@ def _concat(name, parts) -> ObjectMesh:
     return ObjectMesh(name, np.concatenate(pos), np.concatenate(nrm), np.concatenate(uv), np.concatenate(tri))
 
 
-def _unit(v):
+def _unit(v: npt.ArrayLike) -> np.ndarray:
     v = np.asarray(v, dtype=np.float64)
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.where(n > 0, n, 1.0)
 
 
-def _box(center, size, tile, uv_face=None):
+def _box(center: npt.ArrayLike, size: npt.ArrayLike, tile: str, uv_face: str | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """An axis-aligned box with flat face normals: 24 vertices, 12 triangles."""
     c, s = np.asarray(center, float), np.asarray(size, float) / 2.0
-    pos, nrm, uv, tri = [], [], [], []
+    pos: list[np.ndarray] = []
+    nrm: list[np.ndarray] = []
+    uv: list[np.ndarray] = []
+    tri: list[list[int]] = []
     for axis in range(3):
         for sign in (-1.0, 1.0):
             a, b = [(axis + 1) % 3, (axis + 2) % 3]
@@ -183,7 +193,7 @@ def _box(center, size, tile, uv_face=None):
     return np.array(pos), np.array(nrm), np.array(uv), np.array(tri)
 
 
-def _lathe(profile, segments, tile, z_of_normal=None):
+def _lathe(profile: npt.ArrayLike, segments: int, tile: str, z_of_normal: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """A surface of revolution about Z from ``profile (k, 2)`` of (radius, z), smooth normals,
     a seam column duplicated for the UVs."""
     prof = np.asarray(profile, float)
@@ -203,7 +213,7 @@ def _lathe(profile, segments, tile, z_of_normal=None):
     return pos.reshape(-1, 3), nrm.reshape(-1, 3), _tile_uv(uv01.reshape(-1, 2), tile), tri
 
 
-def _tree():
+def _tree() -> ObjectMesh:
     parts = [_lathe([(0.28, 0.0), (0.24, 1.2), (0.18, 2.4)], 8, "bark")]
     for z0, r, h in ((1.6, 2.4, 3.6), (3.4, 1.9, 3.0), (5.0, 1.35, 2.8)):
         # a cone skirt: the underside closes towards the trunk, then the cone to its tip
@@ -211,13 +221,13 @@ def _tree():
     return _concat("tree", parts)
 
 
-def _sign():
+def _sign() -> ObjectMesh:
     post = _box((0.0, 0.1, 1.1), (0.12, 0.12, 2.2), "post")  # behind the panel (its -y face is the sign)
     panel = _box((0.0, 0.0, 2.0), (1.3, 0.08, 0.9), "metal", uv_face="sign")  # the -y face shows the sign
     return _concat("sign", [post, panel])
 
 
-def _icosphere(subdiv: int):
+def _icosphere(subdiv: int) -> tuple[np.ndarray, np.ndarray]:
     t = (1 + 5 ** 0.5) / 2
     v = _unit(np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t], [0, -1, -t], [0, 1, -t],
                         [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], float))
@@ -236,7 +246,7 @@ def _icosphere(subdiv: int):
     return v, f
 
 
-def _rock():
+def _rock() -> ObjectMesh:
     v, f = _icosphere(2)
     rng = np.random.default_rng(1234)  # fixed: the rock shape is part of the program
     k = rng.normal(size=(6, 3))
@@ -249,7 +259,7 @@ def _rock():
     return ObjectMesh("rock", p, n, uv, f)
 
 
-def _rail():
+def _rail() -> ObjectMesh:
     beam = _box((0.5, 0.0, 0.7), (1.0, 0.08, 0.08), "metal")
     posts = [_box((x, 0.0, 0.35), (0.07, 0.07, 0.7), "post") for x in (0.08, 0.92)]
     return _concat("rail", [beam] + posts)
@@ -274,7 +284,8 @@ def object_texture(size: int = 128) -> np.ndarray:
     yy, xx = np.mgrid[0:size, 0:size] / size
     noise = rng.uniform(-1, 1, (size, size))
 
-    def fill(tile, rgb, n=0.0, f=None):
+    def fill(tile: str, rgb: npt.ArrayLike, n: float = 0.0,
+             f: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None) -> None:
         u0, v0, u1, v1 = TILES[tile]
         sl = (slice(int(v0 * size), int(v1 * size)), slice(int(u0 * size), int(u1 * size)))
         base = np.asarray(rgb, float)[None, None] * (1.0 + n * noise[sl])[..., None]
@@ -288,7 +299,7 @@ def object_texture(size: int = 128) -> np.ndarray:
     fill("needles", (0.12, 0.30, 0.16), 0.35)
     fill("rock", (0.46, 0.45, 0.44), 0.3)
 
-    def sign(b, u, v):
+    def sign(b: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         b = np.ones_like(b) * 0.95
         d = np.abs(u - 0.5) + np.abs(v - 0.5)
         b[d < 0.32] = (0.95, 0.45, 0.05)
@@ -304,7 +315,7 @@ def object_texture(size: int = 128) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------- compression
-def oct_encode(normals, bits: int = 8) -> np.ndarray:
+def oct_encode(normals: npt.ArrayLike, bits: int = 8) -> np.ndarray:
     """Octahedral encoding of unit ``normals (v, 3)`` into ``(v, 2)`` int8 (bits 8) or int16
     (bits 16) snorm values (``c / (2^(b-1) - 1)`` decodes them, as GL does)."""
     if bits not in (8, 16):
@@ -320,22 +331,23 @@ def oct_encode(normals, bits: int = 8) -> np.ndarray:
     o = np.stack([ox, oy], 1)
     # pick the best of the 4 roundings (floor / ceil per component): the "precise" variant
     lo = np.floor(o * qmax)
-    best = None
-    best_err = None
+    best: np.ndarray | None = None
+    best_err: np.ndarray | None = None
     for dx in (0, 1):
         for dy in (0, 1):
             c = np.clip(lo + np.array([dx, dy]), -qmax, qmax)
             d = oct_decode(c, bits)
             err = -(d * n / np.linalg.norm(n, axis=1, keepdims=True)).sum(1)
-            if best is None:
+            if best is None or best_err is None:
                 best, best_err = c.copy(), err
             else:
                 better = err < best_err
                 best[better], best_err[better] = c[better], err[better]
+    assert best is not None
     return best.astype(np.int8 if bits == 8 else np.int16)
 
 
-def oct_decode(q, bits: int = 8) -> np.ndarray:
+def oct_decode(q: npt.ArrayLike, bits: int = 8) -> np.ndarray:
     """Unit normals ``(v, 3) float64`` from octahedral snorm values ``q (v, 2)`` (see
     :func:`oct_encode`); the same arithmetic as ``object.vert.glsl``."""
     qmax = (1 << (bits - 1)) - 1
@@ -412,7 +424,7 @@ class CompressedMesh:
         """float32 position, normal, uv (32 bytes a vertex) and uint32 indices."""
         return 32 * n_vertices + 12 * n_triangles
 
-    def decode(self):
+    def decode(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``positions (v, 3)``, ``normals (v, 3)``, ``uv (v, 2)`` float32, as the shader decodes them."""
         q = self.positions.astype(np.float32) / np.float32(65535.0)
         p = self.pos_offset + self.pos_extent * q
@@ -420,7 +432,7 @@ class CompressedMesh:
         return p.astype(np.float32), oct_decode(self.normals, self.normal_bits).astype(np.float32), t.astype(np.float32)
 
 
-def _quantize16(x: np.ndarray):
+def _quantize16(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     lo = x.min(0)
     ext = x.max(0) - lo
     ext = np.where(ext > 0, ext, 1.0)
@@ -443,14 +455,14 @@ def compress_mesh(mesh: ObjectMesh, normal_bits: int = 8) -> CompressedMesh:
 
 
 # ------------------------------------------------------------------------------ transforms
-def normal_matrix(matrix) -> np.ndarray:
+def normal_matrix(matrix: npt.ArrayLike) -> np.ndarray:
     """Inverse-transpose of the 3x3 part of ``matrix (..., 4, 4)`` or ``(..., 3, 3)``: ``(..., 3, 3)``
     float64 (transforms normals correctly under non-uniform scale and shear)."""
     m = np.asarray(matrix, dtype=np.float64)[..., :3, :3]
     return np.swapaxes(np.linalg.inv(m), -1, -2)
 
 
-def transform_mesh(positions, normals, matrix):
+def transform_mesh(positions: npt.ArrayLike, normals: npt.ArrayLike, matrix: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """World ``positions (v, 3)`` and unit ``normals (v, 3)`` (float64) of an object under
     ``matrix (4, 4)``."""
     m = np.asarray(matrix, dtype=np.float64)
@@ -478,14 +490,14 @@ class ObjectSet:
         write off, instances sorted back to front (:mod:`piste.render.object_pass`)
     """
 
-    meshes: dict
-    kinds: tuple
+    meshes: dict[str, CompressedMesh]
+    kinds: tuple[str, ...]
     kind: np.ndarray
     matrix: np.ndarray
     normal_matrix: np.ndarray
     center: np.ndarray
     radius: np.ndarray
-    lights: object = None
+    lights: VertexLights | None = None
     texture: np.ndarray | None = None
     counts: dict = field(default_factory=dict)
     blend: tuple = ()
@@ -497,7 +509,7 @@ class ObjectSet:
         """Indices ``(k,) int64`` of the instances of ``kind``."""
         return np.nonzero(self.kind == self.kinds.index(kind))[0]
 
-    def visible(self, planes, max_distance: float | None = None, eye=None) -> np.ndarray:
+    def visible(self, planes: np.ndarray, max_distance: float | None = None, eye: npt.ArrayLike | None = None) -> np.ndarray:
         """Instances whose bounding spheres meet the frustum ``planes (6, 4)`` (and lie within
         ``max_distance`` of ``eye``): ``(k,) int64``."""
         d = self.center @ planes[:, :3].T + planes[:, 3]  # (n, 6)
@@ -522,14 +534,14 @@ class ObjectSet:
         return out
 
 
-def _frame(x_axis, z_axis):
+def _frame(x_axis: np.ndarray, z_axis: np.ndarray) -> np.ndarray:
     x = _unit(x_axis)
     z = _unit(z_axis - (z_axis * x).sum(-1, keepdims=True) * x)
     y = np.cross(z, x)
     return np.stack([x, y, z], -1)  # (n, 3, 3), columns = axes
 
 
-def _surface(net, xy):
+def _surface(net: PatchNet, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     z, hit, patch, uv = height_at(net, xy)
     if not np.all(hit):
         raise ValidationError(f"place_objects: {int((~hit).sum())} object positions lie off the terrain")
@@ -539,7 +551,7 @@ def _surface(net, xy):
     return z, n
 
 
-def place_objects(net, centerline, lights=None, seed: int = 0, n_trees: int = 220, n_signs: int = 16,
+def place_objects(net: PatchNet, centerline: npt.ArrayLike, lights: Lights | None = None, seed: int = 0, n_trees: int = 220, n_signs: int = 16,
                   n_rocks: int = 40, n_rails: int = 6, normal_bits: int = 8, track_half_width: float = 16.0) -> ObjectSet:
     """Trees, signs, rocks and rails along and around a track, standing on the exact surface.
 
@@ -561,7 +573,7 @@ def place_objects(net, centerline, lights=None, seed: int = 0, n_trees: int = 22
     length = cum[-1]
     lo, hi = net.bounds
 
-    def along(s):
+    def along(s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         s = np.clip(s, 0.0, length)
         p = np.stack([np.interp(s, cum, line[:, k]) for k in range(2)], 1)
         d = np.stack([np.interp(np.minimum(s + 1.0, length), cum, line[:, k]) -
@@ -575,7 +587,7 @@ def place_objects(net, centerline, lights=None, seed: int = 0, n_trees: int = 22
     meshes = {k: compress_mesh(make_mesh(k), normal_bits) for k in kinds_t}
     margin = 3.0
 
-    def clamp_xy(xy):
+    def clamp_xy(xy: np.ndarray) -> np.ndarray:
         return np.clip(xy, lo[:2] + margin, hi[:2] - margin)
 
     # trees: in clumps beside the track, both sides, 6-60 m beyond the lips
@@ -673,7 +685,7 @@ def place_objects(net, centerline, lights=None, seed: int = 0, n_trees: int = 22
 
 
 # --------------------------------------------------------------------------------- lighting
-def bake_vertex_colors(objects: ObjectSet, lights, instances=None) -> dict:
+def bake_vertex_colors(objects: ObjectSet, lights: Lights, instances: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Pre-calculated RGBs: the full lighting equation at every instance vertex.
 
     Returns ``{kind: (k, v, 3) uint8}`` half-bright (128 = 1.0, up to 2x over-bright), instances in
@@ -694,7 +706,7 @@ def bake_vertex_colors(objects: ObjectSet, lights, instances=None) -> dict:
     return out
 
 
-def lighting_report(objects: ObjectSet, lights) -> dict:
+def lighting_report(objects: ObjectSet, lights: Lights) -> dict[str, dict[str, float | int]]:
     """Memory vs quality of the object lighting options, against the full lighting equation
     (every light, per vertex, float).
 
@@ -706,7 +718,7 @@ def lighting_report(objects: ObjectSet, lights) -> dict:
     """
     vl = objects.lights if objects.lights is not None else choose_lights_many(lights, objects.center)
     baked = bake_vertex_colors(objects, lights)
-    err = {"dynamic": [], "baked": [], "points": []}
+    err: dict[str, list[np.ndarray]] = {"dynamic": [], "baked": [], "points": []}
     n_vert = 0
     for ki, kname in enumerate(objects.kinds):
         idx = objects.instances(kname)
@@ -715,6 +727,8 @@ def lighting_report(objects: ObjectSet, lights) -> dict:
             wp, wn = transform_mesh(p, n, objects.matrix[i])
             ref = shade(lights, wp, wn)
             dyn = vertex_light(wn, vl[i])
+            if vl.chosen is None:
+                raise ValidationError("lighting_report: the objects' light sets do not say which lights they chose")
             chosen = [lights.direct[c] for c in vl.chosen[i] if c >= 0]
             pts = shade(Lights(tuple(lights.ambient) + tuple(chosen)), wp, wn)
             err["dynamic"].append(np.abs(dyn - ref).max(1))
@@ -724,7 +738,7 @@ def lighting_report(objects: ObjectSet, lights) -> dict:
     n_obj = len(objects)
     bytes_ = {"dynamic": 84 * n_obj, "baked": 3 * n_vert, "points": 4 * 64 * n_obj}
     out = {}
-    for k, e in err.items():
-        e = np.concatenate(e) if e else np.zeros(1)
+    for k, es in err.items():
+        e = np.concatenate(es) if es else np.zeros(1)
         out[k] = {"bytes": int(bytes_[k]), "mean_error": float(e.mean()), "max_error": float(e.max())}
     return out

@@ -40,15 +40,19 @@ batches and clip tables; :class:`piste.render.scene_renderer.SceneRenderer` draw
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.character import default_rider
 from piste.character.animation import sample_poses
-from piste.character.model import SkinnedMesh
+from piste.character.model import Model, Skeleton, SkinnedMesh
 from piste.character.skeleton import world_from_local
 from piste.errors import ConfigError, ValidationError
+from piste.terrain.net import PatchNet
 from piste.terrain.query import eval_points, height_at
 from piste.transforms import compose_trs
 from piste.world.camera import Camera
@@ -68,7 +72,7 @@ DEFAULT_PACK = (
 )
 
 
-def _unit(v):
+def _unit(v: npt.ArrayLike) -> np.ndarray:
     v = np.asarray(v, dtype=np.float64)
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.where(n > 0, n, 1.0)
@@ -85,7 +89,7 @@ class ClipTable:
     duration : (c,) float64
     """
 
-    def __init__(self, model, rate: float = 60.0):
+    def __init__(self, model: Model, rate: float = 60.0) -> None:
         if model.skeleton is None or not model.clips:
             raise ValidationError(f"ClipTable: model {model.name!r} needs a skeleton and clips")
         self.skeleton = model.skeleton
@@ -116,7 +120,9 @@ class ClipTable:
             self.frames[c] = f
 
     @classmethod
-    def from_samples(cls, skeleton, rate: float, names, duration, translation, rotation, scale) -> "ClipTable":
+    def from_samples(cls, skeleton: Skeleton, rate: float, names: Sequence[str], duration: npt.ArrayLike,
+                     translation: Sequence[np.ndarray], rotation: Sequence[np.ndarray],
+                     scale: Sequence[np.ndarray]) -> "ClipTable":
         """A table from clips already sampled at ``rate`` Hz (a bundle's pre-sampled clips): no curve
         sampling.  For clip ``names[c]``: ``translation[c]`` ``(F_c, b, 3)``, ``rotation[c]``
         ``(F_c, b, 4)`` xyzw, ``scale[c]`` ``(F_c, b, 3)``; ``duration`` ``(c,)`` seconds."""
@@ -154,7 +160,7 @@ class ClipTable:
         except ValueError:
             raise ConfigError(f"no clip {name!r}: the model has {', '.join(self.names)}") from None
 
-    def local(self, clip_ids, times, loop: bool = True):
+    def local(self, clip_ids: npt.ArrayLike, times: npt.ArrayLike, loop: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Local poses of ``n`` instances: ``translation (n, b, 3)``, ``rotation (n, b, 4)``,
         ``scale (n, b, 3)`` of clip ``clip_ids[i]`` at ``times[i]`` seconds (looping)."""
         c = np.asarray(clip_ids, dtype=np.int64)
@@ -171,7 +177,7 @@ class ClipTable:
         r = _unit(r0 + a * (r1 - r0))
         return t0 + a * (t1 - t0), r, s0 + a * (s1 - s0)
 
-    def skin_matrices(self, clip_ids, times, model_matrices=None, loop: bool = True) -> np.ndarray:
+    def skin_matrices(self, clip_ids: npt.ArrayLike, times: npt.ArrayLike, model_matrices: npt.ArrayLike | None = None, loop: bool = True) -> np.ndarray:
         """Skin matrices ``(n, b, 4, 4)`` (bind space -> world when ``model_matrices (n, 4, 4)``
         is given, else -> model space)."""
         tr, rot, sc = self.local(clip_ids, times, loop)
@@ -182,7 +188,8 @@ class ClipTable:
         return world @ sk.inverse_bind
 
 
-def surface_frame(net, xy, heading, probe_xy=None):
+def surface_frame(net: PatchNet, xy: npt.ArrayLike, heading: npt.ArrayLike,
+                  probe_xy: npt.ArrayLike | None = None) -> tuple[np.ndarray, ...]:
     """Anchors, normals and frames on the exact surface of ``net``.
 
     Parameters
@@ -262,8 +269,9 @@ class RiderSet:
     rate : clip table rate in Hz
     """
 
-    def __init__(self, net, centerline, model=None, pack=DEFAULT_PACK, start: float = 150.0, speed: float = 11.0,
-                 rate: float = 60.0):
+    def __init__(self, net: PatchNet, centerline: npt.ArrayLike, model: Model | None = None,
+                 pack: Sequence[tuple[str, float, float, float, float, float]] = DEFAULT_PACK, start: float = 150.0, speed: float = 11.0,
+                 rate: float = 60.0) -> None:
         if model is None:
             model = default_rider(0)
         self.net = net
@@ -289,7 +297,7 @@ class RiderSet:
     def __len__(self) -> int:
         return len(self.clips)
 
-    def _track(self, s):
+    def _track(self, s: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         s = np.clip(s, 0.0, self.length)
         cum, line = self._cum, self.line
         p = np.stack([np.interp(s, cum, line[:, 0]), np.interp(s, cum, line[:, 1])], 1)
@@ -334,12 +342,12 @@ class RiderSet:
         return self.phase * self.table.duration[self.clip_ids] + float(t)
 
     @classmethod
-    def default(cls, net, centerline, model=None, **kw) -> "RiderSet":
+    def default(cls, net: PatchNet, centerline: np.ndarray, model: Model | None = None, **kw: Any) -> "RiderSet":
         return cls(net, centerline, model=model, **kw)
 
 
 def follow_camera(state: RiderState, i: int = 0, behind: float = 7.0, height: float = 3.0, look_ahead: float = 10.0,
-                  net=None, clearance: float = 1.5, **camera_kw):
+                  net: PatchNet | None = None, clearance: float = 1.5, **camera_kw: Any) -> Camera:
     """A chase camera behind rider ``i``: ``behind`` metres back along the track's direction (not
     the rider's carving heading: the camera stays calm through the turns), ``height`` above it,
     looking at a point ``look_ahead`` metres ahead along the track, 1 m above the snow; kept ``clearance`` metres above the terrain (the height probed by
@@ -365,7 +373,7 @@ def follow_camera(state: RiderState, i: int = 0, behind: float = 7.0, height: fl
     return Camera(eye=eye, target=target, **camera_kw)
 
 
-def merged_mesh(model):
+def merged_mesh(model: Model) -> SkinnedMesh:
     """One :class:`~piste.character.model.SkinnedMesh` of every skinned primitive of ``model``
     (texture: the first one's).  Morph targets are merged by name."""
     meshes = [m for m in model.meshes if m.skinned] or list(model.meshes)
@@ -377,7 +385,7 @@ def merged_mesh(model):
     tex = next((m.texture for m in meshes if m.texture is not None), None)
     # morph targets: the union of the primitives' target names (a primitive without one: zeros)
     names = list(dict.fromkeys(n for m in meshes for n in m.morph_names))
-    kw = {}
+    kw: dict[str, Any] = {}
     if names:
         k = len(names)
         mp = [np.zeros((k, m.n_vertices, 3), np.float32) for m in meshes]
@@ -398,7 +406,7 @@ def merged_mesh(model):
         texture=tex, skinned=True, group=model.name, **kw)
 
 
-def rider_model(model):
+def rider_model(model: Model) -> Model:
     """``model`` with all its skinned primitives merged into one mesh and an RGBA texture (white
     when it has none): what a scene cast draws.  Raises ConfigError without a skin or clips."""
     from dataclasses import replace
@@ -418,7 +426,8 @@ def rider_model(model):
     return replace(model, meshes=[replace(mesh, texture=tex)])
 
 
-def pack_for(model, n: int, ahead: float = 0.0, across: float = 0.0, spacing: float = 8.0):
+def pack_for(model: Model, n: int, ahead: float = 0.0, across: float = 0.0,
+             spacing: float = 8.0) -> tuple[tuple[str, float, float, float, float, float], ...]:
     """A pack of ``n`` riders of ``model`` playing its clips in turn: rows for :class:`RiderSet`
     starting ``ahead`` metres ahead of the track position, ``spacing`` metres apart, zig-zagging
     ``across`` +- 3 m."""

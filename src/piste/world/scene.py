@@ -28,17 +28,22 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.character import BlendedMesh, default_rider, make_batches, make_lods
+from piste.character.model import Model, SkinnedMesh
 from piste.errors import ConfigError
 from piste.graph import connected_parts
-from piste.lighting.lights import DirectionalLight, default_lights
+from piste.lighting.lights import DirectionalLight, Lights, default_lights
 from piste.lighting.vertex import choose_lights_many
+from piste.scene_data import Camera
+from piste.terrain.net import PatchNet
 from piste.world.course import TRACK_HALF_WIDTH, default_course, track_centerline
-from piste.world.objects import place_objects
-from piste.world.riders import RiderSet, follow_camera
+from piste.world.objects import ObjectSet, place_objects
+from piste.world.riders import RiderSet, RiderState, follow_camera
 
 __all__ = ["Scene", "SceneFrame", "LOD_DISTANCES", "sun_light", "orient_outward"]
 
@@ -48,7 +53,13 @@ CAMERA_BEHIND = 6.0
 LOD_DISTANCES = (14.0, 35.0)
 
 
-def sun_light(lights):
+def _filled(a: np.ndarray | None) -> np.ndarray:
+    """A SkinnedMesh array its ``__post_init__`` filled (typed optional for the constructor)."""
+    assert a is not None
+    return a
+
+
+def sun_light(lights: Lights) -> DirectionalLight | None:
     """The strongest directional light of ``lights`` (the one that casts projected shadows), or None."""
     d = [x for x in lights.direct if isinstance(x, DirectionalLight)]
     if not d:
@@ -56,7 +67,7 @@ def sun_light(lights):
     return max(d, key=lambda x: abs(x.intensity) * float(np.abs(np.asarray(x.color)).sum()))
 
 
-def orient_outward(mesh):
+def orient_outward(mesh: SkinnedMesh) -> tuple[SkinnedMesh, int]:
     """A copy of a SkinnedMesh whose closed parts all face outward.
 
     Each connected part's signed volume (divergence theorem, ``sum v0 . (v1 x v2) / 6``) tells
@@ -86,6 +97,7 @@ def orient_outward(mesh):
     new_tri = tri.copy()
     new_tri[flip_t] = tri[flip_t][:, ::-1]
     sign = np.where(inward[label], -1.0, 1.0).astype(np.float32)[:, None]
+    assert mesh.normals is not None and mesh.morph_normals is not None  # SkinnedMesh.__post_init__ fills both
     out = replace(mesh, indices=new_tri.astype(np.uint32), normals=mesh.normals * sign,
                   morph_normals=mesh.morph_normals * sign[None])
     return out, int(inward.sum())
@@ -133,8 +145,10 @@ class Scene:
     riders_kw : passed to :class:`piste.world.riders.RiderSet` (``start``, ``speed``, ``pack``)
     """
 
-    def __init__(self, net, centerline, lights, model=None, objects=None, follow: int = 0,
-                 lod_distances=LOD_DISTANCES, camera_kw=None, **riders_kw):
+    def __init__(self, net: PatchNet, centerline: npt.ArrayLike, lights: Lights, model: Model | None = None,
+                 objects: ObjectSet | None = None, follow: int = 0,
+                 lod_distances: tuple[float, float] = LOD_DISTANCES, camera_kw: dict[str, Any] | None = None,
+                 **riders_kw: Any) -> None:
         self.net = net
         self.line = np.asarray(centerline, dtype=np.float64)
         self.lights = lights
@@ -143,7 +157,7 @@ class Scene:
         mesh, self.flipped_parts = orient_outward(self.model.meshes[0])
         self.lods = make_lods(mesh)
         # the LOD's own palette (quantized weights) drives the blended-matrix skinning
-        self.skinners = [BlendedMesh(lod.palette, lod.mesh.positions, lod.mesh.normals) for lod in self.lods]
+        self.skinners = [BlendedMesh(lod.palette, lod.mesh.positions, _filled(lod.mesh.normals)) for lod in self.lods]
         self.riders = RiderSet(net, self.line, model=self.model, **riders_kw)
         if not 0 <= int(follow) < len(self.riders):
             raise ConfigError(f"scene: follow must name one of the {len(self.riders)} riders, got {follow}")
@@ -153,7 +167,8 @@ class Scene:
         self.camera_kw = dict(camera_kw or {})
 
     @classmethod
-    def default(cls, seed: int = 0, lights=None, objects: bool = True, model=None, **kw) -> "Scene":
+    def default(cls, seed: int = 0, lights: Lights | None = None, objects: bool = True, model: Model | None = None,
+                **kw: Any) -> "Scene":
         """The default course of ``seed`` with its default lights (:func:`piste.lighting.default_lights`),
         six riders and the placed objects."""
         net = default_course(seed)
@@ -172,7 +187,7 @@ class Scene:
                 "lod": lod.name,
                 "triangles": lod.n_triangles,
                 "vertices": int(lod.mesh.n_vertices),
-                "bones": int(self.model.skeleton.n_bones),
+                "bones": int(self.model.skeleton.n_bones) if self.model.skeleton is not None else 0,
                 "palette": lod.n_matrices,
                 "step": lod.step,
                 "batches": len(batches),
@@ -180,15 +195,15 @@ class Scene:
         return out
 
     # ------------------------------------------------------------------ a frame
-    def camera(self, state, aspect: float = 640.0 / 448.0, fov_y: float = 60.0):
+    def camera(self, state: RiderState, aspect: float = 640.0 / 448.0, fov_y: float = 60.0) -> Camera:
         kw = {"behind": CAMERA_BEHIND, "height": 2.6, "look_ahead": 9.0}
         kw.update(self.camera_kw)
         return follow_camera(state, self.follow, net=self.net, aspect=aspect, fov_y=fov_y, far=4000.0, **kw)
 
-    def update(self, t: float, aspect: float = 640.0 / 448.0, fov_y: float = 60.0, camera=None) -> SceneFrame:
+    def update(self, t: float, aspect: float = 640.0 / 448.0, fov_y: float = 60.0, camera: Camera | None = None) -> SceneFrame:
         """The CPU work of one frame at ``t`` seconds (see the module docstring).  ``camera``
         overrides the chase camera."""
-        tm = {}
+        tm: dict[str, float] = {}
         t0 = time.perf_counter()
         st = self.riders.state(t, camera_rider=self.follow if camera is None else None,
                                camera_behind=self.camera_kw.get("behind", CAMERA_BEHIND))

@@ -21,6 +21,7 @@ API
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ValidationError
 
@@ -36,7 +37,7 @@ def tile_params() -> tuple[np.ndarray, np.ndarray]:
     return np.tile(t, TILE), np.repeat(t, TILE)
 
 
-def reduce_texture(rgba) -> np.ndarray:
+def reduce_texture(rgba: npt.ArrayLike) -> np.ndarray:
     """An image ``(h, w, 3|4) uint8`` box-filtered to ``(8, 8, 3) uint8`` (rounded means;
     sides that are not multiples of 8 are resampled by nearest texel first)."""
     img = np.asarray(rgba)
@@ -50,7 +51,7 @@ def reduce_texture(rgba) -> np.ndarray:
     return np.clip(np.rint(rgb), 0, 255).astype(np.uint8)
 
 
-def base_tiles(reduced, texture_index, uv) -> np.ndarray:
+def base_tiles(reduced: npt.ArrayLike, texture_index: npt.ArrayLike, uv: npt.ArrayLike) -> np.ndarray:
     """Each patch's base colour at its light-map texel centres.
 
     Parameters
@@ -81,7 +82,7 @@ def base_tiles(reduced, texture_index, uv) -> np.ndarray:
     return out.reshape(n, TILE, TILE, 3)
 
 
-def gs_blend(cd, cs, as_) -> np.ndarray:
+def gs_blend(cd: npt.ArrayLike, cs: npt.ArrayLike, as_: npt.ArrayLike) -> np.ndarray:
     """The GS's light-map blend ``((Cd - Cs) As) >> 7`` clamped to 0..255: ``cd, cs (..., 3)``,
     ``as_ (...)`` -> ``(..., 3) uint8``."""
     cd = np.asarray(cd).astype(np.int32)
@@ -90,7 +91,7 @@ def gs_blend(cd, cs, as_) -> np.ndarray:
     return np.clip(((cd - cs) * a) >> 7, 0, 255).astype(np.uint8)
 
 
-def light_from_source(cd, cs, as_) -> np.ndarray:
+def light_from_source(cd: npt.ArrayLike, cs: npt.ArrayLike, as_: npt.ArrayLike) -> np.ndarray:
     """The linear light (1.0 = full) that stored ``Cs, As`` give on base colour ``Cd``:
     ``(Cd - Cs) As / 128 / Cd`` (``As / 128`` where ``Cd = 0``), ``(..., 3) float32``."""
     cd = np.asarray(cd, dtype=np.float64)

@@ -6,6 +6,7 @@ limits and fixed-point scales, and the strip rule. See :mod:`piste.formats.ssx.m
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 __all__ = [
     "FORMAT_TRICKY_PS2", "MAX_CHUNK_VERTICES", "MAX_SHADOW_CHUNK_VERTICES", "ENCODER_CHUNK_VERTICES",
@@ -53,7 +54,7 @@ PALETTE_ENTRY_DTYPE = np.dtype([("weight", "<i2"), ("bone", "u1"), ("file", "u1"
 assert DIR_DTYPE.itemsize == 80 and BONE_DTYPE.itemsize == 84 and MATERIAL_DTYPE.itemsize == 32
 
 
-def strip_triangles(strip_lengths) -> np.ndarray:
+def strip_triangles(strip_lengths: npt.ArrayLike) -> np.ndarray:
     """Chunk-local triangles ``(t, 3) int64`` of consecutive strips of the given lengths: in a
     strip, triangle ``i`` is ``(i, i+1, i+2)`` for even ``i`` and ``(i+1, i, i+2)`` for odd ``i``."""
     n = np.asarray(strip_lengths, dtype=np.int64).reshape(-1)
