@@ -21,8 +21,12 @@ MAX_LIGHT_INTENSITY
 from __future__ import annotations
 
 import math
+import os
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import FormatError
 
@@ -34,7 +38,8 @@ MAX_LIGHT_INTENSITY = 1e9
 _LIGHT_TYPES = ("directional", "point", "spot")
 
 
-def number(path, field, v, default=None, lo=-math.inf, hi=math.inf, lo_open=False, hi_open=False) -> float:
+def number(path: str | os.PathLike[str], field: str, v: Any, default: float | None = None, lo: float = -math.inf, hi: float = math.inf,
+           lo_open: bool = False, hi_open: bool = False) -> float:
     """``v`` as a finite float within ``[lo, hi]`` (open ends with ``lo_open``/``hi_open``)."""
     if v is None:
         if default is None:
@@ -49,7 +54,8 @@ def number(path, field, v, default=None, lo=-math.inf, hi=math.inf, lo_open=Fals
     return v
 
 
-def vector(path, field, v, n: int, default=None, lo=-math.inf, hi=math.inf) -> np.ndarray:
+def vector(path: str | os.PathLike[str], field: str, v: Any, n: int, default: Sequence[float] | None = None, lo: float = -math.inf,
+           hi: float = math.inf) -> np.ndarray:
     """``v`` as ``(n,)`` finite floats within ``[lo, hi]``."""
     if v is None and default is not None:
         return np.asarray(default, dtype=np.float64)
@@ -61,7 +67,7 @@ def vector(path, field, v, n: int, default=None, lo=-math.inf, hi=math.inf) -> n
     return np.asarray(v, dtype=np.float64)
 
 
-def float_array(v):
+def float_array(v: Any) -> np.ndarray | None:
     """``(k,) float64`` of a (possibly nested) list of finite numbers, or None if it is not one."""
     try:
         a = np.asarray(v, dtype=np.float64).reshape(-1)
@@ -70,7 +76,7 @@ def float_array(v):
     return a if np.all(np.isfinite(a)) else None
 
 
-def light_fields(path, field, ld) -> dict:
+def light_fields(path: str | os.PathLike[str], field: str, ld: Any) -> dict[str, Any]:
     """The checked fields of one ``KHR_lights_punctual`` light: name, type, color, intensity, range,
     inner_cone, outer_cone (radians, ``0 <= inner < outer <= pi/2`` as the extension requires)."""
     if not isinstance(ld, dict):
@@ -101,14 +107,14 @@ def light_fields(path, field, ld) -> dict:
     return out
 
 
-def singular(m, eps: float = 1e-12) -> bool:
+def singular(m: npt.ArrayLike, eps: float = 1e-12) -> bool:
     """True when the 3x3 part of affine ``m (4, 4)`` has (nearly) no inverse (a node scaled to 0)."""
     a = np.asarray(m, dtype=np.float64)[:3, :3]
     scale = max(float(np.abs(a).max()), 1e-300)
     return not abs(float(np.linalg.det(a / scale))) > eps
 
 
-def rest_inverse(m) -> np.ndarray:
+def rest_inverse(m: npt.ArrayLike) -> np.ndarray:
     """Inverse of affine ``m (4, 4)``; the identity when ``m`` is singular (a zero-scaled node: its
     meshes are then kept in the node's own space, so skinning with this inverse is still exact)."""
     m = np.asarray(m, dtype=np.float64)
@@ -121,7 +127,7 @@ def rest_inverse(m) -> np.ndarray:
     return out
 
 
-def normal_matrix(m) -> np.ndarray:
+def normal_matrix(m: npt.ArrayLike) -> np.ndarray:
     """``(3, 3)`` matrix taking normals through affine ``m``: ``inverse(A).T`` up to a positive
     factor, computed from cofactors so a singular ``A`` (zero scale) gives finite (possibly zero)
     normals instead of a LinAlgError."""
@@ -132,6 +138,6 @@ def normal_matrix(m) -> np.ndarray:
     return -cof if det < 0 else cof
 
 
-def _short(v) -> str:
+def _short(v: Any) -> str:
     s = repr(v)
     return s if len(s) <= 80 else s[:70] + "..."

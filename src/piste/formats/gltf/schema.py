@@ -17,8 +17,10 @@ precheck_gltf(path) -> dict     size, GLB chunk layout, JSON nesting and array c
 from __future__ import annotations
 
 import math
+import os
 import struct
 from pathlib import Path
+from typing import Any
 
 from piste.errors import FormatError
 from piste.formats import limits, safe_io
@@ -39,11 +41,15 @@ BOOL = "bool"
 ANY = "any"
 
 
-def arr(item, n=None):
+#: a schema: a kind name (IDX, NUM, ...) or a nested ("array" | "object", ...) tuple
+Schema = Any
+
+
+def arr(item: Schema, n: int | None = None) -> tuple[str, Schema, int | None]:
     return ("array", item, n)
 
 
-def obj(**fields):
+def obj(**fields: Schema) -> tuple[str, dict[str, Schema]]:
     return ("object", fields)
 
 
@@ -93,12 +99,12 @@ _WANT = {IDX: "an index (integer >= 0)", UINT: "an integer >= 0", POS: "an integ
          NUM: "a finite number", STR: "a string", BOOL: "true or false"}
 
 
-def _short(v) -> str:
+def _short(v: Any) -> str:
     s = repr(v)
     return s if len(s) <= 60 else s[:50] + "...'"
 
 
-def _leaf_ok(kind, v) -> bool:
+def _leaf_ok(kind: str, v: Any) -> bool:
     if kind == ANY:
         return True
     if kind == STR:
@@ -114,12 +120,12 @@ def _leaf_ok(kind, v) -> bool:
     return {IDX: v >= 0, UINT: v >= 0, POS: v >= 1, INT: True}[kind] and abs(v) < 2**53
 
 
-def check_gltf_types(doc, path) -> None:
+def check_gltf_types(doc: Any, path: str | os.PathLike[str]) -> None:
     """Raise FormatError (naming ``path`` and the field) on the first field whose JSON type is not
     the one the glTF 2.0 specification gives it."""
     if not isinstance(doc, dict):
         raise FormatError(path, f"expected a JSON object at the top level, got {type(doc).__name__}")
-    stack = [(SCHEMA, doc, "")]
+    stack: list[tuple[Schema, Any, str]] = [(SCHEMA, doc, "")]
     while stack:  # iterative: the work is linear in the document's size
         schema, v, field = stack.pop()
         if isinstance(schema, str):
@@ -148,7 +154,7 @@ def check_gltf_types(doc, path) -> None:
                 stack.append((item, x, f"{field}[{i}]"))
 
 
-def _count_values(doc, stop_objects: int, stop_values: int) -> tuple[int, int]:
+def _count_values(doc: Any, stop_objects: int, stop_values: int) -> tuple[int, int]:
     """``(objects, values)`` in JSON ``doc``; counting stops past either limit (iterative)."""
     n_obj, n_val, stack = 0, 0, [doc]
     while stack and n_obj <= stop_objects and n_val <= stop_values:
@@ -164,7 +170,7 @@ def _count_values(doc, stop_objects: int, stop_values: int) -> tuple[int, int]:
     return n_obj, n_val
 
 
-def precheck_gltf(path) -> dict:
+def precheck_gltf(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Check a ``.gltf`` / ``.glb`` before a full parser sees it; returns its JSON document.
 
     Refuses non-regular files and files over ``safe_io.MAX_MODEL_BYTES``, GLB headers and chunk

@@ -68,12 +68,15 @@ API
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ConfigError, ValidationError
-from piste.scene_data import AmbientLight, Camera, DirectionalLight, PointLight, SpotLight
+from piste.scene_data import AmbientLight, AnyLight, Camera, DirectionalLight, PointLight, SpotLight
 
 __all__ = ["DEFAULT_WHITE_LUX", "INFINITE_RANGE_MATCH", "GltfFrame", "axis_matrix", "light_from_gltf",
            "camera_from_gltf", "light_to_gltf", "lights_without_gltf_form", "camera_to_gltf"]
@@ -105,24 +108,25 @@ class GltfFrame:
     scale: float = 1.0
     white: float = DEFAULT_WHITE_LUX
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         axis_matrix(self.up)  # "y" or "z", else a ConfigError now
 
-    def point(self, p) -> np.ndarray:
+    def point(self, p: npt.ArrayLike) -> np.ndarray:
         """A file point ``(3,)`` in piste's world, ``(3,) float64``."""
         return np.asarray(self.offset, dtype=np.float64) + self.scale * (axis_matrix(self.up) @ np.asarray(p, dtype=np.float64))
 
-    def direction(self, d) -> tuple:
+    def direction(self, d: npt.ArrayLike) -> tuple:
         """A file direction ``(3,)`` as a unit piste direction (3 floats)."""
         return _unit(axis_matrix(self.up) @ np.asarray(d, dtype=np.float64))
 
 
-def _unit(v) -> tuple:
+def _unit(v: npt.ArrayLike) -> tuple[float, ...]:
     v = np.asarray(v, dtype=np.float64)
     return tuple(float(x) for x in v / max(float(np.linalg.norm(v)), 1e-300))
 
 
-def light_from_gltf(fields: dict, position, direction, frame: GltfFrame = GltfFrame(), index: int = 0):
+def light_from_gltf(fields: dict[str, Any], position: npt.ArrayLike, direction: npt.ArrayLike, frame: GltfFrame = GltfFrame(),
+                    index: int = 0) -> DirectionalLight | PointLight | SpotLight:
     """The piste light of one checked ``KHR_lights_punctual`` light (``fields``: name, type, color,
     intensity, range, inner_cone, outer_cone, as :func:`piste.formats.gltf.checks.light_fields`
     gives them) placed at its node's world ``position (3,)`` looking along ``direction (3,)`` (the
@@ -151,7 +155,7 @@ def light_from_gltf(fields: dict, position, direction, frame: GltfFrame = GltfFr
     raise ConfigError(f"glTF light {name!r}: unknown type {kind!r} (expected directional, point or spot)")
 
 
-def camera_from_gltf(fields: dict, position, forward, up, frame: GltfFrame = GltfFrame(), index: int = 0) -> Camera:
+def camera_from_gltf(fields: dict[str, Any], position: npt.ArrayLike, forward: npt.ArrayLike, up: npt.ArrayLike, frame: GltfFrame = GltfFrame(), index: int = 0) -> Camera:
     """The :class:`~piste.scene_data.Camera` of one checked glTF camera (``fields``: name, type,
     yfov, aspect, znear, zfar, xmag, ymag; zfar None = infinite) at its node's world ``position``
     looking along ``forward`` (node -Z) with ``up`` (node +Y), each ``(3,)``, in ``frame``.
@@ -180,7 +184,7 @@ def camera_from_gltf(fields: dict, position, forward, up, frame: GltfFrame = Glt
                   name=name, **kw)
 
 
-def light_to_gltf(light, white: float = DEFAULT_WHITE_LUX, index: int = 0) -> dict | None:
+def light_to_gltf(light: AnyLight, white: float = DEFAULT_WHITE_LUX, index: int = 0) -> dict[str, Any] | None:
     """The ``KHR_lights_punctual`` definition of a piste light (``type``, ``name``, ``color``,
     ``intensity`` in lux or candela, optional ``range`` and ``spot``) plus its node's ``position``
     and ``direction`` (piste's coordinates, ``(3,) float64``); None for a light glTF cannot hold
@@ -209,7 +213,7 @@ def light_to_gltf(light, white: float = DEFAULT_WHITE_LUX, index: int = 0) -> di
     return d
 
 
-def lights_without_gltf_form(lights) -> dict:
+def lights_without_gltf_form(lights: Iterable[AnyLight]) -> dict[str, list[dict[str, Any]]]:
     """``{"ambient": [...], "negative": [...]}``: the ambient and the negative (darkening) lights
     of ``lights`` (any iterable of piste lights), which glTF cannot hold, as dicts in piste's units
     (infinite numbers as "inf") for a file's ``extras``."""
@@ -220,7 +224,7 @@ def lights_without_gltf_form(lights) -> dict:
             ambient.append({"name": name, "color": [float(x) for x in np.asarray(li.color, dtype=np.float64)],
                             "intensity": float(li.intensity)})
         elif li.intensity < 0:
-            d = {"type": type(li).__name__, "name": name}
+            d: dict[str, Any] = {"type": type(li).__name__, "name": name}
             for k in ("position", "direction", "color", "intensity", "range", "falloff", "inner_angle", "outer_angle"):
                 if hasattr(li, k):
                     v = getattr(li, k)
@@ -235,7 +239,7 @@ def camera_to_gltf(camera: Camera) -> dict:
     ``position``, ``forward`` (unit) and ``up`` in piste's coordinates."""
     eye = np.asarray(camera.eye, dtype=np.float64)
     fwd = np.asarray(camera.target, dtype=np.float64) - eye
-    fwd = fwd / max(np.linalg.norm(fwd), 1e-300)
+    fwd = fwd / max(float(np.linalg.norm(fwd)), 1e-300)
     a = float(camera.aspect)
     zfar = float(camera.far) if math.isfinite(float(camera.far)) else None
     out = {"name": camera.name, "position": eye, "forward": fwd, "up": np.asarray(camera.up, dtype=np.float64),
