@@ -61,6 +61,7 @@ STRICT_REQUIRED = (
     "piste.formats.atomic", "piste.formats.bpt", "piste.formats.bundle_schema", "piste.formats.limits",
     "piste.formats.ssx.lightmap", "piste.formats.ssx.mpf_layout",
     "piste.formats.gltf.checks", "piste.formats.gltf.schema", "piste.formats.gltf.units",
+    "piste.formats.geotiff", "piste.formats.safe_io",
     "piste.terrain.bezier", "piste.terrain.fit", "piste.terrain.heightfield", "piste.terrain.stats",
     "piste.character.lod", "piste.character.palette", "piste.character.pose", "piste.character.skeleton",
     "piste.character.strips",

@@ -17,6 +17,10 @@ class PisteError(Exception):
 class FormatError(PisteError):
     """A file could not be read: names the file, the line or field, and what was expected."""
 
+    #: the message without the file and field, on the errors :mod:`piste.formats.safe_io` raises
+    #: (declared only: other FormatErrors have no such attribute, so ``getattr(e, "reason", ...)``)
+    reason: str
+
     def __init__(self, path: str | os.PathLike[str] | None, message: str, line: int | None = None,
                  field: str | None = None) -> None:
         self.path = str(path) if path is not None else None

@@ -32,10 +32,15 @@ Needs ``tifffile`` (the ``dask`` extra: ``pip install 'piste[dask]'``).
 
 from __future__ import annotations
 
+import io
+import os
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ConfigError, FormatError, PisteError, ValidationError
 from piste.formats.atomic import atomic_path
@@ -60,7 +65,7 @@ _PIXEL_IS_AREA, _PIXEL_IS_POINT = 1, 2
 _MODEL_PROJECTED, _MODEL_GEOGRAPHIC = 1, 2
 
 
-def _tifffile():
+def _tifffile() -> Any:
     try:
         import tifffile
     except ImportError:
@@ -102,7 +107,7 @@ _TAG_NAMES = {_TAG_SCALE: "ModelPixelScaleTag", _TAG_TIEPOINT: "ModelTiepointTag
               _TAG_DOUBLES: "GeoDoubleParamsTag"}
 
 
-def _numbers(path: Path, page, code: int, dtype) -> np.ndarray:
+def _numbers(path: Path, page: Any, code: int, dtype: npt.DTypeLike) -> np.ndarray:
     """A numeric tag's values, ``(n,)`` of ``dtype`` (FormatError naming the tag when it holds text,
     bytes, or integers past 64 bits)."""
     value = page.tags[code].value
@@ -114,7 +119,7 @@ def _numbers(path: Path, page, code: int, dtype) -> np.ndarray:
         raise FormatError(path, f"{_TAG_NAMES[code]} must hold numbers ({exc})", field=_TAG_NAMES[code]) from None
 
 
-def _geokeys(path: Path, page) -> dict:
+def _geokeys(path: Path, page: Any) -> dict[int, Any]:
     """GeoKey id -> value (ints, doubles, or tuples of doubles) from the GeoKeyDirectory."""
     tags = page.tags
     if _TAG_GEOKEYS not in tags:
@@ -134,7 +139,7 @@ def _geokeys(path: Path, page) -> dict:
     return keys
 
 
-def _nodata(path: Path, page):
+def _nodata(path: Path, page: Any) -> float | None:
     if _TAG_NODATA not in page.tags:
         return None
     text = page.tags[_TAG_NODATA].value
@@ -146,7 +151,7 @@ def _nodata(path: Path, page):
         raise FormatError(path, f"GDAL_NODATA must be a number, got {text!r}", field="GDAL_NODATA") from None
 
 
-def _georeference(path: Path, page, shape) -> tuple[tuple, tuple, bool, float]:
+def _georeference(path: Path, page: Any, shape: tuple[int, ...]) -> tuple[tuple[float, float], tuple[float, float], bool, float]:
     """((sx, sy), (x0, y0) of pixel (0, 0)'s centre, geographic, z scale) in the file's units."""
     tags = page.tags
     keys = _geokeys(path, page)
@@ -195,7 +200,7 @@ class _Header:
     vcode: int  # vertical unit (EPSG code)
 
 
-def _open_tiff(path: Path):
+def _open_tiff(path: Path) -> tuple[io.BufferedReader, Any]:
     """``(fh, TiffFile)`` of ``path``, opened through the confinement (:mod:`piste.formats.safe_io`)."""
     tifffile = _tifffile()
     if not path.is_file():
@@ -209,7 +214,7 @@ def _open_tiff(path: Path):
     return fh, tf
 
 
-def _header(path: Path, tf, size: int, vertical_units: str | None):
+def _header(path: Path, tf: Any, size: int, vertical_units: str | None) -> tuple[Any, _Header]:
     """(first page, :class:`_Header`): every check made before a sample is decoded."""
     if not tf.pages:
         raise FormatError(path, "not a readable TIFF (no image in the file)")
@@ -278,7 +283,7 @@ def _to_metres(hd: _Header, raw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(z), np.ascontiguousarray(mask)
 
 
-def read_geotiff(path, fill="nearest", vertical_units: str | None = None) -> DemRaster:
+def read_geotiff(path: str | os.PathLike[str], fill: float | str = "nearest", vertical_units: str | None = None) -> DemRaster:
     """Read a one-band GeoTIFF DEM (see the module docstring).
 
     Parameters
@@ -330,14 +335,16 @@ class GeoTiffWindows:
     vertical_units, geographic : as :class:`DemRaster`
     """
 
-    def __init__(self, path, vertical_units: str | None = None):
+    def __init__(self, path: str | os.PathLike[str], vertical_units: str | None = None) -> None:
         import os
         import threading
 
         self.path = Path(path)
-        self._fh, self._tf = _open_tiff(self.path)
+        fh, tf = _open_tiff(self.path)
+        self._fh: io.BufferedReader | None = fh
+        self._tf: Any = tf
         try:
-            st = os.fstat(self._fh.fileno())
+            st = os.fstat(fh.fileno())
             self._stat = (st.st_ino, st.st_size, st.st_mtime_ns)
             self._page, self._hd = _header(self.path, self._tf, st.st_size, vertical_units)
             self._table = _segment_table(self.path, self._page, self._hd, st.st_size)
@@ -362,7 +369,7 @@ class GeoTiffWindows:
     def __enter__(self) -> GeoTiffWindows:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: Any) -> None:
         self.close()
 
     def read(self, rows: slice, cols: slice) -> tuple[np.ndarray, np.ndarray]:
@@ -391,7 +398,7 @@ class GeoTiffWindows:
             raw = _read_window(self.path, self._tf, self._page, self._hd, self._table, fr0, fr1, c0, c1)
         return _to_metres(self._hd, raw)
 
-    def filled(self, rows: slice, cols: slice, fill) -> np.ndarray:
+    def filled(self, rows: slice, cols: slice, fill: float | str) -> np.ndarray:
         """:meth:`read` with missing samples set to ``fill`` (a number), or a FormatError naming the
         first one (``fill="error"``).  ``fill="nearest"`` needs the whole raster (the nearest
         valid sample may lie outside the window): use :func:`read_geotiff` for such a file."""
@@ -411,13 +418,14 @@ class GeoTiffWindows:
         return _fill(self.path, z, mask, fill)
 
 
-def open_geotiff_windows(path, vertical_units: str | None = None) -> GeoTiffWindows:
+def open_geotiff_windows(path: str | os.PathLike[str], vertical_units: str | None = None) -> GeoTiffWindows:
     """A :class:`GeoTiffWindows` of ``path``: the file opened, its header checked (the same
     FormatErrors as :func:`read_geotiff`) and its segment table read; no sample read yet."""
     return GeoTiffWindows(path, vertical_units)
 
 
-def _segment_table(path: Path, page, hd: _Header, size: int):
+def _segment_table(path: Path, page: Any, hd: _Header,
+                   size: int) -> tuple[int, int, int, np.ndarray, np.ndarray] | None:
     """``(tile rows, tile columns, tiles across, offsets, bytecounts)`` of a one-band page whose
     segments can be addressed one by one, or None (decode the page whole)."""
     h, w = hd.shape
@@ -446,7 +454,8 @@ def _segment_table(path: Path, page, hd: _Header, size: int):
     return th, tw, across, offsets, counts
 
 
-def _read_window(path: Path, tf, page, hd: _Header, table, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+def _read_window(path: Path, tf: Any, page: Any, hd: _Header,
+                 table: tuple[int, int, int, np.ndarray, np.ndarray] | None, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
     """File rows ``r0:r1``, columns ``c0:c1`` of the page, ``(r1 - r0, c1 - c0)`` of its dtype,
     decoding only the segments that meet them (``table`` from :func:`_segment_table`; None: the
     segments cannot be addressed one by one, the whole page is decoded)."""
@@ -479,7 +488,7 @@ def _read_window(path: Path, tf, page, hd: _Header, table, r0: int, r1: int, c0:
         raise FormatError(path, f"could not decode the raster ({exc})") from None
 
 
-def _fill(path: Path, z: np.ndarray, mask: np.ndarray, fill) -> np.ndarray:
+def _fill(path: Path, z: np.ndarray, mask: np.ndarray, fill: float | str) -> np.ndarray:
     if isinstance(fill, str) and fill == "error":
         r, c = (int(v) for v in np.argwhere(mask)[0])
         raise FormatError(path, f"{int(mask.sum())} sample(s) have no data, first at row {r}, column {c} "
@@ -496,8 +505,8 @@ def _fill(path: Path, z: np.ndarray, mask: np.ndarray, fill) -> np.ndarray:
     return z
 
 
-def write_geotiff(path, z, spacing, origin=(0.0, 0.0), nodata: float | None = None,
-                  vertical_units: str = "metre", epsg: int | None = None, tile: tuple | None = None,
+def write_geotiff(path: str | os.PathLike[str], z: npt.ArrayLike, spacing: float | tuple[float, float], origin: npt.ArrayLike = (0.0, 0.0), nodata: float | None = None,
+                  vertical_units: str = "metre", epsg: int | None = None, tile: tuple[int, int] | None = None,
                   rowsperstrip: int | None = None, compression: str | None = None) -> Path:
     """Write a north-up float32 GeoTIFF DEM (PixelIsArea), atomically.
 
@@ -524,8 +533,9 @@ def write_geotiff(path, z, spacing, origin=(0.0, 0.0), nodata: float | None = No
     return path
 
 
-def write_geotiff_tiled(path, shape: tuple, window_fn, spacing, origin=(0.0, 0.0), tile: tuple = (256, 256),
-                        dtype="float32", compression: str | None = None) -> Path:
+def write_geotiff_tiled(path: str | os.PathLike[str], shape: tuple[int, int], window_fn: Callable[[slice, slice], np.ndarray],
+                        spacing: float | tuple[float, float], origin: npt.ArrayLike = (0.0, 0.0), tile: tuple[int, int] = (256, 256),
+                        dtype: str = "float32", compression: str | None = None) -> Path:
     """Write a tiled north-up GeoTIFF DEM of ``shape = (H, W)`` samples tile by tile, atomically,
     never holding more than one row of tiles: for DEMs larger than memory (benchmarks, tests).
 
@@ -538,7 +548,7 @@ def write_geotiff_tiled(path, shape: tuple, window_fn, spacing, origin=(0.0, 0.0
     th, tw = (int(v) for v in tile)
     dt = np.dtype(dtype)
 
-    def tiles():
+    def tiles() -> Iterator[np.ndarray]:
         for fr in range(0, h, th):  # file rows, north-up: file row f is piste row h - 1 - f
             band = window_fn(slice(h - min(fr + th, h), h - fr), slice(0, w))[::-1]
             if dt.kind in "ui":
@@ -558,19 +568,22 @@ def write_geotiff_tiled(path, shape: tuple, window_fn, spacing, origin=(0.0, 0.0
     return path
 
 
-def _extratags(h: int, spacing, origin, nodata, vertical_units: str, epsg) -> list:
+def _extratags(h: int, spacing: float | tuple[float, float], origin: npt.ArrayLike, nodata: float | None, vertical_units: str,
+               epsg: int | None) -> list[tuple[int, str, int, Any, bool]]:
     """The GeoTIFF tags of a north-up PixelIsArea raster of ``h`` rows in metres."""
-    dx, dy = (float(spacing), float(spacing)) if np.ndim(spacing) == 0 else (float(spacing[0]), float(spacing[1]))
+    sp = np.asarray(spacing, dtype=np.float64).reshape(-1)
+    dx, dy = (float(sp[0]), float(sp[0])) if sp.size == 1 else (float(sp[0]), float(sp[1]))
     # corner of the north-west pixel
-    x_nw = float(origin[0]) - 0.5 * dx
-    y_nw = float(origin[1]) + (h - 1) * dy + 0.5 * dy
+    o = np.asarray(origin, dtype=np.float64).reshape(-1)
+    x_nw = float(o[0]) - 0.5 * dx
+    y_nw = float(o[1]) + (h - 1) * dy + 0.5 * dy
     keys = [(_KEY_MODEL, 0, 1, _MODEL_PROJECTED), (_KEY_RASTER, 0, 1, _PIXEL_IS_AREA),
             (_KEY_LINEAR_UNITS, 0, 1, 9001), (_KEY_VERTICAL_UNITS, 0, 1, _UNIT_NAMES[vertical_units])]
     if epsg is not None:
         keys.insert(2, (3072, 0, 1, int(epsg)))
     keys.sort()
     geo = [1, 1, 0, len(keys)] + [v for k in keys for v in k]
-    extratags = [
+    extratags: list[tuple[int, str, int, Any, bool]] = [
         (_TAG_SCALE, "d", 3, (dx, dy, 0.0), False),
         (_TAG_TIEPOINT, "d", 6, (0.0, 0.0, 0.0, x_nw, y_nw, 0.0), False),
         (_TAG_GEOKEYS, "H", len(geo), tuple(geo), False),

@@ -57,7 +57,9 @@ import re
 import stat
 import threading
 import urllib.parse
+from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -106,7 +108,7 @@ _SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*:")
 _DRIVE = re.compile(r"^[A-Za-z]:[\\/]")
 
 
-def _err(owner, field, message) -> FormatError:
+def _err(owner: str | os.PathLike[str] | None, field: str | None, message: str) -> FormatError:
     e = FormatError(owner, message, field=field)
     e.reason = message  # the message without the file and field (callers that name them their own way)
     return e
@@ -119,11 +121,11 @@ def _within(target: str, root: str) -> bool:
 # ----------------------------------------------------------------------------- folders the user allows
 #: environment variable naming extra folders (``os.pathsep``-separated) references may read
 ALLOW_PATHS_ENV = "PISTE_ALLOW_PATHS"
-_user_allowed: list = []  # real paths set by the command line (--allow-path DIR)
+_user_allowed: list[str] = []  # real paths set by the command line (--allow-path DIR)
 _lock = threading.Lock()
 
 
-def _folder_list(paths, source: str) -> list:
+def _folder_list(paths: Iterable[str | os.PathLike[str]], source: str) -> list[str]:
     out = []
     for p in paths:
         text = os.fspath(p)
@@ -136,7 +138,7 @@ def _folder_list(paths, source: str) -> list:
     return out
 
 
-def set_user_allow_paths(paths, source: str = "--allow-path") -> tuple:
+def set_user_allow_paths(paths: Iterable[str | os.PathLike[str]] | None, source: str = "--allow-path") -> tuple[Path, ...]:
     """The folders the *user* named on the command line (``--allow-path DIR``, repeatable) that every
     reference may read besides the referring file's own folder.  Replaces the previous set; returns
     :func:`user_allow_paths`.  ConfigError (naming ``source``) for a path that is not a folder."""
@@ -148,7 +150,7 @@ def set_user_allow_paths(paths, source: str = "--allow-path") -> tuple:
     return tuple(Path(f) for f in folders)
 
 
-def user_allow_paths() -> tuple:
+def user_allow_paths() -> tuple[Path, ...]:
     """Real paths of the folders the user allows: ``--allow-path`` (:func:`set_user_allow_paths`)
     and the ``PISTE_ALLOW_PATHS`` environment variable.  A key inside a file never adds to them."""
     out = list(_user_allowed) + list(_env_folders(environ(ALLOW_PATHS_ENV) or ""))
@@ -173,7 +175,7 @@ def _env_folders(value: str) -> tuple:
 _roots: set = set()  # real folders below which every component is opened with O_NOFOLLOW
 
 
-def add_root(folder) -> str:
+def add_root(folder: str | os.PathLike[str]) -> str:
     """Register ``folder`` (a folder the user named, or the folder of a file the user named) as a
     confinement root: every later open of a path below it walks from it one component at a time
     with ``O_NOFOLLOW`` (:func:`open_regular`).  Returns its real path."""
@@ -201,7 +203,7 @@ def _root_of(abspath: str) -> str | None:
             p = parent
 
 
-def anchor(folder) -> str:
+def anchor(folder: str | os.PathLike[str]) -> str:
     """The folder references inside a file of ``folder`` resolve against: an absolute, normalised
     path without links.  Below a registered root it is taken lexically (the open walks it and
     refuses any link swapped in); otherwise it is the user's own folder, resolved and registered."""
@@ -209,7 +211,7 @@ def anchor(folder) -> str:
     return a if _root_of(a) is not None else add_root(a)
 
 
-def resolve_reference(owner, ref: str, allow_paths=(), field: str | None = None, what: str = "model") -> Path:
+def resolve_reference(owner: str | os.PathLike[str], ref: str, allow_paths: Iterable[str | os.PathLike[str]] = (), field: str | None = None, what: str = "model") -> Path:
     """The file that relative reference ``ref`` (a URI, percent-encoded) inside file ``owner`` names.
 
     Returns an absolute, normalised path inside ``owner``'s folder or a folder the user allowed
@@ -243,7 +245,7 @@ def resolve_reference(owner, ref: str, allow_paths=(), field: str | None = None,
     return Path(target)
 
 
-def _short(ref) -> str:
+def _short(ref: object) -> str:
     s = repr(ref)
     return s if len(s) <= 120 else s[:100] + "...'"
 
@@ -263,7 +265,7 @@ def _kind(mode: int) -> str:
             "a symbolic link" if stat.S_ISLNK(mode) else "not a regular file")
 
 
-def _open_error(owner, field, what, path, e: OSError, part: str | None = None) -> FormatError:
+def _open_error(owner: str | os.PathLike[str] | None, field: str | None, what: str, path: str | os.PathLike[str], e: OSError, part: str | None = None) -> FormatError:
     if e.errno in (errno.ELOOP, errno.EMLINK) or (e.errno == errno.ENOTDIR and part is not None):
         where = f" ({part!r} is a symbolic link or not a folder)" if part else ""
         return _err(owner, field, f"{what} {str(path)!r} is reached through a symbolic link{where}: links are "
@@ -271,7 +273,7 @@ def _open_error(owner, field, what, path, e: OSError, part: str | None = None) -
     return _err(owner, field, f"cannot read {what} {str(path)!r}: {e.strerror or e}")
 
 
-def _walk(root: str, parts: list, path, owner, field, what) -> int:
+def _walk(root: str, parts: list[str], path: str | os.PathLike[str], owner: str | os.PathLike[str] | None, field: str | None, what: str) -> int:
     """An ``O_PATH`` (or read-only, non-blocking) descriptor of ``root/parts...``, each component
     opened relative to the previous one with ``O_NOFOLLOW`` (folders with ``O_DIRECTORY``)."""
     try:
@@ -295,7 +297,8 @@ def _walk(root: str, parts: list, path, owner, field, what) -> int:
         raise
 
 
-def _reopen(pfd: int, st: os.stat_result, parts, root, path, owner, field, what) -> int:
+def _reopen(pfd: int, st: os.stat_result, parts: list[str], root: str, path: str | os.PathLike[str], owner: str | os.PathLike[str] | None, field: str | None,
+            what: str) -> int:
     """A read-only descriptor of the file ``O_PATH`` descriptor ``pfd`` holds (the same inode)."""
     try:
         return os.open(f"/proc/self/fd/{pfd}", _O | _NONBLOCK)
@@ -314,7 +317,7 @@ def _reopen(pfd: int, st: os.stat_result, parts, root, path, owner, field, what)
         return rfd
 
 
-def open_regular(path, max_bytes: int = 1 << 62, owner=None, field: str | None = None, what: str = "file") -> int:
+def open_regular(path: str | os.PathLike[str], max_bytes: int = 1 << 62, owner: str | os.PathLike[str] | None = None, field: str | None = None, what: str = "file") -> int:
     """A read-only descriptor of regular file ``path`` of at most ``max_bytes``, opened race-free.
 
     Below a confinement root (:func:`add_root`: the folders of the files the user named, the
@@ -372,14 +375,15 @@ def open_regular(path, max_bytes: int = 1 << 62, owner=None, field: str | None =
         raise
 
 
-def open_file(path, max_bytes: int = 1 << 62, owner=None, field: str | None = None, what: str = "file"):
+def open_file(path: str | os.PathLike[str], max_bytes: int = 1 << 62, owner: str | os.PathLike[str] | None = None, field: str | None = None,
+              what: str = "file") -> io.BufferedReader:
     """:func:`open_regular` as a binary file object (for ``np.load``, PIL, zipfile, tifffile)."""
     raw = io.FileIO(open_regular(path, max_bytes, owner, field, what), "rb", closefd=True)
     raw.name = os.fspath(path)  # readers that report or split the name (tifffile) see the path, not the number
     return io.BufferedReader(raw)
 
 
-def check_regular(path, max_bytes: int, owner=None, field: str | None = None, what: str = "file") -> int:
+def check_regular(path: str | os.PathLike[str], max_bytes: int, owner: str | os.PathLike[str] | None = None, field: str | None = None, what: str = "file") -> int:
     """Size of ``path`` after checking it is a regular file of at most ``max_bytes``, reached
     without links (opened ``O_PATH`` and ``fstat``-ed; nothing is read)."""
     fd = open_regular(path, max_bytes, owner, field, what)
@@ -389,7 +393,7 @@ def check_regular(path, max_bytes: int, owner=None, field: str | None = None, wh
         os.close(fd)
 
 
-def read_regular(path, max_bytes: int, owner=None, field: str | None = None, length: int | None = None,
+def read_regular(path: str | os.PathLike[str], max_bytes: int, owner: str | os.PathLike[str] | None = None, field: str | None = None, length: int | None = None,
                  what: str = "file", length_field: str | None = None) -> bytes:
     """The bytes of regular file ``path`` (all of them, or the first ``length``).
 
@@ -427,14 +431,14 @@ def read_regular(path, max_bytes: int, owner=None, field: str | None = None, len
     return data
 
 
-def read_reference(owner, ref: str, max_bytes: int, allow_paths=(), field: str | None = None,
+def read_reference(owner: str | os.PathLike[str], ref: str, max_bytes: int, allow_paths: Iterable[str | os.PathLike[str]] = (), field: str | None = None,
                    length: int | None = None, what: str = "file", length_field: str | None = None) -> bytes:
     """:func:`resolve_reference` then :func:`read_regular`: the bytes of the file ``ref`` names."""
     f = resolve_reference(owner, ref, allow_paths, field)
     return read_regular(f, max_bytes, owner, field, length, what, length_field)
 
 
-def confined_file(owner, ref: str, allow_paths=(), field: str | None = None, what: str = "file",
+def confined_file(owner: str | os.PathLike[str], ref: str, allow_paths: Iterable[str | os.PathLike[str]] = (), field: str | None = None, what: str = "file",
                   max_bytes: int = 1 << 62) -> Path:
     """The path of the regular file that ``ref`` (a plain path, not a URI) inside ``owner`` names,
     confined to ``owner``'s folder or a folder the user allowed, reached without links, checked
@@ -444,7 +448,7 @@ def confined_file(owner, ref: str, allow_paths=(), field: str | None = None, wha
     return f
 
 
-def confined_folder(owner, ref: str, allow_paths=(), field: str | None = None) -> Path:
+def confined_folder(owner: str | os.PathLike[str], ref: str, allow_paths: Iterable[str | os.PathLike[str]] = (), field: str | None = None) -> Path:
     """The folder ``ref`` inside ``owner`` names (it need not exist yet: an output folder), confined
     like :func:`confined_file`; an existing one must be a folder reached without links."""
     f = resolve_reference(owner, ref, allow_paths, field, what="scene")
@@ -460,7 +464,8 @@ def confined_folder(owner, ref: str, allow_paths=(), field: str | None = None) -
                 break  # created later, by the build
             except OSError as e:
                 raise _open_error(owner, field, "folder", f, e, part) from None
-            os.close(fd)
+            if fd is not None:  # (parts is empty without a root)
+                os.close(fd)
             fd = nfd
     finally:
         if fd is not None:
@@ -468,7 +473,7 @@ def confined_folder(owner, ref: str, allow_paths=(), field: str | None = None) -
     return f
 
 
-def decode_data_uri(uri: str, max_bytes: int, owner=None, field: str | None = None) -> bytes:
+def decode_data_uri(uri: str, max_bytes: int, owner: str | os.PathLike[str] | None = None, field: str | None = None) -> bytes:
     """The bytes of a ``data:`` URI, refusing (before decoding) any that would exceed ``max_bytes``."""
     head, sep, data = uri.partition(",")
     if not sep:
@@ -486,7 +491,7 @@ def decode_data_uri(uri: str, max_bytes: int, owner=None, field: str | None = No
     return out
 
 
-def json_depth(obj) -> int:
+def json_depth(obj: Any) -> int:
     """Nesting depth of a parsed JSON value (a scalar is 0, ``[]`` is 1), computed without recursion."""
     depth, stack = 0, [(obj, 0)]
     while stack:
@@ -504,7 +509,7 @@ def json_depth(obj) -> int:
 _STRING = re.compile(rb'"[^"\\]*(?:\\.[^"\\]*)*"', re.S)
 
 
-def text_depth(data) -> int:
+def text_depth(data: str | bytes) -> int:
     """Deepest ``[`` / ``{`` nesting of JSON text, found without parsing (strings skipped), so a
     deep document is refused before a recursive parser sees it."""
     raw = data.encode("utf-8", "surrogatepass") if isinstance(data, str) else bytes(data)
@@ -524,7 +529,7 @@ def toml_depth(text: str) -> int:
     return text_depth(_TOML_STRING.sub('""', text).replace('"', " "))
 
 
-def loads_json(data, path, max_depth: int = MAX_JSON_DEPTH, field: str | None = None):
+def loads_json(data: str | bytes, path: str | os.PathLike[str] | None, max_depth: int = MAX_JSON_DEPTH, field: str | None = None) -> Any:
     """``json.loads(data)`` whose errors (syntax, encoding, nesting deeper than ``max_depth``) are
     FormatErrors naming ``path``; the nesting is measured on the text before parsing."""
     if text_depth(data) > max_depth:
