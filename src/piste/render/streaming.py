@@ -85,7 +85,7 @@ from piste.terrain.tessellate import tessellate
 from piste.terrain.tiles import (MAX_TILE_OBJECTS, TileError, TileGrid, TileStore, read_tile_objects, tile_entries,
                                  triangulated_heights)
 from piste.world.camera import Camera
-from piste.world.objects import OBJECT_KINDS
+from piste.world.objects import OBJECT_KINDS, make_mesh
 
 __all__ = ["TileCache", "StreamingRenderer", "StreamingTerrain", "TileMesh", "near_mesh", "far_mesh", "mesh_bytes", "fly_path",
            "render_flight", "TileSets", "light_grid", "stride_errors", "chord_error", "visible_indices", "world_fog_density",
@@ -368,8 +368,6 @@ def mesh_bytes(rows: int, cols: int, morph: bool = False) -> int:
 def _kind_meshes() -> tuple:
     """``(heights (kinds,) float64, vertices (kinds,) int64)``: each object kind's mesh height (its
     extent along its own up axis, model units) and vertex count."""
-    from piste.world.objects import make_mesh
-
     meshes = [make_mesh(k) for k in OBJECT_KINDS]
     h = np.array([float(np.ptp(np.asarray(m.positions)[:, 2])) for m in meshes])
     v = np.array([len(m.positions) for m in meshes], dtype=np.int64)
