@@ -46,18 +46,31 @@ place, call :func:`clear_cache`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, Literal, overload
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ValidationError
 from piste.terrain import _kernels
 from piste.terrain.bezier import bernstein, bernstein_derivative, evaluate
+from piste.terrain.net import PatchNet
 
 __all__ = ["height_at", "ray_intersect", "RayHits", "PatchBVH", "PatchGrid", "clear_cache", "eval_points"]
 
 
 # ---------------------------------------------------------------------------- evaluation
-def eval_points(cp: np.ndarray, u: np.ndarray, v: np.ndarray, derivatives: bool = True):
+@overload
+def eval_points(cp: np.ndarray, u: np.ndarray, v: np.ndarray, derivatives: Literal[False]) -> np.ndarray: ...
+
+
+@overload
+def eval_points(cp: np.ndarray, u: np.ndarray, v: np.ndarray,
+                derivatives: Literal[True] = ...) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+
+def eval_points(cp: np.ndarray, u: np.ndarray, v: np.ndarray,
+                derivatives: bool = True) -> np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Evaluate one patch per point: ``Q(u[m], v[m])`` of patch ``cp[m]``.
 
     Parameters
@@ -111,7 +124,7 @@ def _restriction(a: float, b: float) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------- caching
-def _cache(net) -> dict:
+def _cache(net: PatchNet) -> dict[Any, Any]:
     c = net.__dict__.get("_piste_query")
     if c is None or c.get("cp") is not net.control_points:
         c = {"cp": net.control_points}
@@ -119,12 +132,12 @@ def _cache(net) -> dict:
     return c
 
 
-def clear_cache(net) -> None:
+def clear_cache(net: PatchNet) -> None:
     """Drop the cached :class:`PatchGrid` / :class:`PatchBVH` of ``net`` (after editing it in place)."""
     net.__dict__.pop("_piste_query", None)
 
 
-def _scale(net) -> float:
+def _scale(net: PatchNet) -> float:
     size = net.patch_size
     return float(np.median(size)) if len(size) and np.median(size) > 0 else 1.0
 
@@ -141,7 +154,7 @@ class PatchGrid:
     bmin, bmax : (n, 2) per-patch xy bounds of the control points (padded a little)
     """
 
-    def __init__(self, net, cell: float | None = None, max_cells: int | None = None):
+    def __init__(self, net: PatchNet, cell: float | None = None, max_cells: int | None = None) -> None:
         cp = net.control_points
         n = len(cp)
         pts = cp.reshape(n, 16, 3)[..., :2]
@@ -190,14 +203,15 @@ class PatchGrid:
         return q[ok], p[ok]
 
 
-def _grid(net) -> PatchGrid:
+def _grid(net: PatchNet) -> PatchGrid:
     c = _cache(net)
     if "grid" not in c:
         c["grid"] = PatchGrid(net)
     return c["grid"]
 
 
-def height_at(net, xy, max_iter: int = 30, use_numba: bool | None = None):
+def height_at(net: PatchNet, xy: npt.ArrayLike, max_iter: int = 30,
+              use_numba: bool | None = None) -> tuple[Any, Any, Any, Any]:
     """Height of the exact surface above (or below) many xy points.
 
     Parameters
@@ -267,7 +281,8 @@ def height_at(net, xy, max_iter: int = 30, use_numba: bool | None = None):
     return _height_result(k, q, p, u, v, zc, single)
 
 
-def _height_result(k, q, p, u, v, zc, single):
+def _height_result(k: int, q: np.ndarray, p: np.ndarray, u: np.ndarray, v: np.ndarray, zc: np.ndarray,
+                   single: bool) -> tuple[Any, Any, Any, Any]:
     """height_at's outputs from its converged (query, patch, u, v, z) pairs: per query the highest."""
     z = np.full(k, np.nan)
     patch = np.full(k, -1, dtype=np.int64)
@@ -328,7 +343,7 @@ class PatchBVH:
     level_lo, level_hi : list of (2^d, 3) node boxes per level d (NaN for empty nodes)
     """
 
-    def __init__(self, net, split="auto"):
+    def __init__(self, net: PatchNet, split: int | str = "auto") -> None:
         cp = net.control_points
         n = len(cp)
         self.scale = _scale(net)
@@ -340,16 +355,19 @@ class PatchBVH:
                 raise ValidationError(f"PatchBVH: split must be 'auto' or a positive integer, got {split!r}")
             ks = np.full(n, int(split))
         self.split = split
-        subs, pas, uv0, du = [], [], [], []
+        subs: list[np.ndarray] = []
+        pas: list[np.ndarray] = []
+        uv0s: list[np.ndarray] = []
+        dus: list[np.ndarray] = []
         for k in np.unique(ks):
             sel = np.nonzero(ks == k)[0]
             r = np.stack([_restriction(a / k, (a + 1) / k) for a in range(k)])  # (k, 4, 4)
             subs.append(np.einsum("aik,bjl,nklc->nabijc", r, r, cp[sel]).reshape(len(sel) * k * k, 4, 4, 3))
             pas.append(np.repeat(sel, k * k))
             ab = np.stack(np.meshgrid(np.arange(k), np.arange(k), indexing="ij"), -1).reshape(k * k, 2)
-            uv0.append(np.tile(ab, (len(sel), 1)) / k)
-            du.append(np.full(len(sel) * k * k, 1.0 / k))
-        sub, pa, uv0, du = (np.concatenate(x) for x in (subs, pas, uv0, du))
+            uv0s.append(np.tile(ab, (len(sel), 1)) / k)
+            dus.append(np.full(len(sel) * k * k, 1.0 / k))
+        sub, pa, uv0, du = (np.concatenate(x) for x in (subs, pas, uv0s, dus))
         # share each sub-patch's boundary with its parent (exact corners keep seams watertight)
         pts = sub.reshape(-1, 16, 3)
         pad = 1e-7 * self.scale + 1e-9 * np.abs(pts).max((1, 2))[:, None]
@@ -456,7 +474,7 @@ class PatchBVH:
         self.leaf_cone = np.where(ang < np.pi / 2, np.sin(np.minimum(ang, np.pi / 2)), 1.0)
 
     # -------------------------------------------------------------- traversal
-    def candidates(self, o, inv, tmin, tmax):
+    def candidates(self, o: np.ndarray, inv: np.ndarray, tmin: np.ndarray, tmax: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Breadth-first traversal: (ray, leaf, t_enter, t_exit) of every leaf box a ray crosses within
         ``[tmin, tmax]``; ``o (k, 3)``, ``inv (k, 3)`` = 1 / direction (zeros replaced by huge values).
 
@@ -474,7 +492,9 @@ class PatchBVH:
         keep = tn[:, 0] <= tf[:, 0]
         r, node, tn, tf = r[keep], node[keep], tn[keep, 0], tf[keep, 0]
         for level in range(start + 2, self.depth + 1, 2):
-            box = self.level_box4[level][node]  # (m, 6, 4): the four grandchildren
+            box4 = self.level_box4[level]
+            assert box4 is not None  # levels of four or more nodes
+            box = box4[node]  # (m, 6, 4): the four grandchildren
             tn, tf = _slabs(box, rays[r])
             pi, ci = np.nonzero(tn <= tf)
             tn, tf = tn[pi, ci], tf[pi, ci]
@@ -483,7 +503,7 @@ class PatchBVH:
         return r, self.slot_leaf[node], tn.astype(np.float64), tf.astype(np.float64)
 
 
-def _slabs(box: np.ndarray, ray: np.ndarray):
+def _slabs(box: np.ndarray, ray: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Slab test of ``(m, 6, c)`` boxes (lo xyz, hi xyz) against ``(m, 8)`` rays (o, 1/d, tmin, tmax):
     ``(t_enter, t_exit)``, each ``(m, c)``; NaN boxes give NaN (never ``t_enter <= t_exit``)."""
     tn = ray[:, 6, None]
@@ -526,7 +546,7 @@ def _median_split_order(cen: np.ndarray, depth: int) -> np.ndarray:
     return slots
 
 
-def _bvh(net, split="auto") -> PatchBVH:
+def _bvh(net: PatchNet, split: int | str = "auto") -> PatchBVH:
     c = _cache(net)
     key = ("bvh", split)
     if key not in c:
@@ -534,7 +554,8 @@ def _bvh(net, split="auto") -> PatchBVH:
     return c[key]
 
 
-def _newton_ray(cp, o, d, s, w, t, scale, max_iter=12):
+def _newton_ray(cp: np.ndarray, o: np.ndarray, d: np.ndarray, s: np.ndarray, w: np.ndarray, t: np.ndarray, scale: float | np.ndarray,
+                max_iter: int = 12) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Solve ``Q(s, w) = o + t d`` for (m,) pairs; returns (s, w, t, converged)."""
     m = len(s)
     conv = np.zeros(m, dtype=bool)
@@ -574,10 +595,10 @@ def _newton_ray(cp, o, d, s, w, t, scale, max_iter=12):
 
 
 def ray_intersect(
-    net,
-    origins,
-    directions,
-    t_max=np.inf,
+    net: PatchNet,
+    origins: npt.ArrayLike,
+    directions: npt.ArrayLike,
+    t_max: float | npt.ArrayLike = np.inf,
     any_hit: bool = False,
     t_min: float = 0.0,
     bvh: PatchBVH | None = None,
@@ -640,7 +661,8 @@ def ray_intersect(
     return RayHits(hit, hit_t, patch, u, v, pos, nrm)
 
 
-def _trace_batch(bvh: PatchBVH, o, d, t_min, t_max, any_hit, best_t, best_leaf, best_s, best_w):
+def _trace_batch(bvh: PatchBVH, o: np.ndarray, d: np.ndarray, t_min: float, t_max: np.ndarray, any_hit: bool, best_t: np.ndarray, best_leaf: np.ndarray,
+                 best_s: np.ndarray, best_w: np.ndarray) -> None:
     k = len(o)
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         of = (o - bvh.frame_origin) @ bvh.frame.T
@@ -699,7 +721,7 @@ def _trace_batch(bvh: PatchBVH, o, d, t_min, t_max, any_hit, best_t, best_leaf, 
         best_t[rr], best_leaf[rr], best_s[rr], best_w[rr] = t, lf, s, w
 
 
-def _rises_clear(bvh: PatchBVH, o, d, r, leaf, t0, t1) -> np.ndarray:
+def _rises_clear(bvh: PatchBVH, o: np.ndarray, d: np.ndarray, r: np.ndarray, leaf: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
     """(ray, sub-patch) pairs the ray provably misses: the sub-patch is a graph, the ray rises faster
     than the surface can along the ray's horizontal direction, and the ray is above the surface where
     its interval ``[t0, t1]`` enters the sub-patch's xy rectangle.  ``(m,)`` bool."""
@@ -739,7 +761,8 @@ def _rises_clear(bvh: PatchBVH, o, d, r, leaf, t0, t1) -> np.ndarray:
     return out
 
 
-def _solve_pairs(bvh: PatchBVH, o, d, r, leaf, t0, t1, t_min, t_max):
+def _solve_pairs(bvh: PatchBVH, o: np.ndarray, d: np.ndarray, r: np.ndarray, leaf: np.ndarray, t0: np.ndarray, t1: np.ndarray, t_min: float,
+                 t_max: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Newton for (ray, sub-patch) pairs; returns local ``(s, w, t, ok)`` of the nearest root found
     inside the sub-patch with ``t_min <= t <= t_max`` (a root outside the sub-patch belongs to a
     neighbour, which finds it itself).
@@ -795,7 +818,7 @@ def _solve_pairs(bvh: PatchBVH, o, d, r, leaf, t0, t1, t_min, t_max):
     return s_out, w_out, t_out, ok_out
 
 
-def _project_start(cp, p):
+def _project_start(cp: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Parameters of the point of each sub-patch's corner parallelogram nearest to ``p``: ``(m, 2)`` in [0, 1]."""
     c = cp[:, [0, 3, 3, 0], [0, 0, 3, 3]]  # c0, c1, c2, c3
     # the longer of each pair of opposite sides (a collapsed side, as at the teapot's apex, is zero)

@@ -52,11 +52,15 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import os
 import zipfile
+from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import IO, Any, cast
 
 import numpy as np
+import numpy.typing as npt
 
 import math
 import re
@@ -93,13 +97,13 @@ class TileError(FormatError):
     """A tile of a tiled world is bad (missing, torn, of the wrong shape, not finite, reached
     through a link): names the tile's file, the tile ``(ty, tx)`` and the member (``field``)."""
 
-    def __init__(self, path, tile, message: str, field: str | None = None):
+    def __init__(self, path: str | os.PathLike[str] | None, tile: Sequence[int] | None, message: str, field: str | None = None) -> None:
         self.tile = tuple(int(v) for v in tile) if tile is not None else None
         self.reason = message
         where = f"tile ({self.tile[0]}, {self.tile[1]}): " if self.tile is not None else ""
         super().__init__(path, where + message, field=field)
 
-    def __reduce__(self):  # travels between processes intact
+    def __reduce__(self) -> tuple[type[TileError], tuple[Any, ...]]:  # travels between processes intact
         return (TileError, (self.path, self.tile, self.reason, self.field))
 
 
@@ -123,7 +127,7 @@ class TileGrid:
     spacing: tuple
     origin: tuple = (0.0, 0.0)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         s, t = int(self.samples_per_patch), int(self.tile_patches)
         if s < 3:
             raise ValidationError(f"TileGrid: samples_per_patch must be >= 3, got {s}")
@@ -219,7 +223,7 @@ def _spd_solve(g: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     return solveh_banded(ab, rhs, check_finite=False)
 
 
-def fit_edge(samples, s: int) -> np.ndarray:
+def fit_edge(samples: npt.ArrayLike, s: int) -> np.ndarray:
     """Control values of a tile side: ``samples (m s + 1,)`` -> ``(3 m + 1,)`` float64.
 
     The end values are the end samples (shared with the neighbouring sides); the rest is the
@@ -236,7 +240,7 @@ def fit_edge(samples, s: int) -> np.ndarray:
     return out
 
 
-def fit_tile_heights(window, s: int) -> np.ndarray:
+def fit_tile_heights(window: npt.ArrayLike, s: int) -> np.ndarray:
     """The z control grid ``(3 Ty + 1, 3 Tx + 1)`` of a tile from its samples ``window
     (Ty s + 1, Tx s + 1)`` (rims included): corners, edges (:func:`fit_edge`), then the interior
     with the boundary fixed."""
@@ -289,7 +293,7 @@ def tile_uv(grid: TileGrid, cp: np.ndarray) -> np.ndarray:
     return np.stack([(corners[..., 0] - ox) / (s * dx), (corners[..., 1] - oy) / (s * dy)], -1).astype(np.float32)
 
 
-def fit_tile(grid: TileGrid, ty: int, tx: int, window) -> dict:
+def fit_tile(grid: TileGrid, ty: int, tx: int, window: npt.ArrayLike) -> dict[str, np.ndarray]:
     """Fit tile ``(ty, tx)`` from its sample window (:meth:`TileGrid.sample_window`).
 
     Returns ``{"control_points": (n, 4, 4, 3) float64, "uv": (n, 4, 2) float32}``.
@@ -319,21 +323,21 @@ _TILE_KEY = re.compile(r"^(\d{1,7}),(\d{1,7})$")
 _SHA = re.compile(r"^[0-9a-f]{64}$")
 
 
-def _is_int(v) -> bool:
+def _is_int(v: object) -> bool:
     return isinstance(v, int) and not isinstance(v, bool)
 
 
-def _is_num(v) -> bool:
+def _is_num(v: object) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
-def check_index(index, path) -> dict:
+def check_index(index: Any, path: str | os.PathLike[str]) -> dict[str, Any]:
     """``index`` (parsed ``index.json``) after checking every key it holds against the schema
     (:data:`INDEX_KEYS`): known keys only, of the right type and range.  The grid and the tiles
     are checked against each other by :meth:`TileStore.grid` and :func:`tile_entries`.
     FormatError naming ``path`` and the field."""
 
-    def bad(field, message):
+    def bad(field: str | None, message: str) -> FormatError:
         return FormatError(path, message, field=field)
 
     if not isinstance(index, dict):
@@ -355,7 +359,7 @@ def check_index(index, path) -> dict:
     return index
 
 
-def tile_entries(index: dict, grid: TileGrid, path) -> dict:
+def tile_entries(index: dict[str, Any], grid: TileGrid, path: str | os.PathLike[str]) -> dict[tuple[int, int], dict[str, Any]]:
     """The tiles ``index["tiles"]`` lists, checked: ``{(ty, tx): {"bounds": (2, 3) float64,
     "patches": int}}``.  Keys must be ``"ty,tx"`` of a tile of ``grid``, entries hold only
     :data:`TILE_KEYS`, ``patches`` equals the tile's patch count, ``bounds`` is
@@ -392,7 +396,7 @@ def tile_entries(index: dict, grid: TileGrid, path) -> dict:
         b = t.get("bounds")
         ok = (isinstance(b, list) and len(b) == 2 and all(isinstance(r, list) and len(r) == 3 and
                                                           all(_is_num(v) and abs(v) <= MAX_BOUND for v in r) for r in b))
-        if not ok or not all(lo <= hi for lo, hi in zip(b[0], b[1])):
+        if not ok or not isinstance(b, list) or not all(lo <= hi for lo, hi in zip(b[0], b[1])):
             raise FormatError(path, "expected [[x0, y0, z0], [x1, y1, z1]]: finite numbers (|v| <= 1e12) with "
                                     f"lo <= hi, got {str(b)[:80]}", field=f"{field}.bounds")
         out[(ty, tx)] = {"bounds": np.asarray(b, dtype=np.float64), "patches": n}
@@ -422,7 +426,7 @@ class TileStore:
     its inputs) so that :meth:`verify` can tell a finished tile from a stale or torn one.
     """
 
-    def __init__(self, root):
+    def __init__(self, root: str | os.PathLike[str]) -> None:
         # the folder the user named, as a confinement root: tiles are opened below it without
         # following links (piste.formats.safe_io)
         self.root = Path(anchor(root))
@@ -496,7 +500,8 @@ class TileStore:
         write_bytes_atomic(p, data)
         return hashlib.sha256(data).hexdigest()
 
-    def read(self, product: str, ty: int, tx: int, key: str | None = None, names=None, expect=None) -> dict:
+    def read(self, product: str, ty: int, tx: int, key: str | None = None, names: Iterable[str] | None = None,
+             expect: dict[str, tuple[tuple[int, ...], str]] | None = None) -> dict[str, np.ndarray]:
         """The arrays of one tile (all of them, or ``names``), each ``.npy`` header checked before
         its array is allocated (:func:`_read_npz`; ``expect``: ``{name: (shape, dtype kinds)}``).
         TileError naming the tile when missing, torn, stale, of the wrong shape or not finite."""
@@ -526,7 +531,8 @@ class TileStore:
         return hashlib.sha256(data).hexdigest() if got == key else None
 
 
-def _header(p, tile, name: str, fh, info):
+def _header(p: Path, tile: tuple[int, int] | None, name: str, fh: IO[bytes],
+            info: zipfile.ZipInfo) -> tuple[tuple[int, ...], bool, np.dtype[Any]]:
     """``(shape, fortran_order, dtype)`` of a member's ``.npy`` header, read from the stream (a
     few hundred bytes) and checked against the member's declared size before anything else."""
     try:
@@ -545,7 +551,8 @@ def _header(p, tile, name: str, fh, info):
     return tuple(shape), fortran, dtype
 
 
-def _read_npz(p: Path, tile=None, names=None, expect=None, product: str = "tile") -> dict:
+def _read_npz(p: Path, tile: tuple[int, int] | None = None, names: Iterable[str] | None = None, expect: dict[str, tuple[tuple[int, ...], str]] | None = None,
+              product: str = "tile") -> dict[str, np.ndarray]:
     """The arrays of tile file ``p`` (or only ``names``), opened through :mod:`piste.formats.safe_io`.
 
     Before a member's array is allocated: the member count, each member's declared size, its
@@ -593,8 +600,8 @@ def _read_npz(p: Path, tile=None, names=None, expect=None, product: str = "tile"
                                 raise TileError(p, tile, f"expected {tuple(want_shape)} numbers, got {shape} {dtype}",
                                                 field=name)
                         arr = np.empty(shape, dtype, order="F" if fortran else "C")  # checked: at most the member
-                        view = memoryview(arr.reshape(-1, order="A")).cast("B") if arr.size else memoryview(b"")
-                        got = m.readinto(view) if arr.size else 0
+                        view = arr.reshape(-1, order="A").data.cast("B") if arr.size else memoryview(b"")
+                        got = cast(io.BufferedIOBase, m).readinto(view) if arr.size else 0  # a ZipExtFile
                         if got != arr.nbytes:
                             raise TileError(p, tile, f"member {name!r} ended after {got} of {arr.nbytes} bytes",
                                             field=name)
@@ -655,7 +662,7 @@ def read_tile_objects(store: TileStore, grid: TileGrid, ty: int, tx: int, n_kind
     a = store.read("lit", ty, tx, names=TILE_OBJECT_MEMBERS)
     kind, mat = a["objects_kind"], a["objects_matrix"]
 
-    def bad(name, msg):
+    def bad(name: str, msg: str) -> TileError:
         return TileError(p, (ty, tx), f"member {name!r}: {msg}", field=name)
 
     if kind.ndim != 1 or kind.dtype.kind not in "iu":
@@ -682,7 +689,7 @@ def read_tile_objects(store: TileStore, grid: TileGrid, ty: int, tx: int, n_kind
     return kind.astype(np.int64, copy=False), mat
 
 
-def _member_names(p: Path, tile) -> set:
+def _member_names(p: Path, tile: tuple[int, int] | None) -> set[str]:
     """The member names (without ``.npy``) of tile file ``p`` (TileError when unreadable)."""
     try:
         with open_file(p, MAX_TILE_FILE_BYTES, what="tile file") as fh, zipfile.ZipFile(fh) as zf:
@@ -728,4 +735,5 @@ def neighbourhood_net(store: TileStore, grid: TileGrid, ty: int, tx: int, halo: 
     s = grid.samples_per_patch
     net = PatchNet(np.concatenate(cps), uv=np.concatenate(uvs), tol=1e-6 * s * min(grid.spacing),
                    name=f"tile {ty},{tx} + {halo}")
+    assert centre is not None  # the centre tile is always in the neighbourhood
     return net, centre
