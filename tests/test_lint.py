@@ -64,7 +64,7 @@ STRICT_REQUIRED = (
     "piste.formats.geotiff", "piste.formats.safe_io",
     "piste.terrain.bezier", "piste.terrain.fit", "piste.terrain.heightfield", "piste.terrain.stats",
     "piste.terrain.query", "piste.terrain.tiles",
-    "piste.character.lod", "piste.character.palette", "piste.character.pose", "piste.character.skeleton",
+    "piste.character.batches", "piste.character.lod", "piste.character.palette", "piste.character.pose", "piste.character.skeleton",
     "piste.character.strips",
 )
 

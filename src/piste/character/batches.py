@@ -25,11 +25,15 @@ API
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
-from piste.character.palette import palette as make_palette
+from piste.character.model import SkinnedMesh
+from piste.character.palette import Palette, palette as make_palette
 from piste.character.strips import RESTART
 from piste.errors import ConfigError, ValidationError
 
@@ -52,7 +56,7 @@ BUDGETS = {
 }
 
 
-def _budget(budget) -> Budget:
+def _budget(budget: Budget | str | tuple[int, int]) -> Budget:
     if isinstance(budget, Budget):
         b = budget
     elif isinstance(budget, str):
@@ -102,7 +106,7 @@ class Batch:
         return int(self.triangles.shape[0])
 
 
-def _vertex_matrices(vertex_matrices, n_vertices=None) -> np.ndarray:
+def _vertex_matrices(vertex_matrices: npt.ArrayLike, n_vertices: int | None = None) -> np.ndarray:
     vm = np.asarray(vertex_matrices)
     if vm.ndim == 1:
         vm = vm[:, None]
@@ -148,7 +152,8 @@ def _tri_keys(t: np.ndarray) -> np.ndarray:
     return (c[:, 0] * m + c[:, 1]) * m + c[:, 2]
 
 
-def make_batches(indices, vertex_matrices, budget="ps2", lookahead: int = 64, order: str = "cache") -> list:
+def make_batches(indices: npt.ArrayLike, vertex_matrices: npt.ArrayLike, budget: Budget | str | tuple[int, int] = "ps2", lookahead: int = 64,
+                 order: str = "cache") -> list[Batch]:
     """Split triangles into batches within ``budget``.
 
     Parameters
@@ -185,18 +190,20 @@ def make_batches(indices, vertex_matrices, budget="ps2", lookahead: int = 64, or
     pos = 0
     n = len(seq)
     while pos < n:
-        verts: dict = {}
-        mats: dict = {}
-        chosen = []
+        verts: dict[int, int] = {}
+        mats: dict[int, int] = {}
+        chosen: list[int] = []
 
         # (this batch's state bound as defaults: a closure over loop variables would see later batches')
-        def fits(t, verts=verts, mats=mats):
+        def fits(t: int, verts: dict[int, int] = verts,
+                 mats: dict[int, int] = mats) -> tuple[bool, list[int], list[int]]:
             new_v = [int(x) for x in set(tris[t].tolist()) if int(x) not in verts]
             new_m = [m for m in tri_mats[t] if m not in mats]
             return (len(verts) + len(new_v) <= b.max_vertices and len(mats) + len(new_m) <= b.max_matrices,
                     new_v, new_m)
 
-        def add(t, new_v, new_m, verts=verts, mats=mats, chosen=chosen):
+        def add(t: int, new_v: list[int], new_m: list[int], verts: dict[int, int] = verts, mats: dict[int, int] = mats,
+                chosen: list[int] = chosen) -> None:
             for x in tris[t].tolist():
                 if x not in verts:
                     verts[x] = len(verts)
@@ -231,7 +238,7 @@ def make_batches(indices, vertex_matrices, budget="ps2", lookahead: int = 64, or
     return batches
 
 
-def _make_batch(tris, vm, chosen, verts, mats) -> Batch:
+def _make_batch(tris: np.ndarray, vm: np.ndarray, chosen: list[int], verts: dict[int, int], mats: dict[int, int]) -> Batch:
     vertices = np.array(list(verts.keys()), dtype=np.int64)
     matrices = np.array(list(mats.keys()), dtype=np.int64)
     lut = {v: i for v, i in verts.items()}
@@ -244,7 +251,8 @@ def _make_batch(tris, vm, chosen, verts, mats) -> Batch:
     return Batch(vertices, matrices, local.reshape(-1, 3), tri_ids, slots)
 
 
-def batch_mesh(mesh, budget="ps2", step: float = 0.25, max_bones: int = 3, palette=None, **kw) -> list:
+def batch_mesh(mesh: SkinnedMesh, budget: Budget | str | tuple[int, int] = "ps2", step: float = 0.25, max_bones: int = 3,
+               palette: Palette | None = None, **kw: Any) -> list[Batch]:
     """Batches of a skinned mesh for the blended-matrix scheme: each vertex references its
     palette entry (``palette`` or ``palette(mesh, step, max_bones)``)."""
     if palette is None:
@@ -252,7 +260,7 @@ def batch_mesh(mesh, budget="ps2", step: float = 0.25, max_bones: int = 3, palet
     return make_batches(mesh.indices, palette.index, budget, **kw)
 
 
-def check_batches(batches, indices, vertex_matrices, budget) -> None:
+def check_batches(batches: Sequence[Batch], indices: npt.ArrayLike, vertex_matrices: npt.ArrayLike, budget: Budget | str | tuple[int, int]) -> None:
     """Raise ValidationError unless every triangle is in exactly one batch, batch triangles are
     the mesh's (same vertices, same winding), and every batch is within ``budget``."""
     b = _budget(budget)
@@ -277,7 +285,8 @@ def check_batches(batches, indices, vertex_matrices, budget) -> None:
         raise ValidationError(f"triangle {bad} is in {int(count[bad])} batches (expected exactly 1)")
 
 
-def frame_bytes(batches, matrix_bytes: int = 48, vertex_bytes: int = 32, strips=None) -> dict:
+def frame_bytes(batches: Sequence[Batch], matrix_bytes: int = 48, vertex_bytes: int = 32,
+                strips: Sequence[npt.ArrayLike] | None = None) -> dict[str, Any]:
     """Bytes sent per frame by a list of batches.
 
     ``matrix_bytes``: 48 (3x4 float32, PS2 VU1 style) or 64 (4x4). ``vertex_bytes``: 32 by
