@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from piste.errors import ConfigError
+from piste.terrain.bezier import blend_tables, params
 from piste.transforms import cull_boxes, frustum_planes, look_at, perspective
 
 #: default thresholds for a course in metres: edges nearer than ``near`` get 8 vertices, nearer
@@ -64,8 +65,6 @@ def _patch_errors(net, n: int, chunk: int = 1024) -> np.ndarray:
     the level-4, 6 and 8 grid parameters: ``(N,)`` float64 (model units).  Both are linear in the
     control points, so the difference is one table ``(16, k)`` (its columns sum to 0: no offset of the
     net matters) and the errors one product."""
-    from piste.terrain.bezier import blend_tables, params
-
     t1 = np.unique(np.concatenate([params(4), params(6), params(8)]))
     vv, uu = np.meshgrid(t1, t1, indexing="ij")
     u, v = uu.ravel(), vv.ravel()
