@@ -53,6 +53,35 @@ def test_pages_nearest_tiles_within_the_budget(world):
         S.TileCache(world, budget_bytes=far // 2)
 
 
+def test_per_frame_choices_match_the_per_tile_formulas(world):
+    """The per-frame tile choices work on whole arrays (one per tile precomputed at load): the same
+    far strides as the per-tile rule, the same boxes in view as the per-corner test."""
+    cache = S.TileCache(world, budget_bytes=256 << 20)
+    try:
+        rng = np.random.default_rng(3)
+        seen = set()
+        for eye in rng.uniform([-500.0, -500.0, 0.0], [3400.0, 3400.0, 900.0], (12, 3)):
+            for scale in (50.0, 400.0, 3000.0):
+                allowed = np.sqrt((np.maximum(np.maximum(cache.lo - eye, eye - cache.hi), 0.0) ** 2).sum(1)) \
+                    * S.FAR_PIXEL_ERROR / scale
+                want = [max([1] + [k for k in S.FAR_STRIDES[1:]
+                                   if cache.far_error[t][k] + cache.chord_error[t] <= allowed[i]])
+                        for i, t in enumerate(cache.tiles)]
+                assert cache.far_strides(eye, scale).tolist() == want
+                seen |= set(want)
+        assert len(seen) > 1  # eyes and scales that choose different levels
+    finally:
+        cache.close()
+    lo = rng.uniform(-10.0, 10.0, (500, 3))
+    hi = lo + rng.uniform(0.0, 5.0, (500, 3))
+    for _ in range(5):
+        planes = np.concatenate([rng.normal(size=(6, 3)), rng.uniform(-5.0, 5.0, (6, 1))], 1)
+        p = np.where(planes[None, :, :3] >= 0.0, hi[:, None, :], lo[:, None, :])  # each box's positive vertex
+        want = ((p * planes[None, :, :3]).sum(-1) + planes[None, :, 3] >= 0.0).all(-1)
+        got = S._boxes_visible(planes, lo, hi)
+        assert (got == want).all() and 0 < got.sum() < len(got)
+
+
 def test_meshes_share_tile_borders(world):
     store = TileStore(world)
     a, b = store.read("lit", 2, 2), store.read("lit", 2, 3)

@@ -580,6 +580,13 @@ class TileCache:
             keep = [i for i, t in enumerate(self.tiles) if t not in self.bad]
             self.tiles = [self.tiles[i] for i in keep]
             self.lo, self.hi = self.lo[keep].reshape(-1, 3), self.hi[keep].reshape(-1, 3)
+        # per tile of :attr:`tiles`, as arrays (what every frame compares with its distances):
+        # chord and middle errors (n,) and each coarser far level's error on top of the chords
+        # (n, len(FAR_STRIDES) - 1), metres
+        self._chord = np.array([self.chord_error.get(t, 0.0) for t in self.tiles], dtype=np.float64)
+        self._mid = np.array([self.mid_error.get(t, 0.0) for t in self.tiles], dtype=np.float64)
+        self._stride_err = np.array([[self.far_error[t][k] + self.chord_error[t] for k in FAR_STRIDES[1:]]
+                                     for t in self.tiles], dtype=np.float64).reshape(-1, len(FAR_STRIDES) - 1)
         if self._far_bytes > self.budget:
             raise ConfigError(f"streaming budget {self.budget / 2**20:.1f} MiB is below the far field's "
                               f"{self._far_bytes / 2**20:.1f} MiB: raise it")
@@ -868,10 +875,8 @@ class TileCache:
             d3 = np.sqrt((d * d).sum(1))  # metres from the eye to each tile's box
         if pixel_scale is not None and len(self.tiles):
             allowed = pixel_error * np.maximum(d3, 1e-9) / float(pixel_scale)  # metres
-            chord = np.array([self.chord_error.get(t, 0.0) for t in self.tiles])
-            mid_err = np.array([self.mid_error.get(t, 0.0) for t in self.tiles])
-            level = np.where(level > 0, level, np.where(mid_err > allowed, self.near_samples,
-                                                        np.where(chord > allowed, mid, 0)))
+            level = np.where(level > 0, level, np.where(self._mid > allowed, self.near_samples,
+                                                        np.where(self._chord > allowed, mid, 0)))
         has_obj = np.zeros(len(self.tiles), bool)
         if self.load_objects and self.object_counts and d3 is not None:
             has_obj = np.array([t in self.object_counts and t not in self._objects_bad for t in self.tiles])
@@ -948,11 +953,8 @@ class TileCache:
         dist = np.sqrt((d * d).sum(1))
         allowed = dist * pixel_error / max(float(pixel_scale), 1e-9)  # metres of error allowed
         out = np.ones(len(self.tiles), int)
-        for i, t in enumerate(self.tiles):
-            err, chord = self.far_error[t], self.chord_error[t]
-            for k in FAR_STRIDES[1:]:
-                if err[k] + chord <= allowed[i]:  # the coarser grid's error on top of the chords'
-                    out[i] = k
+        for j, k in enumerate(FAR_STRIDES[1:]):  # the coarsest level whose error (on top of the chords') fits
+            out = np.where(self._stride_err[:, j] <= allowed, k, out)
         return out
 
     def morph_factors(self, eye, pixel_scale: float, pixel_error: float | None) -> dict:
@@ -1020,8 +1022,9 @@ def world_fog_density(cache: TileCache) -> float:
 def _boxes_visible(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Axis-aligned boxes ``lo, hi (n, 3)`` against inward frustum planes ``(6, 4)`` (the positive
     vertex test): ``(n,)`` bool, False only for boxes wholly outside one plane."""
-    p = np.where(planes[None, :, :3] >= 0.0, hi[:, None, :], lo[:, None, :])  # (n, 6, 3)
-    return ((p * planes[None, :, :3]).sum(-1) + planes[None, :, 3] >= 0.0).all(-1)
+    n = np.asarray(planes, dtype=np.float64)[:, :3]  # each box's corner furthest along a plane's normal:
+    far = hi @ np.maximum(n, 0.0).T + lo @ np.minimum(n, 0.0).T  # (n, 6), without an (n, 6, 3) temporary
+    return (far + np.asarray(planes, dtype=np.float64)[:, 3] >= 0.0).all(-1)
 
 
 class StreamingRenderer:
