@@ -74,7 +74,7 @@ class Skeleton:
     node_index: np.ndarray | None = None
     is_joint: np.ndarray | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.names = [str(n) for n in self.names]
         b = len(self.names)
         self.parents = np.asarray(self.parents, dtype=np.int32).reshape(b)
@@ -177,7 +177,7 @@ class Track:
     in_tangents: np.ndarray | None = None
     out_tangents: np.ndarray | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.times = np.asarray(self.times, dtype=np.float64).reshape(-1)
         self.values = np.asarray(self.values, dtype=np.float64).reshape(self.times.shape[0], -1)
         if self.interpolation not in INTERPOLATIONS:
@@ -328,7 +328,7 @@ class SkinnedMesh:
     group: str = ""
     material: object = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.positions = np.ascontiguousarray(self.positions, dtype=np.float32).reshape(-1, 3)
         v = self.positions.shape[0]
         self.indices = np.ascontiguousarray(self.indices, dtype=np.uint32).reshape(-1, 3)

@@ -299,7 +299,7 @@ class FaceSkin:
     mode : "morph" | "null_bones";  n_bones : null bones of the fit
     """
 
-    def __init__(self, mesh, palette_index, mode: str = "morph", n_bones: int = FACE_NULL_BONES):
+    def __init__(self, mesh, palette_index, mode: str = "morph", n_bones: int = FACE_NULL_BONES) -> None:
         if mode not in ("morph", "null_bones"):
             raise ValidationError(f"face mode must be 'morph' or 'null_bones', got {mode!r}")
         self.mode = mode

@@ -146,7 +146,7 @@ class _Part:
     """Vertices ``(n, 3)``, uv ``(n, 2)``, triangles ``(t, 3)`` (local indices), along/around
     parameters and a bone-weight matrix ``(n, B)`` filled in by the builder."""
 
-    def __init__(self, name, pos, uv, tri, along, around, dist=None):
+    def __init__(self, name, pos, uv, tri, along, around, dist=None) -> None:
         self.name = name
         self.pos = np.asarray(pos, dtype=np.float64)
         self.uv = np.asarray(uv, dtype=np.float64)
@@ -226,7 +226,7 @@ def _loft(name, centers, rx, ry, segments, tile, exponent=2.0, xaxis=None, caps=
     return _Part(name, pos, uv, tri, along, around, dist_v)
 
 
-def _chain_weights(part, dist, bones, joints_at, width):
+def _chain_weights(part, dist, bones, joints_at, width) -> None:
     """Blend a chain of bones along ``dist``: bone k owns ``[joints_at[k], joints_at[k+1])``,
     transitions smoothed over ``+-width`` (scalar or per transition). Adds into ``part.w`` scaled
     by the weight still free (so earlier assignments keep priority)."""
@@ -554,7 +554,7 @@ def _world_rot(sk, pose):
     return quat_normalize(matrix_to_quat(w[:, :3, :3])), w[:, :3, 3]
 
 
-def _ik_limb(sk, pose, J, upper, lower, end, target, hint, end_world_rot=None):
+def _ik_limb(sk, pose, J, upper, lower, end, target, hint, end_world_rot=None) -> None:
     """Set ``upper``/``lower`` local rotations so the ``end`` joint reaches ``target`` (world),
     bending towards ``hint``; optionally give ``end`` a world rotation."""
     iu, il, ie = _B[upper], _B[lower], _B[end]

@@ -45,18 +45,25 @@ API
 from __future__ import annotations
 
 import weakref
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from piste.character.model import Clip, Model, SkinnedMesh
 from piste.character.palette import Palette, _top_weights, palette as _palette
 from piste.character.palette import palette as make_palette
 from piste.errors import ConfigError, ValidationError
 
 from piste._jit import lazy_njit
 
+_T = TypeVar("_T")
 
-def _blend_py(pal, run_start, run_entry, pos, nrm, out_p, out_n, normalize, cofactor):
+
+def _blend_py(pal: np.ndarray, run_start: np.ndarray, run_entry: np.ndarray, pos: np.ndarray, nrm: np.ndarray, out_p: np.ndarray, out_n: np.ndarray, normalize: bool,
+              cofactor: bool) -> None:
     """Every vertex of every instance by its palette matrix.
 
     ``pal (n p 12,)`` float32: ``n`` palettes of ``p`` row-major 3x4 matrices, flattened; the
@@ -129,7 +136,7 @@ def _runs(index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.r_[start, len(index)].astype(np.int64), index[start].astype(np.int64)
 
 
-def _ex_blend():
+def _ex_blend() -> tuple[Any, ...]:
     return (np.zeros(12, np.float32), np.array([0, 1], np.int64), np.zeros(1, np.int64), np.zeros(3, np.float32),
             np.zeros(3, np.float32), np.zeros(3, np.float32), np.zeros(3, np.float32), True, False)
 
@@ -137,7 +144,7 @@ def _ex_blend():
 _blend_nb = lazy_njit(_blend_py, _ex_blend)  # optional compiled kernel (the 'fast' extra); scipy/numpy is the reference
 
 
-def _compiled(use_numba) -> bool:
+def _compiled(use_numba: bool | None) -> bool:
     """Use the compiled kernel: forced (True), never (False), or when numba has loaded (None)."""
     return _blend_nb is not None and (use_numba or (use_numba is None and _blend_nb.ready()))
 
@@ -157,7 +164,7 @@ def normalize_rows(n: np.ndarray) -> np.ndarray:
     return n
 
 
-def _check_matrices(bone_matrices, mesh) -> np.ndarray:
+def _check_matrices(bone_matrices: ArrayLike, mesh: SkinnedMesh) -> np.ndarray:
     m = np.asarray(bone_matrices)
     if m.ndim != 3 or m.shape[1:] not in ((4, 4), (3, 4)):
         raise ValidationError(f"bone matrices must be (b, 4, 4), got shape {m.shape}")
@@ -176,7 +183,7 @@ def _cofactor3(a: np.ndarray) -> np.ndarray:
     return np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=-1)
 
 
-def skin_exact(mesh, bone_matrices):
+def skin_exact(mesh: SkinnedMesh, bone_matrices: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Reference linear blend skinning (float64 inside, all influences).
 
     Returns ``positions (v, 3) float32`` and unit ``normals (v, 3) float32`` (inverse-transpose
@@ -220,7 +227,7 @@ class PostTransformMesh:
     bind_world: np.ndarray
 
     @classmethod
-    def build(cls, mesh, inverse_bind=None, max_bones: int = 4) -> "PostTransformMesh":
+    def build(cls, mesh: SkinnedMesh, inverse_bind: ArrayLike | None = None, max_bones: int = 4) -> "PostTransformMesh":
         """Store ``mesh``'s vertices in bone space.
 
         ``inverse_bind (b, 4, 4)``: the skeleton's inverse bind matrices (bind -> bone space).
@@ -248,7 +255,7 @@ class PostTransformMesh:
         bind_world = np.linalg.inv(ib) if np.all(np.abs(det) > 1e-12) else np.linalg.pinv(ib)
         return cls(bp.astype(np.float32), bn.astype(np.float32), bones, w.astype(np.float32), bind_world)
 
-    def bone_matrices(self, skin_matrices) -> np.ndarray:
+    def bone_matrices(self, skin_matrices: ArrayLike) -> np.ndarray:
         """Bone -> world matrices ``(b, 3, 4) float32`` from skin matrices ``(b, 4, 4)``."""
         s = np.asarray(skin_matrices, dtype=np.float64)
         b = self.bind_world.shape[0]
@@ -256,7 +263,7 @@ class PostTransformMesh:
             raise ValidationError(f"expected skin matrices (b >= {b}, 4, 4), got shape {s.shape}")
         return np.matmul(s[:b, :3, :], self.bind_world).astype(np.float32)
 
-    def apply(self, skin_matrices):
+    def apply(self, skin_matrices: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Skin one frame: ``positions (v, 3) float32``, ``normals (v, 3) float32``."""
         mb = self.bone_matrices(skin_matrices)
         g = mb[self.bones]  # (v, k, 3, 4)
@@ -277,7 +284,7 @@ class BlendedMesh:
     n_vertices : int
     """
 
-    def __init__(self, palette: Palette, positions, normals, use_sparse: bool | None = None):
+    def __init__(self, palette: Palette, positions: ArrayLike, normals: ArrayLike, use_sparse: bool | None = None) -> None:
         self.palette = palette
         p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
         n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
@@ -314,7 +321,7 @@ class BlendedMesh:
                 self._sparse = self._build_sparse(sp, palette.index, p, n)
 
     @staticmethod
-    def _build_sparse(sp, index, p, n):
+    def _build_sparse(sp: Any, index: np.ndarray, p: np.ndarray, n: np.ndarray) -> Any:
         """CSR ``(6v, 12p) float32``: rows ``3*i + r`` give position coordinate r of vertex i,
         rows ``3v + 3*i + r`` the (unnormalised) normal; columns index the flattened palette."""
         v = p.shape[0]
@@ -331,11 +338,11 @@ class BlendedMesh:
                              shape=(6 * v, 12 * max(psize, 1)))
 
     @classmethod
-    def build(cls, mesh, step: float = 0.25, max_bones: int = 3, use_sparse: bool | None = None) -> "BlendedMesh":
+    def build(cls, mesh: SkinnedMesh, step: float = 0.25, max_bones: int = 3, use_sparse: bool | None = None) -> "BlendedMesh":
         """Quantize ``mesh``'s weights into a palette and precompute the per-vertex mapping."""
         return cls(_palette(mesh, step, max_bones), mesh.positions, mesh.normals, use_sparse)
 
-    def palette_matrices(self, skin_matrices) -> np.ndarray:
+    def palette_matrices(self, skin_matrices: ArrayLike) -> np.ndarray:
         """This frame's palette ``(p, 3, 4) float32`` (``(n, p, 3, 4)`` for ``(n, b, 4, 4)`` input):
         ``sum_i w_i * skin_matrices[bone_i]`` for every entry, as one ``(p, b) @ (b, 12)`` GEMM."""
         m = np.asarray(skin_matrices)
@@ -345,15 +352,15 @@ class BlendedMesh:
         m12 = m[..., :nb, :3, :].astype(np.float32).reshape(m.shape[:-3] + (nb, 12))
         return np.matmul(self._weights, m12).reshape(m.shape[:-3] + (self.palette.size, 3, 4))
 
-    def apply_many(self, skin_matrices, normalize: bool = True, use_numba: bool | None = None):
+    def apply_many(self, skin_matrices: ArrayLike, normalize: bool = True, use_numba: bool | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Skin ``n`` instances at once (e.g. six riders in different poses): ``skin_matrices
         (n, b, 4, 4)`` -> ``positions (n, v, 3)``, ``normals (n, v, 3)`` float32. With numba one
         compiled pass over all vertices of all instances (``use_numba=False``: one scipy sparse x
         dense product, the reference).  = :meth:`skin_palette` of :meth:`palette_matrices`."""
         return self.skin_palette(self.palette_matrices(skin_matrices), normalize=normalize, use_numba=use_numba)
 
-    def skin_palette(self, palette_matrices, normalize: bool = True, use_numba: bool | None = None,
-                     inverse_transpose: bool = False):
+    def skin_palette(self, palette_matrices: ArrayLike, normalize: bool = True, use_numba: bool | None = None,
+                     inverse_transpose: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """The per-vertex half of skinning, given this frame's palette: ``palette_matrices (n, p, 3, 4)``
         (or ``(p, 3, 4)``; float32, e.g. from :meth:`palette_matrices`) -> ``positions (n, v, 3)``,
         ``normals (n, v, 3)`` float32 (``(v, 3)`` each for a ``(p, 3, 4)`` palette).  Each vertex by its
@@ -374,7 +381,7 @@ class BlendedMesh:
         pos, nrm = self._skin_palette(pal, normalize, use_numba, bool(inverse_transpose))
         return (pos[0], nrm[0]) if single else (pos, nrm)
 
-    def _skin_palette(self, pal, normalize, use_numba, inverse_transpose=False):
+    def _skin_palette(self, pal: np.ndarray, normalize: bool, use_numba: bool | None, inverse_transpose: bool = False) -> tuple[np.ndarray, np.ndarray]:
         n = pal.shape[0]
         v = self.n_vertices
         if _compiled(use_numba):
@@ -415,7 +422,7 @@ class BlendedMesh:
                 normalize_rows(nrm[i])
         return pos, nrm
 
-    def apply(self, skin_matrices, normalize: bool = True, use_numba: bool | None = None):
+    def apply(self, skin_matrices: ArrayLike, normalize: bool = True, use_numba: bool | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Skin one frame: generate the palette ``(p, 3, 4)`` then transform every vertex by its
         entry. Returns ``positions (v, 3) float32`` and ``normals (v, 3) float32`` (unit if
         ``normalize``)."""
@@ -440,10 +447,10 @@ class BlendedMesh:
 
 
 # ---------------------------------------------------------------------------------- skin()
-_CACHE: dict = {}
+_CACHE: dict[tuple[Any, ...], tuple[Any, Any, Any]] = {}
 
 
-def _cached(mesh, key, make):
+def _cached(mesh: SkinnedMesh, key: tuple[Any, ...], make: Callable[[], _T]) -> _T:
     """Precomputed data for ``mesh`` (weakly keyed by identity, invalidated when its arrays are
     replaced)."""
     stamp = (id(mesh.positions), id(mesh.normals), id(mesh.joints), id(mesh.weights))
@@ -453,15 +460,15 @@ def _cached(mesh, key, make):
         return hit[1]
     obj = make()
     try:
-        ref = weakref.ref(mesh, lambda _r, k=k: _CACHE.pop(k, None))
+        ref = weakref.ref(mesh, lambda _r, k=k: _CACHE.pop(k, None))  # type: ignore[misc]
     except TypeError:  # not weak-referenceable: do not cache
         return obj
     _CACHE[k] = (stamp, obj, ref)
     return obj
 
 
-def skin(mesh, bone_matrices, scheme: str = "exact", step: float = 0.25, max_bones: int = 3,
-         inverse_bind=None, normalize: bool = True):
+def skin(mesh: SkinnedMesh, bone_matrices: ArrayLike, scheme: str = "exact", step: float = 0.25, max_bones: int = 3,
+         inverse_bind: ArrayLike | None = None, normalize: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Skin ``mesh`` with skin matrices ``bone_matrices (b, 4, 4)``.
 
     Parameters
@@ -500,7 +507,8 @@ def skin(mesh, bone_matrices, scheme: str = "exact", step: float = 0.25, max_bon
     raise ConfigError(f"skinning scheme must be one of {SCHEMES}, got {scheme!r}")
 
 
-def skinning_report(model, steps=(0.1, 0.2, 0.25), max_bones: int = 3, times=None, clip=None) -> list:
+def skinning_report(model: Model, steps: Sequence[float] = (0.1, 0.2, 0.25), max_bones: int = 3,
+                    times: ArrayLike | None = None, clip: Clip | None = None) -> list[dict[str, float]]:
     """Blended and post-transform accuracy of a model against exact skinning.
 
     For each ``step``: palette size (summed over the skinned meshes), max and mean position error
@@ -523,7 +531,7 @@ def skinning_report(model, steps=(0.1, 0.2, 0.25), max_bones: int = 3, times=Non
     poses = [clip.sample(t, loop=True) if clip is not None else sk.rest_pose() for t in times]
     mats = [sk.skin_matrices(p) for p in poses]
 
-    def ang(a, b):
+    def ang(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         a = a.astype(np.float64)
         b = b.astype(np.float64)
         return np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.sum(a * b, axis=1)))
@@ -538,13 +546,14 @@ def skinning_report(model, steps=(0.1, 0.2, 0.25), max_bones: int = 3, times=Non
             post_a.append(ang(npt, ne))
     rows = []
     for step in steps:
-        d, a = [], []
+        ds: list[np.ndarray] = []
+        a: list[np.ndarray] = []
         for m, ex, size in zip(mats, exact, sizes):
             for me, (pe, ne) in zip(meshes, ex):
                 pb, nb = skin(me, m, "blended", step=step, max_bones=max_bones)
-                d.append(np.linalg.norm(pb - pe, axis=1) / size)
+                ds.append(np.linalg.norm(pb - pe, axis=1) / size)
                 a.append(ang(nb, ne))
-        d = np.concatenate(d)
+        d = np.concatenate(ds)
         rows.append({
             "step": float(step),
             "palette": int(sum(make_palette(me, step, max_bones).size for me in meshes)),

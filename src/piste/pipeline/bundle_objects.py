@@ -29,11 +29,17 @@ are then built at run time as before.
 from __future__ import annotations
 
 import functools
+import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, TypeVar
 
 import numpy as np
+import numpy.typing as npt
 
+from piste.character.lod import LOD
+from piste.character.model import Model
 from piste.errors import ConfigError, FormatError, PisteError
 from piste.formats.bundle import RESIDENT_MEMBER, BundleData, camera_to_dict, read_bundle
 from piste.lighting.lightmap import LightMap
@@ -50,6 +56,8 @@ from piste.world.objects import CompressedMesh, ObjectSet, normal_matrix
 
 __all__ = ["Bundle", "load_bundle", "bundle_from_data", "lights_from_dict", "camera_from_dict", "camera_to_dict",
            "resident_members", "RESIDENT_MEMBER", "STORED_BLOCKS_BUDGET"]
+
+_T = TypeVar("_T")
 
 #: the largest vertex blocks a build stores (bytes, uncompressed: 44 B a vertex, 116 vertices a
 #: patch, ~13k patches); bigger nets' blocks are built at run time (they would swell the bundle)
@@ -94,12 +102,12 @@ def camera_from_dict(d: dict) -> Camera:
                   far=d["far"], ortho_height=d.get("ortho_height"), name=str(d.get("name") or ""))
 
 
-def _manifest_errors(fn):
+def _manifest_errors(fn: Callable[..., _T]) -> Callable[..., _T]:
     """A damaged manifest (its SHA-256 sums cover the arrays, not the manifest) or inconsistent
     arrays give a FormatError naming the bundle, never a raw KeyError / ValueError (issue 10)."""
 
     @functools.wraps(fn)
-    def wrapper(obj, *args, **kwargs):
+    def wrapper(obj: Any, *args: Any, **kwargs: Any) -> _T:
         path = getattr(obj, "path", None)
         try:
             return fn(obj, *args, **kwargs)
@@ -133,11 +141,11 @@ class Bundle:
     path: Path
     manifest: dict
     arrays: dict
-    net: object
-    lightmap: object
-    lights: object
+    net: PatchNet
+    lightmap: LightMap
+    lights: Lights
     cameras: dict
-    visibility: object = None
+    visibility: Visibility | None = None
     centerline: np.ndarray | None = None
     _cache: dict = field(default_factory=dict, repr=False)
 
@@ -145,7 +153,7 @@ class Bundle:
     def name(self) -> str:
         return str(self.manifest.get("name", self.path.stem))
 
-    def camera(self, name: str | None = None):
+    def camera(self, name: str | None = None) -> Camera:
         """The camera called ``name`` (default: the first)."""
         if not self.cameras:
             raise ConfigError(f"{self.path}: the scene has no cameras")
@@ -156,7 +164,7 @@ class Bundle:
         return self.cameras[name]
 
     @_manifest_errors
-    def objects(self):
+    def objects(self) -> ObjectSet | None:
         """The placed objects as a :class:`piste.world.objects.ObjectSet` (None when there are none)."""
         if "objects" in self._cache:
             return self._cache["objects"]
@@ -193,7 +201,7 @@ class Bundle:
         return {k: self.arrays[f"objects/colors/{k}"] for k in info.get("kinds", ())}
 
     @_manifest_errors
-    def rider_model(self):
+    def rider_model(self) -> Model | None:
         """The riders' character :class:`piste.character.Model` (skeleton, LOD-0 mesh, clips) or None."""
         if "rider_model" in self._cache:
             return self._cache["rider_model"]
@@ -207,7 +215,7 @@ class Bundle:
         return m
 
     @_manifest_errors
-    def rider_lods(self):
+    def rider_lods(self) -> list[LOD] | None:
         """The riders' LODs (:class:`piste.character.LOD` list, palettes as built) or None."""
         if "rider_lods" in self._cache:
             return self._cache["rider_lods"]
@@ -220,7 +228,7 @@ class Bundle:
         return lods
 
 
-    def sun_visibility(self, direction):
+    def sun_visibility(self, direction: npt.ArrayLike) -> tuple[np.ndarray, tuple[float, ...]] | None:
         """Where the terrain sees a sun shining along ``direction`` (3,), as the build stored it
         (the ``shadow`` step: ``(field (H, W) float32, rect (x0, y0, x1, y1))``, exactly what
         :func:`piste.render.shadow_pass.sun_visibility` gives), or None when the bundle has none or
@@ -240,7 +248,7 @@ class Bundle:
         return np.asarray(f, dtype=np.float32), tuple(float(x) for x in rect)
 
 
-def _terrain_net(path, man: dict, arrays: dict) -> PatchNet:
+def _terrain_net(path: str | os.PathLike[str], man: dict[str, Any], arrays: dict[str, np.ndarray]) -> PatchNet:
     """The bundle's terrain :class:`PatchNet`: its stored topology taken (checked) when the build
     stored one of this format, else computed.  FormatError naming the member when invalid."""
     t = man.get("terrain") or {}
@@ -259,7 +267,7 @@ def _terrain_net(path, man: dict, arrays: dict) -> PatchNet:
         raise FormatError(path, f"invalid terrain ({exc})", field=f"terrain/{member}.npy") from None
 
 
-def _keep_blocks(path, man: dict, arrays: dict, net: PatchNet) -> bool:
+def _keep_blocks(path: str | os.PathLike[str], man: dict[str, Any], arrays: dict[str, np.ndarray], net: PatchNet) -> bool:
     """Keep the bundle's stored vertex blocks on ``net`` (True), or False when it has none this
     piste draws.  FormatError naming the member when they do not fit the net."""
     if not _stored_blocks(man) or RESIDENT_MEMBER not in arrays:
@@ -312,7 +320,7 @@ def bundle_from_data(data: BundleData, warm: bool = False, net: PatchNet | None 
     return Bundle(path, man, arrays, net, lightmap, lights, cameras, vis, line)
 
 
-def load_bundle(path, verify: bool = True, warm: bool = False) -> Bundle:
+def load_bundle(path: str | os.PathLike[str], verify: bool = True, warm: bool = False) -> Bundle:
     """Load a ``.piste`` bundle as the scene's objects (:func:`piste.formats.bundle.read_bundle`, then
     :func:`bundle_from_data`).
 

@@ -247,7 +247,7 @@ class Node_:
 
     __slots__ = ("_d", "_c")
 
-    def __init__(self, d: dict):
+    def __init__(self, d: dict) -> None:
         object.__setattr__(self, "_d", d)
         object.__setattr__(self, "_c", {})
 
@@ -263,7 +263,7 @@ class Node_:
         c[key] = v
         return v
 
-    def __setattr__(self, key, value):
+    def __setattr__(self, key, value) -> None:
         self._c[key] = value
 
     def get(self, key, default=None):
@@ -290,7 +290,7 @@ class Document(Node_):
 
     __slots__ = ("_blob",)
 
-    def __init__(self, doc: dict, blob: bytes | None):
+    def __init__(self, doc: dict, blob: bytes | None) -> None:
         super().__init__(doc)
         object.__setattr__(self, "_blob", blob)
 
@@ -314,7 +314,7 @@ _NESTED = {
 
 
 def _check_shapes(path, doc: dict) -> None:
-    def need(v, fld, kind=dict):
+    def need(v, fld, kind=dict) -> None:
         if not isinstance(v, kind):
             what = "a JSON object" if kind is dict else "an array"
             raise FormatError(path, f"expected {what}, got {type(v).__name__} ({str(v)[:40]})", field=fld)

@@ -61,7 +61,7 @@ _FLOAT = 5126
 class _Reader:
     """Validated access to one glTF document's buffers, accessors and images."""
 
-    def __init__(self, path: Path, g, allow_paths=()):
+    def __init__(self, path: Path, g, allow_paths=()) -> None:
         self.path = path
         self.g = g
         self.allow_paths = tuple(allow_paths)  # folders besides the model's own that URIs may name

@@ -200,7 +200,7 @@ def _trs(matrix, tol: float = 1e-6):
 class _Builder:
     """Accumulates one binary buffer and the glTF lists."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         import pygltflib
 
         self.G = pygltflib
@@ -411,7 +411,7 @@ def _add_character(b: _Builder, c: CharacterExport, root_children: list, scene_r
         clip = model.clips[cname]
         samplers, channels = [], []
 
-        def add(track, node, path, samplers=samplers, channels=channels):  # this clip's lists
+        def add(track, node, path, samplers=samplers, channels=channels) -> None:  # this clip's lists
             vals = np.asarray(track.values, dtype=np.float64)
             if track.interpolation == "CUBICSPLINE":
                 out = np.stack([track.in_tangents, vals, track.out_tangents], axis=1).reshape(-1, vals.shape[1])

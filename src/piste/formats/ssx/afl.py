@@ -311,7 +311,7 @@ def _segment_size(kind: int, count: int) -> int | None:
 
 
 class _Reader:
-    def __init__(self, data: bytes, path, base: int):
+    def __init__(self, data: bytes, path, base: int) -> None:
         self.data, self.path, self.base = data, path, base
 
     def err(self, field_: str, msg: str) -> FormatError:

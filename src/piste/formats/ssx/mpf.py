@@ -443,7 +443,7 @@ def pack_chunks(strips, uv, normals, positions, max_vertices: int = ENCODER_CHUN
 
 # ------------------------------------------------------------------------------------ reading
 class _Reader:
-    def __init__(self, path, data: bytes, base: int, size: int, where: str, buf: bytearray | None = None):
+    def __init__(self, path, data: bytes, base: int, size: int, where: str, buf: bytearray | None = None) -> None:
         self.path, self.data, self.base, self.size, self.where = path, data, base, size, where
         # arrays are writable views of one private copy of the file (no copy per array)
         self.buf = bytearray(data) if buf is None else buf
@@ -452,7 +452,7 @@ class _Reader:
     def err(self, field_name: str, message: str) -> FormatError:
         return FormatError(self.path, f"{self.where}: {message}", field=field_name)
 
-    def need(self, off: int, n: int, field_name: str):
+    def need(self, off: int, n: int, field_name: str) -> None:
         if off < 0 or n < 0 or off + n > self.size:
             raise self.err(field_name, f"{n} bytes at blob offset {off} run past the end of the "
                                        f"{self.size}-byte blob")
@@ -906,13 +906,13 @@ def _morph_bytes(k: MorphKey) -> bytes:
 
 
 class _Buf:
-    def __init__(self):
+    def __init__(self) -> None:
         self.b = bytearray()
 
     def at(self) -> int:
         return len(self.b)
 
-    def pad(self, a: int = 16):
+    def pad(self, a: int = 16) -> None:
         self.b += bytes(_align(len(self.b), a) - len(self.b))
 
     def put(self, data: bytes) -> int:
@@ -1000,7 +1000,7 @@ def _patch_blob(sub: SubModel) -> bytes:
     b = bytearray(sub.source)
     sec = sub._offsets["sections"]
 
-    def put(off, arr):
+    def put(off, arr) -> None:
         data = np.ascontiguousarray(arr).tobytes()
         b[off:off + len(data)] = data
 
@@ -1040,7 +1040,7 @@ def _patch_blob(sub: SubModel) -> bytes:
     return bytes(b)
 
 
-def _check_values(sub: SubModel):
+def _check_values(sub: SubModel) -> None:
     for i, p in enumerate(sub.palettes):
         t = int(np.asarray(p["weight"], np.int64).sum())
         if t != 100:

@@ -195,13 +195,13 @@ _INF = float("inf")
 class _Reader:
     """Checks a parsed JSON document against a schema; errors name the file, the object and the key."""
 
-    def __init__(self, path):
+    def __init__(self, path) -> None:
         self.path = path
         self.count = 0
         self.pending = []  # (dict, key) of floats still to round to float32, done at once in top()
         self.lists = []  # lists of floats still to round
 
-    def fail(self, where: str, key: str, msg: str):
+    def fail(self, where: str, key: str, msg: str) -> None:
         raise FormatError(self.path, f"{where}: {key} {msg}", field=key)
 
     def number(self, v, where, key) -> float:

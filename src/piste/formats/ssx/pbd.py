@@ -264,7 +264,7 @@ class Pbd:
     (:data:`OFFSET_NAMES`), records : (n,) :data:`PATCH_DTYPE` as read, raw : the file's bytes.
     """
 
-    def __init__(self, raw: bytes, records: np.ndarray, path=None):
+    def __init__(self, raw: bytes, records: np.ndarray, path=None) -> None:
         self.raw = bytes(raw)
         self.path = path
         head = np.frombuffer(self.raw[:HEADER_SIZE], _HEADER_DTYPE)[0]
@@ -433,7 +433,7 @@ def weld_candidates(cp) -> list:
     return steps[first:]
 
 
-def _fail(path, msg, field=None):
+def _fail(path, msg, field=None) -> None:
     raise FormatError(path, msg, field=field)
 
 
