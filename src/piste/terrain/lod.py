@@ -7,7 +7,7 @@ two patches on a shared edge always agree: crack-freedom needs nothing more.
 Error-driven levels: flat (below the coarsest) and coarse
 --------------------------------------------------------
 Every patch has precomputed errors (:func:`_patch_errors`: the largest distance between the surface
-and its uniform level-``n`` mesh at the same ``(u, v)``, over the level-4/6/8 grid parameters) for
+and its uniform level-``n`` mesh at the same ``(u, v)``, over the level-4 and 8 grid parameters) for
 the **flat level** (2 vertices a side: the corner quad, triangles ``(0, 1, 2)``, ``(0, 2, 3)``) and the
 coarsest level, and each edge the larger error of its (up to two) patches and the union of their
 control-point boxes (:func:`flat_bounds`, :func:`level_errors`).  With ``lim = flat_error * d``, ``d``
@@ -62,10 +62,10 @@ def _grid_weights(c: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
 def _patch_errors(net, n: int, chunk: int = 1024) -> np.ndarray:
     """Per patch, the largest distance between the surface and its uniform level-``n`` mesh (for
     ``n = 2`` the corner quad, triangles (0, 1, 2), (0, 2, 3)) at the same parameter, over the union of
-    the level-4, 6 and 8 grid parameters: ``(N,)`` float64 (model units).  Both are linear in the
+    the level-4 and 8 grid parameters: ``(N,)`` float64 (model units).  Both are linear in the
     control points, so the difference is one table ``(16, k)`` (its columns sum to 0: no offset of the
     net matters) and the errors one product."""
-    t1 = np.unique(np.concatenate([params(4), params(6), params(8)]))
+    t1 = np.unique(np.concatenate([params(4), params(8)]))
     vv, uu = np.meshgrid(t1, t1, indexing="ij")
     u, v = uu.ravel(), vv.ravel()
     t, _, _ = blend_tables(tuple(u), tuple(v), "float64")  # (16, k): the surface at (u, v)
@@ -79,13 +79,14 @@ def _patch_errors(net, n: int, chunk: int = 1024) -> np.ndarray:
     for a in range(0, N, chunk):
         b = min(a + chunk, N)
         k = b - a
-        # float32 relative to each patch's first control point (errors of ~1e-6 of a patch's size; a
-        # first frame computes these: float32 products run ~10x faster here than float64 ones)
+        # float32 relative to each patch's first control point (errors of ~1e-6 of a patch's size), and
+        # einsum, not matmul: a first frame computes these, and BLAS's worker threads, spinning after a
+        # product, took ~90 ms of CPU from that frame on 2 cores (einsum's loops are single-threaded)
         c = cp_all[a:b].reshape(k, 16, 3)
         c = (c - c[:, :1]).astype(np.float32)
         sq = None
         for x in range(3):
-            e = np.ascontiguousarray(c[:, :, x]) @ d  # (k, m)
+            e = np.einsum("kc,cm->km", np.ascontiguousarray(c[:, :, x]), d, optimize=False)  # (k, m)
             e *= e
             sq = e if sq is None else np.add(sq, e, out=sq)
         out[a:b] = np.sqrt(sq.max(axis=1).astype(np.float64))
