@@ -65,7 +65,8 @@ def _patch_errors(net, n: int, chunk: int = 1024) -> np.ndarray:
     the level-4 and 8 grid parameters: ``(N,)`` float64 (model units).  Both are linear in the
     control points, so the difference is one table ``(16, k)`` (its columns sum to 0: no offset of the
     net matters) and the errors one product."""
-    t1 = np.unique(np.concatenate([params(4), params(8)]))
+    t1 = np.sort(np.concatenate([params(4), params(8)]))
+    t1 = t1[np.r_[True, np.diff(t1) > 0]]  # np.unique's values, without importing numpy.ma (a cold start's 15-26 ms)
     vv, uu = np.meshgrid(t1, t1, indexing="ij")
     u, v = uu.ravel(), vv.ravel()
     t, _, _ = blend_tables(tuple(u), tuple(v), "float64")  # (16, k): the surface at (u, v)
