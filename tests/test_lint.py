@@ -65,7 +65,8 @@ STRICT_REQUIRED = (
     "piste.terrain.bezier", "piste.terrain.fit", "piste.terrain.heightfield", "piste.terrain.stats",
     "piste.terrain.query", "piste.terrain.tiles",
     "piste.character.batches", "piste.character.lod", "piste.character.palette", "piste.character.pose", "piste.character.skeleton",
-    "piste.character.strips",
+    "piste.character.strips", "piste.character.animation", "piste.character.model", "piste.character.morph",
+    "piste.character.skinning",
 )
 
 

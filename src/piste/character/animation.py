@@ -14,7 +14,10 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ConfigError
 from piste.transforms import quat_conjugate, quat_multiply, quat_normalize, quat_slerp
@@ -22,6 +25,9 @@ from piste.transforms import quat_conjugate, quat_multiply, quat_normalize, quat
 __all__ = ["sample_track", "sample_track_many", "clip_time", "sample_pose", "sample_poses", "RETARGET_MODES"]
 
 RETARGET_MODES = ("none", "scaled", "relative")
+
+# ``track``, ``clip``, ``target``/``source`` and the returned pose are piste.character.model's Track,
+# Clip, Skeleton and Pose, typed Any here: model.py imports this module (an import back is a cycle)
 
 
 def clip_time(t: float, duration: float, loop: bool) -> float:
@@ -34,7 +40,7 @@ def clip_time(t: float, duration: float, loop: bool) -> float:
     return min(max(t, 0.0), duration)
 
 
-def sample_track_many(track, times, rotation: bool = False) -> np.ndarray:
+def sample_track_many(track: Any, times: npt.ArrayLike, rotation: bool = False) -> np.ndarray:
     """Values ``(m, c) float64`` of ``track`` at ``times (m,)`` (clamped to the key range)."""
     times = np.atleast_1d(np.asarray(times, dtype=np.float64))
     kt = track.times
@@ -68,12 +74,12 @@ def sample_track_many(track, times, rotation: bool = False) -> np.ndarray:
     return vals[i] + u[:, None] * (vals[i + 1] - vals[i])
 
 
-def sample_track(track, t: float, rotation: bool = False) -> np.ndarray:
+def sample_track(track: Any, t: float, rotation: bool = False) -> np.ndarray:
     """Value ``(c,) float64`` of ``track`` at time ``t`` (clamped to the key range)."""
     return sample_track_many(track, [t], rotation=rotation)[0]
 
 
-def _gather(clip, t, target):
+def _gather(clip: Any, t: float, target: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Sampled clip values on the bones of ``target``: three dicts path -> (bone idx, values)."""
     out = {}
     for path in ("translation", "rotation", "scale"):
@@ -92,7 +98,7 @@ def _gather(clip, t, target):
     return out
 
 
-def sample_poses(clip, times, target):
+def sample_poses(clip: Any, times: npt.ArrayLike, target: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The poses of ``target`` at ``times (m,)`` (already clamped or wrapped), as
     :func:`sample_pose` with ``retarget="none"`` gives them one at a time: ``translation (m, b, 3)``,
     ``rotation (m, b, 4)`` xyzw, ``scale (m, b, 3)`` float64; bones without tracks keep the rest
@@ -113,7 +119,7 @@ def sample_poses(clip, times, target):
     return out["translation"], out["rotation"], out["scale"]
 
 
-def sample_pose(clip, t: float, target, source=None, retarget: str = "none"):
+def sample_pose(clip: Any, t: float, target: Any, source: Any = None, retarget: str = "none") -> Any:
     """Pose of ``target`` at clip time ``t`` (already clamped/wrapped).
 
     ``source`` is the skeleton the clip was made for (or None); ``retarget`` one of
@@ -129,7 +135,7 @@ def sample_pose(clip, t: float, target, source=None, retarget: str = "none"):
             getattr(pose, path)[idx] = vals
         return pose
 
-    def src_index(idx):
+    def src_index(idx: np.ndarray) -> np.ndarray:
         names = [target.names[j] for j in idx]
         return np.array([source.get(n, -1) for n in names], dtype=np.int64)
 

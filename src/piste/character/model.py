@@ -31,9 +31,11 @@ s_source_rest``): use it when the two skeletons have different rest (bind) orien
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.character import animation as _anim
 from piste.character import retarget as _retarget
@@ -97,18 +99,23 @@ class Skeleton:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def ordered(cls, names, parents, rest_translation, rest_rotation, rest_scale, inverse_bind,
-                node_index=None, is_joint=None):
+    def ordered(cls, names: Sequence[str], parents: npt.ArrayLike, rest_translation: npt.ArrayLike,
+                rest_rotation: npt.ArrayLike, rest_scale: npt.ArrayLike, inverse_bind: npt.ArrayLike,
+                node_index: npt.ArrayLike | None = None, is_joint: npt.ArrayLike | None = None) -> tuple[Skeleton, np.ndarray]:
         """Build a skeleton from bones in any order; returns ``(skeleton, order)`` where
         ``order (b,) int64`` maps new bone index -> old index (``new = old[order]``)."""
-        order = topological_order(parents)
-        parents = np.asarray(parents, dtype=np.int64)
+        par = np.asarray(parents, dtype=np.int64)
+        order = topological_order(par)
         inv = np.empty_like(order)
         inv[order] = np.arange(order.size)
-        new_par = np.where(parents[order] >= 0, inv[np.maximum(parents[order], 0)], -1)
-        take = lambda a: None if a is None else np.asarray(a)[order]  # noqa: E731
+        new_par = np.where(par[order] >= 0, inv[np.maximum(par[order], 0)], -1)
+
+        def take(a: npt.ArrayLike) -> np.ndarray:
+            return np.asarray(a)[order]
+
         sk = cls([names[i] for i in order], new_par, take(rest_translation), take(rest_rotation),
-                 take(rest_scale), take(inverse_bind), take(node_index), take(is_joint))
+                 take(rest_scale), take(inverse_bind), None if node_index is None else take(node_index),
+                 None if is_joint is None else take(is_joint))
         return sk, order
 
     # ------------------------------------------------------------------ queries
@@ -126,7 +133,7 @@ class Skeleton:
         except KeyError:
             raise KeyError(f"no bone named {name!r} in skeleton ({len(self.names)} bones)") from None
 
-    def get(self, name: str, default=None):
+    def get(self, name: str, default: int | None = None) -> int | None:
         """Index of the bone called ``name`` or ``default``."""
         return self._index.get(name, default)
 
@@ -197,10 +204,11 @@ class Track:
         """Bytes as stored in glTF (float32 times + values (+ tangents))."""
         n = self.times.size + self.values.size
         if self.interpolation == "CUBICSPLINE":
+            assert self.in_tangents is not None and self.out_tangents is not None  # __post_init__ requires them
             n += self.in_tangents.size + self.out_tangents.size
         return 4 * n
 
-    def sample(self, t, rotation: bool = False) -> np.ndarray:
+    def sample(self, t: float, rotation: bool = False) -> np.ndarray:
         """Value ``(c,)`` at time ``t`` (clamped to the key range); quaternion slerp if ``rotation``."""
         return _anim.sample_track(self, t, rotation=rotation)
 
@@ -261,7 +269,8 @@ class Clip:
         t = _anim.clip_time(t, self.duration, loop)
         return _anim.sample_pose(self, t, sk, self.skeleton, retarget)
 
-    def sample_weights(self, t: float, mesh, loop: bool = False, default=None) -> np.ndarray:
+    def sample_weights(self, t: float, mesh: str | int | SkinnedMesh, loop: bool = False,
+                       default: npt.ArrayLike | None = None) -> np.ndarray:
         """Morph weights ``(k,) float64`` of ``mesh`` (glTF mesh name, SkinnedMesh name / object,
         or glTF mesh index) at time ``t``. If the clip does not animate that mesh, returns
         ``default`` (a SkinnedMesh's ``morph_default_weights`` when a SkinnedMesh is given) or
@@ -314,16 +323,18 @@ class SkinnedMesh:
     name: str
     positions: np.ndarray
     indices: np.ndarray
-    normals: np.ndarray | None = None
-    uv: np.ndarray | None = None
-    joints: np.ndarray | None = None
-    weights: np.ndarray | None = None
-    morph_positions: np.ndarray | None = None
-    morph_normals: np.ndarray | None = None
-    morph_names: list = field(default_factory=list)
-    morph_default_weights: np.ndarray | None = None
+    # None (the default) for these makes __post_init__ fill them, so after construction each is an
+    # array: typed as the array it always is once built (the None default is the constructor's)
+    normals: np.ndarray = None  # type: ignore[assignment]
+    uv: np.ndarray = None  # type: ignore[assignment]
+    joints: np.ndarray = None  # type: ignore[assignment]
+    weights: np.ndarray = None  # type: ignore[assignment]
+    morph_positions: np.ndarray = None  # type: ignore[assignment]
+    morph_normals: np.ndarray = None  # type: ignore[assignment]
+    morph_names: list[str] = field(default_factory=list)
+    morph_default_weights: np.ndarray = None  # type: ignore[assignment]
     texture: np.ndarray | None = None
-    base_color: np.ndarray | None = None
+    base_color: np.ndarray = None  # type: ignore[assignment]
     skinned: bool = False
     group: str = ""
     material: object = None

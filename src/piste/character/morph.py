@@ -15,17 +15,22 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ValidationError
+
+# ``mesh`` below is a piste.character.model.SkinnedMesh, typed Any: model.py imports this module
 
 __all__ = ["vertex_normals", "blend_morphs", "NullBoneRig", "morphs_to_null_bones", "morph_report", "face_weights",
            "FaceSkin", "FACE_NULL_BONES"]
 
 
-def vertex_normals(positions, indices) -> np.ndarray:
+def vertex_normals(positions: npt.ArrayLike, indices: npt.ArrayLike) -> np.ndarray:
     """Area-weighted vertex normals ``(v, 3) float32`` of a triangle mesh; unused vertices get +Z."""
     p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     f = np.asarray(indices, dtype=np.int64).reshape(-1, 3)
@@ -39,12 +44,12 @@ def vertex_normals(positions, indices) -> np.ndarray:
     return out.astype(np.float32)
 
 
-def _normalize_rows(v):
+def _normalize_rows(v: np.ndarray) -> np.ndarray:
     ln = np.linalg.norm(v, axis=-1, keepdims=True)
     return np.where(ln > 1e-30, v / np.where(ln > 1e-30, ln, 1.0), v)
 
 
-def blend_morphs(mesh, weights):
+def blend_morphs(mesh: Any, weights: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Blended ``(positions (v, 3) float32, normals (v, 3) float32)`` of ``mesh`` at ``weights (k,)``.
 
     ``positions = mesh.positions + sum_k weights[k] * mesh.morph_positions[k]`` and likewise the
@@ -98,13 +103,13 @@ class NullBoneRig:
         weights (float32)."""
         return int(self.offsets.size * 4 + self.vertices.size * 4 + self.joints.size * 2 + self.weights.size * 4)
 
-    def bone_translations(self, morph_weights) -> np.ndarray:
+    def bone_translations(self, morph_weights: npt.ArrayLike) -> np.ndarray:
         """``(J, 3) float32`` null-bone translations for morph weights ``(k,)``."""
         w = np.asarray(morph_weights, dtype=np.float32).reshape(-1)
         k, J, _ = self.offsets.shape
         return (w @ self.offsets.reshape(k, J * 3)).reshape(J, 3)
 
-    def apply(self, mesh, morph_weights) -> np.ndarray:
+    def apply(self, mesh: Any, morph_weights: npt.ArrayLike) -> np.ndarray:
         """Positions ``(v, 3) float32`` of ``mesh`` displaced by the null bones."""
         t = self.bone_translations(morph_weights)
         pos = mesh.positions.copy()
@@ -112,7 +117,7 @@ class NullBoneRig:
         return pos
 
 
-def _solve_weights(X, B, max_influences):
+def _solve_weights(X: np.ndarray, B: np.ndarray, max_influences: int) -> np.ndarray:
     """Per-vertex nonnegative weights on at most ``max_influences`` bones: ``(m, J)``."""
     m = X.shape[0]
     J = B.shape[0]
@@ -136,7 +141,7 @@ def _solve_weights(X, B, max_influences):
     return W
 
 
-def morphs_to_null_bones(mesh, n_bones: int, max_influences: int = 2, iterations: int = 20,
+def morphs_to_null_bones(mesh: Any, n_bones: int, max_influences: int = 2, iterations: int = 20,
                          seed: int = 0) -> NullBoneRig:
     """Approximate ``mesh``'s morph targets with ``n_bones`` translation-only bones.
 
@@ -167,7 +172,7 @@ def morphs_to_null_bones(mesh, n_bones: int, max_influences: int = 2, iterations
         warnings.simplefilter("ignore")
         B, _ = kmeans2(X, J, minit="++", seed=rng)
     B = np.where(np.isfinite(B), B, 0.0)
-    best = (np.inf, None, None)
+    best: tuple[float, np.ndarray | None, np.ndarray | None] = (np.inf, None, None)
     for n_inf in sorted({1, int(max_influences)}):  # the 1-influence fit seeds the wider one
         if best[2] is not None:
             B = best[2]
@@ -184,7 +189,10 @@ def morphs_to_null_bones(mesh, n_bones: int, max_influences: int = 2, iterations
             res = float(np.sum((X - W @ B) ** 2))
             if res < best[0]:
                 best = (res, W, B)
-    _, W, B = best
+    _, W_best, B_best = best
+    if W_best is None or B_best is None:  # no iteration ran (or every residual was NaN)
+        raise ValidationError(f"morphs_to_null_bones: no fit of mesh {mesh.name!r} (iterations={iterations})")
+    W, B = W_best, B_best
     n = max(1, int(np.count_nonzero(W, axis=1).max()))
     sel = np.argsort(-W, axis=1)[:, :n]
     wsel = np.take_along_axis(W, sel, axis=1)
@@ -193,7 +201,8 @@ def morphs_to_null_bones(mesh, n_bones: int, max_influences: int = 2, iterations
                        offsets.astype(np.float32))
 
 
-def morph_report(mesh, rig: NullBoneRig, n_samples: int = 64, seed: int = 0, timing_repeats: int = 50) -> dict:
+def morph_report(mesh: Any, rig: NullBoneRig, n_samples: int = 64, seed: int = 0,
+                 timing_repeats: int = 50) -> dict[str, Any]:
     """Memory, cost and error of blended morph targets vs the null-bone rig for ``mesh``.
 
     Error is measured on each target alone at weight 1 and on ``n_samples`` random weight vectors
@@ -206,15 +215,15 @@ def morph_report(mesh, rig: NullBoneRig, n_samples: int = 64, seed: int = 0, tim
     k, v = mesh.n_morphs, mesh.n_vertices
     rng = np.random.default_rng(seed)
     ws = np.concatenate([np.eye(k), rng.uniform(0, 1, size=(n_samples, k))]).astype(np.float32)
-    errs = []
+    err_rows: list[np.ndarray] = []
     nerr = 0.0
     for w in ws:
         p_m, n_m = blend_morphs(mesh, w)
         p_b = rig.apply(mesh, w)
-        errs.append(np.linalg.norm(p_m.astype(np.float64) - p_b, axis=1))
+        err_rows.append(np.linalg.norm(p_m.astype(np.float64) - p_b, axis=1))
         cosang = np.clip(np.sum(n_m * mesh.normals, axis=1), -1, 1)
         nerr = max(nerr, float(np.degrees(np.arccos(cosang)).max()) if v else 0.0)
-    errs = np.stack(errs)
+    errs = np.stack(err_rows)
     disp = float(np.linalg.norm(mesh.morph_positions, axis=2).max()) if k and v else 0.0
     m = rig.vertices.size
     has_n = bool(np.any(mesh.morph_normals))
@@ -248,7 +257,7 @@ def morph_report(mesh, rig: NullBoneRig, n_samples: int = 64, seed: int = 0, tim
 FACE_NULL_BONES = 8
 
 
-def face_weights(names, t, riders) -> np.ndarray:
+def face_weights(names: Sequence[str], t: float, riders: npt.ArrayLike) -> np.ndarray:
     """A procedural face animation: morph weights ``(n, k) float32`` at ``t`` seconds for the
     riders ``riders (n,)`` (their indices: each rider keeps its own rhythm).
 
@@ -299,7 +308,7 @@ class FaceSkin:
     mode : "morph" | "null_bones";  n_bones : null bones of the fit
     """
 
-    def __init__(self, mesh, palette_index, mode: str = "morph", n_bones: int = FACE_NULL_BONES) -> None:
+    def __init__(self, mesh: Any, palette_index: npt.ArrayLike, mode: str = "morph", n_bones: int = FACE_NULL_BONES) -> None:
         if mode not in ("morph", "null_bones"):
             raise ValidationError(f"face mode must be 'morph' or 'null_bones', got {mode!r}")
         self.mode = mode
@@ -319,7 +328,7 @@ class FaceSkin:
     def __bool__(self) -> bool:
         return bool(self.k and len(self.vertices))
 
-    def offsets(self, weights) -> np.ndarray:
+    def offsets(self, weights: npt.ArrayLike) -> np.ndarray:
         """Bind-space displacements ``(n, m, 3) float32`` of the moved vertices for ``weights (n, k)``."""
         w = np.asarray(weights, np.float32).reshape(-1, self.k)
         if self.rig is not None:
@@ -327,7 +336,7 @@ class FaceSkin:
             return np.einsum("mi,nmic->nmc", self.rig.weights, t[:, self.rig.joints])
         return np.einsum("nk,kmc->nmc", w, self.dpos)
 
-    def apply(self, positions, normals, palette, weights) -> None:
+    def apply(self, positions: np.ndarray, normals: np.ndarray, palette: np.ndarray, weights: npt.ArrayLike) -> None:
         """Add the face to skinned ``positions``/``normals (n, v, 3)`` in place, given this frame's
         ``palette (n, p, 3, 4)`` (:meth:`BlendedMesh.palette_matrices`) and ``weights (n, k)``."""
         if not self or not len(positions):

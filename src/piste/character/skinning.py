@@ -384,6 +384,8 @@ class BlendedMesh:
     def _skin_palette(self, pal: np.ndarray, normalize: bool, use_numba: bool | None, inverse_transpose: bool = False) -> tuple[np.ndarray, np.ndarray]:
         n = pal.shape[0]
         v = self.n_vertices
+        pos: np.ndarray
+        nrm: np.ndarray
         if _compiled(use_numba):
             pos = np.empty((n, v, 3), np.float32)
             nrm = np.empty((n, v, 3), np.float32)
@@ -508,7 +510,7 @@ def skin(mesh: SkinnedMesh, bone_matrices: ArrayLike, scheme: str = "exact", ste
 
 
 def skinning_report(model: Model, steps: Sequence[float] = (0.1, 0.2, 0.25), max_bones: int = 3,
-                    times: ArrayLike | None = None, clip: Clip | None = None) -> list[dict[str, float]]:
+                    times: Sequence[float] | np.ndarray | None = None, clip: Clip | None = None) -> list[dict[str, float]]:
     """Blended and post-transform accuracy of a model against exact skinning.
 
     For each ``step``: palette size (summed over the skinned meshes), max and mean position error
