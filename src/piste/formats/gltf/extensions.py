@@ -31,12 +31,18 @@ texture_transform_matrix(offset, rotation, scale) -> (3, 3)
 
 from __future__ import annotations
 
+import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from piste.errors import FormatError
 from piste.formats import safe_io
+
+# ``r`` below is the glTF reader of piste.formats.gltf.read (which imports this module) and the
+# documents are JSON wrapped by Node_: both typed Any
 
 __all__ = ["SUPPORTED", "check_required", "vertex_comps", "apply_uv_transform", "prepare_primitive", "MaterialInfo", "material_info",
            "texture_transform_matrix", "QUANTIZED_COMPS"]
@@ -66,14 +72,14 @@ def to_float(raw: np.ndarray, component_type: int, normalized: bool) -> np.ndarr
     return raw.astype(np.float64)
 
 
-def vertex_comps(r, core: tuple) -> tuple:
+def vertex_comps(r: Any, core: tuple[int, ...]) -> tuple[int, ...]:
     """Component types allowed for a vertex attribute: ``core`` (the glTF 2.0 core set), widened to
     :data:`QUANTIZED_COMPS` when the file declares KHR_mesh_quantization."""
     names = set(r.g.extensionsUsed or []) | set(r.g.extensionsRequired or [])
     return QUANTIZED_COMPS if "KHR_mesh_quantization" in names else core
 
 
-def check_required(r) -> None:
+def check_required(r: Any) -> None:
     """Raise FormatError for an ``extensionsRequired`` entry piste cannot read."""
     req = r.g.extensionsRequired or []
     if not isinstance(req, list):
@@ -85,7 +91,7 @@ def check_required(r) -> None:
                         f"(supported: {', '.join(SUPPORTED)})")
 
 
-def _dracopy(r):
+def _dracopy(r: Any) -> Any:
     try:
         import DracoPy
     except ImportError:
@@ -94,7 +100,7 @@ def _dracopy(r):
     return DracoPy
 
 
-def prepare_primitive(r, prim, field: str) -> None:
+def prepare_primitive(r: Any, prim: Any, field: str) -> None:
     """Decode a KHR_draco_mesh_compression primitive into ``r``'s accessor cache (no-op otherwise)."""
     ext = prim.extensions if isinstance(prim.extensions, dict) else {}
     d = ext.get("KHR_draco_mesh_compression")
@@ -128,7 +134,7 @@ def prepare_primitive(r, prim, field: str) -> None:
         _inject(r, prim.indices, np.asarray(faces, dtype=np.int64).reshape(-1, 1), efield + " (indices)")
 
 
-def _inject(r, acc_i: int, data: np.ndarray, field: str) -> None:
+def _inject(r: Any, acc_i: int, data: np.ndarray, field: str) -> None:
     a = r.item("accessors", acc_i, field)
     nc = _NCOMP.get(a.type)
     if nc is None or a.componentType not in _DTYPES:
@@ -146,7 +152,8 @@ def _inject(r, acc_i: int, data: np.ndarray, field: str) -> None:
 
 
 # ---------------------------------------------------------------------------------------------
-def texture_transform_matrix(offset=(0.0, 0.0), rotation: float = 0.0, scale=(1.0, 1.0)) -> np.ndarray:
+def texture_transform_matrix(offset: Sequence[float] | np.ndarray = (0.0, 0.0), rotation: float = 0.0,
+                             scale: Sequence[float] | np.ndarray = (1.0, 1.0)) -> np.ndarray:
     """KHR_texture_transform's ``(3, 3)`` UV matrix ``T(offset) R(rotation) S(scale)`` (the
     extension's own definition: ``uv' = M @ (u, v, 1)``)."""
     c, s = np.cos(rotation), np.sin(rotation)
@@ -178,14 +185,14 @@ class MaterialInfo:
     unlit: bool = False
 
 
-def _finite(r, v, n, fld):
+def _finite(r: Any, v: Any, n: int, fld: str) -> np.ndarray:
     a = np.asarray(v, dtype=np.float64).reshape(-1)
     if a.shape != (n,) or not np.all(np.isfinite(a)):
         raise r.err(fld, f"expected {n} finite numbers")
     return a
 
 
-def material_info(r, mi, field: str) -> MaterialInfo:
+def material_info(r: Any, mi: int | None, field: str) -> MaterialInfo:
     """:class:`MaterialInfo` of ``materials[mi]`` (defaults when ``mi`` is None)."""
     if mi is None:
         return MaterialInfo()
@@ -251,7 +258,7 @@ class Node_:
         object.__setattr__(self, "_d", d)
         object.__setattr__(self, "_c", {})
 
-    def __getattr__(self, key):
+    def __getattr__(self, key: str) -> Any:
         if key.startswith("__"):
             raise AttributeError(key)
         c = self._c
@@ -263,10 +270,10 @@ class Node_:
         c[key] = v
         return v
 
-    def __setattr__(self, key, value) -> None:
+    def __setattr__(self, key: str, value: Any) -> None:
         self._c[key] = value
 
-    def get(self, key, default=None):
+    def get(self, key: str, default: Any = None) -> Any:
         """dict-style access (morph targets are read both ways)."""
         return getattr(self, key) if key in self._d else default
 
@@ -274,7 +281,7 @@ class Node_:
         return f"Node_({self._d!r})"
 
 
-def _wrap(v):
+def _wrap(v: Any) -> Any:
     if isinstance(v, dict):
         return Node_(v)
     if isinstance(v, list) and v and any(isinstance(x, dict) for x in v):
@@ -294,7 +301,7 @@ class Document(Node_):
         super().__init__(doc)
         object.__setattr__(self, "_blob", blob)
 
-    def binary_blob(self):
+    def binary_blob(self) -> bytes | None:
         return self._blob
 
 
@@ -313,8 +320,8 @@ _NESTED = {
 }
 
 
-def _check_shapes(path, doc: dict) -> None:
-    def need(v, fld, kind=dict) -> None:
+def _check_shapes(path: str | os.PathLike[str], doc: dict[str, Any]) -> None:
+    def need(v: Any, fld: str, kind: type = dict) -> None:
         if not isinstance(v, kind):
             what = "a JSON object" if kind is dict else "an array"
             raise FormatError(path, f"expected {what}, got {type(v).__name__} ({str(v)[:40]})", field=fld)
@@ -350,7 +357,7 @@ def _check_shapes(path, doc: dict) -> None:
                     need(v, f"{key}[{i}]." + ".".join(chain))
 
 
-def read_document(path, doc: dict) -> Document:
+def read_document(path: str | os.PathLike[str], doc: dict[str, Any]) -> Document:
     """A :class:`Document` of ``doc`` (the file's JSON) with the GLB binary chunk of ``path``, if any
     (the GLB framing was checked by ``precheck_gltf``)."""
     import struct

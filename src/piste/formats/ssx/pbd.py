@@ -44,10 +44,13 @@ API
 
 from __future__ import annotations
 
+import os
 import struct
 from pathlib import Path
+from typing import Any, NoReturn
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import FormatError, ValidationError
 from piste.formats.atomic import write_bytes_atomic
@@ -139,7 +142,7 @@ NET_TO_UV = np.array([0, 1, 3, 2])
 
 
 # ----------------------------------------------------------------------------- the basis
-def power_to_bezier(stored) -> np.ndarray:
+def power_to_bezier(stored: npt.ArrayLike) -> np.ndarray:
     """Bézier control points from stored (reversed) power-basis coefficients, in float64.
 
     Parameters
@@ -154,7 +157,7 @@ def power_to_bezier(stored) -> np.ndarray:
     return np.ascontiguousarray((M_INV @ c @ M_INV.T).transpose(0, 2, 3, 1))
 
 
-def bezier_to_power(cp) -> np.ndarray:
+def bezier_to_power(cp: npt.ArrayLike) -> np.ndarray:
     """Stored (reversed) power-basis coefficients of Bézier patches.
 
     Parameters
@@ -196,8 +199,9 @@ def _geometry_fields(rec: np.ndarray, cp: np.ndarray) -> None:
     rec["corners"] = corners
 
 
-def records_from_arrays(control_points, uv=None, lightmap_rect=None, lightmap_page=None, texture_index=None,
-                        surface_type=None, trick_only=None) -> np.ndarray:
+def records_from_arrays(control_points: npt.ArrayLike, uv: npt.ArrayLike | None = None, lightmap_rect: npt.ArrayLike | None = None,
+                        lightmap_page: npt.ArrayLike | None = None, texture_index: npt.ArrayLike | None = None,
+                        surface_type: npt.ArrayLike | None = None, trick_only: npt.ArrayLike | None = None) -> np.ndarray:
     """New patch records (game units) from per-patch arrays.
 
     Parameters
@@ -235,7 +239,7 @@ def records_from_arrays(control_points, uv=None, lightmap_rect=None, lightmap_pa
     return rec
 
 
-def records_from_net(net, scale: float = GAME_SCALE, **fields) -> np.ndarray:
+def records_from_net(net: Any, scale: float = GAME_SCALE, **fields: Any) -> np.ndarray:  # net: a terrain PatchNet
     """Patch records from a :class:`~piste.terrain.net.PatchNet` in metres (``scale`` metres a
     game unit).  The net's corner UVs become the patch UVs (reordered to the SSX corner order);
     light-map tiles, textures and the rest come from ``fields`` (see :func:`records_from_arrays`)."""
@@ -264,7 +268,7 @@ class Pbd:
     (:data:`OFFSET_NAMES`), records : (n,) :data:`PATCH_DTYPE` as read, raw : the file's bytes.
     """
 
-    def __init__(self, raw: bytes, records: np.ndarray, path=None) -> None:
+    def __init__(self, raw: bytes, records: np.ndarray, path: str | os.PathLike[str] | None = None) -> None:
         self.raw = bytes(raw)
         self.path = path
         head = np.frombuffer(self.raw[:HEADER_SIZE], _HEADER_DTYPE)[0]
@@ -403,7 +407,7 @@ class Pbd:
         return Path(self.path).name if self.path is not None else "pbd"
 
 
-def hash_section_bytes(light_hashes) -> bytes:
+def hash_section_bytes(light_hashes: npt.ArrayLike) -> bytes:
     """A hash section (the Multitool's layout, ``PBDHandler.cs`` ``SaveNew``) whose only list is
     the lights': ``(hash, index)`` for each entry of ``light_hashes (k,)`` (signed 32-bit), sorted
     by hash (signed, as the Multitool sorts); the other lists empty."""
@@ -417,7 +421,7 @@ def hash_section_bytes(light_hashes) -> bytes:
     return struct.pack(f"<{len(fields)}I", *fields) + pairs.tobytes()
 
 
-def weld_candidates(cp) -> list:
+def weld_candidates(cp: npt.ArrayLike) -> list[float]:
     """Weld tolerances (game units) to try, smallest first: of 1, 4 and 16 units, those from the
     smallest that pairs up as many patch corners as 16 units does."""
     from scipy.spatial import cKDTree
@@ -433,11 +437,11 @@ def weld_candidates(cp) -> list:
     return steps[first:]
 
 
-def _fail(path, msg, field=None) -> None:
+def _fail(path: str | os.PathLike[str] | None, msg: str, field: str | None = None) -> NoReturn:
     raise FormatError(path, msg, field=field)
 
 
-def parse_pbd(data: bytes, path=None) -> Pbd:
+def parse_pbd(data: bytes, path: str | os.PathLike[str] | None = None) -> Pbd:
     """Parse the bytes of a ``.pbd`` (see :func:`read_pbd`)."""
     data = bytes(data)
     if len(data) < HEADER_SIZE:
@@ -477,7 +481,7 @@ def parse_pbd(data: bytes, path=None) -> Pbd:
     return Pbd(data, rec, path)
 
 
-def read_pbd(path) -> Pbd:
+def read_pbd(path: str | os.PathLike[str]) -> Pbd:
     """Read an SSX Tricky ``.pbd`` level.
 
     Raises :class:`~piste.errors.FormatError` naming the file, the record (``patch 1234``) and the
@@ -489,6 +493,6 @@ def read_pbd(path) -> Pbd:
     return parse_pbd(data, path)
 
 
-def write_pbd(pbd: Pbd, path) -> None:
+def write_pbd(pbd: Pbd, path: str | os.PathLike[str]) -> None:
     """Write ``pbd`` to ``path`` atomically (an unedited level gives the bytes it was read from)."""
     write_bytes_atomic(path, pbd.to_bytes())

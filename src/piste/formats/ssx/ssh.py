@@ -52,11 +52,13 @@ extract_tiles(pages, rect, page) -> (n, 8, 8, 4);  place_tiles(tiles, rect, page
 
 from __future__ import annotations
 
+import os
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import FormatError, ValidationError
 from piste.formats.atomic import write_bytes_atomic
@@ -113,7 +115,7 @@ def clut_order(k: int) -> np.ndarray:
     return (i & 0xE7) | ((i & 8) << 1) | ((i & 16) >> 1)
 
 
-def half_bright(rgba) -> np.ndarray:
+def half_bright(rgba: npt.ArrayLike) -> np.ndarray:
     """The inverse of the display decode (:meth:`SshImage.rgba`): RGB ``(c + 1) // 2`` and alpha
     ``(a + 1) // 2``, ``(..., 4) uint8``."""
     a = np.asarray(rgba, dtype=np.uint16)
@@ -161,6 +163,7 @@ class SshImage:
         """``(h, w, 4) uint8`` as stored: palette looked up, alpha still half range."""
         if self.kind == RGBA32:
             return self.pixels
+        assert self.palette is not None  # indexed kinds are read and built with one
         return self.palette[self.pixels]
 
     def rgba(self) -> np.ndarray:
@@ -240,14 +243,14 @@ class SshBank:
     from bytes remembers them: :meth:`to_bytes` gives those bytes back while no image was changed
     (whatever layout the writer of the file used), else :meth:`encode`'s layout."""
 
-    images: list
+    images: list[SshImage]
     creator: bytes = CREATOR
     read_from: tuple | None = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.images)
 
-    def __getitem__(self, i) -> SshImage:
+    def __getitem__(self, i: int) -> SshImage:
         return self.images[i]
 
     def edited(self) -> bool:
@@ -260,7 +263,7 @@ class SshBank:
 
     def to_bytes(self) -> bytes:
         """The bank's bytes: as read when nothing changed (:meth:`edited`), else :meth:`encode`."""
-        if not self.edited():
+        if not self.edited() and self.read_from is not None:  # (edited() is True without read_from)
             return self.read_from[0]
         return self.encode()
 
@@ -328,7 +331,7 @@ def _implied_size(kind: int, w: int, h: int) -> int:
     return 16 + {1: (w * h + 1) // 2, 2: w * h, 5: w * h * 4, PALETTE: w * h * 4}.get(kind, max(w, 0) * max(h, 0))
 
 
-def parse_ssh(data: bytes, path=None) -> SshBank:
+def parse_ssh(data: bytes, path: str | os.PathLike[str] | None = None) -> SshBank:
     """Parse an ``.ssh`` bank's bytes (see :func:`read_ssh`)."""
     data = bytes(data)
     size = len(data)
@@ -355,7 +358,7 @@ def parse_ssh(data: bytes, path=None) -> SshBank:
     return SshBank(images, creator, (data, creator, [_state(im) for im in images]))
 
 
-def _parse_image(data: bytes, off: int, end: int, name: str, where: str, path) -> SshImage:
+def _parse_image(data: bytes, off: int, end: int, name: str, where: str, path: str | os.PathLike[str] | None) -> SshImage:
     """Walk an image's chunks from ``off`` to ``end`` (the next image or its terminator); a chunk
     size of 0 is implied by the chunk's dimensions (not padded); a long-name chunk's text runs to
     its NUL, the next chunk 16-aligned after it; chunks of the kept types (124, 105) are kept as
@@ -416,6 +419,7 @@ def _parse_image(data: bytes, off: int, end: int, name: str, where: str, path) -
                 raise FormatError(path, f"{where}: {w}x{h} type-{kind} pixels need {nbytes} bytes from {body}, "
                                         f"the file has {size}", field="pixels")
             raw = np.frombuffer(data, np.uint8, count=nbytes, offset=body)
+            pix: np.ndarray
             if kind == RGBA32:
                 pix = raw.reshape(h, w, 4).copy()
             elif kind == 2:
@@ -459,7 +463,7 @@ def _parse_image(data: bytes, off: int, end: int, name: str, where: str, path) -
     return SshImage(name, kind, pix, palette, x, y, flags, long_name, palette_flags, extra)
 
 
-def read_ssh(path) -> SshBank:
+def read_ssh(path: str | os.PathLike[str]) -> SshBank:
     """Read a ``.ssh`` texture bank; bad input raises :class:`~piste.errors.FormatError` naming the
     file, the image and the field."""
     path = Path(path)
@@ -467,13 +471,13 @@ def read_ssh(path) -> SshBank:
     return parse_ssh(data, path)
 
 
-def write_ssh(bank: SshBank, path) -> None:
+def write_ssh(bank: SshBank, path: str | os.PathLike[str]) -> None:
     """Write ``bank`` to ``path`` atomically."""
     write_bytes_atomic(path, bank.to_bytes())
 
 
 # ----------------------------------------------------------------------------- light maps
-def lightmap_pages(bank: SshBank, path=None) -> np.ndarray:
+def lightmap_pages(bank: SshBank, path: str | os.PathLike[str] | None = None) -> np.ndarray:
     """The pages of a light-map bank as stored: ``(P, 128, 128, 4) uint8`` (RGB = Cs, A = As)."""
     pages = []
     for i, im in enumerate(bank.images):
@@ -486,7 +490,7 @@ def lightmap_pages(bank: SshBank, path=None) -> np.ndarray:
     return np.stack(pages)
 
 
-def lightmap_bank(pages) -> SshBank:
+def lightmap_bank(pages: npt.ArrayLike) -> SshBank:
     """A light-map bank from ``(P, 128, 128, 4) uint8`` pages (names ``0000``, ``0001``, ...)."""
     pages = np.asarray(pages)
     if pages.dtype != np.uint8 or pages.ndim != 4 or pages.shape[1:] != (PAGE_SIZE, PAGE_SIZE, 4):
@@ -494,7 +498,8 @@ def lightmap_bank(pages) -> SshBank:
     return SshBank([SshImage(f"{i:04d}", RGBA32, pages[i].copy(), long_name="") for i in range(len(pages))])
 
 
-def tile_origins(rect, page, n_pages: int | None = None, path=None, pages_path=None) -> np.ndarray:
+def tile_origins(rect: npt.ArrayLike, page: npt.ArrayLike, n_pages: int | None = None, path: str | os.PathLike[str] | None = None,
+                 pages_path: str | os.PathLike[str] | None = None) -> np.ndarray:
     """Texel origins ``(n, 2)`` int (x, y) of each patch's tile in its page from the stored rects
     ``(n, 4)`` (x, y, w, h in 0..1); checks tiles are 8x8 inside the page and pages exist.  A
     refusal names ``path``, the file holding the rects and pages (the ``.pbd``), and ``pages_path``,
@@ -517,7 +522,8 @@ def tile_origins(rect, page, n_pages: int | None = None, path=None, pages_path=N
     return np.stack([x0, y0], axis=1)
 
 
-def extract_tiles(pages, rect, page, path=None, pages_path=None) -> np.ndarray:
+def extract_tiles(pages: npt.ArrayLike, rect: npt.ArrayLike, page: npt.ArrayLike, path: str | os.PathLike[str] | None = None,
+                  pages_path: str | os.PathLike[str] | None = None) -> np.ndarray:
     """Each patch's 8x8 light-map tile in piste's orientation: ``(n, 8, 8, C)`` with
     ``[k, j, i]`` the texel at ``u = (i + 0.5) / 8``, ``v = (j + 0.5) / 8`` (the page holds it
     transposed: page row = ``u``, column = ``v``).  ``path``: the file of ``rect`` and ``page``
@@ -532,7 +538,7 @@ def extract_tiles(pages, rect, page, path=None, pages_path=None) -> np.ndarray:
     return pages[page[:, None, None], rows, cols]
 
 
-def place_tiles(tiles, rect, page, n_pages: int, fill=None) -> np.ndarray:
+def place_tiles(tiles: npt.ArrayLike, rect: npt.ArrayLike, page: npt.ArrayLike, n_pages: int, fill: npt.ArrayLike | None = None) -> np.ndarray:
     """Inverse of :func:`extract_tiles`: pages ``(n_pages, 128, 128, C)`` holding every tile."""
     tiles = np.asarray(tiles)
     c = tiles.shape[-1]
