@@ -12,7 +12,9 @@ prints build time (median and range over ``--repeats``), peak RSS (the build pro
 client and the largest worker), the Dask/local time ratio, bake samples/s per worker, the scaling
 exponent of build time in patches (a least-squares slope of log time over log patches; 1.0 =
 linear) and streaming frame times flying across the largest world at 100 m/s (headless EGL,
-``--frames`` frames, every near tile loaded before its frame: the worst case).  The tiles of the
+``--frames`` frames: 'live', the loader thread paging while frames go on, and 'waited', every near tile
+loaded before its frame, interleaved frame by frame with the default course's frame; each streamed
+frame split into paging, GL calls and GPU + read-back).  The tiles of the
 Dask build are compared byte for byte with the local ones.
 
 The Dask time excludes starting the cluster and the workers' first imports (printed beside it).
@@ -276,7 +278,7 @@ def main(argv=None) -> None:
             slope = float(np.polyfit(x, y, 1)[0])
             print(f"\nscaling exponent (local build time ~ patches^k): k = {slope:.2f}  [{flags}]")
         if frames > 0:
-            _streaming(tmp, rows, frames)
+            _streaming(tmp, rows, frames, flags)
         if args.dem:
             _dem(tmp, args.dem, args.dem_dtype, args.dem_tile_patches)
     finally:
@@ -284,51 +286,100 @@ def main(argv=None) -> None:
             shutil.rmtree(tmp, ignore_errors=True)
 
 
-def _streaming(tmp: Path, rows, frames: int) -> None:
-    """Frame times flying across each world, interleaved frame by frame with the default course's
-    terrain frame (:class:`piste.render.TerrainRenderer`, same size, along its track)."""
+def _streamed_frame(s, wait: bool, cam, k: int, times: list, split: dict, tris: list) -> None:
+    """One frame of StreamingRenderer ``s`` (its own GL context) split into paging (``update``, the
+    wait included), GL calls (``submit``) and GPU work with the read-back (``gpu``); frames 0 and 1
+    are warm-up (not recorded)."""
+    with s.ctx:
+        t0 = time.perf_counter()
+        c = cam.with_aspect(*s.size)
+        s.update(c, wait=wait)
+        t1 = time.perf_counter()
+        s.draw(c, read=False, t0=t0)
+        t2 = time.perf_counter()
+        s.ctx.finish()
+        s.fbo.read()
+        t3 = time.perf_counter()
+    if k >= 2:
+        times.append((t3 - t0) * 1e3)
+        for key, a, b in (("update", t0, t1), ("submit", t1, t2), ("gpu", t2, t3)):
+            split[key].append((b - a) * 1e3)
+        tris.append(s.stats["triangles"])
+
+
+def _course_frame(course, line, u: float, k: int, times: list, tris: list) -> None:
+    """One frame of the default course's terrain at track parameter ``u`` (recorded from frame 2)."""
+    from piste.world.camera import track_camera
+
+    with course.ctx:
+        t0 = time.perf_counter()
+        f = course.render(track_camera(line, u, aspect=640 / 448))
+        t1 = time.perf_counter()
+    if k >= 2:
+        times.append((t1 - t0) * 1e3)
+        tris.append(f.triangles)
+
+
+def _streaming(tmp: Path, rows, frames: int, flags: str = "") -> None:
+    """Frame times flying across each world: a 'live' renderer (the loader thread pages tiles while
+    frames go on), a 'waited' one (each frame waits for its near tiles) and the default course's
+    terrain frame (:class:`piste.render.TerrainRenderer`, same size, along its track), each in its own
+    GL context, interleaved frame by frame (their order rotated every frame), so the three share the
+    machine's load alike.  Each streamed frame is split into paging (``update``, the wait included),
+    the GL calls (``submit``) and the GPU's work with the read-back (``gpu``: glFinish + read)."""
     import numpy as np
 
-    from piste.render import StreamingRenderer, TerrainRenderer, render_flight
+    from piste.render import StreamingRenderer, TerrainRenderer
     from piste.render.streaming import fly_path
-    from piste.world.camera import track_camera
     from piste.world.course import default_course, track_centerline
 
     print(f"\nstreaming: {frames} frames flying at 100 m/s, 640x448, headless EGL (llvmpipe), pixels read back; "
           "'live': the loader thread pages tiles while frames go on (far stand-ins until loaded), 'waited': each "
-          "frame waits for its near tiles; interleaved frame by frame with the default course (2,560 patches, "
-          "TerrainRenderer along its track)")
+          "frame waits for its near tiles; both interleaved frame by frame with the default course (2,560 patches, "
+          "TerrainRenderer along its track), the three in a rotating order")
     line = track_centerline(0)
     course = TerrainRenderer(default_course(0), size=(640, 448))
     try:
         for r in rows:
             side = int(round(math.sqrt(r["patches"])))
             root = tmp / f"local_{side}"
-            sw = render_flight(root, frames=frames, speed=100.0, budget_mb=256.0, wait=True)
-            live = StreamingRenderer(root, size=(640, 448), budget_bytes=256 << 20)  # its own GL context
+            rs = {name: StreamingRenderer(root, size=(640, 448), budget_bytes=256 << 20) for name in ("live", "waited")}
+            t = {k: [] for k in ("live", "waited", "course")}
+            split = {k: {"update": [], "submit": [], "gpu": []} for k in ("live", "waited")}
+            tris = {"live": [], "waited": [], "course": []}
+            resident = 0
             try:
-                cams = list(fly_path(live.cache.index, frames + 2))
-                ms, mc, resident = [], [], 0
+                cams = list(fly_path(rs["live"].cache.index, frames + 2))
+
                 for k, cam in enumerate(cams):
-                    t0 = time.perf_counter()
-                    with live.ctx:
-                        live.render(cam, wait=False)
-                    t1 = time.perf_counter()
-                    with course.ctx:
-                        course.render(track_camera(line, 0.1 + 0.4 * k / len(cams), aspect=640 / 448))
-                    t2 = time.perf_counter()
-                    if k >= 2:  # warm-up
-                        ms.append((t1 - t0) * 1e3)
-                        mc.append((t2 - t1) * 1e3)
-                    resident = max(resident, live.stats["resident_bytes"])
+                    for j in range(3):  # the three in a rotating order
+                        name = ("live", "waited", "course")[(k + j) % 3]
+                        if name == "course":
+                            _course_frame(course, line, 0.1 + 0.4 * k / len(cams), k, t[name], tris[name])
+                        else:
+                            _streamed_frame(rs[name], name == "waited", cam, k, t[name], split[name], tris[name])
+                    resident = max(resident, rs["live"].stats["resident_bytes"], rs["waited"].stats["resident_bytes"])
             finally:
-                live.close()
-            ms, mc, mw = np.array(ms), np.array(mc), np.array(sw["ms"][1:])
-            print(f"  {r['patches']:>9,} patches: live frame median {np.median(ms):6.1f} ms "
-                  f"[{ms.min():.1f}..{ms.max():.1f}], default course {np.median(mc):6.1f} ms "
-                  f"[{mc.min():.1f}..{mc.max():.1f}], ratio {np.median(ms) / np.median(mc):.2f}; waited "
-                  f"{np.median(mw):6.1f} ms [{mw.min():.1f}..{mw.max():.1f}]; resident "
-                  f"{max(resident, sw['resident_mb'] * 2**20) / 2**20:.1f} MiB of 256")
+                for s in rs.values():
+                    s.close()
+
+            def med(xs) -> str:
+                a = np.asarray(xs, dtype=np.float64)
+                return f"{np.median(a):6.1f} ms [{a.min():.1f}..{a.max():.1f}]"
+
+            mc = float(np.median(t["course"]))
+            print(f"  {r['patches']:>9,} patches: live frame median {med(t['live'])}, waited {med(t['waited'])}, "
+                  f"default course {med(t['course'])}; ratios live {np.median(t['live']) / mc:.2f}, waited "
+                  f"{np.median(t['waited']) / mc:.2f}; resident {resident / 2**20:.1f} MiB of 256  [{flags}]")
+            for name in ("live", "waited"):
+                sp = split[name]
+                print(f"    {name:6s} split (medians): paging {np.median(sp['update']):.1f} ms, GL calls "
+                      f"{np.median(sp['submit']):.1f} ms, GPU + read {np.median(sp['gpu']):.1f} ms; triangles "
+                      f"{int(np.median(tris[name])):,} a frame (course {int(np.median(tris['course'])):,})  [{flags}]")
+            ratio = float(np.median(t["live"])) / mc
+            record("large", f"streamed frame, {r['patches']:,}-patch world at 100 m/s (live) vs the default course's "
+                   f"[{flags}]", "<= 1.2x", f"{np.median(t['live']):.1f} ms", f"{mc:.1f} ms", f"{ratio:.2f}x",
+                   ratio <= 1.2)
     finally:
         course.release()
 

@@ -327,3 +327,58 @@ def test_a_level_switch_does_not_pop(world, gl):
         assert (np.abs(a - b).max(-1) > 8).sum() > 10  # without the geomorph it pops
     finally:
         r.close()
+
+
+def test_patch_runs_draw_the_chosen_patches_and_the_skirts():
+    inside = np.array([1, 1, 0, 1, 0, 0, 1, 1, 1], bool)
+    cmd = S.patch_runs(inside, 8, 9 * 8 + 5)
+    assert cmd.dtype == np.uint32 and cmd.shape == (4, 5)
+    assert cmd[:, 1].tolist() == [1] * 4 and not cmd[:, 3:].any()  # one instance, no base vertex
+    assert cmd[:, 2].tolist() == [0, 3 * 24, 6 * 24, 9 * 24]  # first index of each run, then the skirts'
+    assert cmd[:, 0].tolist() == [2 * 24, 24, 3 * 24, 5 * 3]
+    drawn = np.concatenate([np.arange(f, f + c, 3) for c, _, f, _, _ in cmd]) // 3  # the triangles drawn
+    assert drawn.tolist() == [t for t in range(9 * 8) if inside[t // 8]] + list(range(72, 77))
+    assert S.patch_runs(inside, 8, 77, skirts=False).shape == (3, 5)
+    assert S.patch_runs(np.zeros(9, bool), 8, 77, skirts=False).shape == (0, 5)
+
+
+def test_middle_tiles_draw_their_far_patches_from_the_corner_grid(world, gl):
+    """A middle tile draws the patches whose corner-grid error is under the pixel error on screen from
+    its corner grid (the middle mesh geomorphed per vertex onto it where they meet, a strip under
+    each seam): fewer triangles, no background through the seams, the same picture but for a few
+    pixels of rounding on silhouettes."""
+    r = S.StreamingRenderer(world, size=(320, 224), ctx=gl, background=MAGENTA, sky=False)
+    try:
+        cams = list(S.fly_path(r.cache.index, 31))[::10]
+        mixed_any = 0
+        for cam in cams:
+            r.mix_levels = True
+            a = r.render(cam, wait=True).astype(int)
+            sa = dict(r.stats)
+            r.mix_levels = False
+            b = r.render(cam, wait=True).astype(int)
+            sb = dict(r.stats)
+            mixed_any += sa["mid_far_patches"]
+            assert sa["mid"] == sb["mid"] > 0 and sb["mid_far_patches"] == 0
+            assert sa["triangles"] < sb["triangles"] or sa["mid_far_patches"] == 0
+            assert (a == (255, 0, 255)).all(-1).sum() == (b == (255, 0, 255)).all(-1).sum()  # no holes
+            assert (np.abs(a - b).max(-1) > 8).sum() <= 5
+        assert mixed_any > 100
+        # the seams' strips: from every edge between a middle and a corner-grid patch, at the targets
+        t = next(t for t in r.cache.near if r.cache.near_level[t] == S.MID_SAMPLES)
+        mesh = r.cache.near[t]
+        coarse = np.zeros(64, bool)
+        coarse[[0, 1, 8, 9]] = True  # a 2 x 2 corner: 4 seam edges of 2 segments, 2 triangles each
+        tri = S.seam_skirts(mesh, (8, 8), coarse, 5.0)
+        assert tri.shape == (16, 3, 3)
+        v = tri.reshape(-1, 3)
+        top = np.isin(v[:, 2], mesh.targets)  # the middle mesh's edge vertices at their targets
+        assert top.sum() == 24 and (np.abs(v[~top, 2][:, None] + 5.0 - mesh.targets[None]).min(1) < 1e-3).all()
+        x0, y0, _, _ = r.cache.grid.tile_bounds_xy(*t)
+        p2 = 2 * 60.0  # two patches of 3 samples 20 m apart: the seams of the corner grid's 2 x 2 patches
+        on_x = np.isclose(v[:, 0], x0 + p2) & (v[:, 1] <= y0 + p2 + 1e-3)
+        on_y = np.isclose(v[:, 1], y0 + p2) & (v[:, 0] <= x0 + p2 + 1e-3)
+        assert (on_x | on_y).all() and on_x.sum() >= 24 and on_y.sum() >= 24
+        assert S.seam_skirts(mesh, (8, 8), np.zeros(64, bool), 5.0).shape == (0, 3, 3)
+    finally:
+        r.close()

@@ -26,6 +26,15 @@ draw through the build's visibility sets of the tile under the eye, which say wh
 of its own patches and of its eight neighbours' (:class:`TileSets`), while every tile of theirs in
 view is drawn at a level their occluders were lowered to (:meth:`TileCache.sets_hold`).
 
+A middle tile is drawn by patch: the patches where its corner grid's error (:attr:`TileCache.chord_error`)
+would be at most ``pixel_error`` pixels at the patch's nearest point come from the tile's full corner
+grid, the others from its middle mesh, geomorphed per vertex by the vertex's own distance (so it is
+fully on the corner grid wherever it meets a corner-grid patch: no cracks, and a patch changes
+level only where the two agree), a strip under each such seam closing the pixels a T-junction can
+leave open (:func:`seam_skirts`); each mesh draws its runs of patches in one indirect multi-draw
+(:func:`patch_runs`).  Far from the eye most of a middle tile is its corner grid (a quarter of the
+triangles).
+
 Where a near tile meets a far one, the near tile's border follows the patch edge curves and the
 far tile's border their chords.  Both lie in the same vertical plane (patch edges are straight in
 x, y), so every tile gets a **skirt**: a strip hanging ``zmax - zmin + 1`` metres down from its
@@ -127,13 +136,18 @@ uniform vec2 u_origin;     // the tile's (x0, y0)
 uniform vec2 u_patch;      // 1 / patch size (x, y)
 uniform vec4 u_light_uv;   // (res - 1) / width, (res - 1) / height, 0.5 / width, 0.5 / height
 uniform float u_morph;     // geomorph: 1 the mesh's own heights, 0 its coarser level's (in_target)
+uniform float u_vmorph;    // > 0: the geomorph per vertex instead, clamp(u_vmorph / distance - 1, 0, 1)
 in vec3 in_pos;
 in float in_target;
 out vec2 v_uv;
 out vec2 v_uvl;
 out float v_fog;
 void main() {
-    vec3 p = vec3(in_pos.xy, in_target + u_morph * (in_pos.z - in_target));
+    float m = u_morph;
+    if (u_vmorph > 0.0) {  // the coarser level's error in pixels at this vertex (its coarse position), over the limit
+        m = clamp(u_vmorph / max(distance(vec3(in_pos.xy, in_target), u_eye), 1e-6) - 1.0, 0.0, 1.0);
+    }
+    vec3 p = vec3(in_pos.xy, in_target + m * (in_pos.z - in_target));
     gl_Position = u_vp * vec4(p, 1.0);
     vec2 q = (p.xy - u_origin) * u_patch;   // patch units from the tile's corner
     v_uv = q;
@@ -353,6 +367,82 @@ def visible_indices(mesh: TileMesh, visible: np.ndarray) -> np.ndarray:
     keep = np.ones(len(tri), bool)
     keep[:n * pt] = np.repeat(np.asarray(visible, bool), pt)
     return np.ascontiguousarray(tri[keep])
+
+
+def patch_boxes(mesh: TileMesh, grid_shape: tuple) -> tuple[np.ndarray, np.ndarray] | None:
+    """The box of each patch's triangles of a patch-major ``mesh`` (:func:`near_mesh`, or
+    :func:`far_mesh` at stride 1) of a ``(ny, nx)`` tile: ``(centre (n, 3), half extent (n, 3))``
+    float64, from the mesh's own float32 vertices (a triangle lies in the box of its vertices; with
+    geomorph targets a vertex is drawn between its height and its target, both inside), padded by a
+    centimetre; None for a mesh that is not patch-major."""
+    pt = int(mesh.patch_triangles)
+    if not pt:
+        return None
+    ny, nx = (int(x) for x in grid_shape)
+    r = int(round(np.sqrt(pt / 2.0)))  # cells a patch side (2 r^2 triangles a patch)
+    rows, cols = ny * r + 1, nx * r + 1
+    if 2 * r * r != pt or len(mesh.positions) < rows * cols:
+        raise ValueError(f"patch_boxes: a mesh of {len(mesh.positions)} vertices and {pt} triangles a patch is not "
+                         f"the grid of a {ny} x {nx} tile")
+    g = mesh.positions[:rows * cols].reshape(rows, cols, 3)
+    tz = None if mesh.targets is None else mesh.targets[:rows * cols].reshape(rows, cols)
+    lo = np.full((ny, nx, 3), np.inf, np.float32)
+    hi = np.full((ny, nx, 3), -np.inf, np.float32)
+    for j in range(r + 1):  # patch (py, px)'s vertices: rows py r .. py r + r, columns likewise
+        for i in range(r + 1):
+            s = g[j:j + ny * r:r, i:i + nx * r:r]
+            np.minimum(lo, s, out=lo)
+            np.maximum(hi, s, out=hi)
+            if tz is not None:
+                z = tz[j:j + ny * r:r, i:i + nx * r:r]
+                np.minimum(lo[..., 2], z, out=lo[..., 2])
+                np.maximum(hi[..., 2], z, out=hi[..., 2])
+    lo64, hi64 = lo.reshape(-1, 3).astype(np.float64), hi.reshape(-1, 3).astype(np.float64)
+    return 0.5 * (lo64 + hi64), 0.5 * (hi64 - lo64) + 0.01
+
+
+def patch_runs(inside: np.ndarray, patch_triangles: int, total_triangles: int, skirts: bool = True) -> np.ndarray:
+    """Indirect draw commands ``(k, 5)`` uint32 (count, instances, first index, base vertex, base
+    instance: ``glMultiDrawElementsIndirect``'s) drawing the patches ``inside (n,) bool`` of a
+    patch-major index buffer of ``total_triangles`` (patch ``p``'s triangles at ``[p pt, (p+1) pt)``,
+    the skirts after the ``n`` patches', drawn with ``skirts``): one command a run of consecutive patches."""
+    m = np.asarray(inside, bool)
+    n, pt = len(m), int(patch_triangles)
+    d = np.diff(np.concatenate([[False], m, [False]]).astype(np.int8))
+    start, end = np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]
+    first = np.append(start * pt * 3, n * pt * 3)
+    count = np.append((end - start) * pt * 3, (int(total_triangles) - n * pt) * 3 if skirts else 0)
+    keep = count > 0
+    out = np.zeros((int(keep.sum()), 5), np.uint32)
+    out[:, 0], out[:, 1], out[:, 2] = count[keep], 1, first[keep]
+    return out
+
+
+def seam_skirts(mesh: TileMesh, grid_shape: tuple, coarse: np.ndarray, depth: float) -> np.ndarray:
+    """Where a middle ``mesh`` (:func:`near_mesh` at ``MID_SAMPLES``, patch-major, with targets) of a
+    ``(ny, nx)`` tile meets its corner grid (the patches ``coarse (n,) bool`` drawn from it): a strip
+    hanging ``depth`` down from every edge between a middle and a corner-grid patch, along the middle
+    mesh's edge vertices at their targets (where it meets a corner-grid patch the middle mesh is
+    drawn fully morphed onto its targets: the edge's chord and its midpoints); it closes the pixels a
+    T-junction can leave open there.  Triangles ``(k, 3, 3)`` float32 (no index buffer), maybe none."""
+    ny, nx = (int(x) for x in grid_shape)
+    r = int(round(np.sqrt(int(mesh.patch_triangles) / 2.0)))
+    rows, cols = ny * r + 1, nx * r + 1
+    g = mesh.positions[:rows * cols].reshape(rows, cols, 3).astype(np.float32, copy=True)
+    g[..., 2] = np.asarray(mesh.targets)[:rows * cols].reshape(rows, cols)
+    mid = ~np.asarray(coarse, bool).reshape(ny, nx)
+    k = np.arange(r + 1)
+    py, px = np.nonzero(mid[:, :-1] != mid[:, 1:])  # vertical edges: column (px + 1) r, rows py r .. py r + r
+    a = g[(py[:, None] * r + k), ((px + 1) * r)[:, None]]  # (e, r + 1, 3)
+    qy, qx = np.nonzero(mid[:-1] != mid[1:])  # horizontal edges: row (qy + 1) r
+    b = g[((qy + 1) * r)[:, None], (qx[:, None] * r + k)]
+    top = np.concatenate([a, b])  # (e, r + 1, 3)
+    if not len(top):
+        return np.zeros((0, 3, 3), np.float32)
+    low = top.copy()
+    low[..., 2] -= np.float32(depth)
+    t0, t1, b0, b1 = top[:, :-1], top[:, 1:], low[:, :-1], low[:, 1:]
+    return np.ascontiguousarray(np.concatenate([np.stack([t0, t1, b1], 2), np.stack([t0, b1, b0], 2)]).reshape(-1, 3, 3))
 
 
 def mesh_bytes(rows: int, cols: int, morph: bool = False) -> int:
@@ -1077,6 +1167,15 @@ class StreamingRenderer:
         self._vis_gpu: dict = {}  # ((tile, level), mesh id, packed set) -> (ibo, vao, triangles)
         #: near tiles draw only the patches their visibility sets say the eye can see
         self.visibility = bool(visibility)
+        #: a middle tile draws the patches whose far-grid error is under ``pixel_error`` on screen
+        #: (at the nearest point of the patch) from its full corner grid, the others from its middle
+        #: mesh, geomorphed per vertex (fully onto the corner grid wherever it meets a far patch: no
+        #: cracks, no pops); one indirect multi-draw a mesh (``glMultiDrawElementsIndirect``, GL 4.3;
+        #: :attr:`stats` ``mid_far_patches``)
+        self.mix_levels = self.ctx.version_code >= 430
+        self._boxes: dict = {}  # (tile, level) -> (mesh id, patch_boxes)
+        self._seams: dict = {}  # (tile, "mid") -> ((mesh id, packed mask), vbo, vao, triangles)
+        self._indirect = None  # the frame's indirect draw commands
         self.stats: dict = {}
 
     def _light(self, t):
@@ -1113,7 +1212,37 @@ class StreamingRenderer:
         """The vertex arrays' attributes (a far mesh has no morph targets: drawn with u_morph = 1)."""
         return [(pos, "3f", "in_pos")] + ([] if tgt is None else [(tgt, "1f", "in_target")])
 
+    def _patch_boxes(self, key, mesh: TileMesh):
+        """:func:`patch_boxes` of a resident mesh (made once while the mesh stays resident)."""
+        got = self._boxes.get(key)
+        if got is None or got[0] != id(mesh):
+            py0, py1, px0, px1 = self.cache.grid.patch_range(*key[0])
+            got = self._boxes[key] = (id(mesh), patch_boxes(mesh, (py1 - py0, px1 - px0)))
+        return got[1]
+
+    def _seam(self, key, mesh: TileMesh, coarse: np.ndarray):
+        """The vertex array of :func:`seam_skirts` for middle ``mesh`` and its ``coarse`` patches and
+        its triangles (kept while the mask stays the same)."""
+        mkey = (id(mesh), np.packbits(coarse).tobytes())
+        got = self._seams.get(key)
+        if got is None or got[0] != mkey:
+            if got is not None:
+                got[1].release()
+                got[2].release()
+            t = key[0]
+            py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
+            tri = seam_skirts(mesh, (py1 - py0, px1 - px0), coarse, min(self.cache._depth(t), self.cache.chord_error[t] + 1.0))
+            vbo = self.ctx.buffer(tri.tobytes() if len(tri) else np.zeros(9, np.float32).tobytes())
+            vao = self.ctx.vertex_array(self.prog, [(vbo, "3f", "in_pos")])
+            got = self._seams[key] = (mkey, vbo, vao, len(tri))
+        return got[2], got[3]
+
     def _release(self, key) -> None:
+        self._boxes.pop(key, None)
+        seam = self._seams.pop(key, None)
+        if seam is not None:
+            seam[2].release()
+            seam[1].release()
         got = self._gpu.pop(key)
         for obj in (got[2], got[1], got[0], got[4]):
             if obj is not None:
@@ -1197,28 +1326,71 @@ class StreamingRenderer:
         todo = self.cache.draw_list(cam.eye, visible, pixel_scale=pixel_scale)
         sets = self.visibility and self.cache.sets_hold(cam.eye, {t: level for t, level, _ in todo})
         drawn["vis_off"] = int(self.visibility and not sets)  # the sets' tiles drawn too coarse this frame
+        drawn["mid_far_patches"] = 0
+        # a middle tile's per-vertex geomorph: its far grid's error in pixels times metres over the limit
+        err_scale = pixel_scale / self.pixel_error if self.pixel_error else None
+        e = np.asarray(cam.eye, dtype=np.float64).reshape(3)
+        jobs, commands, ncmd = [], [], 0  # what each tile draws (all the indirect commands first)
         for t, level, mesh in todo:
             key = (t, level)
             live.add(key)
+            kind = "far" if level.startswith("far") else "near"  # near and mid: evaluated patches
+            drawn["mid"] += level == "mid"
+            drawn[kind] += 1
+            seen = self.cache.visible_patches(t, cam.eye) if sets and (kind == "near" or level == "far1") else None
+            if seen is not None and mesh.patch_triangles and not seen.all():
+                vao, ntri = self._vis_vao(key, mesh, seen)
+                jobs.append((t, kind, mesh, vao, None, 0.0))
+                drawn[f"{kind}_patches"] += int(seen.sum())
+                drawn["vis_culled"] += int((~seen).sum())
+                drawn["triangles"] += ntri
+                continue
+            vao = self._vao(key, mesh)
+            drawn[f"{kind}_patches"] += self.cache.patches[t]
+            vmorph = 0.0
+            if level == "mid" and t in morph and err_scale is not None and mesh.targets is not None:
+                vmorph = max(float(self.cache.chord_error[t]) * err_scale, 1e-30)
+            coarse = None
+            if vmorph and self.mix_levels and mesh.patch_triangles:
+                c, h = self._patch_boxes(key, mesh)
+                d = np.sqrt((np.maximum(np.abs(c - e) - h, 0.0) ** 2).sum(1))  # metres to each patch's box
+                coarse = vmorph <= d  # its far grid's error at most pixel_error pixels there: morphed fully onto it
+            if coarse is None or not coarse.any():
+                jobs.append((t, kind, mesh, vao, None, vmorph))
+                drawn["triangles"] += len(mesh.indices)
+                continue
+            far = self.cache.far[t][1]
+            mine = patch_runs(~coarse, mesh.patch_triangles, len(mesh.indices))  # and the middle mesh's skirts
+            grid = patch_runs(coarse, far.patch_triangles, len(far.indices), skirts=False)
+            live.add((t, "far1"))
+            jobs.append((t, kind, mesh, vao, (ncmd, len(mine)), vmorph))
+            jobs.append((t, "far", far, self._vao((t, "far1"), far), (ncmd + len(mine), len(grid)), 0.0))
+            seam, nseam = self._seam(key, mesh, coarse)
+            if nseam:
+                jobs.append((t, "far", far, seam, None, 0.0))
+                drawn["triangles"] += nseam
+            commands += [mine, grid]
+            ncmd += len(mine) + len(grid)
+            drawn["mid_far_patches"] += int(coarse.sum())
+            drawn["triangles"] += (int(mine[:, 0].sum()) + int(grid[:, 0].sum())) // 3
+        if commands:
+            data = np.concatenate(commands).tobytes()
+            if self._indirect is None or self._indirect.size < len(data):
+                if self._indirect is not None:
+                    self._indirect.release()
+                self._indirect = self.ctx.buffer(reserve=max(2 * len(data), 4096), dynamic=True)
+            self._indirect.write(data)
+        for t, kind, mesh, vao, run, vmorph in jobs:
             tex, origin, luv = self._light(t)
             tex.use(1)
             self.prog["u_origin"].value = origin
             self.prog["u_light_uv"].value = luv
-            kind = "far" if level.startswith("far") else "near"  # near and mid: evaluated patches
             self.prog["u_morph"].value = 1.0 if kind == "far" or mesh.targets is None else morph.get(t, 1.0)
-            drawn["mid"] += level == "mid"
-            seen = self.cache.visible_patches(t, cam.eye) if sets and (kind == "near" or level == "far1") else None
-            if seen is not None and mesh.patch_triangles and not seen.all():
-                vao, ntri = self._vis_vao(key, mesh, seen)
-                vao.render(moderngl.TRIANGLES)
-                drawn[f"{kind}_patches"] += int(seen.sum())
-                drawn["vis_culled"] += int((~seen).sum())
-                drawn["triangles"] += ntri
-            else:
-                self._vao(key, mesh).render(moderngl.TRIANGLES)
-                drawn[f"{kind}_patches"] += self.cache.patches[t]
-                drawn["triangles"] += len(mesh.indices)
-            drawn[kind] += 1
+            self.prog["u_vmorph"].value = vmorph
+            if run is None:
+                vao.render(moderngl.TRIANGLES)  # (a seam's vertex array: its triangles, no index buffer)
+            elif run[1]:
+                vao.render_indirect(self._indirect, moderngl.TRIANGLES, count=run[1], first=run[0])
         with self.cache._lock:
             resident = {t: id(m) for t, m in self.cache.near.items()}
         for key in [k for k in self._gpu if k[1] in ("near", "mid") and k not in live
@@ -1236,6 +1408,9 @@ class StreamingRenderer:
         for tex, _, _ in self._lights.values():
             tex.release()
         self._lights.clear()
+        if self._indirect is not None:
+            self._indirect.release()
+            self._indirect = None
         self.base.release()
         self.prog.release()
         self.fbo.release()
