@@ -59,9 +59,6 @@ def compact_mesh(mesh: SkinnedMesh, indices: npt.ArrayLike) -> SkinnedMesh:
     used = np.unique(idx)
     remap = np.full(mesh.n_vertices, -1, np.int64)
     remap[used] = np.arange(used.size)
-    # SkinnedMesh.__post_init__ fills every optional per-vertex array
-    assert mesh.normals is not None and mesh.uv is not None and mesh.joints is not None and mesh.weights is not None
-    assert mesh.morph_positions is not None and mesh.morph_normals is not None
     return replace(
         mesh,
         positions=mesh.positions[used],

@@ -198,7 +198,6 @@ def palette(mesh: SkinnedMesh, step: float = 0.25, max_bones: int = 3) -> Palett
     per frame (CesiumMan: 269 / 130 / 94 at step 0.1 / 0.2 / 0.25 with 3 bones).
     """
     n = step_units(step)
-    assert mesh.joints is not None and mesh.weights is not None  # SkinnedMesh.__post_init__ fills both
     bones, units = quantize_weights(mesh.joints, mesh.weights, step, max_bones)
     v, k = bones.shape
     used = units > 0

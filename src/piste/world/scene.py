@@ -53,12 +53,6 @@ CAMERA_BEHIND = 6.0
 LOD_DISTANCES = (14.0, 35.0)
 
 
-def _filled(a: np.ndarray | None) -> np.ndarray:
-    """A SkinnedMesh array its ``__post_init__`` filled (typed optional for the constructor)."""
-    assert a is not None
-    return a
-
-
 def sun_light(lights: Lights) -> DirectionalLight | None:
     """The strongest directional light of ``lights`` (the one that casts projected shadows), or None."""
     d = [x for x in lights.direct if isinstance(x, DirectionalLight)]
@@ -97,7 +91,6 @@ def orient_outward(mesh: SkinnedMesh) -> tuple[SkinnedMesh, int]:
     new_tri = tri.copy()
     new_tri[flip_t] = tri[flip_t][:, ::-1]
     sign = np.where(inward[label], -1.0, 1.0).astype(np.float32)[:, None]
-    assert mesh.normals is not None and mesh.morph_normals is not None  # SkinnedMesh.__post_init__ fills both
     out = replace(mesh, indices=new_tri.astype(np.uint32), normals=mesh.normals * sign,
                   morph_normals=mesh.morph_normals * sign[None])
     return out, int(inward.sum())
@@ -157,7 +150,7 @@ class Scene:
         mesh, self.flipped_parts = orient_outward(self.model.meshes[0])
         self.lods = make_lods(mesh)
         # the LOD's own palette (quantized weights) drives the blended-matrix skinning
-        self.skinners = [BlendedMesh(lod.palette, lod.mesh.positions, _filled(lod.mesh.normals)) for lod in self.lods]
+        self.skinners = [BlendedMesh(lod.palette, lod.mesh.positions, lod.mesh.normals) for lod in self.lods]
         self.riders = RiderSet(net, self.line, model=self.model, **riders_kw)
         if not 0 <= int(follow) < len(self.riders):
             raise ConfigError(f"scene: follow must name one of the {len(self.riders)} riders, got {follow}")
