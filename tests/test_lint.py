@@ -66,7 +66,7 @@ STRICT_REQUIRED = (
     "piste.terrain.query", "piste.terrain.tiles",
     "piste.character.batches", "piste.character.lod", "piste.character.palette", "piste.character.pose", "piste.character.skeleton",
     "piste.character.strips", "piste.character.animation", "piste.character.model", "piste.character.morph",
-    "piste.character.skinning",
+    "piste.character.skinning", "piste.formats.ssx.synth",
 )
 
 
