@@ -295,6 +295,46 @@ def _receiver_programs(shadows):
     return [shadows.receiver, before, {}]
 
 
+# the shaders the scene's A/B compares the current ones with (what they replaced)
+_SKY_FS_BEFORE = """#version 330 core
+// Gradient sky: horizon haze to zenith blue by the view ray's elevation, plus a soft sun glow.
+uniform vec3 u_horizon;
+uniform vec3 u_zenith;
+uniform vec3 u_sun;
+in vec3 v_ray;
+out vec4 f_color;
+void main() {
+    vec3 d = normalize(v_ray);
+    float h = clamp(d.z, 0.0, 1.0);
+    vec3 c = mix(u_horizon, u_zenith, 1.0 - exp(-2.2 * h));
+    c = mix(c, u_horizon * 0.9, 1.0 - exp(min(d.z, 0.0) * 3.0));  // a little darker below the horizon
+    float s = max(dot(d, u_sun), 0.0);
+    float s3 = s * s * s;
+    float s24 = s3 * s3;
+    s24 *= s24;
+    s24 *= s24;  // s^24 by squaring (a pow per pixel costs llvmpipe more)
+    c += vec3(1.0, 0.95, 0.85) * (0.25 * s24 + 0.6 * pow(s, 900.0));
+    f_color = vec4(min(c, vec3(1.0)), 1.0);
+}
+"""
+
+
+def _sky_programs(sky):
+    """``set(on)`` for the A/B: the sky pass's program (now) or the one it replaced (two exps and a
+    pow(s, 900) at every sky pixel), each with its own vertex array."""
+    from piste.render.context import load_shader
+
+    before = sky.ctx.program(vertex_shader=load_shader("sky.vert.glsl"), fragment_shader=_SKY_FS_BEFORE)
+    for name in ("u_horizon", "u_zenith", "u_sun"):
+        before[name].value = sky.prog[name].value
+    progs = {True: (sky.prog, sky.vao), False: (before, sky.ctx.vertex_array(before, []))}
+
+    def set_sky(on):
+        sky.prog, sky.vao = progs[on]
+
+    return set_sky
+
+
 def scene_section(args, floor_ms: list) -> dict:
     from piste.render.scene_renderer import SceneRenderer, summarize_scene
 
@@ -376,6 +416,8 @@ def scene_section(args, floor_ms: list) -> dict:
     def set_compute_mips(on):
         r.shadows._mips_cs = compute_mips if on else None
 
+    set_sky = _sky_programs(r.terrain.sky)
+
     def set_cone_cull(on):  # (on: the default, every patch sent)
         r.terrain.terrain.cull_back_patches = not on
 
@@ -400,7 +442,9 @@ def scene_section(args, floor_ms: list) -> dict:
                ("terrain", set_track_per_vertex, "terrain: track distance looked up per vertex",
                 "terrain: track distance looked up per pixel"),
                ("shadow receivers", set_receiver_clip, "receivers cut to the shadow frustum (clip distances)",
-                "receivers: whole triangles, discard outside the frustum")]
+                "receivers: whole triangles, discard outside the frustum"),
+               ("sky", set_sky, "sky: one exp a pixel, the sun's glow by squaring near the sun",
+                "sky: two exps and pow(s, 900) a pixel")]
     ab_res = []
     acc2, undo2 = _profile(r)
     for label, setter, now_name, before_name in changes:
@@ -413,7 +457,7 @@ def scene_section(args, floor_ms: list) -> dict:
         ab_diff = []
         for i in range(max(args.frames // 2, 3)):
             pair = {}
-            for on in (True, False):
+            for on in ((True, False) if i % 2 == 0 else (False, True)):  # the order alternated
                 setter(on)
                 acc2.clear()
                 t1 = time.perf_counter()

@@ -41,15 +41,21 @@ def test_frames_match_render(gl):
         r.release()
 
 
-def test_sky_matches_the_per_pixel_ray(gl):
-    """The sky pass (ray per vertex, interpolated) against the formula evaluated per pixel in numpy."""
+@pytest.mark.parametrize("look", ["ahead", "sun", "down"])
+def test_sky_matches_the_per_pixel_ray(gl, look):
+    """The sky pass (ray per vertex, interpolated) against the formula evaluated per pixel in numpy:
+    looking ahead, into the sun (the glow, computed by squaring and only near the sun) and down
+    (below the horizon)."""
     from piste.render.context import Offscreen
     from piste.render.sky_pass import HORIZON, ZENITH, SkyPass
     from piste.render.textures import SUN_DIRECTION
     from piste.world.camera import Camera
 
     w, h = 96, 64
-    cam = Camera(eye=(0, 0, 10), target=(30, 40, 14), fov_y=60, aspect=w / h, near=0.5, far=1000)
+    sun_dir = np.asarray(SUN_DIRECTION, float) / np.linalg.norm(SUN_DIRECTION)
+    target = {"ahead": (30, 40, 14), "sun": tuple(np.array([0, 0, 10]) + 50 * sun_dir),
+              "down": (30, 40, -20)}[look]
+    cam = Camera(eye=(0, 0, 10), target=target, fov_y=60, aspect=w / h, near=0.5, far=1000)
     vp = cam.view_projection()
     sky = SkyPass(gl)
     t = Offscreen(gl, (w, h))
@@ -75,3 +81,5 @@ def test_sky_matches_the_per_pixel_ray(gl):
     s = np.maximum(d @ sun, 0)[..., None]
     c = np.minimum(c + np.array([1.0, 0.95, 0.85]) * (0.25 * s ** 24 + 0.6 * s ** 900), 1.0)
     assert np.abs(img - c).max() < 2.5 / 255
+    if look == "sun":  # the glow is in the picture (the test covers it)
+        assert s.max() > 0.999 and img[..., 2].max() == 1.0 and np.ptp(img[..., 1]) > 0.1
