@@ -336,7 +336,7 @@ def _sky_programs(sky):
 
 
 def scene_section(args, floor_ms: list) -> dict:
-    from piste.render.scene_renderer import SceneRenderer, summarize_scene
+    from piste.render.scene_renderer import summarize_scene
 
     from piste.pipeline.bundle_objects import load_bundle
     from piste.pipeline.default_scene import build_default_scene
