@@ -5,7 +5,7 @@ edge".  The level is a function of the edge alone (its midpoint's distance to th
 two patches on a shared edge always agree: crack-freedom needs nothing more.
 
 Error-driven levels: flat (below the coarsest) and coarse
---------------------------------------------------------
+---------------------------------------------------------
 Every patch has precomputed errors (:func:`_patch_errors`: the largest distance between the surface
 and its uniform level-``n`` mesh at the same ``(u, v)``, over the level-4 and 8 grid parameters) for
 the **flat level** (2 vertices a side: the corner quad, triangles ``(0, 1, 2)``, ``(0, 2, 3)``) and the
