@@ -335,6 +335,70 @@ def _sky_programs(sky):
     return set_sky
 
 
+def _terrain_fragment_costs(r, one, rounds: int) -> tuple[dict, dict]:
+    """What the terrain's pixels cost: its pass (glFinish around it) with the modulate program as it
+    is and with one part of its fragment shader taken out (a constant colour; no track; no light-map
+    fetch; no base-texture fetch), interleaved round by round with the order rotated; and the
+    fragments that pass the depth test (an occlusion query) in the terrain and sky passes, in
+    screens: the terrain's overdraw, and where the sky shades.  ``({variant: [ms]}, {pass: [screens]})``."""
+    from piste.render.terrain_pass import _MODE_ID, _with_defines
+
+    tp = r.terrain.terrain
+    key = tp._key(_MODE_ID["modulate"])
+    now = tp._program(_MODE_ID["modulate"])
+    fs = tp._fs
+    cuts = {"a constant colour": fs.replace("f_color = vec4(c, 1.0);", "f_color = vec4(0.5, 0.6, 0.7, 1.0);"),
+            "no light-map fetch": fs.replace("* texture(u_light, v_uvl).rgb", "* vec3(v_uvl, 1.0)"),
+            "no base-texture fetch": fs.replace("vec3 c = texture(u_base, uv).rgb;", "vec3 c = vec3(0.9, 0.9, uv.x);")}
+    if key[1] == 1:
+        cuts["no track"] = fs.replace("base_color(v_uv, v_track_d)", "texture(u_base, v_uv).rgb")
+    progs = {"as drawn": now}
+    for name, f in cuts.items():
+        if f == fs:
+            continue  # (the shader changed: this cut no longer applies)
+        progs[name] = tp._apply(tp.ctx.program(vertex_shader=_with_defines(tp._vs, TERRAIN_TRACK=key[1]),
+                                                fragment_shader=_with_defines(f, TERRAIN_MODE=0, TERRAIN_TRACK=key[1])))
+    acc, undo = _profile(r)
+    times: dict = {name: [] for name in progs}
+    names = list(progs)
+    try:
+        for i in range(rounds):
+            for name in names[i % len(names):] + names[:i % len(names)]:
+                tp._programs[key] = progs[name]
+                acc.clear()
+                one(i / 30.0)
+                times[name].append(acc["terrain"][0])
+    finally:
+        tp._programs[key] = now
+        undo()
+        for name, p in progs.items():
+            if p is not now:
+                p.release()
+    # fragments passing the depth test, per pass (the sky: depth LEQUAL against the cleared 1.0)
+    ctx = r.ctx
+    screens: dict = {}
+    wrapped = []
+    for label, obj in (("terrain", tp), ("sky", r.terrain.sky)):
+        fn = obj.draw
+
+        def w(*a, fn=fn, label=label, **k):
+            q = ctx.query(samples=True)
+            with q:
+                out = fn(*a, **k)
+            screens.setdefault(label, []).append(q.samples / float(np.prod(r.terrain.size)))
+            return out
+
+        obj.draw = w
+        wrapped.append(obj)
+    try:
+        for i in range(3):
+            one(i / 30.0)
+    finally:
+        for obj in wrapped:
+            del obj.draw
+    return times, screens
+
+
 def scene_section(args, floor_ms: list) -> dict:
     from piste.render.scene_renderer import summarize_scene
 
@@ -469,6 +533,7 @@ def scene_section(args, floor_ms: list) -> dict:
         setter(True)
         ab_res.append((label, now_name, before_name, ab, ab_frame, ab_diff))
     undo2()
+    frag_times, frag_screens = _terrain_fragment_costs(r, one, max(args.frames // 2, 5))
     # one frame at a time (render: plan, draw, wait, read) against pipelined frames (frames: the next
     # frame planned while the GL draws this one), wall time per frame over blocks of 10, interleaved
     modes = {"one at a time": [], "pipelined": []}
@@ -500,6 +565,13 @@ def scene_section(args, floor_ms: list) -> dict:
     print(f"\nper pass (glFinish around each; frame {med(prof_total):.1f} ms with the extra syncs):")
     for label, ts in sorted(acc.items(), key=lambda kv: -med(kv[1])):
         print(f"  {label:18s} {rng_str(ts)} ms  ({100 * med(ts) / med(prof_total):4.1f} %)")
+    print(f"\n== the terrain's pixels: its pass with a part of its fragment shader taken out, {len(frag_times['as drawn'])} "
+          "rounds interleaved, order rotated (ms, median [range]) ==")
+    base_ms = med(frag_times["as drawn"])
+    for name, ts in frag_times.items():
+        print(f"  {name:24s} {rng_str(ts)} ms  ({med(ts) - base_ms:+5.2f} ms)")
+    print("  fragments passing the depth test, in screens: " + ", ".join(
+        f"{label} {med(v):.2f}" for label, v in frag_screens.items()) + " (terrain + sky = 1: no overdraw to save)")
     if ab_res:
         print("\n== each change's effect on its pass, A/B interleaved over the scene frames (ms, median [range]; "
               "frames with the per-pass syncs) ==")
