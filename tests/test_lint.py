@@ -67,6 +67,7 @@ STRICT_REQUIRED = (
     "piste.character.batches", "piste.character.lod", "piste.character.palette", "piste.character.pose", "piste.character.skeleton",
     "piste.character.strips", "piste.character.animation", "piste.character.model", "piste.character.morph",
     "piste.character.skinning", "piste.formats.ssx.synth",
+    "piste.formats.ssx.multitool", "piste.formats.ssx.multitool_objects",
 )
 
 

@@ -84,10 +84,12 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import re
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -140,12 +142,12 @@ _F32_MAX = float(np.finfo(np.float32).max)
 
 
 # ----------------------------------------------------------------------------- the conventions
-def brighten(rgb) -> np.ndarray:
+def brighten(rgb: np.ndarray) -> np.ndarray:
     """The Multitool's export brightening ``clamp(2c - 1, 0, 255)``: ``(...) uint8`` -> same shape."""
     return np.clip(np.asarray(rgb).astype(np.int16) * 2 - 1, 0, 255).astype(np.uint8)
 
 
-def darken(rgb) -> np.ndarray:
+def darken(rgb: np.ndarray) -> np.ndarray:
     """The Multitool's import darkening ``(c + 1) // 2``: ``(...) uint8`` -> same shape."""
     return ((np.asarray(rgb).astype(np.uint16) + 1) // 2).astype(np.uint8)
 
@@ -164,7 +166,7 @@ def export_texture(im: SshImage) -> np.ndarray:
     return out
 
 
-def export_lightmap(page) -> np.ndarray:
+def export_lightmap(page: np.ndarray) -> np.ndarray:
     """A stored light-map page ``(128, 128, 4) uint8`` as the Multitool exports it: RGB brightened,
     alpha as stored."""
     out = np.asarray(page, np.uint8).copy()
@@ -192,14 +194,14 @@ def _bank_names(bank: SshBank | None) -> list | None:
 
 
 # ----------------------------------------------------------------------------- lights
-def _json_float(x) -> float | str:
+def _json_float(x: float) -> float | str:
     v = float(x)
     if np.isfinite(v):
         return v
     return "NaN" if np.isnan(v) else ("Infinity" if v > 0 else "-Infinity")
 
 
-def lights_json(lights: np.ndarray, hashes=None) -> dict:
+def lights_json(lights: np.ndarray, hashes: np.ndarray | None = None) -> dict:
     """``{"Lights": [...]}`` of light records ``(k,)`` :data:`~piste.formats.ssx.pbd.LIGHT_DTYPE`
     and their hashes ``(k,)`` (None: 0 each), the Multitool's ``Lights.json`` (module docstring)."""
     rec = np.asarray(lights, LIGHT_DTYPE).reshape(-1)
@@ -207,7 +209,7 @@ def lights_json(lights: np.ndarray, hashes=None) -> dict:
     signed = {f: rec[f].astype(np.uint32).view(np.int32) for _, f, kind in _LIGHT_KEYS if kind == "i"}
     out = []
     for i in range(len(rec)):
-        d = {"LightName": f"Light_{i}"}
+        d: dict[str, Any] = {"LightName": f"Light_{i}"}
         for key, f, kind in _LIGHT_KEYS:
             if kind == "i":
                 d[key] = int(signed[f][i])
@@ -220,7 +222,7 @@ def lights_json(lights: np.ndarray, hashes=None) -> dict:
     return {"Lights": out}
 
 
-def _light_number(v, path, where: str, key: str, kind: str):
+def _light_number(v: object, path: str | os.PathLike[str], where: str, key: str, kind: str) -> int | float:
     """A Lights.json value as the record stores it: ``i`` a 32-bit integer (signed or unsigned),
     ``f`` a float32 (a number or "NaN"/"Infinity"/"-Infinity")."""
     if kind == "i":
@@ -235,7 +237,7 @@ def _light_number(v, path, where: str, key: str, kind: str):
     return float(v)
 
 
-def lights_from_json(doc, path) -> tuple[np.ndarray, np.ndarray]:
+def lights_from_json(doc: Any, path: str | os.PathLike[str]) -> tuple[np.ndarray, np.ndarray]:
     """``(records (k,) LIGHT_DTYPE, hashes (k,) int64)`` from a parsed ``Lights.json`` (``{"Lights":
     [...]}`` or a bare list).  Scalars the file leaves out are 0 (as the Multitool's JSON reader
     leaves them); the five vectors are required (3 numbers each)."""
@@ -265,15 +267,15 @@ def lights_from_json(doc, path) -> tuple[np.ndarray, np.ndarray]:
     return rec, hashes
 
 
-def _light_keys(rec: np.ndarray, hashes) -> list:
+def _light_keys(rec: np.ndarray, hashes: np.ndarray | None) -> list:
     """Per light, its Lights.json fields without the name, comparable with == (NaN as a string)."""
     doc = lights_json(rec, hashes)["Lights"]
     return [json.dumps({k: v for k, v in d.items() if k != "LightName"}, sort_keys=True) for d in doc]
 
 
 # ----------------------------------------------------------------------------- writing
-def write_project(folder, pbd: Pbd, textures: SshBank | None = None, lightmaps: SshBank | None = None,
-                  instances: MtInstances | None = None, splines: MtSplines | None = None,
+def write_project(folder: str | os.PathLike[str], pbd: Pbd, textures: SshBank | None = None,
+                  lightmaps: SshBank | None = None, instances: MtInstances | None = None, splines: MtSplines | None = None,
                   models: MtModels | None = None) -> Path:
     """Write ``Patches.json``, ``Lights.json``, ``Instances.json``, ``Splines.json``,
     ``Textures/NAME.png`` and ``Lightmaps/NNNN.png`` into ``folder`` the Multitool's way (module
@@ -311,7 +313,7 @@ def write_project(folder, pbd: Pbd, textures: SshBank | None = None, lightmaps: 
     write_bytes_atomic(folder / SPLINES_JSON, json.dumps(splines_json(spl), indent=1).encode())
     if models is not None:
         write_bytes_atomic(folder / MODELS_JSON, json.dumps(models_json(models), indent=1).encode())
-    if textures is not None:
+    if textures is not None and tex_names is not None:
         for name, im in zip(tex_names, textures.images):
             write_bytes_atomic(folder / "Textures" / name, _png_bytes(export_texture(im)))
     if lightmaps is not None:
@@ -396,8 +398,9 @@ class Project:
         rec = records_from_arrays(self.control_points, self.uv, self.lightmap_rect, self.lightmap_page,
                                   self.texture_index, self.surface_type, self.trick_only)
         platform = self.source.platform if self.source is not None else 1
-        sections = {}
+        sections: dict[str, Any] = {}
         if self.lights is not None and len(self.lights):
+            assert self.light_hashes is not None  # read_project sets both from Lights.json
             sections = {"lights": (len(self.lights), self.lights.tobytes()),
                         "hash": (None, hash_section_bytes(self.light_hashes))}
         if self.splines is not None and len(self.splines):
@@ -408,6 +411,7 @@ class Project:
         """Write the project's lights over the recorded level's (same count), and their hashes over
         its hash section's light list when it has one of that count; unchanged lights and hashes
         keep their stored bytes."""
+        assert self.lights is not None  # to_level calls this only with lights
         lpath = self.path.parent / LIGHTS_JSON
         old = pbd.read_lights()
         k = len(self.lights)
@@ -474,7 +478,7 @@ def _list_pngs(folder: Path) -> list:
     return sorted((p for p in folder.iterdir() if p.suffix.lower() == ".png"), key=lambda p: p.name)
 
 
-def _read_source(folder: Path):
+def _read_source(folder: Path) -> tuple[Pbd | None, list[str]]:
     """``(Pbd, texture file names)`` recorded by piste's :func:`write_project`, or ``(None, [])``."""
     jpath = folder / SOURCE_JSON
     if not jpath.exists():
@@ -490,7 +494,7 @@ def _read_source(folder: Path):
     return parse_pbd(read_regular(ppath, MAX_PBD_BYTES, what="level file"), ppath), list(names)
 
 
-def read_project(folder) -> Project:
+def read_project(folder: str | os.PathLike[str]) -> Project:
     """Read a Multitool project folder (or its ``Patches.json``); see the module docstring."""
     folder = Path(folder)
     jpath = folder if folder.suffix.lower() == ".json" else folder / "Patches.json"
@@ -507,7 +511,7 @@ def read_project(folder) -> Project:
     n = len(items)
     if n == 0 or n > MAX_PATCHES:
         raise FormatError(jpath, f"expected 1..{MAX_PATCHES} patches, got {n}", field="Patches")
-    source, recorded = _read_source(folder)
+    source, recorded_names = _read_source(folder)
     cp = np.zeros((n, 16, 3))
     uv = np.zeros((n, 4, 2), np.float32)
     rect = np.zeros((n, 4), np.float32)
@@ -515,8 +519,8 @@ def read_project(folder) -> Project:
     tex = np.zeros(n, np.int16)
     surf = np.zeros(n, np.uint32)
     trick = np.zeros(n, bool)
-    names = []
-    files = list(recorded)  # texture i's file name: the recorded bank order, then first appearance
+    names: list[str] = []
+    files = list(recorded_names)  # texture i's file name: the recorded bank order, then first appearance
     number = {f: i for i, f in enumerate(files)}
     first_use: dict = {}
     for k, p in enumerate(items):
@@ -564,8 +568,8 @@ def read_project(folder) -> Project:
         for i, name in enumerate(files):
             f = tdir / name
             if not f.exists() and not f.is_symlink():
-                k = first_use.get(name)
-                why = f"patch {k}: TexturePath {name!r}" if k is not None else f"texture {name!r} ({SOURCE_JSON})"
+                first = first_use.get(name)
+                why = f"patch {first}: TexturePath {name!r}" if first is not None else f"texture {name!r} ({SOURCE_JSON})"
                 raise FormatError(jpath, f"{why}: Textures/{name} does not exist", field="TexturePath")
             proj.textures[i] = _read_png(f)
     ldir = folder / "Lightmaps"

@@ -73,9 +73,12 @@ spline_sections(splines) -> {"splines": ..., "spline_segments": ...} for synth.p
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import FormatError
 from piste.formats.ssx.pbd import GAME_SCALE, HEADER_SIZE, M as BEZIER_TO_POWER, M_INV as POWER_TO_BEZIER, Pbd
@@ -168,20 +171,20 @@ _NONFINITE = {"NaN": float("nan"), "Infinity": float("inf"), "-Infinity": float(
 _F32_MAX = float(np.finfo(np.float32).max)
 
 
-def _f32(v) -> float:
+def _f32(v: float) -> float:
     """A float32 value as the Python float of its shortest float32 form (what Json.NET writes)."""
     x = np.float32(v)
     return float(str(x)) if np.isfinite(x) else float(x)
 
 
-def _f32s(a) -> np.ndarray:
+def _f32s(a: npt.ArrayLike) -> np.ndarray:
     """:func:`_f32` of a whole array at once, ``(...)`` float64 (numpy's shortest float32 strings,
     parsed back: both in C)."""
     with np.errstate(over="ignore"):  # past float32's range: inf, as a float32 record would hold it
         return np.asarray(a, np.float32).astype(str).astype(np.float64)
 
 
-def _out_float(v: float):
+def _out_float(v: float) -> float | str:
     if v != v:
         return "NaN"
     if v in (_INF, -_INF):
@@ -195,16 +198,16 @@ _INF = float("inf")
 class _Reader:
     """Checks a parsed JSON document against a schema; errors name the file, the object and the key."""
 
-    def __init__(self, path) -> None:
+    def __init__(self, path: str | os.PathLike[str] | None) -> None:
         self.path = path
         self.count = 0
-        self.pending = []  # (dict, key) of floats still to round to float32, done at once in top()
-        self.lists = []  # lists of floats still to round
+        self.pending: list[tuple[dict, str]] = []  # (dict, key) of floats still to round to float32, done at once in top()
+        self.lists: list[list] = []  # lists of floats still to round
 
     def fail(self, where: str, key: str, msg: str) -> None:
         raise FormatError(self.path, f"{where}: {key} {msg}", field=key)
 
-    def number(self, v, where, key) -> float:
+    def number(self, v: Any, where: str, key: str) -> float:
         if isinstance(v, str) and v in _NONFINITE:
             return _NONFINITE[v]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or (
@@ -212,7 +215,7 @@ class _Reader:
             self.fail(where, key, f"must be a number (float32), got {v!r:.40}")
         return float(v)
 
-    def numbers(self, v, where, key) -> list:
+    def numbers(self, v: Any, where: str, key: str) -> list:
         """A list of float32 values (rounded later, in top())."""
         if all(type(x) is float and -_F32_MAX <= x <= _F32_MAX for x in v):  # the usual case, at C speed
             out = list(v)
@@ -221,12 +224,12 @@ class _Reader:
         self.lists.append(out)
         return out
 
-    def integer(self, v, where, key) -> int:
+    def integer(self, v: Any, where: str, key: str) -> int:
         if isinstance(v, bool) or not isinstance(v, int) or not -2**31 <= v < 2**31:
             self.fail(where, key, f"must be a 32-bit signed integer, got {v!r:.40}")
         return v
 
-    def items(self, v, where, key, required) -> list | None:
+    def items(self, v: Any, where: str, key: str, required: bool) -> list | None:
         if v is None and not required:
             return None
         if not isinstance(v, list):
@@ -236,7 +239,7 @@ class _Reader:
             self.fail(where, key, f"more than the limit of {MAX_ITEMS} entries in one file")
         return v
 
-    def value(self, v, kind, where, key, required):
+    def value(self, v: Any, kind: Any, where: str, key: str, required: bool) -> Any:
         if kind == "s":
             if v is None or isinstance(v, str):
                 return v
@@ -279,7 +282,7 @@ class _Reader:
             return [self.obj(x, kind[1], f"{where}: {key}[{i}]") for i, x in enumerate(v)]
         raise AssertionError(kind)
 
-    def obj(self, d, schema, where) -> dict:
+    def obj(self, d: Any, schema: Any, where: str) -> dict:
         if not isinstance(d, dict):
             raise FormatError(self.path, f"{where}: expected an object, got {type(d).__name__}", field=where)
         out = {}
@@ -296,7 +299,7 @@ class _Reader:
                 self.pending.append((out, key))
         return out
 
-    def top(self, doc, key: str, schema, what: str) -> list:
+    def top(self, doc: Any, key: str, schema: Any, what: str) -> list:
         items = doc.get(key, []) if isinstance(doc, dict) else doc  # {} is none, as the Multitool reads it
         if items is None:
             items = []
@@ -324,9 +327,9 @@ def _finite(v: list) -> bool:
     return all(-_F32_MAX <= x <= _F32_MAX for x in v)
 
 
-def _write(items, schema) -> list:
+def _write(items: list, schema: Any) -> list:
     """Checked items back as JSON values (floats in their float32 form, non-finite as strings)."""
-    def val(v, kind):
+    def val(v: Any, kind: Any) -> Any:
         if v is None:
             return None
         if kind == "f":
@@ -342,14 +345,14 @@ def _write(items, schema) -> list:
                 return [obj(x, kind[1]) for x in v]
         return v
 
-    def obj(d, sch):
+    def obj(d: dict, sch: Any) -> dict:
         return {key: val(d.get(key), kind) for key, kind, _ in sch}
 
     return [obj(d, schema) for d in items]
 
 
 # ----------------------------------------------------------------------------- matrices
-def compose_rows(location, rotation, scale) -> np.ndarray:
+def compose_rows(location: npt.ArrayLike, rotation: npt.ArrayLike, scale: npt.ArrayLike) -> np.ndarray:
     """The Multitool's instance matrix, ``(k, 4, 4)`` float64 in row-vector form (``world = [x y z
     1] @ M``): ``CreateScale(scale) * CreateFromQuaternion(rotation)``, translation ``location``.
     ``location (k, 3)``, ``rotation (k, 4)`` quaternions ``x, y, z, w`` (used as given, not
@@ -375,7 +378,7 @@ def compose_rows(location, rotation, scale) -> np.ndarray:
     return out
 
 
-def decompose_rows(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def decompose_rows(matrix: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(location (k, 3), rotation (k, 4) x, y, z, w, scale (k, 3))`` of row-form matrices ``(k, 4,
     4)``, float64: scale the rows' lengths (all three negated for a mirroring matrix, so the rest
     is a proper rotation), the rotation's quaternion by the trace / largest-diagonal branches of
@@ -386,7 +389,7 @@ def decompose_rows(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return _decompose_rows(matrix)
 
 
-def _decompose_rows(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _decompose_rows(matrix: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The body of :func:`decompose_rows`."""
     m = np.asarray(matrix, np.float64).reshape(-1, 4, 4)
     lin = m[:, :3, :3]
@@ -516,7 +519,7 @@ class MtModels:
         return [m["MeshPath"] for d in self.items for o in d["ModelObjects"] for m in o["MeshData"]]
 
 
-def instances_from_json(doc, path) -> MtInstances:
+def instances_from_json(doc: Any, path: str | os.PathLike[str] | None) -> MtInstances:
     """A parsed ``Instances.json`` (``{"Instances": [...]}`` or a bare list) checked (FormatError
     naming the instance and the key).  Non-finite placements are read (a ``.pbd``'s own NaNs come
     back as they were) and refused only where piste must build a matrix of them
@@ -528,7 +531,7 @@ def instances_json(inst: MtInstances) -> dict:
     return {"Instances": _write(inst.items, INSTANCE_SCHEMA)}
 
 
-def splines_from_json(doc, path) -> MtSplines:
+def splines_from_json(doc: Any, path: str | os.PathLike[str] | None) -> MtSplines:
     """A parsed ``Splines.json`` checked: every spline needs at least one segment (the Multitool's
     rebuild reads segment 0).  Non-finite points are read (a level's own come back as stored) and
     refused where piste must build a segment of them (:func:`spline_sections`,
@@ -541,7 +544,7 @@ def splines_from_json(doc, path) -> MtSplines:
     return MtSplines(items)
 
 
-def _finite_points(raw: np.ndarray, path, i: int, which=None) -> None:
+def _finite_points(raw: np.ndarray, path: str | os.PathLike[str] | None, i: int, which: np.ndarray | None = None) -> None:
     bad = ~np.isfinite(raw).reshape(len(raw), -1).all(1)
     if which is not None:
         bad &= which
@@ -554,7 +557,7 @@ def splines_json(spl: MtSplines) -> dict:
     return {"Splines": _write(spl.items, SPLINE_SCHEMA)}
 
 
-def models_from_json(doc, path) -> MtModels:
+def models_from_json(doc: Any, path: str | os.PathLike[str] | None) -> MtModels:
     return MtModels(_Reader(path).top(doc, "Models", MODEL_SCHEMA, "models"))
 
 
@@ -590,7 +593,7 @@ def _instance_hashes(pbd: Pbd, k: int) -> np.ndarray:
     return out
 
 
-def _instance_items(rec: np.ndarray, hashes: np.ndarray, names=None) -> list:
+def _instance_items(rec: np.ndarray, hashes: np.ndarray, names: list[str] | None = None) -> list:
     """Instances.json objects of instance records ``(k,) INSTANCE_DTYPE`` (what a .pbd holds; the
     .ltg/.adl/.ssf fields at their defaults)."""
     loc, rot, scl = (_f32s(a).tolist() for a in decompose_rows(rec["matrix"]))
@@ -618,7 +621,8 @@ def _instance_items(rec: np.ndarray, hashes: np.ndarray, names=None) -> list:
     return items
 
 
-def instances_from_placements(matrix, model, names=None, light_vectors=None, light_colours=None,
+def instances_from_placements(matrix: npt.ArrayLike, model: npt.ArrayLike, names: list[str] | None = None,
+                              light_vectors: npt.ArrayLike | None = None, light_colours: npt.ArrayLike | None = None,
                               scale: float = GAME_SCALE) -> MtInstances:
     """piste's placed objects as Multitool instances: ``matrix (k, 4, 4)`` object -> world in
     piste's column form (metres; :meth:`MtInstances.placements` gives it back), ``model (k,)`` model
@@ -645,7 +649,7 @@ def instances_from_placements(matrix, model, names=None, light_vectors=None, lig
     return MtInstances(items)
 
 
-def _defaults(d: dict, schema) -> dict:
+def _defaults(d: dict, schema: Any) -> dict:
     out = {}
     for key, kind, _ in schema:
         out[key] = d.get(key, 0 if kind in ("f", "i") else False if kind == "b" else None)
@@ -664,13 +668,13 @@ _PBD_INSTANCE_KEYS = ("Location", "Rotation", "Scale", "LightVector1", "LightVec
                       "UnknownInt30", "UnknownInt31", "UnknownInt32")
 
 
-def _same(a: dict, b: dict, keys) -> bool:
+def _same(a: dict, b: dict, keys: Any) -> bool:
     if all(a[k] == b[k] for k in keys):  # the fast path (a NaN never compares equal)
         return True
     return json.dumps([_out_nested(a[k]) for k in keys]) == json.dumps([_out_nested(b[k]) for k in keys])
 
 
-def _out_nested(v):
+def _out_nested(v: Any) -> Any:
     if isinstance(v, list):
         return [_out_nested(x) for x in v]
     return _out_float(v) if isinstance(v, float) else v
@@ -719,7 +723,8 @@ def _instance_records_of(items: list, old: np.ndarray) -> np.ndarray:
     return rec
 
 
-def instances_in_place(pbd: Pbd, data: bytearray, inst: MtInstances, path, source_name: str) -> list:
+def instances_in_place(pbd: Pbd, data: bytearray, inst: MtInstances, path: str | os.PathLike[str] | None,
+                       source_name: str) -> list:
     """Write ``inst`` over the level's instance records in ``data`` (the same count: the sections
     after them hold absolute offsets piste does not relocate); an instance whose ``.pbd`` fields did
     not change keeps its stored bytes; the hashes go into the hash section's instance list when it
@@ -746,7 +751,7 @@ def instances_in_place(pbd: Pbd, data: bytearray, inst: MtInstances, path, sourc
         if not 0 <= m < n_models:
             raise FormatError(path, f"instance {i}: ModelID {m} is not one of the level's {n_models} models "
                                     f"(0..{n_models - 1})", field="ModelID")
-    notes = []
+    notes: list[str] = []
     if changed.any():
         new = _instance_records([inst.items[i] for i in np.nonzero(changed)[0]], old[changed])
         rec = old.copy()
@@ -806,7 +811,7 @@ def segment_records(raw: np.ndarray, spline: int, first: int) -> np.ndarray:
     return rec
 
 
-def spline_sections(spl: MtSplines, path=None) -> dict:
+def spline_sections(spl: MtSplines, path: str | os.PathLike[str] | None = None) -> dict:
     """The spline and segment sections of a new level (the Multitool's rebuild), as
     :func:`piste.formats.ssx.synth.pbd_bytes` takes them (FormatError naming ``path`` for
     non-finite points)."""
@@ -854,7 +859,8 @@ def splines_from_pbd(pbd: Pbd) -> MtSplines:
     return MtSplines(items)
 
 
-def splines_in_place(pbd: Pbd, data: bytearray, spl: MtSplines, path, source_name: str) -> None:
+def splines_in_place(pbd: Pbd, data: bytearray, spl: MtSplines, path: str | os.PathLike[str] | None,
+                     source_name: str) -> None:
     """Write ``spl``'s points over the level's segments in ``data`` (the same splines with the same
     segment counts); a segment whose points did not change keeps its stored bytes, a changed one
     gets the Multitool's rebuilt record but keeps its stored links and ``Unknown32``; a spline
