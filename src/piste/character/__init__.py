@@ -26,31 +26,27 @@ from typing import TYPE_CHECKING
 
 from piste import _lazy_exports
 
-# ``palette`` is also a submodule's name: imported eagerly, or the module (bound on the package when
-# anything imports ``piste.character.palette``) would shadow the function
-from piste.character.palette import palette
-
-# every other name is imported when first asked for (PEP 562; tests/test_lazy_imports.py)
+# every name is imported when first asked for (PEP 562; tests/test_lazy_imports.py); ``palette`` is also
+# a submodule's name and stays the function (piste._LazyPackage)
 __all__, __getattr__, __dir__ = _lazy_exports(__name__, {
     "model": ("Clip", "Model", "Pose", "Skeleton", "SkinnedMesh", "Track"),
     "compress": ("CompressedClip", "clip_error", "compress_clip", "compression_report"),
     "morph": ("NullBoneRig", "blend_morphs", "morph_report", "morphs_to_null_bones", "vertex_normals"),
     "skinning": ("skin", "skinning_report", "PostTransformMesh", "BlendedMesh"),
-    "palette": ("Palette", "quantize_weights"),
+    "palette": ("palette", "Palette", "quantize_weights"),
     "batches": ("make_batches", "batch_mesh", "check_batches", "frame_bytes", "Budget", "BUDGETS", "Batch"),
     "strips": ("stripify", "unstripify", "strip_stats"),
     "lod": ("make_lods", "simplify_mesh", "LOD"),
     "rider": ("default_rider",),
     "retarget": ("RetargetWarning", "bone_roles", "builtin_bone_map", "retarget_clip"),
 })
-__all__ += ["palette"]
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and the import graph
     from piste.character.model import Clip, Model, Pose, Skeleton, SkinnedMesh, Track  # noqa: F401
     from piste.character.compress import CompressedClip, clip_error, compress_clip, compression_report  # noqa: F401
     from piste.character.morph import NullBoneRig, blend_morphs, morph_report, morphs_to_null_bones, vertex_normals  # noqa: F401
     from piste.character.skinning import BlendedMesh, PostTransformMesh, skin, skinning_report  # noqa: F401
-    from piste.character.palette import Palette, quantize_weights  # noqa: F401
+    from piste.character.palette import Palette, palette, quantize_weights  # noqa: F401
     from piste.character.batches import BUDGETS, Batch, Budget, batch_mesh, check_batches, frame_bytes, make_batches  # noqa: F401
     from piste.character.strips import strip_stats, stripify, unstripify  # noqa: F401
     from piste.character.lod import LOD, make_lods, simplify_mesh  # noqa: F401

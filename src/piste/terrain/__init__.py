@@ -20,30 +20,25 @@ from typing import TYPE_CHECKING
 
 from piste import _lazy_exports
 
-# ``stats`` and ``tessellate`` are also submodules' names: imported eagerly, or the module (bound on
-# the package when anything imports ``piste.terrain.stats``) would shadow the function
-from piste.terrain.stats import stats
-from piste.terrain.tessellate import tessellate
-
-# every other name is imported when first asked for (PEP 562; tests/test_lazy_imports.py)
+# every name is imported when first asked for (PEP 562; tests/test_lazy_imports.py); ``stats`` and
+# ``tessellate`` are also submodules' names and stay the functions (piste._LazyPackage)
 __all__, __getattr__, __dir__ = _lazy_exports(__name__, {
     "net": ("PatchNet",),
-    "tessellate": ("TerrainMesh", "get_shape", "decode_strips"),
+    "tessellate": ("tessellate", "TerrainMesh", "get_shape", "decode_strips"),
     "lod": ("edge_levels", "visible_patches"),
-    "stats": ("format_stats",),
+    "stats": ("stats", "format_stats"),
     "bezier": ("BEZIER_M", "blend_tables", "evaluate", "eval_power_form"),
     "fit": ("fit_heightfield", "fit_error"),
     "query": ("height_at", "ray_intersect", "RayHits", "PatchBVH"),
     "tiles": ("TileGrid", "TileStore", "fit_tile"),
 })
-__all__ += ["stats", "tessellate"]
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and the import graph
     from piste.terrain.bezier import BEZIER_M, blend_tables, evaluate, eval_power_form  # noqa: F401
     from piste.terrain.lod import edge_levels, visible_patches  # noqa: F401
     from piste.terrain.net import PatchNet  # noqa: F401
-    from piste.terrain.stats import format_stats  # noqa: F401
-    from piste.terrain.tessellate import TerrainMesh, decode_strips, get_shape  # noqa: F401
+    from piste.terrain.stats import format_stats, stats  # noqa: F401
+    from piste.terrain.tessellate import TerrainMesh, decode_strips, get_shape, tessellate  # noqa: F401
     from piste.terrain.fit import fit_error, fit_heightfield  # noqa: F401
     from piste.terrain.query import PatchBVH, RayHits, height_at, ray_intersect  # noqa: F401
     from piste.terrain.tiles import TileGrid, TileStore, fit_tile  # noqa: F401
