@@ -28,13 +28,15 @@ LAZY_PACKAGES = ("piste.pipeline", "piste.render", "piste.formats", "piste.forma
 RUNTIME = ("piste.pipeline.bundle_objects", "piste.pipeline.preview", "piste.render.context")
 
 #: modules a bundle render never uses: the build and its steps, the light-map baker, the glTF importer,
-#: the SSX readers, tiled / Dask builds
+#: the SSX readers, tiled / Dask builds, terrain statistics, retargeting
 NOT_IMPORTED = ("piste.pipeline.build", "piste.pipeline.cache", "piste.pipeline.gltf_import", "piste.pipeline.live",
                 "piste.pipeline.default_scene", "piste.pipeline.tiled_build", "piste.pipeline.dask_build",
                 "piste.pipeline.ssx_level", "piste.pipeline.ssx_rider", "piste.lighting.baker", "piste.lighting.gi",
                 "piste.formats.ssx", "piste.formats.geotiff", "piste.formats.gltf.read", "piste.formats.gltf.write",
                 "piste.world.scene_file",
                 "piste.render.streaming", "piste.render.ssx_pass", "piste.render.window", "piste.terrain.tiles",
+                # the talk's statistics table; bone maps and retargeting (the model needs only the coverage check)
+                "piste.terrain.stats", "piste.character.retarget",
                 "dask", "distributed",
                 "scipy", "tifffile")
 

@@ -38,7 +38,7 @@ import numpy as np
 import numpy.typing as npt
 
 from piste.character import animation as _anim
-from piste.character import retarget as _retarget
+from piste.character.coverage import check_coverage
 from piste.character.morph import vertex_normals
 from piste.character.pose import Pose
 from piste.character.skeleton import depth_levels, topological_order, world_from_local
@@ -265,7 +265,7 @@ class Clip:
         if retarget is None:
             retarget = "none" if sk is self.skeleton else "scaled"
         if sk is not self.skeleton:
-            _retarget.check_coverage(self, sk)  # warns naming the unmatched bones (< half driven)
+            check_coverage(self, sk)  # warns naming the unmatched bones (< half driven)
         t = _anim.clip_time(t, self.duration, loop)
         return _anim.sample_pose(self, t, sk, self.skeleton, retarget)
 

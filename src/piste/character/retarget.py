@@ -40,12 +40,12 @@ API
 from __future__ import annotations
 
 import re
-import warnings
 from dataclasses import replace
 
 import numpy as np
 
 from piste.character.animation import sample_poses
+from piste.character.coverage import RetargetWarning, check_coverage, coverage
 from piste.errors import ConfigError
 from piste.transforms import quat_conjugate, quat_multiply, quat_normalize, quat_rotate
 
@@ -83,10 +83,6 @@ _WORDS = {
 }
 #: numbered chains: "<word><n>" -> role stem by n (Fox's b_LeftLeg01 / 02, b_LeftFoot01 / 02)
 _NUMBERED = {("leg", 1): "thigh", ("leg", 2): "shin", ("foot", 1): "foot", ("foot", 2): "toe"}
-
-
-class RetargetWarning(UserWarning):
-    """A clip drives too few of a skeleton's bones (most of it will stay in its rest pose)."""
 
 
 def _tokens(name: str) -> list[str]:
@@ -452,27 +448,6 @@ def _bake(tracks, src, dst, mode: str) -> dict:
             nb[path] = type(tr)(tr.times.copy(), f(tr.values), tr.interpolation, **kw)
         out[bone] = nb
     return out
-
-
-def coverage(clip, target) -> tuple[list[str], list[str]]:
-    """Target joints the clip drives (by name) and those it does not: ``(driven, unmatched)``."""
-    joints = [n for n, j in zip(target.names, target.is_joint) if j] or list(target.names)
-    driven = [n for n in joints if n in clip.tracks]
-    return driven, [n for n in joints if n not in clip.tracks]
-
-
-def check_coverage(clip, target, min_fraction: float = 0.5) -> bool:
-    """Warn (:class:`RetargetWarning`, naming the unmatched bones) when ``clip`` drives fewer than
-    ``min_fraction`` of ``target``'s joints; returns True when coverage is enough."""
-    driven, unmatched = coverage(clip, target)
-    total = len(driven) + len(unmatched)
-    if total == 0 or len(driven) >= min_fraction * total:
-        return True
-    shown = ", ".join(unmatched[:12]) + (f", ... ({len(unmatched) - 12} more)" if len(unmatched) > 12 else "")
-    warnings.warn(f"clip {clip.name!r} drives {len(driven)} of the skeleton's {total} bones; unmatched: {shown} "
-                  f"(give a bone map: piste.character.retarget.retarget_clip(clip, skeleton, bone_map='builtin' "
-                  f"or {{source: target}}), or a scene file's bone_map)", RetargetWarning, stacklevel=3)
-    return False
 
 
 def add_clips(model, source_model, bone_map="builtin", clips=None, mode: str = "relative", warn: bool = True):
