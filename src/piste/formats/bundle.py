@@ -46,7 +46,6 @@ load_bundle(path)                     deprecated here: use :func:`piste.pipeline
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import io
 import json
 import mmap
@@ -93,6 +92,14 @@ RESIDENT_MEMBER = "terrain/resident_blocks"
 STORED_MEMBERS = frozenset({RESIDENT_MEMBER, "lightmap/atlas", "terrain/control_points"})
 
 
+def _sha256(data: bytes | memoryview) -> str:
+    """Hex SHA-256 of ``data``.  hashlib (OpenSSL) is imported on first use: a bundle render, which does
+    not verify members, never loads it (tests/test_lazy_imports.py)."""
+    import hashlib
+
+    return hashlib.sha256(data).hexdigest()
+
+
 def _npy_bytes(arr: np.ndarray) -> bytes:
     buf = io.BytesIO()
     np.lib.format.write_array(buf, np.ascontiguousarray(arr), allow_pickle=False)
@@ -115,7 +122,7 @@ def write_bundle(path, manifest: dict, arrays: dict, compresslevel: int = 1, sto
             raise FormatError(path, "object arrays cannot be stored", field=name)
         data = _npy_bytes(a)
         blobs[f"{name}.npy"] = data
-        members[name] = {"shape": list(a.shape), "dtype": a.dtype.str, "sha256": hashlib.sha256(data).hexdigest()}
+        members[name] = {"shape": list(a.shape), "dtype": a.dtype.str, "sha256": _sha256(data)}
     man["members"] = members
     text = (json.dumps(man, indent=1, sort_keys=True, allow_nan=False) + "\n").encode()
     path = Path(path)
@@ -251,7 +258,7 @@ def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool, o
             raise FormatError(path, f"corrupt member ({exc})", field=member) from None
         if len(data) != zi.file_size:
             raise FormatError(path, f"corrupt member ({len(data)} bytes, the zip says {zi.file_size})", field=member)
-        if verify and hashlib.sha256(data).hexdigest() != info.get("sha256"):
+        if verify and _sha256(data) != info.get("sha256"):
             if not crc_checked and zlib.crc32(data) != zi.CRC:  # a corrupt member, as zipfile says it
                 raise FormatError(path, f"corrupt member (Bad CRC-32 for file {member!r})", field=member)
             raise FormatError(path, "checksum mismatch (the file is corrupt)", field=member)

@@ -35,7 +35,6 @@ a jump and C0-only nets show no crease at seams.
 from __future__ import annotations
 
 import copy
-import hashlib
 import json
 import math
 from dataclasses import dataclass, field
@@ -424,6 +423,8 @@ def inputs_key(net: PatchNet, lights: Lights, res: int, gutter: int, shadows: bo
                extra: dict[str, Any] | None = None) -> str:
     """SHA-256 over everything that determines a bake's output (hex).  ``extra``: further settings
     (bounces, the area sun), hashed only when given, so the keys of plain bakes do not change."""
+    import hashlib  # here: a bundle render never bakes, so it never loads hashlib (OpenSSL)
+
     h = hashlib.sha256()
     h.update(version.encode())
     cp = np.ascontiguousarray(net.control_points, dtype="<f8")
