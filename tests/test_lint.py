@@ -68,6 +68,7 @@ STRICT_REQUIRED = (
     "piste.character.strips", "piste.character.animation", "piste.character.model", "piste.character.morph",
     "piste.character.skinning", "piste.formats.ssx.synth",
     "piste.formats.ssx.multitool", "piste.formats.ssx.multitool_objects",
+    "piste.formats.ssx.afl", "piste.formats.ssx.mpf", "piste.formats.ssx.mpf_encode", "piste.formats.ssx.mpf_model",
 )
 
 

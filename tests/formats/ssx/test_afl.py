@@ -440,3 +440,13 @@ def test_real_body_models_take_a_body_track():
         clip = afl_clips(afl, model.skeleton)["bind"]  # default bones: the documented order
         world = model.skeleton.world_matrices(clip.sample(0.0, model.skeleton))
         np.testing.assert_allclose(world, model.skeleton.bind_pose_world(), atol=1e-3, err_msg=f.path)
+
+
+def test_mpf_body_bones_of_a_model_without_a_skeleton_is_a_clear_error():
+    """Was an AttributeError on None (found by mypy); now a ValidationError that says what is missing."""
+    from types import SimpleNamespace
+
+    from piste.errors import ValidationError
+
+    with pytest.raises(ValidationError, match="no skeleton"):
+        mpf_body_bones(SimpleNamespace(files=[], skeleton=None))

@@ -92,6 +92,16 @@ def test_split_refuses_a_bad_head_bone():
         model_to_mpf_pair(default_rider(0), head_bone="root")
 
 
+def test_split_of_a_model_without_a_skeleton_is_a_clear_error():
+    """Was an AttributeError on None (found by mypy); now the ConfigError model_to_mpf gives."""
+    from dataclasses import replace
+
+    from piste.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="no skeleton"):
+        model_to_mpf_pair(replace(default_rider(0), skeleton=None))
+
+
 def test_build_cache_tracks_the_head_partner(pair, tmp_path, piste_cache):
     import shutil
 

@@ -80,11 +80,15 @@ afl_hash(name) -> int; afl_rotation(euler (..., 3)) -> (..., 3, 3)
 
 from __future__ import annotations
 
+import os
 import struct
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.character.animation import sample_poses
 from piste.character.model import Clip, Skeleton, Track
@@ -94,6 +98,9 @@ from piste.formats.atomic import write_bytes_atomic
 from piste.formats.safe_io import read_regular
 from piste.formats.ssx.mpf_model import CM, SSX_TO_PISTE, bone_euler, bone_rotation
 from piste.transforms import compose_trs, decompose_trs, invert_affine, matrix_to_quat, quat_to_matrix
+
+if TYPE_CHECKING:
+    from piste.formats.ssx.mpf_model import SsxModel
 
 __all__ = [
     "AflFile", "AflClip", "AflClipData", "Curve", "Segment", "HEADER_DTYPE", "TRACK_CHANNELS", "KIND_CLIP",
@@ -149,19 +156,19 @@ def _unpack3(raw: bytes) -> np.ndarray:
     return np.array(struct.unpack(f"<{n}f", b"".join(b"\x80" + raw[i:i + 3] for i in range(0, 3 * n, 3))), np.float32)
 
 
-def _pack3(values) -> bytes:
+def _pack3(values: npt.ArrayLike) -> bytes:
     """``(n,)`` values as packed floats (nearest: the float32's top 3 bytes)."""
     bits = np.asarray(values, np.float32).reshape(-1).view(np.uint32)
     out = np.stack([(bits >> 8) & 0xFF, (bits >> 16) & 0xFF, bits >> 24], axis=1).astype(np.uint8)
     return out.tobytes()
 
 
-def _packed(values) -> np.ndarray:
+def _packed(values: npt.ArrayLike) -> np.ndarray:
     """What packed floats read back as: ``(n,) float32``."""
     return _unpack3(_pack3(values))
 
 
-def afl_rotation(euler) -> np.ndarray:
+def afl_rotation(euler: npt.ArrayLike) -> np.ndarray:
     """Rotation matrices ``(..., 3, 3)`` of AFL / ``.mpf`` Euler triples ``(..., 3)`` radians:
     ``Rz(-z) @ Ry(-y) @ Rx(-x)`` (the public convention: angles negated), the same as a bone
     record's (:func:`piste.formats.ssx.mpf_model.bone_rotation`)."""
@@ -200,9 +207,10 @@ class Segment:
         """The sample values ``(n,) float64`` of a sampled segment (4, 6, 7)."""
         if self.kind == 4:
             return self.params.astype(np.float64)
+        assert self.samples is not None  # kinds 6/7 always carry their samples
         return float(self.params[0]) + float(self.params[1]) * self.samples.astype(np.float64)
 
-    def evaluate(self, u) -> np.ndarray:
+    def evaluate(self, u: npt.ArrayLike) -> np.ndarray:
         """Values ``(m,) float64`` at local frames ``u (m,)``."""
         u = np.asarray(u, np.float64)
         if self.kind == 0:
@@ -232,7 +240,7 @@ class Curve:
     segments: list
     grouped: bool = False
 
-    def evaluate(self, frames) -> np.ndarray:
+    def evaluate(self, frames: npt.ArrayLike) -> np.ndarray:
         """Values ``(m,) float64`` at clip frames ``frames (m,)`` (fractional allowed)."""
         f = np.atleast_1d(np.asarray(frames, np.float64))
         if not self.grouped:
@@ -264,7 +272,7 @@ def constant(value: float, duration: int = 0) -> Segment:
     return Segment(0, int(duration), _packed([value]))
 
 
-def polynomial(coefficients, duration: int = 0) -> Segment:
+def polynomial(coefficients: npt.ArrayLike, duration: int = 0) -> Segment:
     """A polynomial segment of degree 1-3 in the frame, ``coefficients`` highest power first."""
     c = _packed(coefficients)
     if not 2 <= c.size <= 4:
@@ -272,7 +280,7 @@ def polynomial(coefficients, duration: int = 0) -> Segment:
     return Segment(c.size - 1, int(duration), c)
 
 
-def sampled(values, bits: int = 16) -> Segment:
+def sampled(values: npt.ArrayLike, bits: int = 16) -> Segment:
     """A sampled segment of ``values (n,)`` (1 <= n <= 4095): ``bits`` 32 (f32, kind 4), 16 (kind 7)
     or 8 (kind 6: base + scale x integer, quantised to the nearest step)."""
     v = np.asarray(values, np.float64).reshape(-1)
@@ -291,7 +299,7 @@ def sampled(values, bits: int = 16) -> Segment:
                    q.astype(np.uint16 if bits == 16 else np.uint8))
 
 
-def group(segments) -> Curve:
+def group(segments: Sequence[Segment]) -> Curve:
     """A kind-5 curve of ``segments`` (each with its duration as ``count``)."""
     return Curve(list(segments), grouped=True)
 
@@ -311,7 +319,7 @@ def _segment_size(kind: int, count: int) -> int | None:
 
 
 class _Reader:
-    def __init__(self, data: bytes, path, base: int) -> None:
+    def __init__(self, data: bytes, path: str | os.PathLike[str] | None, base: int) -> None:
         self.data, self.path, self.base = data, path, base
 
     def err(self, field_: str, msg: str) -> FormatError:
@@ -420,7 +428,7 @@ class AflFile:
                 return c
         raise KeyError(f"no clip {name!r} in {self.path or 'the .afl'} ({len(self.clips)} clips)")
 
-    def sample(self, clip: AflClip | str, frames=None) -> list:
+    def sample(self, clip: AflClip | str, frames: npt.ArrayLike | None = None) -> list:
         """Channel values of every track of ``clip`` at ``frames (m,)`` (default: every frame):
         one ``(m, c) float64`` array per track, None for a track of unknown kind."""
         c = self.clip(clip) if isinstance(clip, str) else clip
@@ -428,7 +436,7 @@ class AflFile:
             np.asarray(frames, np.float64))
         return [None if offs is None else self.evaluate(offs, f) for _, offs in c.tracks]
 
-    def evaluate(self, offsets, frames) -> np.ndarray:
+    def evaluate(self, offsets: Sequence[int], frames: npt.ArrayLike) -> np.ndarray:
         """Values ``(m, c) float64`` of the curves at data offsets ``offsets (c,)`` at ``frames (m,)``:
         each distinct curve once; the single-segment constants, and the single-segment sampled curves
         of one sample count, in one vectorised gather each; the others curve by curve."""
@@ -454,7 +462,7 @@ class AflFile:
         return res[:, inv.reshape(-1)]
 
 
-def parse_afl(data: bytes, path="<bytes>", names=()) -> AflFile:
+def parse_afl(data: bytes, path: str | os.PathLike[str] = "<bytes>", names: Iterable[str] = ()) -> AflFile:
     """An :class:`AflFile` from the bytes of an ``.afl`` (FormatError naming file and field on bad
     input). ``names``: clip names to resolve the hashes with (besides :data:`KNOWN_CLIP_NAMES`)."""
     data = bytes(data)
@@ -491,7 +499,7 @@ def parse_afl(data: bytes, path="<bytes>", names=()) -> AflFile:
         if name in seen:  # two records with one hash: keep both, named apart by record index
             name = f"{name}@{i}"
         seen.add(name)
-        tracks = []
+        tracks: list[tuple[int, list[int] | None]] = []
         for j in range(i + 1, i + 1 + rel):
             kind = int(kinds[j])
             nch = TRACK_CHANNELS.get(kind)
@@ -512,7 +520,7 @@ def parse_afl(data: bytes, path="<bytes>", names=()) -> AflFile:
     return afl
 
 
-def read_afl(path, names=()) -> AflFile:
+def read_afl(path: str | os.PathLike[str], names: Iterable[str] = ()) -> AflFile:
     """Read an ``.afl`` (regular files only, at most :data:`MAX_FILE_BYTES`)."""
     return parse_afl(read_regular(Path(path), MAX_FILE_BYTES, what="animation bank"), path, names)
 
@@ -526,7 +534,7 @@ def afl_bytes(afl: AflFile) -> bytes:
                      afl.pads[0], np.asarray(afl.pointers, "<u4").tobytes(), afl.pads[1], bytes(afl.data)])
 
 
-def write_afl(afl: AflFile, path) -> None:
+def write_afl(afl: AflFile, path: str | os.PathLike[str]) -> None:
     """Write ``afl`` to ``path`` atomically (no half-written file on failure)."""
     write_bytes_atomic(path, afl_bytes(afl))
 
@@ -542,10 +550,13 @@ class AflClipData:
     tracks: list
 
 
-def encode_afl(clips, console: int = 76, unknown: int = 17) -> AflFile:
+def encode_afl(clips: Iterable[AflClipData], console: int = 76, unknown: int = 17) -> AflFile:
     """A bank of ``clips`` (:class:`AflClipData`) in the layout :func:`parse_afl` reads (each
     distinct curve stored once); returned as parsed from its own bytes."""
-    headers, pointers, blobs, where = [], [], [], {}
+    headers: list[np.ndarray] = []
+    pointers: list[int] = []
+    blobs: list[bytes] = []
+    where: dict[bytes, int] = {}
     size = 0
     for c in clips:
         if not 0 <= int(c.frames) <= 0xFFFF:
@@ -576,7 +587,7 @@ def encode_afl(clips, console: int = 76, unknown: int = 17) -> AflFile:
     return parse_afl(afl_bytes(raw), "<encoded>", names=[c.name for c in clips])
 
 
-def body_track(root_cm, euler, bits: int = 16) -> list:
+def body_track(root_cm: npt.ArrayLike, euler: npt.ArrayLike, bits: int = 16) -> list:
     """The 60 curves of a body track from ``root_cm (F, 3)`` and ``euler (F, 19, 3)`` (fewer bones:
     the rest held at 0): a constant where a channel does not change, else ``bits`` samples."""
     root = np.asarray(root_cm, np.float64).reshape(-1, 3)
@@ -590,13 +601,15 @@ def body_track(root_cm, euler, bits: int = 16) -> list:
 
 
 # ----------------------------------------------------------------------------------- clips
-def mpf_body_bones(model) -> list:
+def mpf_body_bones(model: SsxModel) -> list:
     """The names, in the piste skeleton of ``model`` (an :class:`~piste.formats.ssx.SsxModel`), of
     the body bones in ``.mpf`` file order (the first sub-model with bones of the first file): the
     bones a body track drives, channel triple ``i`` for bone ``i``. A bone the skeleton does not
     hold by that name is None."""
     files = getattr(model, "files", None) or []
     sk = model.skeleton
+    if sk is None:
+        raise ValidationError("mpf_body_bones: the model has no skeleton (expected an .mpf rider's model)")
     for f in files[:1]:
         for s in f.models:
             if len(s.bones):
@@ -608,7 +621,7 @@ _AXES = np.argmax(np.abs(SSX_TO_PISTE), axis=1)          # SSX_TO_PISTE is a sig
 _SIGNS = SSX_TO_PISTE[np.arange(3), _AXES]
 
 
-def _to_piste(rm) -> np.ndarray:
+def _to_piste(rm: np.ndarray) -> np.ndarray:
     """``A @ rm @ A.T`` for rotation matrices ``rm (..., 3, 3)`` in SSX axes (A = SSX_TO_PISTE), by
     indexing (A permutes and signs the axes) instead of two batched matmuls."""
     return rm[..., _AXES[:, None], _AXES[None, :]] * (_SIGNS[:, None] * _SIGNS[None, :])
@@ -620,7 +633,7 @@ def _default_bones(skeleton: Skeleton) -> list:
     return list(skeleton.names[:BODY_BONES])
 
 
-def _continuous(q) -> np.ndarray:
+def _continuous(q: npt.ArrayLike) -> np.ndarray:
     """Quaternions ``(F, ..., 4)`` with each track's sign flipped to stay on one hemisphere (slerp)."""
     q = np.array(q, np.float64)
     dots = np.einsum("t...i,t...i->t...", q[1:], q[:-1])
@@ -638,7 +651,8 @@ def _checked(afl: AflFile, c: AflClip, ch: np.ndarray, what: str) -> np.ndarray:
     return ch
 
 
-def afl_clips(afl: AflFile, skeleton: Skeleton, bones=None, fps: float = DEFAULT_FPS, clips=None,
+def afl_clips(afl: AflFile, skeleton: Skeleton, bones: Iterable[str | None] | None = None, fps: float = DEFAULT_FPS,
+              clips: Iterable[str] | None = None,
               board_bone: str | None = "board") -> dict:
     """The bank's clips as piste :class:`Clip` objects for ``skeleton`` (an ``.mpf`` rider's).
 
@@ -672,12 +686,13 @@ def afl_clips(afl: AflFile, skeleton: Skeleton, bones=None, fps: float = DEFAULT
     work = []  # (clip, frames, body channels (F, 60), board channels (F, 6) or None)
     for c in chosen:
         kinds = [k for k, offs in c.tracks if offs is not None]
-        if BODY_TRACK not in kinds:
+        body = c.body  # the first body track: present exactly when BODY_TRACK is in kinds
+        if body is None:
             afl.notes.append(f"clip {c.name}: no body track; not converted")
             continue
         f = max(c.frames, 1)
         frames = np.arange(f, dtype=np.float64)
-        ch = _checked(afl, c, afl.evaluate(c.body, frames), "body")
+        ch = _checked(afl, c, afl.evaluate(body, frames), "body")
         board = None
         if jb is not None and BOARD_TRACK in kinds:
             offs = next(o for k, o in c.tracks if k == BOARD_TRACK and o is not None)
@@ -715,12 +730,14 @@ def afl_clips(afl: AflFile, skeleton: Skeleton, bones=None, fps: float = DEFAULT
                                       skeleton.levels)[:, parent]
                 world = invert_affine(pw) @ world
             bt_t, bt_r, _ = decompose_trs(world)
+            assert jb is not None  # a board track is evaluated only with a board bone
             tracks[skeleton.names[jb]] = {"translation": Track(times, bt_t), "rotation": Track(times, _continuous(bt_r))}
         out[c.name] = Clip(c.name, float(times[-1]), tracks, skeleton=skeleton)
     return out
 
 
-def clip_channels(clip: Clip, skeleton: Skeleton, bones=None, fps: float = DEFAULT_FPS):
+def clip_channels(clip: Clip, skeleton: Skeleton, bones: Iterable[str | None] | None = None,
+                  fps: float = DEFAULT_FPS) -> tuple[np.ndarray, np.ndarray]:
     """A piste clip as AFL body values (the inverse of :func:`afl_clips`): ``root_cm (F, 3)`` (the
     first driven root's translation, cm, ``.mpf`` axes) and ``euler (F, 19, 3)`` (radians, the
     negated ``Rz Ry Rx`` convention) of ``bones`` (default as :func:`afl_clips`), sampled at

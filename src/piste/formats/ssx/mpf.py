@@ -116,11 +116,15 @@ API
 
 from __future__ import annotations
 
+import os
 import struct
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import FormatError, ValidationError
 from piste.formats.atomic import write_bytes_atomic
@@ -133,6 +137,9 @@ from piste.formats.ssx.mpf_layout import (  # noqa: F401  (re-exported: the modu
     SLOT_NORMAL_BASE, SLOT_TRANSFORM_BASE, UV_SCALE, strip_triangles,
 )
 from piste.formats.ssx.mpf_model import mpf_to_model
+
+if TYPE_CHECKING:
+    from piste.formats.ssx.mpf_model import SsxModel
 
 __all__ = [
     "MpfFile", "SubModel", "Group", "Link", "Mesh", "Chunk", "MorphKey", "read_mpf", "parse_mpf", "write_mpf",
@@ -186,7 +193,7 @@ def _dma(qwc: int, kind: int) -> tuple:
     return (qwc & 0xFFFF) | (kind << 28), 0
 
 
-def _words(*w) -> bytes:
+def _words(*w: int) -> bytes:
     return np.array(w, "<u4").tobytes()
 
 
@@ -233,7 +240,11 @@ class Chunk:
     @property
     def slots(self) -> np.ndarray:
         """Weight slot of each vertex ``(v,) int64`` (index into the link's weight-reference list)."""
-        a = self.shadow_slots.astype(np.int64) if self.shadow else self.uv[:, 2].astype(np.int64)
+        if self.uv is None:  # a shadow mesh: its slots are stored apart
+            assert self.shadow_slots is not None
+            a = self.shadow_slots.astype(np.int64)
+        else:
+            a = self.uv[:, 2].astype(np.int64)
         return (a - SLOT_TRANSFORM_BASE) // 4
 
     def uv_float(self) -> np.ndarray:
@@ -387,15 +398,29 @@ class MpfFile:
     def names(self) -> list:
         return [m.name for m in self.models]
 
-    def to_model(self, *others: "MpfFile", name: str | None = None, weld: bool = True):
+    def to_model(self, *others: "MpfFile", name: str | None = None, weld: bool = True) -> SsxModel:
         """piste's :class:`~piste.character.Model` of this file (plus ``others``, e.g. the head
         file of a body file): :func:`piste.formats.ssx.mpf_model.mpf_to_model`."""
         return mpf_to_model(self, *others, name=name, weld=weld)
 
 
 # ------------------------------------------------------------------------------------ strips
-def pack_chunks(strips, uv, normals, positions, max_vertices: int = ENCODER_CHUNK_VERTICES, shadow_slots=None,
-                return_index: bool = False):
+@overload
+def pack_chunks(strips: Iterable[npt.ArrayLike], uv: np.ndarray | None, normals: np.ndarray | None,
+                positions: np.ndarray, max_vertices: int = ..., shadow_slots: np.ndarray | None = ...,
+                return_index: Literal[False] = ...) -> list[Chunk]: ...
+
+
+@overload
+def pack_chunks(strips: Iterable[npt.ArrayLike], uv: np.ndarray | None, normals: np.ndarray | None,
+                positions: np.ndarray, max_vertices: int = ..., shadow_slots: np.ndarray | None = ..., *,
+                return_index: Literal[True]) -> tuple[list[Chunk], list[np.ndarray]]: ...
+
+
+def pack_chunks(strips: Iterable[npt.ArrayLike], uv: np.ndarray | None, normals: np.ndarray | None,
+                positions: np.ndarray, max_vertices: int = ENCODER_CHUNK_VERTICES,
+                shadow_slots: np.ndarray | None = None,
+                return_index: bool = False) -> list[Chunk] | tuple[list[Chunk], list[np.ndarray]]:
     """Pack non-indexed strips into chunks of at most ``max_vertices`` vertices.
 
     ``strips`` is a list of vertex-index arrays into the per-vertex arrays ``uv (n, 4) int16``,
@@ -419,7 +444,9 @@ def pack_chunks(strips, uv, normals, positions, max_vertices: int = ENCODER_CHUN
             if start + piece.size >= s.size:
                 break
             start += step
-    chunks, cur, index = [], [], []
+    chunks: list[Chunk] = []
+    cur: list[np.ndarray] = []
+    index: list[np.ndarray] = []
     size = 0
     for p in pieces + [None]:
         if p is None or size + p.size > max_vertices:
@@ -443,11 +470,12 @@ def pack_chunks(strips, uv, normals, positions, max_vertices: int = ENCODER_CHUN
 
 # ------------------------------------------------------------------------------------ reading
 class _Reader:
-    def __init__(self, path, data: bytes, base: int, size: int, where: str, buf: bytearray | None = None) -> None:
+    def __init__(self, path: str | os.PathLike[str] | None, data: bytes, base: int, size: int, where: str,
+                 buf: bytearray | None = None) -> None:
         self.path, self.data, self.base, self.size, self.where = path, data, base, size, where
         # arrays are writable views of one private copy of the file (no copy per array)
         self.buf = bytearray(data) if buf is None else buf
-        self.claimed = []  # (offset, size) blob-relative
+        self.claimed: list[tuple[int, int]] = []  # (offset, size) blob-relative
 
     def err(self, field_name: str, message: str) -> FormatError:
         return FormatError(self.path, f"{self.where}: {message}", field=field_name)
@@ -457,7 +485,7 @@ class _Reader:
             raise self.err(field_name, f"{n} bytes at blob offset {off} run past the end of the "
                                        f"{self.size}-byte blob")
 
-    def arr(self, off: int, dtype, count: int, field_name: str, claim: bool = True) -> np.ndarray:
+    def arr(self, off: int, dtype: npt.DTypeLike, count: int, field_name: str, claim: bool = True) -> np.ndarray:
         dtype = np.dtype(dtype)
         if count < 0 or count > self.size:
             raise self.err(field_name, f"count {count} is impossible in a {self.size}-byte blob")
@@ -541,10 +569,10 @@ def _read_chunk(r: _Reader, off: int, where: str) -> tuple:
     return ch, end
 
 
-def _read_stream(r: _Reader, off: int, where: str, starts=frozenset()) -> tuple:
+def _read_stream(r: _Reader, off: int, where: str, starts: frozenset[int] | set[int] = frozenset()) -> tuple:
     """The chunks from blob offset ``off`` on, up to a non-chunk or another mesh's start (blob
     offsets ``starts``): ``(chunks, offset after the last)``."""
-    chunks = []
+    chunks: list[Chunk] = []
     p = off
     r.need(off, 32, f"{where}.chunk0.preamble")
     if r.byte(off + 31) != _UNPACK_V4_32:
@@ -588,15 +616,15 @@ def _read_morphs(r: _Reader, off: int, count: int, size: int, where: str) -> tup
         head = r.raw(p, 32, f"{where}.morph{k}.head")
         num = head[30]
         span = _align(3 * num)
-        deltas = r.arr(p + 32, "i1", 3 * num, f"{where}.morph{k}.deltas").reshape(num, 3)
+        one = r.arr(p + 32, "i1", 3 * num, f"{where}.morph{k}.deltas").reshape(num, 3)
         total = size if size != _NONE and size >= 32 + span else 32 + span + 16
         tail = r.raw(p + 32 + 3 * num, total - 32 - 3 * num, f"{where}.morph{k}.tail")
-        keys.append(MorphKey(deltas=deltas, raw={"head": head, "tail": tail}, offset=p))
+        keys.append(MorphKey(deltas=one, raw={"head": head, "tail": tail}, offset=p))
         p += total
     return keys, p
 
 
-def _read_submodel(path, data: bytes, base: int, entry, index: int, buf: bytearray | None = None) -> tuple:
+def _read_submodel(path: str | os.PathLike[str] | None, data: bytes, base: int, entry: np.ndarray, index: int, buf: bytearray | None = None) -> tuple:
     name = bytes(entry["name"]).split(b"\0", 1)[0].decode("ascii", "replace")
     where = f"sub-model {index} {name!r}"
     size = int(entry["size"])
@@ -640,7 +668,7 @@ def _read_submodel(path, data: bytes, base: int, entry, index: int, buf: bytearr
         refs.append(a)
         refs_off.append(int(h["offset"]))
     gh = r.arr(sec["groups"], GROUP_DTYPE, cnt["groups"], "groups")
-    starts = set()  # every mesh's chunk-stream offset: a stream ends where another begins
+    starts: set[int] = set()  # every mesh's chunk-stream offset: a stream ends where another begins
     for gi, g in enumerate(gh):
         for lk in r.arr(int(g["link_offset"]), LINK_DTYPE, int(g["link_count"]), f"group{gi}.links", claim=False):
             mh = r.arr(int(lk["offset"]), MESH_DTYPE, int(lk["count"]), f"group{gi}.meshes", claim=False)
@@ -710,7 +738,7 @@ def _gaps(claimed: list, size: int) -> list:
     return out
 
 
-def parse_mpf(data: bytes, path="<bytes>") -> MpfFile:
+def parse_mpf(data: bytes, path: str | os.PathLike[str] = "<bytes>") -> MpfFile:
     """Parse ``.mpf`` bytes (see the module docstring); FormatError names file, sub-model, field."""
     data = bytes(data)
     if len(data) < 12:
@@ -763,7 +791,7 @@ def parse_mpf(data: bytes, path="<bytes>") -> MpfFile:
     return mpf
 
 
-def read_mpf(path) -> MpfFile:
+def read_mpf(path: str | os.PathLike[str]) -> MpfFile:
     """Read an SSX Tricky ``.mpf`` model file."""
     return parse_mpf(read_regular(Path(path), MAX_FILE_BYTES, what="model file"), path)
 
@@ -810,10 +838,10 @@ def game_limits(mpf: MpfFile, *partners: MpfFile) -> list:
     ``moby`` rider's tiers hold 3,076 / 1,486 / 714), names the engine's 15-character compare
     cannot tell apart, bone indices past a file's bone list."""
     out = []
-    counts = {}
+    counts: dict[int, int] = {}
     for s in mpf.models:
         counts.setdefault(s.file_id, len(s.bones))
-    seen = {}
+    seen: dict[str, Any] = {}
     for s in mpf.models:
         key = s.name[:15]
         if key in seen and seen[key] != s.name:
@@ -869,7 +897,7 @@ def _chunk_bytes(c: Chunk, gtype: int = GROUP_RENDER, i: int = 0, n: int = 1) ->
     if c.uv is not None:
         data = [np.ascontiguousarray(c.uv, "<i2").tobytes(), np.ascontiguousarray(c.normals, "<i2").tobytes(),
                 np.ascontiguousarray(c.positions, "<f4").tobytes()]
-        tags = _SECTION_TAGS
+        tags: tuple[Any, ...] = _SECTION_TAGS
     else:
         both = np.zeros((v, 4), "<u4")
         both[:, :3] = np.ascontiguousarray(c.positions, "<f4").view("<u4")
@@ -997,10 +1025,11 @@ def _rebuild_blob(sub: SubModel) -> tuple:
 
 def _patch_blob(sub: SubModel) -> bytes:
     """Write ``sub``'s values back into its source blob at the offsets they were read from."""
+    assert sub.source is not None  # mpf_bytes patches only blobs read from a file
     b = bytearray(sub.source)
     sec = sub._offsets["sections"]
 
-    def put(off, arr) -> None:
+    def put(off: int, arr: np.ndarray) -> None:
         data = np.ascontiguousarray(arr).tobytes()
         b[off:off + len(data)] = data
 
@@ -1104,21 +1133,21 @@ def mpf_bytes(mpf: MpfFile, notes: list | None = None) -> bytes:
         notes.append("a blob changed size: the file was laid out anew (bytes outside the blobs were dropped: "
                      + ", ".join(f"{w}@{o}+{s}" for w, o, s, _ in mpf.unknown if w == "file") + ")")
     start = 12 + 80 * n + 4
-    out = _Buf()
-    out.put(np.array([mpf.format_id], "<u4").tobytes() + np.array([n, 12], "<i2").tobytes()
+    buf = _Buf()
+    buf.put(np.array([mpf.format_id], "<u4").tobytes() + np.array([n, 12], "<i2").tobytes()
             + np.array([start], "<u4").tobytes())
-    dir_at = out.put(bytes(80 * n))
-    out.put(bytes(mpf.dir_tail))
+    dir_at = buf.put(bytes(80 * n))
+    buf.put(bytes(mpf.dir_tail))
     for i, bl in enumerate(blobs):
-        out.pad()
-        entries[i]["offset"] = out.at() - start
-        out.put(bl)
+        buf.pad()
+        entries[i]["offset"] = buf.at() - start
+        buf.put(bl)
     for i, e in enumerate(entries):
-        out.b[dir_at + 80 * i:dir_at + 80 * (i + 1)] = np.array(e, DIR_DTYPE).tobytes()
-    return bytes(out.b)
+        buf.b[dir_at + 80 * i:dir_at + 80 * (i + 1)] = np.array(e, DIR_DTYPE).tobytes()
+    return bytes(buf.b)
 
 
-def write_mpf(mpf: MpfFile, path) -> list:
+def write_mpf(mpf: MpfFile, path: str | os.PathLike[str]) -> list:
     """Write ``mpf`` atomically; returns notes on what had to be laid out anew (empty when every
     blob was patched in place)."""
     notes: list = []

@@ -21,12 +21,15 @@ Frames, units and the bone-record conventions it writes are described in
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
 from piste.character.lod import make_lods
-from piste.character.model import Skeleton, SkinnedMesh
+from piste.character.model import Model, Skeleton, SkinnedMesh
+from piste.character.palette import Palette
 from piste.character.retarget import bone_roles
 from piste.character.skinning import BlendedMesh, skin_exact
 from piste.character.strips import stripify
@@ -67,7 +70,7 @@ def _mirror_name(name: str) -> str:
     return name
 
 
-def _merged_source(model) -> SkinnedMesh:
+def _merged_source(model: Model) -> SkinnedMesh:
     meshes = [m for m in model.meshes if m.skinned] or list(model.meshes)
     if not meshes:
         raise ConfigError(f"model {model.name!r} has no meshes")
@@ -82,7 +85,8 @@ def _merged_source(model) -> SkinnedMesh:
                        indices=np.concatenate([m.indices + o for m, o in zip(meshes, off)]),
                        normals=np.concatenate([m.normals for m in meshes]), uv=np.concatenate([m.uv for m in meshes]),
                        joints=np.concatenate([m.joints for m in meshes]),
-                       weights=np.concatenate([m.weights for m in meshes]), morph_positions=morph,
+                       weights=np.concatenate([m.weights for m in meshes]),
+                       morph_positions=morph,  # type: ignore[arg-type]  # None: __post_init__ makes it empty
                        morph_names=meshes[0].morph_names if morph is not None else [], skinned=True, group=model.name)
 
 
@@ -131,7 +135,9 @@ def _links(tri_pal: list, cap: int) -> list:
     """Greedy partition of triangles (each a set of palette entries) into links of <= ``cap``
     entries; triangles visited sorted by their entry tuple so neighbours in weight share links."""
     order = sorted(range(len(tri_pal)), key=lambda i: tri_pal[i])
-    out, cur, entries = [], [], set()
+    out: list[tuple[list[int], list[int]]] = []
+    cur: list[int] = []
+    entries: set[int] = set()
     for i in order:
         s = entries.union(tri_pal[i])
         if len(s) > cap and cur:
@@ -144,8 +150,8 @@ def _links(tri_pal: list, cap: int) -> list:
     return out
 
 
-def _encode_lod(name, mesh, pal, file_id, step, morph_keys, report, shadow: bool = False,
-                bone_ref=None) -> SubModel:
+def _encode_lod(name: str, mesh: SkinnedMesh, pal: Palette, file_id: int, step: float, morph_keys: int,
+                report: dict[str, Any], shadow: bool = False, bone_ref: np.ndarray | None = None) -> SubModel:
     a = SSX_TO_PISTE.T
     pos = (mesh.positions.astype(np.float64) @ a.T / CM).astype("<f4")
     nrm = mesh.normals.astype(np.float64) @ a.T
@@ -215,9 +221,11 @@ def _encode_lod(name, mesh, pal, file_id, step, morph_keys, report, shadow: bool
                     morph_keys=morph_keys if is_morph.any() else 0)
 
 
-def model_to_mpf(model, ratios=(1.0, 0.5, 0.25), names=("Body3000", "Body1500", "Body750"), step: float = 0.25,
+def model_to_mpf(model: Model, ratios: Sequence[float] = (1.0, 0.5, 0.25),
+                 names: Sequence[str] = ("Body3000", "Body1500", "Body750"), step: float = 0.25,
                  max_bones: int = 3, file_id: int = 0, pose_time: float | None = None, clip: str | None = None,
-                 shadow: str | None = "BodyShdw750", _split=None):
+                 shadow: str | None = "BodyShdw750",
+                 _split: tuple[list[int], tuple[str, ...], int] | None = None) -> tuple[Any, ...]:
     """Encode a piste rider as an SSX Tricky body ``.mpf``: ``(MpfFile, report)``.
 
     Each LOD (``ratios`` of the triangles, :func:`make_lods`) becomes a sub-model named from
@@ -240,7 +248,7 @@ def model_to_mpf(model, ratios=(1.0, 0.5, 0.25), names=("Body3000", "Body1500", 
         raise ConfigError(f"model {model.name!r} has no skeleton: an .mpf rider needs a skinned model")
     if len(names) < len(ratios):
         raise ConfigError(f"need a sub-model name per LOD ratio, got {len(names)} names for {len(ratios)} ratios")
-    report = {"uv_clipped": 0, "morph_clipped": 0, "morph_max_error_m": 0.0, "max_link_matrices": 0,
+    report: dict[str, Any] = {"uv_clipped": 0, "morph_clipped": 0, "morph_max_error_m": 0.0, "max_link_matrices": 0,
               "max_chunk_vertices": 0, "lods": []}
     bones = _bone_records(sk, file_id, report)
     mesh = _merged_source(model)
@@ -330,7 +338,7 @@ def _pow2(n: int, cap: int) -> int:
     return p
 
 
-def texture_bank(model, name: str = MATERIAL_ID, max_size: int = 256):
+def texture_bank(model: Model, name: str = MATERIAL_ID, max_size: int = 256) -> tuple[SshBank | None, dict[str, Any]]:
     """The rider's texture as an ``.ssh`` bank: ``(SshBank, report)``, or ``(None, report)`` when
     no mesh has a texture. The first textured mesh's texture is used (a model whose primitives
     carry different textures keeps only that one: ``report['note']`` says so); it is resized to
@@ -340,7 +348,7 @@ def texture_bank(model, name: str = MATERIAL_ID, max_size: int = 256):
     from PIL import Image
 
     texs = [m.texture for m in model.meshes if m.texture is not None]
-    report = {"name": name, "note": ""}
+    report: dict[str, Any] = {"name": name, "note": ""}
     if not texs:
         report["note"] = "the model has no texture: no bank written"
         return None, report
@@ -372,19 +380,20 @@ def texture_bank(model, name: str = MATERIAL_ID, max_size: int = 256):
     return SshBank([im], creator=b"G277"), report
 
 
-def _submesh(mesh: SkinnedMesh, tri_mask: np.ndarray):
+def _submesh(mesh: SkinnedMesh, tri_mask: np.ndarray) -> tuple[SkinnedMesh, np.ndarray]:
     """The triangles ``tri_mask`` of ``mesh`` on their own vertices: ``(SkinnedMesh, vertex ids)``."""
     tris = mesh.indices[tri_mask].astype(np.int64)
     vs, inv = np.unique(tris, return_inverse=True)
     mp = mesh.morph_positions[:, vs] if mesh.n_morphs else None
     sub = SkinnedMesh(name=mesh.name, positions=mesh.positions[vs], indices=inv.reshape(-1, 3),
                       normals=mesh.normals[vs], uv=mesh.uv[vs], joints=mesh.joints[vs], weights=mesh.weights[vs],
-                      morph_positions=mp, morph_names=list(mesh.morph_names) if mp is not None else [],
+                      morph_positions=mp,  # type: ignore[arg-type]  # None: __post_init__ makes it empty
+                      morph_names=list(mesh.morph_names) if mp is not None else [],
                       skinned=True, group=mesh.group)
     return sub, vs
 
 
-def _subpalette(pal, vs):
+def _subpalette(pal: Palette, vs: np.ndarray) -> Palette:
     """``pal`` restricted to the entries the vertices ``vs`` use (index renumbered)."""
     used, inv = np.unique(pal.index[vs], return_inverse=True)
     return replace(pal, bones=pal.bones[used], weights=pal.weights[used], units=pal.units[used],
@@ -411,7 +420,8 @@ def _head_bones(sk: Skeleton, head_bone: str | None) -> list:
     return [int(i) for i in np.nonzero(inside)[0]]
 
 
-def _split_records(bones: np.ndarray, sk: Skeleton, head: list, body_id: int, head_id: int):
+def _split_records(bones: np.ndarray, sk: Skeleton, head: list, body_id: int,
+                   head_id: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bone records of the body and head files: parents and mirror partners as (file id, local bone)."""
     hs = set(head)
     lists = ([i for i in range(sk.n_bones) if i not in hs], list(head))
@@ -431,13 +441,16 @@ def _split_records(bones: np.ndarray, sk: Skeleton, head: list, body_id: int, he
     return out[0], out[1], ref
 
 
-def model_to_mpf_pair(model, head_bone: str | None = None, head_names=("Head3000", "Head1500", "Head750"),
-                      head_file_id: int = HEAD_FILE_ID, **kw):
+def model_to_mpf_pair(model: Model, head_bone: str | None = None,
+                      head_names: Sequence[str] = ("Head3000", "Head1500", "Head750"),
+                      head_file_id: int = HEAD_FILE_ID, **kw: Any) -> tuple[MpfFile, MpfFile, dict[str, Any]]:
     """Encode a piste rider as the game's ``_body.mpf`` + ``_head.mpf`` pair: ``(body, head, report)``.
 
     ``head_bone`` (default: the skeleton's head) and its descendants become the head file's bones
     (file id ``head_file_id``; the subtree's root names its body parent by file id 0); see the
     module docstring for how triangles are divided. ``kw`` as :func:`model_to_mpf` (whose report
     this extends with ``split``: the head bones and each LOD's head / body triangles)."""
+    if model.skeleton is None:
+        raise ConfigError(f"model {model.name!r} has no skeleton: an .mpf rider needs a skinned model")
     head = _head_bones(model.skeleton, head_bone)
     return model_to_mpf(model, _split=(head, tuple(head_names), int(head_file_id)), **kw)

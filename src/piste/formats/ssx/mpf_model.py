@@ -54,11 +54,15 @@ API
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from math import gcd
 from pathlib import Path
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.character.lod import LOD
 from piste.character.model import Model, Skeleton, SkinnedMesh
@@ -68,6 +72,9 @@ from piste.formats.ssx.mpf_layout import (
     GROUP_SHADOW, MORPH_SCALE, NORMAL_SCALE, SLOT_TRANSFORM_BASE, UV_SCALE, strip_triangles,
 )
 from piste.transforms import compose_trs, invert_affine, matrix_to_quat
+
+if TYPE_CHECKING:  # mpf imports this module: a runtime import back would be a cycle
+    from piste.formats.ssx.mpf import MpfFile, SubModel
 
 __all__ = ["SsxModel", "mpf_to_model", "mpf_partners", "euler_to_matrix", "matrix_to_euler", "bone_rotation", "bone_euler",
            "SSX_TO_PISTE", "LOD_TIERS", "CM"]
@@ -96,7 +103,7 @@ class SsxModel(Model):
 
 
 # ----------------------------------------------------------------------------------- rotations
-def euler_to_matrix(e) -> np.ndarray:
+def euler_to_matrix(e: npt.ArrayLike) -> np.ndarray:
     """``(..., 3)`` radians -> ``(..., 3, 3)``: ``Rz(z) @ Ry(y) @ Rx(x)``."""
     e = np.asarray(e, np.float64)
     cx, cy, cz = np.cos(e[..., 0]), np.cos(e[..., 1]), np.cos(e[..., 2])
@@ -114,7 +121,7 @@ def euler_to_matrix(e) -> np.ndarray:
     return m
 
 
-def matrix_to_euler(m) -> np.ndarray:
+def matrix_to_euler(m: npt.ArrayLike) -> np.ndarray:
     """Inverse of :func:`euler_to_matrix`: ``(..., 3, 3)`` -> ``(..., 3)`` radians."""
     m = np.asarray(m, np.float64)
     y = np.arcsin(np.clip(-m[..., 2, 0], -1.0, 1.0))
@@ -126,13 +133,13 @@ def matrix_to_euler(m) -> np.ndarray:
     return np.stack([x, y, z], -1)
 
 
-def bone_rotation(e) -> np.ndarray:
+def bone_rotation(e: npt.ArrayLike) -> np.ndarray:
     """A bone record's bind rotation: ``(..., 3)`` radians -> ``(..., 3, 3)``
     ``Rz(-z) @ Ry(-y) @ Rx(-x)`` (the angles negated: module docstring)."""
     return euler_to_matrix(-np.asarray(e, np.float64))
 
 
-def bone_euler(m) -> np.ndarray:
+def bone_euler(m: npt.ArrayLike) -> np.ndarray:
     """Inverse of :func:`bone_rotation`: ``(..., 3, 3)`` -> ``(..., 3)`` radians as a bone record holds them."""
     return -matrix_to_euler(m)
 
@@ -147,14 +154,18 @@ def _tier(name: str) -> str | None:
     return ""
 
 
-def _skeleton(files: list, notes: list):
+def _skeleton(files: list, notes: list) -> tuple[Skeleton | None, dict[int, int], np.ndarray | None]:
     """Merged skeleton of the files: ``(Skeleton, base {file id: first global index}, order)``."""
-    source = {}
+    source: dict[int, Any] = {}
     for f in files:
         for s in f.models:
             if len(s.bones) and s.file_id not in source:
                 source[s.file_id] = s
-    base, names, parents, t, r = {}, [], [], [], []
+    base: dict[int, int] = {}
+    names: list[str] = []
+    parents_l: list[int] = []
+    t_l: list[np.ndarray] = []
+    r_l: list[np.ndarray] = []
     for fid, s in source.items():
         base[fid] = len(names)
         names += [f"{n}" if f"{n}" not in names else f"{n}.{fid}" for n in s.bone_names]
@@ -162,24 +173,24 @@ def _skeleton(files: list, notes: list):
         for b in s.bones:
             pf, pb = int(b["parent_file"]), int(b["parent_bone"])
             if pb < 0 or pf < 0:
-                parents.append(-1)
+                parents_l.append(-1)
             elif pf not in base or pb >= len(source[pf].bones):
                 notes.append(f"bone {bytes(b['name']).decode('ascii', 'replace')!r}: parent (file {pf}, bone {pb}) "
                              f"is not in the files given; made a root")
-                parents.append(-1)
+                parents_l.append(-1)
             else:
-                parents.append(base[pf] + pb)
-            t.append(b["translation"])
-            r.append(b["rotation"])
+                parents_l.append(base[pf] + pb)
+            t_l.append(b["translation"])
+            r_l.append(b["rotation"])
     if not names:
         return None, base, None
     a = SSX_TO_PISTE
-    t = (np.asarray(t, np.float64) @ a.T) * CM
-    rm = a @ bone_rotation(np.asarray(r, np.float64)) @ a.T
+    t = (np.asarray(t_l, np.float64) @ a.T) * CM
+    rm = a @ bone_rotation(np.asarray(r_l, np.float64)) @ a.T
     q = matrix_to_quat(rm)
     n = len(names)
     local = compose_trs(t, q, np.ones((n, 3)))
-    parents = np.asarray(parents, np.int64)
+    parents = np.asarray(parents_l, np.int64)
     # world matrices in any parent order (iterate to a fixed point; depth <= n)
     world = local.copy()
     done = parents < 0
@@ -199,7 +210,8 @@ def _skeleton(files: list, notes: list):
     return sk, base, order
 
 
-def _palette_tables(sub, base: dict, new_index: np.ndarray, counts: dict | None = None):
+def _palette_tables(sub: SubModel, base: dict, new_index: np.ndarray,
+                    counts: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The sub-model's palettes as ``bones (p, k) int64`` (skeleton indices), ``percent (p, k)``.
     ``counts``: bones per file id; a palette naming a bone past its file's list is refused (it
     would skin with another file's bone, or none)."""
@@ -220,7 +232,7 @@ def _palette_tables(sub, base: dict, new_index: np.ndarray, counts: dict | None 
     return bones, pct
 
 
-def _weld(key: np.ndarray):
+def _weld(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rows of ``key (n, c) float32`` that are bit-identical: ``first (u,)`` (one row of each
     kind, in first-seen order of the sorted hashes) and ``inverse (n,)``. Rows are hashed to 64
     bits and the hashes sorted; a collision (never seen) falls back to sorting the whole rows."""
@@ -240,10 +252,18 @@ def _weld(key: np.ndarray):
     return first, inv
 
 
-def _decode_sub(sub, pal_bones, pal_pct, weld: bool):
+def _decode_sub(sub: SubModel, pal_bones: np.ndarray, pal_pct: np.ndarray, weld: bool) -> tuple[np.ndarray, ...] | None:
     """Arrays of one sub-model's render and morph groups (shadow groups skipped); the chunks are
     gathered first and decoded in one vectorised pass (strips -> triangles, slots -> palettes)."""
-    pos, nrm, uv, refs_cat, ref_base, nvs, strips, morph, mats = [], [], [], [], [], [], [], [], []
+    pos_l: list[np.ndarray] = []
+    nrm_l: list[np.ndarray] = []
+    uv_l: list[np.ndarray] = []
+    refs_cat: list[np.ndarray] = []
+    ref_base: list[int] = []
+    nvs: list[int] = []
+    strips: list[np.ndarray] = []
+    morph_l: list[np.ndarray] = []
+    mats_l: list[np.ndarray] = []
     k = sub.morph_keys
     nref = 0
     for g in sub.groups:
@@ -260,31 +280,32 @@ def _decode_sub(sub, pal_bones, pal_pct, weld: bool):
                 for ki, key in enumerate(m.morphs[:k]):
                     n = min(nv, len(key.deltas))
                     d[ki, :n] = key.deltas[:n]
-                morph.append(d)
+                morph_l.append(d)
                 for c in chunks:
-                    mats.append(np.full(c.n_vertices, g.material, np.int64))
-                    pos.append(c.positions)
-                    nrm.append(c.normals)
-                    uv.append(c.uv)
+                    assert c.uv is not None and c.normals is not None  # not a shadow chunk
+                    mats_l.append(np.full(c.n_vertices, g.material, np.int64))
+                    pos_l.append(c.positions)
+                    nrm_l.append(c.normals)
+                    uv_l.append(c.uv)
                     strips.append(c.strip_lengths)
                     nvs.append(c.n_vertices)
                     ref_base.append(nref)
             nref += len(lk.refs)
-    if not pos:
+    if not pos_l:
         return None
     a = SSX_TO_PISTE.astype(np.float32)
-    raw_pos = np.concatenate(pos)
-    uv_raw = np.concatenate(uv)
+    raw_pos = np.concatenate(pos_l)
+    uv_raw = np.concatenate(uv_l)
     slots = (uv_raw[:, 2].astype(np.int64) - SLOT_TRANSFORM_BASE) // 4
     pidx = np.concatenate(refs_cat)[np.repeat(np.asarray(ref_base, np.int64), nvs) + slots]
     tris = strip_triangles(np.concatenate(strips))
     p0, p1, p2 = raw_pos[tris[:, 0]], raw_pos[tris[:, 1]], raw_pos[tris[:, 2]]
     tris = tris[~((p0 == p1).all(1) | (p1 == p2).all(1) | (p0 == p2).all(1))]  # degenerate
     pos = (raw_pos @ a.T) * np.float32(CM)
-    nrm = (np.concatenate(nrm).astype(np.float32) / np.float32(NORMAL_SCALE)) @ a.T
+    nrm = (np.concatenate(nrm_l).astype(np.float32) / np.float32(NORMAL_SCALE)) @ a.T
     uv = uv_raw[:, :2].astype(np.float32) / np.float32(UV_SCALE)
-    morph = np.concatenate(morph, axis=1).astype(np.float32) @ a.T * np.float32(CM / MORPH_SCALE)
-    mats = np.concatenate(mats)
+    morph = np.concatenate(morph_l, axis=1).astype(np.float32) @ a.T * np.float32(CM / MORPH_SCALE)
+    mats = np.concatenate(mats_l)
     if weld and len(pos):
         first, inv = _weld(np.concatenate([pos, nrm, uv, pidx[:, None].astype(np.float32), mats[:, None].astype(np.float32),
                                            morph.transpose(1, 0, 2).reshape(len(pos), -1)], axis=1))
@@ -297,7 +318,8 @@ def _decode_sub(sub, pal_bones, pal_pct, weld: bool):
     return pos, nrm, uv, pidx, tris, morph, mats
 
 
-def _mesh_from(name, arrays, pal_bones, pal_pct, morph_names):
+def _mesh_from(name: str, arrays: tuple[np.ndarray, ...], pal_bones: np.ndarray, pal_pct: np.ndarray,
+               morph_names: list[str]) -> SkinnedMesh:
     pos, nrm, uv, pidx, tris, morph = arrays[:6]
     bones, pct = pal_bones[pidx], pal_pct[pidx]
     order = np.argsort(-pct, axis=1, kind="stable")[:, :4]
@@ -312,7 +334,7 @@ def _mesh_from(name, arrays, pal_bones, pal_pct, morph_names):
                        morph_positions=morph, morph_names=morph_names, skinned=True, group=name)
 
 
-def _file_palette(pal_bones, pal_pct, pidx) -> Palette:
+def _file_palette(pal_bones: np.ndarray, pal_pct: np.ndarray, pidx: np.ndarray) -> Palette:
     """A piste :class:`Palette` of the file's own palettes (entries used by ``pidx``)."""
     used, index = np.unique(pidx, return_inverse=True)
     b, p = pal_bones[used], pal_pct[used]
@@ -330,7 +352,7 @@ def _file_palette(pal_bones, pal_pct, pidx) -> Palette:
                    max_bones=int(b.shape[1]))
 
 
-def mpf_to_model(*files, name: str | None = None, weld: bool = True) -> SsxModel:
+def mpf_to_model(*files: MpfFile, name: str | None = None, weld: bool = True) -> SsxModel:
     """Decode ``.mpf`` files (a body file and optionally its head file) into an :class:`SsxModel`.
 
     ``meshes``: one :class:`SkinnedMesh` per sub-model of the top LOD tier (``...3000``, or all
@@ -343,13 +365,14 @@ def mpf_to_model(*files, name: str | None = None, weld: bool = True) -> SsxModel
         raise ConfigError("mpf_to_model needs at least one MpfFile")
     notes: list = []
     sk, base, order = _skeleton(list(files), notes)
-    counts = {}
+    counts: dict[int, int] = {}
     for f in files:
         for s in f.models:
             if len(s.bones):
                 counts.setdefault(s.file_id, len(s.bones))
     if sk is None:
         raise ValidationError("the .mpf files hold no bones: not a rider model")
+    assert order is not None  # None only without bones (sk is None)
     new_index = np.empty(len(order), np.int64)
     new_index[order] = np.arange(len(order))
     tiers: dict = {}
@@ -361,12 +384,19 @@ def mpf_to_model(*files, name: str | None = None, weld: bool = True) -> SsxModel
     ordered = [t for t in LOD_TIERS if t in tiers] + ([""] if "" in tiers else [])
     if not ordered:
         raise ValidationError("the .mpf files hold no render sub-models")
-    lods, top_meshes = [], []
-    materials, mat_of, lod_mats, top_mats = [], {}, [], []  # (texture id, index) per distinct material
+    lods: list[LOD] = []
+    top_meshes: list[SkinnedMesh] = []
+    mat_of: dict[tuple[str, int], int] = {}
+    lod_mats: list[np.ndarray] = []
+    top_mats: list[np.ndarray] = []  # (texture id, index) per distinct material
     for li, t in enumerate(ordered):
         subs = tiers[t]
-        meshes, pidx_all, off, vmats = [], [], 0, []
-        bones_all, pct_all = [], []
+        meshes: list[SkinnedMesh] = []
+        pidx_all: list[np.ndarray] = []
+        vmats: list[np.ndarray] = []
+        off = 0
+        bones_all: list[np.ndarray] = []
+        pct_all: list[np.ndarray] = []
         for s in subs:
             pb, pp = _palette_tables(s, base, new_index, counts)
             arrays = _decode_sub(s, pb, pp, weld)
@@ -396,12 +426,12 @@ def mpf_to_model(*files, name: str | None = None, weld: bool = True) -> SsxModel
     for lod in lods:
         lod.ratio = lod.n_triangles / n0
     nm = name or (files[0].path and str(files[0].path).rsplit("/", 1)[-1].rsplit(".", 1)[0]) or "mpf"
-    materials = sorted(mat_of, key=mat_of.get)
+    materials = sorted(mat_of, key=lambda m: mat_of[m])
     return SsxModel(name=nm, skeleton=sk, meshes=top_meshes, lods=lods, notes=notes, files=list(files),
                     path=files[0].path, materials=materials, mesh_materials=top_mats, lod_materials=lod_mats)
 
 
-def _texture_id(sub, i: int) -> str:
+def _texture_id(sub: SubModel, i: int) -> str:
     """The main texture id (4 characters, e.g. ``suit``) of material ``i`` of ``sub`` ("" when
     the slot is empty or the index is past the material records)."""
     if not 0 <= i < len(sub.materials):
@@ -410,7 +440,7 @@ def _texture_id(sub, i: int) -> str:
     return raw.split(b"\0", 1)[0].decode("ascii", "replace").strip()
 
 
-def _merge(name, meshes):
+def _merge(name: str, meshes: list[SkinnedMesh]) -> SkinnedMesh:
     if len(meshes) == 1:
         m = meshes[0]
         return SkinnedMesh(name=name, positions=m.positions, indices=m.indices, normals=m.normals, uv=m.uv,
@@ -428,7 +458,8 @@ def _merge(name, meshes):
                        indices=np.concatenate([m.indices + o for m, o in zip(meshes, off)]),
                        normals=np.concatenate([m.normals for m in meshes]), uv=np.concatenate([m.uv for m in meshes]),
                        joints=np.concatenate([m.joints for m in meshes]),
-                       weights=np.concatenate([m.weights for m in meshes]), morph_positions=morph,
+                       weights=np.concatenate([m.weights for m in meshes]),
+                       morph_positions=morph,  # type: ignore[arg-type]  # None: __post_init__ makes it empty
                        morph_names=names, skinned=True, group=name)
 
 
@@ -440,7 +471,8 @@ def _beside(path: Path, stem: str, suffix: str) -> Path | None:
     return None
 
 
-def mpf_partners(path, texture=None) -> tuple:
+def mpf_partners(path: str | os.PathLike[str],
+                 texture: str | Path | Sequence[str | os.PathLike[str]] | None = None) -> tuple:
     """The files that go with the rider model ``path``: ``(head, banks)``. ``head``: the
     ``<name>_head.mpf`` beside a ``<name>_body.mpf`` (None when absent or not a body file);
     ``banks``: ``texture`` (a path or a list of paths, as given) or else the ``.ssh`` banks with the
