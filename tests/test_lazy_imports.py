@@ -39,6 +39,8 @@ NOT_IMPORTED = ("piste.pipeline.build", "piste.pipeline.cache", "piste.pipeline.
                 "piste.terrain.stats", "piste.character.retarget",
                 # (OpenSSL) hashes bundle members when written or verified and keys bakes: neither is a render
                 "hashlib",
+                # the glTF extension decoders (a bundle's rider material is a MaterialInfo: formats.gltf.material)
+                "piste.formats.gltf.extensions",
                 "dask", "distributed",
                 "scipy", "tifffile")
 

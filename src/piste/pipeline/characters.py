@@ -32,7 +32,7 @@ from piste.character.lod import LOD
 from piste.character.model import Clip, Model, Skeleton, SkinnedMesh, Track
 from piste.character.palette import Palette
 from piste.errors import ConfigError, FormatError
-from piste.formats.gltf.extensions import MaterialInfo
+from piste.formats.gltf.material import MaterialInfo
 from piste.pipeline.object_atlas import pack_object_atlas, primitive_images
 from piste.world.riders import merged_mesh as _merged
 

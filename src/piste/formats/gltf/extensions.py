@@ -33,13 +33,13 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from piste.errors import FormatError
 from piste.formats import safe_io
+from piste.formats.gltf.material import MaterialInfo
 
 # ``r`` below is the glTF reader of piste.formats.gltf.read (which imports this module) and the
 # documents are JSON wrapped by Node_: both typed Any
@@ -161,28 +161,6 @@ def texture_transform_matrix(offset: Sequence[float] | np.ndarray = (0.0, 0.0), 
     rm = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]], dtype=np.float64)
     sm = np.array([[scale[0], 0, 0], [0, scale[1], 0], [0, 0, 1]], dtype=np.float64)
     return t @ rm @ sm
-
-
-@dataclass
-class MaterialInfo:
-    """What piste keeps of a glTF material.
-
-    base_color : (4,) float32 linear RGBA factor;  base_texture : texture index or None
-    texcoord : UV set of the base-colour texture;  uv_transform : (3, 3) KHR_texture_transform matrix
-    alpha_mode : "OPAQUE" | "MASK" | "BLEND";  alpha_cutoff;  double_sided
-    emissive : (3,) linear RGB (factor x KHR_materials_emissive_strength);  unlit (KHR_materials_unlit)
-    """
-
-    name: str = ""
-    base_color: np.ndarray = field(default_factory=lambda: np.ones(4, np.float32))
-    base_texture: int | None = None
-    texcoord: int = 0
-    uv_transform: np.ndarray = field(default_factory=lambda: np.eye(3))
-    alpha_mode: str = "OPAQUE"
-    alpha_cutoff: float = 0.5
-    double_sided: bool = False
-    emissive: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
-    unlit: bool = False
 
 
 def _finite(r: Any, v: Any, n: int, fld: str) -> np.ndarray:
