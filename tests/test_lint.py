@@ -69,6 +69,9 @@ STRICT_REQUIRED = (
     "piste.character.skinning", "piste.formats.ssx.synth",
     "piste.formats.ssx.multitool", "piste.formats.ssx.multitool_objects",
     "piste.formats.ssx.afl", "piste.formats.ssx.mpf", "piste.formats.ssx.mpf_encode", "piste.formats.ssx.mpf_model",
+    "piste.formats.gltf.read", "piste.formats.gltf.write",
+    "piste.formats.gltf", "piste.formats.ssx",  # whole packages: every module, and any new one
+    "piste.formats.gltf.material",
 )
 
 

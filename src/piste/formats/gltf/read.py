@@ -37,7 +37,10 @@ What is imported
 from __future__ import annotations
 
 import io
+import os
+from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -61,18 +64,18 @@ _FLOAT = 5126
 class _Reader:
     """Validated access to one glTF document's buffers, accessors and images."""
 
-    def __init__(self, path: Path, g, allow_paths=()) -> None:
+    def __init__(self, path: Path, g: Any, allow_paths: Iterable[str | os.PathLike[str]] = ()) -> None:
         self.path = path
         self.g = g
         self.allow_paths = tuple(allow_paths)  # folders besides the model's own that URIs may name
         self._buffers: dict[int, bytes] = {}
-        self._accessors: dict[int, np.ndarray] = {}
+        self._accessors: dict[tuple[int, bool], np.ndarray] = {}
 
     def err(self, field: str, message: str) -> FormatError:
         return FormatError(self.path, message, field=field)
 
     # ------------------------------------------------------------------ lists
-    def item(self, kind: str, index, field: str):
+    def item(self, kind: str, index: Any, field: str) -> Any:
         lst = getattr(self.g, kind) or []
         if not isinstance(index, (int, np.integer)) or isinstance(index, bool) or not 0 <= index < len(lst):
             raise self.err(field, f"refers to {kind}[{index}] but the file has {len(lst)} {kind}")
@@ -108,13 +111,13 @@ class _Reader:
         self._buffers[i] = data
         return data
 
-    def _byte_cap(self, n, field: str) -> int:
+    def _byte_cap(self, n: Any, field: str) -> int:
         """A buffer's declared ``byteLength``, checked to be an integer within the cap before reading."""
         if isinstance(n, bool) or not isinstance(n, int) or not 0 <= n <= safe_io.MAX_BUFFER_BYTES:
             raise self.err(field + ".byteLength", f"expected a byte count in 0..{safe_io.MAX_BUFFER_BYTES}, got {n!r}")
         return n
 
-    def buffer_view(self, i: int, field: str):
+    def buffer_view(self, i: int, field: str) -> tuple[Any, bytes, int, int]:
         bv = self.item("bufferViews", i, field)
         bfield = f"bufferViews[{i}]"
         data = self.buffer(bv.buffer) if isinstance(bv.buffer, int) else None
@@ -127,7 +130,8 @@ class _Reader:
         return bv, data, off, ln
 
     # ------------------------------------------------------------------ accessors
-    def accessor(self, i, field: str, types=None, comps=None, floatify: bool = True) -> np.ndarray:
+    def accessor(self, i: Any, field: str, types: tuple[str, ...] | None = None, comps: tuple[int, ...] | None = None,
+                 floatify: bool = True) -> np.ndarray:
         """Accessor ``i`` as ``(count, ncomp)`` array (float64 when ``floatify`` or normalized).
 
         ``types``: allowed accessor types; ``comps``: allowed component types (5126 float, ...).
@@ -182,7 +186,7 @@ class _Reader:
         self._accessors[key] = arr
         return arr
 
-    def _apply_sparse(self, a, arr, afield):
+    def _apply_sparse(self, a: Any, arr: np.ndarray, afield: str) -> np.ndarray:
         sp = a.sparse
         n = sp.count
         sfield = afield + ".sparse"
@@ -211,7 +215,7 @@ class _Reader:
         return arr
 
     # ------------------------------------------------------------------ images
-    def image(self, i: int, field: str):
+    def image(self, i: int, field: str) -> np.ndarray:
         from PIL import Image
 
         img = self.item("images", i, field)
@@ -240,7 +244,7 @@ class _Reader:
 
 
 # ---------------------------------------------------------------------------------------------
-def _node_local(r: _Reader, i: int, n):
+def _node_local(r: _Reader, i: int, n: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     field = f"nodes[{i}]"
     if n.matrix is not None:
         m = np.asarray(n.matrix, dtype=np.float64)
@@ -263,7 +267,7 @@ def _node_local(r: _Reader, i: int, n):
     return t, q / nq, s
 
 
-def _unique(names):
+def _unique(names: Iterable[str]) -> list[str]:
     seen: dict[str, int] = {}
     out = []
     for n in names:
@@ -281,7 +285,7 @@ def _unique(names):
     return out
 
 
-def _triangles(r: _Reader, prim, nv: int, field: str) -> np.ndarray | None:
+def _triangles(r: _Reader, prim: Any, nv: int, field: str) -> np.ndarray | None:
     mode = 4 if prim.mode is None else prim.mode
     if mode not in (4, 5, 6):
         return None
@@ -311,7 +315,8 @@ def _triangles(r: _Reader, prim, nv: int, field: str) -> np.ndarray | None:
     return tri[keep].astype(np.uint32)
 
 
-def _skin_attributes(r: _Reader, attrs, nv: int, n_joints: int, field: str):
+def _skin_attributes(r: _Reader, attrs: Any, nv: int, n_joints: int,
+                     field: str) -> tuple[np.ndarray, np.ndarray] | tuple[None, None]:
     """JOINTS_n / WEIGHTS_n merged to ``(v, 4) int64`` joints (skin-local) and ``(v, 4)`` weights."""
     js, ws = [], []
     k = 0
@@ -351,7 +356,7 @@ def _skin_attributes(r: _Reader, attrs, nv: int, n_joints: int, field: str):
     return j, w
 
 
-def load_gltf(path, allow_paths=(), frame: GltfFrame | None = None) -> "Model":  # noqa: F821 - forward reference
+def load_gltf(path: str | os.PathLike[str], allow_paths: Iterable[str | os.PathLike[str]] = (), frame: GltfFrame | None = None) -> Model:
     """Load a glTF 2.0 file (``.gltf`` with external/embedded buffers, or ``.glb``) as a Model.
 
     Buffer and image URIs are read only inside the model's folder, or inside one of the folders
@@ -419,19 +424,19 @@ def load_gltf(path, allow_paths=(), frame: GltfFrame | None = None) -> "Model": 
     skins = g.skins or []
     skin_ibm = []
     for si, s in enumerate(skins):
-        joints = list(s.joints or [])
-        if not joints:
+        sj = list(s.joints or [])
+        if not sj:
             raise r.err(f"skins[{si}].joints", "is empty")
-        for k, j in enumerate(joints):
+        for k, j in enumerate(sj):
             r.item("nodes", j, f"skins[{si}].joints[{k}]")
         if s.inverseBindMatrices is not None:
             ibm = r.accessor(s.inverseBindMatrices, f"skins[{si}].inverseBindMatrices", types=("MAT4",), comps=(_FLOAT,))
-            if ibm.shape[0] < len(joints):
+            if ibm.shape[0] < len(sj):
                 raise r.err(f"skins[{si}].inverseBindMatrices",
-                            f"has {ibm.shape[0]} matrices for {len(joints)} joints")
-            ibm = ibm[: len(joints)].reshape(-1, 4, 4).transpose(0, 2, 1)  # column-major -> row-major
+                            f"has {ibm.shape[0]} matrices for {len(sj)} joints")
+            ibm = ibm[: len(sj)].reshape(-1, 4, 4).transpose(0, 2, 1)  # column-major -> row-major
         else:
-            ibm = np.tile(np.eye(4), (len(joints), 1, 1))
+            ibm = np.tile(np.eye(4), (len(sj), 1, 1))
         skin_ibm.append(ibm)
 
     # ---------------------------------------------------------------- which nodes are bones
@@ -471,7 +476,7 @@ def load_gltf(path, allow_paths=(), frame: GltfFrame | None = None) -> "Model": 
         b_nodes = list(bone_nodes)
         ibm_all = [gltf_checks.rest_inverse(node_world[i]) for i in b_nodes]  # identity if scaled to 0
         is_joint = [False] * len(b_nodes)
-        idx_of = {n: k for k, n in enumerate(b_nodes)}
+        idx_of: dict[int | tuple[int, int], int] = {n: k for k, n in enumerate(b_nodes)}
         names = [node_names[i] for i in b_nodes]
         par = [idx_of.get(int(parent[i]), -1) if parent[i] >= 0 else -1 for i in b_nodes]
         rt = [local_t[i] for i in b_nodes]
@@ -512,7 +517,7 @@ def load_gltf(path, allow_paths=(), frame: GltfFrame | None = None) -> "Model": 
     # ---------------------------------------------------------------- materials / textures
     image_cache: dict[int, np.ndarray] = {}
 
-    def material(mi, field):
+    def material(mi: Any, field: str) -> tuple[np.ndarray | None, np.ndarray]:
         if mi is None:
             return None, np.ones(4, np.float32)
         m = r.item("materials", mi, field)
@@ -596,14 +601,16 @@ def load_gltf(path, allow_paths=(), frame: GltfFrame | None = None) -> "Model": 
                     mnrm[ti] = d
             dw = np.zeros(k)
             if default_w is not None and k:
-                dw = gltf_checks.float_array(default_w)
-                if dw is None or dw.shape[0] != k or not np.all(np.isfinite(dw)):
+                got = gltf_checks.float_array(default_w)
+                if got is None or got.shape[0] != k or not np.all(np.isfinite(got)):
                     raise r.err(f"meshes[{mi}].weights", f"expected {k} finite morph weights")
+                dw = got
             tex, color = material(prim.material, field + ".material")
             minfo = gltf_ext.material_info(r, prim.material, field + ".material")  # alpha, sides, UV transform
             if uv is not None:
                 uv = gltf_ext.apply_uv_transform(uv, minfo.uv_transform)
             # placement
+            joints: np.ndarray | None
             if skin_i is not None and has_skeleton:
                 j, w = _skin_attributes(r, attrs, nv, len(skins[skin_i].joints), field)
                 if j is None:
@@ -638,7 +645,8 @@ def load_gltf(path, allow_paths=(), frame: GltfFrame | None = None) -> "Model": 
             if uses.get(mi, 0) > 1:
                 name = f"{node_names[ni]}:{name}"
             meshes.append(SkinnedMesh(
-                name=name, positions=pos, indices=tri, normals=nrm, uv=uv, joints=joints, weights=w,
+                # None normals / uv / joints / weights: SkinnedMesh.__post_init__ makes the defaults
+                name=name, positions=pos, indices=tri, normals=nrm, uv=uv, joints=joints, weights=w,  # type: ignore[arg-type]
                 morph_positions=mpos, morph_normals=mnrm, morph_names=[str(x) for x in tnames][:k],
                 morph_default_weights=dw, texture=tex, base_color=color, skinned=skinned, group=group,
                 material=minfo))
@@ -713,20 +721,21 @@ def load_gltf(path, allow_paths=(), frame: GltfFrame | None = None) -> "Model": 
             else:
                 if not has_skeleton or tgt.node not in bone_of_node:
                     continue  # node outside the scene
+                assert skeleton is not None  # built whenever has_skeleton
                 bname = skeleton.names[bone_of_node[tgt.node]]
                 tracks.setdefault(bname, {})[tpath] = tr
         clips[clip_names[ai]] = Clip(clip_names[ai], duration, tracks, wtracks, skeleton=skeleton,
                                      weight_track_mesh_index=wmesh)
 
     # ---------------------------------------------------------------- lights and cameras
-    lights = []
-    cameras = []
+    lights: list[Any] = []
+    cameras: list[Any] = []
     ext = g.extensions if isinstance(g.extensions, dict) else {}
     lpx = ext.get("KHR_lights_punctual")
     light_defs = (lpx.get("lights") if isinstance(lpx, dict) else None) or []
     if not isinstance(light_defs, list):
         raise r.err("extensions.KHR_lights_punctual.lights", f"expected an array, got {type(light_defs).__name__}")
-    for i in np.flatnonzero(in_scene):
+    for i in np.flatnonzero(in_scene).tolist():
         n = nodes[i]
         wm = node_world[i]
         pos = wm[:3, 3].copy()
@@ -748,27 +757,27 @@ def load_gltf(path, allow_paths=(), frame: GltfFrame | None = None) -> "Model": 
                 raise r.err(f"extensions.KHR_lights_punctual.lights[{li}]", str(exc)) from None
         if n.camera is not None:
             c = r.item("cameras", n.camera, f"nodes[{i}].camera")
-            cf, num = f"cameras[{n.camera}]", gltf_checks.number
+            cfield, num = f"cameras[{n.camera}]", gltf_checks.number
             if c.type == "orthographic" and c.orthographic is not None:
-                o, of = c.orthographic, cf + ".orthographic"
+                o, of = c.orthographic, cfield + ".orthographic"
                 znear = num(path, of + ".znear", o.znear, 0.0, 0.0)
-                cf = {"name": c.name or node_names[i], "type": "orthographic", "znear": znear,
+                cdoc = {"name": c.name or node_names[i], "type": "orthographic", "znear": znear,
                       "zfar": num(path, of + ".zfar", o.zfar, lo=znear, lo_open=True),
                       "xmag": num(path, of + ".xmag", o.xmag), "ymag": num(path, of + ".ymag", o.ymag)}
-                cameras.append(camera_from_gltf(cf, pos, fwd, up, frame, len(cameras)))
+                cameras.append(camera_from_gltf(cdoc, pos, fwd, up, frame, len(cameras)))
             else:
                 p = c.perspective
                 if p is None:
                     raise r.err(f"cameras[{n.camera}].perspective", "is missing")
-                pf = cf + ".perspective"
+                pf = cfield + ".perspective"
                 znear = num(path, pf + ".znear", p.znear, lo=0.0, lo_open=True)
-                cf = {"name": c.name or node_names[i], "type": "perspective",
+                cdoc = {"name": c.name or node_names[i], "type": "perspective",
                       "yfov": num(path, pf + ".yfov", p.yfov, lo=0.0, hi=np.pi, lo_open=True, hi_open=True),
                       "aspect": None if p.aspectRatio is None else num(path, pf + ".aspectRatio", p.aspectRatio,
                                                                        lo=0.0, lo_open=True),
                       "znear": znear,
                       "zfar": None if p.zfar is None else num(path, pf + ".zfar", p.zfar, lo=znear, lo_open=True)}
-                cameras.append(camera_from_gltf(cf, pos, fwd, up, frame, len(cameras)))
+                cameras.append(camera_from_gltf(cdoc, pos, fwd, up, frame, len(cameras)))
 
     return Model(name=path.stem, skeleton=skeleton, meshes=meshes, clips=clips, lights=lights, cameras=cameras,
                  path=str(path))

@@ -61,14 +61,20 @@ import dataclasses
 import io
 import json
 import math
+import os
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
+from piste.character.model import Model
 from piste.errors import ConfigError, ValidationError
 from piste.formats.atomic import atomic_path, write_bytes_atomic
 from piste.formats.gltf import units as gltf_units
+from piste.scene_data import AnyLight, Camera
 from piste.transforms import compose_trs, decompose_trs, look_rotation
 
 __all__ = ["TerrainExport", "CharacterExport", "ObjectsExport", "ExportReport", "export_gltf",
@@ -102,7 +108,7 @@ class TerrainExport:
         The light value stored as 255 (float atlases).
     """
 
-    mesh: object
+    mesh: Any  # piste.terrain's TerrainMesh (formats does not import terrain: typed by what it has)
     lightmap: np.ndarray | None = None
     base_texture: np.ndarray | None = None
     lightmap_scale: float = 1.0
@@ -117,7 +123,7 @@ class CharacterExport:
     bone, mesh and clip name (several characters in one file); ``extras`` go on the character node.
     """
 
-    model: object
+    model: Model
     matrix: np.ndarray = field(default_factory=lambda: np.eye(4))
     name: str = "character"
     clips: list | None = None
@@ -157,7 +163,7 @@ class ExportReport:
 
 
 # ---------------------------------------------------------------------------------------------
-def lightmap_to_png_array(atlas, scale: float = 1.0) -> np.ndarray:
+def lightmap_to_png_array(atlas: npt.ArrayLike, scale: float = 1.0) -> np.ndarray:
     """``(H, W, 3) uint8`` of a light-map atlas: float light -> ``round(255 clamp(light / scale))``;
     uint8 atlases are passed through (RGB)."""
     a = np.asarray(atlas)
@@ -170,7 +176,7 @@ def lightmap_to_png_array(atlas, scale: float = 1.0) -> np.ndarray:
     return np.round(np.clip(a[..., :3].astype(np.float64) / scale, 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
-def _png(image) -> bytes:
+def _png(image: npt.ArrayLike) -> bytes:
     from PIL import Image
 
     a = np.ascontiguousarray(np.asarray(image))
@@ -181,12 +187,12 @@ def _png(image) -> bytes:
     return buf.getvalue()
 
 
-def _quat_looking(forward, up) -> list:
+def _quat_looking(forward: npt.ArrayLike, up: npt.ArrayLike) -> list:
     """Node rotation xyzw whose -Z is ``forward`` and +Y is (nearly) ``up`` (Y-up file axes)."""
     return look_rotation(forward, up, fallback=(0.0, 1.0, 0.0))
 
 
-def _trs(matrix, tol: float = 1e-6):
+def _trs(matrix: npt.ArrayLike, tol: float = 1e-6) -> tuple[np.ndarray, np.ndarray, np.ndarray, Any]:
     """``(t, r, s, ok)`` of an affine matrix; ``ok`` False when it has shear (not a TRS)."""
     m = np.asarray(matrix, dtype=np.float64)
     t, r, s = decompose_trs(m)
@@ -214,7 +220,7 @@ class _Builder:
         self._times: dict[bytes, int] = {}
         self._images: dict[int, int] = {}
 
-    def view(self, data: bytes, target=None, stride=None) -> int:
+    def view(self, data: bytes, target: int | None = None, stride: int | None = None) -> int:
         pad = (-len(self.blob)) % 4
         self.blob.extend(b"\0" * pad)
         off = len(self.blob)
@@ -223,7 +229,8 @@ class _Builder:
                                                     byteStride=stride))
         return len(self.g.bufferViews) - 1
 
-    def accessor(self, arr, ctype=_FLOAT, target=None, minmax=False, normalized=False, mat4=False) -> int:
+    def accessor(self, arr: npt.ArrayLike, ctype: int = _FLOAT, target: int | None = None, minmax: bool = False,
+                 normalized: bool = False, mat4: bool = False) -> int:
         arr = np.asarray(arr)
         dt = {_FLOAT: "<f4", _UBYTE: "u1", _USHORT: "<u2", _UINT: "<u4"}[ctype]
         if mat4:
@@ -257,18 +264,18 @@ class _Builder:
         self.g.accessors.append(acc)
         return len(self.g.accessors) - 1
 
-    def indices(self, tri, n_vertices: int) -> int:
+    def indices(self, tri: npt.ArrayLike, n_vertices: int) -> int:
         flat = np.asarray(tri, dtype=np.int64).reshape(-1)
         return self.accessor(flat, _USHORT if n_vertices <= 65535 else _UINT, target=_ELEMENT_ARRAY_BUFFER)
 
-    def times(self, t) -> int:
+    def times(self, t: npt.ArrayLike) -> int:
         a = np.ascontiguousarray(t, dtype="<f4")
         key = a.tobytes()
         if key not in self._times:
             self._times[key] = self.accessor(a, minmax=True)
         return self._times[key]
 
-    def texture(self, image, key=None) -> int:
+    def texture(self, image: npt.ArrayLike, key: int | None = None) -> int:
         k = id(image) if key is None else key
         if k in self._images:
             return self._images[k]
@@ -280,27 +287,27 @@ class _Builder:
         self._images[k] = len(self.g.textures) - 1
         return self._images[k]
 
-    def node(self, **kw) -> int:
+    def node(self, **kw: Any) -> int:
         self.g.nodes.append(self.G.Node(**kw))
         return len(self.g.nodes) - 1
 
-    def mesh(self, name, prims, weights=None, extras=None) -> int:
+    def mesh(self, name: str, prims: list, weights: list | None = None, extras: dict | None = None) -> int:
         self.g.meshes.append(self.G.Mesh(name=name, primitives=prims, weights=weights, extras=extras or {}))
         return len(self.g.meshes) - 1
 
-    def material(self, **kw) -> int:
+    def material(self, **kw: Any) -> int:
         self.g.materials.append(self.G.Material(**kw))
         return len(self.g.materials) - 1
 
 
-def _unit_normals(n, fallback=(0.0, 0.0, 1.0)) -> np.ndarray:
+def _unit_normals(n: npt.ArrayLike, fallback: Sequence[float] = (0.0, 0.0, 1.0)) -> np.ndarray:
     n = np.asarray(n, dtype=np.float64)
     ln = np.linalg.norm(n, axis=1, keepdims=True)
     out = np.where(ln > 1e-12, n / np.where(ln > 1e-12, ln, 1.0), np.asarray(fallback))
     return out.astype(np.float32)
 
 
-def _pbr(b: _Builder, base_color=None, tex=None):
+def _pbr(b: _Builder, base_color: np.ndarray | None = None, tex: int | None = None) -> Any:
     return b.G.PbrMetallicRoughness(
         baseColorFactor=None if base_color is None else [float(x) for x in base_color],
         baseColorTexture=None if tex is None else b.G.TextureInfo(index=tex), metallicFactor=0.0, roughnessFactor=1.0)
@@ -387,7 +394,7 @@ def _add_character(b: _Builder, c: CharacterExport, root_children: list, scene_r
             info = getattr(m, "material", None)  # an imported glTF material (piste.formats.gltf.extensions.MaterialInfo)
             mode = getattr(info, "alpha_mode", None) or ("BLEND" if float(m.base_color[3]) < 1.0 else "OPAQUE")
             mat = b.material(name=p + m.name, pbrMetallicRoughness=_pbr(b, m.base_color, tex), alphaMode=mode,
-                             alphaCutoff=float(info.alpha_cutoff) if mode == "MASK" else None,
+                             alphaCutoff=float(info.alpha_cutoff) if mode == "MASK" and info is not None else None,
                              doubleSided=bool(getattr(info, "double_sided", False)) or None)
             prims.append(b.G.Primitive(attributes=attrs, indices=b.indices(m.indices, nv), material=mat, mode=4,
                                        targets=targets or None))
@@ -409,9 +416,10 @@ def _add_character(b: _Builder, c: CharacterExport, root_children: list, scene_r
         if cname not in model.clips:
             raise ConfigError(f"character {c.name!r} has no clip {cname!r} (clips: {', '.join(model.clips) or 'none'})")
         clip = model.clips[cname]
-        samplers, channels = [], []
+        samplers: list = []
+        channels: list = []
 
-        def add(track, node, path, samplers=samplers, channels=channels) -> None:  # this clip's lists
+        def add(track: Any, node: int, path: str, samplers: list = samplers, channels: list = channels) -> None:  # this clip's lists
             vals = np.asarray(track.values, dtype=np.float64)
             if track.interpolation == "CUBICSPLINE":
                 out = np.stack([track.in_tangents, vals, track.out_tangents], axis=1).reshape(-1, vals.shape[1])
@@ -425,11 +433,12 @@ def _add_character(b: _Builder, c: CharacterExport, root_children: list, scene_r
                                                  target=b.G.AnimationChannelTarget(node=node, path=path)))
 
         for bone, tracks in clip.tracks.items():
-            if sk is None or sk.get(bone) is None:
+            bi = sk.get(bone) if sk is not None else None
+            if bi is None:
                 continue
             for path in ("translation", "rotation", "scale"):
                 if path in tracks:
-                    add(tracks[path], bone_nodes[sk.get(bone)], path)
+                    add(tracks[path], bone_nodes[bi], path)
         for mname, tr in clip.weight_tracks.items():
             if mname in mesh_node_of_group:
                 add(tr, mesh_node_of_group[mname], "weights")
@@ -451,10 +460,10 @@ def _add_objects(b: _Builder, o: ObjectsExport, instancing: str, root_children: 
     cut = o.texture is not None and np.asarray(o.texture).shape[-1] == 4 and int(np.asarray(o.texture)[..., 3].min()) < 255
     mat = b.material(name="objects", pbrMetallicRoughness=_pbr(b, None, tex),  # alpha: pipeline.object_atlas's cut-outs
                      alphaMode="MASK" if cut else None, alphaCutoff=0.5 if cut else None)
-    t, r, s, ok = _trs(mats) if len(mats) else (None, None, None, np.zeros(0, bool))
+    t, r, s, ok = _trs(mats) if len(mats) else (np.zeros((0, 3)), np.zeros((0, 4)), np.zeros((0, 3)), np.zeros(0, bool))
     names = list(o.names) if o.names is not None else [f"{kinds[k]}{i}" for i, k in enumerate(kind)]
 
-    def prim(pos, nrm, uv, tri):
+    def prim(pos: np.ndarray, nrm: np.ndarray, uv: np.ndarray, tri: np.ndarray) -> Any:
         attrs = b.G.Attributes(POSITION=b.accessor(pos, target=_ARRAY_BUFFER, minmax=True),
                                NORMAL=b.accessor(_unit_normals(nrm), target=_ARRAY_BUFFER),
                                TEXCOORD_0=b.accessor(uv, target=_ARRAY_BUFFER))
@@ -489,8 +498,8 @@ def _add_objects(b: _Builder, o: ObjectsExport, instancing: str, root_children: 
     report.objects += int(len(kind))
 
 
-def _add_lights(b: _Builder, lights, root_children: list, report: ExportReport, white: float) -> None:
-    defs = []
+def _add_lights(b: _Builder, lights: Iterable[AnyLight], root_children: list, report: ExportReport, white: float) -> None:
+    defs: list[dict[str, Any]] = []
     for i, li in enumerate(lights):
         d = gltf_units.light_to_gltf(li, white, i)  # piste's units -> lux / candela (None: ambient or negative)
         if d is None:
@@ -511,7 +520,7 @@ def _add_lights(b: _Builder, lights, root_children: list, report: ExportReport, 
     report.lights += len(defs)
 
 
-def _add_cameras(b: _Builder, cameras, root_children: list, report: ExportReport) -> None:
+def _add_cameras(b: _Builder, cameras: Iterable[Camera], root_children: list, report: ExportReport) -> None:
     for c in cameras:
         f = gltf_units.camera_to_gltf(c)
         zfar = f["zfar"]
@@ -533,8 +542,8 @@ def _add_cameras(b: _Builder, cameras, root_children: list, report: ExportReport
 
 
 # ---------------------------------------------------------------------------------------------
-def export_gltf(path, terrain: TerrainExport | None = None, characters=(), objects: ObjectsExport | None = None,
-                lights=(), cameras=(), instancing: str = "ext", extras: dict | None = None,
+def export_gltf(path: str | os.PathLike[str], terrain: TerrainExport | None = None, characters: Iterable[CharacterExport] = (),
+                objects: ObjectsExport | None = None, lights: Iterable[AnyLight] = (), cameras: Iterable[Camera] = (), instancing: str = "ext", extras: dict | None = None,
                 up: str = "y", white: float = gltf_units.DEFAULT_WHITE_LUX) -> ExportReport:
     """Write a glTF 2.0 file: ``.glb`` (one file) or ``.gltf`` (JSON + ``<stem>.bin``), atomically.
 
@@ -608,7 +617,7 @@ def _glb(js: bytes, blob: bytes) -> bytes:
     return struct.pack("<III", 0x46546C67, 2, 12 + len(body)) + body
 
 
-def _clean(x, key=None):
+def _clean(x: Any, key: str | None = None) -> Any:
     """Drop None values, empty lists and empty ``extras`` (glTF forbids empty arrays)."""
     if isinstance(x, dict):
         out = {}
@@ -623,7 +632,7 @@ def _clean(x, key=None):
     return x
 
 
-def _asdict(x):
+def _asdict(x: Any) -> Any:
     """pygltflib's dataclasses as plain JSON values (their field names are the glTF keys); much
     faster than pygltflib's dataclasses-json ``to_json``."""
     if dataclasses.is_dataclass(x) and not isinstance(x, type):
@@ -639,6 +648,6 @@ def _asdict(x):
     return x
 
 
-def _json(g) -> str:
+def _json(g: Any) -> str:
     d = _clean(_asdict(g))
     return json.dumps(d, separators=(",", ":"), sort_keys=True, allow_nan=False)

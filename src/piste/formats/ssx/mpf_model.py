@@ -59,7 +59,7 @@ from dataclasses import dataclass, field
 from math import gcd
 from pathlib import Path
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -73,8 +73,10 @@ from piste.formats.ssx.mpf_layout import (
 )
 from piste.transforms import compose_trs, invert_affine, matrix_to_quat
 
-if TYPE_CHECKING:  # mpf imports this module: a runtime import back would be a cycle
-    from piste.formats.ssx.mpf import MpfFile, SubModel
+# piste.formats.ssx.mpf's MpfFile / SubModel are typed Any here: mpf imports this module, and an
+# import back (even under TYPE_CHECKING) is a cycle tests/test_architecture.py refuses
+_MpfFile = Any
+_SubModel = Any
 
 __all__ = ["SsxModel", "mpf_to_model", "mpf_partners", "euler_to_matrix", "matrix_to_euler", "bone_rotation", "bone_euler",
            "SSX_TO_PISTE", "LOD_TIERS", "CM"]
@@ -210,7 +212,7 @@ def _skeleton(files: list, notes: list) -> tuple[Skeleton | None, dict[int, int]
     return sk, base, order
 
 
-def _palette_tables(sub: SubModel, base: dict, new_index: np.ndarray,
+def _palette_tables(sub: _SubModel, base: dict, new_index: np.ndarray,
                     counts: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The sub-model's palettes as ``bones (p, k) int64`` (skeleton indices), ``percent (p, k)``.
     ``counts``: bones per file id; a palette naming a bone past its file's list is refused (it
@@ -252,7 +254,7 @@ def _weld(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return first, inv
 
 
-def _decode_sub(sub: SubModel, pal_bones: np.ndarray, pal_pct: np.ndarray, weld: bool) -> tuple[np.ndarray, ...] | None:
+def _decode_sub(sub: _SubModel, pal_bones: np.ndarray, pal_pct: np.ndarray, weld: bool) -> tuple[np.ndarray, ...] | None:
     """Arrays of one sub-model's render and morph groups (shadow groups skipped); the chunks are
     gathered first and decoded in one vectorised pass (strips -> triangles, slots -> palettes)."""
     pos_l: list[np.ndarray] = []
@@ -352,7 +354,7 @@ def _file_palette(pal_bones: np.ndarray, pal_pct: np.ndarray, pidx: np.ndarray) 
                    max_bones=int(b.shape[1]))
 
 
-def mpf_to_model(*files: MpfFile, name: str | None = None, weld: bool = True) -> SsxModel:
+def mpf_to_model(*files: _MpfFile, name: str | None = None, weld: bool = True) -> SsxModel:
     """Decode ``.mpf`` files (a body file and optionally its head file) into an :class:`SsxModel`.
 
     ``meshes``: one :class:`SkinnedMesh` per sub-model of the top LOD tier (``...3000``, or all
@@ -431,7 +433,7 @@ def mpf_to_model(*files: MpfFile, name: str | None = None, weld: bool = True) ->
                     path=files[0].path, materials=materials, mesh_materials=top_mats, lod_materials=lod_mats)
 
 
-def _texture_id(sub: SubModel, i: int) -> str:
+def _texture_id(sub: _SubModel, i: int) -> str:
     """The main texture id (4 characters, e.g. ``suit``) of material ``i`` of ``sub`` ("" when
     the slot is empty or the index is past the material records)."""
     if not 0 <= i < len(sub.materials):
