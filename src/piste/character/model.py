@@ -316,7 +316,7 @@ class SkinnedMesh:
     base_color : (4,) float32          base-colour factor (linear RGBA)
     skinned : bool                     joints/weights are meaningful (False: no skeleton)
     group : str                        glTF mesh name this primitive came from
-    material : piste.formats.gltf.extensions.MaterialInfo or None  the glTF material (alpha mode,
+    material : piste.formats.gltf.material.MaterialInfo or None  the glTF material (alpha mode,
                                        double-sided, UV transform (already applied to ``uv``), emissive, unlit)
     """
 
