@@ -72,6 +72,7 @@ STRICT_REQUIRED = (
     "piste.formats.gltf.read", "piste.formats.gltf.write",
     "piste.formats.gltf", "piste.formats.ssx",  # whole packages: every module, and any new one
     "piste.formats.gltf.material",
+    "piste.character.compress", "piste.character.retarget",
 )
 
 

@@ -120,3 +120,10 @@ def test_compressed_clip_retargets_like_the_original(gltf_model):
     a = tgt.world_matrices(clip.sample(0.3, tgt))[:, :3, 3]
     b = tgt.world_matrices(lossy.sample(0.3, tgt))[:, :3, 3]
     assert np.abs(a - b).max() < 0.1
+
+
+def test_clip_error_without_a_skeleton_is_a_clear_error():
+    """Was an AttributeError on None (found by mypy); now a ValidationError, as compress_clip gives."""
+    clip = Clip("c", 1.0, {"a": {"translation": Track(np.array([0.0, 1.0]), np.zeros((2, 3)))}})
+    with pytest.raises(ValidationError, match="no skeleton"):
+        clip_error(clip, clip)

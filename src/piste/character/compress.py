@@ -41,11 +41,13 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.character.animation import sample_track_many
-from piste.character.model import Clip, Track
+from piste.character.model import Clip, Skeleton, Track
 from piste.character.skeleton import world_from_local
 from piste.errors import ValidationError
 from piste.transforms import compose_trs, quat_angle, quat_normalize, quat_slerp
@@ -97,12 +99,14 @@ class CompressedTrack:
     @property
     def n_keys(self) -> int:
         if self.kind == "animated":
+            assert self.keep is not None  # an animated track always has its kept keys
             return int(self.keep.sum())
         return 1 if self.kind == "constant" else 0
 
     def nbytes(self, n_grid: int) -> int:
         n = 4
         if self.kind == "constant":
+            assert self.constant is not None
             n += 4 * self.constant.size
         elif self.kind == "animated":
             n += 8 * self.n_components + (n_grid + 7) // 8 + len(self.packed)
@@ -113,6 +117,7 @@ class CompressedTrack:
         c = self.n_components
         q = _unpack_bits(self.packed, self.bits, self.n_keys * c).reshape(-1, c)
         scale = float((1 << self.bits) - 1)
+        assert self.mins is not None and self.extents is not None  # animated tracks only
         v = self.mins.astype(np.float64) + q.astype(np.float64) / scale * self.extents.astype(np.float64)
         return _from_stored(self.path, v, self.drop)
 
@@ -126,7 +131,7 @@ class CompressedClip:
     grid: np.ndarray  # (n_grid,) float32 key times
     tracks: list
     weight_tracks: list
-    skeleton: object
+    skeleton: Skeleton | None
     max_error: float
     virtual_distance: float
     achieved_error: float = float("nan")
@@ -173,20 +178,23 @@ class CompressedClip:
     def n_keys(self) -> int:
         return sum(t.n_keys for t in self.tracks + self.weight_tracks)
 
-    def decompress(self):
+    def decompress(self) -> Clip:
         """The lossy clip as a :class:`piste.character.Clip` (same name, duration, skeleton)."""
         grid = self.grid.astype(np.float64)
         tracks: dict = {}
         wtracks: dict = {}
         for t in self.tracks + self.weight_tracks:
             if t.kind == "default":
+                assert self.skeleton is not None  # default tracks are made only with a skeleton
                 j = self.skeleton.bone_index(t.target)
                 rest = {"translation": self.skeleton.rest_translation, "rotation": self.skeleton.rest_rotation,
                         "scale": self.skeleton.rest_scale}[t.path][j]
-                tr = Track([0.0], rest[None], "LINEAR")
+                tr = Track(np.zeros(1), rest[None], "LINEAR")
             elif t.kind == "constant":
-                tr = Track([0.0], t.constant.astype(np.float64)[None], "LINEAR")
+                assert t.constant is not None
+                tr = Track(np.zeros(1), t.constant.astype(np.float64)[None], "LINEAR")
             else:
+                assert t.keep is not None
                 tr = Track(grid[t.keep], t.values(), t.interpolation)
             if t.path == "weights":
                 wtracks[t.target] = tr
@@ -197,7 +205,7 @@ class CompressedClip:
 
 
 # ---------------------------------------------------------------------------------------------- error metric
-def _local_arrays(clip, skeleton, times):
+def _local_arrays(clip: Clip, skeleton: Skeleton, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Local TRS of every bone at ``times (T,)``: ``(T,b,3), (T,b,4), (T,b,3)`` (rest where untracked)."""
     T = times.size
     b = skeleton.n_bones
@@ -214,12 +222,12 @@ def _local_arrays(clip, skeleton, times):
     return tr, ro, sc
 
 
-def _object_space(clip, skeleton, times):
+def _object_space(clip: Clip, skeleton: Skeleton, times: np.ndarray) -> np.ndarray:
     t, r, s = _local_arrays(clip, skeleton, times)
     return world_from_local(compose_trs(t, r, s), skeleton.parents, skeleton.levels)
 
 
-def _displacement(wa, wb, d):
+def _displacement(wa: np.ndarray, wb: np.ndarray, d: float) -> np.ndarray:
     """Max displacement ``(..., b)`` of virtual points at +-d on each bone axis."""
     dr = (wa[..., :3, :3] - wb[..., :3, :3]) * d  # columns = axis points' rotation part
     dt = wa[..., :3, 3] - wb[..., :3, 3]
@@ -228,7 +236,7 @@ def _displacement(wa, wb, d):
     return np.maximum(plus.max(-1), minus.max(-1))
 
 
-def evaluation_times(clip, rate: float = 60.0) -> np.ndarray:
+def evaluation_times(clip: Clip, rate: float = 60.0) -> np.ndarray:
     """All key times of ``clip``, the midpoints between consecutive ones and a ``rate`` Hz grid."""
     ts = [tr.times for bt in clip.tracks.values() for tr in bt.values()]
     ts += [tr.times for tr in clip.weight_tracks.values()]
@@ -238,7 +246,8 @@ def evaluation_times(clip, rate: float = 60.0) -> np.ndarray:
     return np.unique(np.concatenate([keys, mids, uni]))
 
 
-def clip_error(reference, candidate, skeleton=None, virtual_distance: float = 1.0, times=None):
+def clip_error(reference: Clip, candidate: Clip, skeleton: Skeleton | None = None, virtual_distance: float = 1.0,
+               times: npt.ArrayLike | None = None) -> tuple[float, np.ndarray]:
     """ACL-style object-space error between two clips on ``skeleton``.
 
     Returns ``(max_error, per_bone (b,) float64)``: the largest displacement of any bone's virtual
@@ -246,6 +255,8 @@ def clip_error(reference, candidate, skeleton=None, virtual_distance: float = 1.
     :func:`evaluation_times` of ``reference``).
     """
     sk = skeleton if skeleton is not None else reference.skeleton
+    if sk is None:
+        raise ValidationError(f"clip {reference.name!r} has no skeleton: pass one to clip_error()")
     if times is None:
         times = evaluation_times(reference)
     times = np.asarray(times, dtype=np.float64)
@@ -256,7 +267,7 @@ def clip_error(reference, candidate, skeleton=None, virtual_distance: float = 1.
 
 
 # ---------------------------------------------------------------------------------------------- compression
-def default_tolerances(skeleton):
+def default_tolerances(skeleton: Skeleton) -> tuple[float, float]:
     """Default ``(max_error, virtual_distance)`` from the rest skeleton's size ``L`` (bounding-box
     diagonal of the joint origins): ``max_error = 1e-4 L`` and ``virtual_distance = 0.02 L``
     (ACL's defaults, 0.01 cm and 3 cm, are ~6e-5 and ~0.017 of a 1.8 m human)."""
@@ -266,7 +277,7 @@ def default_tolerances(skeleton):
     return 1e-4 * L, 0.02 * L
 
 
-def _reach(skeleton, d):
+def _reach(skeleton: Skeleton, d: float) -> np.ndarray:
     """Per bone: ``d`` + the largest rest distance from the bone's origin to a descendant's origin."""
     w = skeleton.world_matrices()[:, :3, 3]
     b = skeleton.n_bones
@@ -280,7 +291,7 @@ def _reach(skeleton, d):
     return reach + d
 
 
-def _err(path, a, b, reach):
+def _err(path: str, a: np.ndarray, b: np.ndarray, reach: np.ndarray | float) -> np.ndarray:
     """Per-key displacement error between value arrays ``a, b (n, c)`` for one track."""
     if path == "rotation":
         return quat_angle(a, b) * reach
@@ -289,13 +300,13 @@ def _err(path, a, b, reach):
     return np.linalg.norm(a - b, axis=1) * reach  # translation / weights: reach = 1 / weight scale
 
 
-def _interp(path, va, vb, u):
+def _interp(path: str, va: np.ndarray, vb: np.ndarray, u: np.ndarray) -> np.ndarray:
     if path == "rotation":
         return quat_slerp(va[None], vb[None], u)
     return va[None] + u[:, None] * (vb - va)[None]
 
 
-def _reduce(times, raw, deq, path, reach, tol, step: bool):
+def _reduce(times: np.ndarray, raw: np.ndarray, deq: np.ndarray, path: str, reach: np.ndarray | float, tol: float, step: bool) -> np.ndarray:
     """Douglas-Peucker key selection; returns ``(n,) bool`` kept keys."""
     n = times.size
     keep = np.zeros(n, bool)
@@ -326,7 +337,7 @@ def _reduce(times, raw, deq, path, reach, tol, step: bool):
     return keep
 
 
-def _quantize(vals, bits):
+def _quantize(vals: np.ndarray, bits: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     mins = vals.min(axis=0).astype(np.float32)
     ext = (vals.max(axis=0) - mins).astype(np.float32)
     # make sure the float32 range covers the data
@@ -339,7 +350,7 @@ def _quantize(vals, bits):
     return q, mins, ext, deq
 
 
-def _choose_drop(q) -> int:
+def _choose_drop(q: np.ndarray) -> int:
     """Component of unit quaternions ``q (n, 4)`` to drop (the one farthest from zero over the
     whole track), or -1 to keep all four when every component gets close to zero somewhere."""
     m = np.abs(q).min(axis=0)
@@ -347,7 +358,7 @@ def _choose_drop(q) -> int:
     return c if m[c] >= 0.3 else -1
 
 
-def _to_stored(path, vals, drop):
+def _to_stored(path: str, vals: np.ndarray, drop: int) -> np.ndarray:
     if path == "rotation":
         v = quat_normalize(vals)
         if drop < 0:
@@ -357,7 +368,7 @@ def _to_stored(path, vals, drop):
     return vals
 
 
-def _from_stored(path, vals, drop):
+def _from_stored(path: str, vals: np.ndarray, drop: int) -> np.ndarray:
     if path == "rotation":
         if drop < 0:
             return quat_normalize(vals)
@@ -366,7 +377,8 @@ def _from_stored(path, vals, drop):
     return vals
 
 
-def _compress_track(target, path, raw, grid, reach, budget, rest, step):
+def _compress_track(target: str, path: str, raw: np.ndarray, grid: np.ndarray, reach: np.ndarray | float, budget: float,
+                    rest: np.ndarray | None, step: bool) -> CompressedTrack:
     """Compress one grid-sampled track ``raw (n, c)`` under ``budget`` (model units)."""
     c_out = raw.shape[1]
     if rest is not None and np.max(_err(path, raw, np.broadcast_to(rest, raw.shape), reach)) <= budget:
@@ -379,13 +391,14 @@ def _compress_track(target, path, raw, grid, reach, budget, rest, step):
         return CompressedTrack(target, path, "constant", c_out, constant=cst)
     drop = _choose_drop(quat_normalize(raw)) if path == "rotation" else -1
     stored = _to_stored(path, raw, drop)
-    chosen = None
+    chosen: tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
     for bits in BIT_RATES:
         q, mins, ext, deq_s = _quantize(stored, bits)
         deq = _from_stored(path, deq_s, drop)
         if np.max(_err(path, deq, raw, reach)) <= 0.5 * budget or bits == BIT_RATES[-1]:
             chosen = (bits, q, mins, ext, deq)
             break
+    assert chosen is not None  # the last bit rate is always taken
     bits, q, mins, ext, deq = chosen
     keep = _reduce(grid, raw, deq, path, reach, budget, step)
     return CompressedTrack(target, path, "animated", stored.shape[1], bits=bits, mins=mins, extents=ext, keep=keep,
@@ -393,7 +406,7 @@ def _compress_track(target, path, raw, grid, reach, budget, rest, step):
                            interpolation="STEP" if step else "LINEAR", drop=drop)
 
 
-def _grid(clip, dense_rate=120.0):
+def _grid(clip: Clip, dense_rate: float = 120.0) -> np.ndarray:
     """Key-time grid: union of all key times; tracks that are not LINEAR add a ``dense_rate`` grid."""
     ts = [np.array([0.0])]
     need_dense = False
@@ -406,7 +419,7 @@ def _grid(clip, dense_rate=120.0):
     return g
 
 
-def compress_clip(clip, skeleton=None, max_error: float | None = None, virtual_distance: float | None = None,
+def compress_clip(clip: Clip, skeleton: Skeleton | None = None, max_error: float | None = None, virtual_distance: float | None = None,
                   weight_tolerance: float = 1e-3, max_iterations: int = 12) -> CompressedClip:
     """Compress ``clip`` so that its ACL-style object-space error on ``skeleton`` is ``<= max_error``.
 
@@ -473,10 +486,11 @@ def compress_clip(clip, skeleton=None, max_error: float | None = None, virtual_d
         if err <= max_error:
             break
         scale *= 0.5
+    assert best is not None  # the loop runs at least once
     return best
 
 
-def _compress_weight(name, tr, grid, tol):
+def _compress_weight(name: str, tr: Track, grid: np.ndarray, tol: float) -> CompressedTrack:
     vals = sample_track_many(tr, grid)
     step = tr.interpolation == "STEP"
     if np.max(np.abs(vals - vals[:1])) <= tol * 0.5:
@@ -491,12 +505,13 @@ def _compress_weight(name, tr, grid, tol):
                            packed=_pack_bits(q[keep].reshape(-1), bits), interpolation="STEP" if step else "LINEAR")
 
 
-def _raw_bytes(clip) -> int:
+def _raw_bytes(clip: Clip) -> int:
     """Bytes of the clip as glTF stores it (:attr:`Clip.nbytes`)."""
     return clip.nbytes
 
 
-def compression_report(clips, skeleton=None, max_error=None, virtual_distance=None, **kw) -> list:
+def compression_report(clips: Any, skeleton: Skeleton | None = None, max_error: float | None = None,
+                       virtual_distance: float | None = None, **kw: Any) -> list:
     """Compress each clip (a Model, a dict or a list of clips) and return one dict per clip:
     ``name, bytes_before, bytes_after, ratio, max_error, achieved_error, virtual_distance,
     keys_before, keys_after``. ``bytes_before`` is the glTF float32 storage (see ``_raw_bytes``)."""

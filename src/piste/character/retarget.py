@@ -40,7 +40,9 @@ API
 from __future__ import annotations
 
 import re
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -48,6 +50,9 @@ from piste.character.animation import sample_poses
 from piste.character.coverage import RetargetWarning, check_coverage, coverage
 from piste.errors import ConfigError
 from piste.transforms import quat_conjugate, quat_multiply, quat_normalize, quat_rotate
+
+if TYPE_CHECKING:  # (types only: this module stays importable without model.py's imports)
+    from piste.character.model import Clip, Model, Skeleton
 
 __all__ = ["RetargetWarning", "ROLES", "bone_roles", "builtin_bone_map", "resolve_bone_map", "retarget_clip", "add_clips",
            "coverage", "check_coverage"]
@@ -130,15 +135,15 @@ def _name_role(name: str) -> str | None:
     return stem
 
 
-def _children(parents) -> list[list[int]]:
-    ch = [[] for _ in range(len(parents))]
+def _children(parents: Sequence[int] | np.ndarray) -> list[list[int]]:
+    ch: list[list[int]] = [[] for _ in range(len(parents))]
     for i, p in enumerate(parents):
         if p >= 0:
             ch[p].append(i)
     return ch
 
 
-def _depth_below(ch) -> np.ndarray:
+def _depth_below(ch: list[list[int]]) -> np.ndarray:
     d = np.zeros(len(ch), np.int64)
     for i in range(len(ch) - 1, -1, -1):  # parents come before children
         if ch[i]:
@@ -146,14 +151,14 @@ def _depth_below(ch) -> np.ndarray:
     return d
 
 
-def _chain(i: int, ch, depth, n: int) -> list[int]:
+def _chain(i: int, ch: list[list[int]], depth: np.ndarray, n: int) -> list[int]:
     out = [i]
     while len(out) < n and ch[out[-1]]:
         out.append(max(ch[out[-1]], key=lambda c: depth[c]))
     return out
 
 
-def _structural_roles(sk) -> dict[int, str]:
+def _structural_roles(sk: Skeleton) -> dict[int, str]:
     """Roles from the hierarchy and rest geometry (see the module docstring)."""
     par = np.asarray(sk.parents)
     ch = _children(par)
@@ -164,7 +169,7 @@ def _structural_roles(sk) -> dict[int, str]:
         return {}
     big = sorted((c for c in ch[hips] if depth[c] >= 2), key=lambda c: -depth[c])
 
-    def branch_point(i):  # first bone at or below i with >= 3 children that have children or are long
+    def branch_point(i: int) -> int | None:  # first bone at or below i with >= 3 children that have children or are long
         stack = [i]
         while stack:
             j = stack.pop(0)
@@ -216,7 +221,7 @@ def _structural_roles(sk) -> dict[int, str]:
         fwd = fwd / max(np.linalg.norm(fwd), 1e-12)
     left = np.cross(up, fwd)
 
-    def side(chain_bones):
+    def side(chain_bones: Iterable[int | None]) -> str:
         b = next(x for x in chain_bones if x is not None)
         return "l" if np.dot(pos[b] - pos[hips], left) > 0 else "r"
 
@@ -226,13 +231,13 @@ def _structural_roles(sk) -> dict[int, str]:
             roles[b] = f"{stem}_{s}"
     for ac in arm_chains:
         s = side(ac)
-        for b, stem in zip(ac, ("clavicle", "upperarm", "lowerarm", "hand")):
-            if b is not None:
-                roles[b] = f"{stem}_{s}"
+        for ab, stem in zip(ac, ("clavicle", "upperarm", "lowerarm", "hand")):
+            if ab is not None:
+                roles[ab] = f"{stem}_{s}"
     return roles
 
 
-def bone_roles(sk) -> dict[str, str]:
+def bone_roles(sk: Skeleton) -> dict[str, str]:
     """``{bone name: role}`` for the bones of ``sk`` that can be labelled (see the module docstring)."""
     roles: dict[int, str] = {}
     used = set()
@@ -261,7 +266,7 @@ def bone_roles(sk) -> dict[str, str]:
     return {sk.names[i]: r for i, r in roles.items()}
 
 
-def builtin_bone_map(source, target) -> dict[str, str]:
+def builtin_bone_map(source: Skeleton, target: Skeleton) -> dict[str, str]:
     """``{source bone: target bone}`` joined on :func:`bone_roles`; bones with the same name in both
     are mapped to themselves first, unless both are labelled with different roles (a false
     friend: the rider's ``spine1`` is not an SSX rig's ``spine1`` when that one is its chest)."""
@@ -278,7 +283,7 @@ def builtin_bone_map(source, target) -> dict[str, str]:
     return out
 
 
-def resolve_bone_map(bone_map, source, target) -> dict[str, str]:
+def resolve_bone_map(bone_map: str | dict[str, str] | None, source: Skeleton, target: Skeleton) -> dict[str, str]:
     """A ``{source: target}`` dict from ``bone_map``: ``"builtin"``, a dict (checked against both
     skeletons), or None (names as they are)."""
     if bone_map is None:
@@ -295,7 +300,7 @@ def resolve_bone_map(bone_map, source, target) -> dict[str, str]:
         raise ConfigError(f"bone_map: no bone {bad_s[0]!r} in the clip's skeleton (it has {', '.join(source.names[:8])}, ...)")
     if bad_t:
         raise ConfigError(f"bone_map: no bone {bad_t[0]!r} in the target skeleton (it has {', '.join(target.names[:8])}, ...)")
-    seen = {}
+    seen: dict[str, str] = {}
     for k, v in bone_map.items():
         if v in seen:
             raise ConfigError(f"bone_map: bones {seen[v]!r} and {k!r} both map to {v!r}")
@@ -303,8 +308,9 @@ def resolve_bone_map(bone_map, source, target) -> dict[str, str]:
     return dict(bone_map)
 
 
-def retarget_clip(clip, target, bone_map="builtin", source=None, warn: bool = True, name: str | None = None,
-                  mode: str | None = None):
+def retarget_clip(clip: Clip, target: Skeleton, bone_map: str | dict[str, str] | None = "builtin",
+                  source: Skeleton | None = None, warn: bool = True, name: str | None = None,
+                  mode: str | None = None) -> Clip:
     """A copy of ``clip`` whose tracks are named for ``target``'s bones.
 
     ``source``: the clip's skeleton (default ``clip.skeleton``); ``bone_map``: see
@@ -351,7 +357,7 @@ def retarget_clip(clip, target, bone_map="builtin", source=None, warn: bool = Tr
     return out
 
 
-def _world(parents, t, r):
+def _world(parents: np.ndarray, t: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World rotations ``(m, b, 4)`` and positions ``(m, b, 3)`` from local ``t (m, b, 3)``,
     ``r (m, b, 4)`` (parents first; scale ignored)."""
     wr, wp = np.empty_like(r), np.empty_like(t)
@@ -364,7 +370,7 @@ def _world(parents, t, r):
     return wr, wp
 
 
-def _bake_world(clip, src, renamed, dst, mapped: set) -> dict:
+def _bake_world(clip: Clip, src: Skeleton, renamed: Skeleton, dst: Skeleton, mapped: set) -> dict:
     """LINEAR tracks for ``dst`` with the ``world`` rule (:func:`retarget_clip`): ``clip`` is the
     source clip on its skeleton ``src`` (all its tracks, mapped or not, move the source's joints),
     ``renamed`` is ``src`` with the mapped bones named for ``dst``."""
@@ -381,7 +387,7 @@ def _bake_world(clip, src, renamed, dst, mapped: set) -> dict:
     ws_r, ws_p = _world(src.parents, st, sr)
     ws_r0, ws_p0 = _world(src.parents, rs_t, rs_r)
     wt_r0, wt_p0 = _world(dst.parents, dst.rest_translation[None], dst.rest_rotation[None])
-    moves = {renamed.names[src.get(b)] for b, bt in clip.tracks.items() if "translation" in bt and src.get(b) is not None}
+    moves = {renamed.names[bi] for b, bt in clip.tracks.items() if "translation" in bt and (bi := src.get(b)) is not None}
     wr = np.empty((m, dst.n_bones, 4))
     wp = np.empty((m, dst.n_bones, 3))
     out = {}
@@ -413,12 +419,14 @@ def _bake_world(clip, src, renamed, dst, mapped: set) -> dict:
     return out
 
 
-def _bake(tracks, src, dst, mode: str) -> dict:
+def _bake(tracks: dict, src: Skeleton, dst: Skeleton, mode: str) -> dict:
     """Tracks with the ``scaled`` / ``relative`` retarget rule applied to every key (and tangent)."""
     out = {}
     for bone, bt in tracks.items():
         i, j = src.get(bone), dst.get(bone)
         nb = {}
+        f: Callable[..., np.ndarray]  # (v) -> mapped v; the lambdas bind their constants as defaults
+        lin: Callable[..., np.ndarray]
         for path, tr in bt.items():
             if path == "rotation":
                 if mode == "relative":
@@ -450,7 +458,8 @@ def _bake(tracks, src, dst, mode: str) -> dict:
     return out
 
 
-def add_clips(model, source_model, bone_map="builtin", clips=None, mode: str = "relative", warn: bool = True):
+def add_clips(model: Model, source_model: Model, bone_map: str | dict[str, str] | None = "builtin",
+              clips: Iterable[str] | None = None, mode: str = "relative", warn: bool = True) -> Model:
     """A copy of ``model`` with ``source_model``'s clips (all, or the names in ``clips``) retargeted
     onto it (baked with ``mode``) and added; a name the model already has gets the source model's
     name in front (``"Fox:Run"``)."""
