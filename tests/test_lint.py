@@ -73,6 +73,8 @@ STRICT_REQUIRED = (
     "piste.formats.gltf", "piste.formats.ssx",  # whole packages: every module, and any new one
     "piste.formats.gltf.material",
     "piste.character.compress", "piste.character.retarget",
+    "piste.character.rider", "piste.character.coverage",
+    "piste.character",  # the whole package: every module, and any new one
 )
 
 

@@ -23,9 +23,13 @@ Units are metres, +Y up. The board lies along X (nose at +X, travel direction); 
 
 from __future__ import annotations
 
+import os
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.character.model import Clip, Model, Skeleton, SkinnedMesh, Track
 from piste.character.morph import vertex_normals
@@ -85,36 +89,36 @@ _MOUTH = (0.36, 0.0)
 
 
 # --------------------------------------------------------------------------- small math helpers
-def _smoothstep(x):
+def _smoothstep(x: npt.ArrayLike) -> np.ndarray:
     x = np.clip(x, 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
 
 
-def _ramp(x, a, b):
+def _ramp(x: npt.ArrayLike, a: float, b: float) -> np.ndarray:
     """0 below a, 1 above b, smooth in between (a > b reverses it)."""
     return _smoothstep((np.asarray(x, dtype=np.float64) - a) / (b - a))
 
 
-def _normalize(v):
+def _normalize(v: npt.ArrayLike) -> np.ndarray:
     v = np.asarray(v, dtype=np.float64)
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.where(n > 0, n, 1.0)
 
 
-def _axis_angle(axis, degrees):
+def _axis_angle(axis: npt.ArrayLike, degrees: float) -> np.ndarray:
     axis = _normalize(np.asarray(axis, dtype=np.float64))
     h = np.radians(degrees) / 2.0
     return np.concatenate([axis * np.sin(h), [np.cos(h)]])
 
 
-def _qmul(*qs):
+def _qmul(*qs: npt.ArrayLike) -> np.ndarray:
     out = np.array([0.0, 0.0, 0.0, 1.0])
     for q in qs:
         out = quat_multiply(out, q)
     return quat_normalize(out)
 
 
-def _swing(u, v):
+def _swing(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Shortest-arc quaternion rotating unit vector ``u`` onto ``v``."""
     u, v = _normalize(u), _normalize(v)
     d = float(np.dot(u, v))
@@ -126,7 +130,7 @@ def _swing(u, v):
     return quat_normalize(np.concatenate([np.cross(u, v), [1.0 + d]]))
 
 
-def _frames(centers):
+def _frames(centers: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Tangents and a rotation-minimising pair of normals ``(n, 3)`` each along a polyline."""
     c = np.asarray(centers, dtype=np.float64)
     t = np.gradient(c, axis=0)
@@ -146,7 +150,11 @@ class _Part:
     """Vertices ``(n, 3)``, uv ``(n, 2)``, triangles ``(t, 3)`` (local indices), along/around
     parameters and a bone-weight matrix ``(n, B)`` filled in by the builder."""
 
-    def __init__(self, name, pos, uv, tri, along, around, dist=None) -> None:
+    theta: np.ndarray  # the head part's polar / azimuth angles per vertex (set by the builder)
+    phi: np.ndarray
+
+    def __init__(self, name: str, pos: npt.ArrayLike, uv: npt.ArrayLike, tri: npt.ArrayLike, along: npt.ArrayLike, around: npt.ArrayLike,
+                 dist: npt.ArrayLike | None = None) -> None:
         self.name = name
         self.pos = np.asarray(pos, dtype=np.float64)
         self.uv = np.asarray(uv, dtype=np.float64)
@@ -157,8 +165,9 @@ class _Part:
         self.w = np.zeros((len(self.pos), len(RIDER_BONES)))
 
 
-def _loft(name, centers, rx, ry, segments, tile, exponent=2.0, xaxis=None, caps=(True, True),
-          cap_len=(0.5, 0.5), around_offset=0.0):
+def _loft(name: str, centers: npt.ArrayLike, rx: npt.ArrayLike, ry: npt.ArrayLike, segments: int, tile: tuple[float, float, float, float],
+          exponent: float = 2.0, xaxis: npt.ArrayLike | None = None, caps: tuple[bool, bool] = (True, True),
+          cap_len: tuple[float, float] = (0.5, 0.5), around_offset: float = 0.0) -> _Part:
     """Sweep a superellipse along ``centers (n, 3)``.
 
     Ring ``i`` is ``c_i + rx_i * cx(a) * X_i + ry_i * cy(a) * Y_i`` with ``a`` in ``[0, 2 pi]``
@@ -226,7 +235,8 @@ def _loft(name, centers, rx, ry, segments, tile, exponent=2.0, xaxis=None, caps=
     return _Part(name, pos, uv, tri, along, around, dist_v)
 
 
-def _chain_weights(part, dist, bones, joints_at, width) -> None:
+def _chain_weights(part: _Part, dist: np.ndarray, bones: list[str], joints_at: Sequence[Any],
+                   width: Any) -> None:
     """Blend a chain of bones along ``dist``: bone k owns ``[joints_at[k], joints_at[k+1])``,
     transitions smoothed over ``+-width`` (scalar or per transition). Adds into ``part.w`` scaled
     by the weight still free (so earlier assignments keep priority)."""
@@ -246,7 +256,7 @@ def _chain_weights(part, dist, bones, joints_at, width) -> None:
         part.w[:, _B[b]] += w[:, k] * free
 
 
-def _build_parts(rng_scale, J):
+def _build_parts(rng_scale: float, J: dict[str, np.ndarray]) -> list[_Part]:
     """All body parts in bind space; ``J`` maps bone name -> bind joint position (3,)."""
     parts = []
     # torso: crotch -> neck top, superelliptic cross-section, puffy jacket
@@ -388,7 +398,7 @@ def _build_parts(rng_scale, J):
     return parts
 
 
-def _head_surface(theta, phi, scale):
+def _head_surface(theta: np.ndarray, phi: np.ndarray, scale: float) -> np.ndarray:
     """Head positions ``(..., 3)`` at polar angle ``theta`` (0 = bottom) and azimuth ``phi``
     (0 = front, +Z): an ellipsoid with a narrower chin, a flatter back and a nose bump."""
     theta = np.asarray(theta, dtype=np.float64)
@@ -411,7 +421,7 @@ def _head_surface(theta, phi, scale):
     return pts
 
 
-def _face_morphs(head, scale):
+def _face_morphs(head: _Part, scale: float) -> np.ndarray:
     """Position deltas ``(3, n, 3)`` of the head part's vertices for smile, blink, shout."""
     th, ph = head.theta, head.phi
     n = len(th)
@@ -442,7 +452,7 @@ def _face_morphs(head, scale):
 
 
 # --------------------------------------------------------------------------- texture
-def _texture(rng):
+def _texture(rng: np.random.Generator) -> np.ndarray:
     """128x128 RGBA atlas ``(h, w, 4) uint8``; row 0 is v = 0 (glTF: v down the image)."""
     size = 128
     tex = np.zeros((size, size, 4), np.uint8)
@@ -457,7 +467,7 @@ def _texture(rng):
     uu = (u + 0.5) / size
     vv = (v + 0.5) / size
 
-    def fill(tile, color):
+    def fill(tile: tuple[float, float, float, float], color: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         u0, v0, u1, v1 = tile
         m = (uu >= u0) & (uu < u1) & (vv >= v0) & (vv < v1)
         tex[m, :3] = color
@@ -499,11 +509,11 @@ def _texture(rng):
 
 
 # --------------------------------------------------------------------------- skeleton and mesh
-def _joint_positions(scale):
+def _joint_positions(scale: float) -> dict[str, np.ndarray]:
     return {name: np.array(p, dtype=np.float64) * np.array([1.0, scale, 1.0]) for name, _, p in _BONES}
 
 
-def _skeleton(J):
+def _skeleton(J: dict[str, np.ndarray]) -> Skeleton:
     names = list(RIDER_BONES)
     parents = [(-1 if p is None else _B[p]) for _, p, _ in _BONES]
     world = np.array([J[n] for n in names])
@@ -511,10 +521,10 @@ def _skeleton(J):
     b = len(names)
     ib = np.tile(np.eye(4), (b, 1, 1))
     ib[:, :3, 3] = -world
-    return Skeleton(names, parents, rest_t, np.tile([0.0, 0.0, 0.0, 1.0], (b, 1)), np.ones((b, 3)), ib)
+    return Skeleton(names, np.asarray(parents), rest_t, np.tile([0.0, 0.0, 0.0, 1.0], (b, 1)), np.ones((b, 3)), ib)
 
 
-def _welded_normals(pos, tri):
+def _welded_normals(pos: np.ndarray, tri: np.ndarray) -> np.ndarray:
     """Smooth normals that agree across duplicated (seam) vertices."""
     key = np.round(pos / 1e-6).astype(np.int64)
     _, inv = np.unique(key, axis=0, return_inverse=True)
@@ -525,7 +535,7 @@ def _welded_normals(pos, tri):
     return un[inv]
 
 
-def _top4(w):
+def _top4(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Dense ``(v, B)`` weights -> ``joints (v, 4) uint16``, ``weights (v, 4) float32`` (rows sum 1)."""
     order = np.argsort(-w, axis=1, kind="stable")[:, :4]
     ww = np.take_along_axis(w, order, axis=1)
@@ -536,7 +546,8 @@ def _top4(w):
 
 
 # --------------------------------------------------------------------------- animation authoring
-def _solve_two_bone(root, target, l1, l2, hint):
+def _solve_two_bone(root: np.ndarray, target: np.ndarray, l1: Any, l2: Any,
+                    hint: npt.ArrayLike) -> np.ndarray:
     """Middle joint position for a two-bone chain from ``root`` reaching ``target``."""
     d_vec = target - root
     d = float(np.linalg.norm(d_vec))
@@ -548,13 +559,14 @@ def _solve_two_bone(root, target, l1, l2, hint):
     return root + a * e + r * p
 
 
-def _world_rot(sk, pose):
+def _world_rot(sk: Skeleton, pose: Any) -> tuple[np.ndarray, np.ndarray]:
     """World rotation quaternions ``(b, 4)`` and positions ``(b, 3)`` of ``pose``."""
     w = sk.world_matrices(pose)
     return quat_normalize(matrix_to_quat(w[:, :3, :3])), w[:, :3, 3]
 
 
-def _ik_limb(sk, pose, J, upper, lower, end, target, hint, end_world_rot=None) -> None:
+def _ik_limb(sk: Skeleton, pose: Any, J: dict[str, np.ndarray], upper: str, lower: str, end: str, target: np.ndarray, hint: npt.ArrayLike,
+            end_world_rot: np.ndarray | None = None) -> None:
     """Set ``upper``/``lower`` local rotations so the ``end`` joint reaches ``target`` (world),
     bending towards ``hint``; optionally give ``end`` a world rotation."""
     iu, il, ie = _B[upper], _B[lower], _B[end]
@@ -576,7 +588,7 @@ def _ik_limb(sk, pose, J, upper, lower, end, target, hint, end_world_rot=None) -
 _X, _Y, _Z = np.eye(3)
 
 
-def _key_pose(sk, J, clip, phase):
+def _key_pose(sk: Skeleton, J: dict[str, np.ndarray], clip: str, phase: float) -> Any:
     """The pose of ``clip`` at ``phase`` in [0, 1) (a looping cycle)."""
     pose = sk.rest_pose()
     c = np.cos(2 * np.pi * phase)
@@ -661,7 +673,7 @@ _DURATIONS = {"ride": 2.0, "crouch": 1.6, "grab": 1.6, "spin": 1.2}
 _KEYS = {"ride": 9, "crouch": 9, "grab": 11, "spin": 13}
 
 
-def key_tables(sk, J, name: str):
+def key_tables(sk: Skeleton, J: dict[str, np.ndarray], name: str) -> tuple[np.ndarray, np.ndarray]:
     """The key poses of clip ``name``: ``rotation (b, n, 4)`` (a continuous quaternion path per
     bone) and ``translation (b, n, 3)``, float64, posed by the rig's IK."""
     n = _KEYS[name]
@@ -700,11 +712,11 @@ def shipped_key_tables() -> dict | None:
     return out
 
 
-def write_key_tables(path=RIDER_KEYS_FILE) -> Path:
+def write_key_tables(path: str | os.PathLike[str] = RIDER_KEYS_FILE) -> Path:
     """Pose the seed-0 rider's keys and write them to ``path`` (regenerates the shipped file)."""
     J = _joint_positions(1.0)
     sk = _skeleton(J)
-    arrays = {}
+    arrays: dict[str, Any] = {}
     for n in RIDER_CLIPS:
         arrays[f"{n}/rotation"], arrays[f"{n}/translation"] = key_tables(sk, J, n)
     path = Path(path)
@@ -713,7 +725,7 @@ def write_key_tables(path=RIDER_KEYS_FILE) -> Path:
     return path
 
 
-def _clips(sk, J, scale: float = 1.0):
+def _clips(sk: Skeleton, J: dict[str, np.ndarray], scale: float = 1.0) -> dict[str, Clip]:
     clips = {}
     shipped = shipped_key_tables() if scale == 1.0 else None
     for name in RIDER_CLIPS:
@@ -759,21 +771,24 @@ def default_rider(seed: int = 0) -> Model:
     J = _joint_positions(scale)
     sk = _skeleton(J)
     parts = _build_parts(scale, J)
-    pos, uv, tri, w = [], [], [], []
+    pos_l: list[np.ndarray] = []
+    uv_l: list[np.ndarray] = []
+    tri_l: list[np.ndarray] = []
+    w_l: list[np.ndarray] = []
     off = 0
-    head_range = None
+    head_range = (0, 0)  # set from the head part below (there is always one)
     for p in parts:
         if p.name == "head":
             head_range = (off, off + len(p.pos))
-        pos.append(p.pos)
-        uv.append(p.uv)
-        tri.append(_outward(p.pos, p.tri) + off)
-        w.append(p.w)
+        pos_l.append(p.pos)
+        uv_l.append(p.uv)
+        tri_l.append(_outward(p.pos, p.tri) + off)
+        w_l.append(p.w)
         off += len(p.pos)
-    pos = np.concatenate(pos)
-    uv = np.concatenate(uv)
-    tri = np.concatenate(tri)
-    joints, weights = _top4(np.concatenate(w))
+    pos = np.concatenate(pos_l)
+    uv = np.concatenate(uv_l)
+    tri = np.concatenate(tri_l)
+    joints, weights = _top4(np.concatenate(w_l))
     normals = _welded_normals(pos, tri)
     head = parts[[p.name for p in parts].index("head")]
     k = len(RIDER_MORPHS)
