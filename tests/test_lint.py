@@ -75,6 +75,7 @@ STRICT_REQUIRED = (
     "piste.character.compress", "piste.character.retarget",
     "piste.character.rider", "piste.character.coverage",
     "piste.character",  # the whole package: every module, and any new one
+    "piste.terrain.lod", "piste.terrain.net", "piste.terrain.cull",
 )
 
 

@@ -22,10 +22,16 @@ patch_tree(net)                 the tree of a net, built once and kept on the ne
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ValidationError
 from piste.terrain import _kernels
+
+if TYPE_CHECKING:
+    from piste.terrain.net import PatchNet
 
 __all__ = ["PatchTree", "patch_tree"]
 
@@ -40,7 +46,7 @@ def _part1by1(x: np.ndarray) -> np.ndarray:
     return x
 
 
-def _classify(lo: np.ndarray, hi: np.ndarray, planes: np.ndarray):
+def _classify(lo: np.ndarray, hi: np.ndarray, planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(outside, inside)`` booleans ``(k,)`` of boxes ``lo, hi (k, 3)`` against inward planes ``(6, 4)``."""
     centre = (lo + hi) * 0.5
     half = (hi - lo) * 0.5
@@ -60,7 +66,7 @@ class PatchTree:
     leaf : patches per leaf
     """
 
-    def __init__(self, lo, hi, leaf: int = 16):
+    def __init__(self, lo: npt.ArrayLike, hi: npt.ArrayLike, leaf: int = 16) -> None:
         lo = np.asarray(lo, dtype=np.float64)
         hi = np.asarray(hi, dtype=np.float64)
         if lo.ndim != 2 or lo.shape[1] != 3 or lo.shape != hi.shape or len(lo) == 0:
@@ -104,7 +110,7 @@ class PatchTree:
     def depth(self) -> int:
         return len(self.levels_lo) - 1
 
-    def cull(self, planes, use_numba: bool | None = None) -> np.ndarray:
+    def cull(self, planes: npt.ArrayLike, use_numba: bool | None = None) -> np.ndarray:
         """Patch ids whose boxes are not wholly outside one of ``planes (6, 4)`` (inward), ``(p,)``
         int64 ascending: the same set as :func:`piste.transforms.cull_boxes` over every box.
         Compiled depth-first walk with numba, else a level-by-level numpy walk (same result)."""
@@ -149,7 +155,7 @@ class PatchTree:
         return np.sort(self.order[pos])
 
 
-def _ranges(starts, counts):
+def _ranges(starts: np.ndarray, counts: npt.ArrayLike) -> np.ndarray:
     counts = np.asarray(counts, dtype=np.int64)
     keep = counts > 0
     starts, counts = starts[keep], counts[keep]
@@ -160,7 +166,7 @@ def _ranges(starts, counts):
     return np.repeat(starts, counts) + np.arange(total) - off
 
 
-def patch_tree(net, leaf: int = 16) -> PatchTree:
+def patch_tree(net: PatchNet, leaf: int = 16) -> PatchTree:
     """The :class:`PatchTree` of ``net``'s patch bounds, built on first use and kept on the net."""
     t = net.__dict__.get("_patch_tree")
     if t is None or t.leaf != leaf:

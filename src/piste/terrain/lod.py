@@ -23,11 +23,17 @@ coarser by its error does not morph to it (the step is under ``flat_error`` on s
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ConfigError
 from piste.terrain.bezier import blend_tables, params
 from piste.transforms import cull_boxes, frustum_planes, look_at, perspective
+
+#: piste.terrain.net.PatchNet, typed Any here: net imports this module (an import back is a cycle)
+_Net = Any
 
 #: default thresholds for a course in metres: edges nearer than ``near`` get 8 vertices, nearer
 #: than ``far`` 6, the rest 4 (tuned so a view down the default course gives the talk's mix)
@@ -59,7 +65,7 @@ def _grid_weights(c: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return w
 
 
-def _patch_errors(net, n: int, chunk: int = 1024) -> np.ndarray:
+def _patch_errors(net: _Net, n: int, chunk: int = 1024) -> np.ndarray:
     """Per patch, the largest distance between the surface and its uniform level-``n`` mesh (for
     ``n = 2`` the corner quad, triangles (0, 1, 2), (0, 2, 3)) at the same parameter, over the union of
     the level-4 and 8 grid parameters: ``(N,)`` float64 (model units).  Both are linear in the
@@ -85,28 +91,29 @@ def _patch_errors(net, n: int, chunk: int = 1024) -> np.ndarray:
         # product, took ~90 ms of CPU from that frame on 2 cores (einsum's loops are single-threaded)
         c = cp_all[a:b].reshape(k, 16, 3)
         c = (c - c[:, :1]).astype(np.float32)
-        sq = None
+        sq: np.ndarray | None = None
         for x in range(3):
             e = np.einsum("kc,cm->km", np.ascontiguousarray(c[:, :, x]), d, optimize=False)  # (k, m)
             e *= e
             sq = e if sq is None else np.add(sq, e, out=sq)
+        assert sq is not None
         out[a:b] = np.sqrt(sq.max(axis=1).astype(np.float64))
     return out
 
 
-def _flat_patch_errors(net) -> np.ndarray:
+def _flat_patch_errors(net: _Net) -> np.ndarray:
     """Per patch, the largest distance between the surface and its corner quad: ``(N,)`` float64."""
     return _patch_errors(net, FLAT_LEVEL)
 
 
-def _edge_max(net, per_patch: np.ndarray) -> np.ndarray:
+def _edge_max(net: _Net, per_patch: np.ndarray) -> np.ndarray:
     """The larger of an edge's (up to two) patches' values, ``(e,)``."""
     ep = np.asarray(net.edge_patches, dtype=np.int64)
     other = np.where(ep[:, 1] >= 0, ep[:, 1], ep[:, 0])
     return np.ascontiguousarray(np.maximum(per_patch[ep[:, 0]], per_patch[other]))
 
 
-def level_errors(net, n: int) -> np.ndarray:
+def level_errors(net: _Net, n: int) -> np.ndarray:
     """Per edge, the larger error of its patches' uniform level-``n`` meshes (:func:`_patch_errors`),
     ``(e,)`` float64; computed once per level and kept on the net."""
     store = net.__dict__.setdefault("_level_errors", {})
@@ -117,7 +124,7 @@ def level_errors(net, n: int) -> np.ndarray:
     return e
 
 
-def flat_bounds(net) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def flat_bounds(net: _Net) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What the flat level decides on, per edge (computed once, kept on the net):
     ``(err (e,) float64, lo (e, 3) float64, hi (e, 3) float64)``: the larger flatness error of the
     edge's patches (:func:`_flat_patch_errors`) and the union of their control-point boxes."""
@@ -134,7 +141,8 @@ def flat_bounds(net) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return fb
 
 
-def error_limit(net, eye, edges=None, flat_error: float = FLAT_ERROR) -> np.ndarray:
+def error_limit(net: _Net, eye: npt.ArrayLike, edges: np.ndarray | None = None,
+                flat_error: float = FLAT_ERROR) -> np.ndarray:
     """The largest error each edge's patches (all edges, or ``edges``, any shape) may have to be drawn
     coarser from ``eye``: ``flat_error * d``, ``d`` the eye's distance to the edge's box, ``(e,)`` or
     ``edges``' shape, float64 (the same arithmetic as the resident path's compiled LOD)."""
@@ -147,21 +155,24 @@ def error_limit(net, eye, edges=None, flat_error: float = FLAT_ERROR) -> np.ndar
     return float(flat_error) * d
 
 
-def flat_edges(net, eye, edges=None, flat_error: float = FLAT_ERROR) -> np.ndarray:
+def flat_edges(net: _Net, eye: npt.ArrayLike, edges: np.ndarray | None = None,
+               flat_error: float = FLAT_ERROR) -> np.ndarray:
     """Whether each edge (all, or ``edges (k,)``) may be drawn flat from ``eye``: its patches' corner
     quads within :func:`error_limit`; ``(k,)`` bool."""
     err = flat_bounds(net)[0]
     return (err if edges is None else err[edges]) < error_limit(net, eye, edges, flat_error)
 
 
-def coarse_edges(net, eye, edges=None, flat_error: float = FLAT_ERROR, coarse: int = LEVELS[0]) -> np.ndarray:
+def coarse_edges(net: _Net, eye: npt.ArrayLike, edges: np.ndarray | None = None, flat_error: float = FLAT_ERROR,
+                 coarse: int = LEVELS[0]) -> np.ndarray:
     """Whether each edge may be drawn at the ``coarse`` level from ``eye`` whatever its distance: its
     patches' uniform ``coarse`` meshes within :func:`error_limit`; ``(k,)`` bool."""
     err = level_errors(net, coarse)
     return (err if edges is None else err[edges]) < error_limit(net, eye, edges, flat_error)
 
 
-def edge_levels(net, eye, near: float = DEFAULT_NEAR, far: float = DEFAULT_FAR, levels=LEVELS,
+def edge_levels(net: _Net, eye: npt.ArrayLike, near: float = DEFAULT_NEAR, far: float = DEFAULT_FAR,
+                levels: tuple[int, ...] = LEVELS,
                 flat_error: float | None = FLAT_ERROR) -> np.ndarray:
     """Vertices per edge for a camera at ``eye``.
 
@@ -199,8 +210,9 @@ def edge_levels(net, eye, near: float = DEFAULT_NEAR, far: float = DEFAULT_FAR, 
     return out
 
 
-def visible_patches(net, eye, target, fov_y: float = 60.0, aspect: float = 640 / 448, znear: float = 0.5,
-                    zfar: float = 5000.0, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+def visible_patches(net: _Net, eye: npt.ArrayLike, target: npt.ArrayLike, fov_y: float = 60.0,
+                    aspect: float = 640 / 448, znear: float = 0.5, zfar: float = 5000.0,
+                    up: npt.ArrayLike = (0.0, 0.0, 1.0)) -> np.ndarray:
     """Patches whose control-point bounds intersect the view frustum, ``(p,)`` int64."""
     planes = frustum_planes(perspective(fov_y, aspect, znear, zfar) @ look_at(eye, target, up))
     lo, hi = net.patch_bounds

@@ -20,11 +20,14 @@ edges are exactly equal in both patches (the basis of bit-identical, crack-free 
 from __future__ import annotations
 
 import logging
+import os
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import FormatError, ValidationError
 from piste.formats.atomic import atomic_path
@@ -180,7 +183,7 @@ class PatchNet:
     edge_degenerate: np.ndarray = field(init=False, repr=False)
     corner_ids: np.ndarray = field(init=False, repr=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         cp = np.array(self.control_points, dtype=np.float64)
         if cp.ndim != 4 or cp.shape[1:] != (4, 4, 3):
             raise ValidationError(f"{self.name}: control_points must have shape (n, 4, 4, 3), got {cp.shape}")
@@ -222,7 +225,8 @@ class PatchNet:
         return {k: getattr(self, k) for k in TOPOLOGY_ARRAYS}
 
     @classmethod
-    def from_topology(cls, control_points, topology: dict, uv=None, lightmap_rect=None, tol=None,
+    def from_topology(cls, control_points: np.ndarray, topology: dict, uv: np.ndarray | None = None,
+                      lightmap_rect: np.ndarray | None = None, tol: float | None = None,
                       name: str = "net") -> "PatchNet":
         """A net whose topology is given (:meth:`topology` of the same, already welded, control
         points) instead of computed: the welding and edge matching (~0.1 s at 2.5k patches) are
@@ -241,7 +245,7 @@ class PatchNet:
         cp = self.control_points
         n = len(cp)
 
-        def bad(key, why):
+        def bad(key: str, why: str) -> ValidationError:
             return ValidationError(f"{self.name}: stored topology {key}: {why}")
 
         if not isinstance(topo, dict):
@@ -286,7 +290,7 @@ class PatchNet:
         pts = np.stack([cp[:, :, 0], cp[:, 3, :], cp[:, :, 3], cp[:, 0, :]], axis=1).reshape(n * 4, 4, 3)
         flat_flip = flip.reshape(-1)
 
-        def canonical(sides):  # the sides' points in their edges' direction, (k, 4, 3)
+        def canonical(sides: np.ndarray) -> np.ndarray:  # the sides' points in their edges' direction, (k, 4, 3)
             out = pts[sides]
             f = flat_flip[sides]
             out[f] = out[f, ::-1]
@@ -313,6 +317,7 @@ class PatchNet:
         cp = self.control_points
         n = len(cp)
         bpts = cp[:, _BOUNDARY]  # (n, 12, 3)
+        assert self.tol is not None  # __post_init__ sets it
         ids = weld_points(bpts.reshape(-1, 3), self.tol)
         # snap every welded point to its cluster's first member
         flat = bpts.reshape(-1, 3)
@@ -336,7 +341,7 @@ class PatchNet:
         over = np.nonzero(counts > 2)[0]
         if len(over):
             sides = np.nonzero(inverse == over[0])[0]
-            names = ", ".join(_side_str(s // 4, s % 4) for s in sides)
+            names = ", ".join(_side_str(int(s) // 4, int(s) % 4) for s in sides)
             raise ValidationError(f"{self.name}: an edge is shared by more than two patches: {names}")
         self._check_c0(canon, degenerate, keys)
 
@@ -443,22 +448,22 @@ class PatchNet:
         return (c[:, 0] + 3.0 * c[:, 1] + 3.0 * c[:, 2] + c[:, 3]) / 8.0
 
     # ------------------------------------------------------------------ evaluation, LOD
-    def evaluate(self, u, v, normals: bool = True):
+    def evaluate(self, u: npt.ArrayLike, v: npt.ArrayLike, normals: bool = True) -> Any:
         """Positions (and normals) of every patch at parameters ``(u[s], v[s])``: ``(n, s, 3)`` float64."""
         return evaluate(self.control_points, u, v, normals=normals)
 
-    def edge_levels(self, eye, **kwargs) -> np.ndarray:
+    def edge_levels(self, eye: npt.ArrayLike, **kwargs: Any) -> np.ndarray:
         """Vertices per edge (4, 6 or 8) for a camera at ``eye``: ``(e,)`` int8.  See :func:`piste.terrain.lod.edge_levels`."""
         return edge_levels(self, eye, **kwargs)
 
     # ------------------------------------------------------------------ I/O
     @classmethod
-    def from_bpt(cls, path, **kwargs) -> "PatchNet":
+    def from_bpt(cls, path: str | os.PathLike[str], **kwargs: Any) -> "PatchNet":
         """Read Newell's patch text format (see :mod:`piste.formats.bpt`)."""
         return cls(read_bpt(path), name=Path(path).name, **kwargs)
 
     @classmethod
-    def from_control_grid(cls, grid, **kwargs) -> "PatchNet":
+    def from_control_grid(cls, grid: npt.ArrayLike, **kwargs: Any) -> "PatchNet":
         """A rectangular net from a shared control-point grid.
 
         Parameters
@@ -481,19 +486,20 @@ class PatchNet:
         return cls(cp.reshape(rows * cols, 4, 4, 3), **kwargs)
 
     @classmethod
-    def from_heightfield(cls, z, spacing, **kwargs) -> "PatchNet":
+    def from_heightfield(cls, z: npt.ArrayLike, spacing: float | tuple[float, float], **kwargs: Any) -> "PatchNet":
         """Fit a C0 net to a height field by least squares (see :func:`piste.terrain.fit.fit_heightfield`;
         the solve is :func:`piste.terrain.heightfield.fit_control_points`)."""
         name = kwargs.pop("name", "heightfield")
         grid = fit_control_points(z, spacing, **kwargs)
         net = cls(grid.control_points, uv=grid.uv, tol=grid.tol, name=name)
-        net.grid_shape = grid.grid_shape  # patches per column and per row: patch py * Px + px
+        net.grid_shape = grid.grid_shape  # type: ignore[attr-defined]  # only a fitted net has one; patches per column and per row: patch py * Px + px
         log.log(logging.INFO if kwargs.get("progress") else logging.DEBUG, "fit_heightfield: PatchNet of %d patches",
                 len(net))
         return net
 
-    def save(self, path) -> None:
+    def save(self, path: str | os.PathLike[str]) -> None:
         """Write the net losslessly to ``path`` (``.npz``), atomically."""
+        assert self.uv is not None and self.lightmap_rect is not None  # __post_init__ sets both
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez_compressed(
@@ -507,7 +513,7 @@ class PatchNet:
                 )
 
     @classmethod
-    def load(cls, path) -> "PatchNet":
+    def load(cls, path: str | os.PathLike[str]) -> "PatchNet":
         """Read a net written by :meth:`save`."""
         path = Path(path)
         try:  # regular files only, no links below a confinement root (piste.formats.safe_io)
@@ -542,21 +548,22 @@ class PatchNet:
             except ValidationError as exc:
                 raise FormatError(path, str(exc), field="control_points") from None
 
-    def subset(self, patches) -> "PatchNet":
+    def subset(self, patches: npt.ArrayLike) -> "PatchNet":
         """A new net of the selected patches (topology recomputed)."""
         patches = np.asarray(patches)
+        assert self.uv is not None and self.lightmap_rect is not None  # __post_init__ sets both
         return PatchNet(
             self.control_points[patches], self.uv[patches], self.lightmap_rect[patches], self.tol, self.name
         )
 
 
-def _extent(cp: np.ndarray, op) -> np.ndarray:
+def _extent(cp: np.ndarray, op: np.ufunc) -> np.ndarray:
     """``op`` (np.minimum / np.maximum) over every control point of ``cp`` (n, 4, 4, 3) -> (3,): over
     rows of 48 contiguous values (one patch) first, then the 16 points."""
     return op.reduce(op.reduce(cp.reshape(-1, 48), axis=0).reshape(16, 3), axis=0)
 
 
-def _fold(cp: np.ndarray, op) -> np.ndarray:
+def _fold(cp: np.ndarray, op: np.ufunc) -> np.ndarray:
     """``op`` (np.minimum / np.maximum) over the 16 control points of each patch: ``cp`` (n, 4, 4, 3)
     -> (n, 3), by halving the points four times (elementwise on contiguous halves)."""
     a = cp.reshape(len(cp), 16, 3)
