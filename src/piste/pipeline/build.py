@@ -216,7 +216,8 @@ def _allow_key(scene: SceneFile) -> tuple[tuple[str, list[str]], ...]:
 
 
 # ----------------------------------------------------------------------------- the step registry
-#: a step's arrays (``{"name": ndarray}``) and its metadata (JSON-able), as the cache stores them
+# a step's arrays ({"name": ndarray}) and its metadata (JSON-able), as the cache stores them (a plain comment:
+# a "#:" one made autodoc document the alias, and viewcode list a "builtins" page that does not exist)
 Arrays = dict[str, np.ndarray]
 Meta = dict[str, Any]
 StepOutput = tuple[Arrays, Meta]
