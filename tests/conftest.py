@@ -87,6 +87,22 @@ def piste_cache(_piste_cache_dir, monkeypatch):
     return _piste_cache_dir
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _numba_kernels_compiled_first():
+    """Every numba kernel compiled (or loaded from numba's cache) once, in the main thread, before
+    the first test, so no kernel's ``ready()`` starts the background warm-up in the middle of a test:
+    numba compiles under ``warnings.catch_warnings``, which swaps the process-wide warning filters
+    and is not thread-safe, and a warm-up thread compiling while a test entered and left
+    ``catch_warnings`` / ``pytest.warns`` left that test's filters in force or lost its warnings
+    (CI: ``test_scene_file_clips_from_with_bone_map`` "DID NOT WARN", then a RetargetWarning raised
+    as an error inside ``pytest.warns``).  ~6 s without numba's cache; tests of the warm-up itself
+    patch ``piste._jit`` as before."""
+    from piste import _jit
+
+    _jit.warm_up()
+    yield
+
+
 @pytest.fixture(autouse=True)
 def _numba_warm_up_joined():
     """A test that started the background numba warm-up (``piste._jit.warm_up_async``, e.g. a
