@@ -76,6 +76,7 @@ STRICT_REQUIRED = (
     "piste.character.rider", "piste.character.coverage",
     "piste.character",  # the whole package: every module, and any new one
     "piste.terrain.lod", "piste.terrain.net", "piste.terrain.cull",
+    "piste.terrain.tessellate",
 )
 
 

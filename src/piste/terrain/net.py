@@ -171,9 +171,10 @@ class PatchNet:
     """
 
     control_points: np.ndarray
-    uv: np.ndarray | None = None
-    lightmap_rect: np.ndarray | None = None
-    tol: float | None = None
+    # None (the constructor's default) is replaced in __post_init__: typed as what every net holds
+    uv: np.ndarray = None  # type: ignore[assignment]
+    lightmap_rect: np.ndarray = None  # type: ignore[assignment]
+    tol: float = None  # type: ignore[assignment]
     name: str = "net"
     side_edge: np.ndarray = field(init=False, repr=False)
     side_flip: np.ndarray = field(init=False, repr=False)
@@ -236,7 +237,7 @@ class PatchNet:
         control points; the result is the same net as ``PatchNet(control_points, ...)``."""
         _STORED_TOPOLOGY.value = topology
         try:
-            return cls(control_points, uv=uv, lightmap_rect=lightmap_rect, tol=tol, name=name)
+            return cls(control_points, uv=uv, lightmap_rect=lightmap_rect, tol=tol, name=name)  # type: ignore[arg-type]
         finally:
             _STORED_TOPOLOGY.value = None
 
@@ -317,7 +318,6 @@ class PatchNet:
         cp = self.control_points
         n = len(cp)
         bpts = cp[:, _BOUNDARY]  # (n, 12, 3)
-        assert self.tol is not None  # __post_init__ sets it
         ids = weld_points(bpts.reshape(-1, 3), self.tol)
         # snap every welded point to its cluster's first member
         flat = bpts.reshape(-1, 3)
@@ -499,7 +499,6 @@ class PatchNet:
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write the net losslessly to ``path`` (``.npz``), atomically."""
-        assert self.uv is not None and self.lightmap_rect is not None  # __post_init__ sets both
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez_compressed(
@@ -551,7 +550,6 @@ class PatchNet:
     def subset(self, patches: npt.ArrayLike) -> "PatchNet":
         """A new net of the selected patches (topology recomputed)."""
         patches = np.asarray(patches)
-        assert self.uv is not None and self.lightmap_rect is not None  # __post_init__ sets both
         return PatchNet(
             self.control_points[patches], self.uv[patches], self.lightmap_rect[patches], self.tol, self.name
         )

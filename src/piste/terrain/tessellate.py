@@ -27,10 +27,13 @@ and vertex -> patch written straight into the outputs), bit-identical to the num
 from __future__ import annotations
 
 import threading
+from collections.abc import Iterable
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ConfigError, ValidationError
 from piste.terrain import _kernels
@@ -155,7 +158,7 @@ def _strip_rows(rows: list[tuple[np.ndarray, np.ndarray]]) -> list:
     return out
 
 
-def _strip_zipper(outer, t_outer, inner, t_inner) -> list:
+def _strip_zipper(outer: np.ndarray, t_outer: np.ndarray, inner: np.ndarray, t_inner: np.ndarray) -> list:
     """One strip for a zipper band.
 
     The zipper's consecutive triangles share an edge; a strip appends one vertex per triangle and
@@ -232,31 +235,31 @@ def get_shape(levels: tuple) -> Shape:
         full[-1, :], full[:, 0] = side_seq[2], side_seq[3]
         a, b, c, d = full[:-1, :-1], full[:-1, 1:], full[1:, 1:], full[1:, :-1]
         tris = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
-        strip = _strip_rows([(full[j], full[j + 1]) for j in range(n - 1)])
+        strip_l = _strip_rows([(full[j], full[j + 1]) for j in range(n - 1)])
     else:
         a, b, c, d = grid[:-1, :-1], grid[:-1, 1:], grid[1:, 1:], grid[1:, :-1]
-        tris = [np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)]
-        strip = _strip_rows([(grid[j], grid[j + 1]) for j in range(mi - 1)])
+        tri_l = [np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)]
+        strip_l = _strip_rows([(grid[j], grid[j + 1]) for j in range(mi - 1)])
         inner_rows = [grid[0, :], grid[:, -1], grid[-1, :], grid[:, 0]]
         for s in range(4):
             z = _zipper(side_seq[s], side_t[s], inner_rows[s], ti)
-            tris.append(np.array(z, dtype=np.int64).reshape(-1, 3))
-            strip += _strip_zipper(side_seq[s], side_t[s], inner_rows[s], ti)
-        tris = np.concatenate(tris)
+            tri_l.append(np.array(z, dtype=np.int64).reshape(-1, 3))
+            strip_l += _strip_zipper(side_seq[s], side_t[s], inner_rows[s], ti)
+        tris = np.concatenate(tri_l)
     tris = _orient(tris.astype(np.int64), param)
-    strip = np.array(_fix_parity(strip[:-1], param), dtype=np.int64)
+    strip = np.array(_fix_parity(strip_l[:-1], param), dtype=np.int64)
     for arr in (param, tris, strip, side_off):
         arr.setflags(write=False)
     return Shape(levels, m, n_verts, side_off, inner_off, param.astype(np.float32), tris, strip)
 
 
-def decode_strips(strips: np.ndarray, restart=RESTART) -> np.ndarray:
+def decode_strips(strips: np.ndarray, restart: int | np.integer = RESTART) -> np.ndarray:
     """Triangles of a strip index buffer (restart-separated), degenerate ones dropped: ``(t, 3)``.
 
     Odd triangles of a strip are flipped, as the GPU does, so windings match the indexed triangles.
     """
     strips = np.asarray(strips).astype(np.int64)
-    restart = np.int64(restart) if restart != -1 else -1
+    restart = np.int64(restart) if restart != -1 else np.int64(-1)
     a, b, c = strips[:-2], strips[1:-1], strips[2:]
     valid = (a != restart) & (b != restart) & (c != restart)
     # parity within each strip: position since the last restart
@@ -283,14 +286,17 @@ class _NetCache:
         self.corner_normals = self._corner_normals(net)
         self.origin32 = self.origin.astype(np.float32)
         self.edge_normals: dict[int, np.ndarray] = {}
-        self.grid_levels, self.grid_flat, self.grid_offset, self.grid_snapshot = {}, None, {}, None
-        self.grid_rows_ = None
+        self.grid_levels: dict[int, np.ndarray] = {}
+        self.grid_flat: np.ndarray | None = None
+        self.grid_offset: dict[int, int] = {}
+        self.grid_snapshot: tuple[_Snapshot, _Snapshot] | None = None
+        self.grid_rows_: tuple[np.ndarray, np.ndarray] | None = None
         self.scale4 = (net.patch_size.astype(np.float32) ** 4).astype(np.float32)
         lo, hi = net.bounds
         self.proj_origin = lo[:2].astype(np.float32)
         self.proj_scale = np.float32(max(float(np.max(hi[:2] - lo[:2])), 1e-12))
 
-    def grids(self, net: PatchNet, levels) -> tuple[np.ndarray, dict]:
+    def grids(self, net: PatchNet, levels: Iterable[int]) -> tuple[np.ndarray, dict]:
         """The vertex cache: every patch tessellated uniformly at each of ``levels``, as one flat
         float32 array of ``VERTEX_FLOATS``-float vertices, and each level's offset (in floats).
 
@@ -307,15 +313,18 @@ class _NetCache:
                     self.grid_levels[n] = np.concatenate(
                         [mesh.positions, mesh.normals, mesh.param, mesh.uv, mesh.uv_lightmap, mesh.uv_projected], axis=1
                     ).astype(np.float32)
-            parts, offset, o = [], {}, 0
+            parts: list[np.ndarray] = []
+            offset: dict[int, int] = {}
+            o = 0
             for n in want:
                 offset[n] = o
                 parts.append(self.grid_levels[n].ravel())
                 o += parts[-1].size
             self.grid_flat, self.grid_offset = np.concatenate(parts) if parts else np.zeros(0, np.float32), offset
+        assert self.grid_flat is not None  # built above
         return self.grid_flat, self.grid_offset
 
-    def compiled_state(self, net: PatchNet, used=()) -> tuple:
+    def compiled_state(self, net: PatchNet, used: Iterable[int] = ()) -> tuple:
         """What :func:`piste.terrain._kernels.tess_frame` reads of the vertex cache, with every
         level of ``used`` built: ``(grid (rows, VERTEX_FLOATS) float32, level_row (MAX_LEVEL + 1,)
         int64 (-1: level not built), (uv_now, uv_snap, lm_now, lm_snap) raw bytes)``; the kernel
@@ -328,7 +337,8 @@ class _NetCache:
                 level_row[n] = o // VERTEX_FLOATS
             self.grid_rows_ = (flat.reshape(-1, VERTEX_FLOATS), level_row)
         grid, level_row = self.grid_rows_
-        raw = tuple(s.raw_now(a) for s, a in zip(self.grid_snapshot, (net.uv, net.lightmap_rect)))
+        assert self.grid_snapshot is not None  # taken by grids() with the rows
+        raw: tuple = tuple(s.raw_now(a) for s, a in zip(self.grid_snapshot, (net.uv, net.lightmap_rect)))
         if raw[0] is None or raw[1] is None:
             if self.uv_changed(net):
                 return self.compiled_state(net, used)
@@ -358,7 +368,7 @@ class _NetCache:
         return out.reshape(-1, 4, 3).astype(np.float32)
 
 
-def _raw_bytes(a: np.ndarray, axes=None) -> np.ndarray | None:
+def _raw_bytes(a: np.ndarray, axes: tuple[int, ...] | None = None) -> np.ndarray | None:
     """The memory of a dense array (C order or any other axis order: ``axes``, largest stride
     first) as a 1-D uint8 view, else None."""
     if a.flags.c_contiguous:
@@ -372,7 +382,7 @@ class _Snapshot:
     default course's UVs, whatever their memory layout: one pass over the raw bytes, where
     ``np.array_equal`` on the strided (n, 4, 2) UVs took ~60 us)."""
 
-    def __init__(self, a: np.ndarray):
+    def __init__(self, a: np.ndarray) -> None:
         a = np.asarray(a)
         self.meta = (a.shape, a.strides, a.dtype)
         self.axes = tuple(int(x) for x in np.argsort(a.strides)[::-1])
@@ -380,7 +390,7 @@ class _Snapshot:
         self.raw = raw.copy() if raw is not None else None
         self.full = a.copy() if raw is None else None
 
-    def raw_now(self, a: np.ndarray):
+    def raw_now(self, a: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """``(a's raw bytes, the snapshot's)`` when ``a`` has the snapshot's shape, dtype and dense
         layout (compare those), else None."""
         if self.raw is None or not isinstance(a, np.ndarray) or (a.shape, a.strides, a.dtype) != self.meta:
@@ -411,7 +421,7 @@ def _cache(net: PatchNet) -> _NetCache:
 
 
 @lru_cache(maxsize=None)
-def _side_tables(s: int, n: int):
+def _side_tables(s: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Derivative blend tables at the interior points of side ``s`` with ``n`` vertices: ``(16, n-2)`` x2."""
     t = params(n)[1:-1]
     uv = _side_uv(s, t)
@@ -423,7 +433,7 @@ def _edge_normals(net: PatchNet, cache: _NetCache, edges: np.ndarray, n: int) ->
     """Normals at the interior vertices of ``edges`` at level ``n``, averaged over the adjacent
     patches, in each edge's canonical direction: ``(k, n - 2, 3)`` float32."""
     acc = np.zeros((len(edges), n - 2, 3), dtype=np.float32)
-    first = None
+    first: np.ndarray | None = None
     for slot in (0, 1):
         pat = net.edge_patches[edges, slot]
         side = net.edge_sides[edges, slot]
@@ -445,10 +455,11 @@ def _edge_normals(net: PatchNet, cache: _NetCache, edges: np.ndarray, n: int) ->
                 first[sel] = nrm
     length = np.linalg.norm(acc, axis=-1, keepdims=True)
     good = length > 1e-6
+    assert first is not None  # every edge has a patch in slot 0
     return np.where(good, acc / np.where(good, length, 1.0), first)
 
 
-def _level_array(net: PatchNet, levels) -> np.ndarray:
+def _level_array(net: PatchNet, levels: int | np.ndarray) -> np.ndarray:
     """``levels`` (one int, or one per edge) as a contiguous ``(e,) int16`` array: the shape is
     checked here, the values by the caller (the compiled path checks them in its kernel)."""
     if np.isscalar(levels) or np.ndim(levels) == 0:
@@ -461,7 +472,7 @@ def _level_array(net: PatchNet, levels) -> np.ndarray:
     return np.ascontiguousarray(lv, dtype=np.int16)
 
 
-def _as_levels(net: PatchNet, levels) -> np.ndarray:
+def _as_levels(net: PatchNet, levels: int | np.ndarray) -> np.ndarray:
     lv = _level_array(net, levels)
     if lv.min() < 2 or lv.max() > MAX_LEVEL:
         raise ValidationError(f"{net.name}: vertices per edge must be in 2..{MAX_LEVEL}, got {lv.min()}..{lv.max()}")
@@ -503,9 +514,12 @@ class _Frame:
     """Per-frame evaluation shared by the uniform and glue paths: each edge at its level once,
     inner grids by one blend-table product per (block, level)."""
 
-    def __init__(self, net: PatchNet, cache: _NetCache, lv: np.ndarray, pids: np.ndarray, used_levels):
+    def __init__(self, net: PatchNet, cache: _NetCache, lv: np.ndarray, pids: np.ndarray,
+                 used_levels: Iterable[int]) -> None:
         self.net, self.cache = net, cache
-        self.edge_pos, self.edge_nrm, self.edge_row = {}, {}, {}
+        self.edge_pos: dict[int, np.ndarray] = {}
+        self.edge_nrm: dict[int, np.ndarray] = {}
+        self.edge_row: dict[int, np.ndarray] = {}
         needed = np.zeros(net.n_edges, dtype=bool)
         needed[net.side_edge[pids]] = True
         for n in used_levels:
@@ -519,7 +533,7 @@ class _Frame:
             self.edge_pos[n] = eval_edges(cache.edge_cp[en], n)  # (k, n-2, 3)
             self.edge_nrm[n] = _edge_normal_cache(net, cache, n)[en]
 
-    def side(self, pids: np.ndarray, s: int, n: int):
+    def side(self, pids: np.ndarray, s: int, n: int) -> tuple[np.ndarray, np.ndarray]:
         """Positions and normals of side ``s`` (level ``n``) of ``pids`` in the side's direction: 2x ``(k, n-2, 3)``."""
         rows = self.edge_row[n][self.net.side_edge[pids, s]]
         kk = np.arange(n - 2)
@@ -527,7 +541,7 @@ class _Frame:
         return (self.edge_pos[n].reshape(-1, 3).take(flat, axis=0),
                 self.edge_nrm[n].reshape(-1, 3).take(flat, axis=0))
 
-    def inner(self, pids: np.ndarray, mm: int):
+    def inner(self, pids: np.ndarray, mm: int) -> tuple[np.ndarray, np.ndarray]:
         """Inner grid positions and normals at level ``mm``: 2x ``(k, (mm-2)^2, 3)`` (transposed views)."""
         ti = params(mm)[1:-1]
         vv, uu = np.meshgrid(ti, ti, indexing="ij")
@@ -549,7 +563,8 @@ def _bilinear_weights(prm: np.ndarray) -> np.ndarray:
     return np.stack([(1 - u) * (1 - v), u * (1 - v), u * v, (1 - u) * v], axis=1).astype(np.float32)
 
 
-def tessellate(net: PatchNet, levels, patches=None, strips: bool = False, cache: bool | None = None,
+def tessellate(net: PatchNet, levels: int | np.ndarray, patches: npt.ArrayLike | None = None, strips: bool = False,
+               cache: bool | None = None,
                use_numba: bool | None = None) -> TerrainMesh:
     """Tessellate ``net`` with per-edge ``levels``.
 
@@ -653,7 +668,7 @@ def _vertex_fields(vert: np.ndarray) -> dict:
             "uv_lightmap": vert[:, 10:12], "uv_projected": vert[:, 12:14]}
 
 
-def _strips(shapes, shape_of, vertex_start) -> np.ndarray:
+def _strips(shapes: list[Shape], shape_of: np.ndarray, vertex_start: np.ndarray) -> np.ndarray:
     parts = []
     for i in range(len(shape_of)):
         st = np.append(shapes[shape_of[i]].strip, -1)
@@ -662,7 +677,8 @@ def _strips(shapes, shape_of, vertex_start) -> np.ndarray:
     return np.where(sb < 0, RESTART, sb).astype(np.uint32)
 
 
-def _write_indices(indices, shapes, shape_of, first_of, vertex_start, tri_start, n_uniform) -> None:
+def _write_indices(indices: np.ndarray, shapes: list[Shape], shape_of: np.ndarray, first_of: np.ndarray, vertex_start: np.ndarray,
+                   tri_start: np.ndarray, n_uniform: int) -> None:
     """Cached index buffers, offset per patch: one broadcast per uniform level, one ragged
     gather for all glue patches."""
     for g, sh in enumerate(shapes):
@@ -684,7 +700,8 @@ def _write_indices(indices, shapes, shape_of, first_of, vertex_start, tri_start,
         indices[tri_start[n_uniform]:] = all_tris[tsrc] + np.repeat(vertex_start[n_uniform:-1], nt)[:, None]
 
 
-def _tessellate_compiled(net: PatchNet, levels, patches, strips: bool) -> TerrainMesh:
+def _tessellate_compiled(net: PatchNet, levels: int | np.ndarray, patches: npt.ArrayLike | None,
+                         strips: bool) -> TerrainMesh:
     """The cached path compiled (:func:`piste.terrain._kernels.tess_frame`, one call a frame):
     bit-identical to the numpy path, with no per-frame intermediate the size of the output."""
     lv = _level_array(net, levels)
@@ -740,7 +757,7 @@ class _ShapeRegistry:
     table, its glue sources and its triangles, appended once, and the keys sorted for the kernel's
     binary search (:func:`piste.terrain._kernels.tess_frame`)."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.lock = threading.Lock()
         self.row: dict[int, int] = {}
         #: (keys sorted (g,) int64, their rows (g,), stab (g, 10) int64, src_level, src_slot (s,) int64,
@@ -748,7 +765,7 @@ class _ShapeRegistry:
         self.arrays = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 10), np.int64),
                        np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3), np.uint32))
 
-    def add(self, keys) -> None:
+    def add(self, keys: Iterable[Any]) -> None:
         """Register the shapes of ``keys`` not registered yet."""
         with self.lock:
             new = [int(k) for k in dict.fromkeys(keys) if int(k) not in self.row]
@@ -796,7 +813,8 @@ def _glue_sources(levels: tuple) -> tuple[np.ndarray, np.ndarray]:
     return lvl, slot
 
 
-def _gather_cached(net, pids, side_lv, m, glue, shapes, shape_of, first_of, vertex_start, n_uniform) -> np.ndarray:
+def _gather_cached(net: PatchNet, pids: np.ndarray, side_lv: np.ndarray, m: np.ndarray, glue: Any, shapes: list[Shape], shape_of: np.ndarray,
+                   first_of: np.ndarray, vertex_start: np.ndarray, n_uniform: int) -> np.ndarray:
     """Vertices ``(V, VERTEX_FLOATS)`` float32 gathered from the net's per-level vertex cache."""
     cache = _cache(net)
     flat, offset = cache.grids(net, np.unique(side_lv))
@@ -829,7 +847,9 @@ def _gather_cached(net, pids, side_lv, m, glue, shapes, shape_of, first_of, vert
     return vert
 
 
-def _evaluate_frame(net, lv, pids, side_lv, m, glue, shapes, shape_of, first_of, vertex_start, n_uniform):
+def _evaluate_frame(net: PatchNet, lv: np.ndarray, pids: np.ndarray, side_lv: np.ndarray, m: np.ndarray, glue: Any, shapes: list[Shape],
+                    shape_of: np.ndarray, first_of: np.ndarray, vertex_start: np.ndarray,
+                    n_uniform: int) -> tuple[np.ndarray, ...]:
     """Evaluate every vertex of this frame with the blend tables (no vertex cache)."""
     cache = _cache(net)
     V = int(vertex_start[-1])
@@ -941,7 +961,7 @@ def open_edges(mesh: TerrainMesh) -> np.ndarray:
     return e_vtx[cnt[inv.ravel()] == 1]
 
 
-def terrain_mesh(net: PatchNet, level=4) -> TerrainMesh:
+def terrain_mesh(net: PatchNet, level: int | np.ndarray = 4) -> TerrainMesh:
     """The terrain tessellated for export (:func:`piste.formats.gltf.write.export_gltf`'s
     ``TerrainExport(mesh)``): every edge at ``level`` (4, 6 or 8, or any level 2..64), or per-edge
     levels ``(edges,) int`` (e.g. a camera's ``edge_levels``).  Not cached."""
@@ -949,7 +969,7 @@ def terrain_mesh(net: PatchNet, level=4) -> TerrainMesh:
         lv = int(level)
         if not 2 <= lv <= 64:
             raise ConfigError(f"terrain level must be between 2 and 64 vertices per edge (4, 6 or 8), got {level!r}")
-        levels = lv
+        levels: int | np.ndarray = lv
     else:
         levels = np.asarray(level, dtype=np.int64)
     return tessellate(net, levels, cache=False)
