@@ -19,7 +19,10 @@ cull_tree          depth-first frustum walk of a :class:`piste.terrain.cull.Patc
 
 from __future__ import annotations
 
+from typing import Any, no_type_check
+
 import numpy as np
+import numpy.typing as npt
 
 from piste._jit import HAVE_NUMBA, lazy_njit
 
@@ -28,6 +31,11 @@ __all__ = ["HAVE_NUMBA", "frame_indices", "tess_frame", "same_bytes", "ragged_ar
 
 
 _jit = lazy_njit  # compiled on first call (numba is imported then, not when piste is)
+
+# The kernel bodies (the ``_*_py`` functions compiled by ``_jit``) are left unannotated: numba types
+# them from the example arguments, with numpy scalar types (uint64 offsets, int64 keys) that mypy's
+# numpy stubs would reject where a body rebinds a name: each is marked @no_type_check (which only
+# sets an attribute on the function numba compiles), and the typed wrappers below are the module's API.
 
 
 def ragged_arange(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
@@ -46,6 +54,7 @@ def ragged_arange(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------ frame indices
+@no_type_check
 def _frame_indices_py(key, base, tmpl, tstart, tcount, out_start, out):
     # unsigned offsets: numba then emits no negative-index wrap-around and LLVM vectorises the copy + add
     for i in range(key.shape[0]):
@@ -57,7 +66,7 @@ def _frame_indices_py(key, base, tmpl, tstart, tcount, out_start, out):
             out[o + j] = tmpl[s + j] + b
 
 
-def _ex_frame_indices():
+def _ex_frame_indices() -> tuple:
     i8, u4 = np.zeros(1, np.int64), np.zeros(3, np.uint32)
     return i8, np.zeros(1, np.uint32), u4, i8, np.full(1, 3, np.int64), np.array([0, 3], np.int64), u4.copy()
 
@@ -104,6 +113,7 @@ KEY_BASE = 65
 TESS_OK, TESS_INVALID, TESS_EMPTY, TESS_NEW_SHAPES, TESS_STALE = 0, 1, 2, 3, 4
 
 
+@no_type_check
 def _tess_frame_py(lv, side_edge, pids, n_patches, max_level, reg_keys, reg_rows, stab, src_level, src_slot, tris,
                    level_row, grid, uv_now, uv_snap, lm_now, lm_snap, pids_out, side_out, kind_out, shape_of, ukey,
                    check):
@@ -320,7 +330,7 @@ def _tess_frame_py(lv, side_edge, pids, n_patches, max_level, reg_keys, reg_rows
     return TESS_OK, u, vert, indices, vpatch, vertex_start, tri_start
 
 
-def _ex_tess_frame():
+def _ex_tess_frame() -> tuple:
     i8 = np.zeros(1, np.int64)
     stab = np.array([[4, 2, 1, 2, 0, 0, 2, 2, 2, 2]], np.int64)
     level_row = np.full(65, -1, np.int64)
@@ -336,6 +346,7 @@ def _ex_tess_frame():
 _tess_frame_nb = _jit(_tess_frame_py, _ex_tess_frame)
 
 
+@no_type_check
 def _same_bytes_py(a, b):
     n8 = a.shape[0] // 8 * 8
     a8 = a[:n8].view(np.uint64)
@@ -348,7 +359,7 @@ def _same_bytes_py(a, b):
     return d == 0
 
 
-def _ex_same_bytes():
+def _ex_same_bytes() -> tuple:
     return np.zeros(8, np.uint8), np.zeros(8, np.uint8)
 
 
@@ -368,7 +379,7 @@ def same_bytes(a: np.ndarray, b: np.ndarray, use_numba: bool | None = None) -> b
     return bool(np.array_equal(a, b))
 
 
-def ready(kernel) -> bool:
+def ready(kernel: Any) -> bool:
     """Whether ``kernel`` is compiled and loaded (False without numba; the first False starts the
     background warm-up of every kernel, see :mod:`piste._jit`)."""
     return kernel is not None and kernel.ready()
@@ -382,7 +393,8 @@ def tess_ready() -> bool:
 gather_ready = tess_ready  # (its earlier name: tests/terrain/test_resident.py asks it)
 
 
-def tess_frame(lv, side_edge, pids, n_patches, max_level, registry, level_row, grid, uv_check):
+def tess_frame(lv: np.ndarray, side_edge: np.ndarray, pids: np.ndarray, n_patches: int, max_level: int, registry: tuple,
+               level_row: np.ndarray, grid: np.ndarray, uv_check: tuple) -> tuple:
     """One frame of the cached CPU tessellation, compiled (needs numba; the numpy path is
     :func:`piste.terrain.tessellate`'s own).  In one call: the patches sorted by shape key
     (stable: a counting sort over the keys with the present levels ranked, or an argsort when
@@ -434,6 +446,7 @@ def tess_frame(lv, side_edge, pids, n_patches, max_level, registry, level_row, g
 
 
 # ------------------------------------------------------------------------------ LOD per visible side
+@no_type_check
 def _side_lod_py(pids, side_edge, edge_mid, degenerate, eye, near, far, band, lod, morph, n_edges, factors, flat_err,
                  coarse_err, flat_lo, flat_hi, flat_tol, key):
     """Level index (-1 flat, 0 coarse, 1 medium, 2 fine) of every side of ``pids``, the shape key
@@ -500,7 +513,7 @@ def _side_lod_py(pids, side_edge, edge_mid, degenerate, eye, near, far, band, lo
         key[i] = k
 
 
-def _ex_side_lod():
+def _ex_side_lod() -> tuple:
     return (np.zeros(1, np.int64), np.zeros((1, 4), np.int64), np.zeros((1, 3)), np.zeros(1, np.bool_), np.zeros(3),
             60.0, 180.0, 0.3, True, True, 1, np.ones(1024, np.float32), np.zeros(1), np.zeros(1), np.zeros((1, 3)),
             np.zeros((1, 3)), 0.0, np.zeros(1, np.int64))
@@ -513,8 +526,10 @@ def side_lod_ready() -> bool:
     return ready(_side_lod_nb)
 
 
-def side_lod(pids, side_edge, edge_mid, degenerate, eye, near, far, band, lod, morph, factors, flat_err=None,
-             flat_lo=None, flat_hi=None, flat_tol: float = 0.0, coarse_err=None) -> np.ndarray:
+def side_lod(pids: np.ndarray, side_edge: np.ndarray, edge_mid: np.ndarray, degenerate: np.ndarray, eye: npt.ArrayLike, near: float, far: float,
+             band: float, lod: bool, morph: bool, factors: np.ndarray, flat_err: np.ndarray | None = None,
+             flat_lo: np.ndarray | None = None, flat_hi: np.ndarray | None = None, flat_tol: float = 0.0,
+             coarse_err: np.ndarray | None = None) -> np.ndarray:
     """Compiled per-side LOD (see :meth:`piste.terrain.resident.ResidentTerrain.frame`): returns the
     shape key ``(p,)`` int64 and fills ``factors`` when ``morph``.  ``flat_err (e,)``, ``flat_lo``,
     ``flat_hi (e, 3)`` float64 (:func:`piste.terrain.lod.flat_bounds`), ``coarse_err (e,)``
@@ -532,6 +547,7 @@ def side_lod(pids, side_edge, edge_mid, degenerate, eye, near, far, band, lod, m
 
 
 # ------------------------------------------------------------------------------ back-facing patches
+@no_type_check
 def _front_py(pids, key, family, base, tmpl, tstart, tcount, axis, cos, sin, done, centre, radius, eye, out):
     """Indices of the patches not wholly facing away from ``eye`` into ``out``; their count, or -1
     when a patch's cone is not computed yet (nothing written then)."""
@@ -564,7 +580,7 @@ def _front_py(pids, key, family, base, tmpl, tstart, tcount, axis, cos, sin, don
     return o
 
 
-def _ex_front():
+def _ex_front() -> tuple:
     i8 = np.zeros(1, np.int64)
     return (i8, i8.copy(), np.zeros(1, np.int64), i8.copy(), np.zeros(3, np.uint32), i8.copy(), np.full(1, 3, np.int64),
             np.zeros((4, 1, 3)), np.zeros((4, 1)), np.zeros((4, 1)), np.ones((4, 1), np.bool_), np.zeros((1, 3)),
@@ -578,7 +594,8 @@ def front_ready() -> bool:
     return ready(_front_nb)
 
 
-def front_indices(pids, key, family, base, tmpl, tstart, tcount, axis, cos, sin, done, centre, radius, eye,
+def front_indices(pids: np.ndarray, key: np.ndarray, family: np.ndarray, base: np.ndarray, tmpl: np.ndarray, tstart: np.ndarray, tcount: np.ndarray, axis: np.ndarray,
+                  cos: np.ndarray, sin: np.ndarray, done: np.ndarray, centre: np.ndarray, radius: np.ndarray, eye: npt.ArrayLike,
                   total: int) -> np.ndarray | None:
     """Compiled: the frame's index list (as :func:`frame_indices`) without the patches whose family
     cone (``axis (4, N, 3)``, ``cos``, ``sin (4, N)``, ``done (4, N)`` bool) and box sphere (``centre
@@ -592,6 +609,7 @@ def front_indices(pids, key, family, base, tmpl, tstart, tcount, axis, cos, sin,
 
 
 # ------------------------------------------------------------------------------ tree culling
+@no_type_check
 def _cull_tree_py(node_lo, node_hi, leaf_start, leaf_end, lo_sorted, hi_sorted, depth, planes, out):
     """Depth-first walk of the implicit tree (heap order); writes sorted positions of the visible
     boxes into ``out``, returns how many."""
@@ -669,7 +687,7 @@ def _cull_tree_py(node_lo, node_hi, leaf_start, leaf_end, lo_sorted, hi_sorted, 
     return cnt
 
 
-def _ex_cull():
+def _ex_cull() -> tuple:
     box = np.zeros((1, 3))
     return (box, box, np.zeros(1, np.int64), np.ones(1, np.int64), box, box, 0, np.zeros((6, 4)), np.zeros(1, np.int64))
 
@@ -681,7 +699,8 @@ def cull_ready() -> bool:
     return ready(_cull_tree_nb)
 
 
-def cull_tree(node_lo, node_hi, leaf_start, leaf_end, lo_sorted, hi_sorted, depth, planes) -> np.ndarray:
+def cull_tree(node_lo: np.ndarray, node_hi: np.ndarray, leaf_start: np.ndarray, leaf_end: np.ndarray, lo_sorted: np.ndarray, hi_sorted: np.ndarray,
+              depth: int, planes: npt.ArrayLike) -> np.ndarray:
     """Sorted-order positions of the boxes that meet ``planes`` (compiled walk; needs numba)."""
     out = np.empty(len(lo_sorted), dtype=np.int64)
     k = _cull_tree_nb(node_lo, node_hi, leaf_start, leaf_end, lo_sorted, hi_sorted, int(depth),
@@ -690,6 +709,7 @@ def cull_tree(node_lo, node_hi, leaf_start, leaf_end, lo_sorted, hi_sorted, dept
 
 
 # ---------------------------------------------------------------------------- height queries
+@no_type_check
 def _height_newton_py(cp, p, target, u, v, tol, max_iter, done, z):
     """Newton on ``Q(u, v).xy = target`` for each (query, patch) pair, as
     :func:`piste.terrain.query.height_at` iterates in numpy: ``u, v`` updated in place (clipped to
@@ -747,7 +767,7 @@ def _height_newton_py(cp, p, target, u, v, tol, max_iter, done, z):
             z[k] = zz
 
 
-def _ex_height_newton():
+def _ex_height_newton() -> tuple:
     cp = np.zeros((1, 4, 4, 3))
     return (cp, np.zeros(1, np.int64), np.zeros((1, 2)), np.zeros(1), np.zeros(1), 1e-9, 30,
             np.zeros(1, np.bool_), np.zeros(1))
@@ -760,7 +780,8 @@ def height_newton_ready() -> bool:
     return ready(_height_newton_nb)
 
 
-def height_newton(cp, p, target, u, v, tol: float, max_iter: int):
+def height_newton(cp: npt.ArrayLike, p: np.ndarray, target: npt.ArrayLike, u: npt.ArrayLike, v: npt.ArrayLike,
+                  tol: float, max_iter: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Compiled Newton for :func:`piste.terrain.query.height_at` (see :func:`_height_newton_py`):
     returns ``(u, v, done, z)`` for the ``(m,)`` pairs.  Needs numba."""
     m = len(p)

@@ -50,11 +50,15 @@ API
 
 from __future__ import annotations
 
+import os
 import threading
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ConfigError, ValidationError
 from piste.terrain import _kernels
@@ -64,8 +68,8 @@ from piste.terrain.lod import (DEFAULT_FAR, DEFAULT_NEAR, FLAT_ERROR, FLAT_LEVEL
                               level_errors)
 from piste.terrain.net import SIDE_CORNERS, PatchNet
 from piste.terrain.bezier import blend_tables, eval_edges, params
-from piste.terrain.tessellate import (MAX_LEVEL, _bilinear_weights, _cache, _glue_sources, _Snapshot, get_shape,
-                                      tessellate)
+from piste.terrain.tessellate import (MAX_LEVEL, TerrainMesh, _bilinear_weights, _cache, _glue_sources, _Snapshot,
+                                      get_shape, tessellate)
 
 __all__ = ["ResidentTerrain", "ResidentMesh", "RESIDENT_FLOATS", "RESIDENT_FORMAT", "MORPH_BAND", "RESIDENT_BUDGET",
            "BUILD_CHUNK", "resident_terrain", "resident_fits", "keep_resident", "morph_setting", "uniform_grids",
@@ -140,7 +144,8 @@ def edge_points(net: PatchNet, n: int) -> np.ndarray:
     return eval_edges(_cache(net).edge_cp[np.arange(net.n_edges)], n).reshape(-1, 3)
 
 
-def uniform_grids(net: PatchNet, levels, patches=None, edges: dict | None = None) -> dict:
+def uniform_grids(net: PatchNet, levels: Iterable[int], patches: np.ndarray | slice | None = None,
+                  edges: dict | None = None) -> dict:
     """Every patch's uniform grid at each level: ``{n: (positions (N, n^2, 3) float32, uvs (N, n^2, 4)
     float32: uv then light-map uv)}`` in the :func:`piste.terrain.get_shape` layout.
 
@@ -241,6 +246,7 @@ class ResidentMesh:
             if out is None:  # cones not computed yet for some patches: compute them, then again
                 r.facing(self.patch_ids, self.shape_key, self.eye)
                 out = _kernels.front_indices(*args)
+            assert out is not None  # the cones are computed now
             return self.indices if out.size == self.indices.size else out.reshape(-1, 3)
         keep = r.facing(self.patch_ids, self.shape_key, self.eye)
         if keep.all():
@@ -266,12 +272,12 @@ class ResidentMesh:
         f = self.factors[v[:, 10].astype(np.int64)][:, None]
         return (tgt + f * (pos - tgt)).astype(np.float32)
 
-    def to_mesh(self):
+    def to_mesh(self) -> TerrainMesh:
         """This frame's patches and levels as a classic :class:`piste.terrain.TerrainMesh` (unmorphed;
         for debug views and export)."""
         return tessellate(self.resident.net, self.edge_levels(), patches=self.patch_ids)
 
-    def compact(self):
+    def compact(self) -> tuple[np.ndarray, np.ndarray]:
         """``(positions (m, 3) float32 morphed, indices (t, 3) uint32)`` over only the vertices used."""
         rows, inv = np.unique(self.indices.ravel(), return_inverse=True)
         return self.morphed_positions(rows), inv.reshape(-1, 3).astype(np.uint32)
@@ -293,7 +299,7 @@ class ResidentTerrain:
         ``{n: offset of level n's grid in a block}``
     """
 
-    def __init__(self, net: PatchNet, levels=LEVELS, vertices: np.ndarray | None = None):
+    def __init__(self, net: PatchNet, levels: Iterable[int] = LEVELS, vertices: np.ndarray | None = None) -> None:
         levels = tuple(int(x) for x in levels)
         if len(levels) != 3 or list(levels) != sorted(set(levels)) or levels[0] < 2 or levels[-1] > MAX_LEVEL:
             raise ConfigError(f"resident terrain levels must be 3 increasing values in 2..{MAX_LEVEL}, got {levels}")
@@ -321,7 +327,7 @@ class ResidentTerrain:
         if vertices is not None:
             self._vertices = self._checked(vertices)
 
-    def _checked(self, vertices) -> np.ndarray:
+    def _checked(self, vertices: Any) -> np.ndarray:
         """Blocks built before (e.g. stored in a bundle): ``(N B, 11) float32`` whose morph slots
         index this net's factors, else :class:`~piste.errors.ValidationError` (they are used as given)."""
         v = vertices
@@ -344,6 +350,7 @@ class ResidentTerrain:
         """``(N B, 11) float32``: position, morph target, uv, light-map uv, morph slot (built on first use)."""
         if self._vertices is None:
             self._build_vertices()
+        assert self._vertices is not None  # _build_vertices sets it
         return self._vertices
 
     def _build_vertices(self) -> None:
@@ -433,8 +440,9 @@ class ResidentTerrain:
         return len(self.net) * self.block * RESIDENT_FLOATS * 4
 
     # ------------------------------------------------------------------ per frame
-    def frame(self, eye, planes=None, near: float = DEFAULT_NEAR, far: float = DEFAULT_FAR, lod: bool = True,
-              morph: bool = True, patches=None, side_levels=None, morph_band: float = MORPH_BAND,
+    def frame(self, eye: npt.ArrayLike, planes: npt.ArrayLike | None = None, near: float = DEFAULT_NEAR, far: float = DEFAULT_FAR,
+              lod: bool = True, morph: bool = True, patches: npt.ArrayLike | None = None, side_levels: npt.ArrayLike | None = None,
+              morph_band: float = MORPH_BAND,
               use_numba: bool | None = None, flat_error: float | None = FLAT_ERROR) -> ResidentMesh:
         """Levels, culling and the index list for a camera at ``eye``.
 
@@ -510,13 +518,13 @@ class ResidentTerrain:
         key = ((d[:, 0] * 4 + d[:, 1]) * 4 + d[:, 2]) * 4 + d[:, 3]
         return self._mesh(pids, key, morph, use_numba, eye)
 
-    def _no_flat(self):
+    def _no_flat(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Empty stand-ins for :func:`piste.terrain.lod.flat_bounds` (the compiled LOD with the flat level off)."""
         z = np.zeros(1, np.float64)
         return z, np.zeros((1, 3), np.float64), np.zeros((1, 3), np.float64)
 
     # ------------------------------------------------------------------ back-facing patches
-    def _cone_state(self):
+    def _cone_state(self) -> tuple:
         """Lazily filled per-patch normal cones, one per shape family ``j`` (shapes whose side digits
         are all ``<= j``: 0 the flat patch, 1 flat or coarsest sides, 2 up to the medium level, 3 all):
         ``(family triangles [(T_j, 3) block-local], axis (4, N, 3), cos (4, N), sin (4, N),
@@ -574,7 +582,7 @@ class ResidentTerrain:
             sin[j, p] = np.sqrt(np.maximum(1.0 - cos[j, p] ** 2, 0.0))
             done[j, p] = True
 
-    def facing(self, pids: np.ndarray, key: np.ndarray, eye) -> np.ndarray:
+    def facing(self, pids: np.ndarray, key: np.ndarray, eye: npt.ArrayLike) -> np.ndarray:
         """``(p,)`` bool: False where patch ``pids[i]`` drawn as shape ``key[i]`` faces wholly away from
         ``eye`` (every triangle's plane has the eye behind it, at any morph factor), True otherwise.
 
@@ -602,7 +610,8 @@ class ResidentTerrain:
         back = (c > 0) & (va * c - vp * sin[fam, pids] > radius[pids] * (1.0 + 1e-6) + 1e-6 * np.sqrt(vv))
         return ~back
 
-    def _mesh(self, pids: np.ndarray, key: np.ndarray, morph: bool, use_numba=None, eye=None) -> ResidentMesh:
+    def _mesh(self, pids: np.ndarray, key: np.ndarray, morph: bool, use_numba: bool | None = None,
+              eye: npt.ArrayLike | None = None) -> ResidentMesh:
         base = pids * self.block
         flat, start = frame_indices(key, base, self.tmpl, self.tmpl_start, self.tmpl_count, use_numba=use_numba)
         return ResidentMesh(
@@ -622,7 +631,7 @@ class ResidentTerrain:
         )
 
 
-def shape_templates(levels=LEVELS) -> dict:
+def shape_templates(levels: Sequence[int] = LEVELS) -> dict:
     """The index templates of every patch shape (``4^4`` side-level combinations: the flat level,
     :data:`piste.terrain.lod.FLAT_LEVEL`, then ``levels``) over a resident block of ``levels``: ``tmpl``
     (concatenated uint32 block-local indices), ``tmpl_start``, ``tmpl_count`` (int64 per shape),
@@ -663,7 +672,7 @@ def shape_templates(levels=LEVELS) -> dict:
 TEMPLATES_FILE = Path(__file__).resolve().parents[1] / "data" / "resident_templates.npz"
 
 
-def shipped_templates(levels) -> dict | None:
+def shipped_templates(levels: Sequence[int]) -> dict | None:
     """:func:`shape_templates` of ``levels`` from :data:`TEMPLATES_FILE`, or None when the file is
     missing, unreadable or for other levels (then the caller computes them)."""
     try:
@@ -680,7 +689,7 @@ def shipped_templates(levels) -> dict | None:
     return out
 
 
-def write_templates(path=TEMPLATES_FILE, levels=LEVELS) -> Path:
+def write_templates(path: str | os.PathLike[str] = TEMPLATES_FILE, levels: Sequence[int] = LEVELS) -> Path:
     """Write :func:`shape_templates` of ``levels`` to ``path`` (regenerates the shipped file)."""
     t = shape_templates(levels)
     path = Path(path)
@@ -694,7 +703,7 @@ def write_templates(path=TEMPLATES_FILE, levels=LEVELS) -> Path:
 RESIDENT_BUDGET = 1 << 30
 
 
-def resident_fits(net: PatchNet, levels=LEVELS, budget: int = RESIDENT_BUDGET) -> bool:
+def resident_fits(net: PatchNet, levels: Iterable[int] = LEVELS, budget: int = RESIDENT_BUDGET) -> bool:
     """Whether ``net``'s resident blocks (``N x 116 x 44`` bytes for levels 4/6/8) stay within
     ``budget`` bytes.  They are built from the control points (:func:`uniform_grids`), not from the
     vertex cache, and :data:`BUILD_CHUNK` patches at a time, so the blocks are what the budget counts
@@ -704,7 +713,7 @@ def resident_fits(net: PatchNet, levels=LEVELS, budget: int = RESIDENT_BUDGET) -
     return len(net) * block * RESIDENT_FLOATS * 4 <= budget
 
 
-def keep_resident(net: PatchNet, vertices: np.ndarray, levels=LEVELS) -> ResidentTerrain:
+def keep_resident(net: PatchNet, vertices: np.ndarray, levels: Iterable[int] = LEVELS) -> ResidentTerrain:
     """Keep blocks built before (a bundle's stored ``terrain/resident_blocks``: the bits
     :class:`ResidentTerrain` builds for ``net`` at ``levels`` with :data:`RESIDENT_FORMAT`) on ``net``:
     :func:`resident_terrain` returns them at once (a fresh process's first frame waited ~0.1 s for
@@ -722,7 +731,7 @@ def morph_setting(explicit: bool | None = None) -> bool:
     return True if explicit is None else bool(explicit)
 
 
-def resident_terrain(net: PatchNet, levels=LEVELS, wait: bool = True) -> ResidentTerrain | None:
+def resident_terrain(net: PatchNet, levels: Iterable[int] = LEVELS, wait: bool = True) -> ResidentTerrain | None:
     """The :class:`ResidentTerrain` of ``net`` at ``levels`` with its vertex blocks, built once and
     kept on the net (rebuilt when its UVs or light-map rects change).
 
@@ -757,7 +766,7 @@ def resident_terrain(net: PatchNet, levels=LEVELS, wait: bool = True) -> Residen
     if job is None:
         job = {"result": None, "error": None}
 
-        def build():
+        def build() -> None:
             try:
                 rr = ResidentTerrain(net, key)
                 rr.vertices  # noqa: B018
