@@ -77,6 +77,8 @@ STRICT_REQUIRED = (
     "piste.character",  # the whole package: every module, and any new one
     "piste.terrain.lod", "piste.terrain.net", "piste.terrain.cull",
     "piste.terrain.tessellate",
+    "piste.formats.bundle",
+    "piste.formats",  # the whole package: every module, and any new one
 )
 
 

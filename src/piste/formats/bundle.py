@@ -54,8 +54,10 @@ import struct
 import warnings
 import zipfile
 import zlib
+from collections.abc import Callable, Collection, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -106,7 +108,8 @@ def _npy_bytes(arr: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def write_bundle(path, manifest: dict, arrays: dict, compresslevel: int = 1, stored=STORED_MEMBERS) -> Path:
+def write_bundle(path: str | os.PathLike[str], manifest: dict, arrays: dict, compresslevel: int = 1,
+                 stored: Collection[str] = STORED_MEMBERS) -> Path:
     """Write a bundle atomically: ``manifest`` (JSON-able dict; ``format`` and ``members`` are set
     here) and ``arrays`` (``{"a/b": ndarray}``, stored as ``a/b.npy``).  ``stored``: names of
     ``arrays`` written without compression (big members read at every start: no inflating).
@@ -139,7 +142,7 @@ def write_bundle(path, manifest: dict, arrays: dict, compresslevel: int = 1, sto
 
 
 @contextlib.contextmanager
-def _open(path: Path):
+def _open(path: Path) -> Iterator[zipfile.ZipFile]:
     """The bundle as a ZipFile, opened through :func:`piste.formats.safe_io.open_file` (regular
     files only: a pipe or device is refused before a read, a link below a confinement root too)."""
     try:
@@ -183,24 +186,25 @@ def _manifest(path: Path, zf: zipfile.ZipFile) -> dict:
     return man
 
 
-def read_manifest(path) -> dict:
+def read_manifest(path: str | os.PathLike[str]) -> dict:
     """The manifest of the bundle at ``path`` (version-checked)."""
     path = Path(path)
     with _open(path) as zf:
         return _manifest(path, zf)
 
 
-def _mapped(zf: zipfile.ZipFile):
+def _mapped(zf: zipfile.ZipFile) -> mmap.mmap | None:
     """The bundle's file mapped read-only (POSIX), or None (then every member is read)."""
     if os.name != "posix":  # (elsewhere a mapped file could not be replaced by a rebuild while in use)
         return None
     try:
-        return mmap.mmap(zf.fp.fileno(), 0, access=mmap.ACCESS_READ)
+        # (a closed zip's fp is None: the AttributeError below)
+        return mmap.mmap(zf.fp.fileno(), 0, access=mmap.ACCESS_READ)  # type: ignore[union-attr]
     except (AttributeError, OSError, ValueError, io.UnsupportedOperation):
         return None
 
 
-def _mapped_member(mm, zi: zipfile.ZipInfo):
+def _mapped_member(mm: mmap.mmap, zi: zipfile.ZipInfo) -> memoryview | bytes | None:
     """Member ``zi`` of the mapped file ``mm``: an uncompressed one as a view of the mapping (no copy:
     reading the 13 MB of vertex blocks into a fresh process's new memory cost ~10 ms more than
     mapping them; its CRC-32 not computed here), a deflated one inflated (at most its declared size)
@@ -227,8 +231,9 @@ def _mapped_member(mm, zi: zipfile.ZipInfo):
     return data
 
 
-def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool, on_terrain=None) -> dict:
-    out = {}
+def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool,
+                 on_terrain: Callable[[dict], Any] | None = None) -> dict:
+    out: dict[str, np.ndarray] = {}
     infos = {i.filename: i for i in zf.infolist()}  # the zip's index, read once
     mm = _mapped(zf)
     # the terrain's members first: ``on_terrain(out)`` can start on the net (e.g. the renderer's vertex
@@ -280,7 +285,7 @@ def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool, o
     return out
 
 
-def _known_array(data: bytes, info: dict, copy: bool) -> np.ndarray | None:
+def _known_array(data: bytes | memoryview, info: dict, copy: bool) -> np.ndarray | None:
     """The array of ``.npy`` bytes whose header is exactly the one :func:`write_bundle` writes for
     the manifest's shape and dtype (``np.lib.format``'s version 1.0 header of a C-order array),
     without parsing it (``read_array`` evaluates each header as a Python literal: ~20 us a member);
@@ -294,12 +299,12 @@ def _known_array(data: bytes, info: dict, copy: bool) -> np.ndarray | None:
         dt = np.dtype(dtype)
         if dt.hasobject or dt.str != dtype:
             return None
-        head = io.BytesIO()
-        np.lib.format.write_array_header_1_0(head, {"descr": np.lib.format.dtype_to_descr(dt),
+        header = io.BytesIO()
+        np.lib.format.write_array_header_1_0(header, {"descr": np.lib.format.dtype_to_descr(dt),
                                                     "fortran_order": False, "shape": tuple(shape)})
     except (TypeError, ValueError):
         return None
-    head = head.getvalue()
+    head = header.getvalue()
     count = int(np.prod(shape, dtype=np.int64))
     if bytes(data[:len(head)]) != head or len(data) - len(head) != count * dt.itemsize:
         return None
@@ -307,7 +312,7 @@ def _known_array(data: bytes, info: dict, copy: bool) -> np.ndarray | None:
     return a.copy() if copy else a
 
 
-def _view_array(data: bytes) -> np.ndarray:
+def _view_array(data: bytes | memoryview) -> np.ndarray:
     """The array of ``.npy`` bytes as a read-only view of them (no copy: ``read_array`` copies a
     13 MB member twice, 256 KB at a time); ValueError when they are not a plain C-order array."""
     fp = io.BytesIO(data)
@@ -325,7 +330,7 @@ def _view_array(data: bytes) -> np.ndarray:
     return np.frombuffer(data, dtype=dtype, count=count, offset=fp.tell()).reshape(shape)
 
 
-def camera_to_dict(cam) -> dict:
+def camera_to_dict(cam: Any) -> dict:
     """The manifest entry of a camera (any object with ``eye``, ``target``, ``up``, ``fov_y``,
     ``near``, ``far``, ``ortho_height``); :func:`piste.pipeline.bundle_objects.camera_from_dict`
     reads it back."""
@@ -345,7 +350,8 @@ class BundleData:
     arrays: dict
 
 
-def read_bundle(path, verify: bool = True, on_terrain=None) -> BundleData:
+def read_bundle(path: str | os.PathLike[str], verify: bool = True,
+                on_terrain: Callable[[dict, dict], Any] | None = None) -> BundleData:
     """Read a ``.piste`` bundle's manifest and arrays (see the module docstring).
 
     ``verify`` checks each member's SHA-256 against the manifest (the zip CRC is always checked).
@@ -394,7 +400,7 @@ def _check_topology_members(path: Path, man: dict, arrays: dict) -> None:
             raise FormatError(path, f"expected a {want} {dtype} array, got {a.shape} {a.dtype.str}", field=f"{name}.npy")
 
 
-def load_bundle(path, verify: bool = True) -> BundleData:
+def load_bundle(path: str | os.PathLike[str], verify: bool = True) -> BundleData:
     """Deprecated here: :func:`piste.pipeline.load_bundle` loads a bundle as the scene's objects
     (``.net``, ``.lightmap``, ``.cameras``, ...).  This returns :func:`read_bundle`'s
     :class:`BundleData` (manifest and arrays only) and warns."""
@@ -404,7 +410,7 @@ def load_bundle(path, verify: bool = True) -> BundleData:
     return read_bundle(path, verify)
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> NoReturn:
     if name in ("Bundle", "lights_from_dict", "camera_from_dict"):
         raise AttributeError(f"piste.formats.bundle.{name} moved to piste.pipeline.bundle_objects (the format layer "
                              f"reads and writes arrays only): from piste.pipeline import {name}")
