@@ -65,17 +65,19 @@ import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
-from piste.character.model import Model
 from piste.errors import ConfigError, ValidationError
 from piste.formats.atomic import atomic_path, write_bytes_atomic
 from piste.formats.gltf import units as gltf_units
 from piste.scene_data import AnyLight, Camera
 from piste.transforms import compose_trs, decompose_trs, look_rotation
+
+if TYPE_CHECKING:  # (types only: writing a file without characters does not import them)
+    from piste.character.model import Model
 
 __all__ = ["TerrainExport", "CharacterExport", "ObjectsExport", "ExportReport", "export_gltf",
            "lightmap_to_png_array", "Y_UP_ROOT_ROTATION"]
