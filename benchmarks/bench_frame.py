@@ -14,7 +14,8 @@ Sections (every configuration interleaved frame by frame in one process; medians
 3. **Completed scene**: six riders chased by the camera, objects, projected shadows, specular: the
    full scene, without shadows / specular, and a per-pass profile (``glFinish`` around each pass:
    what llvmpipe spends in each); then each scene change A/B on its own pass (the objects' per-mode
-   programs with per-instance attributes and levels of detail; the terrain's back-face culling, whole
+   programs with per-instance attributes, levels of detail against full meshes and at <= 1 px against
+   <= 0.5 px of error; the terrain's back-face culling, whole
    back-facing patches left out by normal cones (off by default: no gain measured), error-driven
    edges (flat, 2 corners, or coarsest where under 0.5 px), visibility sets and per-vertex track distance; the shadow mips by compute dispatches; the shadow
    receivers cut to their frusta by clip distances), with the pixels changed.
@@ -455,8 +456,13 @@ def scene_section(args, floor_ms: list) -> dict:
     def set_cull(on):
         r.terrain.terrain.cull_back = on
 
+    lod_now = r.objects.lod_pixels if r.objects is not None else 0.0  # the scene's setting (the default)
+
     def set_object_lod(on):
-        r.objects.lod_pixels = 0.5 if on else 0.0
+        r.objects.lod_pixels = lod_now if on else 0.0
+
+    def set_object_lod_1px(on):  # (lod_now restored after its A/B)
+        r.objects.lod_pixels = 1.0 if on else 0.5
 
     def set_visibility(on):
         r.terrain.set_visibility(bundle.visibility if on else None)
@@ -493,8 +499,10 @@ def scene_section(args, floor_ms: list) -> dict:
 
     changes = [("objects", set_objects, "objects: per-mode programs, instance attributes, no discard",
                 "objects: one program, 14 texelFetch a vertex, u_mode + discard"),
-               ("objects", set_object_lod, "objects: levels of detail, <= 0.5 px of error",
+               ("objects", set_object_lod, "objects: levels of detail, as the scene sets them",
                 "objects: every instance with its full mesh"),
+               ("objects", set_object_lod_1px, "objects: levels of detail, <= 1 px of error",
+                "objects: levels of detail, <= 0.5 px of error"),
                ("terrain", set_cull, "terrain: back faces culled", "terrain: back faces drawn"),
                ("terrain", set_cone_cull, "terrain: every visible patch sent (the default)",
                 "terrain: wholly back-facing patches left out (normal cones, off)"),
@@ -531,6 +539,8 @@ def scene_section(args, floor_ms: list) -> dict:
             d = np.abs(pair[True].astype(int) - pair[False].astype(int)).max(-1)
             ab_diff.append((int(d.max()), int((d > 0).sum())))
         setter(True)
+        if r.objects is not None:
+            r.objects.lod_pixels = lod_now  # (the 1 px A/B leaves the scene's own setting)
         ab_res.append((label, now_name, before_name, ab, ab_frame, ab_diff))
     undo2()
     frag_times, frag_screens = _terrain_fragment_costs(r, one, max(args.frames // 2, 5))

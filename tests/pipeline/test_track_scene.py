@@ -55,7 +55,7 @@ def test_keys_parse_with_defaults_and_errors(tmp_path):
     assert s.auto_objects == AutoObjectsSpec(seed=3, trees=12, signs=2, rocks=3, rails=1)
     assert s.auto_objects.as_dict() == {"seed": 3, "trees": 12, "signs": 2, "rocks": 3, "rails": 1}
     assert s.render.fog == "auto" and s.render.face == "morph" and s.render.object_lod == 2.0
-    assert loads_scene("", tmp_path / "e.toml").render.object_lod == 0.5
+    assert loads_scene("", tmp_path / "e.toml").render.object_lod == 1.0  # (object_lod.DEFAULT_LOD_PIXELS)
     d = loads_scene("[pack]\n[auto_objects]\n", tmp_path / "b.toml")
     assert d.pack == PackSpec() and d.pack.as_dict() == {"follow": "track", "start": 0.12}
     assert d.auto_objects == AutoObjectsSpec()

@@ -1,5 +1,6 @@
 """Object levels of detail in the draw: a row of trees from near to far, drawn with LOD (half a pixel
-of error) and in full: far fewer triangles, the same picture within a pixel's worth."""
+of error, and the default: one pixel) and in full: far fewer triangles, the same picture within a
+pixel's worth."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import pytest
 
 from piste.lighting import AmbientLight, DirectionalLight, Lights
 from piste.lighting.vertex import choose_lights_many
+from piste.world.object_lod import DEFAULT_LOD_PIXELS
 
 LIGHTS = Lights((AmbientLight((0.35, 0.4, 0.5), 0.5),
                  DirectionalLight((-0.35, 0.75, -0.55), (1.0, 0.9, 0.75), 0.8, name="key")))
@@ -47,10 +49,11 @@ def _draw(gl, objs, lod_pixels, mode="dynamic"):
 
 
 @pytest.mark.parametrize("mode", ["dynamic", "baked"])
-def test_lod_keeps_the_picture_with_fewer_triangles(gl, mode):
+@pytest.mark.parametrize("lod_pixels", [0.5, DEFAULT_LOD_PIXELS])
+def test_lod_keeps_the_picture_with_fewer_triangles(gl, mode, lod_pixels):
     objs = _trees()
     full, t_full, counts_full, n = _draw(gl, objs, 0.0, mode)
-    lod, t_lod, counts, n2 = _draw(gl, objs, 0.5, mode)
+    lod, t_lod, counts, n2 = _draw(gl, objs, lod_pixels, mode)
     assert n == n2 == len(objs)
     assert counts_full.tolist()[0] == n and counts_full[1:].sum() == 0
     assert counts.sum() == n and counts[1:].sum() > n // 2  # most of the row is far away
@@ -67,3 +70,23 @@ def test_lod_pixels_zero_is_the_full_mesh(gl):
     b, tb, _, _ = _draw(gl, objs, 0.0)
     assert ta == tb == sum(objs.meshes[objs.kinds[k]].n_triangles for k in objs.kind)
     assert np.array_equal(a, b)
+
+
+def test_default_lod_is_one_pixel_and_coarser_than_half_a_pixel(gl):
+    """The default error (1 px: the scene's pictures hold within their reference tolerance) draws
+    fewer triangles than half a pixel did, and a pass made without ``lod_pixels`` takes it."""
+    from piste.render.object_pass import ObjectPass
+
+    assert DEFAULT_LOD_PIXELS == 1.0
+    objs = _trees()
+    op = ObjectPass(gl, objs, LIGHTS)
+    try:
+        assert op.lod_pixels == DEFAULT_LOD_PIXELS
+    finally:
+        op.release()
+    _, t_half, counts_half, _ = _draw(gl, objs, 0.5)
+    _, t_one, counts_one, _ = _draw(gl, objs, DEFAULT_LOD_PIXELS)
+    assert t_one < t_half
+    # every instance at a level at least as coarse: the mean level rises
+    lv = np.arange(len(counts_one))
+    assert (counts_one * lv).sum() > (counts_half * lv).sum()

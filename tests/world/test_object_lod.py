@@ -94,3 +94,24 @@ def test_choose_lods_orthographic():
     px = errors * 448 / 20.0
     want = int((px <= 0.5).sum() - 1)
     assert lv.tolist() == [want, want] and want == 1
+
+
+def test_chain_goes_down_to_a_few_triangles():
+    # six levels by default: a rock (320 triangles) halves down to 10, every level with a larger error
+    _, lods = _chain("rock")
+    assert len(lods) == 6 and lods[-1].n_triangles <= 16
+    m, _ = _chain("rock")
+    four = object_lods(m.decode()[0], m.indices, max_levels=4)  # (the previous default)
+    assert [lv.n_triangles for lv in four] == [lv.n_triangles for lv in lods[:4]] and four[-1].n_triangles > 16
+
+
+def test_prune_goes_past_a_stalled_chain():
+    # the tree's connected simplification stalls (trunk and crown apart); pruning small parts goes on,
+    # its error still ascending; off by default (a rail would lose whole boxes)
+    m, plain = _chain("tree")
+    pruned = object_lods(m.decode()[0], m.indices, prune=True)
+    assert pruned[-1].n_triangles < plain[-1].n_triangles
+    errs = [lv.error for lv in pruned]
+    assert all(b > a for a, b in zip(errs, errs[1:]))
+    rail, _ = _chain("rail")
+    assert len(object_lods(rail.decode()[0], rail.indices, prune=True)) > 1

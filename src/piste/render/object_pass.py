@@ -17,7 +17,7 @@ instance are not sorted).
 
 Levels of detail (:mod:`piste.world.object_lod`): every kind has a chain of index lists over its one
 set of vertices; each frame a visible instance takes the coarsest level whose simplification error,
-projected at its distance, stays under ``lod_pixels`` (default half a pixel), and each (kind, level)
+projected at its distance, stays under ``lod_pixels`` (default one pixel), and each (kind, level)
 is one instanced draw.  ``lod_pixels=0`` draws every instance in full.
 
 Lighting modes (``mode``): ``dynamic`` (the talk's SSX objects: 1 ambient + 3 directional chosen
@@ -27,7 +27,7 @@ vertex: dynamic point and spot lights with attenuation and cone).
 
 API
 ---
-ObjectPass(ctx, objects, lights, mode="dynamic", lod_pixels=0.5)   ``.draw(vp, eye, visible, fog=None, mode=None)``,
+ObjectPass(ctx, objects, lights, mode="dynamic", lod_pixels=1.0)   ``.draw(vp, eye, visible, fog=None, mode=None)``,
 ``.add_group(key, kind, matrix, colors=None)``, ``.remove_group(key)`` (instances that come and go)
 
 instance_rows(objects) -> (n, 16, 4) float32

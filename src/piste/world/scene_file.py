@@ -60,7 +60,7 @@ scene file.  Every table and key is optional except where noted::
     lightmap_mode = "modulate"    # or "ps2"
     fog = "auto"                  # density per metre (0: none) or "auto" (6e-4 scaled to the scene's size)
     face = "morph"                # riders' faces: "morph" targets, their "null_bones" fit, or "off"
-    object_lod = 0.5              # objects' levels of detail: the simplification error an instance
+    object_lod = 1.0              # objects' levels of detail: the simplification error an instance
                                   #   may show, in pixels (0: every object drawn in full)
     aa = "off"                    # anti-aliasing: "off", "msaa2|4|8" or "fxaa" (`--aa` overrides)
     dof = [20.0, 0.05]            # depth of field: focus distance and lens radius in metres (default:
@@ -162,6 +162,7 @@ from piste.formats.ssx.mpf_model import mpf_partners
 from piste.formats.safe_io import (MAX_TOML_BYTES, check_regular, confined_file, confined_folder, open_file,
                                    read_regular, resolve_reference, toml_depth, user_allow_paths)
 from piste.lighting.lights import AmbientLight, DirectionalLight, PointLight, SpotLight
+from piste.world.object_lod import DEFAULT_LOD_PIXELS
 
 #: the kinds [[tile_objects]] may name (piste.world.objects.OBJECT_KINDS)
 TILE_OBJECT_KINDS = ("tree", "sign", "rock", "rail")
@@ -408,7 +409,7 @@ class RenderSpec:
     lightmap_mode: str = "modulate"
     fog: float | str = "auto"     # density per metre, or "auto" (scaled to the scene's size)
     face: str = "morph"      # "morph", "null_bones" or "off"
-    object_lod: float = 0.5  # pixels of simplification error an object may show (0: full meshes)
+    object_lod: float = DEFAULT_LOD_PIXELS  # pixels of simplification error an object may show (0: full meshes)
     aa: str = "off"          # anti-aliasing: "off", "msaa2", "msaa4", "msaa8" or "fxaa"
     dof: list[float] | None = None       # depth of field: [focus metres, aperture metres] or None (off)
     soft_shadows: bool = False  # percentage-closer soft rider shadows
@@ -774,7 +775,7 @@ def _parse_render(re_: SceneTable, scene: SceneFile) -> RenderSpec:
     spec.face = re_.get("face", "str", "morph")
     if spec.face not in ("morph", "null_bones", "off"):
         raise re_.error("face", f"expected \"morph\", \"null_bones\" or \"off\", got {spec.face!r}")
-    spec.object_lod = re_.get("object_lod", "float", 0.5)
+    spec.object_lod = re_.get("object_lod", "float", DEFAULT_LOD_PIXELS)
     if not 0.0 <= spec.object_lod <= 64.0:
         raise re_.error("object_lod", f"expected pixels in 0..64 (0: full meshes), got {spec.object_lod!r}")
     spec.aa = re_.get("aa", "str", "off")
