@@ -19,7 +19,7 @@ def test_rebuild_reuses_every_step_and_is_byte_identical(small_scene):
     a = r1.path.read_bytes()
     assert set(r1.rebuilt) >= {"terrain", "lightmap", "characters", "objects", "visibility"}
     r2 = build_scene(scene)
-    assert set(r2.cached) == {"terrain", "lightmap", "shadow", "characters", "objects", "visibility", "object_visibility"}
+    assert set(r2.cached) == {"terrain", "lod_errors", "lightmap", "shadow", "characters", "objects", "visibility", "object_visibility"}
     assert r2.path.read_bytes() == a
     # no cache at all: the same bytes again
     r3 = build_scene(scene, out=scene.with_name("nocache.piste"), use_cache=False)
@@ -34,13 +34,13 @@ def test_changing_a_light_rebuilds_only_what_depends_on_it(small_scene):
     scene.write_text(scene.read_text().replace("intensity = 1.0", "intensity = 0.5"))
     r = build_scene(scene)
     assert set(r.rebuilt) == {"lightmap", "objects", "write"}
-    assert set(r.cached) == {"terrain", "shadow", "characters", "visibility", "object_visibility"}
+    assert set(r.cached) == {"terrain", "lod_errors", "shadow", "characters", "visibility", "object_visibility"}
     after = load_bundle(r.path)
     assert after.arrays["lightmap/atlas"].mean() < before.arrays["lightmap/atlas"].mean()
     # and back: every step from the cache, the first bundle's bytes
     scene.write_text(scene.read_text().replace("intensity = 0.5", "intensity = 1.0"))
     r = build_scene(scene)
-    assert set(r.cached) == {"terrain", "lightmap", "shadow", "characters", "objects", "visibility", "object_visibility"}
+    assert set(r.cached) == {"terrain", "lod_errors", "lightmap", "shadow", "characters", "objects", "visibility", "object_visibility"}
 
 
 

@@ -6,6 +6,8 @@ Steps (each keyed by a content hash of what it reads; a key found in the cache i
 step           reads                                                        makes
 ============== ============================================================ =====================
 terrain        the terrain source's bytes (or the course seed), settings    control points, UVs
+lod_errors     terrain key                                                  the LOD's per-patch
+                                                                            error table
 lightmap       terrain key, lights, res / gutter / shadows                  the baked atlas
 shadow         terrain key, the sun's direction                             where the terrain sees
                                                                             the sun (riders' shadows)
@@ -51,7 +53,8 @@ from piste.formats.gltf import load_gltf
 from piste.formats.ssx.mpf_model import mpf_partners
 from piste.lighting.baker import BAKE_VERSION, bake_lightmap
 from piste.lighting.lights import Lights, default_lights
-from piste.pipeline.bundle_objects import camera_from_dict, lights_from_dict, resident_members
+from piste.pipeline.bundle_objects import (LOD_ERRORS_FORMAT, camera_from_dict, lights_from_dict, lod_error_members,
+                                          resident_members)
 from piste.pipeline.cache import Cache, content_key
 from piste.pipeline.characters import CHARACTERS_VERSION, character_arrays
 from piste.pipeline.gltf_import import import_gltf
@@ -390,6 +393,23 @@ def _store_terrain(ctx: BuildContext, out: StepOutput) -> None:
                                "key": ctx.terrain_key}
 
 
+# -------------------------------------------------------------- terrain LOD error table
+# per patch, the errors of the flat and coarsest meshes (piste.terrain.lod): computed here, not in a
+# fresh process's first frame (10-30 ms; 50-160 ms on a loaded machine)
+def _lod_errors_key(ctx: BuildContext) -> str:
+    return content_key(BUILD_VERSION, "lod_errors", LOD_ERRORS_FORMAT, ctx.terrain_key)
+
+
+def _make_lod_errors(ctx: BuildContext) -> StepOutput:
+    return lod_error_members(ctx.net)
+
+
+def _store_lod_errors(ctx: BuildContext, out: StepOutput) -> None:
+    arrays, meta = out
+    ctx.arrays.update(arrays)
+    ctx.manifest["lod_errors"] = dict(meta)
+
+
 # -------------------------------------------------------------- lights and cameras (cheap: each time)
 def _run_lights(ctx: BuildContext) -> None:
     lights = scene_lights(ctx.scene, ctx.gltf_cache)
@@ -690,6 +710,8 @@ def _make_settings(ctx: BuildContext) -> StepOutput:
 BUILD_STEPS: list[BuildStep] = [
     BuildStep("terrain", "the terrain source's bytes (or the course seed) and the [terrain] settings",
               _terrain_key, _make_terrain, _store_terrain),
+    BuildStep("lod_errors", "terrain key (the LOD's per-patch flat / coarsest errors)",
+              _lod_errors_key, _make_lod_errors, _store_lod_errors),
     BuildStep("lights", "inline and glTF lights and cameras (cheap: computed each time)",
               run=_run_lights, cache=False),
     BuildStep("lightmap", "terrain key, lights, [lightmap] res / gutter / shadows (bounces, sun_radius when set)",

@@ -47,7 +47,7 @@ from piste.lighting.lights import AmbientLight, DirectionalLight, Lights, PointL
 from piste.lighting.vertex import choose_lights_many
 from piste.pipeline.characters import lods_from_arrays, model_from_arrays
 from piste.pipeline.visibility import Visibility
-from piste.terrain.lod import LEVELS
+from piste.terrain.lod import LEVELS, STORED_ERROR_LEVELS, keep_patch_errors, patch_error_table
 from piste.terrain.net import TOPOLOGY_ARRAYS, TOPOLOGY_FORMAT, PatchNet
 from piste.terrain.resident import (RESIDENT_FLOATS, RESIDENT_FORMAT, ResidentTerrain, keep_resident, resident_fits,
                                     resident_terrain)
@@ -55,7 +55,8 @@ from piste.world.camera import Camera
 from piste.world.objects import CompressedMesh, ObjectSet, normal_matrix
 
 __all__ = ["Bundle", "load_bundle", "bundle_from_data", "lights_from_dict", "camera_from_dict", "camera_to_dict",
-           "resident_members", "RESIDENT_MEMBER", "STORED_BLOCKS_BUDGET"]
+           "resident_members", "RESIDENT_MEMBER", "STORED_BLOCKS_BUDGET", "lod_error_members", "LOD_ERRORS_MEMBER",
+           "LOD_ERRORS_FORMAT"]
 
 _T = TypeVar("_T")
 
@@ -73,6 +74,37 @@ def resident_members(net: PatchNet) -> tuple[dict, dict | None]:
         return {}, None
     return {RESIDENT_MEMBER: ResidentTerrain(net, LEVELS).vertices}, {"levels": [int(x) for x in LEVELS],
                                                                       "format": RESIDENT_FORMAT}
+
+
+#: the terrain LOD's per-patch error table (the ``lod_errors`` build step)
+LOD_ERRORS_MEMBER = "lod_errors/patch_errors"
+#: what its manifest entry's ``format`` says (bump when the errors are computed otherwise: an older
+#: table is then ignored and the errors computed at the first frame, as for a bundle without one)
+LOD_ERRORS_FORMAT = 1
+
+
+def lod_error_members(net: PatchNet) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """The terrain LOD's per-patch errors as the build stores them: ``({LOD_ERRORS_MEMBER: (N, 2)
+    float64}, manifest entry {"levels", "format"})`` (:func:`piste.terrain.lod.patch_error_table`
+    for the flat and coarsest levels), so that a fresh process's first frame need not compute them."""
+    return ({LOD_ERRORS_MEMBER: patch_error_table(net, STORED_ERROR_LEVELS)},
+            {"levels": [int(x) for x in STORED_ERROR_LEVELS], "format": LOD_ERRORS_FORMAT})
+
+
+def _keep_lod_errors(path: str | os.PathLike[str], man: dict[str, Any], arrays: dict[str, np.ndarray],
+                     net: PatchNet) -> bool:
+    """Keep the bundle's stored LOD error table on ``net`` (True), or False when it has none this
+    piste reads (older bundles, other levels or format: computed at the first frame as before).
+    FormatError naming the member when it does not fit the net (shape, dtype, not finite)."""
+    info = man.get("lod_errors")
+    if not isinstance(info, dict) or LOD_ERRORS_MEMBER not in arrays or info.get("format") != LOD_ERRORS_FORMAT \
+            or info.get("levels") != [int(x) for x in STORED_ERROR_LEVELS]:
+        return False
+    try:
+        keep_patch_errors(net, arrays[LOD_ERRORS_MEMBER], STORED_ERROR_LEVELS)
+    except PisteError as exc:
+        raise FormatError(path, f"invalid terrain LOD error table ({exc})", field=f"{LOD_ERRORS_MEMBER}.npy") from None
+    return True
 
 
 def _stored_blocks(man: dict) -> bool:
@@ -301,6 +333,7 @@ def bundle_from_data(data: BundleData, warm: bool = False, net: PatchNet | None 
             _warm(net)
     else:
         _keep_blocks(path, man, arrays, net)
+    _keep_lod_errors(path, man, arrays, net)
     lm_info = man.get("lightmap", {})
     # the atlas as read (a read-only view of the bundle's mapped bytes: no 3 MB copy a start) when float32
     lightmap = LightMap(atlas=np.asarray(arrays["lightmap/atlas"], dtype=np.float32), rects=arrays["lightmap/rects"],
