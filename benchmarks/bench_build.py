@@ -45,6 +45,13 @@ threading.Thread.run = timed_run
 from piste.pipeline.bundle_objects import load_bundle
 from piste.pipeline.preview import ScenePreview, camera_at
 from piste.render.context import create_context
+import moderngl
+drawn = set()  # the programs the first frame draws with (llvmpipe compiles each at its first draw)
+_draw = moderngl.VertexArray.render
+def counted_draw(self, *a, **k):
+    drawn.add(self.program.glo)
+    return _draw(self, *a, **k)
+moderngl.VertexArray.render = counted_draw
 t1 = time.perf_counter()
 ctx = create_context()
 t2 = time.perf_counter()
@@ -54,7 +61,7 @@ p = ScenePreview(b, size=(640, 448), ctx=ctx)
 t4 = time.perf_counter()
 p.render(camera_at(b, "flight"))
 t5 = time.perf_counter()
-print(done.get("piste-resident-terrain", t0) - t0, t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t5 - t0)
+print(len(drawn), done.get("piste-resident-terrain", t0) - t0, t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t5 - t0)
 """
 
 
@@ -104,14 +111,16 @@ def fresh_first_frame(bundle: Path, runs: int) -> None:
     import numpy as np
 
     cpu: dict = {"piste": [], "peer": []}  # the processes' CPU time (every thread), cached runs
+    programs: list[int] = []  # the programs each run's first frame drew with
 
     def times(env, kind=None):
         out = subprocess.run([sys.executable, "-c", _FRESH + _CPU, str(bundle)], capture_output=True, text=True,
                              check=True, env=env)
-        v = [float(x) for x in out.stdout.split()[-8:]]
+        v = [float(x) for x in out.stdout.split()[-9:]]
+        programs.append(int(v[0]))
         if kind:
             cpu[kind].append(v[-1])
-        return v[:-1]
+        return v[1:-1]
 
     def bare(env, kind=None):
         out = subprocess.run([sys.executable, "-c", _BARE + _CPU], capture_output=True, text=True, check=True, env=env)
@@ -138,12 +147,14 @@ def fresh_first_frame(bundle: Path, runs: int) -> None:
     a = np.array(res)
     resident, a = a[:, 0], a[:, 1:]
     m = np.median(a, axis=0)
-    print(f"fresh process, bundle -> first frame (median of {runs} [range], byte code cached): imports {m[0]:.2f} s"
-          f" + GL context {m[1]:.2f} s + load {m[2]:.2f} s + renderer set-up {m[3]:.2f} s + first frame {m[4]:.2f} s"
-          f" = {m[5]:.2f} s [{a[:, 5].min():.2f}-{a[:, 5].max():.2f}]; compiling from source each run: "
+    print(f"fresh process, bundle -> first frame (median of {runs} [range], byte code cached): imports {m[0]:.3f} s"
+          f" + GL context {m[1]:.3f} s + load {m[2]:.3f} s + renderer set-up {m[3]:.3f} s + first frame {m[4]:.3f} s"
+          f" = {m[5]:.3f} s [{a[:, 5].min():.3f}-{a[:, 5].max():.3f}]; compiling from source each run: "
           f"{np.median(src):.2f} s "
           f"[{min(src):.2f}-{max(src):.2f}]; with an empty Mesa shader cache: {np.median(cold):.2f} s "
           f"[{min(cold):.2f}-{max(cold):.2f}]")
+    print(f"  the first frame draws with {max(programs)} shader programs (llvmpipe compiles each at its first draw, "
+          f"from the Mesa shader cache when it has them); the peer with 1")
     end_setup = np.median(a[:, :4].sum(axis=1))
     if resident.max() > 0:
         print(f"  the terrain's resident vertex blocks (background thread) ready at {np.median(resident):.2f} s, "
