@@ -464,6 +464,15 @@ def scene_section(args, floor_ms: list) -> dict:
     def set_object_lod_1px(on):  # (lod_now restored after its A/B)
         r.objects.lod_pixels = 1.0 if on else 0.5
 
+    errors_now = r.objects.lod_errors.copy() if r.objects is not None else None
+    errors_four = None
+    if errors_now is not None and errors_now.shape[1] > 4:
+        errors_four = errors_now.copy()
+        errors_four[:, 4:] = np.inf  # (inf: a level no instance takes)
+
+    def set_object_lod_levels(on):
+        r.objects.lod_errors = errors_now if on else errors_four
+
     def set_visibility(on):
         r.terrain.set_visibility(bundle.visibility if on else None)
 
@@ -503,6 +512,8 @@ def scene_section(args, floor_ms: list) -> dict:
                 "objects: every instance with its full mesh"),
                ("objects", set_object_lod_1px, "objects: levels of detail, <= 1 px of error",
                 "objects: levels of detail, <= 0.5 px of error"),
+               ("objects", set_object_lod_levels, "objects: up to 6 levels a kind (rocks down to 10 triangles)",
+                "objects: up to 4 levels a kind"),
                ("terrain", set_cull, "terrain: back faces culled", "terrain: back faces drawn"),
                ("terrain", set_cone_cull, "terrain: every visible patch sent (the default)",
                 "terrain: wholly back-facing patches left out (normal cones, off)"),
@@ -521,7 +532,8 @@ def scene_section(args, floor_ms: list) -> dict:
     acc2, undo2 = _profile(r)
     for label, setter, now_name, before_name in changes:
         if label == "objects" and r.objects is None or label == "shadow casters" and compute_mips is None \
-                or setter is set_track_per_vertex and track_progs is None or label == "shadow receivers" and \
+                or setter is set_track_per_vertex and track_progs is None \
+                or setter is set_object_lod_levels and errors_four is None or label == "shadow receivers" and \
                 (r.shadows is None or r.shadows.soft):
             continue
         ab = {True: [], False: []}
