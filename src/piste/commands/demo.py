@@ -50,7 +50,7 @@ def add_arguments(parser) -> None:
                              "pre-calculated RGBs, or dynamic point and spot lights")
     parser.add_argument("--object-lod", type=N.real(0.0, 64.0), default=None, metavar="PX",
                         help="full scene: objects' levels of detail, the simplification error an object may show "
-                             "in pixels (0: full meshes; default: the scene's render.object_lod, 0.5)")
+                             "in pixels (0: full meshes; default: the scene's render.object_lod, 1)")
     parser.add_argument("--no-shadows", action="store_true", help="full scene without projected rider shadows")
     parser.add_argument("--no-specular", action="store_true", help="full scene without the riders' specular pass")
     parser.add_argument("--rider-model", action="append", default=[], metavar="FILE[:N]",
