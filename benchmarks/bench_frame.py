@@ -15,7 +15,8 @@ Sections (every configuration interleaved frame by frame in one process; medians
    full scene, without shadows / specular, and a per-pass profile (``glFinish`` around each pass:
    what llvmpipe spends in each); then each scene change A/B on its own pass (the objects' per-mode
    programs with per-instance attributes, levels of detail against full meshes and at <= 1 px against
-   <= 0.5 px of error; the terrain's back-face culling, whole
+   <= 0.5 px of error, 6 levels a kind against 4, and, as an upper bound for impostors,
+   the instances under 8 px of radius left out; the terrain's back-face culling, whole
    back-facing patches left out by normal cones (off by default: no gain measured), error-driven
    edges (flat, 2 corners, or coarsest where under 0.5 px), visibility sets and per-vertex track distance; the shadow mips by compute dispatches; the shadow
    receivers cut to their frusta by clip distances), with the pixels changed.
