@@ -17,13 +17,17 @@ API
     lights_from_dict(d) -> Lights          ``Lights.to_dict()`` back (infinite ranges may be "inf")
     camera_from_dict(d) -> Camera          :func:`piste.formats.bundle.camera_to_dict` back
     resident_members(net) -> (arrays, manifest entry)   the terrain's vertex blocks as the build stores them
+    lod_error_members(net) -> (arrays, manifest entry)  the terrain LOD's per-patch error table, likewise
 
 The terrain's GPU-resident vertex blocks (:class:`piste.terrain.resident.ResidentTerrain`) are
 stored by the build (:data:`RESIDENT_MEMBER`, uncompressed, for nets up to
 :data:`STORED_BLOCKS_BUDGET`): a load keeps them on the net, so the first frame draws at once (a
 fresh process built them in a background thread and its first frame waited ~0.1 s for them).
 Bundles without them (``piste.bundle/1``, big nets, another block layout) still load: the blocks
-are then built at run time as before.
+are then built at run time as before.  Likewise the terrain LOD's per-patch errors of the flat and
+coarsest levels (:data:`LOD_ERRORS_MEMBER`, the ``lod_errors`` build step): a load keeps them on
+the net (:func:`piste.terrain.lod.keep_patch_errors`) so the first frame does not compute them;
+without them (or of another format or levels) they are computed at the first frame as before.
 """
 
 from __future__ import annotations
