@@ -7,6 +7,7 @@ import pytest
 from PIL import Image
 
 from piste.cli import main
+from piste.world.object_lod import DEFAULT_LOD_PIXELS
 
 
 def test_demo_writes_png_and_mp4(gl_context, piste_cache, tmp_path, capsys):
@@ -25,7 +26,7 @@ def test_demo_writes_png_and_mp4(gl_context, piste_cache, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "lighting baked" in out
     for text in ("4x4 patches", "average polygons per patch", "LOD + cull + tessellation", "draw", "fps",
-                 "pipelined loop (wall time / frames)", "objects per LOD level", "(error <= 0.5 px)"):
+                 "pipelined loop (wall time / frames)", "objects per LOD level", f"(error <= {DEFAULT_LOD_PIXELS:g} px)"):
         assert text in out
     assert sorted(p.name for p in png.parent.iterdir()) == ["demo.mp4", "demo.png"]  # no temp files
 
