@@ -25,6 +25,7 @@ import io
 import json
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from piste.extras import environ
@@ -53,12 +54,12 @@ def cache_root() -> Path:
 class Hasher:
     """SHA-256 over a sequence of typed parts (each part is tagged, so ``("ab",)`` != ``("a", "b")``)."""
 
-    def __init__(self, *parts):
+    def __init__(self, *parts: Any) -> None:
         self._h = hashlib.sha256()
         for p in parts:
             self.update(p)
 
-    def update(self, part) -> "Hasher":
+    def update(self, part: Any) -> "Hasher":
         h = self._h
         if isinstance(part, Path):  # a source file: opened like its reader opens it (piste.formats.safe_io)
             data = read_regular(part, 1 << 40, what="source file")
@@ -86,7 +87,7 @@ class Hasher:
         return self._h.hexdigest()
 
 
-def _json_default(x):
+def _json_default(x: Any) -> Any:
     if isinstance(x, (np.integer,)):
         return int(x)
     if isinstance(x, (np.floating,)):
@@ -98,7 +99,7 @@ def _json_default(x):
     raise TypeError(f"cannot hash {type(x).__name__}")
 
 
-def content_key(*parts) -> str:
+def content_key(*parts: Any) -> str:
     """Hex SHA-256 of ``parts`` (see :class:`Hasher`)."""
     return Hasher(*parts).hexdigest()
 
@@ -131,7 +132,7 @@ def read_npz_bytes(data: bytes) -> dict:
 class Cache:
     """Build-step cache in folder ``root`` (``None``: a cache that stores nothing)."""
 
-    def __init__(self, root):
+    def __init__(self, root: str | Path | None) -> None:
         self.root = Path(root) if root is not None else None
         self.hits: list = []
         self.misses: list = []
@@ -139,7 +140,7 @@ class Cache:
     def path(self, step: str, key: str) -> Path | None:
         return None if self.root is None else self.root / step / f"{key}.npz"
 
-    def get(self, step: str, key: str):
+    def get(self, step: str, key: str) -> tuple[dict[str, np.ndarray], dict[str, Any]] | None:
         """``(arrays dict, meta dict)`` of a stored entry, or None."""
         p = self.path(step, key)
         if p is None or not p.exists():

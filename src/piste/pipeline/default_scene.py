@@ -72,7 +72,7 @@ fov = 60.0
 """
 
 
-def default_scene_path(seed: int = 0, root=None) -> Path:
+def default_scene_path(seed: int = 0, root: str | Path | None = None) -> Path:
     """The default scene file of ``seed`` under ``root`` (default: :func:`piste.pipeline.cache.cache_root` / ``scenes``),
     written (atomically) when missing or different."""
     folder = Path(root) if root is not None else cache_root() / "scenes"
@@ -84,7 +84,7 @@ def default_scene_path(seed: int = 0, root=None) -> Path:
     return path
 
 
-def build_default_scene(seed: int = 0, root=None, progress: bool = False) -> BuildResult:
+def build_default_scene(seed: int = 0, root: str | Path | None = None, progress: bool = False) -> BuildResult:
     """Build (or load from the cache) the default scene of ``seed``: the bundle is
     ``default-seed<seed>.piste`` beside the scene file, the step cache ``.piste-cache`` beside it."""
     path = default_scene_path(seed, root)

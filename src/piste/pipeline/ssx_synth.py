@@ -44,7 +44,8 @@ def synthetic_net(rows: int = 2, cols: int = 3, seed: int = 0, patch_size: float
     return PatchNet.from_control_grid(np.stack([x, y, z], axis=-1), name="synthetic")
 
 
-def synthetic_pages(pbd: Pbd, textures: SshBank, sun=(-0.45, -0.35, 0.82), ambient=0.45, seed: int = 0) -> np.ndarray:
+def synthetic_pages(pbd: Pbd, textures: SshBank, sun: tuple[float, float, float] | np.ndarray = (-0.45, -0.35, 0.82),
+                    ambient: float = 0.45, seed: int = 0) -> np.ndarray:
     """Light-map pages for ``pbd``: a Lambertian sun plus ambient (some over-bright), encoded the
     game's way (As = max CL, Cs = Cd - Cd CL / As against the 8x8-reduced base texture), placed
     at each patch's stored rect and page, transposed.  ``(P, 128, 128, 4) uint8``."""
@@ -73,7 +74,7 @@ class SynthLevel:
     textures: SshBank
     lightmaps: SshBank
 
-    def write(self, folder, name: str = "SYNTH") -> Path:
+    def write(self, folder: str | Path, name: str = "SYNTH") -> Path:
         """Write ``NAME.pbd``, ``NAME.ssh`` and ``NAME_L.ssh`` into ``folder``; returns the .pbd path."""
         folder = Path(folder)
         path = folder / f"{name}.pbd"
@@ -84,7 +85,7 @@ class SynthLevel:
         return path
 
 
-def make_level(net=None, rows: int = 2, cols: int = 3, seed: int = 0, jitter: float = 0.02, n_textures: int = 3,
+def make_level(net: PatchNet | None = None, rows: int = 2, cols: int = 3, seed: int = 0, jitter: float = 0.02, n_textures: int = 3,
                trick_every: int = 0, platform: int = 1, patch_size: float = 12.0) -> SynthLevel:
     """Build a synthetic level.
 
