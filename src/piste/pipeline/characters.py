@@ -25,6 +25,9 @@ merged_mesh(model) -> SkinnedMesh          all skinned primitives of a model as 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any, cast
+
 import numpy as np
 
 from piste.character import batch_mesh, make_lods, stripify
@@ -45,7 +48,7 @@ CHARACTERS_VERSION = 4  # 3: several primitives keep their own base colours (one
 DEFAULT_STEPS = (0.1, 0.2, 0.25)
 
 
-def merged_mesh(model):
+def merged_mesh(model: Model) -> SkinnedMesh:
     """One :class:`SkinnedMesh` of every skinned primitive of ``model`` (see
     :func:`piste.world.riders.merged_mesh`); with several primitives their base colours (texture x
     factor, or the factor) are packed into one texture and the UVs remapped
@@ -66,14 +69,15 @@ def merged_mesh(model):
     return replace(mesh, uv=uvs["rider"], texture=tex, material=material)
 
 
-def rider_material(prims):
+def rider_material(prims: Sequence[SkinnedMesh]) -> MaterialInfo | None:
     """The one material a rider is drawn with (:class:`piste.formats.gltf.extensions.MaterialInfo`, or
     None when no primitive has a glTF material): ``alpha_mode`` MASK when any primitive is MASK or
     BLEND (riders have no blend pass: BLEND is cut out at 0.5, the texture's alpha holds each
     primitive's cutoff baked to 0 / 255 by :func:`primitive_images`), OPAQUE otherwise;
     ``double_sided`` when any primitive is (the character pass then draws back faces; a rider of
     single-sided materials has its back faces culled)."""
-    mats = [m.material for m in prims if getattr(m, "material", None) is not None]
+    # SkinnedMesh.material is typed ``object`` (the character core does not import the glTF formats)
+    mats = [cast(MaterialInfo, m.material) for m in prims if getattr(m, "material", None) is not None]
     if not mats:
         return None
     mask = any(m.alpha_mode in ("MASK", "BLEND") for m in mats)
@@ -81,12 +85,13 @@ def rider_material(prims):
                         double_sided=any(m.double_sided for m in mats))
 
 
-def _steps(ratios, steps):
+def _steps(ratios: Sequence[float], steps: Sequence[float] | None) -> tuple[float, ...]:
     steps = tuple(steps) if steps is not None else DEFAULT_STEPS
     return tuple(steps[min(i, len(steps) - 1)] for i in range(len(ratios)))
 
 
-def character_arrays(model, ratios=(1.0, 0.5, 0.25), steps=None, max_bones: int = 3, rate: float = CLIP_RATE):
+def character_arrays(model: Model, ratios: Sequence[float] = (1.0, 0.5, 0.25), steps: Sequence[float] | None = None,
+                     max_bones: int = 3, rate: float = CLIP_RATE) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """Everything the runtime needs of a rider model, pre-processed: ``(arrays, meta)``."""
     if model.skeleton is None:
         raise ConfigError(f"rider model {model.name!r} has no skeleton: riders need a skinned glTF")
@@ -108,7 +113,8 @@ def character_arrays(model, ratios=(1.0, 0.5, 0.25), steps=None, max_bones: int 
     meta: dict = {"name": model.name, "bones": list(sk.names), "clips": {}, "lods": [], "rate": float(rate),
                   "max_bones": int(max_bones), "morphs": list(mesh.morph_names)}
     if mesh.material is not None:  # glTF riders: how the character pass draws them
-        meta["material"] = {"alpha_mode": mesh.material.alpha_mode, "double_sided": bool(mesh.material.double_sided)}
+        mat = cast(MaterialInfo, mesh.material)
+        meta["material"] = {"alpha_mode": mat.alpha_mode, "double_sided": bool(mat.double_sided)}
     for cname, clip in sorted(model.clips.items()):
         f = int(np.ceil(clip.duration * rate)) + 1
         times = np.minimum(np.arange(f) / rate, clip.duration)
@@ -161,7 +167,7 @@ def _morphs(arrays: dict, prefix: str, meta: dict) -> dict:
             "morph_names": names[:k]}
 
 
-def _material(meta: dict):
+def _material(meta: dict) -> MaterialInfo | None:
     m = meta.get("material")
     if not isinstance(m, dict):
         return None
@@ -170,7 +176,7 @@ def _material(meta: dict):
                         double_sided=bool(m.get("double_sided", False)))
 
 
-def model_from_arrays(arrays: dict, prefix: str, meta: dict):
+def model_from_arrays(arrays: dict, prefix: str, meta: dict) -> Model:
     """The rider :class:`Model` (skeleton, LOD-0 mesh with texture, clips as LINEAR tracks)."""
     g = lambda k: arrays[prefix + k]  # noqa: E731
     sk = Skeleton(meta["bones"], g("skeleton/parents"), g("skeleton/rest_translation"), g("skeleton/rest_rotation"),
@@ -196,7 +202,7 @@ def model_from_arrays(arrays: dict, prefix: str, meta: dict):
     return Model(name=meta["name"], skeleton=sk, meshes=[mesh], clips=clips)
 
 
-def lods_from_arrays(arrays: dict, prefix: str, meta: dict, model=None) -> list:
+def lods_from_arrays(arrays: dict, prefix: str, meta: dict, model: Model | None = None) -> list[LOD]:
     """The LODs as built (meshes and palettes), :class:`piste.character.LOD` items."""
     out = []
     for i, info in enumerate(meta["lods"]):

@@ -21,8 +21,10 @@ from __future__ import annotations
 
 import functools
 from dataclasses import replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ConfigError, PisteError
 from piste.pipeline.bundle_objects import Bundle
@@ -32,6 +34,11 @@ from piste.terrain.query import height_at
 from piste.world.objects import bake_vertex_colors, place_objects
 from piste.world.riders import surface_frame
 
+if TYPE_CHECKING:
+    from piste.lighting.lights import Lights
+    from piste.terrain.net import PatchNet
+    from piste.world.objects import ObjectSet
+
 __all__ = ["standing_positions", "standing_matrices", "add_standing_riders", "add_objects", "keep_streamed_objects"]
 
 #: riders a source may be given (``--riders``)
@@ -40,7 +47,7 @@ MAX_RIDERS = 64
 MAX_OBJECTS = 10_000
 
 
-def standing_positions(net, n: int, spacing: float = 3.0) -> np.ndarray:
+def standing_positions(net: PatchNet, n: int, spacing: float = 3.0) -> np.ndarray:
     """``(n, 2)`` float64 points on ``net``'s surface ``spacing`` metres apart on a grid, the ``n``
     nearest the centre of its bounds (ConfigError when the terrain has fewer)."""
     lo, hi = (np.asarray(b, dtype=np.float64) for b in net.bounds)
@@ -60,7 +67,7 @@ def standing_positions(net, n: int, spacing: float = 3.0) -> np.ndarray:
     return pts[order[:n]]
 
 
-def standing_matrices(net, xy) -> np.ndarray:
+def standing_matrices(net: PatchNet, xy: npt.ArrayLike) -> np.ndarray:
     """``(n, 4, 4)`` rider -> world matrices (the rider model is Y up, board along +X) standing on
     the exact surface at ``xy (n, 2)``, facing down the fall line (+X where the ground is flat)."""
     xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
@@ -79,7 +86,7 @@ def standing_matrices(net, xy) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=1)
-def _default_character():
+def _default_character() -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """The built-in rider's character arrays and meta (as the build's ``characters`` step makes them)."""
     arrays, meta = character_arrays(load_rider_model("builtin:rider"))
     return arrays, dict(meta, model="builtin:rider")
@@ -144,11 +151,11 @@ def add_objects(bundle: Bundle, n: int, seed: int = 0) -> Bundle:
     return replace(bundle, manifest=man, arrays=arrays, _cache={})
 
 
-def object_arrays(objs, lights, arrays: dict) -> dict:
+def object_arrays(objs: ObjectSet, lights: Lights, arrays: dict[str, Any]) -> dict[str, Any]:
     """Write an :class:`~piste.world.objects.ObjectSet` into ``arrays`` under ``objects/...`` the way
     a scene build stores it (what :meth:`piste.pipeline.bundle_objects.Bundle.objects` reads back,
     vertex colours baked from ``lights``); returns the manifest's ``objects`` entry."""
-    meta = {"kinds": list(objs.kinds), "meshes": {}}
+    meta: dict[str, Any] = {"kinds": list(objs.kinds), "meshes": {}}
     for k in objs.kinds:
         m = objs.meshes[k]
         p = f"objects/meshes/{k}/"

@@ -29,19 +29,26 @@ blends(model) -> bool   whether any primitive's material is alphaMode BLEND
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
+
+if TYPE_CHECKING:
+    from piste.character.model import Model
+    from piste.world.objects import ObjectMesh
 
 __all__ = ["primitive_images", "pack_object_atlas", "double_sided", "blends"]
 
 
-def _srgb_u8(c) -> np.ndarray:
+def _srgb_u8(c: Any) -> np.ndarray:
     """Linear RGBA factor -> 8-bit sRGB RGBA (the texture's encoding)."""
     c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
     rgb = np.where(c[:3] <= 0.0031308, 12.92 * c[:3], 1.055 * c[:3] ** (1 / 2.4) - 0.055)
     return np.round(np.concatenate([rgb, c[3:]]) * 255).astype(np.uint8)
 
 
-def primitive_images(model) -> list:
+def primitive_images(model: Model) -> list[tuple[int, int, np.ndarray]]:
     """``[(v0, v1, image)]``: the vertex range of each of ``model.meshes`` (concatenated in order, as
     :func:`piste.pipeline.sources.load_object_mesh` merges them) and its base colour as an RGBA
     uint8 image: the texture times the factor, or a 4x4 image of the factor alone."""
@@ -74,12 +81,13 @@ def primitive_images(model) -> list:
     return out
 
 
-def blends(model) -> bool:
+def blends(model: Model) -> bool:
     """Whether any of ``model.meshes`` has a material with ``alphaMode`` BLEND."""
     return any(getattr(getattr(m, "material", None), "alpha_mode", "OPAQUE") == "BLEND" for m in model.meshes)
 
 
-def pack_object_atlas(base, parts: dict, builtin: dict | None = None, max_size: int = 256, gutter: int = 2):
+def pack_object_atlas(base: np.ndarray, parts: dict[str, Any], builtin: dict[str, np.ndarray] | None = None,
+                      max_size: int = 256, gutter: int = 2) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """The built-in atlas ``base (H, W, 4) uint8`` with every part's regions added below it.
 
     ``parts``: ``{kind: (uv (v, 2), [(v0, v1, image), ...])}``; ``builtin``: ``{kind: uv (v, 2)}``
@@ -99,7 +107,7 @@ def pack_object_atlas(base, parts: dict, builtin: dict | None = None, max_size: 
                 from PIL import Image  # (here: ~13 ms of imports a renderer loading a bundle never needs)
 
                 img = np.asarray(Image.fromarray(img, "RGBA").resize((max(1, round(w * s)), max(1, round(h * s))),
-                                                                     Image.LANCZOS))
+                                                                     Image.Resampling.LANCZOS))
             regions.append((kind, k, img))
     width = max(base.shape[1], max(r[2].shape[1] + 2 * gutter for r in regions))
     # shelves, tallest first
@@ -142,7 +150,8 @@ def pack_object_atlas(base, parts: dict, builtin: dict | None = None, max_size: 
     return atlas, out
 
 
-def double_sided(mesh, model, images):
+def double_sided(mesh: ObjectMesh, model: Model, images: Sequence[tuple[int, int, np.ndarray]]
+                 ) -> tuple[ObjectMesh, list[tuple[int, int, np.ndarray]]]:
     """``mesh`` (the merged ObjectMesh of ``model``'s meshes, in order) with every primitive whose
     material is double-sided given reversed back-face triangles on its own vertex copies, and
     ``images`` (:func:`primitive_images`) extended with those copies' ranges.  Returns

@@ -84,7 +84,7 @@ class SsxLevel:
 
     path: Path
     pbd: Pbd
-    net: object
+    net: PatchNet
     base_atlas: np.ndarray
     reduced: np.ndarray
     light: np.ndarray

@@ -23,6 +23,7 @@ level_camera(net) -> Camera
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -35,10 +36,13 @@ from piste.pipeline.ssx_level import SSX_TRICKY_LOD, SsxLevel, load_level
 from piste.terrain.resident import resident_fits, resident_terrain
 from piste.world.camera import Camera
 
+if TYPE_CHECKING:
+    from piste.terrain.net import PatchNet
+
 __all__ = ["open_ssx_level", "level_bundle", "level_camera"]
 
 
-def level_camera(net) -> Camera:
+def level_camera(net: PatchNet) -> Camera:
     """A camera looking at the whole level from the south-west, above (``piste ssx render``'s)."""
     lo, hi = net.bounds
     c = (lo + hi) / 2.0
@@ -71,7 +75,7 @@ def level_bundle(level: SsxLevel, warm: bool = False) -> Bundle:
     return Bundle(level.path, manifest, arrays, net, lightmap, lights, {"level": camera_from_dict(cam)})
 
 
-def open_ssx_level(path, quiet: bool = True, warm: bool = False) -> Bundle:
+def open_ssx_level(path: str | Path, quiet: bool = True, warm: bool = False) -> Bundle:
     """``LEVEL.pbd`` (and the banks beside it) as a runtime scene (see the module docstring)."""
     p = Path(path)
     if p.suffix.lower() != ".pbd":
