@@ -24,11 +24,16 @@ from __future__ import annotations
 import logging
 import time
 import weakref
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
 
 from piste.errors import ConfigError
 from piste.pipeline.tiled_build import (TiledResult, TiledSpec, build_tiles, far_heights_task, fit_task, lit_task,
                                         spec_from_scene,
                                         write_index)
+
+if TYPE_CHECKING:
+    from piste.world.scene_file import SceneFile
 
 __all__ = ["dask_client", "close_client", "build_tiles_dask", "build_scene_tiles"]
 
@@ -37,7 +42,7 @@ log = logging.getLogger(__name__)
 _CLUSTERS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def _distributed():
+def _distributed() -> Any:
     try:
         import distributed
     except ImportError:
@@ -46,7 +51,7 @@ def _distributed():
 
 
 def dask_client(dask: str | None = None, scheduler: str | None = None, workers: int | None = None,
-                threads_per_worker: int = 1, processes: bool = True):
+                threads_per_worker: int = 1, processes: bool = True) -> Any:
     """A :class:`distributed.Client`: ``dask="local"`` starts a LocalCluster on 127.0.0.1 (its
     dashboard on a free loopback port), ``scheduler="tcp://HOST:PORT"`` connects to one.  Close it when done."""
     distributed = _distributed()
@@ -63,6 +68,7 @@ def dask_client(dask: str | None = None, scheduler: str | None = None, workers: 
         client = distributed.Client(cluster)
         _CLUSTERS[client] = cluster
         return client
+    scheduler = cast(str, scheduler)  # exactly one of the two is given (checked above)
     if not scheduler.startswith(("tcp://", "tls://", "inproc://", "ucx://")):
         raise ConfigError(f"--scheduler takes an address like tcp://HOST:8786, got {scheduler!r}")
     try:
@@ -71,7 +77,7 @@ def dask_client(dask: str | None = None, scheduler: str | None = None, workers: 
         raise ConfigError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
 
 
-def close_client(client) -> None:
+def close_client(client: Any) -> None:
     """Close ``client`` and the local cluster :func:`dask_client` started for it, if any."""
     cluster = _CLUSTERS.pop(client, None)
     client.close()
@@ -79,7 +85,7 @@ def close_client(client) -> None:
         cluster.close()
 
 
-def build_tiles_dask(spec: TiledSpec, client, progress: bool = False) -> TiledResult:
+def build_tiles_dask(spec: TiledSpec, client: Any, progress: bool = False) -> TiledResult:
     """Build every tile of ``spec`` as Dask tasks on ``client``; the index is written here, last.
 
     Raises :class:`~piste.pipeline.tiled_build.TileError` naming the first tile that failed.
@@ -127,7 +133,7 @@ def build_tiles_dask(spec: TiledSpec, client, progress: bool = False) -> TiledRe
     return TiledResult(spec.store.root, index, time.perf_counter() - t0, fits, lits)
 
 
-def build_scene_tiles(scene, out=None, dask: str | None = None, scheduler: str | None = None,
+def build_scene_tiles(scene: SceneFile, out: str | Path | None = None, dask: str | None = None, scheduler: str | None = None,
                       workers: int | None = None, progress: bool = False) -> TiledResult:
     """``piste build`` of a scene with a tiled terrain: in this process, or on Dask when ``dask``
     (``"local"``) or ``scheduler`` is given.  ``out``: the tiles folder (default ``terrain.tiles``,

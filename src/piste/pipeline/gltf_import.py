@@ -27,7 +27,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -35,7 +37,12 @@ from piste.formats.atomic import write_bytes_atomic
 from piste.formats.gltf import load_gltf
 from piste.formats.gltf.units import DEFAULT_WHITE_LUX, GltfFrame, axis_matrix
 from piste.transforms import look_rotation
-from piste.world.camera import camera_planes
+from piste.world.camera import Camera, camera_planes
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
+
+    from piste.world.scene_file import GltfSpec
 
 __all__ = ["axis_matrix", "import_gltf", "GltfCameras", "write_scene_gltf", "DEFAULT_WHITE_LUX"]
 
@@ -45,12 +52,12 @@ class GltfCameras(dict):
     ``planes_given[name]`` is ``(znear, zfar)`` in metres, None where the file has none (an
     infinite ``zfar``).  :meth:`fitted` re-derives the missing planes once the terrain is known."""
 
-    def __init__(self, *args, **kwargs):
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        self.planes_given: dict = {}
+        self.planes_given: dict[str, tuple[float | None, float | None]] = {}
 
     @classmethod
-    def from_file(cls, cameras) -> "GltfCameras":
+    def from_file(cls, cameras: Iterable[Camera]) -> "GltfCameras":
         """The runtime cameras of a file's (:attr:`piste.character.Model.cameras`: ``far = inf``
         / ``near = 0`` where the file leaves a plane open): open planes are 4000 m far / 0.5 m near
         (:func:`piste.world.camera.camera_planes`) until :meth:`fitted`."""
@@ -63,7 +70,7 @@ class GltfCameras(dict):
             out.planes_given[cam.name] = (given_near, given_far)
         return out
 
-    def fitted(self, lo=None, hi=None) -> dict:
+    def fitted(self, lo: npt.ArrayLike | None = None, hi: npt.ArrayLike | None = None) -> dict[str, Camera]:
         """``{name: Camera}`` with the planes the file did not give following the terrain bounded
         by ``lo..hi`` (``(3,)`` each; None: unknown) by the scene cameras' rule
         (:func:`piste.world.camera.camera_planes`); cameras whose file gave both are unchanged."""
@@ -77,7 +84,7 @@ class GltfCameras(dict):
         return out
 
 
-def import_gltf(spec) -> tuple[list, dict]:
+def import_gltf(spec: GltfSpec) -> tuple[list[Any], GltfCameras]:
     """Lights and cameras of a :class:`piste.world.scene_file.GltfSpec`'s file, in piste's terms."""
     frame = GltfFrame(spec.up, tuple(spec.offset), float(spec.scale), float(spec.white))
     model = load_gltf(spec.file, allow_paths=getattr(spec, "allow_paths", ()), frame=frame)
@@ -87,12 +94,13 @@ def import_gltf(spec) -> tuple[list, dict]:
 
 
 # ----------------------------------------------------------------------------- writing
-def _quat_looking(forward, up) -> list:
+def _quat_looking(forward: npt.ArrayLike, up: npt.ArrayLike) -> list[float]:
     """glTF node rotation ``[x, y, z, w]`` whose -Z axis is ``forward`` and +Y is (nearly) ``up``."""
     return look_rotation(forward, up, fallback=(0.0, 0.0, 1.0))
 
 
-def write_scene_gltf(path, lights=(), cameras=(), up: str = "y") -> Path:
+def write_scene_gltf(path: str | Path, lights: Sequence[Mapping[str, Any]] = (),
+                     cameras: Sequence[Mapping[str, Any]] = (), up: str = "y") -> Path:
     """Write a glTF file (JSON, no buffers) holding KHR_lights_punctual lights and cameras -- what
     Blender exports for a lit, framed scene.  Positions and directions are given in **piste**
     coordinates (Z up) and converted to the file's axes (``up``), so importing the file back gives
