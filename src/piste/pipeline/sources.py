@@ -20,8 +20,11 @@ heading_vector(degrees) -> (2,)              0 = +y, counter-clockwise seen from
 
 from __future__ import annotations
 
+import os
+from collections.abc import Iterable, Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -43,6 +46,13 @@ from piste.world.course import default_course
 from piste.world.objects import ObjectMesh, make_mesh
 from piste.world.riders import surface_frame
 
+if TYPE_CHECKING:
+    from piste.character.model import Model
+    from piste.world.scene_file import ActorSpec, TerrainSpec
+
+#: paths a glTF file's URIs may also read (:func:`piste.formats.gltf.load_gltf`)
+AllowPaths = Iterable[str | os.PathLike[str]]
+
 #: largest height-field file (PNG, .npz) read
 MAX_HEIGHTFIELD_FILE_BYTES = 1 << 30
 
@@ -50,7 +60,7 @@ __all__ = ["load_terrain", "load_heightfield", "load_rider_model", "load_object_
            "object_matrices", "heading_vector"]
 
 
-def load_heightfield(spec) -> tuple[np.ndarray, tuple]:
+def load_heightfield(spec: TerrainSpec) -> tuple[np.ndarray, tuple[float, ...]]:
     """``(z (H, W) float64 metres, (dx, dy))`` of a height-field terrain spec."""
     path = Path(spec.path)
     if spec.kind == "geotiff":
@@ -84,7 +94,7 @@ def load_heightfield(spec) -> tuple[np.ndarray, tuple]:
     return z * spec.height_scale + spec.height_offset, tuple(float(s) for s in spacing)
 
 
-def _member_shape(path, data, name: str) -> tuple:
+def _member_shape(path: str | Path, data: Any, name: str) -> tuple[int, ...]:
     """Shape of ``.npz`` member ``name`` from its ``.npy`` header alone (nothing decompressed)."""
     try:
         with data.zip.open(name + ".npy") as fh:
@@ -99,7 +109,7 @@ def _member_shape(path, data, name: str) -> tuple:
     return tuple(shape)
 
 
-def _npz_array(path, data, name: str, max_size: int) -> np.ndarray:
+def _npz_array(path: str | Path, data: Any, name: str, max_size: int) -> np.ndarray:
     shape = _member_shape(path, data, name)
     if int(np.prod(shape, dtype=np.float64)) > max_size:
         raise FormatError(path, f"array {name!r} of shape {shape} is more than the limit of {max_size} values",
@@ -110,14 +120,14 @@ def _npz_array(path, data, name: str, max_size: int) -> np.ndarray:
         raise FormatError(path, f"array {name!r} is unreadable ({type(exc).__name__}: {exc})", field=name) from None
 
 
-def _spacing_value(path, name: str, a: np.ndarray, index: int) -> float:
+def _spacing_value(path: str | Path, name: str, a: np.ndarray, index: int) -> float:
     flat = a.ravel()
     if flat.size == 0 or not np.isfinite(flat[index]) or not flat[index] > 0:
         raise FormatError(path, f"expected a spacing > 0 metres, got {a.tolist()!r}", field=name)
     return float(flat[index])
 
 
-def _npz_heightfield(path, spec) -> tuple:
+def _npz_heightfield(path: str | Path, spec: TerrainSpec) -> tuple[np.ndarray, tuple[float, float]]:
     """``(z, spacing)`` from an ``.npz``: every member's shape and type checked from its header
     before it is read, the height array capped at MAX_HEIGHTFIELD_SAMPLES."""
     fh = open_file(path, MAX_HEIGHTFIELD_FILE_BYTES, what="height field")  # race-free, no links
@@ -154,7 +164,7 @@ def _npz_heightfield(path, spec) -> tuple:
     return z, spacing
 
 
-def load_terrain(spec):
+def load_terrain(spec: TerrainSpec) -> PatchNet:
     """The :class:`piste.terrain.PatchNet` a :class:`~piste.world.scene_file.TerrainSpec` names."""
     if spec.kind == "default":
         return default_course(spec.seed)
@@ -171,7 +181,7 @@ def load_terrain(spec):
     raise ConfigError(f"unknown terrain kind {spec.kind!r}")
 
 
-def load_rider_model(model: str, allow_paths=()):
+def load_rider_model(model: str, allow_paths: AllowPaths = ()) -> Model:
     """A rider :class:`piste.character.Model`: ``builtin:rider`` or a skinned glTF file (whose URIs
     may also read ``allow_paths``, see :func:`piste.formats.gltf.load_gltf`)."""
     if model == "builtin:rider":
@@ -184,7 +194,8 @@ def load_rider_model(model: str, allow_paths=()):
     return m
 
 
-def add_rider_clips(model, sources, allow_paths=()):
+def add_rider_clips(model: Model, sources: Iterable[tuple[str | os.PathLike[str], str | dict[str, str] | None]],
+                    allow_paths: AllowPaths = ()) -> Model:
     """``model`` with the clips of each ``(file, bone_map)`` in ``sources`` retargeted onto it
     (:func:`piste.character.retarget.add_clips`, relative rule baked; a scene's ``clips_from``).
     An ``.afl`` file (SSX Tricky animation bank, ``bone_map`` None) adds its clips to an ``.mpf``
@@ -200,7 +211,7 @@ def add_rider_clips(model, sources, allow_paths=()):
     return model
 
 
-def _add_afl_clips(model, file):
+def _add_afl_clips(model: Model, file: str | os.PathLike[str]) -> Model:
     """A copy of ``model`` (an ``.mpf`` rider, :func:`piste.pipeline.ssx_rider.load_mpf_rider`) with
     the clips of the ``.afl`` bank ``file`` (:func:`piste.pipeline.ssx_rider.afl_rider_clips`, root
     tracks lifted as the rider is); a name the model already has gets the file's stem in front
@@ -220,7 +231,7 @@ def _add_afl_clips(model, file):
     return replace(model, clips=new)
 
 
-def load_object_mesh(model: str, allow_paths=()):
+def load_object_mesh(model: str, allow_paths: AllowPaths = ()) -> ObjectMesh:
     """An object mesh (object space Z up, base at the origin): a built-in kind or a glTF file's
     meshes merged (glTF Y up turned Z up, see :mod:`piste.pipeline.gltf_import`)."""
     if model.startswith("builtin:"):
@@ -243,7 +254,7 @@ def heading_vector(degrees: float) -> np.ndarray:
     return np.array([-np.sin(h), np.cos(h)])
 
 
-def rider_matrices(net, riders) -> np.ndarray:
+def rider_matrices(net: PatchNet, riders: Sequence[ActorSpec]) -> np.ndarray:
     """``(n, 4, 4)`` rider -> world matrices (the rider model is Y up, board along +X) standing on
     the exact surface, oriented to the slope, travelling along each rider's heading."""
     if not riders:
@@ -267,7 +278,7 @@ def rider_matrices(net, riders) -> np.ndarray:
     return m
 
 
-def object_matrices(net, objects) -> np.ndarray:
+def object_matrices(net: PatchNet, objects: Sequence[ActorSpec]) -> np.ndarray:
     """``(m, 4, 4)`` object -> world matrices: upright, rotated by the heading, scaled, standing on
     the surface (z from :func:`piste.terrain.query.height_at` unless the position gives it)."""
     if not objects:

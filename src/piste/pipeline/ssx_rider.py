@@ -21,7 +21,10 @@ shared_clips(model) -> dict of the default rider's clips, and how many bones the
 
 from __future__ import annotations
 
+import os
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -36,21 +39,27 @@ from piste.formats.ssx.ssh import read_ssh
 from piste.pipeline.object_atlas import pack_object_atlas
 from piste.world.riders import merged_mesh
 
+if TYPE_CHECKING:
+    from piste.character.model import Skeleton
+    from piste.formats.ssx.mpf_model import SsxModel
+    from piste.formats.ssx.ssh import SshBank, SshImage
+
 __all__ = ["load_mpf_rider", "shared_clips", "apply_texture_banks", "material_images", "stand_on_origin"]
 
 
-def material_images(model, banks, where=()) -> list:
+def material_images(model: SsxModel, banks: Sequence[SshBank], where: Sequence[str] = ()) -> list[np.ndarray | None]:
     """One ``(h, w, 4) uint8`` display image (half-bright undone) per entry of ``model.materials``:
     the bank image whose 4-character name is the material's main texture id (first bank first,
     as the game resolves ids by shortname); failing that, image ``i`` of the first bank for
     material index ``i`` (piste's assumption for banks whose names do not match); else None.
     ``model.notes`` lists the materials that found no image."""
-    named = {}
+    named: dict[str, SshImage] = {}
+    im: SshImage | None
     for bank in banks:
         for im in bank.images:
             named.setdefault(im.name.rstrip("\0 "), im)
     first = banks[0].images if banks else []
-    out = []
+    out: list[np.ndarray | None] = []
     for tid, mi in model.materials:
         im = named.get(tid) if tid else None
         how = "by name"
@@ -66,7 +75,7 @@ def material_images(model, banks, where=()) -> list:
     return out
 
 
-def apply_texture_banks(model, banks, where=()) -> object:
+def apply_texture_banks(model: SsxModel, banks: Sequence[SshBank], where: Sequence[str] = ()) -> SsxModel:
     """Texture a decoded ``.mpf`` rider (:class:`~piste.formats.ssx.mpf_model.SsxModel`) from
     ``banks`` (:class:`~piste.formats.ssx.ssh.SshBank`): each material's image
     (:func:`material_images`); one material's image is the rider's texture as it is (its UVs
@@ -108,7 +117,7 @@ def apply_texture_banks(model, banks, where=()) -> object:
     return model
 
 
-def shared_clips(model) -> tuple:
+def shared_clips(model: SsxModel) -> tuple[dict[str, Clip], int]:
     """The default rider's clips for ``model`` and the number of ``model``'s bones they animate.
 
     When every bone the clips animate has its name in ``model`` they play as they are; otherwise
@@ -120,12 +129,12 @@ def shared_clips(model) -> tuple:
     degrees off); bones the map leaves out keep their rest pose; ``model.notes`` says how many
     bones that mapped."""
     src = default_rider(0)
-    sk = model.skeleton
+    sk = cast("Skeleton", model.skeleton)  # None for an .mpf without bones: not checked (an AttributeError)
     names = set(sk.names)
     animated = {b for c in src.clips.values() for b in c.tracks}
     if animated <= names:
         return dict(src.clips), len(animated)
-    bone_map = builtin_bone_map(src.skeleton, sk)
+    bone_map = builtin_bone_map(cast("Skeleton", src.skeleton), sk)  # the default rider has a skeleton
     clips = {n: retarget_clip(c, sk, bone_map, source=src.skeleton, warn=False, mode="world")
              for n, c in src.clips.items()}
     driven = {b for c in clips.values() for b in c.tracks}
@@ -138,7 +147,7 @@ def shared_clips(model) -> tuple:
     return clips, len(driven)
 
 
-def stand_on_origin(model, tolerance: float = 0.05) -> float:
+def stand_on_origin(model: SsxModel, tolerance: float = 0.05) -> float:
     """Lift a decoded ``.mpf`` rider so its lowest bind-pose vertex is at height 0, in place;
     returns the lift in metres (0 when the model already stands within ``tolerance`` of it).
 
@@ -154,7 +163,7 @@ def stand_on_origin(model, tolerance: float = 0.05) -> float:
     up = np.array([0.0, h, 0.0], np.float32)
     for m in meshes:
         m.positions = (m.positions + up).astype(np.float32)
-    sk = model.skeleton
+    sk = cast("Skeleton", model.skeleton)
     roots = sk.parents < 0
     sk.rest_translation[roots] += up
     down = np.eye(4)
@@ -164,7 +173,8 @@ def stand_on_origin(model, tolerance: float = 0.05) -> float:
     return h
 
 
-def load_mpf_rider(path, texture=None) -> object:
+def load_mpf_rider(path: str | os.PathLike[str],
+                   texture: str | Path | Sequence[str | os.PathLike[str]] | None = None) -> SsxModel:
     """Read an ``.mpf`` rider (plus its ``_head.mpf`` partner when ``path`` is a ``_body.mpf``),
     convert it, texture it from its ``.ssh`` bank(s) (``texture``: a path or a list; default: the
     banks with the model files' stems beside them, :func:`piste.formats.ssx.mpf_model.mpf_partners`)
@@ -184,16 +194,16 @@ def load_mpf_rider(path, texture=None) -> object:
     return model
 
 
-def afl_rider_clips(model, afl: AflFile, fps: float | None = None) -> dict[str, Clip]:
+def afl_rider_clips(model: SsxModel, afl: AflFile, fps: float | None = None) -> dict[str, Clip]:
     """The clips of the ``.afl`` bank ``afl`` (:func:`piste.formats.ssx.afl.afl_clips`: the body
     track's channels on the body bones in ``.mpf`` file order, the board track on ``board``) for the
     ``.mpf`` rider ``model`` (:func:`load_mpf_rider`). The root channels are in the file's
     coordinates: a rider lifted to stand on its origin (:func:`stand_on_origin`) gets the same lift
     on its root tracks, so the game's clips play at the height the rider is drawn at. ``fps``: the
     bank's frame rate (None: afl's default)."""
-    kw = {} if fps is None else {"fps": fps}
-    clips = afl_clips(afl, model.skeleton, mpf_body_bones(model), **kw)
-    sk = model.skeleton
+    kw: dict[str, Any] = {} if fps is None else {"fps": fps}
+    clips = afl_clips(afl, cast("Skeleton", model.skeleton), mpf_body_bones(model), **kw)
+    sk = cast("Skeleton", model.skeleton)
     lift = {}  # root bone -> (3,) metres: its rest translation less the file's bind translation
     for sub in model.files[0].models:
         if len(sub.bones):

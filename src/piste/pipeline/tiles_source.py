@@ -31,7 +31,9 @@ API
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -47,10 +49,16 @@ from piste.terrain.tiles import TileError, TileStore, read_tile_objects, tile_en
 from piste.world.camera import Camera
 from piste.world.objects import OBJECT_KINDS
 
+if TYPE_CHECKING:
+    import numpy.typing as npt
+
+    from piste.terrain.net import PatchNet
+    from piste.terrain.tiles import TileGrid
+
 __all__ = ["open_tiles", "flight_cameras"]
 
 
-def _centre_camera(net) -> Camera:
+def _centre_camera(net: PatchNet) -> Camera:
     lo, hi = (np.asarray(b, dtype=np.float64) for b in net.bounds)
     c = (lo + hi) / 2.0
     ext = float(np.linalg.norm(hi[:2] - lo[:2]))
@@ -58,7 +66,8 @@ def _centre_camera(net) -> Camera:
     return Camera(eye, c, fov_y=50.0, near=1.0, far=max(8.0 * ext, 3000.0))
 
 
-def open_tiles(path, quiet: bool = True, warm: bool = False, budget_mb: float = 256.0, track=None,
+def open_tiles(path: str | Path, quiet: bool = True, warm: bool = False, budget_mb: float = 256.0,
+               track: npt.ArrayLike | None = None,
                track_riders: int | None = None) -> Bundle:
     """The runtime scene of a tiled world (see the module docstring).  ``track``: ``(x0, y0, x1, y1)``
     metres, a straight track a pack of ``track_riders`` riders (None: the default six; 1..64)
@@ -78,7 +87,8 @@ def open_tiles(path, quiet: bool = True, warm: bool = False, budget_mb: float = 
     b = np.array([e["bounds"] for e in entries.values()], dtype=np.float64)
     lo, hi = b[:, 0].min(0), b[:, 1].max(0)
     centre = np.array(grid.tile_of(*((lo[:2] + hi[:2]) / 2.0)))
-    net = first = None
+    net: PatchNet | None = None
+    first: TileError | None = None
     for ty, tx in sorted(entries, key=lambda t: (float(np.abs(np.array(t) - centre).sum()), t)):  # a bad tile:
         try:  # the nearest good one stands in (the streamed view leaves the bad one out)
             net = tile_net(store, ty, tx)
@@ -86,9 +96,9 @@ def open_tiles(path, quiet: bool = True, warm: bool = False, budget_mb: float = 
         except TileError as exc:
             first = first or exc
     if net is None:
-        raise first
+        raise cast(TileError, first)  # entries holds at least one tile: a None net had an error
     cams = {"flight": next(fly_path(index, 1)), "centre": _centre_camera(net)}
-    manifest = {
+    manifest: dict[str, Any] = {
         "name": root.stem,
         "source": "tiles",
         "terrain": {"name": root.stem, "source": "tiles", "root": str(root), "budget_mb": float(budget_mb),
@@ -117,7 +127,7 @@ def open_tiles(path, quiet: bool = True, warm: bool = False, budget_mb: float = 
     return bundle
 
 
-def _track_riders(bundle: Bundle, store, grid, track, riders: int = 6) -> Bundle:
+def _track_riders(bundle: Bundle, store: TileStore, grid: TileGrid, track: npt.ArrayLike, riders: int = 6) -> Bundle:
     """``bundle`` whose pack of ``riders`` rides the straight track ``(x0, y0, x1, y1)`` (see
     :func:`open_tiles`)."""
     try:
@@ -141,14 +151,14 @@ def _track_riders(bundle: Bundle, store, grid, track, riders: int = 6) -> Bundle
 OBJECT_PROBE_TILES = 64
 
 
-def _has_objects(store, grid, t) -> bool:
+def _has_objects(store: TileStore, grid: TileGrid, t: Sequence[int]) -> bool:
     try:
         return len(read_tile_objects(store, grid, t[0], t[1], len(OBJECT_KINDS))[0]) > 0
     except TileError:
         return False
 
 
-def flight_cameras(bundle: Bundle, frames: int, fps: float = 30.0, speed: float = 100.0) -> list:
+def flight_cameras(bundle: Bundle, frames: int, fps: float = 30.0, speed: float = 100.0) -> list[Camera]:
     """The cameras of a straight flight across the tiled world of ``bundle`` at ``speed`` m/s
     (:func:`piste.render.streaming.fly_path`), one per frame."""
     if not speed > 0:
