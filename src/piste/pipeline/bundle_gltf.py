@@ -22,7 +22,11 @@ export_bundle(bundle, path, level=4, instancing="ext") -> ExportReport
 
 from __future__ import annotations
 
+import os
 from dataclasses import replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
 
 from piste.errors import ConfigError
 from piste.formats.gltf.write import CharacterExport, ObjectsExport, TerrainExport, export_gltf
@@ -33,16 +37,20 @@ from piste.render.textures import snow_texture
 from piste.terrain.lod import edge_levels
 from piste.terrain.tessellate import terrain_mesh
 
+if TYPE_CHECKING:
+    from piste.formats.gltf.write import ExportReport
+    from piste.pipeline.bundle_objects import Bundle
+
 __all__ = ["WHITE_LUX", "INFINITE_RANGE_MATCH", "terrain_levels", "bundle_parts", "export_bundle"]
 
 
-def terrain_levels(bundle, level):
+def terrain_levels(bundle: Bundle, level: int | str) -> int | np.ndarray:
     """``4``/``6``/``8`` (int) or per-edge levels ``(edges,)`` for ``"camera:NAME"`` (the bundle's LOD distances)."""
 
     if isinstance(level, str) and level.startswith("camera:"):
         cam = bundle.camera(level.split(":", 1)[1])
         lod = bundle.manifest.get("lod") or {}
-        kw = {k: float(lod[k]) for k in ("near", "far") if k in lod}
+        kw: dict[str, Any] = {k: float(lod[k]) for k in ("near", "far") if k in lod}
         return edge_levels(bundle.net, cam.eye, **kw)
     try:
         lv = int(level)
@@ -53,7 +61,7 @@ def terrain_levels(bundle, level):
     return lv
 
 
-def bundle_parts(bundle, level=4, with_base_texture: bool = True) -> dict:
+def bundle_parts(bundle: Bundle, level: int | str = 4, with_base_texture: bool = True) -> dict[str, Any]:
     """Keyword arguments of :func:`piste.formats.gltf.write.export_gltf` for a loaded bundle."""
 
     base = None
@@ -62,7 +70,7 @@ def bundle_parts(bundle, level=4, with_base_texture: bool = True) -> dict:
         if base is None:
             base = snow_texture()
     mesh = terrain_mesh(bundle.net, terrain_levels(bundle, level))
-    parts = {"terrain": TerrainExport(mesh, bundle.lightmap.atlas, base)}
+    parts: dict[str, Any] = {"terrain": TerrainExport(mesh, bundle.lightmap.atlas, base)}
     info = bundle.manifest.get("characters") or {}
     models: dict = {}
     chars = []
@@ -85,6 +93,7 @@ def bundle_parts(bundle, level=4, with_base_texture: bool = True) -> dict:
             p, n, uv = objs.meshes[k].decode()
             meshes[k] = (p, n, uv, objs.meshes[k].indices)
         inst = (bundle.manifest.get("objects") or {}).get("instances") or []
+        names: list[Any] | None
         names = [d.get("name") if isinstance(d, dict) else None for d in inst]
         if len(names) != len(objs.kind) or not all(names):
             names = None
@@ -98,6 +107,7 @@ def bundle_parts(bundle, level=4, with_base_texture: bool = True) -> dict:
     return parts
 
 
-def export_bundle(bundle, path, level=4, instancing: str = "ext", with_base_texture: bool = True):
+def export_bundle(bundle: Bundle, path: str | os.PathLike[str], level: int | str = 4, instancing: str = "ext",
+                  with_base_texture: bool = True) -> ExportReport:
     """Write ``bundle`` as glTF (see :func:`piste.formats.gltf.write.export_gltf`); returns its ExportReport."""
     return export_gltf(path, instancing=instancing, **bundle_parts(bundle, level, with_base_texture))
