@@ -41,7 +41,9 @@ API
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -54,6 +56,16 @@ from piste.terrain.query import height_at
 from piste.terrain.query import eval_points
 from piste.terrain.tiles import TileError, TileGrid, read_tile_objects
 from piste.world.objects import OBJECT_KINDS, ObjectSet, compress_mesh, make_mesh, normal_matrix, object_texture
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
+
+    from piste.lighting.lights import Lights
+    from piste.pipeline.bundle_objects import Bundle
+    from piste.terrain.tiles import TileStore
+
+#: tile indices ``(ty, tx)``
+Tiles = Sequence[tuple[int, int]]
 
 __all__ = ["ObjectRule", "DEFAULT_RULES", "rules_key", "place_tile_objects", "object_set", "MAX_TILE_OBJECTS",
            "tiles_objects", "add_tile_objects", "stream_tile_objects", "track_tiles", "track_net", "world_track", "add_track_riders",
@@ -85,7 +97,7 @@ class ObjectRule:
     altitude: tuple = (-math.inf, math.inf)
     scale: tuple = (0.7, 1.4)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         what = f"object rule {self.kind!r}"
         if self.kind not in OBJECT_KINDS:
             raise ValidationError(f"{what}: kind must be one of {', '.join(OBJECT_KINDS)}")
@@ -111,7 +123,7 @@ DEFAULT_RULES = (ObjectRule("tree", 6.0, slope=(0.0, 30.0)), ObjectRule("rock", 
                                                                         scale=(0.8, 2.0)))
 
 
-def rules_key(rules) -> list:
+def rules_key(rules: Iterable[ObjectRule]) -> list[list[Any]]:
     """The rules as plain lists (what a build's content key hashes)."""
     return [[r.kind, float(r.density), list(r.slope), list(r.altitude), list(r.scale)] for r in rules]
 
@@ -130,7 +142,8 @@ def _hash(ix: np.ndarray, iy: np.ndarray, salt: int) -> np.ndarray:
     return (h >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0)
 
 
-def _surface(control_points: np.ndarray, grid: TileGrid, ty: int, tx: int, xy: np.ndarray):
+def _surface(control_points: np.ndarray, grid: TileGrid, ty: int, tx: int, xy: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray]:
     """Heights ``(k,)`` and unit up-facing normals ``(k, 3)`` of the tile's exact surface at
     ``xy (k, 2)`` (inside the tile): the patch and its (u, v) found directly (x, y are linear in
     u, v on a fitted height field)."""
@@ -150,7 +163,8 @@ def _surface(control_points: np.ndarray, grid: TileGrid, ty: int, tx: int, xy: n
     return q[:, 2], n
 
 
-def place_tile_objects(control_points: np.ndarray, grid: TileGrid, ty: int, tx: int, rules=DEFAULT_RULES,
+def place_tile_objects(control_points: np.ndarray, grid: TileGrid, ty: int, tx: int,
+                       rules: Iterable[ObjectRule] = DEFAULT_RULES,
                        seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """The objects of tile ``(ty, tx)`` (see the module docstring).
 
@@ -170,7 +184,10 @@ def place_tile_objects(control_points: np.ndarray, grid: TileGrid, ty: int, tx: 
     cp = np.asarray(control_points, dtype=np.float64)
     x0, y0, x1, y1 = grid.tile_bounds_xy(ty, tx)
     ox, oy = grid.origin
-    kinds, mats = [], []
+    kinds: list[np.ndarray] = []
+    mats: list[np.ndarray] = []
+    gx: np.ndarray  # (cells,) int64 (numpy types meshgrid's outputs 2-D)
+    gy: np.ndarray
     for ri, rule in enumerate(rules):
         c = rule.cell
         iy = np.arange(math.floor((y0 - oy) / c), math.floor((y1 - oy) / c) + 1, dtype=np.int64)
@@ -226,7 +243,7 @@ def place_tile_objects(control_points: np.ndarray, grid: TileGrid, ty: int, tx: 
     return kind, matrix
 
 
-def object_set(kind: np.ndarray, matrix: np.ndarray, lights=None, normal_bits: int = 8) -> ObjectSet:
+def object_set(kind: np.ndarray, matrix: np.ndarray, lights: Lights | None = None, normal_bits: int = 8) -> ObjectSet:
     """The :class:`~piste.world.objects.ObjectSet` of instances ``kind (k,) int64`` and ``matrix
     (k, 4, 4) float64`` (e.g. the objects of the tiles in view, concatenated): meshes, bounding
     spheres (the mesh's radius times the matrix's largest column), each instance's vertex lights
@@ -247,7 +264,7 @@ def object_set(kind: np.ndarray, matrix: np.ndarray, lights=None, normal_bits: i
                      counts)
 
 
-def tiles_objects(store, grid: TileGrid, tiles) -> tuple[np.ndarray, np.ndarray]:
+def tiles_objects(store: TileStore, grid: TileGrid, tiles: Iterable[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
     """The objects stored in ``tiles`` (``[(ty, tx), ...]``, in that order), concatenated: ``kind
     (k,) int64``, ``matrix (k, 4, 4) float64`` (:func:`piste.terrain.tiles.read_tile_objects`:
     TileError naming a bad tile)."""
@@ -257,7 +274,7 @@ def tiles_objects(store, grid: TileGrid, tiles) -> tuple[np.ndarray, np.ndarray]
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
 
-def add_tile_objects(bundle, store, grid: TileGrid, tiles, skip_bad: bool = False):
+def add_tile_objects(bundle: Bundle, store: TileStore, grid: TileGrid, tiles: Tiles, skip_bad: bool = False) -> Bundle:
     """A copy of ``bundle`` (a tiled world's runtime scene) holding the objects stored in ``tiles``
     (their vertex colours baked from the bundle's lights, as a build stores them); ``bundle`` itself
     when those tiles hold none.  ``skip_bad``: a tile whose objects do not read back (TileError) is
@@ -282,7 +299,7 @@ def add_tile_objects(bundle, store, grid: TileGrid, tiles, skip_bad: bool = Fals
     return replace(bundle, manifest=man, arrays=arrays, _cache={})
 
 
-def stream_tile_objects(bundle):
+def stream_tile_objects(bundle: Bundle) -> Bundle:
     """A copy of ``bundle`` (a tiled world's runtime scene) whose objects are paged with its tiles:
     ``bundle.objects()`` is an empty :class:`piste.render.object_pass.ObjectGroups` (every kind's
     mesh, the atlas, vertex lights chosen from the bundle's lights) that the streamed terrain
@@ -301,7 +318,7 @@ def stream_tile_objects(bundle):
     return replace(bundle, manifest=man, arrays=arrays, _cache={"objects": groups})
 
 
-def track_tiles(grid: TileGrid, xy, halo: int = 1) -> list:
+def track_tiles(grid: TileGrid, xy: npt.ArrayLike, halo: int = 1) -> list[tuple[int, int]]:
     """The tiles under the polyline ``xy (k, 2)`` metres (sampled every eighth of a tile) and within
     ``halo`` tiles of them, sorted: ``[(ty, tx), ...]`` (ConfigError: a point off the world, more
     than :data:`MAX_TRACK_TILES`)."""
@@ -327,7 +344,7 @@ def track_tiles(grid: TileGrid, xy, halo: int = 1) -> list:
     return out
 
 
-def track_net(store, grid: TileGrid, tiles):
+def track_net(store: TileStore, grid: TileGrid, tiles: Tiles) -> PatchNet:
     """The fitted patches of ``tiles`` as one :class:`~piste.terrain.net.PatchNet` (shared tile
     edges are bit-identical: the riders' ground has no seams)."""
 
@@ -336,7 +353,8 @@ def track_net(store, grid: TileGrid, tiles):
                     tol=1e-6 * grid.samples_per_patch * min(grid.spacing), name=f"track ({len(tiles)} tiles)")
 
 
-def world_track(store, grid: TileGrid, start_xy, end_xy, step: float = 5.0):
+def world_track(store: TileStore, grid: TileGrid, start_xy: npt.ArrayLike, end_xy: npt.ArrayLike,
+                step: float = 5.0) -> tuple[np.ndarray, PatchNet]:
     """A straight track from ``start_xy`` to ``end_xy`` (metres, on the world) across as many tiles
     as it crosses: ``line (k, 3)`` float64 points every ``step`` metres on the exact surface, and
     the net of the tiles under it and around it (:func:`track_tiles`, :func:`track_net`)."""
@@ -358,7 +376,8 @@ def world_track(store, grid: TileGrid, start_xy, end_xy, step: float = 5.0):
     return np.column_stack([xy, z]), net
 
 
-def add_track_riders(bundle, store, grid: TileGrid, start_xy, end_xy, start: float = 0.12, riders: int = 6):
+def add_track_riders(bundle: Bundle, store: TileStore, grid: TileGrid, start_xy: npt.ArrayLike, end_xy: npt.ArrayLike,
+                     start: float = 0.12, riders: int = 6) -> Bundle:
     """A copy of ``bundle`` (a tiled world's runtime scene) whose pack of ``riders`` riders (1..64,
     :func:`piste.pipeline.preview.track_pack`) follows a straight track from ``start_xy`` to
     ``end_xy`` across tiles: the centre line (``terrain/centerline``), ``[pack] follow = "track"``
