@@ -30,11 +30,16 @@ API
 from __future__ import annotations
 
 import logging
+import os
 import time
+from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
+
+import numpy as np
 
 from piste.errors import PisteError
-from piste.pipeline.build import build_scene
+from piste.pipeline.build import BuildResult, build_scene
 from piste.pipeline.bundle_objects import load_bundle
 from piste.pipeline.preview import BundleScene, ScenePreview, camera_at
 from piste.render import window
@@ -42,14 +47,20 @@ from piste.render.context import save_png
 from piste.render.frame import DEFAULT_FOG_DENSITY
 from piste.render.sky_pass import HORIZON
 from piste.render.ssx_pass import SsxTerrainRenderer
-from piste.render.window import SceneView, ViewFrame, _wrap_screen
+from piste.render.window import SceneView, ViewFrame, ViewOptions, _wrap_screen
 from piste.world.scene_file import load_scene
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from piste.pipeline.bundle_objects import Bundle
+    from piste.world.camera import Camera
 
 __all__ = ["LiveScene", "PreviewView", "LiveView", "run_headless", "run_window"]
 
 
-def _stamp(paths) -> dict:
-    out = {}
+def _stamp(paths: Iterable[str | os.PathLike[str]]) -> dict[str, tuple[int, int] | None]:
+    out: dict[str, tuple[int, int] | None] = {}
     for p in paths:
         try:
             st = Path(p).stat()
@@ -72,26 +83,27 @@ class LiveScene:
     preview_kw : more :class:`~piste.pipeline.preview.ScenePreview` options (``face``, ``fog``)
     """
 
-    def __init__(self, path, bundle=None, cache_dir=None, size=None, camera: str | None = None, ctx=None,
-                 **preview_kw):
+    def __init__(self, path: str | os.PathLike[str], bundle: str | os.PathLike[str] | None = None,
+                 cache_dir: str | os.PathLike[str] | None = None, size: tuple[int, int] | None = None,
+                 camera: str | None = None, ctx: moderngl.Context | None = None, **preview_kw: Any) -> None:
         self.path = Path(path)
         self.is_bundle = self.path.suffix.lower() == ".piste"
         self.bundle_path = Path(bundle) if bundle is not None else self.path.with_suffix(".piste")
         self.cache_dir = cache_dir
         self.camera = camera
         self.last_error: Exception | None = None
-        self.last_build = None
+        self.last_build: BuildResult | None = None
         self.rebuilds = 0
         if self.is_bundle:
             self.bundle_path = self.path
-            self._files = [self.path]
+            self._files: list[Path] = [self.path]
         else:
             self._build()
         self._stamps = _stamp(self._files)
         self.bundle = load_bundle(self.bundle_path)
         self.preview = ScenePreview(self.bundle, size=size, ctx=ctx, **preview_kw)
 
-    def _build(self):
+    def _build(self) -> BuildResult:
         try:
             scene = load_scene(self.path)
             self._files = scene.source_files()
@@ -124,17 +136,17 @@ class LiveScene:
         self.rebuilds += 1
         return True
 
-    def render(self, t: float = 0.0):
+    def render(self, t: float = 0.0) -> np.ndarray:
         """The current frame ``(H, W, 3) uint8`` from the chosen camera."""
         chase = self.camera is None and self.preview.follow
-        return self.preview.render(None if chase else camera_at(self.bundle, self.camera), t)
+        return cast(np.ndarray, self.preview.render(None if chase else camera_at(self.bundle, self.camera), t))  # read
 
     def release(self) -> None:
         self.preview.release()
 
 
-def run_headless(live: LiveScene, out_dir, frames: int | None = None, seconds: float | None = None,
-                 interval: float = 0.1, log=None) -> list:
+def run_headless(live: LiveScene, out_dir: str | os.PathLike[str], frames: int | None = None, seconds: float | None = None,
+                 interval: float = 0.1, log: Callable[[str], Any] | None = None) -> list[Path]:
     """Render ``out_dir/frame_0000.png`` now and one more frame after every change, until ``frames``
     frames were written or ``seconds`` passed (None: until interrupted).  Returns the PNG paths."""
     out = Path(out_dir)
@@ -163,20 +175,20 @@ class PreviewView:
     the bundle's scene drawn by the runtime straight into the window; V switches the bundle's
     visibility sets.  ``piste view`` of the default course uses it over the built default scene."""
 
-    def __init__(self, preview):
+    def __init__(self, preview: ScenePreview) -> None:
         self.preview = preview
-        self.ctx = None
+        self.ctx: moderngl.Context | None = None
         self._hook()
 
     def _hook(self) -> None:
         self._vis = getattr(self.preview.terrain, "visibility", None)  # the bundle's sets (set_visibility)
 
     @property
-    def bundle(self):
+    def bundle(self) -> Bundle:
         return self.preview.bundle
 
     @property
-    def terrain(self):
+    def terrain(self) -> Any:
         return self.preview.terrain
 
     @property
@@ -188,14 +200,14 @@ class PreviewView:
     def has_visibility(self) -> bool:
         return self.bundle.visibility is not None
 
-    def attach(self, ctx) -> None:
+    def attach(self, ctx: moderngl.Context | None) -> None:
         self.ctx = ctx
         _wrap_screen(self.preview.terrain, ctx)
 
-    def poll(self):
+    def poll(self) -> str | None:
         return None
 
-    def draw(self, camera, t, opts):
+    def draw(self, camera: Camera, t: float, opts: ViewOptions) -> ViewFrame:
         p = self.preview
         bundle = self.bundle
         p.terrain.set_visibility(self._vis if opts.visibility else None)
@@ -213,7 +225,7 @@ class PreviewView:
             mesh = p.terrain.prepare(camera, lod=opts.lod)
             frame = p.terrain.draw(camera, mesh, lightmap_mode=opts.lightmap_mode, debug=opts.debug, read=False,
                                    fog="scene" if p.fog is None else p.fog)
-        extra = {}
+        extra: dict[str, Any] = {}
         if p.objects is not None:
             vis = p.objects.objects.visible(camera.frustum_planes(), max_distance=camera.far, eye=camera.eye)
             if opts.visibility and bundle.visibility is not None and len(vis):
@@ -232,11 +244,11 @@ class LiveView(PreviewView):
     """The window's view of a :class:`LiveScene`: a :class:`PreviewView` of its preview, rebuilt and
     reloaded in place when the scene's files change."""
 
-    def __init__(self, live: LiveScene):
+    def __init__(self, live: LiveScene) -> None:
         self.live = live
         super().__init__(live.preview)
 
-    def poll(self):
+    def poll(self) -> str | None:
         """Rebuild/reload on change; a message for the log or None."""
         live = self.live
         if live.poll():
@@ -253,13 +265,14 @@ class LiveView(PreviewView):
         self.live.release()
 
 
-def run_window(live_factory, camera=None, size=(640, 448), caption="piste view", **kw) -> dict:
+def run_window(live_factory: Callable[[moderngl.Context], LiveScene], camera: Camera | None = None,
+               size: tuple[int, int] = (640, 448), caption: str = "piste view", **kw: Any) -> dict[str, Any]:
     """Show a live scene in the fly-through window (:func:`piste.render.window.run_window`),
     reloading on change.  ``live_factory(ctx) -> LiveScene`` (the scene's GL objects live in the
     window's context).  Returns the window's state dict."""
-    holder = {}
+    holder: dict[str, LiveView] = {}
 
-    def make(ctx):
+    def make(ctx: moderngl.Context) -> LiveView:
         holder["view"] = LiveView(live_factory(ctx))
         return holder["view"]
 
