@@ -43,7 +43,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -360,7 +360,7 @@ def _terrain_key(ctx: BuildContext) -> str:
     ts = ctx.scene.terrain
     src = _file_key(ts.path) if ts.path is not None else f"seed {ts.seed}"
     if ts.kind == "ssx_pbd":  # the .pbd and the texture / light-map banks beside it
-        src = level_key(ts.path)
+        src = level_key(cast(Path, ts.path))  # an ssx_pbd terrain names its file (scene_file checks)
     return content_key(BUILD_VERSION, "terrain", ts.kind, src, ts.seed, ts.spacing, ts.height_scale,
                        ts.height_offset, ts.key, ts.samples_per_patch, ts.smooth,
                        *((ts.nodata, ts.vertical_units) if ts.kind == "geotiff" else ()))
@@ -439,7 +439,7 @@ def _lightmap_key(ctx: BuildContext) -> str:
 def _make_lightmap(ctx: BuildContext) -> StepOutput:
     scene, ts, lm_spec = ctx.scene, ctx.scene.terrain, ctx.scene.lightmap
     if ts.kind == "ssx_pbd":  # an SSX level brings its own light maps and textures (pipeline.ssx_level)
-        return bundle_arrays(ts.path), {"stats": {}}
+        return bundle_arrays(cast(Path, ts.path)), {"stats": {}}
     partial = bake_partial_dir(scene.path, ctx.cache.root) if ctx.cache.root is not None else None
     lm = bake_lightmap(ctx.net, ctx.lights, res=lm_spec.res, gutter=lm_spec.gutter, shadows=lm_spec.shadows,
                        jobs=ctx.jobs, partial_dir=partial, progress=ctx.progress, bounces=lm_spec.bounces,

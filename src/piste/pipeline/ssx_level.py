@@ -37,6 +37,7 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 
@@ -94,7 +95,7 @@ class SsxLevel:
     info: dict = field(default_factory=dict)
 
 
-def level_files(path) -> tuple[Path | None, Path | None]:
+def level_files(path: str | os.PathLike[str]) -> tuple[Path | None, Path | None]:
     """``(NAME.ssh, NAME_L.ssh)`` beside ``NAME.pbd`` (case-insensitive), each None if absent.
     The game's 8.3-style names may drop the stem's last character for the light maps
     (``elysium.pbd`` -> ``elysiu_L.ssh``), so that name is tried second."""
@@ -105,7 +106,8 @@ def level_files(path) -> tuple[Path | None, Path | None]:
     return names.get(f"{stem}.ssh"), light
 
 
-def texture_atlas(bank: SshBank | None, cell: int = 64, gutter: int = 8):
+def texture_atlas(bank: SshBank | None, cell: int = 64, gutter: int = 8
+                  ) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
     """Every texture of ``bank`` resampled to ``cell x cell`` in a grid, with ``gutter`` wrapped
     texels around each, plus a final white cell.  Returns ``(atlas (H, W, 4) uint8, origins
     (T + 1, 2) texel (x, y) of each cell's inner corner, (W, H))``."""
@@ -128,7 +130,7 @@ def texture_atlas(bank: SshBank | None, cell: int = 64, gutter: int = 8):
     return atlas, origins, (cols * step, rows * step)
 
 
-def _atlas_uv(pbd: Pbd, origins, size, cell: int, n_textures: int) -> np.ndarray:
+def _atlas_uv(pbd: Pbd, origins: np.ndarray, size: tuple[int, int], cell: int, n_textures: int) -> np.ndarray:
     """Net corner UVs (PatchNet order) in the texture atlas, ``(n, 4, 2)`` float32."""
     ti = np.asarray(pbd.texture_index, dtype=np.int64)
     ti = np.where((ti >= 0) & (ti < n_textures), ti, n_textures)  # missing -> the white cell
@@ -141,7 +143,7 @@ def _atlas_uv(pbd: Pbd, origins, size, cell: int, n_textures: int) -> np.ndarray
     return out.astype(np.float32)
 
 
-def _render_tiles(tiles, n: int):
+def _render_tiles(tiles: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Tiles ``(n, 8, 8, C)`` into an atlas with a 1-texel gutter; returns ``(atlas, rects)`` with
     edge-aligned rects (parameter 0 / 1 on the tile's outer texel edges)."""
     lay = atlas_layout(n, 8, 1)
@@ -152,7 +154,8 @@ def _render_tiles(tiles, n: int):
     return atlas, rects
 
 
-def level_light(pbd: Pbd, pages, reduced, pages_path=None):
+def level_light(pbd: Pbd, pages: np.ndarray | None, reduced: np.ndarray, pages_path: str | os.PathLike[str] | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(light (h, w, 3) float32, source (h, w, 4) uint8, rects (n, 4))`` render atlases of a
     level's stored light-map pages (or unlit, ``Cs = 0, As = 128``, when ``pages`` is None).  A
     patch's tile outside the pages is refused naming the ``.pbd`` (``pbd.path``) and the bank
@@ -170,7 +173,8 @@ def level_light(pbd: Pbd, pages, reduced, pages_path=None):
     return light, source, rects
 
 
-def pbd_to_net(pbd: Pbd, scale: float = GAME_SCALE, tol: float | None = None, lightmap_rect=None,
+def pbd_to_net(pbd: Pbd, scale: float = GAME_SCALE, tol: float | None = None,
+               lightmap_rect: np.ndarray | None = None,
                name: str | None = None) -> PatchNet:
     """The level's patches as a :class:`~piste.terrain.net.PatchNet` in metres.
 
@@ -200,7 +204,8 @@ def pbd_to_net(pbd: Pbd, scale: float = GAME_SCALE, tol: float | None = None, li
     tols = [tol] if tol is not None else [t * scale for t in weld_candidates(pbd.control_points)]
     for k, t in enumerate(tols):
         try:
-            return PatchNet(cp, uv=pbd.uv[:, UV_TO_NET], lightmap_rect=lightmap_rect, tol=t,
+            # None: PatchNet lays out default rects (its field is typed np.ndarray, default None)
+            return PatchNet(cp, uv=pbd.uv[:, UV_TO_NET], lightmap_rect=cast(np.ndarray, lightmap_rect), tol=t,
                             name=name or pbd.display_name)
         except ValidationError as exc:
             if k == len(tols) - 1 or "C0" not in str(exc):
@@ -208,7 +213,7 @@ def pbd_to_net(pbd: Pbd, scale: float = GAME_SCALE, tol: float | None = None, li
     raise AssertionError("unreachable: the last tolerance returns or raises")
 
 
-def load_level(path, cell: int = 64, tol: float | None = None) -> SsxLevel:
+def load_level(path: str | os.PathLike[str], cell: int = 64, tol: float | None = None) -> SsxLevel:
     """Read ``path`` (a .pbd) and the banks beside it; see the module docstring."""
     path = Path(path)
     pbd = read_pbd(path)
@@ -242,7 +247,7 @@ class BakedPages:
     stats: dict
 
 
-def _light_chunk(args):
+def _light_chunk(args: tuple[PatchNet, Lights, np.ndarray, np.ndarray, bool]) -> tuple[np.ndarray, dict[str, Any]]:
     net, lights, pos, nrm, shadows = args
     stats: dict = {}
     shadow = None
@@ -288,7 +293,7 @@ def bake_level(level: SsxLevel, lights: Lights, shadows: bool = True, jobs: int 
     return BakedPages(pages, rect, page, cl, cd, stats)
 
 
-def write_baked(level: SsxLevel, baked: BakedPages, out_pbd=None) -> tuple[Path, Path]:
+def write_baked(level: SsxLevel, baked: BakedPages, out_pbd: str | os.PathLike[str] | None = None) -> tuple[Path, Path]:
     """Write the baked pages as ``NAME_L.ssh`` beside ``out_pbd`` (default: the level's own .pbd,
     rewritten) and the .pbd with every patch's light-map rect and page updated, every other byte
     as read (a new name also gets a byte-for-byte copy of the level's ``.ssh`` as ``NAME.ssh``);
@@ -325,7 +330,7 @@ class BakeReport:
                 f"{self.rays_occluded:,} occluded) in {self.seconds:.2f} s: {self.lightmaps}, {self.pbd}")
 
 
-def level_path(path) -> Path:
+def level_path(path: str | os.PathLike[str]) -> Path:
     """``path`` as an SSX level path (ConfigError unless it names a ``.pbd``)."""
     p = Path(path)
     if p.suffix.lower() != ".pbd":
@@ -333,7 +338,7 @@ def level_path(path) -> Path:
     return p
 
 
-def bake_file(path, lights: Lights | None = None, out=None, shadows: bool = True, jobs: int = 1) -> BakeReport:
+def bake_file(path: str | os.PathLike[str], lights: Lights | None = None, out: str | os.PathLike[str] | None = None, shadows: bool = True, jobs: int = 1) -> BakeReport:
     """``piste ssx bake`` / ``piste bake LEVEL.pbd --format ssx-tricky``: bake ``NAME_L.ssh`` the
     game's way with ``lights`` (default: piste's) and write it with the level (:func:`write_baked`)."""
     t0 = time.perf_counter()
@@ -346,16 +351,16 @@ def bake_file(path, lights: Lights | None = None, out=None, shadows: bool = True
 
 
 # ----------------------------------------------------------------------------- scene builds
-def level_key(path) -> str:
+def level_key(path: str | os.PathLike[str]) -> str:
     """Content hash of ``path`` and the ``.ssh`` / ``_L.ssh`` beside it (a build-cache key part)."""
     path = Path(path)
-    parts = []
+    parts: list[str | bytes] = []
     for p in (path, *level_files(path)):  # regular files only (a pipe or device is refused, never read)
         parts += ["-"] if p is None else [p.name, read_regular(p, MAX_PBD_BYTES, what="level file")]
     return content_key("ssx-level/2", *parts)
 
 
-def bundle_arrays(path) -> dict:
+def bundle_arrays(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     """What a scene build stores for an SSX terrain (``[terrain] ssx_pbd = ...``): the level's own
     light map as the bundle's linear ``atlas (h, w, 3) float32`` with its ``rects (n, 4)``, the
     stored texels as ``source (h, w, 4) uint8`` (Cs, As: ps2 mode) and the level textures as
