@@ -43,7 +43,9 @@ ground) gets no set, so everything is drawn: culling is lost there, never a pixe
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -52,6 +54,12 @@ from piste.terrain.bezier import evaluate, grid_params
 from piste.terrain.query import height_at, ray_intersect
 from piste.transforms import cull_boxes
 from piste.world.camera import track_camera
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
+
+    from piste.terrain.net import PatchNet
+    from piste.world.camera import Camera
 
 __all__ = ["Visibility", "compute_visibility", "culling_report", "patch_targets", "is_heightfield", "height_above",
            "scene_eye_heights", "band_warnings", "camera_eyes", "drawn_floor"]
@@ -92,7 +100,7 @@ class Visibility:
         field an eye sees no less from higher up, so the top sample covers the band below it)."""
         return float(max(self.eye_heights)) if self.eye_heights else 0.0
 
-    def in_band(self, eye) -> bool:
+    def in_band(self, eye: npt.ArrayLike) -> bool:
         """Whether ``eye (3,)`` is within the band over its cell (conservatively: measured from the
         cell's lowest sampled ground); True outside the grid (nothing is culled there anyway)."""
         c = self.cell_of(eye)
@@ -100,7 +108,7 @@ class Visibility:
             return True
         return float(np.asarray(eye, dtype=np.float64).reshape(-1)[2]) <= float(self.ground_min[c]) + self.band
 
-    def cell_of(self, eye) -> int:
+    def cell_of(self, eye: npt.ArrayLike) -> int:
         """Cell index of an eye position ``(3,)`` (or ``(2,)``), -1 outside the grid."""
         e = np.asarray(eye, dtype=np.float64).reshape(-1)[:2]
         ij = np.floor((e - self.origin) / self.cell).astype(np.int64)
@@ -109,7 +117,7 @@ class Visibility:
             return -1
         return int(ij[1] * cols + ij[0])
 
-    def patches_at(self, eye) -> np.ndarray | None:
+    def patches_at(self, eye: npt.ArrayLike) -> np.ndarray | None:
         """``(n,) bool`` patches visible from the cell holding ``eye``; None outside the grid or above
         the band (:meth:`in_band`): draw all."""
         c = self.cell_of(eye)
@@ -124,7 +132,7 @@ class Visibility:
                 bits = self.level_bits[j, c]
         return np.unpackbits(bits, count=self.n_patches, bitorder="little").astype(bool)
 
-    def objects_at(self, eye) -> np.ndarray | None:
+    def objects_at(self, eye: npt.ArrayLike) -> np.ndarray | None:
         """``(m,) bool`` objects visible from the cell holding ``eye``; None outside the grid."""
         c = self.cell_of(eye)
         if c < 0 or not self.in_band(eye):
@@ -168,7 +176,7 @@ class Visibility:
 
 
 # ----------------------------------------------------------------------------- targets, eyes
-def patch_targets(net, params=(0.1, 0.5, 0.9)) -> np.ndarray:
+def patch_targets(net: PatchNet, params: Sequence[float] = (0.1, 0.5, 0.9)) -> np.ndarray:
     """Sample points of every patch, ``(n, k*k, 3)`` float64, at parameters ``params`` x ``params``."""
     p = np.asarray(params, dtype=np.float64)
     u, v = np.meshgrid(p, p, indexing="ij")
@@ -176,7 +184,7 @@ def patch_targets(net, params=(0.1, 0.5, 0.9)) -> np.ndarray:
     return np.asarray(pts[0] if isinstance(pts, tuple) else pts, dtype=np.float64)
 
 
-def is_heightfield(net, samples: int = 64) -> bool:
+def is_heightfield(net: PatchNet, samples: int = 64) -> bool:
     """Whether the net is a graph over xy (each patch's xy map is one-to-one and patches don't
     overlap): tested on the patches' sample points (z up normals everywhere, cells covered once)."""
     t = np.linspace(0.02, 0.98, 5)
@@ -195,7 +203,7 @@ def is_heightfield(net, samples: int = 64) -> bool:
     return bool(area <= 1.05 * np.prod(bhi[:2] - blo[:2]) + 1e-9)
 
 
-def _grid_for(net, cell: float, region=None):
+def _grid_for(net: PatchNet, cell: float, region: np.ndarray | None = None) -> tuple[np.ndarray, tuple[int, int]]:
     lo, hi = net.bounds
     if region is not None:  # the eyes' cells over part of the net (e.g. a tile of its neighbourhood)
         lo = np.array([region[0], region[1], lo[2]], dtype=np.float64)
@@ -206,7 +214,8 @@ def _grid_for(net, cell: float, region=None):
     return origin, (rows, cols)
 
 
-def _eye_points(net, origin, shape, cell, eye_heights, region=None):
+def _eye_points(net: PatchNet, origin: np.ndarray, shape: tuple[int, int], cell: float, eye_heights: Sequence[float],
+                region: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Eye points and which cells they serve: ``eyes (k, 3)``, ``owner`` list of (cell, eye) pairs."""
     rows, cols = shape
     lo, hi = net.bounds
@@ -228,7 +237,7 @@ def _eye_points(net, origin, shape, cell, eye_heights, region=None):
 
 
 # ----------------------------------------------------------------------------- the horizon test
-def drawn_floor(net, patch: np.ndarray, uv: np.ndarray, levels) -> np.ndarray:
+def drawn_floor(net: PatchNet, patch: np.ndarray, uv: np.ndarray, levels: Iterable[int]) -> np.ndarray:
     """The lowest of the triangulated meshes a renderer may draw for ``net``'s patches: at points
     ``(patch (k,), uv (k, 2))``, the minimum over ``levels`` (samples a patch side, e.g. 2: the
     patch-corner grid) of the patch evaluated on an ``m x m`` grid, each cell split along its
@@ -240,7 +249,7 @@ def drawn_floor(net, patch: np.ndarray, uv: np.ndarray, levels) -> np.ndarray:
     cp = np.asarray(net.control_points, dtype=np.float64)
     for m in sorted({int(x) for x in levels}):
         gu, gv = grid_params(m)
-        z = evaluate(cp, gu, gv, normals=False)[..., 2].reshape(len(cp), m, m)  # [patch, j (v), i (u)]
+        z = cast(np.ndarray, evaluate(cp, gu, gv, normals=False))[..., 2].reshape(len(cp), m, m)  # [patch, j (v), i (u)]
         s, t = np.clip(u, 0.0, 1.0) * (m - 1), np.clip(v, 0.0, 1.0) * (m - 1)
         i = np.minimum(np.floor(s).astype(np.int64), m - 2)
         j = np.minimum(np.floor(t).astype(np.int64), m - 2)
@@ -257,7 +266,7 @@ class _HeightGrid:
     """The terrain's lower envelope on a regular grid (occluder heights), -inf off the terrain;
     with ``levels``, also no higher than the coarser meshes drawn for it (:func:`drawn_floor`)."""
 
-    def __init__(self, net, spacing: float, margin: float, levels=()):
+    def __init__(self, net: PatchNet, spacing: float, margin: float, levels: Sequence[int] = ()) -> None:
         from scipy.ndimage import minimum_filter
 
         lo, hi = net.bounds
@@ -318,7 +327,7 @@ def _horizon_visible(grid: _HeightGrid, eyes: np.ndarray, targets: np.ndarray, a
     return out
 
 
-def _rays_visible(net, eyes: np.ndarray, targets: np.ndarray, margin: float) -> np.ndarray:
+def _rays_visible(net: PatchNet, eyes: np.ndarray, targets: np.ndarray, margin: float) -> np.ndarray:
     tgt = targets + np.array([0.0, 0.0, margin])
     o = np.repeat(eyes, len(tgt), axis=0)
     d = np.tile(tgt, (len(eyes), 1)) - o
@@ -331,9 +340,11 @@ def _rays_visible(net, eyes: np.ndarray, targets: np.ndarray, margin: float) -> 
 
 
 # ----------------------------------------------------------------------------- the step
-def compute_visibility(net, cell: float = 50.0, eye_heights=(1.7, 9.0), objects=None, method: str = "auto",
+def compute_visibility(net: PatchNet, cell: float = 50.0, eye_heights: Sequence[float] = (1.7, 9.0),
+                       objects: npt.ArrayLike | None = None, method: str = "auto",
                        azimuths: int = 720, step: float | None = None, margin: float = 0.25,
-                       progress: bool = False, patches: bool = True, region=None, levels=(),
+                       progress: bool = False, patches: bool = True, region: npt.ArrayLike | None = None,
+                       levels: Sequence[int] = (),
                        cover_ground: bool = False) -> Visibility:
     """Visibility bitsets of ``net``'s patches (and objects) for a grid of ``cell``-metre cells.
 
@@ -384,7 +395,7 @@ def compute_visibility(net, cell: float = 50.0, eye_heights=(1.7, 9.0), objects=
     origin, shape = _grid_for(net, cell, region)
     rows, cols = shape
     # bound the work before allocating: (eye points x targets) booleans (a tiny cell asked for TiBs)
-    def check_work(heights):
+    def check_work(heights: Sequence[float]) -> None:
         work = ((rows + 1) * (cols + 1) + rows * cols) * len(heights) * (n * (9 if patches else 0) + 2 * m)
         if work > MAX_VISIBILITY_WORK:
             raise ConfigError(f"visibility: a cell of {cell:g} m cuts the course into {rows} x {cols} cells, "
@@ -408,7 +419,7 @@ def compute_visibility(net, cell: float = 50.0, eye_heights=(1.7, 9.0), objects=
     otargets = np.concatenate([spheres[:, :3], spheres[:, :3] + np.stack([np.zeros(m), np.zeros(m), spheres[:, 3]], 1)])
     targets = np.concatenate([ptargets.reshape(-1, 3), otargets])
     eyes = np.concatenate([np.column_stack([xy, zg + h]) for h in heights])  # (g * H, 3)
-    valid = np.tile(hit, len(heights))
+    valid: np.ndarray = np.tile(hit, len(heights))
     vis_eye = np.zeros((len(eyes), len(targets)), dtype=bool)
     idx = np.nonzero(valid)[0]
     if method == "horizon":
@@ -439,7 +450,7 @@ def compute_visibility(net, cell: float = 50.0, eye_heights=(1.7, 9.0), objects=
     # per cell: union over its five ground points
     g = len(xy)
     per_level = np.logical_or.accumulate(vis_eye.reshape(len(heights), g, -1), axis=0)  # (H, g, targets)
-    point_valid = valid.reshape(len(heights), g).any(axis=0)
+    point_valid = cast(np.ndarray, valid.reshape(len(heights), g).any(axis=0))  # (g,) bool
     cells = rows * cols
     cell_ok = np.zeros(cells, dtype=bool)
     for j in range(nodes.shape[1]):
@@ -461,14 +472,15 @@ def compute_visibility(net, cell: float = 50.0, eye_heights=(1.7, 9.0), objects=
     return Visibility(origin, float(cell), shape, pbits, obits, n, m, method, heights, gz, lbits)
 
 
-def height_above(net, eyes) -> np.ndarray:
+def height_above(net: PatchNet, eyes: npt.ArrayLike) -> np.ndarray:
     """``(k,)`` metres of each eye ``(k, 3)`` above the terrain under it (NaN off the terrain)."""
     e = np.asarray(eyes, dtype=np.float64).reshape(-1, 3)
     z, hit, _, _ = height_at(net, e[:, :2])
     return np.where(hit, e[:, 2] - z, np.nan)
 
 
-def scene_eye_heights(net, base=(1.7, 9.0), eyes=(), cell: float = 50.0, slack: float = 1.1) -> tuple:
+def scene_eye_heights(net: PatchNet, base: Iterable[float] = (1.7, 9.0), eyes: npt.ArrayLike = (), cell: float = 50.0,
+                      slack: float = 1.1) -> tuple[float, ...]:
     """The heights above the snow to sample for a scene: ``base`` plus the band's top, the highest
     of ``eyes (k, 3)`` (its cameras along their paths, its riders' heads) above the lowest ground
     within a ``cell`` around it (what :meth:`Visibility.in_band` measures from), times ``slack``,
@@ -490,7 +502,7 @@ def scene_eye_heights(net, base=(1.7, 9.0), eyes=(), cell: float = 50.0, slack: 
     return tuple(heights)
 
 
-def camera_eyes(cameras, centerline=None, samples: int = 16) -> np.ndarray:
+def camera_eyes(cameras: Iterable[Mapping[str, Any]], centerline: np.ndarray | None = None, samples: int = 16) -> np.ndarray:
     """Every eye ``(k, 3)`` the scene's cameras (bundle manifest dicts) reach: fixed eyes, and
     ``samples`` points along each track camera's flight."""
     out = []
@@ -504,7 +516,8 @@ def camera_eyes(cameras, centerline=None, samples: int = 16) -> np.ndarray:
     return np.asarray(out, dtype=np.float64).reshape(-1, 3)
 
 
-def band_warnings(net, vis: Visibility, cameras, names=None) -> list:
+def band_warnings(net: PatchNet, vis: Visibility, cameras: Iterable[Camera], names: Sequence[str] | None = None
+                  ) -> list[str]:
     """A message per camera (``cameras``: Camera objects; ``names``: their labels) whose eye is
     above the visibility band (:meth:`Visibility.in_band`): the sets are not used there (every
     patch drawn), so culling is lost, never pixels."""
@@ -519,7 +532,7 @@ def band_warnings(net, vis: Visibility, cameras, names=None) -> list:
     return out
 
 
-def culling_report(net, vis: Visibility, cameras) -> dict:
+def culling_report(net: PatchNet, vis: Visibility, cameras: Iterable[Camera]) -> dict[str, Any]:
     """Patches drawn with frustum culling alone vs frustum culling and the visibility sets.
 
     Parameters
