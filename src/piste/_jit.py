@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import importlib.util
 import threading
+from collections.abc import Callable
+from typing import Any
 
 from piste.extras import environ
 
@@ -36,15 +38,15 @@ _HOLDS = [0, False]  # [holds in force, warm-up asked for while held]
 
 
 class _Lazy:
-    def __init__(self, fn, example=None):
+    def __init__(self, fn: Callable[..., Any], example: Callable[[], tuple[Any, ...]] | None = None) -> None:
         self.fn = fn
         self.example = example
-        self.compiled = None
+        self.compiled: Any = None
         self._ready = False
         self.__doc__ = fn.__doc__
         self.__name__ = fn.__name__
 
-    def _compile(self):
+    def _compile(self) -> Any:
         with _LOCK:
             if self.compiled is None:
                 import numba
@@ -67,16 +69,17 @@ class _Lazy:
         warm_up_async()
         return False
 
-    def __call__(self, *args):
+    def __call__(self, *args: Any) -> Any:
         c = self.compiled
         if c is None:
             c = self._compile()
         return c(*args)
 
 
-def lazy_njit(fn, example=None):
+def lazy_njit(fn: Callable[..., Any], example: Callable[[], tuple[Any, ...]] | None = None) -> Any:
     """``fn`` compiled on first call (numba), or None when numba is not available.  ``example()``
-    returns arguments of the types it is called with (for the background warm-up)."""
+    returns arguments of the types it is called with (for the background warm-up).  (Typed ``Any``:
+    callers test for None through their own flags, e.g. ``_compiled(use_numba)``, which mypy cannot follow.)"""
     if not HAVE_NUMBA:
         return None
     k = _Lazy(fn, example)
@@ -118,7 +121,7 @@ class WarmUpHold:
     e.g. a preview closed after one frame, not: the next ``ready()`` asks again).  (:func:`warm_up`
     is not held.)"""
 
-    def __init__(self):
+    def __init__(self) -> None:
         with _START:
             _HOLDS[0] += 1
         self.held = True

@@ -14,6 +14,7 @@ import argparse
 import importlib
 import logging
 import sys
+from typing import NoReturn
 
 from piste import __version__
 from piste.commands import _numbers as N
@@ -42,7 +43,7 @@ class _Parser(argparse.ArgumentParser):
     error: argument --seed: expected an integer in [0, 4294967295], got '-1' (piste demo -h: usage)``
     (subcommands' parsers are of this class too: add_subparsers takes the parent's class)."""
 
-    def error(self, message: str):
+    def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {' '.join(message.split())} ({self.prog} -h: usage)\n")
 
 

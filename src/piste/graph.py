@@ -9,11 +9,12 @@ alone cost a fresh process ~0.2 s before its first frame.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 __all__ = ["connected_parts"]
 
 
-def connected_parts(n_vertices: int, edges) -> tuple[int, np.ndarray]:
+def connected_parts(n_vertices: int, edges: npt.ArrayLike) -> tuple[int, np.ndarray]:
     """Connected components of a graph: ``(count, label (n_vertices,) int64)``, labels ``0..count-1``
     in the order of each part's smallest vertex.
 

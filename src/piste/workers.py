@@ -20,6 +20,8 @@ import contextlib
 import os
 import signal
 import sys
+from collections.abc import Callable
+from typing import Any
 
 __all__ = ["die_with_parent", "kill_pool"]
 
@@ -39,7 +41,7 @@ def _set_pdeathsig(sig: int = signal.SIGKILL) -> bool:
         return False
 
 
-def die_with_parent(parent_pid: int, init=None, *args) -> None:
+def die_with_parent(parent_pid: int, init: Callable[..., Any] | None = None, *args: Any) -> None:
     """Pool ``initializer``: the worker is killed when process ``parent_pid`` ends (and exits at
     once if it already has), then runs ``init(*args)``."""
     _set_pdeathsig()
@@ -49,7 +51,7 @@ def die_with_parent(parent_pid: int, init=None, *args) -> None:
         init(*args)
 
 
-def kill_pool(pool) -> None:
+def kill_pool(pool: Any) -> None:
     """Cancel ``pool``'s pending futures and terminate its worker processes now (a
     :class:`concurrent.futures.ProcessPoolExecutor`); the caller's ``with pool:`` then joins them
     quickly instead of waiting for the running tasks."""

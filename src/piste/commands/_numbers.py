@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Callable
+from typing import Any
 
 __all__ = ["COORDINATE", "FOV", "FPS", "FRACTION", "FRAMES", "JOBS", "MAX_COORDINATE", "SECONDS", "SEED", "SIZE",
            "WORKERS", "NumberType", "integer", "real"]
@@ -30,13 +31,14 @@ MAX_COORDINATE = 1e8
 class NumberType:
     """An argparse ``type``: parses one number and checks it (see the module docstring)."""
 
-    def __init__(self, kind: str, lo, hi, lo_open: bool = False, hi_open: bool = False):
+    def __init__(self, kind: str, lo: float | None, hi: float | None, lo_open: bool = False, hi_open: bool = False
+                 ) -> None:
         self.kind = kind  # "int" or "float"
         self.lo, self.hi = lo, hi
         self.lo_open, self.hi_open = lo_open, hi_open
         self.__name__ = kind  # argparse names the type in some messages
 
-    def _fmt(self, x) -> str:
+    def _fmt(self, x: float) -> str:
         if self.kind == "int" or (float(x).is_integer() and abs(x) < 1e7):
             return str(int(x))
         return f"{x:g}"
@@ -52,8 +54,9 @@ class NumberType:
             return f"{what} {'<' if self.hi_open else '<='} {self._fmt(self.hi)}"
         return what
 
-    def __call__(self, text: str):
+    def __call__(self, text: str) -> Any:  # an int (kind "int") or a float
         text = str(text)
+        value: int | float
         try:
             if self.kind == "int":
                 value = int(text.strip(), 10)

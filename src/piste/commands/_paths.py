@@ -20,13 +20,13 @@ def _folder(text: str) -> str:
     return text
 
 
-def add_allow_path(parser) -> None:
+def add_allow_path(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--allow-path", action="append", type=_folder, default=[], metavar="DIR",
                         help="a folder the files this command reads may also name (repeatable; "
                              f"also ${ALLOW_PATHS_ENV}). Without it a scene, model or world reads only "
                              "inside its own folder, through no symbolic link")
 
 
-def apply(args) -> None:
+def apply(args: argparse.Namespace) -> None:
     """Make ``args.allow_path`` the process's user-allowed folders (none when the flag is absent)."""
     set_user_allow_paths(getattr(args, "allow_path", None) or (), "--allow-path")
