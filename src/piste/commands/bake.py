@@ -9,8 +9,13 @@ its chunks are and how much they hold; ``piste bake --clean [--out DIR]`` remove
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
 
-def add_arguments(parser) -> None:
+if TYPE_CHECKING:
+    import argparse
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     from piste.commands import _numbers as N
 
     parser.add_argument("net", nargs="?", help="a .bpt or .npz patch net (default: the default course)")
@@ -38,7 +43,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--scene", metavar="TOML", help="ssx-tricky: take the lights from this scene file")
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     import shutil
     import sys
     import time

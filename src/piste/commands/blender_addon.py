@@ -12,6 +12,10 @@ from __future__ import annotations
 import io
 import zipfile
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import argparse
 
 #: the folder name inside the zip (the add-on's module name in Blender)
 ADDON_NAME = "piste_addon"
@@ -19,7 +23,7 @@ _REPO_SOURCES = Path(__file__).resolve().parents[3] / "blender" / ADDON_NAME
 PACKAGED_ZIP = Path(__file__).resolve().parents[1] / "data" / "blender_addon.zip"
 
 
-def add_arguments(parser) -> None:
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, metavar="F.zip", help="the add-on zip to write")
 
 
@@ -49,7 +53,7 @@ def addon_zip_bytes(sources: Path | None = None) -> bytes:
     return buf.getvalue()
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     import sys
 
     from piste.errors import ConfigError

@@ -11,8 +11,15 @@ resumes from them); the failure says where they are and how much they hold, and
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
 
-def add_arguments(parser) -> None:
+if TYPE_CHECKING:
+    import argparse
+
+    from piste.pipeline.build import BuildResult
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     from piste.commands import _numbers as N
 
     parser.add_argument("scene", help="scene description (.toml)")
@@ -30,7 +37,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--workers", type=N.WORKERS, default=None, help="--dask local: worker processes (default: cores)")
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     import sys
 
     from pathlib import Path
@@ -70,7 +77,7 @@ def run(args) -> int:
     return 0
 
 
-def format_result(r) -> str:
+def format_result(r: BuildResult) -> str:
     """A short human report of a :class:`piste.pipeline.build.BuildResult`."""
     lines = [f"built {r.path} ({r.bytes / 1e6:.2f} MB) in {r.seconds:.2f} s"]
     for name, s in r.steps.items():

@@ -5,11 +5,16 @@ glTF (units, what is written) is :mod:`piste.pipeline.bundle_gltf`.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import argparse
+
 #: names that moved to :mod:`piste.pipeline.bundle_gltf` (still importable from here)
 _MOVED = ("WHITE_LUX", "INFINITE_RANGE_MATCH", "terrain_levels", "bundle_parts", "export_bundle")
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> Any:
     if name in _MOVED:
         from piste.pipeline import bundle_gltf
 
@@ -17,7 +22,7 @@ def __getattr__(name: str):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def add_arguments(parser) -> None:
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     from piste.commands import _numbers as N
 
     parser.add_argument("scene", help="a scene (.toml), a bundle (.piste) or an SSX level (.pbd)")
@@ -36,7 +41,7 @@ def add_arguments(parser) -> None:
                              "without objects of its own (an SSX level, a tiled world)")
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     from piste.errors import ConfigError
     from piste.pipeline.bundle_gltf import export_bundle
     from piste.pipeline.open_scene import open_source, source_kind

@@ -2,8 +2,17 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
 
-def add_arguments(parser) -> None:
+if TYPE_CHECKING:
+    import argparse
+
+    import numpy as np
+
+    from piste.terrain.net import PatchNet
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     from piste.commands import _numbers as N
 
     parser.add_argument("net", nargs="?", help="a .bpt or .npz patch net (default: the default course)")
@@ -17,7 +26,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--json", action="store_true", help="print the numbers as JSON")
 
 
-def default_camera(net, is_course: bool):
+def default_camera(net: PatchNet, is_course: bool) -> tuple[np.ndarray, np.ndarray]:
     """Eye and target: a rider's view down the track on the default course, else an oblique view."""
     import numpy as np
 
@@ -33,7 +42,7 @@ def default_camera(net, is_course: bool):
     return default_view(net)
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     import json
 
     from piste.pipeline.open_scene import load_net
