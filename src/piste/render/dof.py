@@ -27,11 +27,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from piste.errors import ConfigError
 from piste.render.context import load_shader
+
+if TYPE_CHECKING:
+    import moderngl
+    import numpy.typing as npt
+
+    from piste.world.camera import Camera
 
 __all__ = ["parse_dof", "check_dof", "coc_pixels", "DofPass", "lens_cameras", "MAX_COC_FRACTION"]
 
@@ -76,7 +83,7 @@ void main() {
 """ % SAMPLES
 
 
-def check_dof(focus, aperture, where: str = "dof") -> tuple[float, float]:
+def check_dof(focus: Any, aperture: Any, where: str = "dof") -> tuple[float, float]:
     """``(focus, aperture)`` as floats if focus is in (0, 1e5] m and aperture in [0, 100] m, else ConfigError."""
     try:
         f, a = float(focus), float(aperture)
@@ -96,7 +103,7 @@ def parse_dof(text: str, where: str = "--dof") -> tuple[float, float]:
     return check_dof(parts[0], parts[1], where)
 
 
-def coc_pixels(z, focus: float, aperture: float, fov_y: float, height: int) -> np.ndarray:
+def coc_pixels(z: npt.ArrayLike, focus: float, aperture: float, fov_y: float, height: int) -> np.ndarray:
     """CoC radius in pixels of view depths ``z`` ``(n,)`` metres (unclamped)."""
     scale = aperture * height / (2.0 * math.tan(math.radians(fov_y) / 2.0))
     return scale * np.abs(1.0 / np.asarray(z, dtype=np.float64) - 1.0 / focus)
@@ -105,7 +112,7 @@ def coc_pixels(z, focus: float, aperture: float, fov_y: float, height: int) -> n
 class DofPass:
     """The depth-of-field post pass for frames of ``size = (W, H)`` (see the module docstring)."""
 
-    def __init__(self, ctx, size: tuple[int, int]):
+    def __init__(self, ctx: moderngl.Context, size: tuple[int, int]) -> None:
         self.ctx = ctx
         self.size = (int(size[0]), int(size[1]))
         self.color = ctx.texture(self.size, 4)
@@ -118,12 +125,13 @@ class DofPass:
         for t in (self.color, self.depth):  # whole texels: an in-focus pixel's nearest samples are itself
             t.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.fbo = ctx.framebuffer(color_attachments=[self.color], depth_attachment=self.depth)
-        self.prog = ctx.program(vertex_shader=load_shader("fullscreen.vert.glsl"), fragment_shader=_FS)
+        # Any: moderngl types prog["name"] as a union of uniform, block, attribute and varying
+        self.prog = cast(Any, ctx.program(vertex_shader=load_shader("fullscreen.vert.glsl"), fragment_shader=_FS))
         self.prog["u_color"].value, self.prog["u_depth"].value = 0, 1
         self.prog["u_rcp"].value = (1.0 / self.size[0], 1.0 / self.size[1])
         self.vao = ctx.vertex_array(self.prog, [])
 
-    def apply(self, src, dst, camera, focus: float, aperture: float) -> None:
+    def apply(self, src: moderngl.Framebuffer, dst: moderngl.Framebuffer, camera: Camera, focus: float, aperture: float) -> None:
         """Blur the frame in framebuffer ``src`` (colour + depth, single-sampled) into ``dst`` (colour;
         may be ``src``) for ``camera`` (its near, far, fov_y)."""
         import moderngl
@@ -155,7 +163,7 @@ class DofPass:
             obj.release()
 
 
-def lens_cameras(camera, focus: float, aperture: float, n: int = 32) -> list:
+def lens_cameras(camera: Camera, focus: float, aperture: float, n: int = 32) -> list[Camera]:
     """``n`` pinhole cameras over a lens disc of radius ``aperture`` metres around ``camera``'s eye
     (a golden-angle spiral: even area coverage), each aimed at the point ``focus`` metres ahead on
     the axis: their mean frame is the depth-of-field reference."""

@@ -17,11 +17,18 @@ OverlayPass(ctx)               ``.update(image)``, ``.draw(viewport_size)``, ``.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from piste.render.textures import LOD_COLORS
 from piste.terrain.stats import TALK
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from piste.render.frame import Frame
 
 __all__ = ["StatsHistory", "overlay_image", "OverlayPass", "LOD_COLOURS", "pass_bars"]
 
@@ -32,11 +39,11 @@ LOD_COLOURS = {k: tuple(int(c) for c in LOD_COLORS[k][:3]) for k in (4, 6, 8, 0)
 class StatsHistory:
     """The last ``n`` frames: terrain kind counts, triangles, patches, stage times and frame time."""
 
-    def __init__(self, n: int = 120):
+    def __init__(self, n: int = 120) -> None:
         self.n = int(n)
         self.frames: deque = deque(maxlen=self.n)
 
-    def add(self, frame, frame_ms: float, extra: dict | None = None) -> None:
+    def add(self, frame: Frame, frame_ms: float, extra: dict | None = None) -> None:
         """Record a :class:`piste.render.Frame` (terrain) and the wall time of the whole frame."""
         k = frame.kind_counts
         self.frames.append({
@@ -101,7 +108,7 @@ class StatsHistory:
         return rows
 
 
-def _font():
+def _font() -> Any:
     from PIL import ImageFont
 
     return ImageFont.load_default()
@@ -122,7 +129,7 @@ def overlay_image(history: StatsHistory, header: str, width: int = 300, plot_h: 
     y += line
     col_b, col_c = 212, 222  # right edge of this view's column, left edge of the talk's
 
-    def right(x, yy, text, fill):
+    def right(x: float, yy: float, text: str, fill: tuple[int, int, int, int]) -> None:
         d.text((x - d.textlength(text, font=font), yy), text, fill=fill, font=font)
 
     right(col_b, y, "view", (170, 200, 255, 255))
@@ -215,15 +222,16 @@ void main() { colour = texture(tex, uv); }
 class OverlayPass:
     """Blends an RGBA image (straight alpha) over the top-left corner of the current framebuffer."""
 
-    def __init__(self, ctx):
+    def __init__(self, ctx: moderngl.Context) -> None:
         import moderngl
 
         self.ctx = ctx
-        self.prog = ctx.program(vertex_shader=_VS, fragment_shader=_FS)
+        # Any: moderngl types prog["name"] as a union of uniform, block, attribute and varying
+        self.prog = cast(Any, ctx.program(vertex_shader=_VS, fragment_shader=_FS))
         quad = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], dtype="f4")
         self.vbo = ctx.buffer(quad.tobytes())
         self.vao = ctx.vertex_array(self.prog, [(self.vbo, "2f", "in_pos")])
-        self.tex = None
+        self.tex: moderngl.Texture | None = None
         self._moderngl = moderngl
 
     def update(self, image: np.ndarray) -> None:
@@ -236,7 +244,7 @@ class OverlayPass:
             self.tex.filter = (self._moderngl.NEAREST, self._moderngl.NEAREST)
         self.tex.write(np.ascontiguousarray(image[::-1]).tobytes())
 
-    def draw(self, viewport_size) -> None:
+    def draw(self, viewport_size: Sequence[int]) -> None:
         if self.tex is None:
             return
         mgl = self._moderngl
@@ -249,7 +257,7 @@ class OverlayPass:
         ctx.disable(mgl.DEPTH_TEST | mgl.CULL_FACE)
         ctx.enable(mgl.BLEND)
         ctx.blend_equation = mgl.FUNC_ADD
-        ctx.blend_func = (mgl.SRC_ALPHA, mgl.ONE_MINUS_SRC_ALPHA, mgl.ZERO, mgl.ONE)
+        ctx.blend_func = (mgl.SRC_ALPHA, mgl.ONE_MINUS_SRC_ALPHA, mgl.ZERO, mgl.ONE)  # type: ignore[assignment]  # the stub lacks the 4-tuple form
         self.tex.use(0)
         self.vao.render(mgl.TRIANGLE_STRIP)
         ctx.disable(mgl.BLEND)

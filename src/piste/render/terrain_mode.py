@@ -13,6 +13,11 @@ API
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from piste.world.camera import Camera
+
 __all__ = ["TerrainMode"]
 
 
@@ -28,17 +33,19 @@ class TerrainMode:
     #: riders and objects are fogged like the terrain (the SSX ps2 frame has no fog)
     fog = True
 
-    def __init__(self, terrain, lightmap_mode: str = "modulate", debug: str | None = None):
+    def __init__(self, terrain: Any, lightmap_mode: str = "modulate", debug: str | None = None) -> None:
+        # terrain: any terrain renderer (frame.TerrainRenderer, ssx_pass.SsxTerrainRenderer, streaming.StreamingTerrain)
         self.terrain = terrain
         self.lightmap_mode = lightmap_mode
         self.debug = debug
 
-    def prepare(self, camera, lod: bool = True, timings: dict | None = None):
+    def prepare(self, camera: Camera, lod: bool = True, timings: dict | None = None) -> Any:
         """The frame's terrain mesh for ``camera`` (LOD, culling, tessellation: no GL call)."""
         return self.terrain.prepare(camera, lod=lod, levels=None, timings=timings)
 
-    def draw(self, camera, mesh, fog=None, timings: dict | None = None):
+    def draw(self, camera: Camera, mesh: Any, fog: Any = None, timings: dict | None = None) -> Any:
         """Draw ``mesh`` (+ sky) into the terrain's target without waiting for the GL or reading
-        back (the scene's passes follow); returns the terrain's ``Frame``."""
+        back (the scene's passes follow); returns the terrain's :class:`~piste.render.frame.Frame`
+        (typed Any: piste.render.frame imports this module)."""
         return self.terrain.draw(camera, mesh, lightmap_mode=self.lightmap_mode, fog=fog, read=False,
                                  timings=timings, debug=self.debug, sync=False)

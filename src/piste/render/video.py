@@ -6,6 +6,7 @@ import contextlib
 import os
 import tempfile
 from pathlib import Path
+from types import TracebackType
 
 import numpy as np
 
@@ -22,7 +23,7 @@ class VideoWriter:
     reader never sees a half-written video; :meth:`abort` (or an exception inside ``with``) removes it.
     """
 
-    def __init__(self, path, fps: int = 30, quality: float = 7.0):
+    def __init__(self, path: str | os.PathLike[str], fps: int = 30, quality: float = 7.0) -> None:
         imageio = require("imageio.v2", "MP4 output")
 
         self.path = Path(path)
@@ -31,7 +32,7 @@ class VideoWriter:
         os.close(fd)
         self._tmp = Path(tmp)
         self.frames = 0
-        self.size = None
+        self.size: tuple[int, ...] | None = None
         try:
             self._writer = imageio.get_writer(
                 self._tmp, format="FFMPEG", mode="I", fps=fps, codec="libx264", quality=quality,
@@ -41,7 +42,7 @@ class VideoWriter:
             self._tmp.unlink(missing_ok=True)
             raise RenderError(f"{self.path}: cannot start the video encoder: {exc}") from None
 
-    def append(self, image) -> None:
+    def append(self, image: np.ndarray) -> None:
         img = np.asarray(image)
         if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] not in (3, 4):
             raise RenderError(f"{self.path}: frames must be (H, W, 3) uint8, got {img.shape} {img.dtype}")
@@ -68,10 +69,11 @@ class VideoWriter:
             self._writer.close()
         self._tmp.unlink(missing_ok=True)
 
-    def __enter__(self):
+    def __enter__(self) -> VideoWriter:
         return self
 
-    def __exit__(self, exc_type, exc, tb):
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
         if exc_type is None:
             self.close()
         else:
