@@ -17,13 +17,20 @@ flush               glFlush: start the GL on what was issued, without waiting (p
 from __future__ import annotations
 
 from functools import lru_cache
+import os
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import RenderError
 from piste.extras import require as require_extra
 from piste.formats.atomic import atomic_path
+
+if TYPE_CHECKING:
+    import moderngl
 
 __all__ = ["create_context", "Offscreen", "save_png", "load_shader", "check_gl_error", "set_depth_write", "APT_PACKAGES"]
 
@@ -32,7 +39,7 @@ APT_PACKAGES = ("libegl1", "libgl1", "libgl1-mesa-dri")
 SHADER_DIR = Path(__file__).parent / "shaders"
 
 
-def create_context(backend: str = "egl", require: tuple[int, int] = (3, 3)):
+def create_context(backend: str | None = "egl", require: tuple[int, int] = (3, 3)) -> moderngl.Context:
     """A standalone (window-less) moderngl context.
 
     Parameters
@@ -45,7 +52,7 @@ def create_context(backend: str = "egl", require: tuple[int, int] = (3, 3)):
     RenderError naming the packages to install when no context can be created.
     """
     moderngl = require_extra("moderngl", "OpenGL rendering")
-    kwargs = {"require": require[0] * 100 + require[1] * 10}
+    kwargs: dict[str, Any] = {"require": require[0] * 100 + require[1] * 10}
     if backend:
         kwargs["backend"] = backend
     try:
@@ -59,14 +66,14 @@ def create_context(backend: str = "egl", require: tuple[int, int] = (3, 3)):
         ) from None
 
 
-def check_gl_error(ctx, where: str = "") -> None:
+def check_gl_error(ctx: moderngl.Context, where: str = "") -> None:
     """Raise :class:`RenderError` if ``ctx.error`` is not ``GL_NO_ERROR``."""
     err = ctx.error
     if err != "GL_NO_ERROR":
         raise RenderError(f"OpenGL error {err}" + (f" after {where}" if where else ""))
 
 
-def set_depth_write(ctx, on: bool) -> bool:
+def set_depth_write(ctx: moderngl.Context, on: bool) -> bool:
     """Turn writing to the depth buffer on or off for the draws that follow; returns the previous
     setting.
 
@@ -110,12 +117,12 @@ class Offscreen:
     ``read()`` returns the colour buffer as ``(H, W, 4) uint8`` with row 0 at the top of the image.
     """
 
-    def __init__(self, ctx, size: tuple[int, int], depth: bool = True):
+    def __init__(self, ctx: moderngl.Context, size: tuple[int, int], depth: bool = True) -> None:
         w, h = int(size[0]), int(size[1])
         if w < 1 or h < 1 or w > 16384 or h > 16384:
             raise RenderError(f"framebuffer size must be between 1x1 and 16384x16384, got {w}x{h}")
         self.ctx = ctx
-        self.size = (w, h)
+        self.size: tuple[int, int] = (w, h)
         self.color = ctx.renderbuffer((w, h), 4)
         self.depth = ctx.depth_renderbuffer((w, h)) if depth else None
         self.fbo = ctx.framebuffer(color_attachments=[self.color], depth_attachment=self.depth)
@@ -123,7 +130,8 @@ class Offscreen:
         self._buf = np.empty((h, w, 4), dtype=np.uint8)
 
     @classmethod
-    def wrap(cls, ctx, fbo, color=None, depth=None, owned: bool = False) -> "Offscreen":
+    def wrap(cls, ctx: moderngl.Context, fbo: moderngl.Framebuffer, color: Any = None, depth: Any = None,
+             owned: bool = False) -> "Offscreen":
         """Use an existing framebuffer (e.g. a window's ``ctx.screen``) as the target.
 
         ``color``/``depth`` are its attachments when the caller wants them reachable (e.g. textures
@@ -132,7 +140,7 @@ class Offscreen:
         this class made itself."""
         self = cls.__new__(cls)
         self.ctx = ctx
-        self.size = tuple(fbo.size)
+        self.size = cast("tuple[int, int]", tuple(fbo.size))
         self.color, self.depth = color, depth
         self.fbo = fbo
         self._owned = bool(owned)
@@ -151,7 +159,7 @@ class Offscreen:
         self.fbo.use()
         self.ctx.viewport = (0, 0, *self.size)
 
-    def clear(self, rgba=(0.0, 0.0, 0.0, 1.0), depth: float = 1.0) -> None:
+    def clear(self, rgba: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0), depth: float = 1.0) -> None:
         self.fbo.clear(*rgba, depth=depth)
 
     def read(self) -> np.ndarray:
@@ -171,7 +179,7 @@ class Offscreen:
                 obj.release()
 
 
-def save_png(path, image) -> Path:
+def save_png(path: str | os.PathLike[str], image: npt.ArrayLike) -> Path:
     """Write ``image`` ``(H, W, 3|4) uint8`` (or ``(H, W)``) to ``path`` as PNG, atomically."""
     from PIL import Image
 
@@ -186,7 +194,7 @@ def save_png(path, image) -> Path:
 
 
 @lru_cache(maxsize=1)
-def _gl_flush():
+def _gl_flush() -> Callable[[], None] | None:
     """``glFlush`` of the GL library (GLVND's ``libGL``/``libOpenGL`` dispatch to the current
     context, EGL or GLX alike), or None when neither library loads."""
     import ctypes
@@ -202,7 +210,7 @@ def _gl_flush():
     return None
 
 
-def flush(ctx) -> bool:
+def flush(ctx: moderngl.Context) -> bool:
     """Hand the commands issued so far to the GL (``glFlush``, which moderngl does not expose) without
     waiting for them: llvmpipe's rasterizer threads start on the frame while the caller goes on (the
     next frame's CPU work).  Returns False where no GL library gave ``glFlush`` (then nothing

@@ -35,6 +35,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import RenderError
 
@@ -44,7 +45,7 @@ __all__ = ["field_times", "flicker_filter", "weave", "interlace", "line_alternat
 _LUMA = np.array([0.299, 0.587, 0.114], dtype=np.float32)
 
 
-def field_times(times, fps: float) -> np.ndarray:
+def field_times(times: npt.ArrayLike, fps: float) -> np.ndarray:
     """``(2n,) float64``: each output frame time ``t`` followed by its second field's, ``t + 0.5 / fps``
     (fields at twice the frame rate: 60 a second for 30 fps video)."""
     t = np.asarray(times, dtype=np.float64).reshape(-1)
@@ -53,7 +54,7 @@ def field_times(times, fps: float) -> np.ndarray:
     return np.stack([t, t + 0.5 / float(fps)], axis=1).reshape(-1)
 
 
-def _check(image, what: str) -> np.ndarray:
+def _check(image: npt.ArrayLike, what: str) -> np.ndarray:
     img = np.asarray(image)
     if img.dtype != np.uint8 or img.ndim != 3 or img.shape[0] < 2:
         raise RenderError(f"interlace: {what} must be an (H, W, C) uint8 image with H >= 2, "
@@ -61,7 +62,7 @@ def _check(image, what: str) -> np.ndarray:
     return img
 
 
-def flicker_filter(image) -> np.ndarray:
+def flicker_filter(image: npt.ArrayLike) -> np.ndarray:
     """``(H, W, C) uint8``: ``image`` filtered [1 2 1] / 4 down its columns (rounded; the first and
     last rows use themselves as the missing neighbour)."""
     img = _check(image, "a field").astype(np.uint16)
@@ -70,7 +71,7 @@ def flicker_filter(image) -> np.ndarray:
     return ((up + 2 * img + down + 2) >> 2).astype(np.uint8)
 
 
-def weave(first, second, filtered: bool = False) -> np.ndarray:
+def weave(first: npt.ArrayLike, second: npt.ArrayLike, filtered: bool = False) -> np.ndarray:
     """One output frame ``(H, W, C) uint8``: the even lines (0, 2, ...) from field ``first``, the odd
     lines from field ``second`` (each flicker-filtered first when ``filtered``)."""
     a = _check(first, "the first field")
@@ -84,7 +85,7 @@ def weave(first, second, filtered: bool = False) -> np.ndarray:
     return out
 
 
-def interlace(fields: Iterable, filtered: bool = False) -> Iterator[np.ndarray]:
+def interlace(fields: Iterable[npt.ArrayLike], filtered: bool = False) -> Iterator[np.ndarray]:
     """Woven frames from ``fields`` (two per frame, in time order: :func:`field_times`); an odd
     field at the end is an error (a frame needs both)."""
     it = iter(fields)
@@ -95,7 +96,7 @@ def interlace(fields: Iterable, filtered: bool = False) -> Iterator[np.ndarray]:
         yield weave(first, second, filtered)
 
 
-def line_alternation(frames) -> np.ndarray:
+def line_alternation(frames: npt.ArrayLike) -> np.ndarray:
     """``(n, H - 2, W) float32``: each frame's line-alternating component, luminance row ``i`` minus
     the mean of rows ``i - 1`` and ``i + 1`` (``frames``: ``(n, H, W, 3)`` uint8 or a list of them)."""
     f = np.asarray(frames)
@@ -105,7 +106,7 @@ def line_alternation(frames) -> np.ndarray:
     return y[:, 1:-1] - 0.5 * (y[:, :-2] + y[:, 2:])
 
 
-def flicker(frames) -> float:
+def flicker(frames: npt.ArrayLike) -> float:
     """The flicker of a video ``(n, H, W, 3)`` (n >= 2): the mean over consecutive frame pairs and
     pixels of the squared change of :func:`line_alternation` (luma levels squared)."""
     hf = line_alternation(frames)
@@ -117,12 +118,12 @@ def flicker(frames) -> float:
 class FlickerMeter:
     """:func:`flicker` over a video seen one frame at a time (only the last frame's component kept)."""
 
-    def __init__(self):
-        self._last = None
+    def __init__(self) -> None:
+        self._last: np.ndarray | None = None
         self._sum = 0.0
         self.pairs = 0
 
-    def add(self, frame) -> None:
+    def add(self, frame: npt.ArrayLike) -> None:
         """One more frame ``(H, W, 3) uint8``."""
         hf = line_alternation(np.asarray(frame)[None])[0]
         if self._last is not None:
