@@ -27,11 +27,19 @@ API
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ConfigError
 from piste.render.context import Offscreen, load_shader
 from piste.render.dof import DofPass
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from piste.world.camera import Camera
 
 __all__ = ["AA_MODES", "aa_samples", "check_aa", "AATarget", "downsample", "edge_pixels", "edge_error"]
 
@@ -111,7 +119,7 @@ def aa_samples(mode: str) -> int:
     return int(mode[4:]) if mode.startswith("msaa") else 0
 
 
-def check_aa(mode) -> str:
+def check_aa(mode: Any) -> str:
     """``mode`` if it is one of :data:`AA_MODES`, else :class:`ConfigError`."""
     if mode not in AA_MODES:
         raise ConfigError(f"aa must be one of {', '.join(AA_MODES)}; got {mode!r}")
@@ -132,13 +140,18 @@ class AATarget(Offscreen):
     is resolved once: :meth:`use` marks a new one.
     """
 
-    def __init__(self, ctx, size: tuple[int, int], mode: str, dof: tuple[float, float] | None = None):
+    def __init__(self, ctx: moderngl.Context, size: tuple[int, int], mode: str,
+                 dof: tuple[float, float] | None = None) -> None:
         self.mode = check_aa(mode)
         super().__init__(ctx, size)  # the single-sampled output (what read() returns)
         self.samples = min(aa_samples(mode), int(ctx.max_samples)) if mode.startswith("msaa") else 0
-        self.out = self.fbo, self.color, self.depth
+        self.out: tuple[Any, Any, Any] = (self.fbo, self.color, self.depth)
         w, h = self.size
-        self._prog = self._vao = None
+        # Any: moderngl types prog["name"] as a union of uniform, block, attribute and varying
+        self._prog: Any = None
+        self._vao: Any = None
+        self.color: Any
+        self.depth: Any
         if self.samples > 1:
             self.color = ctx.renderbuffer((w, h), 4, samples=self.samples)
             self.depth = ctx.depth_renderbuffer((w, h), samples=self.samples)
@@ -152,10 +165,10 @@ class AATarget(Offscreen):
             self._vao = ctx.vertex_array(self._prog, [])
         if self.color is not self.out[1]:
             self.fbo = ctx.framebuffer(color_attachments=[self.color], depth_attachment=self.depth)
-        self.screen = None
+        self.screen: moderngl.Framebuffer | None = None
         self.dof = dof
-        self.camera = None
-        self._dof = None
+        self.camera: Camera | None = None
+        self._dof: DofPass | None = None
         self._fresh = True  # a frame drawn since the last resolve
 
     def use(self) -> None:
@@ -221,7 +234,7 @@ class AATarget(Offscreen):
         self._vao = self._prog = None
 
 
-def downsample(image, n: int) -> np.ndarray:
+def downsample(image: npt.ArrayLike, n: int) -> np.ndarray:
     """``(H n, W n, C) uint8`` -> ``(H, W, C) uint8``: the mean of each ``n x n`` block (a box filter),
     rounded."""
     img = np.asarray(image)
@@ -233,7 +246,7 @@ def downsample(image, n: int) -> np.ndarray:
     return np.rint(blocks.mean(axis=(1, 3))).astype(np.uint8)
 
 
-def edge_pixels(reference, threshold: float = 24.0) -> np.ndarray:
+def edge_pixels(reference: npt.ArrayLike, threshold: float = 24.0) -> np.ndarray:
     """``(H, W) bool``: pixels of ``reference`` ``(H, W, C) uint8`` whose luma gradient (the larger
     of the central differences across x and y, 0..255) is at least ``threshold`` (a strong edge)."""
     ref = np.asarray(reference, dtype=np.float32)
@@ -245,7 +258,7 @@ def edge_pixels(reference, threshold: float = 24.0) -> np.ndarray:
     return np.maximum(gx, gy) >= threshold
 
 
-def edge_error(image, reference, threshold: float = 24.0) -> tuple[float, int]:
+def edge_error(image: npt.ArrayLike, reference: npt.ArrayLike, threshold: float = 24.0) -> tuple[float, int]:
     """Mean absolute difference (0..255 a channel, RGB) of ``image`` against ``reference``, both
     ``(H, W, C) uint8``, over the reference's edge pixels (:func:`edge_pixels`); and how many there are."""
     a, b = np.asarray(image), np.asarray(reference)
