@@ -37,10 +37,17 @@ API
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import RenderError
 from piste.render.shadow_pass import shadow_triangles
+
+if TYPE_CHECKING:
+    from piste.world.camera import Camera
 
 __all__ = ["occluder_depth", "HiZ", "near_patches", "occlude_frame", "OCCLUDER_PATCHES", "CELL"]
 
@@ -50,7 +57,7 @@ CELL = 8
 OCCLUDER_PATCHES = 256
 
 
-def near_patches(lo, hi, ids, eye, count: int = OCCLUDER_PATCHES) -> np.ndarray:
+def near_patches(lo: np.ndarray, hi: np.ndarray, ids: npt.ArrayLike, eye: npt.ArrayLike, count: int = OCCLUDER_PATCHES) -> np.ndarray:
     """The ``count`` of ``ids (p,)`` whose boxes ``lo, hi (N, 3)`` come nearest ``eye (3,)``, ``(k,) int64``."""
     ids = np.asarray(ids, dtype=np.int64)
     if len(ids) <= count:
@@ -60,14 +67,14 @@ def near_patches(lo, hi, ids, eye, count: int = OCCLUDER_PATCHES) -> np.ndarray:
     return ids[np.argsort(d, kind="stable")[:count]]
 
 
-def _project(points, vp):
+def _project(points: npt.ArrayLike, vp: npt.ArrayLike) -> np.ndarray:
     """``(n, 3)`` world points -> ``(n, 4)`` clip coordinates through ``vp (4, 4)``."""
     p = np.asarray(points, dtype=np.float64)
     m = np.asarray(vp, dtype=np.float64)
     return p @ m[:, :3].T + m[:, 3]
 
 
-def occluder_depth(positions, indices, vp, size, cell: int = CELL) -> np.ndarray:
+def occluder_depth(positions: npt.ArrayLike, indices: npt.ArrayLike, vp: npt.ArrayLike, size: Sequence[int], cell: int = CELL) -> np.ndarray:
     """The conservative low-resolution depth of the triangles (see the module docstring).
 
     Parameters
@@ -208,7 +215,8 @@ class HiZ:
     cell : pixels a cell;  eps : NDC depth a box must lie beyond the cells by (the GPU's rounding)
     """
 
-    def __init__(self, depth, vp, size, cell: int = CELL, eps: float = 1e-5):
+    def __init__(self, depth: npt.ArrayLike, vp: npt.ArrayLike, size: Sequence[int], cell: int = CELL,
+                 eps: float = 1e-5) -> None:
         d = np.asarray(depth, dtype=np.float64)
         self.levels = [d]
         while max(d.shape) > 1:
@@ -227,7 +235,7 @@ class HiZ:
         """The fraction of cells some occluder covers."""
         return float(np.isfinite(self.levels[0]).mean())
 
-    def occluded(self, lo, hi) -> np.ndarray:
+    def occluded(self, lo: npt.ArrayLike, hi: npt.ArrayLike) -> np.ndarray:
         """Which boxes ``lo, hi (n, 3)`` are certainly hidden by the occluders: ``(n,) bool``."""
         lo = np.asarray(lo, dtype=np.float64).reshape(-1, 3)
         hi = np.asarray(hi, dtype=np.float64).reshape(-1, 3)
@@ -269,18 +277,20 @@ class _Hidden:
     """A terrain visibility hook (:meth:`piste.render.frame.TerrainRenderer.set_visibility`) that
     drops ``hidden (k,)`` patch ids from what ``inner`` (another hook or None) keeps."""
 
-    def __init__(self, inner, n: int, hidden):
+    def __init__(self, inner: Any, n: int, hidden: npt.ArrayLike) -> None:
         self.inner, self.n, self.hidden = inner, int(n), np.asarray(hidden, dtype=np.int64)
 
-    def patches_at(self, eye):
+    def patches_at(self, eye: npt.ArrayLike) -> np.ndarray:
         keep = self.inner.patches_at(eye) if self.inner is not None else None
         keep = np.ones(self.n, dtype=bool) if keep is None else np.array(keep, dtype=bool)
         keep[self.hidden] = False
         return keep
 
 
-def occlude_frame(terrain, mesh, camera, size, patch_lo, patch_hi, objects=None, objects_visible=None,
-                  prepare=None, count: int = OCCLUDER_PATCHES, cell: int = CELL):
+def occlude_frame(terrain: Any, mesh: Any, camera: Camera, size: Sequence[int], patch_lo: np.ndarray, patch_hi: np.ndarray,
+                  objects: Any = None, objects_visible: np.ndarray | None = None,
+                  prepare: Callable[[], Any] | None = None, count: int = OCCLUDER_PATCHES, cell: int = CELL
+                  ) -> tuple[Any, Any, dict[str, Any]]:
     """One frame's occlusion culling: the hierarchical-Z of the ``count`` nearest patches of
     ``mesh`` (this frame's prepared terrain), the patches and objects it hides dropped.
 
