@@ -15,11 +15,17 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from piste.errors import ConfigError
 
+if TYPE_CHECKING:
+    import argparse
 
-def add_arguments(p) -> None:
+    from piste.formats.ssx.mpf import MpfFile
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
     from piste.commands import _numbers as N
 
     sub = p.add_subparsers(dest="mpf_command", metavar="ACTION")
@@ -54,10 +60,10 @@ def add_arguments(p) -> None:
     c.add_argument("out")
 
 
-def _info(f, *partners) -> dict:
+def _info(f: MpfFile, *partners: MpfFile) -> dict[str, Any]:
     from piste.formats.ssx.mpf import game_limits, tag_differences
 
-    out = {"file": f.path, "format_id": f.format_id, "sub_models": [], "unknown": [list(u) for u in f.unknown],
+    out: dict[str, Any] = {"file": f.path, "format_id": f.format_id, "sub_models": [], "unknown": [list(u) for u in f.unknown],
            "partners": [p.path for p in partners], "game_limits": [list(x) for x in game_limits(f, *partners)],
            "tag_differences": [list(x) for x in tag_differences(f)]}
     for s in f.models:
@@ -72,7 +78,7 @@ def _info(f, *partners) -> dict:
     return out
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     from piste.formats.ssx.mpf import read_mpf, write_mpf
 
     if args.mpf_command == "info":

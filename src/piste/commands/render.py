@@ -11,8 +11,16 @@ This module only parses.
 
 from __future__ import annotations
 
+import os
+from typing import TYPE_CHECKING
 
-def add_arguments(parser) -> None:
+if TYPE_CHECKING:
+    import argparse
+
+    from piste.pipeline.bundle_objects import Bundle
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     from piste.commands import _numbers as N
 
     parser.add_argument("scene", help="a scene (.toml), a bundle (.piste), an SSX level (.pbd) or a tiled world folder "
@@ -47,7 +55,7 @@ def add_arguments(parser) -> None:
                              "without objects of its own (an SSX level, a tiled world)")
 
 
-def load_or_build(scene, quiet: bool = True):
+def load_or_build(scene: str | os.PathLike[str], quiet: bool = True) -> Bundle:
     """The runtime scene of ``scene`` with its terrain warming (the old name, for scripts and tests:
     :func:`piste.pipeline.open_scene.open_source`)."""
     from piste.pipeline.open_scene import open_source
@@ -55,16 +63,16 @@ def load_or_build(scene, quiet: bool = True):
     return open_source(scene, quiet=quiet, warm=True)
 
 
-def _morph(args):
+def _morph(args: argparse.Namespace) -> bool | None:
     return None if getattr(args, "lod_morph", None) is None else args.lod_morph == "on"
 
 
-def _occlusion(args):
+def _occlusion(args: argparse.Namespace) -> bool | None:
     """``--occlusion on|off`` as the runtime's ``occlusion`` (None: the scene file's ``[render] occlusion``)."""
     return None if getattr(args, "occlusion", None) is None else args.occlusion == "on"
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     import sys
     from pathlib import Path
 
