@@ -28,12 +28,19 @@ import ctypes.util
 from functools import lru_cache
 from pathlib import Path
 from types import SimpleNamespace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import RenderError, ValidationError
 from piste.render.context import load_shader
 from piste.terrain.bezier import grid_params
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from piste.terrain.net import PatchNet
 
 __all__ = ["snow_texture", "compute_snow_texture", "SNOW_FILE", "placeholder_lightmap", "lightmap_atlas_size",
            "track_field", "mip_chain",
@@ -114,7 +121,7 @@ def compute_snow_texture(size: int = 256, seed: int = 0) -> np.ndarray:
     return out
 
 
-def lightmap_atlas_size(net, res: int = 8) -> tuple[int, int]:
+def lightmap_atlas_size(net: PatchNet, res: int = 8) -> tuple[int, int]:
     """``(W, H)`` of the atlas described by ``net.lightmap_rect`` for tiles of ``res x res`` texels.
 
     A tile spans ``res - 1`` texels between its first and last texel centres, so
@@ -132,7 +139,7 @@ def lightmap_atlas_size(net, res: int = 8) -> tuple[int, int]:
     return int(w[0]), int(h[0])
 
 
-def placeholder_lightmap(net, res: int = 8, sun=SUN_DIRECTION, gutter: int = 1) -> np.ndarray:
+def placeholder_lightmap(net: PatchNet, res: int = 8, sun: npt.ArrayLike = SUN_DIRECTION, gutter: int = 1) -> np.ndarray:
     """PLACEHOLDER light map: each patch's tile shaded from its surface normals by a fixed sun.
 
     Not a baked light map (no shadows, no bounce): it stands in until ``piste.lighting`` bakes one.
@@ -178,7 +185,7 @@ def placeholder_lightmap(net, res: int = 8, sun=SUN_DIRECTION, gutter: int = 1) 
     return atlas
 
 
-def track_field(centerline, bounds, texel: float = 0.75) -> tuple[np.ndarray, np.ndarray]:
+def track_field(centerline: npt.ArrayLike, bounds: tuple[npt.ArrayLike, npt.ArrayLike], texel: float = 0.75) -> tuple[np.ndarray, np.ndarray]:
     """Signed horizontal distance (metres) from the track's centre line, sampled on a world x-y grid.
 
     Parameters
@@ -242,7 +249,7 @@ def track_field(centerline, bounds, texel: float = 0.75) -> tuple[np.ndarray, np
     return field, rect
 
 
-def mip_chain(image) -> list[np.ndarray]:
+def mip_chain(image: npt.ArrayLike) -> list[np.ndarray]:
     """The mip levels of ``image`` ``(H, W, C) uint8`` (H and W powers of two) down to 1 x 1.
 
     Returns ``[image, level 1, ..., level n]``, level ``l`` of shape ``(max(H >> l, 1), max(W >> l,
@@ -261,7 +268,7 @@ def mip_chain(image) -> list[np.ndarray]:
     if h < 1 or w < 1 or h & (h - 1) or w & (w - 1):
         raise ValidationError(f"mip_chain: image sides must be powers of two, got {w} x {h}")
     out = [img]
-    lv = img.astype(np.uint16)
+    lv: np.ndarray = img.astype(np.uint16)
     while lv.shape[0] > 1 or lv.shape[1] > 1:
         if lv.shape[1] > 1:
             lv = (lv[:, 0::2] + lv[:, 1::2] + 1) >> 1
@@ -279,7 +286,7 @@ _GL_FORMATS = {1: (0x8229, 0x1903), 2: (0x822B, 0x8227), 3: (0x8051, 0x1907), 4:
 
 
 @lru_cache(maxsize=None)
-def _gl_entry_points():
+def _gl_entry_points() -> SimpleNamespace | None:
     """``glTexImage2D``, ``glTexParameteri``, ``glPixelStorei`` and ``glFramebufferTexture2D`` (a
     namespace) from the system's GL dispatch library (libglvnd's ``libOpenGL.so.0``, else
     ``libGL``), which call into the context current on this thread, as moderngl's own calls do;
@@ -290,6 +297,7 @@ def _gl_entry_points():
     u, i = ctypes.c_uint, ctypes.c_int
     signatures = {"glTexImage2D": [u, i, i, i, i, i, u, u, ctypes.c_void_p], "glTexParameteri": [u, u, i],
                   "glPixelStorei": [u, i], "glFramebufferTexture2D": [u, u, u, u, i]}
+    name: Any
     for name in names:
         name = name() if callable(name) else name
         if not name:
@@ -306,7 +314,7 @@ def _gl_entry_points():
     return None
 
 
-def mipmapped_texture(ctx, image, cpu: bool = True):
+def mipmapped_texture(ctx: moderngl.Context, image: npt.ArrayLike, cpu: bool = True) -> moderngl.Texture:
     """A moderngl texture of ``image`` ``(H, W, C) uint8`` (C = 1..4) with a full mip chain.
 
     The levels are :func:`mip_chain`'s, uploaded level by level (``glTexImage2D``: moderngl 5
@@ -365,7 +373,7 @@ class MipLevels:
     this machine's GL library gives the entry points (else use ``build_mipmaps``).
     """
 
-    def __init__(self, ctx, texture, levels: int):
+    def __init__(self, ctx: moderngl.Context, texture: moderngl.Texture, levels: int) -> None:
         w, h = texture.size
         gl = _gl_entry_points()
         if gl is None:
@@ -383,14 +391,15 @@ class MipLevels:
         self._limits(0, self.levels)
         # the program is compiled at the first build (where ComputeMips draws the levels this one
         # never builds: ~3 ms of llvmpipe compiling in a fresh process with an empty shader cache)
-        self._prog = self._vao = None
+        self._prog: Any = None  # moderngl types prog["name"] as a union: read as Any
+        self._vao: Any = None
         self.fbo = ctx.framebuffer(color_attachments=[texture])
         err = ctx.error
         if err != "GL_NO_ERROR":
             raise RenderError(f"MipLevels: allocating {self.levels} levels of a {w}x{h} texture: OpenGL error {err}")
 
     @property
-    def prog(self):
+    def prog(self) -> Any:
         """The program that draws a level from the one above (compiled on first use)."""
         if self._prog is None:
             self._prog = self.ctx.program(vertex_shader=load_shader("fullscreen.vert.glsl"),
@@ -398,14 +407,14 @@ class MipLevels:
         return self._prog
 
     @property
-    def vao(self):
+    def vao(self) -> Any:
         """Its vertex array (no buffers: a full-screen triangle from gl_VertexID)."""
         if self._vao is None:
             self._vao = self.ctx.vertex_array(self.prog, [])
         return self._vao
 
     @staticmethod
-    def supported(ctx, texture, levels: int) -> bool:
+    def supported(ctx: moderngl.Context, texture: moderngl.Texture, levels: int) -> bool:
         """Whether :class:`MipLevels` can draw ``levels`` levels of ``texture`` here (else use
         ``build_mipmaps``)."""
         w, h = texture.size
