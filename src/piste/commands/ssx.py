@@ -18,16 +18,27 @@ the same path as ``piste render|view LEVEL.pbd``.
 
 from __future__ import annotations
 
-def add_arguments(parser) -> None:
+import os
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import argparse
+
+    import moderngl
+
+    from piste.pipeline.live import PreviewView
+    from piste.world.camera import Camera
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     from piste.commands import _numbers as N
 
     sub = parser.add_subparsers(dest="ssx_command", metavar="ACTION")
     sub.required = True
 
-    def level(p, help="an SSX Tricky level (.pbd; its .ssh and _L.ssh beside it)"):
+    def level(p: argparse.ArgumentParser, help: str = "an SSX Tricky level (.pbd; its .ssh and _L.ssh beside it)") -> None:
         p.add_argument("level", metavar="LEVEL.pbd", help=help)
 
-    def look(p, default_out):
+    def look(p: argparse.ArgumentParser, default_out: str) -> None:
         p.add_argument("--out", default=default_out, help=f"PNG to write (default {default_out})")
         p.add_argument("--lightmap", choices=("modulate", "ps2"), default="modulate",
                        help="light-map mode: modulate (base x light) or ps2 (the stored Cs/As blended as the GS does)")
@@ -72,7 +83,8 @@ def add_arguments(parser) -> None:
     i.add_argument("--out", required=True, help="the new level's .pbd")
 
 
-def render_pbd(level, out, size=(640, 448), lightmap_mode="modulate", camera=None) -> str:
+def render_pbd(level: str | os.PathLike[str], out: str | os.PathLike[str], size: tuple[int, int] = (640, 448),
+               lightmap_mode: str = "modulate", camera: Camera | None = None) -> str:
     """Render ``level`` (a ``.pbd`` path) to ``out`` (PNG) through the one runtime, as ``piste
     render LEVEL.pbd`` does (:func:`piste.pipeline.open_scene.open_source` +
     :func:`piste.pipeline.preview.render_frames`); ``camera``: a
@@ -87,7 +99,7 @@ def render_pbd(level, out, size=(640, 448), lightmap_mode="modulate", camera=Non
     return str(out)
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     import sys
     from pathlib import Path
 
@@ -175,7 +187,7 @@ def run(args) -> int:
     return 0
 
 
-def view_pbd(args) -> int:
+def view_pbd(args: argparse.Namespace) -> int:
     """A level in a window, drawn by the one runtime as ``piste view LEVEL.pbd`` draws it
     (:class:`piste.pipeline.preview.ScenePreview` in :class:`piste.pipeline.live.PreviewView`);
     without a display, one off-screen frame to ``--out``."""
@@ -197,7 +209,7 @@ def view_pbd(args) -> int:
 
     bundle = open_source(level_path(args.level), warm=True)
 
-    def make_view(ctx):
+    def make_view(ctx: moderngl.Context) -> PreviewView:
         return PreviewView(ScenePreview(bundle, size=size, ctx=ctx, stream_wait=False, lightmap_mode=args.lightmap))
 
     run_window(make_view, camera_at(bundle), size=size, caption=f"piste view {bundle.path.name}",
@@ -206,7 +218,7 @@ def view_pbd(args) -> int:
     return 0
 
 
-def gltf_pbd(level_path, out) -> int:
+def gltf_pbd(level_path: str | os.PathLike[str], out: str | os.PathLike[str]) -> int:
     """The level as glTF: a scene ``terrain = { ssx_pbd = LEVEL }`` built in a temporary folder (no
     files beside the level) and exported like ``piste export``."""
     import json
