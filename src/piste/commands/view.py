@@ -21,9 +21,21 @@ Without a display it says so and renders one frame off-screen instead (``--out``
 from __future__ import annotations
 
 import sys
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import argparse
+
+    import moderngl
+
+    from piste.pipeline.bundle_objects import Bundle
+    from piste.pipeline.live import LiveScene, LiveView, PreviewView
+    from piste.pipeline.preview import ScenePreview
+    from piste.world.camera import Camera
 
 
-def print_benchmark(st: dict, what: str, size) -> float:
+def print_benchmark(st: dict, what: str, size: Sequence[int]) -> float:
     """Print the fps of a ``run_window(benchmark=N)`` state (``st["frame_ms"]``: the frame times in
     ms); returns the median fps."""
     import numpy as np
@@ -36,7 +48,7 @@ def print_benchmark(st: dict, what: str, size) -> float:
     return 1e3 / med
 
 
-def add_arguments(parser) -> None:
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     from piste.commands import _numbers as N
 
     parser.add_argument("--size", nargs=2, type=N.SIZE, default=(960, 672), metavar=("W", "H"),
@@ -88,7 +100,7 @@ def add_arguments(parser) -> None:
                              "(X0, Y0) to (X1, Y1) metres across the tiles (F: chase rider 0)")
 
 
-def course_preview(args, bundle, ctx=None):
+def course_preview(args: argparse.Namespace, bundle: Bundle, ctx: moderngl.Context | None = None) -> ScenePreview:
     """The runtime (:class:`piste.pipeline.preview.ScenePreview`) of the built default scene
     ``bundle`` with the view's flags: the terrain alone or the whole scene, the pack from
     ``--start``, ``--rider-model`` casts, ``--lighting``, ``--face``."""
@@ -107,18 +119,18 @@ def course_preview(args, bundle, ctx=None):
                         **_quality(args))
 
 
-def _morph(args):
+def _morph(args: argparse.Namespace) -> bool | None:
     return None if getattr(args, "lod_morph", None) is None else args.lod_morph == "on"
 
 
-def _quality(args) -> dict:
+def _quality(args: argparse.Namespace) -> dict[str, Any]:
     """``--soft-shadows`` and ``--occlusion on|off`` as the runtime's ``soft_shadows`` / ``occlusion``
     (None: the scene file's ``[render]`` keys)."""
     occ = getattr(args, "occlusion", None)
     return {"soft_shadows": getattr(args, "soft_shadows", None), "occlusion": None if occ is None else occ == "on"}
 
 
-def _view_scene(args) -> int:
+def _view_scene(args: argparse.Namespace) -> int:
     """``piste view SCENE``: a scene file or bundle, previewed live (:mod:`piste.pipeline.live`)."""
     from pathlib import Path
 
@@ -144,10 +156,10 @@ def _view_scene(args) -> int:
             live.release()
     path = Path(args.scene)
 
-    def factory(ctx):
+    def factory(ctx: moderngl.Context) -> LiveScene:
         return LiveScene(path, size=size, camera=args.camera, ctx=ctx, **kw)
 
-    def start_camera(view):
+    def start_camera(view: LiveView) -> Camera:
         return camera_at(view.live.bundle, args.camera)
 
     size = size or (640, 448)
@@ -165,7 +177,7 @@ def _view_scene(args) -> int:
     return 0
 
 
-def _view_source(args, kind: str) -> int:
+def _view_source(args: argparse.Namespace, kind: str) -> int:
     """``piste view LEVEL.pbd`` or ``WORLD.tiles`` (a source that is not watched): opened by
     :func:`piste.pipeline.open_scene.open_source` and drawn by the runtime in the window (or one
     frame off-screen to ``--out`` without a display).  A tiled world starts at its flight
@@ -201,7 +213,7 @@ def _view_source(args, kind: str) -> int:
         return 0
     opts = ViewOptions(lightmap_mode=args.lightmap, debug=args.debug, follow=args.follow, overlay=not args.no_overlay)
 
-    def make(ctx):
+    def make(ctx: moderngl.Context) -> PreviewView:
         return PreviewView(ScenePreview(bundle, size=size, ctx=ctx, stream_wait=False, **kw))
 
     if args.benchmark:
@@ -221,7 +233,7 @@ def _view_source(args, kind: str) -> int:
     return 0
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     if args.scene:
         from piste.pipeline.open_scene import source_kind
 
@@ -260,7 +272,7 @@ def run(args) -> int:
     opts = ViewOptions(lightmap_mode=args.lightmap, debug=args.debug, follow=args.follow,
                        overlay=not args.no_overlay)
 
-    def make(ctx):
+    def make(ctx: moderngl.Context) -> PreviewView:
         return PreviewView(course_preview(args, bundle, ctx))
     if args.benchmark:
         cams = None

@@ -265,11 +265,12 @@ class LiveView(PreviewView):
         self.live.release()
 
 
-def run_window(live_factory: Callable[[moderngl.Context], LiveScene], camera: Camera | None = None,
+def run_window(live_factory: Callable[[moderngl.Context], LiveScene],
+               camera: Camera | Callable[[LiveView], Camera] | None = None,
                size: tuple[int, int] = (640, 448), caption: str = "piste view", **kw: Any) -> dict[str, Any]:
     """Show a live scene in the fly-through window (:func:`piste.render.window.run_window`),
     reloading on change.  ``live_factory(ctx) -> LiveScene`` (the scene's GL objects live in the
-    window's context).  Returns the window's state dict."""
+    window's context); ``camera``: the start camera, or ``view -> camera``.  Returns the window's state dict."""
     holder: dict[str, LiveView] = {}
 
     def make(ctx: moderngl.Context) -> LiveView:
