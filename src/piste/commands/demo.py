@@ -12,10 +12,19 @@ the objects placed along it; built once into the piste cache folder, then loaded
 from __future__ import annotations
 
 import contextlib
+from typing import TYPE_CHECKING, Any
 
 from piste.commands import _numbers as N
 
-def add_arguments(parser) -> None:
+if TYPE_CHECKING:
+    import argparse
+
+    from piste.lighting.lights import Lights
+    from piste.pipeline.bundle_objects import Bundle
+    from piste.render.interlace import FlickerMeter
+    from piste.world.scene import Scene
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--size", nargs=2, type=N.SIZE, default=(640, 448), metavar=("W", "H"),
                         help="image size in pixels (default: 640 448, the PS2's)")
     parser.add_argument("--out", default="out/demo.png", help="PNG of the first frame (default: out/demo.png)")
@@ -58,7 +67,7 @@ def add_arguments(parser) -> None:
                              "(repeatable: any number of different rider models)")
 
 
-def demo_bundle(args):
+def demo_bundle(args: argparse.Namespace) -> tuple[Bundle, Any, str]:
     """The built (cached) default scene of ``args.seed`` and what ``--lighting`` draws with it:
     ``(bundle, lightmap for ScenePreview, lighting as printed)``."""
     import sys
@@ -72,7 +81,7 @@ def demo_bundle(args):
     return bundle, lightmap, args.lighting
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     import sys
     import time
 
@@ -171,7 +180,7 @@ def run(args) -> int:
     return 0
 
 
-def _print_flicker(args, meter) -> None:
+def _print_flicker(args: argparse.Namespace, meter: FlickerMeter) -> None:
     """The video's flicker (:func:`piste.render.interlace.flicker`), with how it was drawn."""
     if meter.value is None:
         return
@@ -181,17 +190,17 @@ def _print_flicker(args, meter) -> None:
           f"{meter.pairs} frame pairs): {meter.value:.2f}")
 
 
-def _occlusion(args):
+def _occlusion(args: argparse.Namespace) -> bool | None:
     """``--occlusion on|off`` as the runtime's ``occlusion`` (None: the scene file's ``[render] occlusion``)."""
     return None if getattr(args, "occlusion", None) is None else args.occlusion == "on"
 
 
-def _morph(args):
+def _morph(args: argparse.Namespace) -> bool | None:
     """``--lod-morph on|off`` as the runtime's ``lod_morph`` (None: the scene file's ``[lod] morph``)."""
     return None if getattr(args, "lod_morph", None) is None else args.lod_morph == "on"
 
 
-def _objects_table(scene, lights) -> list[str]:
+def _objects_table(scene: Scene, lights: Lights) -> list[str]:
     from piste.world.objects import lighting_report
 
     objs = scene.objects
@@ -212,7 +221,7 @@ def _objects_table(scene, lights) -> list[str]:
     return lines
 
 
-def run_scene(args, bundle, lightmap, lighting: str, t0: float) -> int:
+def run_scene(args: argparse.Namespace, bundle: Bundle, lightmap: Any, lighting: str, t0: float) -> int:
     """``piste demo --scene full`` (the default): the completed real-time scene.
 
     Six riders playing their clips down the default course, the camera chasing the first; trees,
