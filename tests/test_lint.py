@@ -79,6 +79,17 @@ STRICT_REQUIRED = (
     "piste.terrain.tessellate",
     "piste.formats.bundle",
     "piste.formats",  # the whole package: every module, and any new one
+    # the runtime and the command layer, module by module (pipeline, render and commands still hold
+    # lenient modules: preview, tiled_build, sources, the passes, scene_renderer, frame, window, ...)
+    "piste.pipeline.cache", "piste.pipeline.default_scene", "piste.pipeline.ssx_synth", "piste.pipeline.object_atlas",
+    "piste.pipeline.ssx_source", "piste.pipeline.characters", "piste.pipeline.furnish", "piste.pipeline.dask_build",
+    "piste.pipeline.gltf_import", "piste.pipeline.tiles_source", "piste.pipeline.ssx_rider",
+    "piste.pipeline.bundle_gltf", "piste.pipeline.tile_objects", "piste.pipeline.live", "piste.pipeline.ssx_level",
+    "piste.pipeline.visibility", "piste.render.terrain_mode", "piste.render.sky_pass", "piste.render.video",
+    "piste.render.dof", "piste.render.overlay", "piste.render.interlace", "piste.render.context", "piste.render.aa",
+    "piste.render.occlusion", "piste.render.textures", "piste.commands._paths", "piste.commands._numbers",
+    "piste.commands.bake", "piste.commands.blender_addon", "piste.commands.export", "piste.commands.stats",
+    "piste.commands.ssx", "piste.workers", "piste.graph", "piste.cli", "piste._jit", "piste.extras",
 )
 
 
