@@ -28,7 +28,9 @@ API
 from __future__ import annotations
 
 import time
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -46,6 +48,12 @@ from piste.render.trace import NULL_TRACER
 from piste.terrain.cull import patch_tree
 from piste.world.course import TRACK_HALF_WIDTH
 from piste.world.object_lod import DEFAULT_LOD_PIXELS
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from piste.world.camera import Camera
+    from piste.world.scene import Scene
 
 __all__ = ["SceneRenderer", "SceneImage", "summarize_scene"]
 
@@ -103,11 +111,13 @@ class SceneRenderer:
         stored Cs/As (its public ``ssx_source`` pass) over the base texture, riders and all.
     """
 
-    def __init__(self, scene, size=(640, 448), ctx=None, lightmap="placeholder", object_lighting: str = "dynamic",
-                 shadows: bool = True, specular: bool = True, shadow_tile: int = 128, casts=(),
-                 face: str | None = "morph", terrain=None, sunlight=None, object_lod: float = DEFAULT_LOD_PIXELS,
+    def __init__(self, scene: Scene, size: tuple[int, int] = (640, 448), ctx: moderngl.Context | None = None,
+                 lightmap: Any = "placeholder", object_lighting: str = "dynamic",
+                 shadows: bool = True, specular: bool = True, shadow_tile: int = 128, casts: Iterable[Any] = (),
+                 face: str | None = "morph", terrain: Any = None, sunlight: tuple[np.ndarray, np.ndarray] | None = None,
+                 object_lod: float = DEFAULT_LOD_PIXELS,
                  soft_shadows: bool = False, sun_radius: float = SUN_RADIUS, occlusion: bool = False,
-                 **terrain_kw):
+                 **terrain_kw: Any) -> None:
         self.scene = scene
         terrain_kw.setdefault("track", scene.line)
         terrain_kw.setdefault("track_half_width", TRACK_HALF_WIDTH)
@@ -151,10 +161,10 @@ class SceneRenderer:
         self.tracer = NULL_TRACER
 
     @property
-    def size(self):
+    def size(self) -> tuple[int, int]:
         return self.terrain.size
 
-    def render(self, t: float, read: bool = True, fog: float | None = None, camera=None, lod: bool = True,
+    def render(self, t: float, read: bool = True, fog: float | None = None, camera: Camera | None = None, lod: bool = True,
                lightmap_mode: str = "modulate", light_only: bool = False, debug: str | None = None,
                count_rider_pixels: bool = False, face_time: float | None = None) -> SceneImage:
         """Render the scene at ``t`` seconds.  ``camera`` overrides the chase camera; ``light_only``
@@ -167,8 +177,9 @@ class SceneRenderer:
             self._issue(plan, fog=fog, light_only=light_only, count_rider_pixels=count_rider_pixels)
             return self._finish(plan, read)
 
-    def frames(self, times, read: bool = True, fog: float | None = None, cameras=None, lod: bool = True,
-               lightmap_mode: str = "modulate", face_times=None):
+    def frames(self, times: Iterable[float], read: bool = True, fog: float | None = None,
+               cameras: Sequence[Camera | None] | None = None, lod: bool = True,
+               lightmap_mode: str = "modulate", face_times: Sequence[float | None] | None = None) -> Iterator[SceneImage]:
         """Render the scene at each of ``times``, pipelined: yields a :class:`SceneImage` per time, the
         same pictures as :meth:`render`.  While the GL rasterizes frame ``i`` (handed over with
         ``glFlush``, not waited for), the CPU work of frame ``i + 1`` (animation, skinning, LOD,
@@ -186,7 +197,7 @@ class SceneRenderer:
         if len(cams) != len(times) or len(faces) != len(times):
             raise ConfigError(f"frames: {len(times)} times need as many cameras and face times, "
                               f"got {len(cams)} and {len(faces)}")
-        kw = dict(lod=lod, lightmap_mode=lightmap_mode)
+        kw: dict[str, Any] = dict(lod=lod, lightmap_mode=lightmap_mode)
         plan = self._plan(times[0], camera=cams[0], face_time=faces[0], **kw) if times else None
         for i in range(len(times)):
             self._issue(plan, fog=fog)
@@ -196,7 +207,7 @@ class SceneRenderer:
             yield self._finish(plan, read)
             plan = nxt
 
-    def _plan(self, t: float, camera=None, lod: bool = True, lightmap_mode: str = "modulate",
+    def _plan(self, t: float, camera: Camera | None = None, lod: bool = True, lightmap_mode: str = "modulate",
               debug: str | None = None, face_time: float | None = None) -> dict:
         """A frame's CPU side (no GL call): scene update (animation, LOD, skinning, lights, object
         culling), faces, terrain LOD / culling / indices, shadow frustums and their patches."""
@@ -385,7 +396,7 @@ class SceneRenderer:
         self.terrain.release()
 
 
-def summarize_scene(images) -> dict:
+def summarize_scene(images: Sequence[SceneImage]) -> dict:
     """Means over frames: every timing (``<stage>_ms``), ``fps`` from the mean total, and the mean
     counts (rider triangles, objects, shadow patches)."""
     if not images:
