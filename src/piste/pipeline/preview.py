@@ -36,9 +36,12 @@ API
 
 from __future__ import annotations
 
+import os
 import time
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -68,6 +71,14 @@ from piste.world.objects import place_objects
 from piste.world.riders import DEFAULT_PACK, ClipTable, RiderState, pack_for, rider_model
 from piste.world.scene import LOD_DISTANCES, Scene, sun_light
 
+if TYPE_CHECKING:
+    import moderngl
+    import numpy.typing as npt
+
+    from piste.character.model import Model
+    from piste.pipeline.bundle_objects import Bundle
+    from piste.world.objects import ObjectSet
+
 __all__ = ["PlacedRiders", "BundleScene", "clip_table", "cast_model", "rider_casts", "track_scene", "track_pack",
            "pack_track_ahead", "ScenePreview", "camera_at", "render_image", "render_frames"]
 
@@ -81,7 +92,8 @@ class PlacedRiders:
     clips : n clip names;  phases : (n,) seconds into each clip at t = 0
     """
 
-    def __init__(self, model, matrices, clips, phases, rate: float = 30.0, table=None):
+    def __init__(self, model: Model, matrices: npt.ArrayLike, clips: Iterable[str], phases: npt.ArrayLike,
+                 rate: float = 30.0, table: ClipTable | None = None) -> None:
         self.model = model
         self.table = table if table is not None else ClipTable(model, rate)
         self.matrix = np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)
@@ -92,7 +104,7 @@ class PlacedRiders:
     def __len__(self) -> int:
         return len(self.clips)
 
-    def state(self, t: float, camera_rider=None, **_ignored):
+    def state(self, t: float, camera_rider: int | None = None, **_ignored: Any) -> RiderState:
         """All riders at ``t`` seconds (:class:`piste.world.riders.RiderState`); the chase-camera
         keywords of :meth:`RiderSet.state` are accepted and ignored (scene cameras are used)."""
         m = self.matrix
@@ -103,7 +115,7 @@ class PlacedRiders:
         return RiderState(float(t), anchor, normal, fwd, m, skin, self.clips, np.zeros(len(self)))
 
 
-def clip_table(bundle, character: str = "rider") -> ClipTable:
+def clip_table(bundle: Bundle, character: str = "rider") -> ClipTable:
     """A :class:`piste.world.riders.ClipTable` filled straight from the bundle's pre-sampled clip
     tables (no curve sampling at load: the build did it)."""
     meta = bundle.manifest["characters"][character]
@@ -118,7 +130,7 @@ def clip_table(bundle, character: str = "rider") -> ClipTable:
                                   [bundle.arrays[prefix + n + "/scale"] for n in names])
 
 
-def _first_character(bundle) -> str:
+def _first_character(bundle: Bundle) -> str:
     chars = bundle.manifest.get("characters") or {}
     return "rider" if "rider" in chars else next(iter(chars), "rider")
 
@@ -131,7 +143,7 @@ class BundleScene(Scene):
     (``character=``), which :class:`~piste.render.scene_renderer.SceneRenderer` draws with it.
     """
 
-    def __init__(self, bundle, character: str | None = None):  # noqa: D401 - Scene's own __init__ builds the default pack
+    def __init__(self, bundle: Bundle, character: str | None = None) -> None:  # noqa: D401 - Scene's own __init__ builds the default pack
         man = bundle.manifest
         first = _first_character(bundle)
         cid = character or first
@@ -169,7 +181,7 @@ class BundleScene(Scene):
         self.camera_kw = {}
         self.visibility = bundle.visibility
 
-    def update(self, t, aspect=640.0 / 448.0, fov_y=60.0, camera=None):
+    def update(self, t: float, aspect: float = 640.0 / 448.0, fov_y: float = 60.0, camera: Camera | None = None) -> Any:
         sf = super().update(t, aspect=aspect, fov_y=fov_y, camera=camera)
         if self.visibility is not None and len(sf.objects_visible):
             keep = self.visibility.objects_at(sf.camera.eye)
@@ -213,7 +225,7 @@ def pack_track_ahead(n: int = len(DEFAULT_PACK)) -> float:
 _AUTO_COUNTS = {"trees": "n_trees", "signs": "n_signs", "rocks": "n_rocks", "rails": "n_rails"}
 
 
-def auto_objects(bundle):
+def auto_objects(bundle: Bundle) -> ObjectSet | None:
     """The course's objects placed along the track from the manifest's ``auto_objects``
     (``{"seed", "trees", "signs", "rocks", "rails"}``, the scene file's ``[auto_objects]``), or None."""
     auto = bundle.manifest.get("auto_objects")
@@ -234,7 +246,7 @@ def auto_objects(bundle):
                          track_half_width=TRACK_HALF_WIDTH, **kw)
 
 
-def cast_model(model):
+def cast_model(model: Model) -> Model:
     """A glTF rider model as the runtime draws it, the way a scene build makes it: its skinned
     primitives merged into one mesh whose packed texture keeps each primitive's own base colour and
     material (:func:`piste.pipeline.characters.merged_mesh`; merged by
@@ -243,7 +255,7 @@ def cast_model(model):
     return rider_model(replace(model, meshes=[merged_mesh(model)]))
 
 
-def rider_casts(specs) -> list:
+def rider_casts(specs: Iterable[str]) -> list[tuple[Model, Any]]:
     """``FILE[:N]`` specs (``--rider-model``) -> ``[(rider model, pack rows)]``: N riders (default 2)
     of each skinned glTF model, placed between the default pack's riders (``track_scene(casts=)``)."""
     out = []
@@ -257,7 +269,7 @@ def rider_casts(specs) -> list:
     return out
 
 
-def track_scene(bundle, start: float | None = None, casts=()):
+def track_scene(bundle: Bundle, start: float | None = None, casts: Iterable[tuple[Model, Any]] = ()) -> Scene:
     """The :class:`piste.world.scene.Scene` of a bundle built with ``[pack] follow = "track"``: a
     pack of ``pack.riders`` riders (default the six of the default pack; :func:`track_pack`)
     running down the track (rider 0 at fraction ``start`` of it at t = 0; default: the scene file's
@@ -291,7 +303,8 @@ def track_scene(bundle, start: float | None = None, casts=()):
     return scene
 
 
-def terrain_renderer(bundle, size, ctx, atlas, lightmap="bundle", stream_wait: bool = True, kw=None):
+def terrain_renderer(bundle: Bundle, size: tuple[int, int], ctx: moderngl.Context | None, atlas: Any, lightmap: Any = "bundle",
+                     stream_wait: bool = True, kw: dict[str, Any] | None = None) -> Any:
     """The terrain renderer a source's manifest asks for (``terrain.source``), or None for the
     default :class:`~piste.render.frame.TerrainRenderer`: a tiled world streams its tiles
     (:class:`~piste.render.streaming.StreamingTerrain`; the bundle's net is the local terrain), an
@@ -308,7 +321,7 @@ def terrain_renderer(bundle, size, ctx, atlas, lightmap="bundle", stream_wait: b
     return None
 
 
-def camera_at(bundle, name: str | None = None, i: int = 0, n: int = 1):
+def camera_at(bundle: Bundle, name: str | None = None, i: int = 0, n: int = 1) -> Camera:
     """The scene camera ``name`` (default: the first) at frame ``i`` of ``n``: a track camera flies
     from its first to its second fraction of the track; other cameras stay put."""
     cams = bundle.manifest.get("cameras", [])
@@ -386,12 +399,14 @@ class ScenePreview:
     :class:`piste.render.SceneImage`) with its timings.
     """
 
-    def __init__(self, bundle, size=None, ctx=None, visibility: bool = True, scene=None, lightmap="bundle",
+    def __init__(self, bundle: Bundle, size: Sequence[int] | None = None, ctx: moderngl.Context | None = None,
+                 visibility: bool = True, scene: Scene | None = None, lightmap: Any = "bundle",
                  object_lighting: str = "baked", shadows: bool = True, specular: bool = True,
-                 lightmap_mode: str | None = None, start: float | None = None, casts=(),
-                 terrain_only: bool = False, face: str | None = None, fog=None, object_lod: float | None = None,
-                 lod_morph: bool | None = None, stream_wait: bool = True, trace=None, aa: str | None = None,
-                 supersample: int = 1, dof=None, soft_shadows: bool | None = None, occlusion: bool | None = None):
+                 lightmap_mode: str | None = None, start: float | None = None, casts: Iterable[tuple[Model, Any]] = (),
+                 terrain_only: bool = False, face: str | None = None, fog: float | str | None = None, object_lod: float | None = None,
+                 lod_morph: bool | None = None, stream_wait: bool = True, trace: str | os.PathLike[str] | None = None,
+                 aa: str | None = None, supersample: int = 1, dof: str | tuple[float, float] | None = None,
+                 soft_shadows: bool | None = None, occlusion: bool | None = None) -> None:
         if not (isinstance(lightmap, str) and lightmap in ("bundle", "placeholder")) and lightmap is not None:
             raise ConfigError(f"lightmap must be 'bundle', 'placeholder' or None, got {lightmap!r}")
         self.ctx = ctx if ctx is not None else create_context()
@@ -402,14 +417,14 @@ class ScenePreview:
             raise ConfigError(f"supersample must be an integer in 1..8, got {supersample!r}")
         self.supersample = supersample
         self.render_size = (self.size[0] * supersample, self.size[1] * supersample)  # what the renderers draw
-        self.options = {"scene": scene, "lightmap": lightmap, "object_lighting": object_lighting,
+        self.options: dict[str, Any] = {"scene": scene, "lightmap": lightmap, "object_lighting": object_lighting,
                         "shadows": bool(shadows), "specular": bool(specular), "lightmap_mode": lightmap_mode,
                         "start": start, "casts": list(casts), "terrain_only": bool(terrain_only), "face": face,
                         "fog": fog, "object_lod": object_lod, "lod_morph": lod_morph,
                         "stream_wait": bool(stream_wait), "aa": aa, "dof": dof, "soft_shadows": soft_shadows,
                         "occlusion": occlusion}
         self.stats: dict = {}
-        self.frame = None
+        self.frame: Any = None  # the last frame drawn: a Frame (terrain only) or a SceneImage
         self.tracer = make_tracer(trace, self.ctx)  # the no-op NULL_TRACER without a trace file
         # numba's background import (~0.8 s, mostly holding the GIL) waits until the first frame is
         # drawn: beside it a fresh process's first frame took ~0.13 s longer (released by the next
@@ -417,7 +432,7 @@ class ScenePreview:
         self._warm_up_hold = WarmUpHold()
         self._setup(bundle)
 
-    def _setup(self, bundle) -> None:
+    def _setup(self, bundle: Bundle) -> None:
         self.bundle = bundle
         streamed = (bundle.manifest.get("terrain") or {}).get("source") == "tiles"
         if not streamed and resident_fits(bundle.net):  # the terrain's resident vertex blocks, built (in the background)
@@ -498,12 +513,12 @@ class ScenePreview:
         # the pre-computed visibility in front of frustum culling
         self.terrain.set_visibility(bundle.visibility if self.use_visibility else None)
 
-    def reload(self, bundle) -> None:
+    def reload(self, bundle: Bundle) -> None:
         """Swap in a rebuilt bundle (the GL context is kept)."""
         self._release_passes()
         self._setup(bundle)
 
-    def render(self, camera=None, t: float = 0.0, lod: bool = True, debug: str | None = None,
+    def render(self, camera: Camera | None = None, t: float = 0.0, lod: bool = True, debug: str | None = None,
                read: bool = True) -> np.ndarray | None:
         """One frame ``(H, W, 3) uint8`` for ``camera`` at ``t`` seconds (None with ``read=False``);
         see :meth:`_render_frame`.  Traced as one frame (``trace=``)."""
@@ -561,12 +576,12 @@ class ScenePreview:
         self.stats.update(terrain_patches=frame.patches, terrain_triangles=frame.triangles)
         return self._output(image) if read else None
 
-    def _output(self, image) -> np.ndarray:
+    def _output(self, image: np.ndarray) -> np.ndarray:
         """A frame as returned: ``(H, W, 3) uint8``, box-filtered down from the drawn size when
         supersampled."""
         return downsample(image[..., :3], self.supersample)
 
-    def frames(self, times, lod: bool = True, read: bool = True):
+    def frames(self, times: Iterable[float], lod: bool = True, read: bool = True) -> Iterator[np.ndarray | None]:
         """Frames ``(H, W, 3) uint8`` (None without ``read``) at each of ``times`` along the chase
         camera, pipelined where the scene has riders (:meth:`piste.render.SceneRenderer.frames`: the
         next frame's CPU work runs while the GL draws this one); else one :meth:`render` a frame.
@@ -611,7 +626,8 @@ class ScenePreview:
             self.ctx.release()
 
 
-def render_image(bundle, camera: str | None = None, size=None, t: float = 0.0, ctx=None) -> np.ndarray:
+def render_image(bundle: Bundle, camera: str | None = None, size: Sequence[int] | None = None, t: float = 0.0,
+                 ctx: moderngl.Context | None = None) -> np.ndarray:
     """One image ``(H, W, 3) uint8`` of ``bundle`` from scene camera ``camera``."""
     p = ScenePreview(bundle, size=size, ctx=ctx)
     try:
@@ -620,9 +636,11 @@ def render_image(bundle, camera: str | None = None, size=None, t: float = 0.0, c
         p.release()
 
 
-def render_frames(bundle, camera=None, frames: int = 1, size=None, fps: int = 30, video=None,
-                  first_png=None, ctx=None, progress: bool = False, interlace: bool = False,
-                  flicker_filter: bool = False, **preview_kw) -> list:
+def render_frames(bundle: Bundle, camera: str | Camera | Sequence[Camera] | None = None, frames: int = 1,
+                  size: Sequence[int] | None = None, fps: int = 30, video: str | os.PathLike[str] | None = None,
+                  first_png: str | os.PathLike[str] | None = None, ctx: moderngl.Context | None = None,
+                  progress: bool = False, interlace: bool = False,
+                  flicker_filter: bool = False, **preview_kw: Any) -> list[dict[str, Any]]:
     """Render ``frames`` frames (time ``i / fps``; track cameras fly), writing the first to
     ``first_png`` and all to the MP4 ``video`` when given.  Returns each frame's stats.  ``camera``:
     a scene camera's name, a :class:`piste.world.camera.Camera` (stays put), a list of cameras (one
