@@ -54,7 +54,9 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+import os
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -76,6 +78,10 @@ from piste.terrain.heightfield import single_threaded
 from piste.terrain.tiles import (TILE_FIT_VERSION, TILES_FORMAT, TileGrid, TileStore, fit_tile, neighbourhood_net,
                                  triangulated_heights)
 from piste.terrain.tiles import TileError as TileFileError
+
+if TYPE_CHECKING:
+    from piste.lighting.lights import Lights
+    from piste.world.scene_file import SceneFile, TerrainSpec
 
 __all__ = ["TiledSpec", "TiledResult", "ArraySource", "FileSource", "SyntheticSource", "TileError", "fit_task",
            "lit_task",
@@ -150,7 +156,7 @@ class FileSource:
     window that holds missing samples when the fill is ``"nearest"`` (the nearest valid sample may
     lie in another tile; a numeric fill stays windowed)."""
 
-    spec: object = field(repr=False)
+    spec: TerrainSpec = field(repr=False)
 
     def _stat_key(self) -> tuple:
         p = Path(self.spec.path)
@@ -340,7 +346,7 @@ class TiledSpec:
         return content_key(FAR_HEIGHTS_VERSION, TILE_FIT_VERSION, self.source_key(), self.grid.to_dict(), FAR_MAX_CELLS,
                            FAR_SUBDIV)
 
-    def lights(self):
+    def lights(self) -> Lights:
         return loads_lights(self.lights_toml, "<lights>") if self.lights_toml else _default_lights()
 
 
@@ -396,7 +402,7 @@ def far_heights(spec: TiledSpec) -> dict:
     heights = np.full((ny, nx), -np.inf)
     store = spec.store
 
-    def nodes(c: np.ndarray, last: int, n: int):
+    def nodes(c: np.ndarray, last: int, n: int) -> tuple[np.ndarray, np.ndarray]:
         """The nodes within half a stride of fine indices ``c`` (the last fine index also feeds
         the nodes beyond it, as an edge-padded grid would): lowest and highest node index."""
         lo = np.maximum(-((half - c) // stride), 0)
@@ -438,7 +444,7 @@ def _subdiv_grid(z: np.ndarray, k: int) -> np.ndarray:
     return out
 
 
-def far_heights_task(spec: TiledSpec, *_deps) -> dict:
+def far_heights_task(spec: TiledSpec, *_deps: Any) -> dict:
     """Write the world's far heights (after every fit; skipped when its output verifies or no bake
     needs it): ``{"sha256", "skipped", "seconds"}``.  ``_deps`` only orders the task after the fits."""
     t0 = time.perf_counter()
@@ -499,7 +505,7 @@ def _far_shadows(spec: TiledSpec, ty: int, tx: int, lights, pos, nrm, terms, sha
         stats["far_occluded"] = stats.get("far_occluded", 0) + int(occ.sum())
 
 
-def lit_task(spec: TiledSpec, ty: int, tx: int, *_deps) -> dict:
+def lit_task(spec: TiledSpec, ty: int, tx: int, *_deps: Any) -> dict:
     """Bake one tile's light map, far field and visibility (needs the fits of its neighbourhood).
 
     Returns ``{"tile", "sha256", "skipped", "seconds", "samples", "rays", "zmin", "zmax", "patches"}``.
@@ -682,7 +688,7 @@ def build_tiles(spec: TiledSpec, progress: bool = False) -> TiledResult:
     return TiledResult(spec.store.root, index, time.perf_counter() - t0, fits, lits)
 
 
-def spec_from_scene(scene, root=None, res: int | None = None) -> TiledSpec:
+def spec_from_scene(scene: SceneFile, root: str | os.PathLike[str] | None = None, res: int | None = None) -> TiledSpec:
     """The :class:`TiledSpec` of a scene whose terrain is a height field (``terrain.tiles``)."""
     ts = scene.terrain
     if ts.kind not in ("heightfield", "geotiff"):
@@ -702,7 +708,7 @@ def spec_from_scene(scene, root=None, res: int | None = None) -> TiledSpec:
                      objects=tuple(ObjectRule(**r.rule_fields()) for r in getattr(scene, "tile_objects", ())))
 
 
-def synthetic_spec(root, patches_side: int, samples_per_patch: int = 3, tile_patches: int = 64, spacing: float = 10.0,
+def synthetic_spec(root: str | os.PathLike[str], patches_side: int, samples_per_patch: int = 3, tile_patches: int = 64, spacing: float = 10.0,
                    seed: int = 0, res: int = 4, shadows: bool = True, cell: float = 0.0) -> TiledSpec:
     """A synthetic world of ``patches_side ** 2`` patches (for benchmarks and examples)."""
     n = patches_side * samples_per_patch + 1
