@@ -87,7 +87,7 @@ STRICT_REQUIRED = (
     "piste.pipeline.bundle_gltf", "piste.pipeline.tile_objects", "piste.pipeline.live", "piste.pipeline.ssx_level",
     "piste.pipeline.visibility", "piste.render.terrain_mode", "piste.render.sky_pass", "piste.render.video",
     "piste.render.dof", "piste.render.overlay", "piste.render.interlace", "piste.render.context", "piste.render.aa",
-    "piste.render.occlusion", "piste.render.textures", "piste.commands._paths", "piste.commands._numbers",
+    "piste.render.occlusion", "piste.render.textures", "piste.render.trace", "piste.commands._paths", "piste.commands._numbers",
     "piste.commands.bake", "piste.commands.blender_addon", "piste.commands.export", "piste.commands.stats",
     "piste.commands.ssx", "piste.workers", "piste.graph", "piste.cli", "piste._jit", "piste.extras",
 )

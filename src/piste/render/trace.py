@@ -53,9 +53,14 @@ import contextlib
 import json
 import os
 import time
+from contextlib import AbstractContextManager
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal, cast
 
 from piste.errors import PisteError
+
+if TYPE_CHECKING:
+    import moderngl
 
 __all__ = ["Tracer", "NULL_TRACER", "ChromeTracer", "TraceError", "load_trace", "make_tracer"]
 
@@ -77,13 +82,13 @@ class Tracer:
     enabled = False
     last: dict = {}
 
-    def frame(self, index: int | None = None):
+    def frame(self, index: int | None = None) -> AbstractContextManager[Any]:
         return _NULL
 
-    def span(self, name: str, **args):
+    def span(self, name: str, **args: Any) -> AbstractContextManager[Any]:
         return _NULL
 
-    def gpu_pass(self, name: str):
+    def gpu_pass(self, name: str) -> AbstractContextManager[Any]:
         return _NULL
 
     def close(self) -> Path | None:
@@ -98,14 +103,14 @@ class _Span:
 
     __slots__ = ("tracer", "name", "cat", "args", "t0")
 
-    def __init__(self, tracer, name, cat, args):
+    def __init__(self, tracer: ChromeTracer, name: str, cat: str, args: dict[str, Any] | None) -> None:
         self.tracer, self.name, self.cat, self.args = tracer, name, cat, args
 
-    def __enter__(self):
+    def __enter__(self) -> _Span:
         self.t0 = time.perf_counter_ns()
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> Literal[False]:
         t1 = time.perf_counter_ns()
         self.tracer._cpu(self.name, self.cat, self.t0, t1, self.args)
         return False
@@ -114,10 +119,10 @@ class _Span:
 class _Frame:
     __slots__ = ("tracer", "index", "t0", "outer")
 
-    def __init__(self, tracer, index):
+    def __init__(self, tracer: ChromeTracer, index: int) -> None:
         self.tracer, self.index = tracer, index
 
-    def __enter__(self):
+    def __enter__(self) -> _Frame:
         tr = self.tracer
         self.outer = tr._open is None
         if self.outer:
@@ -125,7 +130,7 @@ class _Frame:
             self.t0 = time.perf_counter_ns()
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> Literal[False]:
         if self.outer:
             self.tracer._close_frame(self, time.perf_counter_ns())
         return False
@@ -136,10 +141,10 @@ class _Pass:
 
     __slots__ = ("tracer", "name", "t0", "query")
 
-    def __init__(self, tracer, name):
+    def __init__(self, tracer: ChromeTracer, name: str) -> None:
         self.tracer, self.name = tracer, name
 
-    def __enter__(self):
+    def __enter__(self) -> _Pass:
         tr = self.tracer
         self.query = None
         if tr.gpu_timing == "glFinish":
@@ -156,7 +161,7 @@ class _Pass:
         self.t0 = time.perf_counter_ns()
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> Literal[False]:
         tr = self.tracer
         if self.query is not None:
             self.query.__exit__(None, None, None)
@@ -184,11 +189,13 @@ class ChromeTracer(Tracer):
 
     enabled = True
 
-    def __init__(self, path, ctx=None, gpu: str = "auto"):
+    def __init__(self, path: str | os.PathLike[str], ctx: moderngl.Context | None = None, gpu: str = "auto") -> None:
         if gpu not in ("auto", "query", "finish"):
             raise TraceError(f"{path}: gpu timing must be 'auto', 'query' or 'finish', got {gpu!r}")
         self.path = Path(path)
-        self.ctx = ctx
+        # Any: a pass runs only with a context (gpu_pass), and moderngl's Query stub types __exit__'s
+        # arguments as tuples
+        self.ctx: Any = cast(Any, ctx)
         self.gpu_timing, self.gpu_timing_why = None, "no GL context: CPU spans only"
         if ctx is not None:
             renderer = ""
@@ -215,13 +222,13 @@ class ChromeTracer(Tracer):
         self._closed = False
 
     # -- recording --------------------------------------------------------------------------
-    def frame(self, index: int | None = None):
+    def frame(self, index: int | None = None) -> _Frame:
         return _Frame(self, self.frames if index is None else int(index))
 
-    def span(self, name: str, **args):
+    def span(self, name: str, **args: Any) -> _Span:
         return _Span(self, name, "cpu", args or None)
 
-    def gpu_pass(self, name: str):
+    def gpu_pass(self, name: str) -> _Span | _Pass:
         if self.ctx is None:
             return _Span(self, name, "pass", None)
         return _Pass(self, name)
@@ -229,7 +236,7 @@ class ChromeTracer(Tracer):
     def _us(self, ns: int) -> float:
         return (ns - self.origin) / 1e3
 
-    def _cpu(self, name, cat, t0, t1, args) -> None:
+    def _cpu(self, name: str, cat: str, t0: int, t1: int, args: dict[str, Any] | None) -> None:
         ev = {"name": name, "ph": "X", "ts": self._us(t0), "dur": (t1 - t0) / 1e3, "pid": self.pid,
               "tid": _CPU_TID, "cat": cat}
         if args:
@@ -247,7 +254,7 @@ class ChromeTracer(Tracer):
         self.events.append({"name": "frame", "ph": "X", "ts": self._us(fr.t0), "dur": (t1 - fr.t0) / 1e3,
                             "pid": self.pid, "tid": _CPU_TID, "cat": "frame", "args": {"frame": idx}})
         self.events.extend(evs)
-        last = {}
+        last: dict[str, Any] = {}
         for ev in evs:
             if ev["cat"] == "pass":
                 last[ev["name"]] = [last.get(ev["name"], [0.0, 0.0])[0] + ev["dur"] / 1e3, 0.0]
@@ -312,7 +319,7 @@ class ChromeTracer(Tracer):
         return self.path
 
 
-def make_tracer(path, ctx=None) -> Tracer:
+def make_tracer(path: str | os.PathLike[str] | None, ctx: moderngl.Context | None = None) -> Tracer:
     """A :class:`ChromeTracer` writing ``path``, or :data:`NULL_TRACER` when ``path`` is None."""
     if path is None:
         return NULL_TRACER
@@ -324,7 +331,7 @@ def make_tracer(path, ctx=None) -> Tracer:
     return ChromeTracer(p, ctx=ctx)
 
 
-def load_trace(path) -> dict:
+def load_trace(path: str | os.PathLike[str]) -> dict:
     """A trace file read back and checked: a ``traceEvents`` list whose ``X`` events carry name, ts,
     dur, pid, tid and cat (:class:`TraceError` naming the file and the field otherwise)."""
     p = Path(path)
