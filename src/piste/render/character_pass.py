@@ -39,12 +39,23 @@ API
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any, cast
+
 import numpy as np
+import numpy.typing as npt
 
 from piste.character import rider as _rider
 from piste.errors import RenderError
 from piste.render.context import load_shader, set_depth_write
 from piste.render.textures import mipmapped_texture
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from piste.character.lod import LOD
+    from piste.character.model import SkinnedMesh
+    from piste.lighting.lights import DirectionalLight
 
 __all__ = ["CharacterPass", "specular_map", "rider_textures", "SHININESS", "JACKETS"]
 
@@ -55,7 +66,7 @@ JACKETS = ((214, 52, 38), (30, 120, 200), (250, 180, 30), (40, 160, 90), (150, 6
 SHININESS = 32.0
 
 
-def specular_map(texture) -> np.ndarray:
+def specular_map(texture: npt.ArrayLike) -> np.ndarray:
     """The default rider's specular map, ``(H, W, 4) uint8`` matching its texture atlas.
 
     Red = specular strength: goggle lenses 1.0 and strap 0.5, the board's top sheet 0.8 and
@@ -70,7 +81,7 @@ def specular_map(texture) -> np.ndarray:
     uu, vv = (u + 0.5) / w, (v + 0.5) / h
     tiles = getattr(_rider, "_TILES", {})
 
-    def tile(name):
+    def tile(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if name not in tiles:
             return np.zeros((h, w), bool), uu, vv
         u0, v0, u1, v1 = tiles[name]
@@ -92,7 +103,7 @@ def specular_map(texture) -> np.ndarray:
     return out
 
 
-def rider_textures(texture, n: int) -> list:
+def rider_textures(texture: npt.ArrayLike, n: int) -> list[np.ndarray]:
     """``n`` variants of a rider texture atlas ``(H, W, 4) uint8``, one jacket colour each
     (:data:`JACKETS`): the jacket and sleeve tiles' dominant colour (and its darker zip shade) is
     replaced, keeping the stripes.  Variant 0 keeps the original colours."""
@@ -130,7 +141,7 @@ class _LodBuffers:
     """GPU buffers of one LOD for up to ``n`` riders: static UVs and indices, streamed positions
     and normals."""
 
-    def __init__(self, ctx, mesh, n: int, progs: dict):
+    def __init__(self, ctx: moderngl.Context, mesh: SkinnedMesh, n: int, progs: dict[str, Any]) -> None:
         self.ctx = ctx
         self.v = int(mesh.n_vertices)
         self.t = int(mesh.n_triangles)
@@ -147,7 +158,7 @@ class _LodBuffers:
             self.vao(k, p)
         self.count = 0
 
-    def vao(self, which: str, prog):
+    def vao(self, which: str, prog: Any) -> Any:
         """The vertex array of program ``which`` (made on first use)."""
         vao = self.vaos.get(which)
         if vao is None:
@@ -156,7 +167,7 @@ class _LodBuffers:
                                                            skip_errors=True)
         return vao
 
-    def write(self, pos, nrm) -> None:
+    def write(self, pos: np.ndarray, nrm: np.ndarray) -> None:
         k = len(pos)
         if k > self.n:
             raise RenderError(f"character pass: {k} riders at one LOD, room for {self.n}")
@@ -165,7 +176,7 @@ class _LodBuffers:
             self.pos.write(np.ascontiguousarray(pos, dtype=np.float32).tobytes())
             self.nrm.write(np.ascontiguousarray(nrm, dtype=np.float32).tobytes())
 
-    def release(self):
+    def release(self) -> None:
         for vao in self.vaos.values():
             vao.release()
         for b in (self.index, self.uv, self.pos, self.nrm):
@@ -192,8 +203,9 @@ class CharacterPass:
         same pixels within a rounding step); False: the talk's separate additive second pass
     """
 
-    def __init__(self, ctx, lods, texture, spec_map=None, max_riders: int = 6, rider_atlas: bool = True,
-                 material=None):
+    def __init__(self, ctx: moderngl.Context, lods: Sequence[LOD], texture: npt.ArrayLike,
+                 spec_map: npt.ArrayLike | None = None, max_riders: int = 6, rider_atlas: bool = True,
+                 material: Any = None) -> None:
         import moderngl
 
         self.ctx = ctx
@@ -209,9 +221,10 @@ class CharacterPass:
         # the programs are compiled on first use: a frame with the specular folded in (the default)
         # draws with the lit program only (the plain base and the separate specular pass cost a fresh
         # process ~4 ms of llvmpipe compiling each, with an empty shader cache, for nothing)
-        self._prog_lit = None  # the base pass with the specular added
-        self._prog = None  # the base pass without it (light_only, no sun, or specular off)
-        self._prog_spec = None  # the talk's separate additive specular pass (fold_specular False)
+        # (Any: moderngl types prog["name"] as a union of uniform, block, attribute and varying)
+        self._prog_lit: Any = None  # the base pass with the specular added
+        self._prog: Any = None  # the base pass without it (light_only, no sun, or specular off)
+        self._prog_spec: Any = None  # the talk's separate additive specular pass (fold_specular False)
         tex = np.asarray(texture)
         if tex.dtype != np.uint8 or tex.ndim != 3 or tex.shape[2] != 4:
             raise RenderError(f"character texture: expected (H, W, 4) uint8, got {tex.shape} {tex.dtype}")
@@ -229,7 +242,7 @@ class CharacterPass:
         self.lods = [_LodBuffers(ctx, lod.mesh, max_riders, {}) for lod in lods]  # vertex arrays: on first use
         self.riders = [np.zeros(0, np.int64) for _ in lods]
 
-    def _tex(self, img):
+    def _tex(self, img: np.ndarray) -> moderngl.Texture:
         """A mip-mapped texture (levels computed on the CPU: no GPU mipmap blit to compile)."""
         return mipmapped_texture(self.ctx, img)
 
@@ -238,7 +251,7 @@ class CharacterPass:
         """Triangles drawn by the last upload (one pass)."""
         return int(sum(b.t * b.count for b in self.lods))
 
-    def upload(self, skinned) -> None:
+    def upload(self, skinned: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> None:
         """Stream this frame's skinned riders: ``skinned[l] = (rider indices (k,), positions (k, v, 3),
         normals (k, v, 3))`` per LOD ``l`` (world space; see :class:`piste.world.scene.SceneFrame`)."""
         if len(skinned) != len(self.lods):
@@ -247,7 +260,8 @@ class CharacterPass:
             self.lods[level].write(pos, nrm)
             self.riders[level] = np.asarray(idx)
 
-    def draw(self, vp, eye, lights, sun=None, fog=None, specular: bool = True, light_only: bool = False,
+    def draw(self, vp: npt.ArrayLike, eye: npt.ArrayLike, lights: Any, sun: DirectionalLight | None = None,
+             fog: tuple[float, float, float, float] | None = None, specular: bool = True, light_only: bool = False,
              base: bool = True) -> None:
         """Draw the uploaded riders into the bound framebuffer (depth test on).
 
@@ -275,7 +289,9 @@ class CharacterPass:
         finally:
             ctx.disable(moderngl.CULL_FACE)
 
-    def _draw(self, ctx, vp, eye, lights, sun, fog, specular, light_only, base) -> None:
+    def _draw(self, ctx: moderngl.Context, vp: npt.ArrayLike, eye: npt.ArrayLike, lights: Any,
+              sun: DirectionalLight | None, fog: tuple[float, float, float, float] | None, specular: bool,
+              light_only: bool, base: bool) -> None:
         import moderngl
 
         vp_bytes = np.asarray(vp, dtype=np.float32).T.tobytes()
@@ -315,7 +331,7 @@ class CharacterPass:
             ctx.depth_func = "<"
 
     @property
-    def prog(self):
+    def prog(self) -> Any:
         """The base pass's program (the texture lit per vertex; compiled on first use)."""
         if self._prog is None:
             self._prog = self.ctx.program(vertex_shader=self._vs, fragment_shader=self._fs)
@@ -323,7 +339,7 @@ class CharacterPass:
         return self._prog
 
     @property
-    def prog_spec(self):
+    def prog_spec(self) -> Any:
         """The separate additive specular pass's program (compiled on first use)."""
         if self._prog_spec is None:
             self._prog_spec = self.ctx.program(vertex_shader=self._vs,
@@ -331,23 +347,24 @@ class CharacterPass:
             self._prog_spec["u_spec"].value = 1
         return self._prog_spec
 
-    def _lit_program(self):
+    def _lit_program(self) -> Any:
         """The base pass compiled with the specular term (``CHARACTER_SPECULAR``)."""
         if self._prog_lit is None:
             head, _, rest = self._fs.partition("\n")
-            p = self.ctx.program(vertex_shader=self._vs, fragment_shader=head + "\n#define CHARACTER_SPECULAR 1\n" + rest)
+            p = cast(Any, self.ctx.program(vertex_shader=self._vs,
+                                           fragment_shader=head + "\n#define CHARACTER_SPECULAR 1\n" + rest))
             p["u_tex"].value = 0
             p["u_spec"].value = 1
             self._prog_lit = p
         return self._prog_lit
 
     @staticmethod
-    def _sun_uniforms(prog, sun) -> None:
+    def _sun_uniforms(prog: Any, sun: DirectionalLight) -> None:
         prog["u_sun_dir"].value = tuple(float(-x) for x in sun.direction)
         prog["u_sun_color"].value = tuple(float(sun.intensity * c) for c in sun.color)
         prog["u_shininess"].value = SHININESS
 
-    def _draw_all(self, which, prog, lights) -> None:
+    def _draw_all(self, which: str, prog: Any, lights: Any) -> None:
         import moderngl
 
         for buf, idx in zip(self.lods, self.riders):
