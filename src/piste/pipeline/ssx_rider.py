@@ -185,6 +185,9 @@ def load_mpf_rider(path: str | os.PathLike[str],
     model = mpf_to_model(*files, name=path.stem)
     if not model.meshes:
         raise ConfigError(f"{path}: no render sub-models to draw")
+    if model.skeleton is None:
+        raise ConfigError(f"{path}: no sub-model holds bones: a rider needs a skeleton to stand on its origin and "
+                          "play the shared clips")
     stand_on_origin(model)
     if banks:
         apply_texture_banks(model, [read_ssh(b) for b in banks], [str(b) for b in banks])

@@ -313,3 +313,19 @@ def test_rigid_chunks_call_the_retail_rigid_program(encoded):
                         assert c.program == (10 if single else 0)
                         seen.add(c.program)
     assert seen == {0, 10}
+
+
+def test_a_rider_file_without_bones_is_refused_by_name(encoded, tmp_path, monkeypatch):
+    """An ``.mpf`` whose sub-models hold no bones gives a ConfigError naming the file, not a raw
+    AttributeError further on (mypy found the path: ``stand_on_origin`` and the clips read the skeleton)."""
+    import dataclasses
+
+    from piste.errors import ConfigError
+    from piste.formats.ssx.mpf import write_mpf
+    from piste.pipeline import ssx_rider
+
+    write_mpf(parse_mpf(encoded[2]), tmp_path / "boneless.mpf")
+    real = ssx_rider.mpf_to_model
+    monkeypatch.setattr(ssx_rider, "mpf_to_model", lambda *f, **k: dataclasses.replace(real(*f, **k), skeleton=None))
+    with pytest.raises(ConfigError, match="boneless.mpf: no sub-model holds bones"):
+        ssx_rider.load_mpf_rider(tmp_path / "boneless.mpf")
