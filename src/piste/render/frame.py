@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -26,6 +27,12 @@ from piste.terrain.resident import morph_setting, resident_fits, resident_terrai
 from piste.terrain.tessellate import tessellate
 
 from piste.transforms import cull_boxes  # noqa: E402  (re-exported)
+
+if TYPE_CHECKING:
+    from piste.scene_data import Camera
+    from piste.terrain.net import PatchNet
+    from piste.terrain.resident import ResidentMesh
+    from piste.terrain.tessellate import TerrainMesh
 
 __all__ = ["TerrainRenderer", "Frame", "summarize", "cull_boxes", "DEFAULT_FOG_DENSITY", "scene_fog_density"]
 
@@ -47,7 +54,7 @@ DEFAULT_FOG_DENSITY = 6e-4
 FOG_REFERENCE_SIZE = 1077.0
 
 
-def scene_fog_density(net, density: float = DEFAULT_FOG_DENSITY) -> float:
+def scene_fog_density(net: PatchNet, density: float = DEFAULT_FOG_DENSITY) -> float:
     """Fog in units of the scene's size: ``density`` per metre for scenes up to the default
     course's size, thinner in proportion for larger ones (a 1 km-spacing DEM would otherwise be
     uniform haze: the same share of the view fogged at any scale)."""
@@ -79,7 +86,7 @@ class Frame:
     timings: dict = field(default_factory=dict)
 
 
-def faces_up(net) -> bool:
+def faces_up(net: PatchNet) -> bool:
     """Whether every patch of ``net`` faces up: the two triangles of its corner quad (the coarsest
     tessellation, drawn with the renderer's winding) have normals with z > 0.  Then, seen from
     above, the first surface a view ray meets is an upper side, and back faces can be culled
@@ -167,7 +174,7 @@ class TerrainRenderer:
         if self.resident and resident_fits(self.net):
             resident_terrain(self.net, wait=False)
 
-    def set_visibility(self, visibility=None) -> None:
+    def set_visibility(self, visibility: Any = None) -> None:  # a pipeline Visibility (upward import: Any)
         """Pre-computed visibility in front of frustum culling (a bundle's per-cell sets, see
         :class:`piste.pipeline.visibility.Visibility`): any object whose ``patches_at(eye)`` gives an
         ``(n,)`` bool mask of the patches seen from the eye's cell, or None (outside: keep all).
@@ -179,16 +186,16 @@ class TerrainRenderer:
     def size(self) -> tuple[int, int]:
         return self.target.size
 
-    def set_lightmap(self, atlas, half_bright: bool = False) -> None:
+    def set_lightmap(self, atlas: np.ndarray | None, half_bright: bool = False) -> None:
         """Plug in another light-map atlas (see :meth:`TerrainPass.set_lightmap`)."""
         self.terrain.set_lightmap(atlas, half_bright=half_bright)
 
     # ------------------------------------------------------------------ CPU side
-    def levels(self, camera, lod: bool = True):
+    def levels(self, camera: Camera, lod: bool = True) -> np.ndarray | int:
         """Vertices per edge for ``camera``: ``(e,)`` int array, or the int 8 with ``lod=False``."""
         return self.net.edge_levels(camera.eye, **self.lod_kwargs) if lod else 8
 
-    def visible(self, camera) -> np.ndarray:
+    def visible(self, camera: Camera) -> np.ndarray:
         """Patches whose control-point boxes meet the view frustum, ``(p,)`` int64 ascending
         (hierarchical: :class:`piste.terrain.cull.PatchTree`, the same set as the flat test), then
         cut by the pre-computed visibility when one is set (:meth:`set_visibility`)."""
@@ -201,7 +208,8 @@ class TerrainRenderer:
         self.cull_stats = {"frustum_patches": int(frustum), "drawn_patches": int(len(ids))}
         return ids
 
-    def prepare(self, camera, lod: bool = True, levels=None, timings: dict | None = None):
+    def prepare(self, camera: Camera, lod: bool = True, levels: np.ndarray | int | None = None,
+                timings: dict | None = None) -> TerrainMesh | ResidentMesh:
         """LOD, cull and tessellate for ``camera``; returns the :class:`TerrainMesh`.
 
         ``levels`` overrides the LOD (an ``(e,)`` array or one int for every edge).
@@ -231,9 +239,10 @@ class TerrainRenderer:
         return mesh
 
     # ------------------------------------------------------------------ a frame
-    def render(self, camera, lod: bool = True, lightmap_mode: str = "modulate", debug: str | None = None,
-               fog: float | None | str = "scene", sky: bool = True, clear=(0.0, 0.0, 0.0, 1.0),
-               levels=None, read: bool = True) -> Frame:
+    def render(self, camera: Camera, lod: bool = True, lightmap_mode: str = "modulate", debug: str | None = None,
+               fog: float | None | str = "scene", sky: bool = True,
+               clear: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0),
+               levels: np.ndarray | int | None = None, read: bool = True) -> Frame:
         """Render one frame of the terrain seen by ``camera`` (its aspect is set to the target's).
 
         Parameters
@@ -258,8 +267,9 @@ class TerrainRenderer:
         this renderer's own pass in ``lightmap_mode``."""
         return TerrainMode(self, lightmap_mode, debug)
 
-    def draw(self, camera, mesh, lightmap_mode: str = "modulate", debug: str | None = None,
-             fog: float | None | str = "scene", sky: bool = True, clear=(0.0, 0.0, 0.0, 1.0),
+    def draw(self, camera: Camera, mesh: TerrainMesh | ResidentMesh, lightmap_mode: str = "modulate",
+             debug: str | None = None, fog: float | None | str = "scene", sky: bool = True,
+             clear: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0),
              read: bool = True, timings: dict | None = None, resolve: bool = True, sync: bool = True) -> Frame:
         """Upload and draw a given :class:`TerrainMesh` (any mesh with its fields) for ``camera``;
         the second half of :meth:`render`.  ``resolve=False`` leaves a ps2 frame in the half-float
