@@ -25,12 +25,19 @@ mode (no run-time mode branch).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from piste.errors import ConfigError, RenderError
 from piste.render.context import load_shader, set_depth_write
 from piste.render.textures import LOD_COLORS, mipmapped_texture, snow_texture
 from piste.terrain.resident import ResidentMesh
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from piste.terrain.tessellate import TerrainMesh
 
 __all__ = ["TerrainPass", "LIGHTMAP_MODES", "DEBUG_VIEWS"]
 
@@ -68,7 +75,7 @@ class _Stream:
         self.buffer.write(np.ascontiguousarray(data))
         return False
 
-    def release(self):
+    def release(self) -> None:
         if self.buffer is not None:
             self.buffer.release()
             self.buffer = None
@@ -130,17 +137,17 @@ class TerrainPass:
         self._front_of = None
 
     @property
-    def prog(self):
+    def prog(self) -> moderngl.Program:
         """The modulate first-pass program (compiled on first use)."""
         return self._program(_MODE_ID["modulate"])
 
     @property
-    def prog_ps2(self):
+    def prog_ps2(self) -> moderngl.Program:
         """The PS2 scheme's second pass, ``(Cd - Cs) x As`` (compiled on first use)."""
         return self._program("ps2")
 
     @property
-    def prog_fog(self):
+    def prog_fog(self) -> moderngl.Program:
         """The PS2 scheme's fog pass, blended over the second (compiled on first use)."""
         return self._program("fog")
 
@@ -187,7 +194,7 @@ class TerrainPass:
         h, w = img.shape[:2]
         return self.ctx.texture((w, h), 4, np.ascontiguousarray(img).tobytes(), alignment=1)
 
-    def set_base_texture(self, image) -> None:
+    def set_base_texture(self, image: np.ndarray) -> None:
         """Use ``image`` ``(N, N, 3|4) uint8`` (tileable) as the base texture, mip-mapped and repeated."""
         import moderngl
 
@@ -200,7 +207,7 @@ class TerrainPass:
         self.base.repeat_x = self.base.repeat_y = True
         # anisotropic filtering triples the fill cost on llvmpipe (15 -> 42 ms a frame): off
 
-    def set_lightmap(self, atlas, half_bright: bool = False) -> None:
+    def set_lightmap(self, atlas: np.ndarray | None, half_bright: bool = False) -> None:
         """Use a light-map atlas (``None``: white, i.e. unlit).
 
         Parameters
@@ -239,7 +246,8 @@ class TerrainPass:
         self.light.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.light.repeat_x = self.light.repeat_y = False
 
-    def set_track(self, field, rect, half_width: float = 16.0) -> None:
+    def set_track(self, field: np.ndarray | None, rect: tuple[float, float, float, float] | np.ndarray,
+                  half_width: float = 16.0) -> None:
         """Mark a groomed track (cooler groomed snow, dye lines on its lips) as a projected texture.
 
         Parameters
@@ -269,7 +277,7 @@ class TerrainPass:
                            u_track_half=float(half_width))
 
     # ------------------------------------------------------------------ geometry
-    def upload(self, mesh, kinds: bool = False) -> None:
+    def upload(self, mesh: TerrainMesh | ResidentMesh, kinds: bool = False) -> None:
         """Upload a frame's terrain: a :class:`piste.terrain.TerrainMesh` (buffers are reused and
         orphaned) or a :class:`piste.terrain.resident.ResidentMesh` (the net's vertex blocks are
         uploaded once; each frame writes only its indices and morph factors).
@@ -345,7 +353,8 @@ class TerrainPass:
         return vao
 
     # ------------------------------------------------------------------ drawing
-    def draw(self, mvp, eye, lightmap_mode: str = "modulate", debug: str | None = None, fog=None) -> None:
+    def draw(self, mvp: np.ndarray, eye: np.ndarray, lightmap_mode: str = "modulate", debug: str | None = None,
+             fog: tuple[float, float, float, float] | None = None) -> None:
         """Draw the uploaded terrain into the bound framebuffer (depth test on).
 
         Parameters
