@@ -48,7 +48,11 @@ plain set into groups (its own instances the group ``None``).
 
 from __future__ import annotations
 
+from collections.abc import Hashable, Iterable, Mapping
+from typing import TYPE_CHECKING
+
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import ConfigError, RenderError
 from piste.lighting.lights import DirectionalLight, SpotLight
@@ -57,6 +61,11 @@ from piste.render.textures import mipmapped_texture
 from piste.lighting.vertex import VertexLights, choose_lights_many
 from piste.world.object_lod import DEFAULT_LOD_PIXELS, choose_lods, instance_scale, object_lods
 from piste.world.objects import ObjectSet, bake_vertex_colors, normal_matrix
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from piste.lighting.lights import Lights
 
 __all__ = ["ObjectPass", "ObjectGroups", "instance_rows", "light_uniforms", "MAX_POINT_LIGHTS"]
 
@@ -81,7 +90,7 @@ def _pack_rows(rows: np.ndarray) -> np.ndarray:
     return out
 
 
-def instance_rows(objects) -> np.ndarray:
+def instance_rows(objects: ObjectSet) -> np.ndarray:
     """Per-instance shader data ``(n, 16, 4) float32``: texels 0-3 the object matrix's columns,
     4-6 the normal matrix's columns, 7-9 the light-direction matrix's rows, 10-12 the
     light-colour matrix's columns, 13 the ambient colour with the instance's index within its
@@ -103,7 +112,7 @@ def instance_rows(objects) -> np.ndarray:
     return rows
 
 
-def light_uniforms(lights) -> dict:
+def light_uniforms(lights: Lights) -> dict:
     """The ``points`` mode's uniforms from a :class:`piste.lighting.Lights`: every direct light
     (at most :data:`MAX_POINT_LIGHTS`) as position/type, direction/range, colour/falloff and cone."""
     direct = lights.direct
@@ -176,7 +185,8 @@ class ObjectGroups(ObjectSet):
         self._mesh_radius = np.array([float(meshes[k].radius) for k in kinds])
 
     @classmethod
-    def of(cls, objects, colors=None, world_lights=None) -> "ObjectGroups":
+    def of(cls, objects: ObjectSet, colors: Mapping[str, np.ndarray] | None = None,
+           world_lights: Lights | None = None) -> "ObjectGroups":
         """``objects`` (an ObjectSet) as the group ``None`` of a new set (its ``colors``, if any)."""
         g = cls(objects.meshes, objects.kinds, objects.texture, objects.blend, world_lights)
         g.groups[None] = objects
@@ -184,7 +194,7 @@ class ObjectGroups(ObjectSet):
         g._concat()
         return g
 
-    def part(self, kind, matrix) -> ObjectSet:
+    def part(self, kind: npt.ArrayLike, matrix: npt.ArrayLike) -> ObjectSet:
         """The ObjectSet of instances ``kind (k,) int64`` (into :attr:`kinds`) and ``matrix (k, 4, 4)``
         object -> world: bounding spheres, normal matrices and vertex lights (from
         :attr:`world_lights`) computed for them alone (RenderError: bad shapes or kinds)."""
@@ -206,7 +216,8 @@ class ObjectGroups(ObjectSet):
         return ObjectSet(self.meshes, self.kinds, kind, matrix, normal_matrix(matrix), center, radius, vl,
                          self.texture, counts, self.blend)
 
-    def add(self, key, kind, matrix, colors=None) -> ObjectSet:
+    def add(self, key: Hashable, kind: npt.ArrayLike, matrix: npt.ArrayLike,
+            colors: Mapping[str, np.ndarray] | None = None) -> ObjectSet:
         """Add (or replace) group ``key``: instances ``kind (k,)``, ``matrix (k, 4, 4)`` (:meth:`part`),
         their baked vertex colours ``{kind: (k_kind, v, 3) uint8}`` or None (baked when drawn)."""
         part = self.part(kind, matrix)
@@ -224,7 +235,7 @@ class ObjectGroups(ObjectSet):
         self._concat()
         return part
 
-    def remove(self, key) -> bool:
+    def remove(self, key: Hashable) -> bool:
         """Drop group ``key`` (True if it was there)."""
         if key not in self.groups:
             return False
@@ -233,7 +244,8 @@ class ObjectGroups(ObjectSet):
         self._concat()
         return True
 
-    def change(self, add=None, remove=()) -> int:
+    def change(self, add: Mapping[Hashable, tuple[npt.ArrayLike, npt.ArrayLike]] | None = None,
+               remove: Iterable[Hashable] = ()) -> int:
         """Drop the groups ``remove`` (keys; absent ones ignored), then add (or replace) ``add``
         ``{key: (kind, matrix)}`` (:meth:`add`, colours baked when drawn), the set's arrays
         concatenated once (many tiles paging in at once); the number of groups changed."""
@@ -274,7 +286,7 @@ class ObjectGroups(ObjectSet):
         self.counts = {k: int(np.count_nonzero(self.kind == i)) for i, k in enumerate(self.kinds)}
         self.version += 1
 
-    def visible(self, planes, max_distance: float | None = None, eye=None) -> np.ndarray:
+    def visible(self, planes: np.ndarray, max_distance: float | None = None, eye: npt.ArrayLike | None = None) -> np.ndarray:
         """As :meth:`ObjectSet.visible`, after :attr:`on_visible` (which may change the groups)."""
         if self.on_visible is not None:
             self.on_visible(np.asarray(planes, dtype=np.float64), eye)
@@ -357,7 +369,7 @@ class ObjectPass:
         self.triangles = 0
 
     @property
-    def prog(self):
+    def prog(self) -> moderngl.Program:
         """The generic program (run-time uniforms; drawn with when :attr:`specialised` is False),
         compiled on first use: a specialised frame never uses it (~4 ms of llvmpipe compiling in a
         fresh process with an empty shader cache)."""
@@ -399,7 +411,7 @@ class ObjectPass:
             vao = vaos[(k, level)] = self.ctx.vertex_array(prog, content, buf[3], index_element_size=m.indices.itemsize)
         return vao
 
-    def set_vertex_colors(self, colors) -> None:
+    def set_vertex_colors(self, colors: Mapping[str, np.ndarray]) -> None:
         """Use pre-calculated RGBs for the baked mode: ``{kind: (k, v, 3) uint8}`` half-bright, the
         instances of each kind in the order of ``objects.instances(kind)`` (what
         :func:`piste.world.objects.bake_vertex_colors` returns and a bundle stores)."""
@@ -444,7 +456,8 @@ class ObjectPass:
             t.filter = (moderngl.NEAREST, moderngl.NEAREST)
             self.kinds[k]["baked"] = t
 
-    def draw(self, vp, eye, visible=None, fog=None, mode: str | None = None, light_only: bool = False) -> None:
+    def draw(self, vp: np.ndarray, eye: np.ndarray, visible: np.ndarray | None = None,
+             fog: tuple[float, float, float, float] | None = None, mode: str | None = None, light_only: bool = False) -> None:
         """Draw the ``visible (k,)`` instances (default: all) into the bound framebuffer.
 
         ``mode`` overrides the lighting mode; ``light_only`` draws the light without the texture."""
@@ -519,7 +532,8 @@ class ObjectPass:
                 ctx.disable(moderngl.BLEND)
 
     # ------------------------------------------------------------------ instance groups
-    def add_group(self, key, kind, matrix, colors=None) -> None:
+    def add_group(self, key: Hashable, kind: npt.ArrayLike, matrix: npt.ArrayLike,
+                  colors: Mapping[str, np.ndarray] | None = None) -> None:
         """Add (or replace) the instances ``kind (k,) int64`` (into the set's kinds) with object ->
         world ``matrix (k, 4, 4)`` as group ``key``, their baked colours ``{kind: (k_kind, v, 3)
         uint8}`` or None (baked from the world's lights when the baked mode draws them); only their
@@ -527,7 +541,7 @@ class ObjectPass:
         self._groups().add(key, kind, matrix, colors)
         self._follow()
 
-    def remove_group(self, key) -> bool:
+    def remove_group(self, key: Hashable) -> bool:
         """Drop group ``key``'s instances (True if it was there)."""
         gone = self._groups().remove(key)
         self._follow()
