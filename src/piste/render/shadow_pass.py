@@ -41,13 +41,25 @@ API
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
+import numpy.typing as npt
 
 from piste.errors import RenderError
 from piste.render.context import Offscreen, load_shader, set_depth_write
 from piste.render.textures import MipLevels
 from piste.terrain.query import height_at
 from piste.world.camera import look_at, orthographic
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from piste.terrain.cull import PatchTree
+    from piste.terrain.net import PatchNet
+    from piste.terrain.resident import ResidentMesh
+    from piste.terrain.tessellate import TerrainMesh
 
 __all__ = ["shadow_matrices", "shadow_patches", "shadow_triangles", "ShadowPass", "SHADE", "sun_visibility",
            "area_light_visibility", "SUN_RADIUS", "ComputeMips"]
@@ -61,7 +73,7 @@ SUN_RADIUS = 0.27
 _GL_CLIP_DISTANCE0 = 0x3000
 
 
-def sun_disc_directions(sun_direction, sun_radius: float, rays: int) -> np.ndarray:
+def sun_disc_directions(sun_direction: npt.ArrayLike, sun_radius: float, rays: int) -> np.ndarray:
     """``rays`` unit directions ``(rays, 3) float64`` *towards* the sun, spread evenly over its disc
     of angular radius ``sun_radius`` degrees (Vogel's spiral in the disc's tangent plane)."""
     d = -np.asarray(sun_direction, dtype=np.float64)
@@ -77,7 +89,7 @@ def sun_disc_directions(sun_direction, sun_radius: float, rays: int) -> np.ndarr
     return out / np.linalg.norm(out, axis=1, keepdims=True)
 
 
-def area_light_visibility(points, triangles, sun_direction, sun_radius: float = SUN_RADIUS, rays: int = 64,
+def area_light_visibility(points: npt.ArrayLike, triangles: npt.ArrayLike, sun_direction: npt.ArrayLike, sun_radius: float = SUN_RADIUS, rays: int = 64,
                           chunk: int = 1 << 22) -> np.ndarray:
     """The reference of the soft shadows: the fraction of the sun's disc each point sees.
 
@@ -131,7 +143,7 @@ def area_light_visibility(points, triangles, sun_direction, sun_radius: float = 
     return 1.0 - hit.mean(axis=1)
 
 
-def shadow_matrices(centers, radius, sun_direction, reach: float = 40.0) -> np.ndarray:
+def shadow_matrices(centers: npt.ArrayLike, radius: npt.ArrayLike, sun_direction: npt.ArrayLike, reach: float = 40.0) -> np.ndarray:
     """Orthographic light view-projection matrices ``(n, 4, 4) float64`` of ``n`` shadow casters.
 
     Parameters
@@ -156,7 +168,8 @@ def shadow_matrices(centers, radius, sun_direction, reach: float = 40.0) -> np.n
     return proj @ view
 
 
-def shadow_patches(patch_lo, patch_hi, light_vp, candidates=None, tree=None) -> list:
+def shadow_patches(patch_lo: np.ndarray, patch_hi: np.ndarray, light_vp: np.ndarray,
+                   candidates: np.ndarray | None = None, tree: PatchTree | None = None) -> list:
     """Terrain patches each shadow frustum touches.
 
     Parameters
@@ -205,7 +218,8 @@ def _ragged(starts, counts):
     return np.repeat(np.asarray(starts, dtype=np.int64), counts) + np.arange(total) - off
 
 
-def shadow_triangles(mesh, patch_lists, light_vp=None):
+def shadow_triangles(mesh: TerrainMesh | ResidentMesh, patch_lists: Sequence[npt.ArrayLike],
+                     light_vp: npt.ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The triangles of the given patches in this frame's terrain mesh, for the extra pass.
 
     Parameters
@@ -272,7 +286,10 @@ def shadow_triangles(mesh, patch_lists, light_vp=None):
     return pos, idx, np.stack([first, per], 1)
 
 
-def sun_visibility(net, sun_direction, spacing: float | None = None, soften: float = 1.0):
+# sun_direction: a (3,) direction, typed Any: pipeline.build passes its Optional sun (the step runs only
+# when it is set), which ArrayLike would reject
+def sun_visibility(net: PatchNet, sun_direction: Any, spacing: float | None = None,
+                   soften: float = 1.0) -> tuple[np.ndarray, tuple[float, float, float, float]]:
     """Where a height-field terrain sees the sun: ``(field (H, W) float32 0..1, rect (x0, y0, x1, y1))``.
 
     A grid of ``spacing`` metres (default: a quarter of the median patch) over the net's xy; each
@@ -376,7 +393,7 @@ class ComputeMips:
         self._steps = [(lv, (w >> (lv + 2), h >> (lv + 2))) for lv in range(0, self.levels, 2)]
 
     @staticmethod
-    def supported(ctx, texture, levels: int) -> bool:
+    def supported(ctx: moderngl.Context, texture: moderngl.Texture, levels: int) -> bool:
         """Whether this GL runs compute shaders (4.3) and ``texture`` is RGBA8 with sides that halve
         exactly ``levels`` (even, >= 2) times."""
         levels = int(levels)
@@ -455,7 +472,7 @@ class ShadowPass:
         self.triangles = 0
 
     # ------------------------------------------------------------------ casters
-    def render_casters(self, positions, indices, light_vp, first: int = 0, group: int = 0) -> None:
+    def render_casters(self, positions: np.ndarray, indices: np.ndarray, light_vp: np.ndarray, first: int = 0, group: int = 0) -> None:
         """Draw ``n`` riders' low-LOD meshes (``positions (n, v, 3)`` world space, shared
         ``indices (t, 3)``) into tiles ``first .. first + n - 1`` with ``light_vp (n, 4, 4)``.
 
@@ -516,7 +533,8 @@ class ShadowPass:
         ctx.finish()
         ctx.enable(moderngl.DEPTH_TEST)
 
-    def set_sunlight(self, field=None, rect=(0.0, 0.0, 1.0, 1.0)) -> None:
+    def set_sunlight(self, field: np.ndarray | None = None,
+                     rect: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)) -> None:
         """Where the terrain itself sees the sun: ``field (H, W)`` float 0..1 over world xy
         ``rect = (x0, y0, x1, y1)`` (:func:`sun_visibility`), rows along y.  A rider's shadow
         darkens only sunlit terrain (inside the terrain's own shadow the light map already lacks
@@ -538,7 +556,8 @@ class ShadowPass:
         return data[::-1, :, 0].copy()
 
     # ------------------------------------------------------------------ receivers
-    def draw_receivers(self, mesh, patch_lists, vp, shade=SHADE, depth_bias: float = 2e-5) -> None:
+    def draw_receivers(self, mesh: TerrainMesh | ResidentMesh, patch_lists: Sequence[npt.ArrayLike], vp: np.ndarray,
+                       shade: tuple[float, float, float] = SHADE, depth_bias: float = 2e-5) -> None:
         """The extra terrain pass (see the module docstring) into the bound framebuffer."""
         import moderngl
 
@@ -603,8 +622,10 @@ class ShadowPass:
             obj.release()
 
 
-def shadow_on_plane(ctx, positions, indices, sun_direction, rect, res: int = 96, soft: bool = False,
-                    sun_radius: float = SUN_RADIUS, tile: int = 128, radius: float | None = None):
+def shadow_on_plane(ctx: moderngl.Context, positions: np.ndarray, indices: np.ndarray, sun_direction: npt.ArrayLike,
+                    rect: tuple[float, float, float, float], res: int = 96, soft: bool = False,
+                    sun_radius: float = SUN_RADIUS, tile: int = 128,
+                    radius: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """One caster's projected shadow on the flat ground ``z = 0`` as the pass draws it, seen from
     straight above: the visibility the receivers leave (1 lit, 0 fully shadowed) and the ground
     points of the pixels, to compare with :func:`area_light_visibility` (tests, benchmarks).
