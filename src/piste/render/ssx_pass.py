@@ -27,6 +27,7 @@ A level is drawn by the one runtime (:func:`piste.pipeline.open_scene.open_sourc
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -34,6 +35,12 @@ from piste.errors import RenderError
 from piste.render.context import check_gl_error, load_shader, set_depth_write
 from piste.render.frame import TerrainRenderer
 from piste.render.terrain_mode import TerrainMode
+
+if TYPE_CHECKING:
+    from piste.render.frame import Frame
+    from piste.scene_data import Camera
+    from piste.terrain.resident import ResidentMesh
+    from piste.terrain.tessellate import TerrainMesh
 
 __all__ = ["SourcePass", "SsxTerrainRenderer", "SourceMode"]
 
@@ -52,7 +59,7 @@ class SourcePass:
         self._vao = None
         self._n = 0
 
-    def set_source(self, image) -> None:
+    def set_source(self, image: np.ndarray) -> None:
         """Use ``(h, w, 4) uint8`` stored texels (RGB = Cs, A = As) laid out by the net's
         ``lightmap_rect``; sampled bilinearly, clamped."""
         import moderngl
@@ -68,7 +75,7 @@ class SourcePass:
         self.source.repeat_x = self.source.repeat_y = False
         self.overbright = bool((img[..., 3] > 128).any())
 
-    def upload(self, mesh) -> None:
+    def upload(self, mesh: TerrainMesh) -> None:
         """Upload a terrain mesh's positions, light-map UVs and indices; an empty mesh (nothing in
         view: the camera sees only sky) uploads nothing and :meth:`draw` then draws nothing (GL
         buffers cannot be empty)."""
@@ -84,7 +91,7 @@ class SourcePass:
                                           index_element_size=4)
         self._n = int(np.asarray(mesh.indices).size)
 
-    def draw(self, mvp, stage: str = "blend") -> None:
+    def draw(self, mvp: np.ndarray, stage: str = "blend") -> None:
         """Draw the uploaded mesh into the bound framebuffer.  ``stage``: "blend" (the GS blend,
         both stages) or "raw" (the texels, no blending)."""
         import moderngl
@@ -151,8 +158,8 @@ class SsxTerrainRenderer(TerrainRenderer):
         self.ssx_source = SourcePass(self.ctx)
         self.ssx_source.set_source(source)
 
-    def render(self, camera, lod: bool = True, lightmap_mode: str = "modulate", debug: str | None = None,
-               read: bool = True, levels=None, **kwargs):
+    def render(self, camera: Camera, lod: bool = True, lightmap_mode: str = "modulate", debug: str | None = None,
+               read: bool = True, levels: np.ndarray | int | None = None, **kwargs: Any) -> Frame:
         mode = self.frame_mode(lightmap_mode, debug)
         if not isinstance(mode, SourceMode):  # every mode but ps2 is the terrain renderer's own
             return super().render(camera, lod=lod, lightmap_mode=lightmap_mode, debug=debug, read=read,
@@ -175,7 +182,7 @@ class SsxTerrainRenderer(TerrainRenderer):
             return SourceMode(self, lightmap_mode, debug)
         return super().frame_mode(lightmap_mode, debug)
 
-    def source_frame(self, camera, lod: bool = True) -> np.ndarray:
+    def source_frame(self, camera: Camera, lod: bool = True) -> np.ndarray:
         """The stored texels under each pixel, unblended: ``(H, W, 4) uint8`` (RGB = Cs, A = As;
         background alpha 0), for checking the blend against the GS formula."""
         cam = replace(camera, aspect=self.size[0] / self.size[1])
@@ -199,10 +206,11 @@ class SourceMode(TerrainMode):
 
     fog = False
 
-    def prepare(self, camera, lod: bool = True, timings: dict | None = None):
+    def prepare(self, camera: Camera, lod: bool = True, timings: dict | None = None) -> TerrainMesh | ResidentMesh:
         return self.terrain.prepare(camera, lod=lod, levels=self.terrain.levels(camera, lod), timings=timings)
 
-    def draw(self, camera, mesh, fog=None, timings: dict | None = None, sync: bool = False, **kwargs):
+    def draw(self, camera: Camera, mesh: TerrainMesh | ResidentMesh, fog: Any = None, timings: dict | None = None,
+             sync: bool = False, **kwargs: Any) -> Frame:
         """The base texture, then the stored texels blended over it (``fog`` is ignored: none);
         ``kwargs`` go to the base pass (``sky``, ``clear``)."""
         t = self.terrain
