@@ -30,7 +30,10 @@ import json
 import logging
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -40,6 +43,13 @@ from piste.formats.atomic import atomic_path
 from piste.render.context import Offscreen, save_png
 from piste.render.overlay import OverlayPass, StatsHistory, overlay_image
 from piste.world.camera import FlyCamera
+
+if TYPE_CHECKING:
+    import os
+
+    import moderngl
+
+    from piste.scene_data import Camera
 
 __all__ = ["has_display", "run_window", "ViewOptions", "ViewFrame", "TerrainView", "SceneView", "HELP",
            "riders_in_view"]
@@ -77,7 +87,7 @@ class ViewFrame:
     extra: dict = field(default_factory=dict)
 
 
-def riders_in_view(camera, anchors, radius: float = 1.2) -> int:
+def riders_in_view(camera: Camera, anchors: np.ndarray, radius: float = 1.2) -> int:
     """How many rider anchors ``(n, 3)`` (spheres of ``radius`` around their middles) meet the view frustum."""
     a = np.asarray(anchors, dtype=np.float64).reshape(-1, 3)
     if not len(a):
@@ -106,10 +116,10 @@ class TerrainView:
         self.renderer = renderer
         self.terrain = renderer
 
-    def attach(self, ctx) -> None:
+    def attach(self, ctx: moderngl.Context) -> None:
         _wrap_screen(self.renderer, ctx)
 
-    def draw(self, camera, t: float, opts: ViewOptions) -> ViewFrame:
+    def draw(self, camera: Camera, t: float, opts: ViewOptions) -> ViewFrame:
         frame = self.renderer.render(camera, lod=opts.lod, lightmap_mode=opts.lightmap_mode, debug=opts.debug,
                                      read=False)
         return ViewFrame(camera, frame, {})
@@ -134,10 +144,10 @@ class SceneView:
     def riders(self) -> int:
         return len(self.renderer.scene.riders)
 
-    def attach(self, ctx) -> None:
+    def attach(self, ctx: moderngl.Context) -> None:
         _wrap_screen(self.renderer.terrain, ctx)
 
-    def draw(self, camera, t: float, opts: ViewOptions) -> ViewFrame:
+    def draw(self, camera: Camera, t: float, opts: ViewOptions) -> ViewFrame:
         scene = self.renderer.scene
         if opts.follow is not None:
             scene.follow = int(opts.follow) % max(len(scene.riders), 1)
@@ -163,9 +173,13 @@ def _cam_record(cam) -> dict:
     return {"eye": [float(x) for x in cam.eye], "forward": [float(x) for x in cam.forward]}
 
 
-def run_window(make_view, camera, size=(640, 448), caption: str = "piste view", opts: ViewOptions | None = None,
-               frames: int | None = None, screenshot=None, state=None, exit_after: float | None = None,
-               benchmark: int | None = None, benchmark_camera=None, poll=None, log=None) -> dict:
+# camera: a Camera or ``view -> Camera``, typed Any: pipeline.live.run_window passes its Optional camera through
+def run_window(make_view: Callable[[moderngl.Context], Any], camera: Any,
+               size: tuple[int, int] = (640, 448), caption: str = "piste view", opts: ViewOptions | None = None,
+               frames: int | None = None, screenshot: str | os.PathLike[str] | None = None,
+               state: str | os.PathLike[str] | None = None, exit_after: float | None = None,
+               benchmark: int | None = None, benchmark_camera: Camera | Callable[[int], Camera] | None = None,
+               poll: Callable[[], str | None] | None = None, log: Callable[[str], object] | None = None) -> dict:
     """Open a window, make the view (``make_view(ctx)``) and fly ``camera`` (a
     :class:`piste.world.camera.Camera`) through it.
 
@@ -217,21 +231,21 @@ def run_window(make_view, camera, size=(640, 448), caption: str = "piste view", 
         overlay = OverlayPass(ctx)
         fly = FlyCamera.from_camera(camera)
         held: set = set()
-        st = {"quit": False, "frames": 0, "t": 0.0, "error": None, "max_riders_in_view": 0, "max_rider_pixels": 0,
+        st: dict[str, Any] = {"quit": False, "frames": 0, "t": 0.0, "error": None, "max_riders_in_view": 0, "max_rider_pixels": 0,
               "start": _cam_record(camera), "cam": camera, "overlay_at": 0.0, "moved_keys": []}
         history = StatsHistory(120)
 
-        def fly_record():
+        def fly_record() -> dict:
             return {"position": [float(x) for x in fly.position], "yaw": fly.yaw, "pitch": fly.pitch,
                     "forward": [float(x) for x in fly.forward]}
 
         st["fly_start"] = fly_record()  # where free flight began (updated when leaving the chase camera)
 
-        def shot(path=None):
+        def shot(path: str | os.PathLike[str] | None = None) -> Path:
             img = view.terrain.target.read()
             return save_png(path or f"out/view_{int(time.time())}.png", img[..., :3])
 
-        def leave_follow():
+        def leave_follow() -> None:
             if opts.follow is not None:
                 cam = st["cam"]
                 fly.position = np.asarray(cam.eye, dtype=np.float64).copy()
@@ -241,7 +255,7 @@ def run_window(make_view, camera, size=(640, 448), caption: str = "piste view", 
                 opts.follow = None
                 st["fly_start"] = fly_record()
 
-        def on_key_press(symbol, modifiers):
+        def on_key_press(symbol: int, modifiers: int) -> bool | None:
             held.add(symbol)
             if symbol == key.ESCAPE:
                 st["quit"] = True
@@ -270,25 +284,25 @@ def run_window(make_view, camera, size=(640, 448), caption: str = "piste view", 
                 return None
             return pyglet.event.EVENT_HANDLED
 
-        def on_key_release(symbol, modifiers):
+        def on_key_release(symbol: int, modifiers: int) -> None:
             held.discard(symbol)
 
-        def on_deactivate():
+        def on_deactivate() -> None:
             held.clear()
 
-        def on_mouse_drag(x, y, dx, dy, buttons, modifiers):
+        def on_mouse_drag(x: int, y: int, dx: int, dy: int, buttons: int, modifiers: int) -> None:
             leave_follow()
             fly.look(dx * 0.004, dy * 0.004)
 
-        def on_close():
+        def on_close() -> bool:
             st["quit"] = True
             return pyglet.event.EVENT_HANDLED
 
         window.push_handlers(on_key_press=on_key_press, on_key_release=on_key_release, on_deactivate=on_deactivate,
                              on_mouse_drag=on_mouse_drag, on_close=on_close)
 
-        def fly_update(dt):
-            def k(*syms):
+        def fly_update(dt: float) -> None:
+            def k(*syms: int) -> float:
                 return 1.0 if any(s in held for s in syms) else 0.0
 
             fast = 4.0 if k(key.LSHIFT, key.RSHIFT) else 1.0
@@ -299,7 +313,7 @@ def run_window(make_view, camera, size=(640, 448), caption: str = "piste view", 
                 fly.move(fwd * fast, right * fast, up * fast, dt)
                 fly.look(yaw * 1.5 * dt, pitch * 1.0 * dt)
 
-        def draw_frame(cam_override=None):
+        def draw_frame(cam_override: Camera | None = None) -> ViewFrame:
             cam = cam_override if cam_override is not None else fly.camera(w / h)
             ctx.error  # noqa: B018  pyglet's own calls may leave an error behind (Xvfb + llvmpipe): clear it
             vf = view.draw(cam, st["t"], opts)
@@ -313,7 +327,7 @@ def run_window(make_view, camera, size=(640, 448), caption: str = "piste view", 
                 raise RenderError(f"OpenGL error {err} after drawing a frame of the view")
             return vf
 
-        def header():
+        def header() -> str:
             tog = [opts.lightmap_mode, "LOD view" if opts.debug == "lod" else "", "" if opts.lod else "LOD off",
                    ("vis on" if opts.visibility else "vis off") if view.has_visibility else "",
                    f"rider {opts.follow}" if opts.follow is not None else "fly", "paused" if opts.paused else ""]
