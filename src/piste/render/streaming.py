@@ -76,8 +76,10 @@ import logging
 import queue
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -95,6 +97,13 @@ from piste.terrain.tiles import (MAX_TILE_OBJECTS, TileError, TileGrid, TileStor
                                  triangulated_heights)
 from piste.world.camera import Camera
 from piste.world.objects import OBJECT_KINDS, make_mesh
+
+if TYPE_CHECKING:
+    import os
+
+    import numpy.typing as npt
+
+    from piste.terrain.tessellate import TerrainMesh
 
 __all__ = ["TileCache", "StreamingRenderer", "StreamingTerrain", "TileMesh", "near_mesh", "far_mesh", "mesh_bytes", "fly_path",
            "render_flight", "TileSets", "light_grid", "stride_errors", "chord_error", "visible_indices", "world_fog_density",
@@ -514,7 +523,7 @@ class TileSets:
     level_bits: np.ndarray | None = None
     heights: tuple = ()
 
-    def visible_tile(self, t, eye) -> np.ndarray | None:
+    def visible_tile(self, t: tuple[int, int], eye: npt.ArrayLike) -> np.ndarray | None:
         """``(n_t,) bool`` patches of tile ``t`` an eye ``(3,)`` over this set's tile may see
         (:meth:`visible`), or None: ``t`` is not in the sets, or the eye is outside the grid or above
         the band (draw all)."""
@@ -528,7 +537,7 @@ class TileSets:
         bits = got[1]
         return None if bits is None else bits[span[0]:span[0] + span[1]]
 
-    def visible(self, eye) -> np.ndarray | None:
+    def visible(self, eye: npt.ArrayLike) -> np.ndarray | None:
         """``(n,) bool`` patches an eye ``(3,)`` over the tile may see, or None (outside the grid,
         or above the band over its cell: draw all).  The sets were sampled at five eye points a
         cell (its corners and centre) and an eye between them can see a little more, so this is
@@ -821,7 +830,7 @@ class TileCache:
         with self._lock:
             return dict(self.objects)
 
-    def sets_hold(self, eye, drawn: dict) -> bool:
+    def sets_hold(self, eye: npt.ArrayLike, drawn: dict) -> bool:
         """Whether the sets of the tile under ``eye`` may cull this frame: every tile of theirs among
         ``drawn`` (``{tile: level}``, :meth:`draw_list`'s) is drawn at a level their occluders were
         lowered to (:attr:`TileSets.levels`: a coarser mesh sags below the surface and may show what
@@ -840,7 +849,7 @@ class TileCache:
                     return False
         return True
 
-    def visible_patches(self, t, eye) -> np.ndarray | None:
+    def visible_patches(self, t: tuple[int, int], eye: npt.ArrayLike) -> np.ndarray | None:
         """``(n,) bool`` patches of tile ``t`` seen from ``eye``, by the sets of the resident tile under
         the eye (:meth:`TileSets.visible_tile`: its own patches and its neighbours'), None: draw them
         all (no sets there, ``t`` not in them, the eye outside their grid or above their band)."""
@@ -907,20 +916,20 @@ class TileCache:
             elif t in self._objects_wanted:
                 self.objects[t] = objs
 
-    def distance(self, eye, t) -> float:
+    def distance(self, eye: npt.ArrayLike, t: tuple[int, int]) -> float:
         """Metres from ``eye`` (x, y) to tile ``t``'s rectangle."""
         b = self.bounds[t]
         dx = max(b[0, 0] - eye[0], 0.0, eye[0] - b[1, 0])
         dy = max(b[0, 1] - eye[1], 0.0, eye[1] - b[1, 1])
         return float(np.hypot(dx, dy))
 
-    def distances(self, eye) -> np.ndarray:
+    def distances(self, eye: npt.ArrayLike) -> np.ndarray:
         """:meth:`distance` to every tile of :attr:`tiles` at once, ``(n,)`` float64."""
         eye = np.asarray(eye, dtype=np.float64)[:2]
         d = np.maximum(np.maximum(self.lo[:, :2] - eye, eye - self.hi[:, :2]), 0.0)
         return np.hypot(d[:, 0], d[:, 1])
 
-    def object_distances(self, eye, pixel_scale: float | None = None, far: float | None = None,
+    def object_distances(self, eye: npt.ArrayLike, pixel_scale: float | None = None, far: float | None = None,
                          fog_density: float | None = None) -> np.ndarray:
         """How far from the eye each tile of :attr:`tiles` keeps its objects paged in, ``(n,)``
         metres (compared with the distance from the eye ``(3,)`` to the tile's box): ``object_distance``
@@ -942,7 +951,7 @@ class TileCache:
             out = np.minimum(out, float(far))
         return out
 
-    def update(self, eye, pixel_scale: float | None = None, pixel_error: float = FAR_PIXEL_ERROR,
+    def update(self, eye: npt.ArrayLike, pixel_scale: float | None = None, pixel_error: float = FAR_PIXEL_ERROR,
                far: float | None = None, fog_density: float | None = None, object_scale: float | None = None) -> None:
         """Choose the paged meshes for ``eye``: nearest tiles first, while the budget allows, get
         near meshes (``near_samples`` a patch side) within ``near_radius`` and, with
@@ -1027,13 +1036,13 @@ class TileCache:
         if self.errors:
             raise self.errors[0]
 
-    def far_stride(self, eye, t) -> int:
+    def far_stride(self, eye: npt.ArrayLike, t: tuple[int, int]) -> int:
         """The far level of tile ``t`` seen from ``eye``: corner stride 1 within ``far_lod_distance``,
         2 within twice that, 4 within four times, else 8."""
         d = self.distance(eye, t) / self.far_lod_distance
         return next((k for k in FAR_STRIDES if d < k), FAR_STRIDES[-1])
 
-    def far_strides(self, eye, pixel_scale: float, pixel_error: float = FAR_PIXEL_ERROR) -> np.ndarray:
+    def far_strides(self, eye: npt.ArrayLike, pixel_scale: float, pixel_error: float = FAR_PIXEL_ERROR) -> np.ndarray:
         """The far level of every tile of :attr:`tiles` seen from ``eye`` ``(3,)``: the coarsest
         stride whose height error (:func:`stride_errors` plus the corner grid's :attr:`chord_error`)
         projects to at most ``pixel_error`` pixels at the tile's nearest point, ``pixel_scale``
@@ -1047,7 +1056,7 @@ class TileCache:
             out = np.where(self._stride_err[:, j] <= allowed, k, out)
         return out
 
-    def morph_factors(self, eye, pixel_scale: float, pixel_error: float | None) -> dict:
+    def morph_factors(self, eye: npt.ArrayLike, pixel_scale: float, pixel_error: float | None) -> dict:
         """Geomorph factor of every resident near or middle tile seen from ``eye``: ``{tile: f}``,
         f = clamp(e / pixel_error - 1, 0, 1) where e is the pixels the coarser level's error
         (:attr:`mid_error` under a near mesh, :attr:`chord_error` under a middle one) projects to at
@@ -1071,7 +1080,7 @@ class TileCache:
             out[t] = float(np.clip(px / float(pixel_error) - 1.0, 0.0, 1.0))
         return out
 
-    def draw_list(self, eye=None, mask=None, pixel_scale: float | None = None) -> list:
+    def draw_list(self, eye: npt.ArrayLike | None = None, mask: np.ndarray | None = None, pixel_scale: float | None = None) -> list:
         """``[(tile, level, TileMesh)]``: a near mesh where one is resident, else the far one at the
         stride for ``eye`` (``"far1"``, ``"far2"``, ...; the full corner grid without ``eye``):
         by screen error with ``pixel_scale`` (:meth:`far_strides`), else by distance
@@ -1269,7 +1278,7 @@ class StreamingRenderer:
             got = self._vis_gpu[vkey] = (ibo, vao, len(idx))
         return got[1], got[2]
 
-    def render(self, camera, wait: bool = False, read: bool = True) -> np.ndarray | None:
+    def render(self, camera: Camera, wait: bool = False, read: bool = True) -> np.ndarray | None:
         """One frame from ``camera`` (:class:`piste.world.camera.Camera`): ``(H, W, 3)`` uint8.
 
         ``wait``: block until every wanted near tile is loaded first (offline rendering, tests);
@@ -1281,7 +1290,7 @@ class StreamingRenderer:
         self.update(cam, wait)
         return self.draw(cam, read, t0)
 
-    def update(self, camera, wait: bool = False) -> None:
+    def update(self, camera: Camera | _View, wait: bool = False) -> None:
         """Page tiles for ``camera`` (nearest first under the budget; scene objects by their own
         distance for this view, its far plane and the world's fog); ``wait``: until loaded."""
         far = getattr(camera, "far", None)
@@ -1295,7 +1304,7 @@ class StreamingRenderer:
         elif self.cache.errors:
             raise self.cache.errors[0]
 
-    def draw(self, cam, read: bool = True, t0: float | None = None, sky: bool = True) -> np.ndarray | None:
+    def draw(self, cam: Camera, read: bool = True, t0: float | None = None, sky: bool = True) -> np.ndarray | None:
         """Draw the resident tiles for ``cam`` (its aspect the target's) into :attr:`fbo`, cleared
         to the background (and the sky gradient over it with a sky pass and ``sky``); the image
         ``(H, W, 3) uint8`` with ``read``, else None (more passes follow)."""
@@ -1465,11 +1474,11 @@ class StreamingTerrain:
         self.level = max(int(self.streaming.cache.res), 2)
 
     @property
-    def target(self):
+    def target(self) -> Offscreen:
         return self.streaming.fbo
 
     @target.setter
-    def target(self, value) -> None:  # a window wraps its screen (render.window._wrap_screen)
+    def target(self, value: Offscreen) -> None:  # a window wraps its screen (render.window._wrap_screen)
         self.streaming.fbo = value
 
     @property
@@ -1479,12 +1488,12 @@ class StreamingTerrain:
     def start_resident(self) -> None:
         """(Nothing to build: tiles load as the camera moves.)"""
 
-    def set_visibility(self, visibility=None) -> None:
+    def set_visibility(self, visibility: Any = None) -> None:  # a pipeline Visibility (upward import: Any)
         """(The interface's; a tiled world's near tiles use their own per-tile sets, built with
         ``cell > 0``: :attr:`StreamingRenderer.visibility`.)"""
         self.visibility = visibility
 
-    def levels(self, camera, lod: bool = True) -> int:
+    def levels(self, camera: Camera, lod: bool = True) -> int:
         return self.level
 
     def _update(self, cam) -> None:
@@ -1517,7 +1526,8 @@ class StreamingTerrain:
         self.cull_stats.update(object_tiles=len(self.objects.groups), objects_resident=len(self.objects))
         return {"added": len(new), "removed": len(gone), "tiles": len(self.objects.groups)}
 
-    def prepare(self, camera, lod: bool = True, levels=None, timings: dict | None = None):
+    def prepare(self, camera: Camera, lod: bool = True, levels: np.ndarray | int | None = None,
+                timings: dict | None = None) -> TerrainMesh:
         """Page the tiles for ``camera`` and return the local net's patches in view, tessellated at
         the tiles' grid (a :class:`~piste.terrain.TerrainMesh`: the shadow receivers' triangles)."""
         t0 = time.perf_counter()
@@ -1531,9 +1541,9 @@ class StreamingTerrain:
             timings.update(lod=0.0, cull=(t1 - t0) * 1e3, tessellate=(time.perf_counter() - t1) * 1e3)
         return mesh
 
-    def draw(self, camera, mesh=None, lightmap_mode: str = "modulate", debug: str | None = None, fog=None,
-             sky: bool = True, clear=None, read: bool = True, timings: dict | None = None, resolve: bool = True,
-             sync: bool = True):
+    def draw(self, camera: Camera, mesh: TerrainMesh | None = None, lightmap_mode: str = "modulate", debug: str | None = None,
+             fog: float | str | None = None, sky: bool = True, clear: tuple[float, float, float, float] | None = None, read: bool = True,
+             timings: dict | None = None, resolve: bool = True, sync: bool = True) -> Frame:
         """Draw the streamed tiles like the course's terrain in modulate mode (base texture x light
         map; the other light-map and debug modes are not drawn differently), fogged with ``fog``
         (density per metre, "scene": :attr:`fog_density`, None or 0: none), the sky over the rest
@@ -1567,8 +1577,8 @@ class StreamingTerrain:
         """How a scene frame draws the streamed tiles: their own pass (see :meth:`draw`)."""
         return TerrainMode(self, lightmap_mode, debug)
 
-    def render(self, camera, lod: bool = True, lightmap_mode: str = "modulate", debug: str | None = None,
-               fog="scene", read: bool = True, **_ignored):
+    def render(self, camera: Camera, lod: bool = True, lightmap_mode: str = "modulate", debug: str | None = None,
+               fog: float | str | None = "scene", read: bool = True, **_ignored: Any) -> Frame:
         """One frame of the tiles alone (:meth:`prepare` + :meth:`draw`)."""
         cam = camera.with_aspect(*self.size)
         self._update(cam)
@@ -1590,7 +1600,7 @@ class _View:
 
 
 def fly_path(index: dict, frames: int, fps: float = 30.0, speed: float = 100.0, height: float = 120.0,
-             fov: float = 60.0, far: float | None = None):
+             fov: float = 60.0, far: float | None = None) -> Iterator[Camera]:
     """Cameras of a straight flight across the world's diagonal at ``speed`` m/s, ``height`` m
     above the tiles' top, looking ahead and down."""
     g = TileGrid.from_dict(index["grid"])
@@ -1608,9 +1618,10 @@ def fly_path(index: dict, frames: int, fps: float = 30.0, speed: float = 100.0, 
         yield Camera(eye, eye + d * 400.0 - np.array([0.0, 0.0, 150.0]), fov_y=fov, near=1.0, far=far)
 
 
-def render_flight(root, out=None, size=(640, 448), frames: int = 1, fps: float = 30.0, speed: float = 100.0,
-                  budget_mb: float = 256.0, video=None, wait: bool = True, progress: bool = False,
-                  camera=None) -> dict:
+def render_flight(root: str | os.PathLike[str], out: str | os.PathLike[str] | None = None,
+                  size: tuple[int, int] = (640, 448), frames: int = 1, fps: float = 30.0, speed: float = 100.0,
+                  budget_mb: float = 256.0, video: str | os.PathLike[str] | None = None, wait: bool = True,
+                  progress: bool = False, camera: Camera | None = None) -> dict:
     """``piste render WORLD.tiles``: fly across a tiled world; PNG of the first frame, optional MP4.
     ``camera``: a :class:`~piste.world.camera.Camera` that stays put for every frame instead of the
     flight (:func:`fly_path`).
