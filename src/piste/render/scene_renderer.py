@@ -53,6 +53,7 @@ if TYPE_CHECKING:
     import moderngl
 
     from piste.world.camera import Camera
+    from piste.world.riders import RiderState
     from piste.world.scene import Scene
 
 __all__ = ["SceneRenderer", "SceneImage", "summarize_scene"]
@@ -362,7 +363,8 @@ class SceneRenderer:
         return SceneImage(image, frame, sf, patches, stats, tm, frames[1:])
 
     @staticmethod
-    def face_weights(cast, state, t: float, face_t: float, riders) -> np.ndarray:
+    def face_weights(cast: Any, state: RiderState, t: float, face_t: float, riders: np.ndarray) -> np.ndarray:
+        # cast: a Scene or a Scene-like cast (SceneRenderer(casts=...): model, lods, riders), hence Any
         """Morph weights ``(len(riders), k)`` of ``cast``'s riders: their clip's weight track
         when it has one for the whole mesh (a glTF morph animation), else the procedural face."""
         mesh = cast.lods[0].mesh
