@@ -576,21 +576,8 @@ def _section(pbd: Pbd, name: str, dtype: np.dtype) -> np.ndarray:
 
 
 def _instance_hashes(pbd: Pbd, k: int) -> np.ndarray:
-    """Each instance's hash from the hash section's instance list (the first pair naming it; 0 for
-    one it does not name, as the Multitool leaves it), ``(k,)`` int64."""
-    out = np.zeros(k, np.int64)
-    h = pbd.hash_header()
-    if h is None:
-        return out
-    start, end = pbd._hash_span()
-    off, n = start + h["offset_instances"], h["count_instances"]
-    if off + 8 * n > end:
-        raise FormatError(pbd.path, f"the hash section's {n} instance hashes from offset {off} run past the end "
-                                    f"of the section ({end})", field="hash.count_instances")
-    pairs = np.frombuffer(pbd.raw, "<i4", count=2 * n, offset=off).reshape(n, 2).astype(np.int64)
-    ok = (pairs[:, 1] >= 0) & (pairs[:, 1] < k)
-    out[pairs[ok, 1][::-1]] = pairs[ok, 0][::-1]
-    return out
+    """Each instance's hash from the hash section's instance list (:meth:`Pbd.hash_list`), ``(k,)`` int64."""
+    return pbd.hash_list("instances", k)
 
 
 def _instance_items(rec: np.ndarray, hashes: np.ndarray, names: list[str] | None = None) -> list:

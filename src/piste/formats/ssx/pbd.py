@@ -35,7 +35,8 @@ API
 ::
 
     read_pbd(path) -> Pbd / parse_pbd(data, path) -> Pbd
-    Pbd.read_lights() -> (k,) LIGHT_DTYPE; Pbd.light_hashes() -> (k,) int64 or None
+    Pbd.read_lights() -> (k,) LIGHT_DTYPE; Pbd.light_hashes() -> (k,) int64 or None;
+    Pbd.hash_list(kind, k) -> (k,) int64
     hash_section_bytes(light_hashes) -> bytes   a hash section holding only a light list
     write_pbd(pbd, path)                 atomic
     bezier_to_power(cp) / power_to_bezier(c)   (n, 4, 4, 3) <-> (n, 16, 3) stored order
@@ -339,18 +340,27 @@ class Pbd:
         """Each light's name hash from the hash section's light list, ``(counts["lights"],)`` int64
         (signed 32-bit values, as the Multitool's JSON holds them; 0 for a light the list does not
         name, as the Multitool leaves it), or None without a hash section."""
+        if self.hash_header() is None:
+            return None
+        return self.hash_list("lights", self.counts["lights"])
+
+    def hash_list(self, kind: str, k: int) -> np.ndarray:
+        """Each of ``k`` records' hash from the hash section's ``kind`` list (``"lights"`` or
+        ``"instances"``: ``(hash, index)`` pairs of signed 32-bit values; the first pair naming a record
+        wins; 0 for a record no pair names, as the Multitool leaves it), ``(k,)`` int64; all 0 without a
+        hash section.  FormatError (``hash.count_<kind>``) when the list runs past the section."""
+        out = np.zeros(k, np.int64)
         h = self.hash_header()
         if h is None:
-            return None
+            return out
         start, end = self._hash_span()
-        off, k = start + h["offset_lights"], h["count_lights"]
-        if off + 8 * k > end:
-            raise FormatError(self.path, f"the hash section's {k} light hashes from offset {off} run past the end "
-                                         f"of the section ({end})", field="hash.count_lights")
-        pairs = np.frombuffer(self.raw, "<i4", count=2 * k, offset=off).reshape(k, 2).astype(np.int64)
-        out = np.zeros(self.counts["lights"], np.int64)
-        ok = (pairs[:, 1] >= 0) & (pairs[:, 1] < len(out))
-        out[pairs[ok, 1][::-1]] = pairs[ok, 0][::-1]  # the first pair naming a light wins
+        off, n = start + h[f"offset_{kind}"], h[f"count_{kind}"]
+        if off + 8 * n > end:
+            raise FormatError(self.path, f"the hash section's {n} {kind[:-1]} hashes from offset {off} run past the "
+                                         f"end of the section ({end})", field=f"hash.count_{kind}")
+        pairs = np.frombuffer(self.raw, "<i4", count=2 * n, offset=off).reshape(n, 2).astype(np.int64)
+        ok = (pairs[:, 1] >= 0) & (pairs[:, 1] < k)
+        out[pairs[ok, 1][::-1]] = pairs[ok, 0][::-1]  # the first pair naming a record wins
         return out
 
     # ------------------------------------------------------------------ encoding
