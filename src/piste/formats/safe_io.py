@@ -42,6 +42,7 @@ loads_json(data, path, max_depth=MAX_JSON_DEPTH) -> object         json.loads wi
 json_depth(obj) -> int                                              nesting depth (iterative)
 text_depth(text) -> int                                             nesting depth of JSON text, unparsed
 toml_depth(text) -> int                                             nesting depth of TOML text, unparsed
+loads_toml(text, path, what, error) -> dict                         tomllib.loads with the size/depth/syntax guards
 Limits: MAX_MODEL_BYTES, MAX_BUFFER_BYTES, MAX_IMAGE_BYTES, MAX_IMAGE_PIXELS, MAX_JSON_DEPTH
 """
 
@@ -59,6 +60,7 @@ import threading
 import urllib.parse
 from collections.abc import Iterable
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -103,6 +105,8 @@ MAX_IMAGE_PIXELS = 64 << 20
 MAX_JSON_DEPTH = 64
 #: largest scene or light TOML text: hand-written files are a few KB (tomllib takes ~1 s per 10 MB)
 MAX_TOML_BYTES = 16 << 20
+#: deepest array / table nesting a TOML file piste reads may have (real ones nest 2 or 3 deep)
+MAX_TOML_DEPTH = 32
 
 _SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*:")
 _DRIVE = re.compile(r"^[A-Za-z]:[\\/]")
@@ -527,6 +531,26 @@ def toml_depth(text: str) -> int:
     """Deepest ``[`` / ``{`` nesting of TOML text (strings and comments skipped), measured before
     parsing: :mod:`tomllib` recurses on nested arrays and would raise RecursionError."""
     return text_depth(_TOML_STRING.sub('""', text).replace('"', " "))
+
+
+def loads_toml(text: str, path: str | os.PathLike[str] | None, what: str = "TOML file",
+               error: Callable[..., Exception] = FormatError) -> dict[str, Any]:
+    """``tomllib.loads(text)`` with piste's guards: more than :data:`MAX_TOML_BYTES` characters, nesting
+    deeper than :data:`MAX_TOML_DEPTH` (measured before parsing: tomllib recurses) and syntax errors
+    raise ``error(path, message, line=...)`` (a scene file's SceneError, a lights file's FormatError);
+    ``what`` names the kind of file in the size message."""
+    import tomllib  # (imported where used: a bundle render parses no TOML)
+
+    if len(text) > MAX_TOML_BYTES:
+        raise error(path, f"{len(text)} characters: more than the limit of {MAX_TOML_BYTES} for a {what}")
+    if toml_depth(text) > MAX_TOML_DEPTH:
+        raise error(path, f"arrays or tables nested more than {MAX_TOML_DEPTH} deep")
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        msg = str(exc)
+        m = re.search(r"line (\d+)", msg)
+        raise error(path, f"not valid TOML: {msg}", line=int(m.group(1)) if m else None) from None
 
 
 def loads_json(data: str | bytes, path: str | os.PathLike[str] | None, max_depth: int = MAX_JSON_DEPTH, field: str | None = None) -> Any:

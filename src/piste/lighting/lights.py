@@ -74,7 +74,7 @@ import numpy as np
 import numpy.typing as npt
 
 from piste.errors import FormatError, ValidationError
-from piste.formats.safe_io import MAX_TOML_BYTES, toml_depth
+from piste.formats.safe_io import loads_toml
 from piste.scene_data import (KIND_OF_LIGHT, LIGHT_KINDS, AmbientLight, AnyLight, DirectionalLight, Lights, PointLight,  # noqa: F401
                               SpotLight)  # (the light family lives in the foundation; re-exported here)
 
@@ -132,18 +132,7 @@ def loads_lights(text: str, path: str | os.PathLike[str] = "<string>") -> Lights
 
     Raises :class:`~piste.errors.FormatError` naming the file, line and key on any mistake.
     """
-    import tomllib
-
-    if len(text) > MAX_TOML_BYTES:
-        raise FormatError(path, f"{len(text)} characters: more than the limit of {MAX_TOML_BYTES} for a lights file")
-    if toml_depth(text) > 32:  # before tomllib, which recurses (RecursionError)
-        raise FormatError(path, "arrays or tables nested more than 32 deep")
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        msg = str(exc)
-        m = re.search(r"at line (\d+)", msg)
-        raise FormatError(path, f"not valid TOML: {msg}", line=int(m.group(1)) if m else None) from None
+    doc = loads_toml(text, path, "lights file")
     lights = []
     name = doc.pop("name", Path(str(path)).name)
     for kind, items in doc.items():

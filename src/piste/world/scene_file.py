@@ -159,8 +159,8 @@ from typing import Any
 from piste.errors import ConfigError, PisteError, ValidationError
 from piste.formats.gltf.schema import precheck_gltf
 from piste.formats.ssx.mpf_model import mpf_partners
-from piste.formats.safe_io import (MAX_TOML_BYTES, check_regular, confined_file, confined_folder, open_file,
-                                   read_regular, resolve_reference, toml_depth, user_allow_paths)
+from piste.formats.safe_io import (MAX_TOML_BYTES, check_regular, confined_file, confined_folder, loads_toml, open_file,
+                                   read_regular, resolve_reference, user_allow_paths)
 from piste.lighting.lights import AmbientLight, DirectionalLight, PointLight, SpotLight
 from piste.world.object_lod import DEFAULT_LOD_PIXELS
 
@@ -194,8 +194,6 @@ __all__ = [
 
 BUILTIN_MODELS = ("builtin:rider", "builtin:tree", "builtin:sign", "builtin:rock", "builtin:rail")
 HEIGHTFIELD_IMAGES = (".png", ".tif", ".tiff", ".pgm")
-#: deepest array / table nesting a scene file may have (real ones nest 2 or 3 deep)
-MAX_TOML_DEPTH = 32
 #: [lod] preset -> (near, far) metres: piste's own, and SSX Tricky's 3000 / 15000 game units
 LOD_PRESETS = {"piste": (60.0, 180.0), "ssx_tricky": (30.0, 150.0)}
 #: largest absolute coordinate in metres a scene may give (eyes, targets, positions, offsets): 100,000 km
@@ -1049,19 +1047,8 @@ _SCENE_FIELDS = frozenset(f.name for f in fields(SceneFile))
 
 def loads_scene(text: str, path: str | os.PathLike[str] = "scene.toml") -> SceneFile:
     """Parse and validate scene TOML ``text``; relative paths resolve against ``path``'s folder."""
-    import tomllib
-
     path = Path(path)
-    if len(text) > MAX_TOML_BYTES:
-        raise SceneError(path, f"{len(text)} characters: more than the limit of {MAX_TOML_BYTES} for a scene file")
-    if toml_depth(text) > MAX_TOML_DEPTH:  # before tomllib, which recurses (RecursionError)
-        raise SceneError(path, f"arrays or tables nested more than {MAX_TOML_DEPTH} deep")
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        msg = str(exc)
-        m = re.search(r"line (\d+)", msg)
-        raise SceneError(path, f"not valid TOML: {msg}", line=int(m.group(1)) if m else None) from None
+    doc = loads_toml(text, path, "scene file", SceneError)
     lines = key_lines(text)
     top = SceneTable(path, lines, doc, (), "")
     top.allow({*_TOP_KEYS, *SCENE_SECTIONS})
