@@ -302,7 +302,7 @@ def test_a_level_switch_does_not_pop(world, gl):
     try:
         cam = next(S.fly_path(r.cache.index, 1)).with_aspect(160, 120)
         c, e = r.cache, np.asarray(cam.eye)
-        ps = 120 / (2 * np.tan(np.radians(cam.fov_y) / 2))
+        ps = r.lod_scale(cam.fov_y)  # pixels a radian the levels are chosen at
         seen = S._boxes_visible(cam.frustum_planes(), c.lo, c.hi)
         d3 = np.sqrt((np.maximum(np.maximum(c.lo - e, e - c.hi), 0.0) ** 2).sum(1))
         px = [(c.chord_error[t] * ps / d3[i], t) for i, t in enumerate(c.tiles)

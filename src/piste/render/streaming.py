@@ -118,6 +118,10 @@ FAR_STRIDES = (1, 2, 4, 8)
 #: far levels are chosen so that a level's height error (against the full corner grid) stays
 #: under this many pixels on screen
 FAR_PIXEL_ERROR = 3.0
+#: pixel errors are counted in pixels of a frame at least this many lines tall (the PS2's): a smaller
+#: target gets the same error as an angle, as the course's LOD thresholds are angles
+#: (:data:`piste.terrain.lod.FLAT_ERROR`: 0.5 px at 640 x 448), a taller one ``pixel_error`` of its own pixels
+LOD_REFERENCE_LINES = 448
 #: near meshes evaluate every patch at least this many samples a side (the course's LOD beyond 180 m)
 NEAR_SAMPLES = 4
 #: samples a patch side of the middle level: evaluated patches (a centre and edge midpoints: a
@@ -145,18 +149,24 @@ uniform vec2 u_origin;     // the tile's (x0, y0)
 uniform vec2 u_patch;      // 1 / patch size (x, y)
 uniform vec4 u_light_uv;   // (res - 1) / width, (res - 1) / height, 0.5 / width, 0.5 / height
 uniform float u_morph;     // geomorph: 1 the mesh's own heights, 0 its coarser level's (in_target)
-uniform float u_vmorph;    // > 0: the geomorph per vertex instead, clamp(u_vmorph / distance - 1, 0, 1)
+uniform float u_verr;      // > 0: the geomorph per vertex instead, by the vertex's errors (pixels a metre of error at 1 m over the limit)
 in vec3 in_pos;
-in float in_target;
+in float in_target;        // the next coarser level's height here (a near mesh: the middle level's; a middle one: the corner grid's)
+in float in_corner;        // the corner grid's height here
+in vec2 in_err;            // the corner grid's and the middle level's errors (metres) of the patches around the vertex
 out vec2 v_uv;
 out vec2 v_uvl;
 out float v_fog;
 void main() {
-    float m = u_morph;
-    if (u_vmorph > 0.0) {  // the coarser level's error in pixels at this vertex (its coarse position), over the limit
-        m = clamp(u_vmorph / max(distance(vec3(in_pos.xy, in_target), u_eye), 1e-6) - 1.0, 0.0, 1.0);
+    float z = in_target + u_morph * (in_pos.z - in_target);
+    if (u_verr > 0.0) {  // each level's error in pixels at this vertex (its corner-grid position), over the limit
+        float dc = max(distance(vec3(in_pos.xy, in_corner), u_eye), 1e-6);
+        float m1 = clamp(in_err.x * u_verr / dc - 1.0, 0.0, 1.0);  // corner grid -> middle level
+        float m2 = clamp(in_err.y * u_verr / dc - 1.0, 0.0, 1.0);  // middle level -> the mesh's own
+        float hm = in_corner + m1 * (in_target - in_corner);
+        z = hm + m2 * (in_pos.z - hm);
     }
-    vec3 p = vec3(in_pos.xy, in_target + m * (in_pos.z - in_target));
+    vec3 p = vec3(in_pos.xy, z);
     gl_Position = u_vp * vec4(p, 1.0);
     vec2 q = (p.xy - u_origin) * u_patch;   // patch units from the tile's corner
     v_uv = q;
@@ -186,17 +196,22 @@ class TileMesh:
     """A tile's triangles: positions ``(k, 3)`` float32, colours ``(k, 3)`` uint8 (half-bright),
     indices ``(t, 3)`` uint32; ``patch_triangles``: the first ``n * patch_triangles`` triangles
     are patch-major (patch ``p``'s at ``[p pt, (p+1) pt)``, the skirts after them; 0: not ordered);
-    ``targets`` ``(k,)`` float32 or None: each vertex's height on the next coarser level (geomorph)."""
+    ``targets`` ``(k,)`` float32 or None: each vertex's height on the next coarser level (geomorph);
+    with them (near and middle meshes, :func:`near_mesh`) ``corner`` ``(k,)`` float32: its height on the
+    corner grid, ``errors`` ``(k, 2)`` float32: the largest corner-grid and middle-level errors
+    (metres) of the patches around it (what its per-vertex geomorph follows: :func:`vertex_errors`)."""
 
     positions: np.ndarray
     colors: np.ndarray
     indices: np.ndarray
     patch_triangles: int = 0
     targets: np.ndarray | None = None
+    corner: np.ndarray | None = None
+    errors: np.ndarray | None = None
 
     @property
     def nbytes(self) -> int:
-        extra = 0 if self.targets is None else self.targets.nbytes
+        extra = sum(a.nbytes for a in (self.targets, self.corner, self.errors) if a is not None)
         return self.positions.nbytes + self.colors.nbytes + self.indices.nbytes + extra
 
 
@@ -321,11 +336,52 @@ def _bilinear(img: np.ndarray, y: np.ndarray, x: np.ndarray) -> np.ndarray:
     return top * (1 - fy) + bot * fy
 
 
-def near_mesh(fit: dict, lit: dict, grid_shape: tuple, depth: float, samples: int | None = None) -> TileMesh:
+class _Patches:
+    """Control points ``(n, 4, 4, 3)`` as the net :func:`piste.terrain.lod.patch_error_table` reads."""
+
+    def __init__(self, control_points: np.ndarray):
+        self.control_points = control_points
+
+    def __len__(self) -> int:
+        return len(self.control_points)
+
+
+def patch_level_errors(control_points: np.ndarray) -> np.ndarray:
+    """Per patch ``(n, 4, 4, 3)``, how far the surface leaves its corner quad and its middle-level
+    mesh (3 samples a side), both split along the (0, 0)-(1, 1) diagonal as the streamed meshes
+    are: ``(n, 2)`` float64 metres (:func:`piste.terrain.lod.patch_error_table`, the course's
+    per-patch LOD errors; on a height field the distance at the same ``(u, v)`` is vertical)."""
+    from piste.terrain.lod import FLAT_LEVEL, patch_error_table
+
+    cp = np.asarray(control_points, dtype=np.float64)
+    return patch_error_table(_Patches(cp), (FLAT_LEVEL, MID_SAMPLES)) if len(cp) else np.zeros((0, 2))
+
+
+def vertex_errors(patch_errors: np.ndarray, grid_shape: tuple, r: int) -> np.ndarray:
+    """Per vertex of a welded tile grid of ``r`` cells a patch side (``(ny r + 1, nx r + 1)``), the
+    largest of ``patch_errors (ny nx, c)`` over the (up to four) patches it belongs to: ``(ny r + 1,
+    nx r + 1, c)``.  A vertex on a patch edge carries the same values in both patches, so its
+    geomorph is the same whichever patch draws it (no cracks inside a tile)."""
+    ny, nx = (int(x) for x in grid_shape)
+    e = np.asarray(patch_errors).reshape(ny, nx, -1)
+    j, i = np.arange(ny * r + 1), np.arange(nx * r + 1)
+    a0, a1 = np.clip((j - 1) // r, 0, ny - 1), np.clip(j // r, 0, ny - 1)
+    b0, b1 = np.clip((i - 1) // r, 0, nx - 1), np.clip(i // r, 0, nx - 1)
+    return np.maximum(np.maximum(e[a0][:, b0], e[a0][:, b1]), np.maximum(e[a1][:, b0], e[a1][:, b1]))
+
+
+def near_mesh(fit: dict, lit: dict, grid_shape: tuple, depth: float, samples: int | None = None,
+              max_errors: tuple[float, float] | None = None) -> TileMesh:
     """The near mesh of a tile: every patch evaluated on a ``samples x samples`` parameter grid
     (default: its ``res x res`` light-map grid), welded into one ``(ny (samples-1) + 1, nx
     (samples-1) + 1)`` vertex grid (patches share their edge vertices: no cracks inside a tile by
     construction), coloured by its light map (bilinear between texels), plus skirts.
+
+    Each vertex carries its heights on the coarser levels (``targets``: the middle level's, or the
+    corner grid's for a middle mesh; ``corner``: the corner grid's) and the patches' errors around
+    it (``errors``: :func:`patch_level_errors` through :func:`vertex_errors`, at most
+    ``max_errors``: the tile's corner-grid and middle-level errors, what its level is chosen by), so
+    it is drawn between the levels by its own error on screen.
 
     ``grid_shape``: ``(ny, nx)`` patches of the tile (patch ``row * nx + col``).
     """
@@ -334,8 +390,9 @@ def near_mesh(fit: dict, lit: dict, grid_shape: tuple, depth: float, samples: in
     m = int(samples) if samples is not None else res
     if m < 2:
         raise ValueError(f"near_mesh: samples must be >= 2, got {m}")
+    cp = np.asarray(fit["control_points"])
     u, v = grid_params(m)
-    pos = evaluate(np.asarray(fit["control_points"]), u, v, normals=False)  # (n, m*m, 3)
+    pos = evaluate(cp, u, v, normals=False)  # (n, m*m, 3)
     ny, nx = grid_shape
     r = m - 1
     rows, cols = ny * r + 1, nx * r + 1
@@ -345,13 +402,17 @@ def near_mesh(fit: dict, lit: dict, grid_shape: tuple, depth: float, samples: in
     # a near mesh, the corner grid's for a middle one): drawn fully morphed, a mesh is that level
     coarse = 3 if m > 3 else 2
     cu, cv = grid_params(coarse)
-    zc = evaluate(np.asarray(fit["control_points"]), cu, cv, normals=False)[..., 2].reshape(-1, coarse, coarse)
-    tz = triangulated_heights(zc, np.linspace(0.0, 1.0, m)).reshape(ny, nx, m, m)
+    zc = evaluate(cp, cu, cv, normals=False)[..., 2].reshape(-1, coarse, coarse)
+    lin = np.linspace(0.0, 1.0, m)
+    tz = triangulated_heights(zc, lin).reshape(ny, nx, m, m)
+    cz = triangulated_heights(zc[:, ::coarse - 1, ::coarse - 1], lin).reshape(ny, nx, m, m)  # the corner quad's
     gt = np.empty((rows, cols))
+    gz = np.empty((rows, cols))
     for j in range(m):  # scatter: a shared vertex takes the value of the last patch written
         for i in range(m):
             gp[j:j + ny * r:r, i:i + nx * r:r] = pos[:, :, j, i]
             gt[j:j + ny * r:r, i:i + nx * r:r] = tz[:, :, j, i]
+            gz[j:j + ny * r:r, i:i + nx * r:r] = cz[:, :, j, i]
     light = light_grid(texels, grid_shape)  # (ny (res-1) + 1, nx (res-1) + 1, 3)
     k = (res - 1) / r  # light texels a vertex step
     gc = np.clip(np.rint(_bilinear(light, np.arange(rows) * k, np.arange(cols) * k)), 0, 255).astype(np.uint8)
@@ -362,8 +423,22 @@ def near_mesh(fit: dict, lit: dict, grid_shape: tuple, depth: float, samples: in
     order = np.argsort(np.concatenate([cell_patch, cell_patch]), kind="stable")  # patch-major (visibility sets)
     mesh = _with_skirts(gp.reshape(-1, 3), gc.reshape(-1, 3), _grid_triangles(rows, cols)[order], sides, depth)
     mesh.patch_triangles = 2 * r * r
-    t = gt.reshape(-1)
-    mesh.targets = np.concatenate([t] + [np.concatenate([t[i], t[i] - depth]) for i in sides]).astype(np.float32)
+    # per patch: the corner grid's error (at least the middle level's: where the corner grid fits,
+    # so does the middle level) and the error of the level under this mesh (a middle mesh: the corner grid)
+    pe = patch_level_errors(cp)
+    if max_errors is not None:
+        pe = np.minimum(pe, np.asarray(max_errors, dtype=np.float64)[None, :])
+    pe[:, 0] = np.maximum(pe[:, 0], pe[:, 1])
+    if m <= 3:
+        pe[:, 1] = pe[:, 0]
+    ge = vertex_errors(pe, grid_shape, r).reshape(-1, 2)
+
+    def skirted(a: np.ndarray, down: float) -> np.ndarray:  # a value a vertex, the skirts' after the grid's
+        return np.concatenate([a] + [np.concatenate([a[i], a[i] - down]) for i in sides]).astype(np.float32)
+
+    mesh.targets = skirted(gt.reshape(-1), depth)
+    mesh.corner = skirted(gz.reshape(-1), depth)
+    mesh.errors = skirted(ge, 0.0)
     return mesh
 
 
@@ -394,20 +469,40 @@ def patch_boxes(mesh: TileMesh, grid_shape: tuple) -> tuple[np.ndarray, np.ndarr
         raise ValueError(f"patch_boxes: a mesh of {len(mesh.positions)} vertices and {pt} triangles a patch is not "
                          f"the grid of a {ny} x {nx} tile")
     g = mesh.positions[:rows * cols].reshape(rows, cols, 3)
-    tz = None if mesh.targets is None else mesh.targets[:rows * cols].reshape(rows, cols)
-    lo = np.full((ny, nx, 3), np.inf, np.float32)
-    hi = np.full((ny, nx, 3), -np.inf, np.float32)
-    for j in range(r + 1):  # patch (py, px)'s vertices: rows py r .. py r + r, columns likewise
-        for i in range(r + 1):
-            s = g[j:j + ny * r:r, i:i + nx * r:r]
-            np.minimum(lo, s, out=lo)
-            np.maximum(hi, s, out=hi)
-            if tz is not None:
-                z = tz[j:j + ny * r:r, i:i + nx * r:r]
-                np.minimum(lo[..., 2], z, out=lo[..., 2])
-                np.maximum(hi[..., 2], z, out=hi[..., 2])
+    lo = _patch_reduce(g, (ny, nx), r, np.minimum)
+    hi = _patch_reduce(g, (ny, nx), r, np.maximum)
+    for a in (mesh.targets, mesh.corner):  # heights a vertex may be drawn at too
+        if a is not None:
+            z = a[:rows * cols].reshape(rows, cols)
+            np.minimum(lo[..., 2], _patch_reduce(z, (ny, nx), r, np.minimum), out=lo[..., 2])
+            np.maximum(hi[..., 2], _patch_reduce(z, (ny, nx), r, np.maximum), out=hi[..., 2])
     lo64, hi64 = lo.reshape(-1, 3).astype(np.float64), hi.reshape(-1, 3).astype(np.float64)
     return 0.5 * (lo64 + hi64), 0.5 * (hi64 - lo64) + 0.01
+
+
+def _patch_reduce(grid: np.ndarray, grid_shape: tuple, r: int, op) -> np.ndarray:
+    """``op`` (np.minimum or np.maximum) over each patch's vertices of a welded ``grid (ny r + 1,
+    nx r + 1, ...)``: ``(ny, nx, ...)``."""
+    ny, nx = grid_shape
+    out = grid[0:ny * r:r, 0:nx * r:r].copy()
+    for j in range(r + 1):  # patch (py, px)'s vertices: rows py r .. py r + r, columns likewise
+        for i in range(r + 1):
+            op(out, grid[j:j + ny * r:r, i:i + nx * r:r], out=out)
+    return out
+
+
+def patch_corner_errors(mesh: TileMesh, grid_shape: tuple) -> np.ndarray | None:
+    """The largest corner-grid error (:attr:`TileMesh.errors` column 0) over each patch's vertices of
+    a patch-major ``mesh`` with errors, ``(n,)`` float64 (None without them): where ``pixel_error``
+    pixels of it fit at the patch's box, every vertex of the patch is drawn fully morphed onto the
+    corner grid, so the patch may be drawn from the corner grid instead."""
+    if mesh.errors is None or not mesh.patch_triangles:
+        return None
+    ny, nx = (int(x) for x in grid_shape)
+    r = int(round(np.sqrt(int(mesh.patch_triangles) / 2.0)))
+    rows, cols = ny * r + 1, nx * r + 1
+    e = np.asarray(mesh.errors)[:rows * cols, 0].reshape(rows, cols)
+    return _patch_reduce(e, (ny, nx), r, np.maximum).reshape(-1).astype(np.float64)
 
 
 def patch_runs(inside: np.ndarray, patch_triangles: int, total_triangles: int, skirts: bool = True) -> np.ndarray:
@@ -438,7 +533,8 @@ def seam_skirts(mesh: TileMesh, grid_shape: tuple, coarse: np.ndarray, depth: fl
     r = int(round(np.sqrt(int(mesh.patch_triangles) / 2.0)))
     rows, cols = ny * r + 1, nx * r + 1
     g = mesh.positions[:rows * cols].reshape(rows, cols, 3).astype(np.float32, copy=True)
-    g[..., 2] = np.asarray(mesh.targets)[:rows * cols].reshape(rows, cols)
+    low = mesh.corner if mesh.corner is not None else mesh.targets  # the corner grid's heights
+    g[..., 2] = np.asarray(low)[:rows * cols].reshape(rows, cols)
     mid = ~np.asarray(coarse, bool).reshape(ny, nx)
     k = np.arange(r + 1)
     py, px = np.nonzero(mid[:, :-1] != mid[:, 1:])  # vertical edges: column (px + 1) r, rows py r .. py r + r
@@ -456,11 +552,11 @@ def seam_skirts(mesh: TileMesh, grid_shape: tuple, coarse: np.ndarray, depth: fl
 
 def mesh_bytes(rows: int, cols: int, morph: bool = False) -> int:
     """Bytes of a grid mesh of ``rows x cols`` vertices with skirts (positions, colours, indices;
-    with ``morph`` the geomorph targets of a near or middle mesh)."""
+    with ``morph`` the geomorph heights and errors of a near or middle mesh)."""
     border = 2 * (rows + cols)
     verts = rows * cols + 2 * border
     tris = 2 * (rows - 1) * (cols - 1) + 2 * (border - 4)
-    return verts * (19 if morph else 15) + tris * 12
+    return verts * (31 if morph else 15) + tris * 12
 
 
 @functools.lru_cache(maxsize=1)
@@ -886,7 +982,8 @@ class TileCache:
                 if samples is not None:
                     py0, py1, px0, px1 = self.grid.patch_range(*t)
                     mesh = near_mesh(self._read("fit", t, ("control_points",)), self._read("lit", t, ("texels",)),
-                                     (py1 - py0, px1 - px0), self._depth(t), samples)
+                                     (py1 - py0, px1 - px0), self._depth(t), samples,
+                                     max_errors=(self.chord_error[t], self.mid_error[t]))
                     vis = self._read_vis(t)
                     with self._lock:
                         if self._wanted.get(t) == samples:  # still wanted and still fits: the budget was reserved
@@ -1211,22 +1308,27 @@ class StreamingRenderer:
             self._release(key)
         pos = self.ctx.buffer(np.ascontiguousarray(mesh.positions))
         ibo = self.ctx.buffer(np.ascontiguousarray(mesh.indices))
-        tgt = None if mesh.targets is None else self.ctx.buffer(np.ascontiguousarray(mesh.targets))
-        vao = self.ctx.vertex_array(self.prog, self._attributes(pos, tgt), index_buffer=ibo, index_element_size=4)
-        self._gpu[key] = (pos, ibo, vao, id(mesh), tgt)
+        extra = [(self.ctx.buffer(np.ascontiguousarray(a)), fmt, name)
+                 for a, fmt, name in ((mesh.targets, "1f", "in_target"), (mesh.corner, "1f", "in_corner"),
+                                      (mesh.errors, "2f", "in_err")) if a is not None]
+        vao = self.ctx.vertex_array(self.prog, self._attributes(pos, extra), index_buffer=ibo, index_element_size=4)
+        self._gpu[key] = (pos, ibo, vao, id(mesh), extra)
         return vao
 
     @staticmethod
-    def _attributes(pos, tgt) -> list:
-        """The vertex arrays' attributes (a far mesh has no morph targets: drawn with u_morph = 1)."""
-        return [(pos, "3f", "in_pos")] + ([] if tgt is None else [(tgt, "1f", "in_target")])
+    def _attributes(pos, extra: list) -> list:
+        """The vertex arrays' attributes: positions and a near or middle mesh's geomorph heights and
+        errors ``extra`` (a far mesh has none: drawn with u_morph = 1, u_verr = 0)."""
+        return [(pos, "3f", "in_pos")] + list(extra)
 
     def _patch_boxes(self, key, mesh: TileMesh):
-        """:func:`patch_boxes` of a resident mesh (made once while the mesh stays resident)."""
+        """:func:`patch_boxes` of a resident mesh and its :func:`patch_corner_errors` (made once while
+        the mesh stays resident): ``(centre, half extent, errors or None)``."""
         got = self._boxes.get(key)
         if got is None or got[0] != id(mesh):
             py0, py1, px0, px1 = self.cache.grid.patch_range(*key[0])
-            got = self._boxes[key] = (id(mesh), patch_boxes(mesh, (py1 - py0, px1 - px0)))
+            shape = (py1 - py0, px1 - px0)
+            got = self._boxes[key] = (id(mesh), (*patch_boxes(mesh, shape), patch_corner_errors(mesh, shape)))
         return got[1]
 
     def _seam(self, key, mesh: TileMesh, coarse: np.ndarray):
@@ -1253,9 +1355,8 @@ class StreamingRenderer:
             seam[2].release()
             seam[1].release()
         got = self._gpu.pop(key)
-        for obj in (got[2], got[1], got[0], got[4]):
-            if obj is not None:
-                obj.release()
+        for obj in (got[2], got[1], got[0], *(b for b, _, _ in got[4])):
+            obj.release()
         for k in [k for k in self._vis_gpu if k[0] == key]:
             for obj in self._vis_gpu.pop(k)[:2][::-1]:
                 obj.release()
@@ -1290,6 +1391,12 @@ class StreamingRenderer:
         self.update(cam, wait)
         return self.draw(cam, read, t0)
 
+    def lod_scale(self, fov_y: float) -> float:
+        """Pixels a radian the levels' errors are counted in (``pixel_error`` pixels at this scale):
+        the target's own, but at least a ``LOD_REFERENCE_LINES``-line frame's, so a smaller target
+        keeps the same angular error (as the course's LOD thresholds are angles)."""
+        return max(self.size[1], LOD_REFERENCE_LINES) / (2.0 * np.tan(np.radians(fov_y) / 2.0))
+
     def update(self, camera: Camera | _View, wait: bool = False) -> None:
         """Page tiles for ``camera`` (nearest first under the budget; scene objects by their own
         distance for this view, its far plane and the world's fog); ``wait``: until loaded."""
@@ -1298,7 +1405,8 @@ class StreamingRenderer:
         if self.pixel_error is None:
             self.cache.update(camera.eye, far=far, fog_density=self.fog_density, object_scale=scale)
         else:
-            self.cache.update(camera.eye, scale, self.pixel_error, far=far, fog_density=self.fog_density)
+            self.cache.update(camera.eye, self.lod_scale(camera.fov_y), self.pixel_error, far=far,
+                              fog_density=self.fog_density, object_scale=scale)
         if wait:
             self.cache.wait_idle()
         elif self.cache.errors:
@@ -1330,13 +1438,13 @@ class StreamingRenderer:
         live = set()
         visible = _boxes_visible(planes, self.cache.lo, self.cache.hi)
         drawn["culled"] = int((~visible).sum())
-        pixel_scale = self.size[1] / (2.0 * np.tan(np.radians(cam.fov_y) / 2.0))
+        pixel_scale = self.lod_scale(cam.fov_y)
         morph = self.cache.morph_factors(cam.eye, pixel_scale, self.pixel_error)
         todo = self.cache.draw_list(cam.eye, visible, pixel_scale=pixel_scale)
         sets = self.visibility and self.cache.sets_hold(cam.eye, {t: level for t, level, _ in todo})
         drawn["vis_off"] = int(self.visibility and not sets)  # the sets' tiles drawn too coarse this frame
-        drawn["mid_far_patches"] = 0
-        # a middle tile's per-vertex geomorph: its far grid's error in pixels times metres over the limit
+        drawn["mid_far_patches"] = drawn["frustum_culled"] = 0
+        # the per-vertex geomorph: pixels on screen of a metre of error at 1 m, over the limit
         err_scale = pixel_scale / self.pixel_error if self.pixel_error else None
         e = np.asarray(cam.eye, dtype=np.float64).reshape(3)
         jobs, commands, ncmd = [], [], 0  # what each tile draws (all the indirect commands first)
@@ -1347,40 +1455,48 @@ class StreamingRenderer:
             drawn["mid"] += level == "mid"
             drawn[kind] += 1
             seen = self.cache.visible_patches(t, cam.eye) if sets and (kind == "near" or level == "far1") else None
-            if seen is not None and mesh.patch_triangles and not seen.all():
-                vao, ntri = self._vis_vao(key, mesh, seen)
-                jobs.append((t, kind, mesh, vao, None, 0.0))
-                drawn[f"{kind}_patches"] += int(seen.sum())
-                drawn["vis_culled"] += int((~seen).sum())
-                drawn["triangles"] += ntri
+            # near and middle meshes: geomorphed per vertex by the errors of the patches around it
+            verr = err_scale if kind == "near" and t in morph and err_scale and mesh.errors is not None else 0.0
+            if not (verr and self.mix_levels and mesh.patch_triangles):
+                if seen is not None and mesh.patch_triangles and not seen.all():
+                    vao, ntri = self._vis_vao(key, mesh, seen)
+                    jobs.append((t, kind, mesh, vao, None, verr))
+                    drawn[f"{kind}_patches"] += int(seen.sum())
+                    drawn["vis_culled"] += int((~seen).sum())
+                    drawn["triangles"] += ntri
+                else:
+                    jobs.append((t, kind, mesh, self._vao(key, mesh), None, verr))
+                    drawn[f"{kind}_patches"] += self.cache.patches[t]
+                    drawn["triangles"] += len(mesh.indices)
                 continue
+            # per patch, like the course's error-driven levels: out of the frustum (or the sets), not
+            # drawn; where the corner grid's error fits pixel_error pixels at the patch's box (every
+            # vertex of it fully morphed onto the corner grid), drawn from the corner grid; else from
+            # the mesh, each vertex between the levels by its own error on screen
             vao = self._vao(key, mesh)
-            drawn[f"{kind}_patches"] += self.cache.patches[t]
-            vmorph = 0.0
-            if level == "mid" and t in morph and err_scale is not None and mesh.targets is not None:
-                vmorph = max(float(self.cache.chord_error[t]) * err_scale, 1e-30)
-            coarse = None
-            if vmorph and self.mix_levels and mesh.patch_triangles:
-                c, h = self._patch_boxes(key, mesh)
-                d = np.sqrt((np.maximum(np.abs(c - e) - h, 0.0) ** 2).sum(1))  # metres to each patch's box
-                coarse = vmorph <= d  # its far grid's error at most pixel_error pixels there: morphed fully onto it
-            if coarse is None or not coarse.any():
-                jobs.append((t, kind, mesh, vao, None, vmorph))
-                drawn["triangles"] += len(mesh.indices)
-                continue
+            c, h, perr = self._patch_boxes(key, mesh)
+            d = np.sqrt((np.maximum(np.abs(c - e) - h, 0.0) ** 2).sum(1))  # metres to each patch's box
+            coarse = perr * verr <= d
+            inside = _boxes_visible(planes, c - h, c + h)
+            drawn["frustum_culled"] += int((~inside).sum())
+            if seen is not None:
+                drawn["vis_culled"] += int((inside & ~seen).sum())
+                inside &= seen
             far = self.cache.far[t][1]
-            mine = patch_runs(~coarse, mesh.patch_triangles, len(mesh.indices))  # and the middle mesh's skirts
-            grid = patch_runs(coarse, far.patch_triangles, len(far.indices), skirts=False)
+            mine = patch_runs(inside & ~coarse, mesh.patch_triangles, len(mesh.indices))  # and the mesh's skirts
+            grid = patch_runs(inside & coarse, far.patch_triangles, len(far.indices), skirts=False)
             live.add((t, "far1"))
-            jobs.append((t, kind, mesh, vao, (ncmd, len(mine)), vmorph))
+            jobs.append((t, kind, mesh, vao, (ncmd, len(mine)), verr))
             jobs.append((t, "far", far, self._vao((t, "far1"), far), (ncmd + len(mine), len(grid)), 0.0))
-            seam, nseam = self._seam(key, mesh, coarse)
-            if nseam:
-                jobs.append((t, "far", far, seam, None, 0.0))
-                drawn["triangles"] += nseam
+            if coarse.any():
+                seam, nseam = self._seam(key, mesh, coarse)
+                if nseam:
+                    jobs.append((t, "far", far, seam, None, 0.0))
+                    drawn["triangles"] += nseam
             commands += [mine, grid]
             ncmd += len(mine) + len(grid)
-            drawn["mid_far_patches"] += int(coarse.sum())
+            drawn[f"{kind}_patches"] += int(inside.sum())
+            drawn["mid_far_patches"] += int((inside & coarse).sum())
             drawn["triangles"] += (int(mine[:, 0].sum()) + int(grid[:, 0].sum())) // 3
         if commands:
             data = np.concatenate(commands).tobytes()
@@ -1395,7 +1511,7 @@ class StreamingRenderer:
             self.prog["u_origin"].value = origin
             self.prog["u_light_uv"].value = luv
             self.prog["u_morph"].value = 1.0 if kind == "far" or mesh.targets is None else morph.get(t, 1.0)
-            self.prog["u_vmorph"].value = vmorph
+            self.prog["u_verr"].value = vmorph
             if run is None:
                 vao.render(moderngl.TRIANGLES)  # (a seam's vertex array: its triangles, no index buffer)
             elif run[1]:
