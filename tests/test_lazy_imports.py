@@ -41,6 +41,9 @@ NOT_IMPORTED = ("piste.pipeline.build", "piste.pipeline.cache", "piste.pipeline.
                 "hashlib",
                 # the glTF extension decoders (a bundle's rider material is a MaterialInfo: formats.gltf.material)
                 "piste.formats.gltf.extensions",
+                # (stdlib) atomic writes' and videos' temporary files, find_library's ldconfig run: a render
+                # writes no temp file and names its GL libraries (piste.render.context.EGL_LIBRARIES)
+                "tempfile", "subprocess", "ctypes.util",
                 "dask", "distributed",
                 "scipy", "tifffile")
 

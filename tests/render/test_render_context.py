@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from PIL import Image
@@ -55,6 +59,36 @@ def test_offscreen_rejects_bad_size(gl):
 def test_bad_backend_names_packages():
     with pytest.raises(RenderError, match="libgl1-mesa-dri"):
         create_context(backend="no-such-backend")
+
+
+_FRESH_CONTEXT = """
+import sys
+from piste.render.context import create_context
+ctx = create_context()
+fbo = ctx.simple_framebuffer((4, 4)); fbo.use(); ctx.clear(0.0, 1.0, 0.0, 1.0)
+print(fbo.read()[:3] == bytes([0, 255, 0]), ctx.version_code >= 330, "ctypes.util" in sys.modules)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the EGL libraries are named for Linux")
+def test_egl_context_names_its_libraries_and_works(gl):
+    """A fresh process's EGL context is made with glcontext's libraries named (no find_library: no
+    ctypes.util, no ``ldconfig -p`` run twice) and draws."""
+    out = subprocess.run([sys.executable, "-c", _FRESH_CONTEXT], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["True", "True", "False"]
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the EGL libraries are named for Linux")
+def test_egl_library_environment_variable_is_still_obeyed(gl):
+    """glcontext's ``GLCONTEXT_LINUX_LIBEGL`` still chooses the EGL library: a missing one is the usual
+    RenderError naming the packages, not a context from the default library."""
+    env = {**os.environ, "GLCONTEXT_LINUX_LIBEGL": "libpiste-no-such-egl.so"}
+    code = ("from piste.errors import RenderError\nfrom piste.render.context import create_context\n"
+            "try:\n    create_context()\nexcept RenderError as e:\n    print('RenderError', 'libgl1-mesa-dri' in str(e))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["RenderError", "True"]
 
 
 def test_save_png_roundtrip_and_atomic(tmp_path):

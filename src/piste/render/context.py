@@ -16,8 +16,10 @@ flush               glFlush: start the GL on what was issued, without waiting (p
 
 from __future__ import annotations
 
-from functools import lru_cache
+import contextlib
 import os
+import sys
+from functools import lru_cache
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
@@ -53,6 +55,10 @@ def create_context(backend: str | None = "egl", require: tuple[int, int] = (3, 3
     """
     moderngl = require_extra("moderngl", "OpenGL rendering")
     kwargs: dict[str, Any] = {"require": require[0] * 100 + require[1] * 10}
+    if backend == "egl":
+        ctx = _egl_context(moderngl, kwargs["require"])
+        if ctx is not None:
+            return ctx
     if backend:
         kwargs["backend"] = backend
     try:
@@ -64,6 +70,42 @@ def create_context(backend: str | None = "egl", require: tuple[int, int] = (3, 3
             f"`sudo apt-get install -y --no-install-recommends {' '.join(APT_PACKAGES)}` "
             "(`make demo` does this for you)."
         ) from None
+
+
+#: the GL and EGL libraries glcontext's EGL backend loads, named (the names ``find_library`` gives on
+#: Linux): glcontext otherwise looks each up with ``ctypes.util.find_library``, which imports ctypes.util
+#: and subprocess and runs ``ldconfig -p`` twice, ~10 ms of a fresh process's start (of ~30 ms for the
+#: whole context).  ``GLCONTEXT_LINUX_LIBGL`` / ``GLCONTEXT_LINUX_LIBEGL`` still choose others.
+EGL_LIBRARIES = {"libgl": "libGL.so.1", "libegl": "libEGL.so.1"}
+
+
+def _egl_context(mgl: Any, version: int) -> moderngl.Context | None:
+    """A standalone moderngl context on glcontext's EGL backend, created the way the backend's own
+    factory creates it (``glcontext.egl.create_context(mode="standalone", ...)``, glcontext's
+    ``GLCONTEXT_*`` environment variables applied) but with :data:`EGL_LIBRARIES` named, then handed
+    to moderngl (``context=``).  None where that does not work here (not Linux, another glcontext,
+    libraries of other names): the caller then takes moderngl's usual path, which says what failed."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        from glcontext import egl
+    except ImportError:
+        return None
+    kw: dict[str, Any] = {"mode": "standalone", "glversion": version, **EGL_LIBRARIES}
+    raw = None
+    try:
+        for name, env, kind in (("device_index", "GLCONTEXT_DEVICE_INDEX", int), ("glversion", "GLCONTEXT_GLVERSION", int),
+                                ("libgl", "GLCONTEXT_LINUX_LIBGL", str), ("libegl", "GLCONTEXT_LINUX_LIBEGL", str)):
+            value = os.environ.get(env)
+            if value:
+                kw[name] = kind(value)
+        raw = egl.create_context(**kw)
+        return cast("moderngl.Context", mgl.create_standalone_context(require=version, context=raw))
+    except Exception:
+        if raw is not None:
+            with contextlib.suppress(Exception):
+                raw.release()
+        return None
 
 
 def check_gl_error(ctx: moderngl.Context, where: str = "") -> None:

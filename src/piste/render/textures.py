@@ -24,7 +24,6 @@ API
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 from functools import lru_cache
 from pathlib import Path
 from types import SimpleNamespace
@@ -285,6 +284,14 @@ _GL_TEXTURE_BASE_LEVEL, _GL_TEXTURE_MAX_LEVEL = 0x813C, 0x813D
 _GL_FORMATS = {1: (0x8229, 0x1903), 2: (0x822B, 0x8227), 3: (0x8051, 0x1907), 4: (0x8058, 0x1908)}
 
 
+def _find_library(name: str) -> str | None:
+    """``ctypes.util.find_library(name)``; ctypes.util (and the subprocess module it imports, ~3 ms
+    of a fresh process's start) is imported only where the usual library names were not found."""
+    import ctypes.util
+
+    return ctypes.util.find_library(name)
+
+
 @lru_cache(maxsize=None)
 def _gl_entry_points() -> SimpleNamespace | None:
     """``glTexImage2D``, ``glTexParameteri``, ``glPixelStorei`` and ``glFramebufferTexture2D`` (a
@@ -292,8 +299,8 @@ def _gl_entry_points() -> SimpleNamespace | None:
     ``libGL``), which call into the context current on this thread, as moderngl's own calls do;
     None where there is no such library (then textures build their mip levels with
     ``build_mipmaps``)."""
-    names = ("libOpenGL.so.0", "libGL.so.1", lambda: ctypes.util.find_library("OpenGL"),
-             lambda: ctypes.util.find_library("GL"))  # (find_library runs ldconfig: only if needed)
+    names = ("libOpenGL.so.0", "libGL.so.1", lambda: _find_library("OpenGL"),
+             lambda: _find_library("GL"))  # (find_library runs ldconfig: only if needed)
     u, i = ctypes.c_uint, ctypes.c_int
     signatures = {"glTexImage2D": [u, i, i, i, i, i, u, u, ctypes.c_void_p], "glTexParameteri": [u, u, i],
                   "glPixelStorei": [u, i], "glFramebufferTexture2D": [u, u, u, u, i]}
