@@ -246,6 +246,14 @@ def _with_skirts(pos: np.ndarray, rgb: np.ndarray, tris: np.ndarray, sides: list
                     np.concatenate(ts).astype(np.uint32))
 
 
+def _border_sides(idx: np.ndarray) -> list:
+    """The four border polylines of a ``(rows, cols)`` grid of vertex indices (row = y, column = x),
+    each ordered so that its skirt (:func:`_skirt`) faces out of the tile (counter-clockwise seen
+    from outside): the frames draw with back faces culled, and a gap at a tile border shows only
+    from the side of the lower border, where the higher one's skirt hangs facing it."""
+    return [idx[0][::-1], idx[:, -1][::-1], idx[-1], idx[:, 0]]
+
+
 def _stride_index(n: int, stride: int) -> np.ndarray:
     """``0, stride, 2 stride, ...`` and always the last of ``n``."""
     i = np.arange(0, n, stride)
@@ -262,7 +270,7 @@ def far_mesh(lit: dict, depth: float, stride: int = 1) -> TileMesh:
     g, c = g[ri][:, ci], c[ri][:, ci]
     rows, cols = g.shape[:2]
     idx = np.arange(rows * cols).reshape(rows, cols)
-    sides = [idx[0], idx[:, -1], idx[-1], idx[:, 0]]
+    sides = _border_sides(idx)
     tris = _grid_triangles(rows, cols)
     if stride == 1:  # cell k's two triangles are k and k + cells: together, cell by cell
         cells = (rows - 1) * (cols - 1)
@@ -417,7 +425,7 @@ def near_mesh(fit: dict, lit: dict, grid_shape: tuple, depth: float, samples: in
     k = (res - 1) / r  # light texels a vertex step
     gc = np.clip(np.rint(_bilinear(light, np.arange(rows) * k, np.arange(cols) * k)), 0, 255).astype(np.uint8)
     idx = np.arange(rows * cols).reshape(rows, cols)
-    sides = [idx[0], idx[:, -1], idx[-1], idx[:, 0]]
+    sides = _border_sides(idx)
     cr, cc = np.mgrid[0:rows - 1, 0:cols - 1]
     cell_patch = ((cr // r) * nx + cc // r).ravel()
     order = np.argsort(np.concatenate([cell_patch, cell_patch]), kind="stable")  # patch-major (visibility sets)
@@ -1457,7 +1465,7 @@ class StreamingRenderer:
             seen = self.cache.visible_patches(t, cam.eye) if sets and (kind == "near" or level == "far1") else None
             # near and middle meshes: geomorphed per vertex by the errors of the patches around it
             verr = err_scale if kind == "near" and t in morph and err_scale and mesh.errors is not None else 0.0
-            if not (verr and self.mix_levels and mesh.patch_triangles):
+            if not (self.mix_levels and mesh.patch_triangles and (verr or level == "far1")):
                 if seen is not None and mesh.patch_triangles and not seen.all():
                     vao, ntri = self._vis_vao(key, mesh, seen)
                     jobs.append((t, kind, mesh, vao, None, verr))
@@ -1475,13 +1483,21 @@ class StreamingRenderer:
             # the mesh, each vertex between the levels by its own error on screen
             vao = self._vao(key, mesh)
             c, h, perr = self._patch_boxes(key, mesh)
-            d = np.sqrt((np.maximum(np.abs(c - e) - h, 0.0) ** 2).sum(1))  # metres to each patch's box
-            coarse = perr * verr <= d
             inside = _boxes_visible(planes, c - h, c + h)
             drawn["frustum_culled"] += int((~inside).sum())
             if seen is not None:
                 drawn["vis_culled"] += int((inside & ~seen).sum())
                 inside &= seen
+            drawn[f"{kind}_patches"] += int(inside.sum())
+            if not verr:  # a full corner grid: its patches in view
+                mine = patch_runs(inside, mesh.patch_triangles, len(mesh.indices))
+                jobs.append((t, kind, mesh, vao, (ncmd, len(mine)), 0.0))
+                commands.append(mine)
+                ncmd += len(mine)
+                drawn["triangles"] += int(mine[:, 0].sum()) // 3
+                continue
+            d = np.sqrt((np.maximum(np.abs(c - e) - h, 0.0) ** 2).sum(1))  # metres to each patch's box
+            coarse = perr * verr <= d
             far = self.cache.far[t][1]
             mine = patch_runs(inside & ~coarse, mesh.patch_triangles, len(mesh.indices))  # and the mesh's skirts
             grid = patch_runs(inside & coarse, far.patch_triangles, len(far.indices), skirts=False)
@@ -1491,11 +1507,10 @@ class StreamingRenderer:
             if coarse.any():
                 seam, nseam = self._seam(key, mesh, coarse)
                 if nseam:
-                    jobs.append((t, "far", far, seam, None, 0.0))
+                    jobs.append((t, "seam", far, seam, None, 0.0))
                     drawn["triangles"] += nseam
             commands += [mine, grid]
             ncmd += len(mine) + len(grid)
-            drawn[f"{kind}_patches"] += int(inside.sum())
             drawn["mid_far_patches"] += int((inside & coarse).sum())
             drawn["triangles"] += (int(mine[:, 0].sum()) + int(grid[:, 0].sum())) // 3
         if commands:
@@ -1505,13 +1520,21 @@ class StreamingRenderer:
                     self._indirect.release()
                 self._indirect = self.ctx.buffer(reserve=max(2 * len(data), 4096), dynamic=True)
             self._indirect.write(data)
+        # back faces culled (a height field seen from above hides its back faces behind front ones;
+        # tile skirts face out of their tile, :func:`_border_sides`)
+        self.ctx.front_face, self.ctx.cull_face = "ccw", "back"
+        self.ctx.enable(moderngl.CULL_FACE)
+        culling = True
         for t, kind, mesh, vao, run, vmorph in jobs:
             tex, origin, luv = self._light(t)
             tex.use(1)
             self.prog["u_origin"].value = origin
             self.prog["u_light_uv"].value = luv
-            self.prog["u_morph"].value = 1.0 if kind == "far" or mesh.targets is None else morph.get(t, 1.0)
+            self.prog["u_morph"].value = 1.0 if kind in ("far", "seam") or mesh.targets is None else morph.get(t, 1.0)
             self.prog["u_verr"].value = vmorph
+            if (kind == "seam") == culling:  # the seams' strips are seen from both sides
+                culling = not culling
+                (self.ctx.disable if kind == "seam" else self.ctx.enable)(moderngl.CULL_FACE)
             if run is None:
                 vao.render(moderngl.TRIANGLES)  # (a seam's vertex array: its triangles, no index buffer)
             elif run[1]:
@@ -1521,6 +1544,7 @@ class StreamingRenderer:
         for key in [k for k in self._gpu if k[1] in ("near", "mid") and k not in live
                     and resident.get(k[0]) != self._gpu[k][3]]:
             self._release(key)  # evicted (or replaced) near tiles leave the GPU too
+        self.ctx.disable(moderngl.CULL_FACE)
         if self.sky is not None and sky:
             self.sky.draw(vp)  # last: only where no tile was drawn
         image = self.fbo.read()[..., :3].copy() if read else None
