@@ -214,6 +214,9 @@ def main(argv=None) -> None:
     ap.add_argument("--frames", type=int, default=60, help="streaming frames (default 60; 0 = none)")
     ap.add_argument("--repeats", type=int, default=1, help="builds of each kind and size (default 1)")
     ap.add_argument("--keep", metavar="DIR", help="build into DIR and keep the worlds")
+    ap.add_argument("--reuse", action="store_true",
+                    help="with --keep DIR: worlds already built there (local_SIDE/index.json) are streamed, not rebuilt "
+                         "(no build figures for them)")
     ap.add_argument("--dem", type=int, nargs="?", const=20_000, metavar="SIDE",
                     help="also write a SIDE x SIDE tiled GeoTIFF DEM (default 20,000) to the temp folder and fit it "
                          "tile by tile (windowed reads): time and peak RSS")
@@ -230,6 +233,8 @@ def main(argv=None) -> None:
     # printed with every figure: the build's settings, as the command line that reproduces them
     flags = f"--res {res}{'' if shadows else ' --no-shadows'}{' (--quick)' if args.quick else ''}"
     tmp = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="bench_large_"))
+    if args.reuse and not args.keep:
+        ap.error("--reuse needs --keep DIR")
     if args.dem_only:
         if not args.dem:
             ap.error("--dem-only needs --dem [SIDE]")
@@ -241,6 +246,13 @@ def main(argv=None) -> None:
     try:
         for n in sizes:
             side = int(round(math.sqrt(n)))
+            built = tmp / f"local_{side}" / "index.json"
+            if args.reuse and built.is_file():
+                idx = json.loads(built.read_text())
+                rows.append({"patches": int(idx["patches"]), "tiles": len(idx["tiles"]), "local_s": []})
+                print(f"\n{rows[-1]['patches']:>9,} patches ({rows[-1]['tiles']} tiles): reused {built.parent} "
+                      f"(res {idx.get('res')}, shadows {idx.get('shadows')}), not rebuilt")
+                continue
             runs = {"local": [], "dask": []}
             for _ in range(args.repeats):  # interleaved: local, dask, local, dask, ...
                 runs["local"].append(_run_child("local", tmp / f"local_{side}", side, res, shadows, args.workers))
@@ -270,11 +282,12 @@ def main(argv=None) -> None:
                       f" (cluster start + worker imports {dk[0]['startup_s']:.1f} s, not counted)  [{flags}]")
                 print(f"  dask / local time ratio {ratio:.2f} ({args.workers} workers); tiles byte-identical: {same}")
             rows.append(line)
-        if len(rows) > 1:
+        timed = [r for r in rows if r["local_s"]]
+        if len(timed) > 1:
             import numpy as np
 
-            x = np.log([r["patches"] for r in rows])
-            y = np.log([sorted(r["local_s"])[len(r["local_s"]) // 2] for r in rows])
+            x = np.log([r["patches"] for r in timed])
+            y = np.log([sorted(r["local_s"])[len(r["local_s"]) // 2] for r in timed])
             slope = float(np.polyfit(x, y, 1)[0])
             print(f"\nscaling exponent (local build time ~ patches^k): k = {slope:.2f}  [{flags}]")
         if frames > 0:
