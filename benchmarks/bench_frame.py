@@ -481,11 +481,15 @@ def scene_section(args, floor_ms: list) -> dict:
     receivers = _receiver_programs(r.shadows)
 
     def set_receiver_clip(on):
+        r.shadows.resident_receivers = False  # (both programs on the gathered vertices: set_resident_receivers)
         prog, cur = receivers[0] if on else receivers[1], r.shadows.receiver
         if prog is not cur:  # (each program its own vertex array)
             receivers[2][id(cur)] = r.shadows._recv
             r.shadows._recv = receivers[2].get(id(prog), {"pos": None, "idx": None, "vao": None})
             r.shadows.receiver = prog
+    def set_resident_receivers(on):
+        r.shadows.resident_receivers = on
+
     track_progs = _track_programs(r.terrain.terrain)
 
     def set_track_per_vertex(on):
@@ -527,6 +531,8 @@ def scene_section(args, floor_ms: list) -> dict:
                 "terrain: track distance looked up per pixel"),
                ("shadow receivers", set_receiver_clip, "receivers cut to the shadow frustum (clip distances)",
                 "receivers: whole triangles, discard outside the frustum"),
+               ("shadow receivers", set_resident_receivers, "receivers: the terrain's resident blocks by index",
+                "receivers: vertices gathered, morphed, box-culled on the CPU, uploaded"),
                ("sky", set_sky, "sky: one exp a pixel, the sun's glow by squaring near the sun",
                 "sky: two exps and pow(s, 900) a pixel")]
     # an upper bound, not a change: the objects pass with the instances whose bounding sphere projects
@@ -578,6 +584,20 @@ def scene_section(args, floor_ms: list) -> dict:
             r.objects.lod_pixels = lod_now  # (the 1 px A/B leaves the scene's own setting)
         ab_res.append((label, now_name, before_name, ab, ab_frame, ab_diff))
     undo2()
+    # whole frames (no per-pass syncs: what they change is when llvmpipe rasterizes), interleaved frame
+    # by frame, the order alternated: the terrain flushed to the rasterizer threads as soon as it is
+    # issued (they fill it while this thread issues the receivers, objects and riders) vs everything
+    # rasterized at the frame's end
+    frame_ab = {True: [], False: []}
+    frame_cpu = {True: [], False: []}
+    for i in range(max(args.frames, 6) * 2):
+        for on in ((True, False) if i % 2 == 0 else (False, True)):
+            r.terrain.flush_early = on
+            c1, t1 = time.process_time(), time.perf_counter()
+            one(i / 30.0)
+            frame_ab[on].append((time.perf_counter() - t1) * 1e3)
+            frame_cpu[on].append((time.process_time() - c1) * 1e3)
+    r.terrain.flush_early = True
     frag_times, frag_screens = _terrain_fragment_costs(r, one, max(args.frames // 2, 5))
     # one frame at a time (render: plan, draw, wait, read) against pipelined frames (frames: the next
     # frame planned while the GL draws this one), wall time per frame over blocks of 10, interleaved
@@ -630,6 +650,11 @@ def scene_section(args, floor_ms: list) -> dict:
             continue
         record("frame", f"effect: {before_name} -> {now_name}", "faster", f"{med(ab[True]):.1f} ms",
                f"{med(ab[False]):.1f} ms", f"{med(ab[False]) / med(ab[True]):.2f}x")
+    print("\n== whole frames, A/B interleaved frame by frame (ms, median [range]; CPU: every thread's, llvmpipe's too) ==")
+    for on, name in ((True, "terrain flushed to the rasterizer once issued (now)"),
+                     (False, "everything rasterized at the frame's end (before)")):
+        print(f"  {name:56s} frame {rng_str(frame_ab[on])}  {med(frame_ab[on]) / med(frame_ab[True]):5.2f}x   "
+              f"CPU {rng_str(frame_cpu[on])}")
     print("\n== one frame at a time vs pipelined (wall time a frame over blocks of 10 frames, interleaved) ==")
     for name, ts in modes.items():
         print(f"  {name:14s} {rng_str(ts)} ms  ({1e3 / med(ts):5.1f} fps, {med(ts) / fl:5.2f}x the floor)")

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from piste.errors import ConfigError
-from piste.render.context import Offscreen, check_gl_error, create_context, load_shader
+from piste.render.context import Offscreen, check_gl_error, create_context, flush, load_shader
 from piste.render.sky_pass import HORIZON, SkyPass
 from piste.render.terrain_pass import TerrainPass
 from piste.render.terrain_mode import TerrainMode
@@ -166,6 +166,9 @@ class TerrainRenderer:
         self.active = self.target  # where the current frame is drawn (see draw / resolve)
         self.visibility = None  # see set_visibility
         self.cull_stats: dict = {}
+        #: ``draw(sync=False)`` flushes the terrain to the GL (see draw); False: everything issued in the
+        #: frame is rasterized at its end (bench_frame.py's A/B)
+        self.flush_early = True
 
     def start_resident(self) -> None:
         """Start building the resident vertex blocks in the background now (e.g. while the other
@@ -275,7 +278,8 @@ class TerrainRenderer:
         the second half of :meth:`render`.  ``resolve=False`` leaves a ps2 frame in the half-float
         target (:attr:`active`, still bound) for more passes; :meth:`resolve` finishes it.
         ``sync=False`` (with ``read=False``) returns without waiting for the GL (more passes follow;
-        the ``draw`` timing is then the issue time only)."""
+        the ``draw`` timing is then the issue time only), the terrain flushed to the GL
+        (:attr:`flush_early`)."""
         camera = replace(camera, aspect=self.size[0] / self.size[1])
         t = {"lod": 0.0, "cull": 0.0, "tessellate": 0.0}
         t.update(timings or {})
@@ -296,6 +300,11 @@ class TerrainRenderer:
             self.resolve()
         if sync or read:
             self.ctx.finish()
+        elif self.flush_early:
+            # the terrain (+ sky) handed to llvmpipe's rasterizer threads now (glFlush: it bins a scene
+            # on this thread and rasterizes it only when flushed), so that they fill it while this
+            # thread issues the passes that follow (receivers, objects, riders) instead of after them
+            flush(self.ctx)
         t2 = time.perf_counter()
         image = self.target.read() if read else None
         t3 = time.perf_counter()

@@ -286,7 +286,7 @@ class SceneRenderer:
         fog_rgba = (*HORIZON, float(fog)) if fog and plan["mode"].fog else None  # (the SSX ps2 frame has none)
         if self.shadows is not None and sun is not None:
             with tr.gpu_pass("shadow receivers"):
-                self.shadows.draw_receivers(mesh, plan["patches"], frame_vp)
+                self.shadows.draw_receivers(mesh, plan["patches"], frame_vp, terrain=getattr(self.terrain, "terrain", None))
         if self.objects is not None:
             with tr.gpu_pass("objects"):
                 self.objects.draw(vp, cam.eye, sf.objects_visible, fog=fog_rgba, light_only=light_only)

@@ -39,13 +39,16 @@ if TYPE_CHECKING:
 
     from piste.terrain.tessellate import TerrainMesh
 
-__all__ = ["TerrainPass", "LIGHTMAP_MODES", "DEBUG_VIEWS"]
+__all__ = ["TerrainPass", "LIGHTMAP_MODES", "DEBUG_VIEWS", "RESIDENT_FORMAT"]
 
 LIGHTMAP_MODES = ("modulate", "ps2")
 DEBUG_VIEWS = (None, "base", "lightmap", "lod", "wire")
 _MODE_ID = {"modulate": 0, "base": 1, "lightmap": 2, "lod": 3, "flat": 4, "lod_wire": 5}
 _MORPH_UNIT = 4
 _RESIDENT_FORMAT = ("3f 3f 2f 2f 1f", "in_pos", "in_target", "in_uv", "in_uvl", "in_morph")
+#: the resident vertex blocks' layout (:meth:`TerrainPass.resident_blocks`): a moderngl format and its
+#: attribute names (position, morph target, base UV, light-map UV, morph slot), 44 bytes a vertex
+RESIDENT_FORMAT = _RESIDENT_FORMAT
 
 
 def _with_defines(source: str, **defines) -> str:
@@ -330,6 +333,15 @@ class TerrainPass:
         self._morph = bool(mesh.morph)
         self.has_kind = False
         self.n_indices = int(front.size)
+
+    def resident_blocks(self, mesh: object) -> tuple[moderngl.Buffer, moderngl.Texture | None] | None:
+        """The GPU copy of ``mesh``'s vertex blocks, when ``mesh`` is the
+        :class:`~piste.terrain.resident.ResidentMesh` this pass last uploaded: ``(vertex buffer, morph
+        factor texture or None when the frame does not morph)``, laid out as :data:`RESIDENT_FORMAT`
+        (another pass, e.g. the shadow receivers, draws the same vertices by index); else None."""
+        if self._source != "resident" or not isinstance(mesh, ResidentMesh) or mesh.resident is not self._resident:
+            return None
+        return self._resident_buf, (self._morph_tex if mesh.morph else None)
 
     def _release_vaos(self) -> None:
         for vao in self._vaos.values():
