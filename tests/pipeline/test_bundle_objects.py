@@ -87,3 +87,51 @@ def test_the_light_map_atlas_is_the_stored_member_not_a_copy(tmp_path):
     assert np.array_equal(b.lightmap.atlas, arrays["lightmap/atlas"]) and not b.lightmap.atlas.flags.writeable
     assert b.net.control_points.flags.writeable and not np.shares_memory(b.net.control_points,
                                                                          b.arrays["terrain/control_points"])
+
+
+def _furnished(tmp_path, drop=(), change=None):
+    """The minimal bundle with 20 course objects placed (furnish.add_objects: their level chains stored
+    beside the meshes, as a build stores them), written and loaded again; ``drop``: member names left
+    out, ``change``: ``{member: array}`` written instead."""
+    from piste.pipeline.furnish import add_objects
+
+    path, _ = _minimal(tmp_path)
+    big = load_bundle(path).net.control_points * np.array([40.0, 40.0, 1.0])  # 240 m square: room for them
+    path, _ = _minimal(tmp_path, control_points=big)
+    b = add_objects(load_bundle(path), 20)
+    arrays = {k: v for k, v in b.arrays.items() if k not in drop}
+    arrays.update(change or {})
+    man = {k: v for k, v in b.manifest.items() if k not in ("format", "members")}
+    return load_bundle(write_bundle(tmp_path / "furnished.piste", man, arrays))
+
+
+def test_object_level_chains_are_read_from_the_bundle_as_computed(tmp_path):
+    from piste.world.object_lod import object_lods
+
+    objs = _furnished(tmp_path).objects()
+    assert objs is not None and set(objs.meshes) >= {"tree", "rock"}
+    for m in objs.meshes.values():
+        want = object_lods(m.decode()[0], m.indices)
+        assert m.lods is not None and len(m.lods) == len(want)
+        for got, ref in zip(m.lods, want):
+            assert np.array_equal(got.indices, ref.indices) and got.error == ref.error
+    assert any(len(m.lods) > 1 for m in objs.meshes.values())
+
+
+def test_a_bundle_without_object_level_chains_leaves_them_to_the_renderer(tmp_path):
+    kinds = ("tree", "rock", "sign", "rail")
+    objs = _furnished(tmp_path, drop={f"objects/meshes/{k}/lod_errors" for k in kinds}).objects()
+    assert all(m.lods is None for m in objs.meshes.values())
+
+
+def test_bad_object_level_chains_name_the_member(tmp_path):
+    b = _furnished(tmp_path)
+    tris = b.arrays["objects/meshes/tree/lod_triangles"]
+    with pytest.raises(FormatError) as e:
+        _furnished(tmp_path, change={"objects/meshes/tree/lod_triangles": tris[::-1].copy()}).objects()
+    assert "objects/meshes/tree/lod_triangles.npy" in str(e.value) and "strictly fewer" in str(e.value)
+    idx = b.arrays["objects/meshes/tree/lod_indices"].copy()
+    idx[-1] = 1 << 20
+    with pytest.raises(FormatError) as e:
+        _furnished(tmp_path, change={"objects/meshes/tree/lod_indices": idx}).objects()
+    assert "objects/meshes/tree/lod_indices.npy" in str(e.value) and "past the mesh" in str(e.value)

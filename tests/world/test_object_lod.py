@@ -115,3 +115,35 @@ def test_prune_goes_past_a_stalled_chain():
     assert all(b > a for a, b in zip(errs, errs[1:]))
     rail, _ = _chain("rail")
     assert len(object_lods(rail.decode()[0], rail.indices, prune=True)) > 1
+
+
+@pytest.mark.parametrize("kind", ["tree", "rock", "rail"])
+def test_stored_chain_round_trips(kind):
+    from piste.world.object_lod import lod_arrays, stored_lods
+
+    m, lods = _chain(kind)
+    a = lod_arrays(lods)
+    assert a["lod_indices"].dtype == np.uint32 and a["lod_errors"].dtype == np.float64
+    back = stored_lods(a["lod_indices"], a["lod_triangles"], a["lod_errors"], m.n_vertices, m.n_triangles)
+    assert len(back) == len(lods)
+    for got, ref in zip(back, lods):
+        assert np.array_equal(got.indices, ref.indices) and got.error == ref.error
+
+
+def test_stored_chain_that_does_not_fit_its_mesh_is_refused():
+    from piste.errors import ValidationError
+    from piste.world.object_lod import lod_arrays, stored_lods
+
+    m, lods = _chain("tree")
+    a = lod_arrays(lods)
+    args = (a["lod_indices"], a["lod_triangles"], a["lod_errors"])
+    with pytest.raises(ValidationError, match="lod_triangles: expected"):
+        stored_lods(*args, m.n_vertices, m.n_triangles + 1)  # another mesh's chain
+    with pytest.raises(ValidationError, match="past the mesh"):
+        stored_lods(*args, 3, m.n_triangles)
+    with pytest.raises(ValidationError, match="lod_indices: expected"):
+        stored_lods(a["lod_indices"][:-3], *args[1:], m.n_vertices, m.n_triangles)
+    with pytest.raises(ValidationError, match="lod_errors: expected 0 then"):
+        stored_lods(args[0], args[1], args[2][::-1].copy(), m.n_vertices, m.n_triangles)
+    with pytest.raises(ValidationError, match="lod_indices: expected a flat uint32"):
+        stored_lods(args[0].astype(np.int64), args[1], args[2], m.n_vertices, m.n_triangles)

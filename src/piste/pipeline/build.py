@@ -68,6 +68,7 @@ from piste.render.shadow_pass import sun_visibility
 from piste.terrain.net import TOPOLOGY_FORMAT, PatchNet
 from piste.world.camera import Camera, camera_planes, track_camera
 from piste.world.course import track_centerline
+from piste.world.object_lod import lod_arrays, object_lods
 from piste.world.objects import ObjectSet, bake_vertex_colors, compress_mesh, normal_matrix, object_texture
 from piste.world.scene import sun_light
 from piste.world.scene_file import ActorSpec, SceneFile, load_scene
@@ -587,7 +588,7 @@ def _objects_key(ctx: BuildContext) -> str | None:
     srcs = _object_sources(ctx)
     src_keys = [m if m.startswith("builtin:") else _file_key(m) for m in srcs]
     placements = [(o.name, o.model, list(o.position), o.heading, o.scale) for o in scene.objects]
-    return content_key(BUILD_VERSION, "objects", "object_atlas/4", ctx.terrain_key, srcs, src_keys, placements,
+    return content_key(BUILD_VERSION, "objects", "object_atlas/4", "object_lods/1", ctx.terrain_key, srcs, src_keys, placements,
                        ctx.manifest["lights"], *_allow_key(scene))
 
 
@@ -864,6 +865,8 @@ def _objects_arrays(net: PatchNet, objects: Sequence[ActorSpec], sources: Sequen
                   p + "uv": cm.uv, p + "uv_offset": cm.uv_offset, p + "uv_extent": cm.uv_extent,
                   p + "normals": cm.normals, p + "indices": cm.indices})
         a[f"colors/{k}"] = colors[k]
+        # its level chain as the renderer would simplify it at every start (stored: ~3 ms less a start)
+        a.update({p + n: v for n, v in lod_arrays(object_lods(cm.decode()[0], cm.indices)).items()})
         meta["meshes"][k] = {"normal_bits": int(cm.normal_bits), "radius": float(cm.radius), "blend": k in blend,
                              "vertices": cm.n_vertices,
                              "triangles": cm.n_triangles, "bytes": int(cm.nbytes),

@@ -56,6 +56,7 @@ from piste.terrain.net import TOPOLOGY_ARRAYS, TOPOLOGY_FORMAT, PatchNet
 from piste.terrain.resident import (RESIDENT_FLOATS, RESIDENT_FORMAT, ResidentTerrain, keep_resident, resident_fits,
                                     resident_terrain)
 from piste.world.camera import Camera
+from piste.world.object_lod import LOD_ARRAYS, stored_lods
 from piste.world.objects import CompressedMesh, ObjectSet, normal_matrix
 
 __all__ = ["Bundle", "load_bundle", "bundle_from_data", "lights_from_dict", "camera_from_dict", "camera_to_dict",
@@ -216,7 +217,7 @@ class Bundle:
             m = info["meshes"][k]
             meshes[k] = CompressedMesh(k, a[p + "positions"], a[p + "pos_offset"], a[p + "pos_extent"], a[p + "uv"],
                                        a[p + "uv_offset"], a[p + "uv_extent"], a[p + "normals"], int(m["normal_bits"]),
-                                       a[p + "indices"], float(m["radius"]))
+                                       a[p + "indices"], float(m["radius"]), lods=self._object_lods(p))
         kind = a["objects/kind"].astype(np.int64)
         matrix = a["objects/matrix"].astype(np.float64)
         vl = None
@@ -229,6 +230,21 @@ class Bundle:
                          a["objects/radius"].astype(np.float64), vl, tex, counts, blend)
         self._cache["objects"] = objs
         return objs
+
+    def _object_lods(self, prefix: str) -> list | None:
+        """The level chain stored beside the object mesh at ``prefix`` (``objects/meshes/KIND/``: the
+        build's :func:`piste.world.object_lod.object_lods`, so a renderer's set-up does not simplify
+        every kind again), or None when the bundle has none (built before they were stored).  FormatError
+        naming the member when they do not fit the mesh."""
+        a = self.arrays
+        if not all(prefix + n in a for n in LOD_ARRAYS):
+            return None
+        try:
+            idx, tris, err = (a[prefix + n] for n in LOD_ARRAYS)
+            return stored_lods(idx, tris, err, len(a[prefix + "positions"]), len(a[prefix + "indices"]))
+        except PisteError as exc:
+            member = str(exc).split(":", 1)[0] if str(exc).split(":", 1)[0] in LOD_ARRAYS else LOD_ARRAYS[0]
+            raise FormatError(self.path, f"invalid object levels of detail ({exc})", field=f"{prefix}{member}.npy") from None
 
     @_manifest_errors
     def vertex_colors(self) -> dict:

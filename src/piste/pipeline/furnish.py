@@ -31,6 +31,7 @@ from piste.pipeline.bundle_objects import Bundle
 from piste.pipeline.characters import character_arrays
 from piste.pipeline.sources import load_rider_model
 from piste.terrain.query import height_at
+from piste.world.object_lod import lod_arrays, object_lods
 from piste.world.objects import bake_vertex_colors, place_objects
 from piste.world.riders import surface_frame
 
@@ -161,6 +162,8 @@ def object_arrays(objs: ObjectSet, lights: Lights, arrays: dict[str, Any]) -> di
         p = f"objects/meshes/{k}/"
         for name in ("positions", "pos_offset", "pos_extent", "uv", "uv_offset", "uv_extent", "normals", "indices"):
             arrays[p + name] = getattr(m, name)
+        # the level chain a renderer would simplify at every start, stored beside the mesh
+        arrays.update({p + n: v for n, v in lod_arrays(m.lods or object_lods(m.decode()[0], m.indices)).items()})
         meta["meshes"][k] = {"normal_bits": int(m.normal_bits), "radius": float(m.radius), "blend": k in objs.blend}
     arrays["objects/kind"] = objs.kind.astype(np.int64)
     arrays["objects/matrix"] = objs.matrix.astype(np.float64)

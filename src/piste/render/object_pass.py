@@ -339,7 +339,7 @@ class ObjectPass:
         self.kinds = []
         for k, name in enumerate(objects.kinds):
             m = objects.meshes[name]
-            lods = object_lods(m.decode()[0], m.indices)
+            lods = m.lods or object_lods(m.decode()[0], m.indices)  # (a bundle's mesh: the chain stored with it)
             # every level's indices in one buffer, level after level (drawn with ``first``)
             idx = np.concatenate([lv.indices.reshape(-1) for lv in lods]).astype(m.indices.dtype)
             sizes = [lv.indices.size for lv in lods]

@@ -373,6 +373,8 @@ class CompressedMesh:
     normals : (v, 2) int8 or int16 octahedral snorm;  normal_bits : 8 or 16
     indices : (t, 3) uint16 (uint32 past 65,535 vertices)
     radius : float, bounding-sphere radius about the origin (object space)
+    lods : its level chain (:func:`piste.world.object_lod.object_lods` of the decoded mesh) when stored
+        with it (a bundle's), else None (a renderer computes it)
     """
 
     name: str
@@ -386,6 +388,7 @@ class CompressedMesh:
     normal_bits: int
     indices: np.ndarray
     radius: float = 1.0
+    lods: list | None = field(default=None, repr=False, compare=False)
 
     @property
     def n_vertices(self) -> int:
