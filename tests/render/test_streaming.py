@@ -25,7 +25,8 @@ def world(tmp_path_factory):
 
 def test_pages_nearest_tiles_within_the_budget(world):
     one = S.mesh_bytes(8 * 2 + 1, 8 * 2 + 1, morph=True)  # a near tile's mesh (with its geomorph targets)
-    far = (S.mesh_bytes(9, 9) + S.mesh_bytes(5, 5) + S.mesh_bytes(3, 3) + S.mesh_bytes(2, 2)) * 36  # strides 1..8
+    lit = TileStore(world).read("lit", 0, 0)  # far levels: the corner grid at strides 1..8 (every tile alike)
+    far = sum(S.far_mesh(lit, 1.0, k).nbytes for k in S.FAR_STRIDES) * 36
     far += 17 * 17 * 3 * 36  # and each tile's welded light map (near and far levels sample it)
     cache = S.TileCache(world, budget_bytes=far + 3 * one + 100, near_radius=1000.0, near_samples=3)
     try:
@@ -133,6 +134,7 @@ def test_no_background_through_tile_borders(world, gl, monkeypatch):
         r.close()
     # the same views without skirts do show the background at near/far borders: the test can fail
     monkeypatch.setattr(S, "_with_skirts", lambda p, c, t, sides, depth, f=S._with_skirts: f(p, c, t, sides, 0.0))
+    monkeypatch.setattr(S, "far_mesh", lambda lit, depth, stride=1, f=S.far_mesh: f(lit, 0.0, stride))
     r = S.StreamingRenderer(world, size=(200, 150), budget_bytes=4 << 20, near_radius=250.0, ctx=gl,
                             background=MAGENTA, pixel_error=None, sky=False)
     try:

@@ -115,6 +115,8 @@ SKY = (0.80, 0.86, 0.93)
 #: corner strides of the far levels (every tile keeps all of them: 1 + 1/4 + 1/16 + 1/64 of the grid)
 FAR_STRIDES = (1, 2, 4, 8)
 
+#: patches a side of the blocks a far tile draws each at its own stride (the coarsest stride's cell)
+FAR_BLOCK = FAR_STRIDES[-1]
 #: far levels are chosen so that a level's height error (against the full corner grid) stays
 #: under this many pixels on screen
 FAR_PIXEL_ERROR = 3.0
@@ -208,6 +210,8 @@ class TileMesh:
     targets: np.ndarray | None = None
     corner: np.ndarray | None = None
     errors: np.ndarray | None = None
+    #: a far mesh's blocks (:func:`far_mesh`), or None
+    blocks: dict | None = None
 
     @property
     def nbytes(self) -> int:
@@ -263,20 +267,63 @@ def _stride_index(n: int, stride: int) -> np.ndarray:
 def far_mesh(lit: dict, depth: float, stride: int = 1) -> TileMesh:
     """The far stand-in of a tile: its corner grid ``(ny+1, nx+1)`` (every ``stride``-th corner, the
     border rows always kept) plus skirts.  At stride 1 (a cell a patch) the triangles are
-    patch-major (``patch_triangles`` 2: visibility sets cull it per patch like a near mesh)."""
+    patch-major (``patch_triangles`` 2: visibility sets cull it per patch like a near mesh); at
+    coarser strides block-major.
+
+    Blocks of ``FAR_BLOCK`` x ``FAR_BLOCK`` patches are drawn each at its own stride
+    (:meth:`TileCache.block_strides`), so every block has a skirt under each of its four sides
+    (hanging ``depth``, facing out of the block), drawn where the block meets a block of another
+    stride or the tile's border: the tile's skirts are its border blocks'.  ``blocks``:
+    ``{"cells": (nb + 1,) first triangle of each block's cells (coarser strides), "skirt_first",
+    "skirt_count": (nb, 4)}`` (sides south, east, north, west; block ``row * bx + col``)."""
     g = np.asarray(lit["far_positions"], dtype=np.float64)
     c = np.asarray(lit["far_colors"])
-    ri, ci = _stride_index(g.shape[0], stride), _stride_index(g.shape[1], stride)
+    rows0, cols0 = g.shape[:2]
+    ri, ci = _stride_index(rows0, stride), _stride_index(cols0, stride)
     g, c = g[ri][:, ci], c[ri][:, ci]
     rows, cols = g.shape[:2]
     idx = np.arange(rows * cols).reshape(rows, cols)
-    sides = _border_sides(idx)
     tris = _grid_triangles(rows, cols)
+    cells = (rows - 1) * (cols - 1)
+    by, bx = -(-(rows0 - 1) // FAR_BLOCK), -(-(cols0 - 1) // FAR_BLOCK)
+    cell_block = ((ri[:-1] // FAR_BLOCK)[:, None] * bx + (ci[:-1] // FAR_BLOCK)[None, :]).ravel()
     if stride == 1:  # cell k's two triangles are k and k + cells: together, cell by cell
-        cells = (rows - 1) * (cols - 1)
         tris = tris.reshape(2, cells, 3).transpose(1, 0, 2).reshape(-1, 3)
-    mesh = _with_skirts(g.reshape(-1, 3), c.reshape(-1, 3), tris, sides, depth)
+    else:  # block by block
+        tris = tris[np.argsort(np.concatenate([cell_block, cell_block]), kind="stable")]
+    first = np.concatenate([[0], np.cumsum(2 * np.bincount(cell_block, minlength=by * bx))])
+    # the block lines (every FAR_BLOCK-th corner and the last) among the strided rows and columns
+    lr = np.nonzero((ri % FAR_BLOCK == 0) | (ri == rows0 - 1))[0]
+    lc = np.nonzero((ci % FAR_BLOCK == 0) | (ci == cols0 - 1))[0]
+    n = rows * cols
+    low_r = n + np.arange(len(lr) * cols).reshape(len(lr), cols)  # a lowered copy of each block-line vertex
+    low_c = n + low_r.size + np.arange(len(lc) * rows).reshape(len(lc), rows)
+    pos = np.concatenate([g.reshape(-1, 3), g[lr].reshape(-1, 3), g[:, lc].transpose(1, 0, 2).reshape(-1, 3)])
+    pos[n:, 2] -= depth
+    col = np.concatenate([c.reshape(-1, 3), c[lr].reshape(-1, 3), c[:, lc].transpose(1, 0, 2).reshape(-1, 3)])
+    segs, keys = [], []
+
+    def strip(top, low, key, forward: bool) -> None:  # the segments of polylines (k, m) top and low
+        ta, tb, la, lb = top[:, :-1], top[:, 1:], low[:, :-1], low[:, 1:]
+        if not forward:
+            ta, tb, la, lb = tb, ta, lb, la
+        segs.append(np.stack([np.stack([ta, tb, lb], -1), np.stack([ta, lb, la], -1)], -2).reshape(-1, 2, 3))
+        keys.append(key.reshape(-1))
+
+    bcol = (ci[:-1] // FAR_BLOCK)[None, :]  # the block column of each segment along a row line
+    brow = (ri[:-1] // FAR_BLOCK)[None, :]
+    line_r, line_c = np.arange(len(lr))[:, None], np.arange(len(lc))[:, None]
+    strip(idx[lr][:-1], low_r[:-1], (line_r[:-1] * bx + bcol) * 4 + 0, False)  # the south side of the blocks above
+    strip(idx[lr][1:], low_r[1:], ((line_r[1:] - 1) * bx + bcol) * 4 + 2, True)  # the north side of those below
+    strip(idx[:, lc].T[:-1], low_c[:-1], (brow * bx + line_c[:-1]) * 4 + 3, True)  # the west side of the blocks east
+    strip(idx[:, lc].T[1:], low_c[1:], (brow * bx + line_c[1:] - 1) * 4 + 1, False)  # the east side of those west
+    seg, key = np.concatenate(segs), np.concatenate(keys)
+    seg = seg[np.argsort(key, kind="stable")].reshape(-1, 3)
+    count = 2 * np.bincount(key, minlength=by * bx * 4)
+    sfirst = 2 * cells + np.concatenate([[0], np.cumsum(count)[:-1]])
+    mesh = TileMesh(pos.astype(np.float32), col.astype(np.uint8), np.concatenate([tris, seg]).astype(np.uint32))
     mesh.patch_triangles = 2 if stride == 1 else 0
+    mesh.blocks = {"cells": first, "skirt_first": sfirst.reshape(-1, 4), "skirt_count": count.reshape(-1, 4)}
     return mesh
 
 
@@ -303,6 +350,11 @@ def light_grid(texels: np.ndarray, grid_shape: tuple) -> np.ndarray:
 def stride_errors(far_positions: np.ndarray) -> dict:
     """Height error of each far level: ``{stride: metres}``, the largest vertical distance between
     the full corner grid ``(ny+1, nx+1, 3)`` and the level's grid interpolated bilinearly."""
+    return {k: float(e.max()) for k, e in stride_error_grids(far_positions).items()}
+
+
+def stride_error_grids(far_positions: np.ndarray) -> dict:
+    """:func:`stride_errors` at every corner: ``{stride: (ny+1, nx+1) float64 metres}``."""
     g = np.asarray(far_positions, dtype=np.float64)[..., 2]
     rows, cols = np.arange(g.shape[0]), np.arange(g.shape[1])
     out = {}
@@ -311,8 +363,50 @@ def stride_errors(far_positions: np.ndarray) -> dict:
         c = g[ri][:, ci]
         a = np.stack([np.interp(cols, ci, row) for row in c])  # (len(ri), cols)
         b = np.stack([np.interp(rows, ri, a[:, x]) for x in range(a.shape[1])], 1)  # (rows, cols)
-        out[k] = float(np.abs(b - g).max())
+        out[k] = np.abs(b - g)
     return out
+
+
+def _block_reduce(grid: np.ndarray, op) -> np.ndarray:
+    """``op`` (np.minimum or np.maximum) over the corners of each far block (:data:`FAR_BLOCK`
+    patches a side, both border lines included) of a corner grid ``(ny+1, nx+1)``: ``(by, bx)``."""
+    out = np.asarray(grid)
+    for axis in (0, 1):
+        n = out.shape[axis]
+        s = np.arange(0, n - 1, FAR_BLOCK)
+        e = np.minimum(s + FAR_BLOCK, n - 1)
+        out = op(op.reduceat(out, s, axis=axis), np.take(out, e, axis=axis))
+    return out
+
+
+def far_blocks(far_positions: np.ndarray, depth: float, chord: float) -> dict:
+    """What a far tile's blocks (:func:`far_mesh`) are chosen by, from its corner grid ``(ny+1, nx+1,
+    3)``: ``lo, hi (nb, 3)`` their boxes (skirts included, ``depth``), ``err (nb, 3)`` each coarser
+    stride's height error (:func:`stride_error_grids`) over the block plus its corner grid's chord
+    error (a quarter of the corner heights' largest second difference there, as :func:`chord_error`,
+    at most the tile's ``chord``), metres, and ``patches (nb,)``."""
+    g = np.asarray(far_positions, dtype=np.float64)
+    z = g[..., 2]
+    sd = np.zeros_like(z)  # per corner: the largest second difference through it, along x or y
+    if z.shape[0] >= 3:
+        sd[1:-1] = np.abs(z[2:] - 2.0 * z[1:-1] + z[:-2])
+    if z.shape[1] >= 3:
+        sd[:, 1:-1] = np.maximum(sd[:, 1:-1], np.abs(z[:, 2:] - 2.0 * z[:, 1:-1] + z[:, :-2]))
+    sd = np.maximum(sd, np.maximum(np.roll(sd, 1, 0), np.roll(sd, -1, 0)))  # (the border corners: a neighbour's)
+    sd = np.maximum(sd, np.maximum(np.roll(sd, 1, 1), np.roll(sd, -1, 1)))
+    ch = np.minimum(_block_reduce(sd, np.maximum) / 4.0, float(chord))
+    grids = stride_error_grids(g)
+    err = np.stack([_block_reduce(grids[k], np.maximum) + ch for k in FAR_STRIDES[1:]], -1)
+    rows, cols = z.shape
+    rs, cs = np.arange(0, rows - 1, FAR_BLOCK), np.arange(0, cols - 1, FAR_BLOCK)
+    re, ce = np.minimum(rs + FAR_BLOCK, rows - 1), np.minimum(cs + FAR_BLOCK, cols - 1)
+    x0, x1 = g[0, cs, 0][None, :], g[0, ce, 0][None, :]
+    y0, y1 = g[rs, 0, 1][:, None], g[re, 0, 1][:, None]
+    shape = (len(rs), len(cs))
+    lo = np.stack([np.broadcast_to(x0, shape), np.broadcast_to(y0, shape), _block_reduce(z, np.minimum) - depth], -1)
+    hi = np.stack([np.broadcast_to(x1, shape), np.broadcast_to(y1, shape), _block_reduce(z, np.maximum)], -1)
+    return {"lo": lo.reshape(-1, 3), "hi": hi.reshape(-1, 3), "err": err.reshape(-1, len(FAR_STRIDES) - 1),
+            "patches": ((re - rs)[:, None] * (ce - cs)[None, :]).reshape(-1)}
 
 
 def chord_error(far_positions: np.ndarray) -> float:
@@ -513,21 +607,56 @@ def patch_corner_errors(mesh: TileMesh, grid_shape: tuple) -> np.ndarray | None:
     return _patch_reduce(e, (ny, nx), r, np.maximum).reshape(-1).astype(np.float64)
 
 
-def patch_runs(inside: np.ndarray, patch_triangles: int, total_triangles: int, skirts: bool = True) -> np.ndarray:
+def entry_runs(mask: np.ndarray, first: np.ndarray, count: np.ndarray) -> np.ndarray:
     """Indirect draw commands ``(k, 5)`` uint32 (count, instances, first index, base vertex, base
-    instance: ``glMultiDrawElementsIndirect``'s) drawing the patches ``inside (n,) bool`` of a
-    patch-major index buffer of ``total_triangles`` (patch ``p``'s triangles at ``[p pt, (p+1) pt)``,
-    the skirts after the ``n`` patches', drawn with ``skirts``): one command a run of consecutive patches."""
-    m = np.asarray(inside, bool)
-    n, pt = len(m), int(patch_triangles)
+    instance: ``glMultiDrawElementsIndirect``'s) drawing the entries ``mask (m,) bool`` of an index
+    buffer whose entry ``j`` is the triangles ``[first[j], first[j] + count[j])``, entries in buffer
+    order and back to back: one command a run of consecutive entries."""
+    m = np.asarray(mask, bool)
+    first, count = np.asarray(first, np.int64), np.asarray(count, np.int64)
     d = np.diff(np.concatenate([[False], m, [False]]).astype(np.int8))
     start, end = np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]
-    first = np.append(start * pt * 3, n * pt * 3)
-    count = np.append((end - start) * pt * 3, (int(total_triangles) - n * pt) * 3 if skirts else 0)
-    keep = count > 0
+    n = (first[end - 1] + count[end - 1] - first[start]) * 3
+    keep = n > 0
     out = np.zeros((int(keep.sum()), 5), np.uint32)
-    out[:, 0], out[:, 1], out[:, 2] = count[keep], 1, first[keep]
+    out[:, 0], out[:, 1], out[:, 2] = n[keep], 1, first[start][keep] * 3
     return out
+
+
+def patch_runs(inside: np.ndarray, patch_triangles: int, total_triangles: int, skirts: bool = True) -> np.ndarray:
+    """Indirect draw commands ``(k, 5)`` uint32 (:func:`entry_runs`) drawing the patches ``inside
+    (n,) bool`` of a patch-major index buffer of ``total_triangles`` (patch ``p``'s triangles at
+    ``[p pt, (p+1) pt)``, the skirts after the ``n`` patches', drawn with ``skirts``): one command a
+    run of consecutive patches."""
+    m = np.asarray(inside, bool)
+    n, pt = len(m), int(patch_triangles)
+    out = entry_runs(m, np.arange(n) * pt, np.full(n, pt))
+    rest = int(total_triangles) - n * pt
+    if skirts and rest > 0:
+        out = np.concatenate([out, np.array([[rest * 3, 1, n * pt * 3, 0, 0]], np.uint32)])
+    return out
+
+
+def block_runs(mesh: TileMesh, grid_shape: tuple, strides: np.ndarray, drawn: np.ndarray, stride: int) -> np.ndarray:
+    """Indirect draw commands ``(k, 5)`` uint32 (:func:`entry_runs`) drawing, of far ``mesh`` at
+    ``stride`` (:func:`far_mesh`) of a ``(ny, nx)``-patch tile, the blocks ``drawn (nb,) bool`` whose
+    stride (``strides (nb,) int``, block ``row * bx + col``) is ``stride``: their cells, and the
+    skirts of their sides on the tile's border or against a block of another stride."""
+    ny, nx = (int(x) for x in grid_shape)
+    by, bx = -(-ny // FAR_BLOCK), -(-nx // FAR_BLOCK)
+    st = np.asarray(strides).reshape(by, bx)
+    sel = (np.asarray(drawn, bool) & (np.asarray(strides) == stride)).reshape(by, bx)
+    pad = np.pad(st, 1, constant_values=0)  # 0: beyond the tile's border (no stride)
+    other = np.stack([pad[:-2, 1:-1], pad[1:-1, 2:], pad[2:, 1:-1], pad[1:-1, :-2]], -1)  # south, east, north, west
+    skirt = (sel[..., None] & (other != stride)).reshape(-1)
+    blk = mesh.blocks
+    assert blk is not None
+    if stride == 1:  # patch-major cells: the patches of the blocks
+        py, px = np.arange(ny) // FAR_BLOCK, np.arange(nx) // FAR_BLOCK
+        cells = patch_runs(sel[py][:, px].reshape(-1), 2, 2 * ny * nx, skirts=False)
+    else:
+        cells = entry_runs(sel.reshape(-1), blk["cells"][:-1], np.diff(blk["cells"]))
+    return np.concatenate([cells, entry_runs(skirt, blk["skirt_first"].reshape(-1), blk["skirt_count"].reshape(-1))])
 
 
 def seam_skirts(mesh: TileMesh, grid_shape: tuple, coarse: np.ndarray, depth: float) -> np.ndarray:
@@ -757,6 +886,8 @@ class TileCache:
         #: worlds built without it, :func:`chord_error` and a quarter of it)
         self.chord_error: dict = {}
         self.mid_error: dict = {}
+        #: per tile: its far blocks' boxes and errors (:func:`far_blocks`)
+        self.blocks: dict = {}
         for t in sorted(self.bounds):
             try:
                 lit = self._read("lit", t, None)  # every member (the far field, texels, far_error, sets)
@@ -777,6 +908,7 @@ class TileCache:
             else:  # a world built before it: estimated from the corner grid
                 self.chord_error[t] = chord_error(lit["far_positions"])
                 self.mid_error[t] = self.chord_error[t] / 4.0
+            self.blocks[t] = far_blocks(lit["far_positions"], self._depth(t), self.chord_error[t])
             self._far_bytes += sum(m.nbytes for m in self.far[t].values()) + self.light[t].nbytes
             self._note_objects(t, lit)
         if self.bad:  # only tiles with a far stand-in are drawn
@@ -790,6 +922,12 @@ class TileCache:
         self._mid = np.array([self.mid_error.get(t, 0.0) for t in self.tiles], dtype=np.float64)
         self._stride_err = np.array([[self.far_error[t][k] + self.chord_error[t] for k in FAR_STRIDES[1:]]
                                      for t in self.tiles], dtype=np.float64).reshape(-1, len(FAR_STRIDES) - 1)
+        # the far blocks of every tile of :attr:`tiles`, concatenated: tile i's at [block_start[i], block_start[i+1])
+        nb = [len(self.blocks[t]["patches"]) for t in self.tiles]
+        self.block_start = np.concatenate([[0], np.cumsum(nb)]).astype(np.int64)
+        self.tile_index = {t: i for i, t in enumerate(self.tiles)}
+        self._blk = {k: np.concatenate([self.blocks[t][k] for t in self.tiles]) if self.tiles else
+                     np.zeros((0, 3) if k != "patches" else 0) for k in ("lo", "hi", "err", "patches")}
         if self._far_bytes > self.budget:
             raise ConfigError(f"streaming budget {self.budget / 2**20:.1f} MiB is below the far field's "
                               f"{self._far_bytes / 2**20:.1f} MiB: raise it")
@@ -1161,6 +1299,21 @@ class TileCache:
             out = np.where(self._stride_err[:, j] <= allowed, k, out)
         return out
 
+    def block_strides(self, eye: npt.ArrayLike, pixel_scale: float, tile_strides: np.ndarray,
+                      pixel_error: float = FAR_PIXEL_ERROR) -> np.ndarray:
+        """The stride of every far block (:attr:`block_start`, :func:`far_blocks`) seen from ``eye``
+        ``(3,)``: the coarsest whose error projects to at most ``pixel_error`` pixels at the block's
+        nearest point (``pixel_scale`` pixels a radian), at least its tile's ``tile_strides (n,)``
+        (:meth:`far_strides`, by the tile's largest error at its nearest point); ``(nb,)`` int."""
+        eye = np.asarray(eye, dtype=np.float64).reshape(3)
+        lo, hi = self._blk["lo"], self._blk["hi"]
+        d = np.maximum(np.maximum(lo - eye, eye - hi), 0.0)
+        allowed = np.sqrt((d * d).sum(1)) * pixel_error / max(float(pixel_scale), 1e-9)
+        out = np.ones(len(lo), np.int64)
+        for j, k in enumerate(FAR_STRIDES[1:]):
+            out = np.where(self._blk["err"][:, j] <= allowed, k, out)
+        return np.maximum(out, np.repeat(np.asarray(tile_strides, np.int64), np.diff(self.block_start)))
+
     def morph_factors(self, eye: npt.ArrayLike, pixel_scale: float, pixel_error: float | None) -> dict:
         """Geomorph factor of every resident near or middle tile seen from ``eye``: ``{tile: f}``,
         f = clamp(e / pixel_error - 1, 0, 1) where e is the pixels the coarser level's error
@@ -1290,6 +1443,7 @@ class StreamingRenderer:
         self._boxes: dict = {}  # (tile, level) -> (mesh id, patch_boxes)
         self._seams: dict = {}  # (tile, "mid") -> ((mesh id, packed mask), vbo, vao, triangles)
         self._indirect = None  # the frame's indirect draw commands
+        self._far_runs: dict = {}  # tile -> ((block strides, blocks in view), {stride: commands})
         self.stats: dict = {}
 
     def _light(self, t):
@@ -1455,6 +1609,11 @@ class StreamingRenderer:
         # the per-vertex geomorph: pixels on screen of a metre of error at 1 m, over the limit
         err_scale = pixel_scale / self.pixel_error if self.pixel_error else None
         e = np.asarray(cam.eye, dtype=np.float64).reshape(3)
+        blocks = None  # far tiles by block: every block's stride and whether its box is in view
+        drawn["far_blocks"] = drawn["far_blocks_culled"] = 0
+        if self.mix_levels and len(self.cache.tiles):
+            blocks = (self.cache.block_strides(e, pixel_scale, self.cache.far_strides(e, pixel_scale)),
+                      _boxes_visible(planes, self.cache._blk["lo"], self.cache._blk["hi"]))
         jobs, commands, ncmd = [], [], 0  # what each tile draws (all the indirect commands first)
         for t, level, mesh in todo:
             key = (t, level)
@@ -1465,6 +1624,28 @@ class StreamingRenderer:
             seen = self.cache.visible_patches(t, cam.eye) if sets and (kind == "near" or level == "far1") else None
             # near and middle meshes: geomorphed per vertex by the errors of the patches around it
             verr = err_scale if kind == "near" and t in morph and err_scale and mesh.errors is not None else 0.0
+            if kind == "far" and seen is None and blocks is not None and mesh.blocks is not None:
+                # a far tile: each block at its own stride (:meth:`TileCache.block_strides`), those in view
+                i = self.cache.tile_index[t]
+                st = blocks[0][self.cache.block_start[i]:self.cache.block_start[i + 1]]
+                vis = blocks[1][self.cache.block_start[i]:self.cache.block_start[i + 1]]
+                bkey = (st.tobytes(), np.packbits(vis).tobytes())
+                got = self._far_runs.get(t)
+                if got is None or got[0] != bkey:
+                    py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
+                    runs = {k: block_runs(self.cache.far[t][k], (py1 - py0, px1 - px0), st, vis, k)
+                            for k in FAR_STRIDES if (vis & (st == k)).any()}
+                    got = self._far_runs[t] = (bkey, runs)
+                for k, cmd in got[1].items():
+                    fk = self.cache.far[t][k]
+                    jobs.append((t, kind, fk, self._vao((t, f"far{k}"), fk), (ncmd, len(cmd)), 0.0))
+                    commands.append(cmd)
+                    ncmd += len(cmd)
+                    drawn["triangles"] += int(cmd[:, 0].sum()) // 3
+                drawn["far_patches"] += self.cache.patches[t]
+                drawn["far_blocks"] += int(len(st))
+                drawn["far_blocks_culled"] += int((~vis).sum())
+                continue
             if not (self.mix_levels and mesh.patch_triangles and (verr or level == "far1")):
                 if seen is not None and mesh.patch_triangles and not seen.all():
                     vao, ntri = self._vis_vao(key, mesh, seen)
@@ -1486,9 +1667,9 @@ class StreamingRenderer:
             inside = _boxes_visible(planes, c - h, c + h)
             drawn["frustum_culled"] += int((~inside).sum())
             if seen is not None:
-                drawn["vis_culled"] += int((inside & ~seen).sum())
+                drawn["vis_culled"] += int((~seen).sum())
                 inside &= seen
-            drawn[f"{kind}_patches"] += int(inside.sum())
+            drawn[f"{kind}_patches"] += self.cache.patches[t] - (0 if seen is None else int((~seen).sum()))
             if not verr:  # a full corner grid: its patches in view
                 mine = patch_runs(inside, mesh.patch_triangles, len(mesh.indices))
                 jobs.append((t, kind, mesh, vao, (ncmd, len(mine)), 0.0))
