@@ -18,8 +18,10 @@ Sections (every configuration interleaved frame by frame in one process; medians
    <= 0.5 px of error, 6 levels a kind against 4, and, as an upper bound for impostors,
    the instances under 8 px of radius left out; the terrain's back-face culling, whole
    back-facing patches left out by normal cones (off by default: no gain measured), error-driven
-   edges (flat, 2 corners, or coarsest where under 0.5 px), visibility sets and per-vertex track distance; the shadow mips by compute dispatches; the shadow
-   receivers cut to their frusta by clip distances), with the pixels changed.
+   edges (flat, 2 corners, or coarsest where under 1 px, and 1 px against 0.5 px), visibility sets and per-vertex track distance; the shadow mips by compute dispatches; the shadow
+   receivers cut to their frusta by clip distances, and drawn from the terrain's resident blocks by index), with the pixels changed;
+   then whole frames, without the per-pass syncs: the terrain flushed to llvmpipe's rasterizer threads
+   as soon as it is issued against everything rasterized at the frame's end (wall and CPU time).
 4. **Scaling**: frame time and CPU side against the number of patches (2,560 / 10k / 40k; the
    camera's far plane at 1 km caps the visible set; ``bench_terrain.py`` takes the CPU side to 160k)
    and riders (6 / 24 / 96), with the fitted exponent ``t ~ n^k``.
@@ -505,11 +507,15 @@ def scene_section(args, floor_ms: list) -> dict:
     def set_cone_cull(on):  # (on: the default, every patch sent)
         r.terrain.terrain.cull_back_patches = not on
 
+    flat_now = r.terrain.lod_kwargs.get("flat_error")  # the renderer's (frame.LOD_ERROR_PX: 1 px)
+
     def set_flat(on):
-        if on:
-            r.terrain.lod_kwargs.pop("flat_error", None)
-        else:
-            r.terrain.lod_kwargs["flat_error"] = None
+        r.terrain.lod_kwargs["flat_error"] = flat_now if on else None
+
+    def set_flat_1px(on):
+        from piste.terrain.lod import FLAT_ERROR
+
+        r.terrain.lod_kwargs["flat_error"] = flat_now if on else FLAT_ERROR
 
     changes = [("objects", set_objects, "objects: per-mode programs, instance attributes, no discard",
                 "objects: one program, 14 texelFetch a vertex, u_mode + discard"),
@@ -522,8 +528,10 @@ def scene_section(args, floor_ms: list) -> dict:
                ("terrain", set_cull, "terrain: back faces culled", "terrain: back faces drawn"),
                ("terrain", set_cone_cull, "terrain: every visible patch sent (the default)",
                 "terrain: wholly back-facing patches left out (normal cones, off)"),
-               ("terrain", set_flat, "terrain: edges flat (2 corners) or coarsest where under 0.5 px",
+               ("terrain", set_flat, "terrain: edges flat (2 corners) or coarsest where under 1 px",
                 "terrain: levels by distance alone (4 a side at the coarsest)"),
+               ("terrain", set_flat_1px, "terrain: edges flat or coarsest where under 1 px (the default)",
+                "terrain: ... where under 0.5 px (the terrain core's FLAT_ERROR)"),
                ("terrain", set_visibility, "terrain: the bundle's visibility sets", "terrain: frustum culling alone"),
                ("shadow casters", set_compute_mips, "shadow mips: two levels a compute dispatch",
                 "shadow mips: a framebuffer (and a rasterizer wait) per level"),

@@ -23,6 +23,7 @@ from piste.render.terrain_pass import TerrainPass
 from piste.render.terrain_mode import TerrainMode
 from piste.render.textures import placeholder_lightmap, track_field
 from piste.terrain.cull import patch_tree
+from piste.terrain.lod import FLAT_ERROR
 from piste.terrain.resident import morph_setting, resident_fits, resident_terrain
 from piste.terrain.tessellate import tessellate
 
@@ -47,6 +48,16 @@ void main() {
     gl_FragDepth = texelFetch(u_depth, p, 0).r;
 }
 """
+
+#: the terrain's simplification error on screen, pixels of a 448-line frame: edges flat (2 corners) or
+#: at the coarsest level where that is under it.  1 px, as the objects' levels of detail
+#: (:data:`piste.world.object_lod.DEFAULT_LOD_PIXELS`): on the default scene 20 % fewer terrain
+#: triangles than the terrain core's 0.5 px (:data:`piste.terrain.lod.FLAT_ERROR`), a mean pixel
+#: difference under 0.01 levels and at most 0.02 % of the pixels off by more than 16 (a silhouette
+#: moved by a pixel here and there; bench_frame.py's A/B)
+LOD_ERROR_PX = 1.0
+#: the pixels :data:`piste.terrain.lod.FLAT_ERROR` (an angle) stands for at 640 x 448
+FLAT_ERROR_PX = 0.5
 
 #: fog density per metre (about 45 % haze at 1 km)
 DEFAULT_FOG_DENSITY = 6e-4
@@ -116,6 +127,10 @@ class TerrainRenderer:
         ``LightMap.atlas``) or uint8 (255 = 1.0), or None (unlit)
     base_texture : (N, N, 3|4) uint8 (default: procedural snow)
     lod_near, lod_far : per-edge LOD distance thresholds (default: the terrain core's)
+    lod_error : an edge is drawn flat (its two corners) or at the coarsest level where that shows at
+        most this many pixels of error in a 448-line frame (the same angle at any size; see
+        :func:`piste.terrain.lod.edge_levels`' ``flat_error``; :data:`LOD_ERROR_PX`); None: levels by
+        distance alone
     track : (k, 3) centre line of a groomed track to mark on the snow (projected texture), or None
     track_half_width : metres from the centre line to the track's dye lines
     lod_morph : geomorph between LOD levels (False: the talk's exact positions, which pop); None: on
@@ -134,7 +149,8 @@ class TerrainRenderer:
 
     def __init__(self, net, size=(640, 448), ctx=None, lightmap="placeholder", base_texture=None,
                  lod_near: float | None = None, lod_far: float | None = None, track=None,
-                 track_half_width: float = 16.0, lod_morph: bool | None = None, resident: bool = True):
+                 track_half_width: float = 16.0, lod_morph: bool | None = None, resident: bool = True,
+                 lod_error: float | None = LOD_ERROR_PX):
         self.net = net
         self.lod_morph = morph_setting(lod_morph)
         self.resident = bool(resident)
@@ -155,6 +171,12 @@ class TerrainRenderer:
             self.terrain.set_track(*track_field(track, net.bounds), half_width=track_half_width)
         self.sky = SkyPass(self.ctx)
         self.lod_kwargs = {k: v for k, v in (("near", lod_near), ("far", lod_far)) if v is not None}
+        if lod_error is None:
+            self.lod_kwargs["flat_error"] = None
+        else:
+            if not (np.isfinite(lod_error) and lod_error > 0):
+                raise ConfigError(f"lod_error must be a positive number of pixels or None, got {lod_error!r}")
+            self.lod_kwargs["flat_error"] = float(lod_error) * FLAT_ERROR / FLAT_ERROR_PX
         self.bounds = net.patch_bounds
         lo, hi = self.bounds
         self._centre = np.ascontiguousarray(((lo + hi) / 2.0).T)  # (3, n): boxes as centre +- half
