@@ -1493,6 +1493,39 @@ class StreamingRenderer:
             got = self._boxes[key] = (id(mesh), (*patch_boxes(mesh, shape), patch_corner_errors(mesh, shape)))
         return got[1]
 
+    def _coarse_blocks(self, t, coarse: np.ndarray, blocks: tuple) -> tuple:
+        """The blocks of near or middle tile ``t`` whose patches are all ``coarse (n,) bool`` (drawn
+        from the corner grid: every vertex fully morphed onto it) and whose stride is coarser than the
+        corner grid's, drawn like a far tile's, each at its stride (``blocks``: every block's stride
+        and whether it is in view, :meth:`draw`'s), with the
+        corner grid's skirts of the other blocks where they meet one drawn coarser.  ``(patches
+        (n,) bool`` left to the patch-by-patch draw, ``([(t, kind, mesh, vertex array)], [commands])``."""
+        py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
+        ny, nx = py1 - py0, px1 - px0
+        by, bx = -(-ny // FAR_BLOCK), -(-nx // FAR_BLOCK)
+        pb = ((np.arange(ny) // FAR_BLOCK)[:, None] * bx + (np.arange(nx) // FAR_BLOCK)[None, :]).reshape(-1)
+        i = self.cache.tile_index[t]
+        sl = slice(self.cache.block_start[i], self.cache.block_start[i + 1])
+        # (a block at stride 1 is the corner grid's patches: left to them, without skirts)
+        full = (np.bincount(pb, weights=~np.asarray(coarse, bool), minlength=by * bx) == 0) & (blocks[0][sl] > 1)
+        st = np.where(full, blocks[0][sl], 0)
+        vis = blocks[1][sl] & full
+        jobs, cmds = [], []
+        for k in FAR_STRIDES:
+            if (vis & (st == k)).any():
+                fk = self.cache.far[t][k]
+                jobs.append((t, "far", fk, self._vao((t, f"far{k}"), fk)))
+                cmds.append(block_runs(fk, (ny, nx), st, vis, k))
+        pad = np.pad(st.reshape(by, bx), 1)
+        other = np.stack([pad[:-2, 1:-1], pad[1:-1, 2:], pad[2:, 1:-1], pad[1:-1, :-2]], -1)  # south, east, north, west
+        skirt = ((~full).reshape(by, bx)[..., None] & (other > 1)).reshape(-1)
+        if skirt.any():
+            f1 = self.cache.far[t][1]
+            assert f1.blocks is not None
+            jobs.append((t, "far", f1, self._vao((t, "far1"), f1)))
+            cmds.append(entry_runs(skirt, f1.blocks["skirt_first"].reshape(-1), f1.blocks["skirt_count"].reshape(-1)))
+        return full[pb], (jobs, cmds)
+
     def _seam(self, key, mesh: TileMesh, coarse: np.ndarray):
         """The vertex array of :func:`seam_skirts` for middle ``mesh`` and its ``coarse`` patches and
         its triangles (kept while the mask stays the same)."""
@@ -1680,6 +1713,14 @@ class StreamingRenderer:
             d = np.sqrt((np.maximum(np.abs(c - e) - h, 0.0) ** 2).sum(1))  # metres to each patch's box
             coarse = perr * verr <= d
             far = self.cache.far[t][1]
+            if seen is None and blocks is not None:  # blocks wholly on the corner grid: drawn as a far tile's
+                own, (jobs_b, cmds_b) = self._coarse_blocks(t, coarse, blocks)
+                for job, cmd in zip(jobs_b, cmds_b):
+                    jobs.append((*job[:4], (ncmd, len(cmd)), 0.0))
+                    commands.append(cmd)
+                    ncmd += len(cmd)
+                    drawn["triangles"] += int(cmd[:, 0].sum()) // 3
+                inside = inside & ~own
             mine = patch_runs(inside & ~coarse, mesh.patch_triangles, len(mesh.indices))  # and the mesh's skirts
             grid = patch_runs(inside & coarse, far.patch_triangles, len(far.indices), skirts=False)
             live.add((t, "far1"))
