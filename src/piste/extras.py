@@ -56,6 +56,12 @@ ENVIRONMENT: dict[str, str] = {
     "PISTE_NO_NUMBA": "set to anything: never compile with numba, run the numpy paths (piste._jit)",
     "DISPLAY": "an X11 display: piste view opens a window (piste.render.window.has_display)",
     "WAYLAND_DISPLAY": "a Wayland display: piste view opens a window",
+    # glcontext's own variables, obeyed as glcontext obeys them where piste makes the EGL context itself
+    # (piste.render.context names the GL libraries: no find_library)
+    "GLCONTEXT_LINUX_LIBGL": "the GL library the headless EGL context loads (default libGL.so.1)",
+    "GLCONTEXT_LINUX_LIBEGL": "the EGL library the headless EGL context loads (default libEGL.so.1)",
+    "GLCONTEXT_DEVICE_INDEX": "the EGL device the headless context opens (glcontext's default 0)",
+    "GLCONTEXT_GLVERSION": "the OpenGL version glcontext asks the EGL context for (e.g. 330)",
 }
 
 

@@ -28,7 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from piste.errors import RenderError
-from piste.extras import require as require_extra
+from piste.extras import environ, require as require_extra
 from piste.formats.atomic import atomic_path
 
 if TYPE_CHECKING:
@@ -96,7 +96,7 @@ def _egl_context(mgl: Any, version: int) -> moderngl.Context | None:
     try:
         for name, env, kind in (("device_index", "GLCONTEXT_DEVICE_INDEX", int), ("glversion", "GLCONTEXT_GLVERSION", int),
                                 ("libgl", "GLCONTEXT_LINUX_LIBGL", str), ("libegl", "GLCONTEXT_LINUX_LIBEGL", str)):
-            value = os.environ.get(env)
+            value = environ(env)
             if value:
                 kw[name] = kind(value)
         raw = egl.create_context(**kw)
