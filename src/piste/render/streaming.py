@@ -197,7 +197,8 @@ void main() {
 class TileMesh:
     """A tile's triangles: positions ``(k, 3)`` float32, colours ``(k, 3)`` uint8 (half-bright),
     indices ``(t, 3)`` uint32; ``patch_triangles``: the first ``n * patch_triangles`` triangles
-    are patch-major (patch ``p``'s at ``[p pt, (p+1) pt)``, the skirts after them; 0: not ordered);
+    are patch-major (the ``j``-th patch of :func:`patch_order`'s at ``[j pt, (j+1) pt)``, the skirts
+    after them; 0: not ordered);
     ``targets`` ``(k,)`` float32 or None: each vertex's height on the next coarser level (geomorph);
     with them (near and middle meshes, :func:`near_mesh`) ``corner`` ``(k,)`` float32: its height on the
     corner grid, ``errors`` ``(k, 2)`` float32: the largest corner-grid and middle-level errors
@@ -212,6 +213,14 @@ class TileMesh:
     errors: np.ndarray | None = None
     #: a far mesh's blocks (:func:`far_mesh`), or None
     blocks: dict | None = None
+    #: the triangles of the mesh drawn whole (the first ``whole``: a far mesh's cells and tile skirts,
+    #: its block skirts and zippers after them); None: all
+    whole: int | None = None
+
+    @property
+    def whole_triangles(self) -> int:
+        """Triangles of the mesh drawn whole (:attr:`whole`)."""
+        return len(self.indices) if self.whole is None else int(self.whole)
 
     @property
     def nbytes(self) -> int:
@@ -258,6 +267,26 @@ def _border_sides(idx: np.ndarray) -> list:
     return [idx[0][::-1], idx[:, -1][::-1], idx[-1], idx[:, 0]]
 
 
+@functools.lru_cache(maxsize=64)
+def patch_order(ny: int, nx: int) -> np.ndarray:
+    """The order patch-major meshes (:func:`near_mesh`, :func:`far_mesh` at stride 1) hold the
+    patches of a ``(ny, nx)`` tile in, and far meshes their blocks: Z (Morton) order of (row,
+    column), so that a region of patches chosen by distance or by the frustum is few runs of
+    consecutive patches (:func:`patch_runs`: one indirect draw command a run).  ``(n,)`` int64 patch
+    ids (``row * nx + col``) in mesh order, read-only."""
+
+    def spread(v: np.ndarray) -> np.ndarray:  # the bits of v (< 2^16) to the even bits
+        v = v.astype(np.uint64)
+        for shift, mask in ((8, 0x00FF00FF), (4, 0x0F0F0F0F), (2, 0x33333333), (1, 0x55555555)):
+            v = (v | (v << np.uint64(shift))) & np.uint64(mask)
+        return v
+
+    py, px = np.mgrid[0:int(ny), 0:int(nx)]
+    out = np.argsort((spread(py) << np.uint64(1) | spread(px)).reshape(-1), kind="stable")
+    out.flags.writeable = False
+    return out
+
+
 def _stride_index(n: int, stride: int) -> np.ndarray:
     """``0, stride, 2 stride, ...`` and always the last of ``n``."""
     i = np.arange(0, n, stride)
@@ -273,9 +302,12 @@ def far_mesh(lit: dict, depth: float, stride: int = 1) -> TileMesh:
     Blocks of ``FAR_BLOCK`` x ``FAR_BLOCK`` patches are drawn each at its own stride
     (:meth:`TileCache.block_strides`), so every block has a skirt under each of its four sides
     (hanging ``depth``, facing out of the block), drawn where the block meets a block of another
-    stride or the tile's border: the tile's skirts are its border blocks'.  ``blocks``:
-    ``{"cells": (nb + 1,) first triangle of each block's cells (coarser strides), "skirt_first",
-    "skirt_count": (nb, 4)}`` (sides south, east, north, west; block ``row * bx + col``)."""
+    stride or the tile's border: the tile's skirts are its border blocks'.  The patches (stride 1)
+    and blocks are in :func:`patch_order`.  ``blocks`` (first triangle and triangles of each entry):
+    ``{"cell_first", "cell_count": (nb,)`` each block's cells (coarser strides), ``"block_order"``
+    the blocks in mesh order, ``"skirt_first", "skirt_count": (nb, 4)`` each block side's skirt
+    (sides south, east, north, west; block ``row * bx + col``), ``"skirt_order" (4 nb,)`` the
+    sides in mesh order (side by side, along the tile: its border is four runs)}``."""
     g = np.asarray(lit["far_positions"], dtype=np.float64)
     c = np.asarray(lit["far_colors"])
     rows0, cols0 = g.shape[:2]
@@ -286,12 +318,18 @@ def far_mesh(lit: dict, depth: float, stride: int = 1) -> TileMesh:
     tris = _grid_triangles(rows, cols)
     cells = (rows - 1) * (cols - 1)
     by, bx = -(-(rows0 - 1) // FAR_BLOCK), -(-(cols0 - 1) // FAR_BLOCK)
+    nb = by * bx
     cell_block = ((ri[:-1] // FAR_BLOCK)[:, None] * bx + (ci[:-1] // FAR_BLOCK)[None, :]).ravel()
-    if stride == 1:  # cell k's two triangles are k and k + cells: together, cell by cell
-        tris = tris.reshape(2, cells, 3).transpose(1, 0, 2).reshape(-1, 3)
+    border = patch_order(by, bx)  # the blocks in mesh order
+    if stride == 1:  # cell k's two triangles are k and k + cells: together, in patch order
+        tris = tris.reshape(2, cells, 3).transpose(1, 0, 2)[patch_order(rows - 1, cols - 1)].reshape(-1, 3)
     else:  # block by block
-        tris = tris[np.argsort(np.concatenate([cell_block, cell_block]), kind="stable")]
-    first = np.concatenate([[0], np.cumsum(2 * np.bincount(cell_block, minlength=by * bx))])
+        rank = np.empty(nb, np.int64)
+        rank[border] = np.arange(nb)
+        tris = tris[np.argsort(rank[np.concatenate([cell_block, cell_block])], kind="stable")]
+    ccount = 2 * np.bincount(cell_block, minlength=nb)
+    cfirst = np.empty(nb, np.int64)
+    cfirst[border] = np.concatenate([[0], np.cumsum(ccount[border])[:-1]])
     # the block lines (every FAR_BLOCK-th corner and the last) among the strided rows and columns
     lr = np.nonzero((ri % FAR_BLOCK == 0) | (ri == rows0 - 1))[0]
     lc = np.nonzero((ci % FAR_BLOCK == 0) | (ci == cols0 - 1))[0]
@@ -318,12 +356,56 @@ def far_mesh(lit: dict, depth: float, stride: int = 1) -> TileMesh:
     strip(idx[:, lc].T[:-1], low_c[:-1], (brow * bx + line_c[:-1]) * 4 + 3, True)  # the west side of the blocks east
     strip(idx[:, lc].T[1:], low_c[1:], (brow * bx + line_c[1:] - 1) * 4 + 1, False)  # the east side of those west
     seg, key = np.concatenate(segs), np.concatenate(keys)
-    seg = seg[np.argsort(key, kind="stable")].reshape(-1, 3)
-    count = 2 * np.bincount(key, minlength=by * bx * 4)
-    sfirst = 2 * cells + np.concatenate([[0], np.cumsum(count)[:-1]])
-    mesh = TileMesh(pos.astype(np.float32), col.astype(np.uint8), np.concatenate([tris, seg]).astype(np.uint32))
+    # the skirts side by side, each side's blocks along it (rows for south and north, columns for
+    # east and west): a tile's border is four runs
+    entry = np.arange(nb * 4)
+    br, bc, side = entry // 4 // bx, entry // 4 % bx, entry % 4
+    along = np.where(side % 2 == 0, br * bx + bc, bc * by + br)
+    inner = ~(((side == 0) & (br == 0)) | ((side == 2) & (br == by - 1)) | ((side == 1) & (bc == bx - 1))
+              | ((side == 3) & (bc == 0)))  # the tile's border first: a whole tile is its cells and border skirts
+    sorder = np.argsort(inner * 4 * nb + side * nb + along, kind="stable")  # the (block, side) entries in mesh order
+    srank = np.empty(nb * 4, np.int64)
+    srank[sorder] = entry
+    seg = seg[np.argsort(srank[key], kind="stable")].reshape(-1, 3)
+    count = 2 * np.bincount(key, minlength=nb * 4)
+    sfirst = np.empty(nb * 4, np.int64)
+    sfirst[sorder] = 2 * cells + np.concatenate([[0], np.cumsum(count[sorder])[:-1]])
+    # zippers: where a block side meets a coarser block (stride k), the fan from each of the coarse
+    # side's vertices over this side's vertices up to the next one (both windings): it fills the
+    # gap between the two in their vertical plane exactly, with this mesh's own edge vertices
+    zips, zkeys = [], []
+    for kidx, k in enumerate(FAR_STRIDES):
+        if k <= stride:
+            continue
+        for line, corner, last, along, nlines, side_lo, side_hi in (
+                (idx[lr], ci, cols0 - 1, bcol[0], len(lr), 0, 2), (idx[:, lc].T, ri, rows0 - 1, brow[0], len(lc), 3, 1)):
+            coarse = (corner % k == 0) | (corner == last)
+            a = np.maximum.accumulate(np.where(coarse, np.arange(len(corner)), 0))
+            ps = np.nonzero(~coarse[:-1])[0]  # the segments that do not start at a coarse vertex
+            if not len(ps):
+                continue
+            fan = np.stack([line[:, a[ps]], line[:, ps], line[:, ps + 1]], -1)  # (lines, s, 3)
+            fan = np.stack([fan, fan[..., ::-1]], 2)  # (lines, s, 2, 3): both windings
+            ln = np.arange(nlines)[:, None]
+            blk_lo = (ln * bx + along[ps][None, :]) if side_lo != 3 else (along[ps][None, :] * bx + ln)
+            blk_hi = ((ln - 1) * bx + along[ps][None, :]) if side_lo != 3 else (along[ps][None, :] * bx + ln - 1)
+            for blk, side, ok in ((blk_lo, side_lo, ln < nlines - 1), (blk_hi, side_hi, ln > 0)):
+                sel = np.broadcast_to(ok, blk.shape)
+                zips.append(fan[sel])
+                zkeys.append(((blk[sel] * 4 + side) * 4 + kidx))
+    zip_tris = np.concatenate(zips).reshape(-1, 3) if zips else np.zeros((0, 3), np.int64)
+    zkey = np.concatenate(zkeys) if zkeys else np.zeros(0, np.int64)
+    zorder = np.argsort(zkey, kind="stable")
+    zip_tris = zip_tris.reshape(-1, 2, 3)[zorder].reshape(-1, 3)
+    zcount = 2 * np.bincount(zkey, minlength=nb * 16)
+    zfirst = 2 * cells + len(seg) + np.concatenate([[0], np.cumsum(zcount)[:-1]])
+    mesh = TileMesh(pos.astype(np.float32), col.astype(np.uint8),
+                    np.concatenate([tris, seg, zip_tris]).astype(np.uint32))
     mesh.patch_triangles = 2 if stride == 1 else 0
-    mesh.blocks = {"cells": first, "skirt_first": sfirst.reshape(-1, 4), "skirt_count": count.reshape(-1, 4)}
+    mesh.whole = 2 * cells + int(count[~inner].sum())
+    mesh.blocks = {"cell_first": cfirst, "cell_count": ccount, "block_order": border,
+                   "skirt_first": sfirst.reshape(-1, 4), "skirt_count": count.reshape(-1, 4), "skirt_order": sorder,
+                   "zip_first": zfirst.reshape(-1, 4, 4), "zip_count": zcount.reshape(-1, 4, 4)}
     return mesh
 
 
@@ -522,7 +604,9 @@ def near_mesh(fit: dict, lit: dict, grid_shape: tuple, depth: float, samples: in
     sides = _border_sides(idx)
     cr, cc = np.mgrid[0:rows - 1, 0:cols - 1]
     cell_patch = ((cr // r) * nx + cc // r).ravel()
-    order = np.argsort(np.concatenate([cell_patch, cell_patch]), kind="stable")  # patch-major (visibility sets)
+    rank = np.empty(ny * nx, np.int64)
+    rank[patch_order(ny, nx)] = np.arange(ny * nx)
+    order = np.argsort(rank[np.concatenate([cell_patch, cell_patch])], kind="stable")  # patch-major, in patch_order
     mesh = _with_skirts(gp.reshape(-1, 3), gc.reshape(-1, 3), _grid_triangles(rows, cols)[order], sides, depth)
     mesh.patch_triangles = 2 * r * r
     # per patch: the corner grid's error (at least the middle level's: where the corner grid fits,
@@ -544,14 +628,16 @@ def near_mesh(fit: dict, lit: dict, grid_shape: tuple, depth: float, samples: in
     return mesh
 
 
-def visible_indices(mesh: TileMesh, visible: np.ndarray) -> np.ndarray:
-    """The triangles of a patch-major ``mesh`` (:func:`near_mesh`) whose patch is ``visible
-    (n,) bool``, and every skirt triangle: ``(t', 3)`` uint32."""
+def visible_indices(mesh: TileMesh, visible: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """The triangles of a patch-major ``mesh`` (:func:`near_mesh`, patches in ``order``:
+    :func:`patch_order`) whose patch is ``visible (n,) bool``, and every skirt triangle: ``(t', 3)``
+    uint32."""
     pt = mesh.patch_triangles
     n = len(visible)
     tri = mesh.indices
-    keep = np.ones(len(tri), bool)
-    keep[:n * pt] = np.repeat(np.asarray(visible, bool), pt)
+    keep = np.zeros(len(tri), bool)
+    keep[:mesh.whole_triangles] = True  # (a far mesh's block skirts and zippers are drawn by block)
+    keep[:n * pt] = np.repeat(np.asarray(visible, bool)[order], pt)
     return np.ascontiguousarray(tri[keep])
 
 
@@ -623,12 +709,15 @@ def entry_runs(mask: np.ndarray, first: np.ndarray, count: np.ndarray) -> np.nda
     return out
 
 
-def patch_runs(inside: np.ndarray, patch_triangles: int, total_triangles: int, skirts: bool = True) -> np.ndarray:
+def patch_runs(inside: np.ndarray, patch_triangles: int, total_triangles: int, skirts: bool = True,
+               order: np.ndarray | None = None) -> np.ndarray:
     """Indirect draw commands ``(k, 5)`` uint32 (:func:`entry_runs`) drawing the patches ``inside
-    (n,) bool`` of a patch-major index buffer of ``total_triangles`` (patch ``p``'s triangles at
-    ``[p pt, (p+1) pt)``, the skirts after the ``n`` patches', drawn with ``skirts``): one command a
-    run of consecutive patches."""
+    (n,) bool`` of a patch-major index buffer of ``total_triangles`` (the ``j``-th patch of ``order``,
+    :func:`patch_order`, default patch ``j``: triangles ``[j pt, (j+1) pt)``, the skirts after the
+    ``n`` patches', drawn with ``skirts``): one command a run of consecutive patches."""
     m = np.asarray(inside, bool)
+    if order is not None:
+        m = m[order]
     n, pt = len(m), int(patch_triangles)
     out = entry_runs(m, np.arange(n) * pt, np.full(n, pt))
     rest = int(total_triangles) - n * pt
@@ -637,26 +726,49 @@ def patch_runs(inside: np.ndarray, patch_triangles: int, total_triangles: int, s
     return out
 
 
-def block_runs(mesh: TileMesh, grid_shape: tuple, strides: np.ndarray, drawn: np.ndarray, stride: int) -> np.ndarray:
+def block_runs(mesh: TileMesh, grid_shape: tuple, strides: np.ndarray, drawn: np.ndarray, stride: int,
+               border: tuple | None = None) -> np.ndarray:
     """Indirect draw commands ``(k, 5)`` uint32 (:func:`entry_runs`) drawing, of far ``mesh`` at
     ``stride`` (:func:`far_mesh`) of a ``(ny, nx)``-patch tile, the blocks ``drawn (nb,) bool`` whose
     stride (``strides (nb,) int``, block ``row * bx + col``) is ``stride``: their cells, and the
-    skirts of their sides on the tile's border or against a block of another stride."""
+    joins of their sides: against a coarser block (within the tile, or across its border:
+    ``border``, the strides of the neighbouring tiles' blocks along its south, east, north and west
+    sides, ``(bx,), (by,), (bx,), (by,)``) the side's zipper to it (a finer block zips to this one,
+    blocks of one stride share their corners), against anything else (0 in ``border``: a neighbour
+    not drawn by blocks, or none; None: all 0) the side's skirt."""
     ny, nx = (int(x) for x in grid_shape)
     by, bx = -(-ny // FAR_BLOCK), -(-nx // FAR_BLOCK)
     st = np.asarray(strides).reshape(by, bx)
     sel = (np.asarray(drawn, bool) & (np.asarray(strides) == stride)).reshape(by, bx)
     pad = np.pad(st, 1, constant_values=0)  # 0: beyond the tile's border (no stride)
+    if border is not None:
+        pad[0, 1:-1], pad[1:-1, -1], pad[-1, 1:-1], pad[1:-1, 0] = border
     other = np.stack([pad[:-2, 1:-1], pad[1:-1, 2:], pad[2:, 1:-1], pad[1:-1, :-2]], -1)  # south, east, north, west
-    skirt = (sel[..., None] & (other != stride)).reshape(-1)
+    skirt = (sel[..., None] & (other == 0)).reshape(-1)  # against what is not a far block: a skirt
     blk = mesh.blocks
     assert blk is not None
     if stride == 1:  # patch-major cells: the patches of the blocks
         py, px = np.arange(ny) // FAR_BLOCK, np.arange(nx) // FAR_BLOCK
-        cells = patch_runs(sel[py][:, px].reshape(-1), 2, 2 * ny * nx, skirts=False)
+        cells = patch_runs(sel[py][:, px].reshape(-1), 2, 2 * ny * nx, skirts=False, order=patch_order(ny, nx))
     else:
-        cells = entry_runs(sel.reshape(-1), blk["cells"][:-1], np.diff(blk["cells"]))
-    return np.concatenate([cells, entry_runs(skirt, blk["skirt_first"].reshape(-1), blk["skirt_count"].reshape(-1))])
+        bo = blk["block_order"]
+        cells = entry_runs(sel.reshape(-1)[bo], blk["cell_first"][bo], blk["cell_count"][bo])
+    # against a coarser block: this side's zipper to that stride (a finer one zips to this side)
+    zmask = np.zeros((by * bx * 4, len(FAR_STRIDES)), bool)
+    o = other.reshape(-1)
+    up = sel.reshape(-1).repeat(4) & (o > stride)
+    zmask[np.nonzero(up)[0], np.searchsorted(FAR_STRIDES, o[up])] = True
+    zips = entry_runs(zmask.reshape(-1), blk["zip_first"].reshape(-1), blk["zip_count"].reshape(-1))
+    return np.concatenate([cells, skirt_runs(mesh, skirt), zips])
+
+
+def skirt_runs(mesh: TileMesh, mask: np.ndarray) -> np.ndarray:
+    """Indirect draw commands ``(k, 5)`` uint32 (:func:`entry_runs`) drawing the block-side skirts
+    ``mask (4 nb,) bool`` (block ``b``'s side ``s`` at ``4 b + s``) of far ``mesh``."""
+    blk = mesh.blocks
+    assert blk is not None
+    so = blk["skirt_order"]
+    return entry_runs(np.asarray(mask, bool)[so], blk["skirt_first"].reshape(-1)[so], blk["skirt_count"].reshape(-1)[so])
 
 
 def seam_skirts(mesh: TileMesh, grid_shape: tuple, coarse: np.ndarray, depth: float) -> np.ndarray:
@@ -1493,6 +1605,29 @@ class StreamingRenderer:
             got = self._boxes[key] = (id(mesh), (*patch_boxes(mesh, shape), patch_corner_errors(mesh, shape)))
         return got[1]
 
+    def _block_shape(self, t) -> tuple[int, int]:
+        """``(by, bx)``: the far blocks of tile ``t``."""
+        py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
+        return -(-(py1 - py0) // FAR_BLOCK), -(-(px1 - px0) // FAR_BLOCK)
+
+    def _border_strides(self, t, strides: np.ndarray, block_tiles: set) -> tuple:
+        """The strides ``(bx,), (by,), (bx,), (by,)`` of the blocks of tile ``t``'s south, east, north
+        and west neighbours along its sides (:func:`block_runs`' ``border``), 0 where a neighbour is
+        not among ``block_tiles`` (drawn by blocks this frame) or its blocks do not line up;
+        ``strides`` every block's (:meth:`TileCache.block_strides`)."""
+        by, bx = self._block_shape(t)
+        ty, tx = t
+        out = []
+        for (dy, dx), n, edge in (((-1, 0), bx, lambda g: g[-1]), ((0, 1), by, lambda g: g[:, 0]),
+                                  ((1, 0), bx, lambda g: g[0]), ((0, -1), by, lambda g: g[:, -1])):
+            nt = (ty + dy, tx + dx)
+            e = None
+            if nt in block_tiles:
+                j = self.cache.tile_index[nt]
+                e = edge(strides[self.cache.block_start[j]:self.cache.block_start[j + 1]].reshape(self._block_shape(nt)))
+            out.append(np.asarray(e, np.int64) if e is not None and len(e) == n else np.zeros(n, np.int64))
+        return tuple(out)
+
     def _coarse_blocks(self, t, coarse: np.ndarray, blocks: tuple) -> tuple:
         """The blocks of near or middle tile ``t`` whose patches are all ``coarse (n,) bool`` (drawn
         from the corner grid: every vertex fully morphed onto it) and whose stride is coarser than the
@@ -1523,7 +1658,7 @@ class StreamingRenderer:
             f1 = self.cache.far[t][1]
             assert f1.blocks is not None
             jobs.append((t, "far", f1, self._vao((t, "far1"), f1)))
-            cmds.append(entry_runs(skirt, f1.blocks["skirt_first"].reshape(-1), f1.blocks["skirt_count"].reshape(-1)))
+            cmds.append(skirt_runs(f1, skirt))
         return full[pb], (jobs, cmds)
 
     def _seam(self, key, mesh: TileMesh, coarse: np.ndarray):
@@ -1566,7 +1701,8 @@ class StreamingRenderer:
             if len(self._vis_gpu) >= 32:  # a few cells' worth; the oldest go first
                 for obj in self._vis_gpu.pop(next(iter(self._vis_gpu)))[:2][::-1]:
                     obj.release()
-            idx = visible_indices(mesh, seen)
+            py0, py1, px0, px1 = self.cache.grid.patch_range(*key[0])
+            idx = visible_indices(mesh, seen, patch_order(py1 - py0, px1 - px0))
             ibo = self.ctx.buffer(idx)
             g = self._gpu[key]
             vao = self.ctx.vertex_array(self.prog, self._attributes(g[0], g[4]), index_buffer=ibo,
@@ -1648,25 +1784,30 @@ class StreamingRenderer:
             blocks = (self.cache.block_strides(e, pixel_scale, self.cache.far_strides(e, pixel_scale)),
                       _boxes_visible(planes, self.cache._blk["lo"], self.cache._blk["hi"]))
         jobs, commands, ncmd = [], [], 0  # what each tile draws (all the indirect commands first)
+        seen_of = {t: self.cache.visible_patches(t, cam.eye) if sets and (not level.startswith("far") or level == "far1")
+                   else None for t, level, _ in todo}
+        block_tiles = set() if blocks is None else {  # the far tiles drawn by block
+            t for t, level, mesh in todo if level.startswith("far") and seen_of[t] is None and mesh.blocks is not None}
         for t, level, mesh in todo:
             key = (t, level)
             live.add(key)
             kind = "far" if level.startswith("far") else "near"  # near and mid: evaluated patches
             drawn["mid"] += level == "mid"
             drawn[kind] += 1
-            seen = self.cache.visible_patches(t, cam.eye) if sets and (kind == "near" or level == "far1") else None
+            seen = seen_of[t]
             # near and middle meshes: geomorphed per vertex by the errors of the patches around it
             verr = err_scale if kind == "near" and t in morph and err_scale and mesh.errors is not None else 0.0
-            if kind == "far" and seen is None and blocks is not None and mesh.blocks is not None:
+            if t in block_tiles:
                 # a far tile: each block at its own stride (:meth:`TileCache.block_strides`), those in view
                 i = self.cache.tile_index[t]
                 st = blocks[0][self.cache.block_start[i]:self.cache.block_start[i + 1]]
                 vis = blocks[1][self.cache.block_start[i]:self.cache.block_start[i + 1]]
-                bkey = (st.tobytes(), np.packbits(vis).tobytes())
+                border = self._border_strides(t, blocks[0], block_tiles)
+                bkey = (st.tobytes(), np.packbits(vis).tobytes(), b"|".join(b.tobytes() for b in border))
                 got = self._far_runs.get(t)
                 if got is None or got[0] != bkey:
                     py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
-                    runs = {k: block_runs(self.cache.far[t][k], (py1 - py0, px1 - px0), st, vis, k)
+                    runs = {k: block_runs(self.cache.far[t][k], (py1 - py0, px1 - px0), st, vis, k, border)
                             for k in FAR_STRIDES if (vis & (st == k)).any()}
                     got = self._far_runs[t] = (bkey, runs)
                 for k, cmd in got[1].items():
@@ -1682,20 +1823,22 @@ class StreamingRenderer:
             if not (self.mix_levels and mesh.patch_triangles and (verr or level == "far1")):
                 if seen is not None and mesh.patch_triangles and not seen.all():
                     vao, ntri = self._vis_vao(key, mesh, seen)
-                    jobs.append((t, kind, mesh, vao, None, verr))
+                    jobs.append((t, kind, mesh, vao, "all", verr))
                     drawn[f"{kind}_patches"] += int(seen.sum())
                     drawn["vis_culled"] += int((~seen).sum())
                     drawn["triangles"] += ntri
                 else:
                     jobs.append((t, kind, mesh, self._vao(key, mesh), None, verr))
                     drawn[f"{kind}_patches"] += self.cache.patches[t]
-                    drawn["triangles"] += len(mesh.indices)
+                    drawn["triangles"] += mesh.whole_triangles
                 continue
             # per patch, like the course's error-driven levels: out of the frustum (or the sets), not
             # drawn; where the corner grid's error fits pixel_error pixels at the patch's box (every
             # vertex of it fully morphed onto the corner grid), drawn from the corner grid; else from
             # the mesh, each vertex between the levels by its own error on screen
             vao = self._vao(key, mesh)
+            py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
+            po = patch_order(py1 - py0, px1 - px0)  # the mesh's patch order
             c, h, perr = self._patch_boxes(key, mesh)
             inside = _boxes_visible(planes, c - h, c + h)
             drawn["frustum_culled"] += int((~inside).sum())
@@ -1704,7 +1847,7 @@ class StreamingRenderer:
                 inside &= seen
             drawn[f"{kind}_patches"] += self.cache.patches[t] - (0 if seen is None else int((~seen).sum()))
             if not verr:  # a full corner grid: its patches in view
-                mine = patch_runs(inside, mesh.patch_triangles, len(mesh.indices))
+                mine = patch_runs(inside, mesh.patch_triangles, mesh.whole_triangles, order=po)
                 jobs.append((t, kind, mesh, vao, (ncmd, len(mine)), 0.0))
                 commands.append(mine)
                 ncmd += len(mine)
@@ -1721,15 +1864,15 @@ class StreamingRenderer:
                     ncmd += len(cmd)
                     drawn["triangles"] += int(cmd[:, 0].sum()) // 3
                 inside = inside & ~own
-            mine = patch_runs(inside & ~coarse, mesh.patch_triangles, len(mesh.indices))  # and the mesh's skirts
-            grid = patch_runs(inside & coarse, far.patch_triangles, len(far.indices), skirts=False)
+            mine = patch_runs(inside & ~coarse, mesh.patch_triangles, mesh.whole_triangles, order=po)  # and its skirts
+            grid = patch_runs(inside & coarse, far.patch_triangles, len(far.indices), skirts=False, order=po)
             live.add((t, "far1"))
             jobs.append((t, kind, mesh, vao, (ncmd, len(mine)), verr))
             jobs.append((t, "far", far, self._vao((t, "far1"), far), (ncmd + len(mine), len(grid)), 0.0))
             if coarse.any():
                 seam, nseam = self._seam(key, mesh, coarse)
                 if nseam:
-                    jobs.append((t, "seam", far, seam, None, 0.0))
+                    jobs.append((t, "seam", far, seam, "all", 0.0))
                     drawn["triangles"] += nseam
             commands += [mine, grid]
             ncmd += len(mine) + len(grid)
@@ -1757,8 +1900,10 @@ class StreamingRenderer:
             if (kind == "seam") == culling:  # the seams' strips are seen from both sides
                 culling = not culling
                 (self.ctx.disable if kind == "seam" else self.ctx.enable)(moderngl.CULL_FACE)
-            if run is None:
-                vao.render(moderngl.TRIANGLES)  # (a seam's vertex array: its triangles, no index buffer)
+            if isinstance(run, str):  # all of a vertex array's triangles (a seam's, a visibility set's)
+                vao.render(moderngl.TRIANGLES)
+            elif run is None:  # a whole mesh
+                vao.render(moderngl.TRIANGLES, vertices=3 * mesh.whole_triangles)
             elif run[1]:
                 vao.render_indirect(self._indirect, moderngl.TRIANGLES, count=run[1], first=run[0])
         with self.cache._lock:
