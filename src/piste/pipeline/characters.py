@@ -26,18 +26,23 @@ merged_mesh(model) -> SkinnedMesh          all skinned primitives of a model as 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
-from piste.character import batch_mesh, make_lods, stripify
+# the mesh batcher, the stripifier and the LOD maker (the character step's) and the glTF material
+# through the packages' lazy names (PEP 562): a bundle load reads their results, it does not import them
+from piste import character as _character
 from piste.character.lod import LOD
 from piste.character.model import Clip, Model, Skeleton, SkinnedMesh, Track
 from piste.character.palette import Palette
 from piste.errors import ConfigError, FormatError
-from piste.formats.gltf.material import MaterialInfo
+from piste.formats import gltf as _gltf
 from piste.pipeline.object_atlas import pack_object_atlas, primitive_images
 from piste.world.riders import merged_mesh as _merged
+
+if TYPE_CHECKING:
+    from piste.formats.gltf.material import MaterialInfo
 
 __all__ = ["character_arrays", "model_from_arrays", "lods_from_arrays", "merged_mesh", "CLIP_RATE",
            "CHARACTERS_VERSION"]
@@ -77,11 +82,11 @@ def rider_material(prims: Sequence[SkinnedMesh]) -> MaterialInfo | None:
     ``double_sided`` when any primitive is (the character pass then draws back faces; a rider of
     single-sided materials has its back faces culled)."""
     # SkinnedMesh.material is typed ``object`` (the character core does not import the glTF formats)
-    mats = [cast(MaterialInfo, m.material) for m in prims if getattr(m, "material", None) is not None]
+    mats = [cast("MaterialInfo", m.material) for m in prims if getattr(m, "material", None) is not None]
     if not mats:
         return None
     mask = any(m.alpha_mode in ("MASK", "BLEND") for m in mats)
-    return MaterialInfo(alpha_mode="MASK" if mask else "OPAQUE", alpha_cutoff=0.5,
+    return _gltf.MaterialInfo(alpha_mode="MASK" if mask else "OPAQUE", alpha_cutoff=0.5,
                         double_sided=any(m.double_sided for m in mats))
 
 
@@ -100,7 +105,7 @@ def character_arrays(model: Model, ratios: Sequence[float] = (1.0, 0.5, 0.25), s
     steps = _steps(ratios, steps)
     lods = getattr(model, "lods", None)  # a model that ships its own LODs (an .mpf's Body3000/1500/750)
     if not lods or len(lods) != len(ratios):
-        lods = make_lods(mesh, ratios=ratios, steps=steps, max_bones=max_bones)
+        lods = _character.make_lods(mesh, ratios=ratios, steps=steps, max_bones=max_bones)
     a: dict = {
         "skeleton/parents": sk.parents.astype(np.int32),
         "skeleton/rest_translation": sk.rest_translation,
@@ -113,7 +118,7 @@ def character_arrays(model: Model, ratios: Sequence[float] = (1.0, 0.5, 0.25), s
     meta: dict = {"name": model.name, "bones": list(sk.names), "clips": {}, "lods": [], "rate": float(rate),
                   "max_bones": int(max_bones), "morphs": list(mesh.morph_names)}
     if mesh.material is not None:  # glTF riders: how the character pass draws them
-        mat = cast(MaterialInfo, mesh.material)
+        mat = cast("MaterialInfo", mesh.material)
         meta["material"] = {"alpha_mode": mat.alpha_mode, "double_sided": bool(mat.double_sided)}
     for cname, clip in sorted(model.clips.items()):
         f = int(np.ceil(clip.duration * rate)) + 1
@@ -133,11 +138,11 @@ def character_arrays(model: Model, ratios: Sequence[float] = (1.0, 0.5, 0.25), s
                   p + "indices": m.indices.astype(np.uint32), p + "joints": m.joints, p + "weights": m.weights,
                   p + "palette_bones": pal.bones.astype(np.int32), p + "palette_weights": pal.weights.astype(np.float32),
                   p + "palette_units": pal.units.astype(np.int32), p + "palette_index": pal.index.astype(np.int32)})
-        batches = batch_mesh(m, palette=pal)
+        batches = _character.batch_mesh(m, palette=pal)
         verts = [b.vertices for b in batches]
         mats = [b.matrices for b in batches]
         tris = [b.triangles for b in batches]
-        strips = [stripify(b.triangles) for b in batches]
+        strips = [_character.stripify(b.triangles) for b in batches]
         counts = np.array([[len(v), len(mm), len(t)] for v, mm, t in zip(verts, mats, tris)], np.int64).reshape(-1, 3)
         a[p + "batch_offsets"] = np.concatenate([np.zeros((1, 3), np.int64), np.cumsum(counts, axis=0)])
         a[p + "batch_vertices"] = np.concatenate(verts).astype(np.int32) if verts else np.zeros(0, np.int32)
@@ -172,7 +177,7 @@ def _material(meta: dict) -> MaterialInfo | None:
     if not isinstance(m, dict):
         return None
     mode = m.get("alpha_mode", "OPAQUE")
-    return MaterialInfo(alpha_mode=mode if mode in ("OPAQUE", "MASK") else "OPAQUE",
+    return _gltf.MaterialInfo(alpha_mode=mode if mode in ("OPAQUE", "MASK") else "OPAQUE",
                         double_sided=bool(m.get("double_sided", False)))
 
 

@@ -33,7 +33,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from piste.character import BlendedMesh, default_rider, make_batches, make_lods
+# the default rider and the batcher through the package's lazy names (PEP 562): a bundle's scene brings
+# its own model and LODs, so a bundle render imports neither module
+from piste import character as _character
+from piste.character import BlendedMesh, make_lods
 from piste.character.model import Model, SkinnedMesh
 from piste.errors import ConfigError
 from piste.graph import connected_parts
@@ -146,7 +149,7 @@ class Scene:
         self.line = np.asarray(centerline, dtype=np.float64)
         self.lights = lights
         self.sun = sun_light(lights)
-        self.model = model if model is not None else default_rider(0)
+        self.model = model if model is not None else _character.default_rider(0)
         mesh, self.flipped_parts = orient_outward(self.model.meshes[0])
         self.lods = make_lods(mesh)
         # the LOD's own palette (quantized weights) drives the blended-matrix skinning
@@ -175,7 +178,7 @@ class Scene:
         """Per LOD: name, triangles, vertices, bones, palette matrices (the talk: ~250 / 150 / 75)."""
         out = []
         for lod in self.lods:
-            batches = make_batches(lod.mesh.indices, lod.palette.index)
+            batches = _character.make_batches(lod.mesh.indices, lod.palette.index)
             out.append({
                 "lod": lod.name,
                 "triangles": lod.n_triangles,
