@@ -33,8 +33,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-# the default rider and the batcher through the package's lazy names (PEP 562): a bundle's scene brings
-# its own model and LODs, so a bundle render imports neither module
+# the default rider and the batcher through the package's lazy names (PEP 562), looked up where used: a
+# bundle's scene brings its own model, and a bundle render does not import the batcher
 from piste import character as _character
 from piste.character import BlendedMesh, make_lods
 from piste.character.model import Model, SkinnedMesh
