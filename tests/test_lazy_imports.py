@@ -47,6 +47,8 @@ NOT_IMPORTED = ("piste.pipeline.build", "piste.pipeline.cache", "piste.pipeline.
                 # the character step's batcher and stripifier and the glTF material (a bundle stores their
                 # results; a bundle rider without a material of its own makes none)
                 "piste.character.batches", "piste.character.strips", "piste.formats.gltf.material",
+                # interlaced frames, MP4 output and the occlusion pass: only when asked for
+                "piste.render.interlace", "piste.render.video", "piste.render.occlusion",
                 "dask", "distributed",
                 "scipy", "tifffile")
 

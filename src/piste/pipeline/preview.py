@@ -48,21 +48,19 @@ import numpy as np
 from piste._jit import WarmUpHold
 from piste.character import BlendedMesh
 from piste.errors import ConfigError, FormatError
-# the glTF reader, the SSX terrain and the streamed tiles through the packages' lazy names (PEP 562):
-# imported when a --rider-model, an SSX level or a tiled world asks, not by every bundle render
+# the glTF reader, the SSX terrain, the streamed tiles, depth of field, interlacing and video through the
+# packages' lazy names (PEP 562): imported when a --rider-model, an SSX level, a tiled world, --dof,
+# an interlaced or a video render asks, not by every bundle render
 from piste import formats as _formats, render as _render
 from piste.pipeline.bundle_objects import camera_from_dict
 from piste.pipeline.characters import lods_from_arrays, merged_mesh, model_from_arrays
 from piste.render.aa import AATarget, check_aa, downsample
-from piste.render.dof import check_dof
 from piste.render.context import create_context, save_png
 from piste.render.frame import DEFAULT_FOG_DENSITY, TerrainRenderer
 from piste.render.object_pass import ObjectPass
-from piste.render.interlace import weave
 from piste.render.scene_renderer import SceneRenderer
 from piste.render.sky_pass import HORIZON
 from piste.render.trace import make_tracer
-from piste.render.video import VideoWriter
 from piste.terrain.resident import resident_fits, resident_terrain
 from piste.world.camera import Camera, track_camera, warn_if_no_terrain
 from piste.world.course import TRACK_HALF_WIDTH
@@ -461,8 +459,8 @@ class ScenePreview:
         self.face = face
         self.aa = check_aa(opt["aa"] if opt["aa"] is not None else rman.get("aa", "off"))
         dof = opt["dof"] if opt["dof"] is not None else rman.get("dof")
-        self.dof = None if dof is None or dof == "off" else check_dof(*dof) if isinstance(dof, (list, tuple)) and \
-            len(dof) == 2 else check_dof(dof, None)
+        self.dof = None if dof is None or dof == "off" else _render.check_dof(*dof) if isinstance(dof, (list, tuple)) and \
+            len(dof) == 2 else _render.check_dof(dof, None)
         if self.dof is not None and self.dof[1] == 0.0:
             self.dof = None  # (a pinhole: nothing to blur)
         self.fog = None if fog == "auto" else float(fog)  # None: the renderer's scene-sized default
@@ -658,7 +656,7 @@ def render_frames(bundle: Bundle, camera: str | Camera | Sequence[Camera] | None
     out = []
     try:
         if video is not None:
-            writer = VideoWriter(video, fps=fps)
+            writer = _render.VideoWriter(video, fps=fps)
         it = range(frames)
         if progress:
             from tqdm import tqdm
@@ -673,7 +671,7 @@ def render_frames(bundle: Bundle, camera: str | Camera | Sequence[Camera] | None
                 return camera if isinstance(camera, Camera) else (None if chase else camera_at(bundle, camera, k, frames))
             t0 = time.perf_counter()
             if interlace:
-                img = weave(*(p.render(cam_at(i + h), (i + h) / float(fps)) for h in (0.0, 0.5)),
+                img = _render.weave(*(p.render(cam_at(i + h), (i + h) / float(fps)) for h in (0.0, 0.5)),
                             filtered=flicker_filter)
             else:
                 img = p.render(cam_at(i), i / float(fps))

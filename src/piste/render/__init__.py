@@ -40,6 +40,10 @@ __all__, __getattr__, __dir__ = _lazy_exports(__name__, {
     "frame": ("TerrainRenderer", "Frame", "summarize", "cull_boxes"),
     "scene_renderer": ("SceneRenderer", "SceneImage", "summarize_scene"),
     "video": ("VideoWriter",),
+    # post-processes and the occlusion pass a frame uses only when asked (a bundle render imports none)
+    "dof": ("check_dof",),
+    "interlace": ("weave",),
+    "occlusion": ("occlude_frame",),
     "terrain_pass": ("TerrainPass", "LIGHTMAP_MODES", "DEBUG_VIEWS"),
     "sky_pass": ("SkyPass",),
     "streaming": ("StreamingRenderer", "TileCache", "render_flight", "StreamingTerrain"),
@@ -54,5 +58,8 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and the import g
     from piste.render.terrain_pass import DEBUG_VIEWS, LIGHTMAP_MODES, TerrainPass  # noqa: F401
     from piste.render.textures import LOD_COLORS, MipLevels, lightmap_atlas_size, mip_chain, mipmapped_texture, placeholder_lightmap, snow_texture, track_field  # noqa: F401
     from piste.render.video import VideoWriter  # noqa: F401
+    from piste.render.dof import check_dof  # noqa: F401
+    from piste.render.interlace import weave  # noqa: F401
+    from piste.render.occlusion import occlude_frame  # noqa: F401
     from piste.render.streaming import StreamingRenderer, StreamingTerrain, TileCache, render_flight  # noqa: F401
     from piste.render.ssx_pass import SsxTerrainRenderer  # noqa: F401

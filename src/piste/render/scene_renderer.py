@@ -36,12 +36,12 @@ import numpy as np
 
 from piste.character.animation import clip_time, sample_track
 from piste.character.morph import FaceSkin, face_weights
+from piste import render as _render  # (occlude_frame by its lazy name: imported when occlusion is on)
 from piste.errors import ConfigError
 from piste.render.character_pass import CharacterPass
 from piste.render.context import check_gl_error, flush
 from piste.render.frame import TerrainRenderer
 from piste.render.object_pass import ObjectPass
-from piste.render.occlusion import occlude_frame
 from piste.render.shadow_pass import SUN_RADIUS, ShadowPass, sun_visibility, shadow_matrices, shadow_patches
 from piste.render.sky_pass import HORIZON
 from piste.render.trace import NULL_TRACER
@@ -237,7 +237,7 @@ class SceneRenderer:
         occ = None
         if self.occlusion:
             with tr.span("occlusion"):
-                mesh, sf.objects_visible, occ = occlude_frame(
+                mesh, sf.objects_visible, occ = _render.occlude_frame(
                     self.terrain, mesh, cam, (w, h), self.patch_lo, self.patch_hi, self.scene.objects,
                     sf.objects_visible, prepare=lambda: mode.prepare(cam, lod=lod))
         t2 = time.perf_counter()
