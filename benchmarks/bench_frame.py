@@ -18,7 +18,7 @@ Sections (every configuration interleaved frame by frame in one process; medians
    <= 0.5 px of error, 6 levels a kind against 4, and, as an upper bound for impostors,
    the instances under 8 px of radius left out; the terrain's back-face culling, whole
    back-facing patches left out by normal cones (off by default: no gain measured), error-driven
-   edges (flat, 2 corners, or coarsest where under 1 px, and 1 px against 0.5 px), visibility sets and per-vertex track distance; the shadow mips by compute dispatches; the shadow
+   edges (flat, 2 corners, or coarsest where under 1 px, and 1 px against 0.5 px), visibility sets and per-vertex track distance; the shadow mips by compute dispatches, level l read as an image; the shadow
    receivers cut to their frusta by clip distances, and drawn from the terrain's resident blocks by index), with the pixels changed;
    then whole frames, without the per-pass syncs: the terrain flushed to llvmpipe's rasterizer threads
    as soon as it is issued against everything rasterized at the frame's end (wall and CPU time).
@@ -323,6 +323,35 @@ void main() {
 """
 
 
+class _MipsTexelFetch:
+    """The shadow mips' compute pass as it was before it read level ``l`` as an image: ``texelFetch``
+    through a sampler at lod ``u_level`` (the same levels; bench A/B only)."""
+
+    def __init__(self, cm):
+        from piste.render.context import load_shader
+
+        src = load_shader("mip_levels.comp.glsl")
+        old = src.replace("layout(rgba8, binding = 2) readonly uniform image2D u_src;  // level l",
+                          "uniform sampler2D u_src;\nuniform int u_level;").replace(
+            "imageLoad(u_src, p)", "texelFetch(u_src, p, u_level)")
+        assert old != src
+        self.cm, self.levels = cm, cm.levels
+        self.cs = cm.ctx.compute_shader(old)
+
+    def build(self):
+        ctx, tex, cs = self.cm.ctx, self.cm.texture, self.cs
+        unit = ctx.default_texture_unit
+        tex.use(unit)
+        cs["u_src"].value = unit
+        for lv, (w, h) in self.cm._steps:
+            cs["u_level"].value = lv
+            cs["u_size"].value = (w, h)
+            tex.bind_to_image(0, read=False, write=True, level=lv + 1)
+            tex.bind_to_image(1, read=False, write=True, level=lv + 2)
+            cs.run((w + 7) // 8, (h + 7) // 8)
+            ctx.memory_barrier(self.cm._barrier)
+
+
 def _sky_programs(sky):
     """``set(on)`` for the A/B: the sky pass's program (now) or the one it replaced (two exps and a
     pow(s, 900) at every sky pixel), each with its own vertex array."""
@@ -502,6 +531,11 @@ def scene_section(args, floor_ms: list) -> dict:
     def set_compute_mips(on):
         r.shadows._mips_cs = compute_mips if on else None
 
+    mips_fetch = _MipsTexelFetch(compute_mips) if compute_mips is not None else None
+
+    def set_mips_image(on):
+        r.shadows._mips_cs = compute_mips if on else mips_fetch
+
     set_sky = _sky_programs(r.terrain.sky)
 
     def set_cone_cull(on):  # (on: the default, every patch sent)
@@ -533,6 +567,8 @@ def scene_section(args, floor_ms: list) -> dict:
                ("terrain", set_flat_1px, "terrain: edges flat or coarsest where under 1 px (the default)",
                 "terrain: ... where under 0.5 px (the terrain core's FLAT_ERROR)"),
                ("terrain", set_visibility, "terrain: the bundle's visibility sets", "terrain: frustum culling alone"),
+               ("shadow casters", set_mips_image, "shadow mips: level l read as an image (imageLoad)",
+                "shadow mips: level l read by texelFetch through a sampler"),
                ("shadow casters", set_compute_mips, "shadow mips: two levels a compute dispatch",
                 "shadow mips: a framebuffer (and a rasterizer wait) per level"),
                ("terrain", set_track_per_vertex, "terrain: track distance looked up per vertex",

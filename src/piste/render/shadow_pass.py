@@ -408,7 +408,10 @@ class ComputeMips:
     ends its scene (rasterizes what was drawn) at each framebuffer change, and each level's draw
     samples the level the one before wrote: four waits for the rasterizer threads.  The two
     dispatches wait for none (measured on llvmpipe, 2 cores: the 4 levels of the 768 x 128 shadow
-    texture 0.25 ms vs 0.38 ms; the scene's caster pass 1.35 vs 1.49 ms).  The levels must already exist (a
+    texture 0.25 ms vs 0.38 ms; the scene's caster pass 1.35 vs 1.49 ms).  Each dispatch reads level
+    ``l`` bound as an image (image unit 2; units 0 and 1 take the two levels written): ``texelFetch``
+    through a sampler cost llvmpipe ~3x as much (0.57 ms vs 0.20 standalone; the caster pass 1.50 vs
+    1.31 ms in bench_frame's A/B).  The levels must already exist (a
     :class:`~piste.render.textures.MipLevels` of the same texture allocates them, and is the
     fallback where this is not :meth:`supported`)."""
 
@@ -436,12 +439,9 @@ class ComputeMips:
     def build(self) -> None:
         """Redraw levels ``1 .. levels`` from level 0 (what was drawn into the texture)."""
         ctx, tex, cs = self.ctx, self.texture, self.cs
-        unit = ctx.default_texture_unit
-        tex.use(unit)
-        cs["u_src"].value = unit
         for lv, (w, h) in self._steps:
-            cs["u_level"].value = lv
             cs["u_size"].value = (w, h)
+            tex.bind_to_image(2, read=True, write=False, level=lv)  # (images, not a sampler: see the shader)
             tex.bind_to_image(0, read=False, write=True, level=lv + 1)
             tex.bind_to_image(1, read=False, write=True, level=lv + 2)
             cs.run((w + 7) // 8, (h + 7) // 8)
