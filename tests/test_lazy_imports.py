@@ -49,6 +49,8 @@ NOT_IMPORTED = ("piste.pipeline.build", "piste.pipeline.cache", "piste.pipeline.
                 "piste.character.batches", "piste.character.strips", "piste.formats.gltf.material",
                 # interlaced frames, MP4 output and the occlusion pass: only when asked for
                 "piste.render.interlace", "piste.render.video", "piste.render.occlusion",
+                # making a net from a height field or a .bpt file (a bundle stores its net)
+                "piste.terrain.heightfield", "piste.terrain.fit", "piste.formats.bpt",
                 "dask", "distributed",
                 "scipy", "tifffile")
 

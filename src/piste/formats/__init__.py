@@ -19,9 +19,11 @@ __all__, __getattr__, __dir__ = _lazy_exports(__name__, {
     "gltf": ("load_gltf",),
     "bundle": ("read_bundle", "read_manifest", "write_bundle", "BundleData", "load_bundle"),
     "geotiff": ("DemRaster", "read_geotiff", "write_geotiff"),
+    "bpt": ("read_bpt",),
 })
 
 if TYPE_CHECKING:  # the same names, eagerly, for type checkers and the import graph
     from piste.formats.gltf import load_gltf  # noqa: F401
     from piste.formats.bundle import BundleData, load_bundle, read_bundle, read_manifest, write_bundle  # noqa: F401
     from piste.formats.geotiff import DemRaster, read_geotiff, write_geotiff  # noqa: F401
+    from piste.formats.bpt import read_bpt  # noqa: F401

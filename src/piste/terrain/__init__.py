@@ -30,6 +30,7 @@ __all__, __getattr__, __dir__ = _lazy_exports(__name__, {
     "bezier": ("BEZIER_M", "blend_tables", "evaluate", "eval_power_form"),
     "fit": ("fit_heightfield", "fit_error"),
     "query": ("height_at", "ray_intersect", "RayHits", "PatchBVH"),
+    "heightfield": ("fit_control_points",),
     "tiles": ("TileGrid", "TileStore", "fit_tile"),
 })
 
@@ -41,4 +42,5 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and the import g
     from piste.terrain.tessellate import TerrainMesh, decode_strips, get_shape, tessellate  # noqa: F401
     from piste.terrain.fit import fit_error, fit_heightfield  # noqa: F401
     from piste.terrain.query import PatchBVH, RayHits, height_at, ray_intersect  # noqa: F401
+    from piste.terrain.heightfield import fit_control_points  # noqa: F401
     from piste.terrain.tiles import TileGrid, TileStore, fit_tile  # noqa: F401

@@ -32,10 +32,11 @@ import numpy.typing as npt
 from piste.errors import FormatError, ValidationError
 from piste.formats.atomic import atomic_path
 from piste.graph import connected_parts
-from piste.formats.bpt import read_bpt
+# the .bpt reader and the height-field fit through the packages' lazy names (PEP 562): used by
+# PatchNet.from_bpt / from_heightfield only, so a bundle load imports neither
+from piste import formats as _formats, terrain as _terrain
 from piste.formats.safe_io import open_file
 from piste.terrain.bezier import evaluate
-from piste.terrain.heightfield import fit_control_points
 from piste.terrain.lod import edge_levels
 
 log = logging.getLogger(__name__)
@@ -460,7 +461,7 @@ class PatchNet:
     @classmethod
     def from_bpt(cls, path: str | os.PathLike[str], **kwargs: Any) -> "PatchNet":
         """Read Newell's patch text format (see :mod:`piste.formats.bpt`)."""
-        return cls(read_bpt(path), name=Path(path).name, **kwargs)
+        return cls(_formats.read_bpt(path), name=Path(path).name, **kwargs)
 
     @classmethod
     def from_control_grid(cls, grid: npt.ArrayLike, **kwargs: Any) -> "PatchNet":
@@ -490,7 +491,7 @@ class PatchNet:
         """Fit a C0 net to a height field by least squares (see :func:`piste.terrain.fit.fit_heightfield`;
         the solve is :func:`piste.terrain.heightfield.fit_control_points`)."""
         name = kwargs.pop("name", "heightfield")
-        grid = fit_control_points(z, spacing, **kwargs)
+        grid = _terrain.fit_control_points(z, spacing, **kwargs)
         net = cls(grid.control_points, uv=grid.uv, tol=grid.tol, name=name)
         net.grid_shape = grid.grid_shape  # type: ignore[attr-defined]  # only a fitted net has one; patches per column and per row: patch py * Px + px
         log.log(logging.INFO if kwargs.get("progress") else logging.DEBUG, "fit_heightfield: PatchNet of %d patches",

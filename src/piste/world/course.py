@@ -26,10 +26,11 @@ from functools import lru_cache
 
 import numpy as np
 
+# the height-field fit and the terrain query through the package's lazy names (PEP 562): used to make
+# the default course, not by a render that only reads TRACK_HALF_WIDTH
+from piste import terrain as _terrain
 from piste.errors import ValidationError
-from piste.terrain.fit import fit_heightfield
 from piste.terrain.net import PatchNet
-from piste.terrain.query import height_at
 
 __all__ = ["default_course", "track_centerline", "course_heightfield", "COURSE_WIDTH", "COURSE_LENGTH"]
 
@@ -144,7 +145,7 @@ def course_heightfield(seed: int = 0) -> tuple[np.ndarray, float, tuple[float, f
 @lru_cache(maxsize=8)
 def _course(seed: int) -> PatchNet:
     z, spacing, origin = course_heightfield(seed)
-    net = fit_heightfield(z, spacing, samples_per_patch=SAMPLES_PER_PATCH, origin=origin, name=f"default course (seed {seed})")
+    net = _terrain.fit_heightfield(z, spacing, samples_per_patch=SAMPLES_PER_PATCH, origin=origin, name=f"default course (seed {seed})")
     return net
 
 
@@ -171,5 +172,5 @@ def track_centerline(seed: int = 0, n: int = 200) -> np.ndarray:
     p = _params(int(seed))
     y = np.linspace(10.0, COURSE_LENGTH - 10.0, int(n))
     x = p.track_x(y)
-    z, hit, _, _ = height_at(_course(int(seed)), np.stack([x, y], 1))
+    z, hit, _, _ = _terrain.height_at(_course(int(seed)), np.stack([x, y], 1))
     return np.stack([x, y, z], 1)
