@@ -347,8 +347,8 @@ def test_patch_runs_draw_the_chosen_patches_and_the_skirts():
 
 def test_middle_tiles_draw_their_far_patches_from_the_corner_grid(world, gl):
     """A middle tile draws the patches whose corner-grid error is under the pixel error on screen from
-    its corner grid (the middle mesh geomorphed per vertex onto it where they meet, a strip under
-    each seam): fewer triangles, no background through the seams, the same picture but for a few
+    its corner grid (the middle mesh geomorphed per vertex onto it where they meet, glued to its
+    edges): fewer triangles, no background through the seams, the same picture but for a few
     pixels of rounding on silhouettes."""
     r = S.StreamingRenderer(world, size=(320, 224), ctx=gl, background=MAGENTA, sky=False)
     try:
@@ -367,21 +367,20 @@ def test_middle_tiles_draw_their_far_patches_from_the_corner_grid(world, gl):
             assert (a == (255, 0, 255)).all(-1).sum() == (b == (255, 0, 255)).all(-1).sum()  # no holes
             assert (np.abs(a - b).max(-1) > 8).sum() <= 5
         assert mixed_any > 100
-        # the seams' strips: from every edge between a middle and a corner-grid patch, at the targets
+        # the glue: a middle patch beside a corner-grid one draws that side as the corner grid's edge
         t = next(t for t in r.cache.near if r.cache.near_level[t] == S.MID_SAMPLES)
         mesh = r.cache.near[t]
-        coarse = np.zeros(64, bool)
-        coarse[[0, 1, 8, 9]] = True  # a 2 x 2 corner: 4 seam edges of 2 segments, 2 triangles each
-        tri = S.seam_skirts(mesh, (8, 8), coarse, 5.0)
-        assert tri.shape == (16, 3, 3)
-        v = tri.reshape(-1, 3)
-        top = np.isin(v[:, 2], mesh.targets)  # the middle mesh's edge vertices at their targets
-        assert top.sum() == 24 and (np.abs(v[~top, 2][:, None] + 5.0 - mesh.targets[None]).min(1) < 1e-3).all()
-        x0, y0, _, _ = r.cache.grid.tile_bounds_xy(*t)
-        p2 = 2 * 60.0  # two patches of 3 samples 20 m apart: the seams of the corner grid's 2 x 2 patches
-        on_x = np.isclose(v[:, 0], x0 + p2) & (v[:, 1] <= y0 + p2 + 1e-3)
-        on_y = np.isclose(v[:, 1], y0 + p2) & (v[:, 0] <= x0 + p2 + 1e-3)
-        assert (on_x | on_y).all() and on_x.sum() >= 24 and on_y.sum() >= 24
-        assert S.seam_skirts(mesh, (8, 8), np.zeros(64, bool), 5.0).shape == (0, 3, 3)
+        glued = np.zeros((64, 4), bool)
+        glued[10, 0] = glued[10, 3] = True  # patch (1, 2): its south and west sides
+        tri = S.glue_indices(mesh, (8, 8), glued)
+        row, col = tri // 17, tri % 17  # the middle mesh's 17 x 17 grid, 2 cells a patch
+        assert len(tri) == 6 and tri.max() < 17 * 17  # 8 triangles less the 2 collapsed to nothing
+        assert ((row >= 2) & (row <= 4) & (col >= 4) & (col <= 6)).all()  # patch (1, 2)'s vertices ...
+        assert not ((row == 2) & (col == 5)).any() and not ((col == 4) & (row == 3)).any()  # ... less its sides' midpoints
+        p = mesh.positions[tri.astype(int)][..., :2].astype(np.float64)
+        u, w = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+        area = (u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]) / 2.0
+        assert (area > 0).all() and np.isclose(area.sum(), 60.0 * 60.0)  # the patch, once, counter-clockwise
+        assert S.glue_indices(mesh, (8, 8), np.zeros((64, 4), bool)).shape == (0, 3)
     finally:
         r.close()

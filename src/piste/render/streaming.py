@@ -19,27 +19,35 @@ A tile's level follows its error on screen: the build measures how far each tile
 the corner grid and the middle level (``far_error``, :func:`piste.pipeline.tiled_build.far_errors`);
 a tile is drawn at the coarsest level whose error projects to at most ``pixel_error`` pixels
 (``FAR_PIXEL_ERROR``), nearest tiles first under the budget (and near within ``near_radius``).
-Near and middle meshes geomorph: each vertex carries its height on the next coarser level and is
-drawn between the two by the tile's error (:meth:`TileCache.morph_factors`), fully on the coarser
-level where the tile switches, so a switch does not pop.  Near, middle and full-corner-grid tiles
-draw through the build's visibility sets of the tile under the eye, which say what eyes over it see
-of its own patches and of its eight neighbours' (:class:`TileSets`), while every tile of theirs in
-view is drawn at a level their occluders were lowered to (:meth:`TileCache.sets_hold`).
+Within a tile the level follows each patch's error, as on the course (:mod:`piste.terrain.lod`'s
+per-patch errors, :func:`patch_level_errors`).  Near and middle meshes geomorph per vertex: each
+vertex carries its heights on the middle level and on the corner grid and the largest errors of the
+patches around it (:func:`vertex_errors`), and is drawn corner grid -> middle -> its own by those
+errors on screen, fully on the coarser level where they fit ``pixel_error`` pixels, so nothing pops
+where a tile or a patch changes level.  A near or middle tile is drawn by patch: patches out of the
+frustum (or the visibility sets) are left out, patches all of whose vertices are fully on the
+corner grid (:func:`patch_corner_errors` under ``pixel_error`` at the patch's box) come from the
+tile's corner grid, the rest from the mesh, each mesh's runs of patches in one indirect multi-draw
+(:func:`patch_runs`, patches in :func:`patch_order`); a mesh patch beside a corner-grid patch is
+glued to its edge (:func:`glue_indices`: the side's inner vertices collapsed onto its corners, as
+the course's glue patches zip to a flat neighbour), so they share the edge, not a T-junction.
 
-A middle tile is drawn by patch: the patches where its corner grid's error (:attr:`TileCache.chord_error`)
-would be at most ``pixel_error`` pixels at the patch's nearest point come from the tile's full corner
-grid, the others from its middle mesh, geomorphed per vertex by the vertex's own distance (so it is
-fully on the corner grid wherever it meets a corner-grid patch: no cracks, and a patch changes
-level only where the two agree), a strip under each such seam closing the pixels a T-junction can
-leave open (:func:`seam_skirts`); each mesh draws its runs of patches in one indirect multi-draw
-(:func:`patch_runs`).  Far from the eye most of a middle tile is its corner grid (a quarter of the
-triangles).
+A far tile is drawn by block of ``FAR_BLOCK`` x ``FAR_BLOCK`` patches, each at the coarsest stride
+whose error fits ``FAR_PIXEL_ERROR`` pixels at the block (:meth:`TileCache.block_strides`), blocks
+out of the frustum left out; where a block meets a coarser one (in its tile or across the border of
+another far tile) it draws its zipper to it, a fan from the coarser side's vertices over its own
+edge that fills the gap between the two exactly (:func:`far_mesh`, :func:`block_runs`).  Near,
+middle and full-corner-grid tiles draw through the build's visibility sets of the tile under the
+eye, which say what eyes over it see of its own patches and of its eight neighbours'
+(:class:`TileSets`), while every tile of theirs in view is drawn at a level their occluders were
+lowered to (:meth:`TileCache.sets_hold`).  Tiles are drawn with back faces culled.
 
 Where a near tile meets a far one, the near tile's border follows the patch edge curves and the
 far tile's border their chords.  Both lie in the same vertical plane (patch edges are straight in
 x, y), so every tile gets a **skirt**: a strip hanging ``zmax - zmin + 1`` metres down from its
-border (the curve and its chord both lie inside the tile's height range).  Whichever border is
-higher, the other tile's skirt closes the gap; skirts are hidden under the terrain everywhere else.
+border (the curve and its chord both lie inside the tile's height range), facing out of it.
+Whichever border is higher, its skirt closes the gap, seen from the lower side; skirts are hidden
+under the terrain everywhere else.
 
 Paging
 ------
@@ -622,6 +630,7 @@ def near_mesh(fit: dict, lit: dict, grid_shape: tuple, depth: float, samples: in
     def skirted(a: np.ndarray, down: float) -> np.ndarray:  # a value a vertex, the skirts' after the grid's
         return np.concatenate([a] + [np.concatenate([a[i], a[i] - down]) for i in sides]).astype(np.float32)
 
+    gt[::r, ::r] = gz[::r, ::r] = gp[::r, ::r, 2]  # patch corners: every level's the same, to the bit
     mesh.targets = skirted(gt.reshape(-1), depth)
     mesh.corner = skirted(gz.reshape(-1), depth)
     mesh.errors = skirted(ge, 0.0)
@@ -639,6 +648,41 @@ def visible_indices(mesh: TileMesh, visible: np.ndarray, order: np.ndarray) -> n
     keep[:mesh.whole_triangles] = True  # (a far mesh's block skirts and zippers are drawn by block)
     keep[:n * pt] = np.repeat(np.asarray(visible, bool)[order], pt)
     return np.ascontiguousarray(tri[keep])
+
+
+def glue_indices(mesh: TileMesh, grid_shape: tuple, glued: np.ndarray) -> np.ndarray:
+    """The triangles of the patches of a patch-major ``mesh`` (:func:`near_mesh`) of a ``(ny, nx)``
+    tile with sides ``glued (n, 4) bool`` (south, east, north, west), where a side meets a patch
+    drawn from the corner grid: each such side's inner vertices collapsed onto its nearer corner
+    (as the course's glue patches zip their strips to a flat neighbour's straight edge), so the side
+    is the corner grid's edge itself, shared vertex for vertex, not a T-junction (whose rasterized
+    pinholes no strip under it closes); the patch's vertices there are fully morphed onto the
+    corner grid, so the surface does not move.  ``(t, 3)`` uint32, degenerate triangles left out:
+    the patches with a glued side, in :func:`patch_order`."""
+    ny, nx = (int(x) for x in grid_shape)
+    pt = int(mesh.patch_triangles)
+    r = int(round(np.sqrt(pt / 2.0)))
+    cols = nx * r + 1
+    g = np.asarray(glued, bool).reshape(ny * nx, 4)
+    order = patch_order(ny, nx)
+    rank = np.empty(ny * nx, np.int64)
+    rank[order] = np.arange(ny * nx)
+    p = order[g[order].any(1)]  # (k,) the patches with a glued side, in mesh order
+    if not len(p):
+        return np.zeros((0, 3), np.uint32)
+    tri = np.asarray(mesh.indices)[(rank[p] * pt)[:, None] + np.arange(pt)].astype(np.int64)  # (k, pt, 3)
+    row, col = tri // cols, tri % cols
+    r0, c0 = ((p // nx) * r)[:, None, None], ((p % nx) * r)[:, None, None]
+    gs = g[p][:, None, None, :]
+    snap_c = np.where(2 * (col - c0) < r, c0, c0 + r)  # along a south or north side: to the nearer corner
+    snap_r = np.where(2 * (row - r0) < r, r0, r0 + r)
+    on = ((row == r0) & gs[..., 0]) | ((row == r0 + r) & gs[..., 2])
+    col = np.where(on, snap_c, col)
+    on = ((col == c0 + r) & gs[..., 1]) | ((col == c0) & gs[..., 3])
+    row = np.where(on, snap_r, row)
+    out = (row * cols + col).reshape(-1, 3)
+    keep = (out[:, 0] != out[:, 1]) & (out[:, 1] != out[:, 2]) & (out[:, 0] != out[:, 2])
+    return np.ascontiguousarray(out[keep], dtype=np.uint32)
 
 
 def patch_boxes(mesh: TileMesh, grid_shape: tuple) -> tuple[np.ndarray, np.ndarray] | None:
@@ -769,34 +813,6 @@ def skirt_runs(mesh: TileMesh, mask: np.ndarray) -> np.ndarray:
     assert blk is not None
     so = blk["skirt_order"]
     return entry_runs(np.asarray(mask, bool)[so], blk["skirt_first"].reshape(-1)[so], blk["skirt_count"].reshape(-1)[so])
-
-
-def seam_skirts(mesh: TileMesh, grid_shape: tuple, coarse: np.ndarray, depth: float) -> np.ndarray:
-    """Where a middle ``mesh`` (:func:`near_mesh` at ``MID_SAMPLES``, patch-major, with targets) of a
-    ``(ny, nx)`` tile meets its corner grid (the patches ``coarse (n,) bool`` drawn from it): a strip
-    hanging ``depth`` down from every edge between a middle and a corner-grid patch, along the middle
-    mesh's edge vertices at their targets (where it meets a corner-grid patch the middle mesh is
-    drawn fully morphed onto its targets: the edge's chord and its midpoints); it closes the pixels a
-    T-junction can leave open there.  Triangles ``(k, 3, 3)`` float32 (no index buffer), maybe none."""
-    ny, nx = (int(x) for x in grid_shape)
-    r = int(round(np.sqrt(int(mesh.patch_triangles) / 2.0)))
-    rows, cols = ny * r + 1, nx * r + 1
-    g = mesh.positions[:rows * cols].reshape(rows, cols, 3).astype(np.float32, copy=True)
-    low = mesh.corner if mesh.corner is not None else mesh.targets  # the corner grid's heights
-    g[..., 2] = np.asarray(low)[:rows * cols].reshape(rows, cols)
-    mid = ~np.asarray(coarse, bool).reshape(ny, nx)
-    k = np.arange(r + 1)
-    py, px = np.nonzero(mid[:, :-1] != mid[:, 1:])  # vertical edges: column (px + 1) r, rows py r .. py r + r
-    a = g[(py[:, None] * r + k), ((px + 1) * r)[:, None]]  # (e, r + 1, 3)
-    qy, qx = np.nonzero(mid[:-1] != mid[1:])  # horizontal edges: row (qy + 1) r
-    b = g[((qy + 1) * r)[:, None], (qx[:, None] * r + k)]
-    top = np.concatenate([a, b])  # (e, r + 1, 3)
-    if not len(top):
-        return np.zeros((0, 3, 3), np.float32)
-    low = top.copy()
-    low[..., 2] -= np.float32(depth)
-    t0, t1, b0, b1 = top[:, :-1], top[:, 1:], low[:, :-1], low[:, 1:]
-    return np.ascontiguousarray(np.concatenate([np.stack([t0, t1, b1], 2), np.stack([t0, b1, b0], 2)]).reshape(-1, 3, 3))
 
 
 def mesh_bytes(rows: int, cols: int, morph: bool = False) -> int:
@@ -1553,9 +1569,9 @@ class StreamingRenderer:
         #: :attr:`stats` ``mid_far_patches``)
         self.mix_levels = self.ctx.version_code >= 430
         self._boxes: dict = {}  # (tile, level) -> (mesh id, patch_boxes)
-        self._seams: dict = {}  # (tile, "mid") -> ((mesh id, packed mask), vbo, vao, triangles)
         self._indirect = None  # the frame's indirect draw commands
         self._far_runs: dict = {}  # tile -> ((block strides, blocks in view), {stride: commands})
+        self._glue: dict = {}  # (tile, level) -> (index buffer, vertex array, mesh id): the glued patches
         self.stats: dict = {}
 
     def _light(self, t):
@@ -1628,62 +1644,30 @@ class StreamingRenderer:
             out.append(np.asarray(e, np.int64) if e is not None and len(e) == n else np.zeros(n, np.int64))
         return tuple(out)
 
-    def _coarse_blocks(self, t, coarse: np.ndarray, blocks: tuple) -> tuple:
-        """The blocks of near or middle tile ``t`` whose patches are all ``coarse (n,) bool`` (drawn
-        from the corner grid: every vertex fully morphed onto it) and whose stride is coarser than the
-        corner grid's, drawn like a far tile's, each at its stride (``blocks``: every block's stride
-        and whether it is in view, :meth:`draw`'s), with the
-        corner grid's skirts of the other blocks where they meet one drawn coarser.  ``(patches
-        (n,) bool`` left to the patch-by-patch draw, ``([(t, kind, mesh, vertex array)], [commands])``."""
-        py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
-        ny, nx = py1 - py0, px1 - px0
-        by, bx = -(-ny // FAR_BLOCK), -(-nx // FAR_BLOCK)
-        pb = ((np.arange(ny) // FAR_BLOCK)[:, None] * bx + (np.arange(nx) // FAR_BLOCK)[None, :]).reshape(-1)
-        i = self.cache.tile_index[t]
-        sl = slice(self.cache.block_start[i], self.cache.block_start[i + 1])
-        # (a block at stride 1 is the corner grid's patches: left to them, without skirts)
-        full = (np.bincount(pb, weights=~np.asarray(coarse, bool), minlength=by * bx) == 0) & (blocks[0][sl] > 1)
-        st = np.where(full, blocks[0][sl], 0)
-        vis = blocks[1][sl] & full
-        jobs, cmds = [], []
-        for k in FAR_STRIDES:
-            if (vis & (st == k)).any():
-                fk = self.cache.far[t][k]
-                jobs.append((t, "far", fk, self._vao((t, f"far{k}"), fk)))
-                cmds.append(block_runs(fk, (ny, nx), st, vis, k))
-        pad = np.pad(st.reshape(by, bx), 1)
-        other = np.stack([pad[:-2, 1:-1], pad[1:-1, 2:], pad[2:, 1:-1], pad[1:-1, :-2]], -1)  # south, east, north, west
-        skirt = ((~full).reshape(by, bx)[..., None] & (other > 1)).reshape(-1)
-        if skirt.any():
-            f1 = self.cache.far[t][1]
-            assert f1.blocks is not None
-            jobs.append((t, "far", f1, self._vao((t, "far1"), f1)))
-            cmds.append(skirt_runs(f1, skirt))
-        return full[pb], (jobs, cmds)
-
-    def _seam(self, key, mesh: TileMesh, coarse: np.ndarray):
-        """The vertex array of :func:`seam_skirts` for middle ``mesh`` and its ``coarse`` patches and
-        its triangles (kept while the mask stays the same)."""
-        mkey = (id(mesh), np.packbits(coarse).tobytes())
-        got = self._seams.get(key)
-        if got is None or got[0] != mkey:
+    def _glue_vao(self, key, mesh: TileMesh, idx: np.ndarray):
+        """A vertex array drawing ``idx (t, 3)`` uint32 of near or middle ``mesh`` (its glued patches,
+        :func:`glue_indices`) through the mesh's vertex buffers, its index buffer rewritten each
+        frame (grown when short); ``(vertex array, triangles)``."""
+        self._vao(key, mesh)  # the vertex buffers
+        got = self._glue.get(key)
+        data = np.ascontiguousarray(idx, dtype=np.uint32).tobytes()
+        if got is None or got[2] != id(mesh) or got[0].size < len(data):
             if got is not None:
                 got[1].release()
-                got[2].release()
-            t = key[0]
-            py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
-            tri = seam_skirts(mesh, (py1 - py0, px1 - px0), coarse, min(self.cache._depth(t), self.cache.chord_error[t] + 1.0))
-            vbo = self.ctx.buffer(tri.tobytes() if len(tri) else np.zeros(9, np.float32).tobytes())
-            vao = self.ctx.vertex_array(self.prog, [(vbo, "3f", "in_pos")])
-            got = self._seams[key] = (mkey, vbo, vao, len(tri))
-        return got[2], got[3]
+                got[0].release()
+            ibo = self.ctx.buffer(reserve=max(2 * len(data), 4096), dynamic=True)
+            g = self._gpu[key]
+            vao = self.ctx.vertex_array(self.prog, self._attributes(g[0], g[4]), index_buffer=ibo, index_element_size=4)
+            got = self._glue[key] = (ibo, vao, id(mesh))
+        got[0].write(data)
+        return got[1], len(idx)
 
     def _release(self, key) -> None:
         self._boxes.pop(key, None)
-        seam = self._seams.pop(key, None)
-        if seam is not None:
-            seam[2].release()
-            seam[1].release()
+        glue = self._glue.pop(key, None)
+        if glue is not None:
+            glue[1].release()
+            glue[0].release()
         got = self._gpu.pop(key)
         for obj in (got[2], got[1], got[0], *(b for b, _, _ in got[4])):
             obj.release()
@@ -1823,7 +1807,7 @@ class StreamingRenderer:
             if not (self.mix_levels and mesh.patch_triangles and (verr or level == "far1")):
                 if seen is not None and mesh.patch_triangles and not seen.all():
                     vao, ntri = self._vis_vao(key, mesh, seen)
-                    jobs.append((t, kind, mesh, vao, "all", verr))
+                    jobs.append((t, kind, mesh, vao, -1, verr))
                     drawn[f"{kind}_patches"] += int(seen.sum())
                     drawn["vis_culled"] += int((~seen).sum())
                     drawn["triangles"] += ntri
@@ -1856,24 +1840,21 @@ class StreamingRenderer:
             d = np.sqrt((np.maximum(np.abs(c - e) - h, 0.0) ** 2).sum(1))  # metres to each patch's box
             coarse = perr * verr <= d
             far = self.cache.far[t][1]
-            if seen is None and blocks is not None:  # blocks wholly on the corner grid: drawn as a far tile's
-                own, (jobs_b, cmds_b) = self._coarse_blocks(t, coarse, blocks)
-                for job, cmd in zip(jobs_b, cmds_b):
-                    jobs.append((*job[:4], (ncmd, len(cmd)), 0.0))
-                    commands.append(cmd)
-                    ncmd += len(cmd)
-                    drawn["triangles"] += int(cmd[:, 0].sum()) // 3
-                inside = inside & ~own
-            mine = patch_runs(inside & ~coarse, mesh.patch_triangles, mesh.whole_triangles, order=po)  # and its skirts
+            # the mesh's patches beside a corner-grid patch are glued to its edge (:func:`glue_indices`)
+            ny, nx = py1 - py0, px1 - px0
+            cg = np.pad(coarse.reshape(ny, nx), 1)  # (a neighbour beyond the tile's border: not coarse)
+            fine = (inside & ~coarse).reshape(ny, nx)
+            glued = fine[..., None] & np.stack([cg[:-2, 1:-1], cg[1:-1, 2:], cg[2:, 1:-1], cg[1:-1, :-2]], -1)
+            gl = glued.any(-1).reshape(-1)
+            if gl.any():
+                gvao, ntri = self._glue_vao(key, mesh, glue_indices(mesh, (ny, nx), glued))
+                jobs.append((t, kind, mesh, gvao, 3 * ntri, verr))
+                drawn["triangles"] += ntri
+            mine = patch_runs(inside & ~coarse & ~gl, mesh.patch_triangles, mesh.whole_triangles, order=po)  # + skirts
             grid = patch_runs(inside & coarse, far.patch_triangles, len(far.indices), skirts=False, order=po)
             live.add((t, "far1"))
             jobs.append((t, kind, mesh, vao, (ncmd, len(mine)), verr))
             jobs.append((t, "far", far, self._vao((t, "far1"), far), (ncmd + len(mine), len(grid)), 0.0))
-            if coarse.any():
-                seam, nseam = self._seam(key, mesh, coarse)
-                if nseam:
-                    jobs.append((t, "seam", far, seam, "all", 0.0))
-                    drawn["triangles"] += nseam
             commands += [mine, grid]
             ncmd += len(mine) + len(grid)
             drawn["mid_far_patches"] += int((inside & coarse).sum())
@@ -1886,22 +1867,18 @@ class StreamingRenderer:
                 self._indirect = self.ctx.buffer(reserve=max(2 * len(data), 4096), dynamic=True)
             self._indirect.write(data)
         # back faces culled (a height field seen from above hides its back faces behind front ones;
-        # tile skirts face out of their tile, :func:`_border_sides`)
+        # skirts face out of their tile or block, :func:`_border_sides`; zippers hold both windings)
         self.ctx.front_face, self.ctx.cull_face = "ccw", "back"
         self.ctx.enable(moderngl.CULL_FACE)
-        culling = True
         for t, kind, mesh, vao, run, vmorph in jobs:
             tex, origin, luv = self._light(t)
             tex.use(1)
             self.prog["u_origin"].value = origin
             self.prog["u_light_uv"].value = luv
-            self.prog["u_morph"].value = 1.0 if kind in ("far", "seam") or mesh.targets is None else morph.get(t, 1.0)
+            self.prog["u_morph"].value = 1.0 if kind == "far" or mesh.targets is None else morph.get(t, 1.0)
             self.prog["u_verr"].value = vmorph
-            if (kind == "seam") == culling:  # the seams' strips are seen from both sides
-                culling = not culling
-                (self.ctx.disable if kind == "seam" else self.ctx.enable)(moderngl.CULL_FACE)
-            if isinstance(run, str):  # all of a vertex array's triangles (a seam's, a visibility set's)
-                vao.render(moderngl.TRIANGLES)
+            if isinstance(run, int):  # indices of a vertex array (a visibility set's, glued patches'; -1: all)
+                vao.render(moderngl.TRIANGLES, vertices=run)
             elif run is None:  # a whole mesh
                 vao.render(moderngl.TRIANGLES, vertices=3 * mesh.whole_triangles)
             elif run[1]:
