@@ -797,13 +797,21 @@ def block_runs(mesh: TileMesh, grid_shape: tuple, strides: np.ndarray, drawn: np
     else:
         bo = blk["block_order"]
         cells = entry_runs(sel.reshape(-1)[bo], blk["cell_first"][bo], blk["cell_count"][bo])
-    # against a coarser block: this side's zipper to that stride (a finer one zips to this side)
-    zmask = np.zeros((by * bx * 4, len(FAR_STRIDES)), bool)
-    o = other.reshape(-1)
-    up = sel.reshape(-1).repeat(4) & (o > stride)
+    return np.concatenate([cells, skirt_runs(mesh, skirt), zip_runs(mesh, sel.reshape(-1), other, stride)])
+
+
+def zip_runs(mesh: TileMesh, blocks: np.ndarray, other: np.ndarray, stride: int) -> np.ndarray:
+    """Indirect draw commands ``(k, 5)`` uint32 (:func:`entry_runs`) drawing the zippers of far
+    ``mesh`` (at ``stride``, :func:`far_mesh`) of the blocks ``blocks (nb,) bool`` to their
+    neighbours coarser than ``stride``: ``other (nb, 4)`` the neighbours' strides (sides south, east,
+    north, west; a finer or equal one, or 0: none)."""
+    blk = mesh.blocks
+    assert blk is not None
+    zmask = np.zeros((len(blk["zip_count"]) * 4, len(FAR_STRIDES)), bool)
+    o = np.asarray(other).reshape(-1)
+    up = np.asarray(blocks, bool).repeat(4) & (o > stride)
     zmask[np.nonzero(up)[0], np.searchsorted(FAR_STRIDES, o[up])] = True
-    zips = entry_runs(zmask.reshape(-1), blk["zip_first"].reshape(-1), blk["zip_count"].reshape(-1))
-    return np.concatenate([cells, skirt_runs(mesh, skirt), zips])
+    return entry_runs(zmask.reshape(-1), blk["zip_first"].reshape(-1), blk["zip_count"].reshape(-1))
 
 
 def skirt_runs(mesh: TileMesh, mask: np.ndarray) -> np.ndarray:
@@ -1644,6 +1652,37 @@ class StreamingRenderer:
             out.append(np.asarray(e, np.int64) if e is not None and len(e) == n else np.zeros(n, np.int64))
         return tuple(out)
 
+    def _coarse_blocks(self, t, coarse: np.ndarray, blocks: tuple) -> tuple:
+        """The blocks of near or middle tile ``t`` whose patches are all ``coarse (n,) bool`` (every
+        vertex fully on the corner grid) and whose far stride (``blocks``: every block's stride and
+        whether it is in view, :meth:`draw`'s) is coarser than 1, drawn like a far tile's blocks; the
+        other blocks' edges there are the corner grid's (its patches, or mesh patches glued to them),
+        so the corner grid's zippers join them exactly.  ``(patches (n,) bool`` so drawn, ``[((t, kind,
+        mesh, vertex array), commands)])``."""
+        py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
+        ny, nx = py1 - py0, px1 - px0
+        by, bx = -(-ny // FAR_BLOCK), -(-nx // FAR_BLOCK)
+        pb = ((np.arange(ny) // FAR_BLOCK)[:, None] * bx + (np.arange(nx) // FAR_BLOCK)[None, :]).reshape(-1)
+        i = self.cache.tile_index[t]
+        sl = slice(self.cache.block_start[i], self.cache.block_start[i + 1])
+        full = (np.bincount(pb, weights=~np.asarray(coarse, bool), minlength=by * bx) == 0) & (blocks[0][sl] > 1)
+        out: list = []
+        if not full.any():
+            return np.zeros(ny * nx, bool), out
+        st = np.where(full, blocks[0][sl], 1)  # (the others' edges: the corner grid's)
+        vis = blocks[1][sl] & full
+        for k in FAR_STRIDES[1:]:
+            if (vis & (st == k)).any():
+                fk = self.cache.far[t][k]
+                out.append(((t, "far", fk, self._vao((t, f"far{k}"), fk)), block_runs(fk, (ny, nx), st, vis, k)))
+        pad = np.pad(st.reshape(by, bx), 1)
+        other = np.stack([pad[:-2, 1:-1], pad[1:-1, 2:], pad[2:, 1:-1], pad[1:-1, :-2]], -1)  # south, east, north, west
+        f1 = self.cache.far[t][1]
+        z = zip_runs(f1, ~full, other, 1)
+        if len(z):
+            out.append(((t, "far", f1, self._vao((t, "far1"), f1)), z))
+        return full[pb], out
+
     def _glue_vao(self, key, mesh: TileMesh, idx: np.ndarray):
         """A vertex array drawing ``idx (t, 3)`` uint32 of near or middle ``mesh`` (its glued patches,
         :func:`glue_indices`) through the mesh's vertex buffers, its index buffer rewritten each
@@ -1840,6 +1879,14 @@ class StreamingRenderer:
             d = np.sqrt((np.maximum(np.abs(c - e) - h, 0.0) ** 2).sum(1))  # metres to each patch's box
             coarse = perr * verr <= d
             far = self.cache.far[t][1]
+            if seen is None and blocks is not None:  # blocks wholly on the corner grid at a coarser stride
+                own, bjobs = self._coarse_blocks(t, coarse, blocks)
+                for job, cmd in bjobs:
+                    jobs.append((*job, (ncmd, len(cmd)), 0.0))
+                    commands.append(cmd)
+                    ncmd += len(cmd)
+                    drawn["triangles"] += int(cmd[:, 0].sum()) // 3
+                inside = inside & ~own
             # the mesh's patches beside a corner-grid patch are glued to its edge (:func:`glue_indices`)
             ny, nx = py1 - py0, px1 - px0
             cg = np.pad(coarse.reshape(ny, nx), 1)  # (a neighbour beyond the tile's border: not coarse)
