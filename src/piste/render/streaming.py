@@ -1580,6 +1580,7 @@ class StreamingRenderer:
         self._indirect = None  # the frame's indirect draw commands
         self._far_runs: dict = {}  # tile -> ((block strides, blocks in view), {stride: commands})
         self._glue: dict = {}  # (tile, level) -> (index buffer, vertex array, mesh id): the glued patches
+        self._coarse_runs: dict = {}  # tile -> ((strides, in view), [(job, commands)]): a near tile's far blocks
         self.stats: dict = {}
 
     def _light(self, t):
@@ -1671,6 +1672,10 @@ class StreamingRenderer:
             return np.zeros(ny * nx, bool), out
         st = np.where(full, blocks[0][sl], 1)  # (the others' edges: the corner grid's)
         vis = blocks[1][sl] & full
+        ckey = (st.tobytes(), vis.tobytes())
+        got = self._coarse_runs.get(t)
+        if got is not None and got[0] == ckey:
+            return full[pb], got[1]
         for k in FAR_STRIDES[1:]:
             if (vis & (st == k)).any():
                 fk = self.cache.far[t][k]
@@ -1681,6 +1686,7 @@ class StreamingRenderer:
         z = zip_runs(f1, ~full, other, 1)
         if len(z):
             out.append(((t, "far", f1, self._vao((t, "far1"), f1)), z))
+        self._coarse_runs[t] = (ckey, out)
         return full[pb], out
 
     def _glue_vao(self, key, mesh: TileMesh, idx: np.ndarray):
@@ -1917,13 +1923,19 @@ class StreamingRenderer:
         # skirts face out of their tile or block, :func:`_border_sides`; zippers hold both windings)
         self.ctx.front_face, self.ctx.cull_face = "ccw", "back"
         self.ctx.enable(moderngl.CULL_FACE)
+        last: tuple = (None, None, None)  # the tile, u_morph and u_verr set last (jobs of a tile come together)
         for t, kind, mesh, vao, run, vmorph in jobs:
-            tex, origin, luv = self._light(t)
-            tex.use(1)
-            self.prog["u_origin"].value = origin
-            self.prog["u_light_uv"].value = luv
-            self.prog["u_morph"].value = 1.0 if kind == "far" or mesh.targets is None else morph.get(t, 1.0)
-            self.prog["u_verr"].value = vmorph
+            if t != last[0]:
+                tex, origin, luv = self._light(t)
+                tex.use(1)
+                self.prog["u_origin"].value = origin
+                self.prog["u_light_uv"].value = luv
+            um = 1.0 if kind == "far" or mesh.targets is None else morph.get(t, 1.0)
+            if um != last[1]:
+                self.prog["u_morph"].value = um
+            if vmorph != last[2]:
+                self.prog["u_verr"].value = vmorph
+            last = (t, um, vmorph)
             if isinstance(run, int):  # indices of a vertex array (a visibility set's, glued patches'; -1: all)
                 vao.render(moderngl.TRIANGLES, vertices=run)
             elif run is None:  # a whole mesh
