@@ -115,7 +115,9 @@ if TYPE_CHECKING:
 
 __all__ = ["TileCache", "StreamingRenderer", "StreamingTerrain", "TileMesh", "near_mesh", "far_mesh", "mesh_bytes", "fly_path",
            "render_flight", "TileSets", "light_grid", "stride_errors", "chord_error", "visible_indices", "world_fog_density",
-           "object_instance_bytes", "object_kind_heights", "OBJECT_MIN_PIXELS"]
+           "object_instance_bytes", "object_kind_heights", "OBJECT_MIN_PIXELS", "patch_order", "patch_level_errors",
+           "vertex_errors", "glue_indices", "far_blocks", "block_runs", "patch_runs", "entry_runs", "FAR_BLOCK",
+           "LOD_REFERENCE_LINES"]
 
 _log = logging.getLogger(__name__)
 
