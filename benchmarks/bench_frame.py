@@ -676,6 +676,9 @@ def scene_section(args, floor_ms: list) -> dict:
         print(f"{name:14s} " + " ".join(f"{m[c]:8.2f}" for c in cols) + f" {1e3 / m['total']:6.1f} {m['total'] / fl:8.2f}")
     full = summarize_scene(ims["full scene"])
     m = out["full scene"]
+    print("(upload: the terrain's index list and morph factors, the riders' skinned vertices, and the whole shadow "
+          "caster pass, whose data are only the casters' low-LOD vertices (~31 kB for six riders): its time is the "
+          "casters' draws, their rasterization, which the mips' compute dispatch waits for, and the mips)")
     print(f"\nper pass (glFinish around each; frame {med(prof_total):.1f} ms with the extra syncs):")
     for label, ts in sorted(acc.items(), key=lambda kv: -med(kv[1])):
         print(f"  {label:18s} {rng_str(ts)} ms  ({100 * med(ts) / med(prof_total):4.1f} %)")
