@@ -374,7 +374,8 @@ class CompressedMesh:
     indices : (t, 3) uint16 (uint32 past 65,535 vertices)
     radius : float, bounding-sphere radius about the origin (object space)
     lods : its level chain (:func:`piste.world.object_lod.object_lods` of the decoded mesh) when stored
-        with it (a bundle's), else None (a renderer computes it)
+        with it (a bundle's), else None (a renderer computes it); a copy with other geometry
+        (``dataclasses.replace``) must set it to None
     """
 
     name: str
