@@ -310,9 +310,10 @@ def far_mesh(lit: dict, depth: float, stride: int = 1) -> TileMesh:
     coarser strides block-major.
 
     Blocks of ``FAR_BLOCK`` x ``FAR_BLOCK`` patches are drawn each at its own stride
-    (:meth:`TileCache.block_strides`), so every block has a skirt under each of its four sides
-    (hanging ``depth``, facing out of the block), drawn where the block meets a block of another
-    stride or the tile's border: the tile's skirts are its border blocks'.  The patches (stride 1)
+    (:meth:`TileCache.block_strides`): every block side has a zipper to each coarser stride (the fan
+    from the coarse side's vertices over this side's: it fills the gap between the two exactly,
+    drawn two-sided), and the sides on the tile's border a skirt (hanging ``depth``, facing out of
+    the tile) for neighbours that are not far blocks (:func:`block_runs`).  The patches (stride 1)
     and blocks are in :func:`patch_order`.  ``blocks`` (first triangle and triangles of each entry):
     ``{"cell_first", "cell_count": (nb,)`` each block's cells (coarser strides), ``"block_order"``
     the blocks in mesh order, ``"skirt_first", "skirt_count": (nb, 4)`` each block side's skirt
@@ -344,11 +345,11 @@ def far_mesh(lit: dict, depth: float, stride: int = 1) -> TileMesh:
     lr = np.nonzero((ri % FAR_BLOCK == 0) | (ri == rows0 - 1))[0]
     lc = np.nonzero((ci % FAR_BLOCK == 0) | (ci == cols0 - 1))[0]
     n = rows * cols
-    low_r = n + np.arange(len(lr) * cols).reshape(len(lr), cols)  # a lowered copy of each block-line vertex
-    low_c = n + low_r.size + np.arange(len(lc) * rows).reshape(len(lc), rows)
-    pos = np.concatenate([g.reshape(-1, 3), g[lr].reshape(-1, 3), g[:, lc].transpose(1, 0, 2).reshape(-1, 3)])
+    low_r = n + np.arange(2 * cols).reshape(2, cols)  # a lowered copy of each border vertex: rows 0 and last
+    low_c = n + 2 * cols + np.arange(2 * rows).reshape(2, rows)  # columns 0 and last
+    pos = np.concatenate([g.reshape(-1, 3), g[[0, -1]].reshape(-1, 3), g[:, [0, -1]].transpose(1, 0, 2).reshape(-1, 3)])
     pos[n:, 2] -= depth
-    col = np.concatenate([c.reshape(-1, 3), c[lr].reshape(-1, 3), c[:, lc].transpose(1, 0, 2).reshape(-1, 3)])
+    col = np.concatenate([c.reshape(-1, 3), c[[0, -1]].reshape(-1, 3), c[:, [0, -1]].transpose(1, 0, 2).reshape(-1, 3)])
     segs, keys = [], []
 
     def strip(top, low, key, forward: bool) -> None:  # the segments of polylines (k, m) top and low
@@ -360,11 +361,11 @@ def far_mesh(lit: dict, depth: float, stride: int = 1) -> TileMesh:
 
     bcol = (ci[:-1] // FAR_BLOCK)[None, :]  # the block column of each segment along a row line
     brow = (ri[:-1] // FAR_BLOCK)[None, :]
-    line_r, line_c = np.arange(len(lr))[:, None], np.arange(len(lc))[:, None]
-    strip(idx[lr][:-1], low_r[:-1], (line_r[:-1] * bx + bcol) * 4 + 0, False)  # the south side of the blocks above
-    strip(idx[lr][1:], low_r[1:], ((line_r[1:] - 1) * bx + bcol) * 4 + 2, True)  # the north side of those below
-    strip(idx[:, lc].T[:-1], low_c[:-1], (brow * bx + line_c[:-1]) * 4 + 3, True)  # the west side of the blocks east
-    strip(idx[:, lc].T[1:], low_c[1:], (brow * bx + line_c[1:] - 1) * 4 + 1, False)  # the east side of those west
+    # skirts under the tile's border only (inside a tile, blocks meet blocks: zippers)
+    strip(idx[[0]], low_r[[0]], bcol * 4 + 0, False)  # the south side of the first row of blocks
+    strip(idx[[-1]], low_r[[1]], ((by - 1) * bx + bcol) * 4 + 2, True)  # the north side of the last
+    strip(idx[:, [0]].T, low_c[[0]], (brow * bx) * 4 + 3, True)  # the west side of the first column
+    strip(idx[:, [-1]].T, low_c[[1]], (brow * bx + bx - 1) * 4 + 1, False)  # the east side of the last
     seg, key = np.concatenate(segs), np.concatenate(keys)
     # the skirts side by side, each side's blocks along it (rows for south and north, columns for
     # east and west): a tile's border is four runs
@@ -381,7 +382,7 @@ def far_mesh(lit: dict, depth: float, stride: int = 1) -> TileMesh:
     sfirst = np.empty(nb * 4, np.int64)
     sfirst[sorder] = 2 * cells + np.concatenate([[0], np.cumsum(count[sorder])[:-1]])
     # zippers: where a block side meets a coarser block (stride k), the fan from each of the coarse
-    # side's vertices over this side's vertices up to the next one (both windings): it fills the
+    # side's vertices over this side's vertices up to the next one (drawn two-sided): it fills the
     # gap between the two in their vertical plane exactly, with this mesh's own edge vertices
     zips, zkeys = [], []
     for kidx, k in enumerate(FAR_STRIDES):
@@ -395,7 +396,6 @@ def far_mesh(lit: dict, depth: float, stride: int = 1) -> TileMesh:
             if not len(ps):
                 continue
             fan = np.stack([line[:, a[ps]], line[:, ps], line[:, ps + 1]], -1)  # (lines, s, 3)
-            fan = np.stack([fan, fan[..., ::-1]], 2)  # (lines, s, 2, 3): both windings
             ln = np.arange(nlines)[:, None]
             blk_lo = (ln * bx + along[ps][None, :]) if side_lo != 3 else (along[ps][None, :] * bx + ln)
             blk_hi = ((ln - 1) * bx + along[ps][None, :]) if side_lo != 3 else (along[ps][None, :] * bx + ln - 1)
@@ -406,8 +406,8 @@ def far_mesh(lit: dict, depth: float, stride: int = 1) -> TileMesh:
     zip_tris = np.concatenate(zips).reshape(-1, 3) if zips else np.zeros((0, 3), np.int64)
     zkey = np.concatenate(zkeys) if zkeys else np.zeros(0, np.int64)
     zorder = np.argsort(zkey, kind="stable")
-    zip_tris = zip_tris.reshape(-1, 2, 3)[zorder].reshape(-1, 3)
-    zcount = 2 * np.bincount(zkey, minlength=nb * 16)
+    zip_tris = zip_tris[zorder]
+    zcount = np.bincount(zkey, minlength=nb * 16)
     zfirst = 2 * cells + len(seg) + np.concatenate([[0], np.cumsum(zcount)[:-1]])
     mesh = TileMesh(pos.astype(np.float32), col.astype(np.uint8),
                     np.concatenate([tris, seg, zip_tris]).astype(np.uint32))
@@ -448,15 +448,27 @@ def stride_errors(far_positions: np.ndarray) -> dict:
 def stride_error_grids(far_positions: np.ndarray) -> dict:
     """:func:`stride_errors` at every corner: ``{stride: (ny+1, nx+1) float64 metres}``."""
     g = np.asarray(far_positions, dtype=np.float64)[..., 2]
-    rows, cols = np.arange(g.shape[0]), np.arange(g.shape[1])
     out = {}
     for k in FAR_STRIDES:
         ri, ci = _stride_index(g.shape[0], k), _stride_index(g.shape[1], k)
-        c = g[ri][:, ci]
-        a = np.stack([np.interp(cols, ci, row) for row in c])  # (len(ri), cols)
-        b = np.stack([np.interp(rows, ri, a[:, x]) for x in range(a.shape[1])], 1)  # (rows, cols)
+        b = _lerp_matrix(g.shape[0], ri) @ g[ri][:, ci] @ _lerp_matrix(g.shape[1], ci).T  # (rows, cols)
         out[k] = np.abs(b - g)
     return out
+
+
+def _lerp_matrix(n: int, at: np.ndarray) -> np.ndarray:
+    """``(n, len(at))``: linear interpolation at ``0 .. n-1`` between the samples at the sorted
+    indices ``at`` (``np.interp``'s, as one matrix)."""
+    x = np.arange(n, dtype=np.float64)
+    j = np.clip(np.searchsorted(at, x, side="right") - 1, 0, max(len(at) - 2, 0))
+    w = np.zeros((n, len(at)))
+    if len(at) == 1:
+        w[:, 0] = 1.0
+        return w
+    f = np.clip((x - at[j]) / (at[j + 1] - at[j]), 0.0, 1.0)
+    w[np.arange(n), j] = 1.0 - f
+    w[np.arange(n), j + 1] += f
+    return w
 
 
 def _block_reduce(grid: np.ndarray, op) -> np.ndarray:
@@ -471,7 +483,7 @@ def _block_reduce(grid: np.ndarray, op) -> np.ndarray:
     return out
 
 
-def far_blocks(far_positions: np.ndarray, depth: float, chord: float) -> dict:
+def far_blocks(far_positions: np.ndarray, depth: float, chord: float, grids: dict | None = None) -> dict:
     """What a far tile's blocks (:func:`far_mesh`) are chosen by, from its corner grid ``(ny+1, nx+1,
     3)``: ``lo, hi (nb, 3)`` their boxes (skirts included, ``depth``), ``err (nb, 3)`` each coarser
     stride's height error (:func:`stride_error_grids`) over the block plus its corner grid's chord
@@ -487,7 +499,7 @@ def far_blocks(far_positions: np.ndarray, depth: float, chord: float) -> dict:
     sd = np.maximum(sd, np.maximum(np.roll(sd, 1, 0), np.roll(sd, -1, 0)))  # (the border corners: a neighbour's)
     sd = np.maximum(sd, np.maximum(np.roll(sd, 1, 1), np.roll(sd, -1, 1)))
     ch = np.minimum(_block_reduce(sd, np.maximum) / 4.0, float(chord))
-    grids = stride_error_grids(g)
+    grids = stride_error_grids(g) if grids is None else grids
     err = np.stack([_block_reduce(grids[k], np.maximum) + ch for k in FAR_STRIDES[1:]], -1)
     rows, cols = z.shape
     rs, cs = np.arange(0, rows - 1, FAR_BLOCK), np.arange(0, cols - 1, FAR_BLOCK)
@@ -773,7 +785,7 @@ def patch_runs(inside: np.ndarray, patch_triangles: int, total_triangles: int, s
 
 
 def block_runs(mesh: TileMesh, grid_shape: tuple, strides: np.ndarray, drawn: np.ndarray, stride: int,
-               border: tuple | None = None) -> np.ndarray:
+               border: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Indirect draw commands ``(k, 5)`` uint32 (:func:`entry_runs`) drawing, of far ``mesh`` at
     ``stride`` (:func:`far_mesh`) of a ``(ny, nx)``-patch tile, the blocks ``drawn (nb,) bool`` whose
     stride (``strides (nb,) int``, block ``row * bx + col``) is ``stride``: their cells, and the
@@ -781,7 +793,8 @@ def block_runs(mesh: TileMesh, grid_shape: tuple, strides: np.ndarray, drawn: np
     ``border``, the strides of the neighbouring tiles' blocks along its south, east, north and west
     sides, ``(bx,), (by,), (bx,), (by,)``) the side's zipper to it (a finer block zips to this one,
     blocks of one stride share their corners), against anything else (0 in ``border``: a neighbour
-    not drawn by blocks, or none; None: all 0) the side's skirt."""
+    not drawn by blocks, or none; None: all 0) the side's skirt (a far mesh has them under the tile's
+    border).  ``(cells and skirts, zippers)``: the zippers are drawn two-sided."""
     ny, nx = (int(x) for x in grid_shape)
     by, bx = -(-ny // FAR_BLOCK), -(-nx // FAR_BLOCK)
     st = np.asarray(strides).reshape(by, bx)
@@ -799,7 +812,7 @@ def block_runs(mesh: TileMesh, grid_shape: tuple, strides: np.ndarray, drawn: np
     else:
         bo = blk["block_order"]
         cells = entry_runs(sel.reshape(-1)[bo], blk["cell_first"][bo], blk["cell_count"][bo])
-    return np.concatenate([cells, skirt_runs(mesh, skirt), zip_runs(mesh, sel.reshape(-1), other, stride)])
+    return np.concatenate([cells, skirt_runs(mesh, skirt)]), zip_runs(mesh, sel.reshape(-1), other, stride)
 
 
 def zip_runs(mesh: TileMesh, blocks: np.ndarray, other: np.ndarray, stride: int) -> np.ndarray:
@@ -1040,13 +1053,14 @@ class TileCache:
             py0, py1, px0, px1 = self.grid.patch_range(*t)
             self.far[t] = {k: far_mesh(lit, self._depth(t), k) for k in FAR_STRIDES}
             self.light[t] = light_grid(lit["texels"], (py1 - py0, px1 - px0))
-            self.far_error[t] = stride_errors(lit["far_positions"])
+            grids = stride_error_grids(lit["far_positions"])
+            self.far_error[t] = {k: float(e.max()) for k, e in grids.items()}
             if "far_error" in lit:  # measured by the build (tiled_build.far_errors)
                 self.chord_error[t], self.mid_error[t] = (float(x) for x in lit["far_error"])
             else:  # a world built before it: estimated from the corner grid
                 self.chord_error[t] = chord_error(lit["far_positions"])
                 self.mid_error[t] = self.chord_error[t] / 4.0
-            self.blocks[t] = far_blocks(lit["far_positions"], self._depth(t), self.chord_error[t])
+            self.blocks[t] = far_blocks(lit["far_positions"], self._depth(t), self.chord_error[t], grids)
             self._far_bytes += sum(m.nbytes for m in self.far[t].values()) + self.light[t].nbytes
             self._note_objects(t, lit)
         if self.bad:  # only tiles with a far stand-in are drawn
@@ -1681,13 +1695,15 @@ class StreamingRenderer:
         for k in FAR_STRIDES[1:]:
             if (vis & (st == k)).any():
                 fk = self.cache.far[t][k]
-                out.append(((t, "far", fk, self._vao((t, f"far{k}"), fk)), block_runs(fk, (ny, nx), st, vis, k)))
+                main, zips = block_runs(fk, (ny, nx), st, vis, k)
+                vao = self._vao((t, f"far{k}"), fk)
+                out += [((t, what, fk, vao), cmd) for what, cmd in (("far", main), ("zip", zips)) if len(cmd)]
         pad = np.pad(st.reshape(by, bx), 1)
         other = np.stack([pad[:-2, 1:-1], pad[1:-1, 2:], pad[2:, 1:-1], pad[1:-1, :-2]], -1)  # south, east, north, west
         f1 = self.cache.far[t][1]
         z = zip_runs(f1, ~full, other, 1)
         if len(z):
-            out.append(((t, "far", f1, self._vao((t, "far1"), f1)), z))
+            out.append(((t, "zip", f1, self._vao((t, "far1"), f1)), z))
         self._coarse_runs[t] = (ckey, out)
         return full[pb], out
 
@@ -1841,12 +1857,14 @@ class StreamingRenderer:
                     runs = {k: block_runs(self.cache.far[t][k], (py1 - py0, px1 - px0), st, vis, k, border)
                             for k in FAR_STRIDES if (vis & (st == k)).any()}
                     got = self._far_runs[t] = (bkey, runs)
-                for k, cmd in got[1].items():
+                for k, pair in got[1].items():
                     fk = self.cache.far[t][k]
-                    jobs.append((t, kind, fk, self._vao((t, f"far{k}"), fk), (ncmd, len(cmd)), 0.0))
-                    commands.append(cmd)
-                    ncmd += len(cmd)
-                    drawn["triangles"] += int(cmd[:, 0].sum()) // 3
+                    for what, cmd in zip(("far", "zip"), pair):  # (the zippers two-sided)
+                        if len(cmd):
+                            jobs.append((t, what, fk, self._vao((t, f"far{k}"), fk), (ncmd, len(cmd)), 0.0))
+                            commands.append(cmd)
+                            ncmd += len(cmd)
+                            drawn["triangles"] += int(cmd[:, 0].sum()) // 3
                 drawn["far_patches"] += self.cache.patches[t]
                 drawn["far_blocks"] += int(len(st))
                 drawn["far_blocks_culled"] += int((~vis).sum())
@@ -1925,14 +1943,18 @@ class StreamingRenderer:
         # skirts face out of their tile or block, :func:`_border_sides`; zippers hold both windings)
         self.ctx.front_face, self.ctx.cull_face = "ccw", "back"
         self.ctx.enable(moderngl.CULL_FACE)
+        culling = True
         last: tuple = (None, None, None)  # the tile, u_morph and u_verr set last (jobs of a tile come together)
         for t, kind, mesh, vao, run, vmorph in jobs:
+            if (kind != "zip") != culling:  # zippers are seen from both sides
+                culling = not culling
+                (self.ctx.enable if culling else self.ctx.disable)(moderngl.CULL_FACE)
             if t != last[0]:
                 tex, origin, luv = self._light(t)
                 tex.use(1)
                 self.prog["u_origin"].value = origin
                 self.prog["u_light_uv"].value = luv
-            um = 1.0 if kind == "far" or mesh.targets is None else morph.get(t, 1.0)
+            um = 1.0 if kind in ("far", "zip") or mesh.targets is None else morph.get(t, 1.0)
             if um != last[1]:
                 self.prog["u_morph"].value = um
             if vmorph != last[2]:
