@@ -352,6 +352,32 @@ class _MipsTexelFetch:
             ctx.memory_barrier(self.cm._barrier)
 
 
+_TRACK_MATH_BEFORE = """        float w = max(fwidth(d), 1e-4);
+        float groomed = 1.0 - smoothstep(u_track_half - 1.0, u_track_half, ad);
+        c *= mix(vec3(1.0), vec3(0.95, 0.97, 1.0), groomed);  // groomed snow: a little cooler
+        float hw = 0.3;
+        float line = clamp((hw - abs(ad - u_track_half)) / w + 0.5, 0.0, 1.0) * min(1.0, 2.0 * hw / w);
+"""
+
+
+def _track_math_programs(tp):
+    """``(key, now, before)``: the terrain's modulate program and the same with the track's groomed
+    tint and dye lines as they were written before (a smoothstep and two divisions a pixel), or
+    None without a track."""
+    from piste.render.terrain_pass import _MODE_ID, _with_defines
+
+    key = tp._key(_MODE_ID["modulate"])
+    if key[1] != 1:
+        return None
+    fs = tp._fs
+    a = fs.index("        // (one division a pixel")
+    b = fs.index("        c = mix(c, vec3(0.18, 0.32, 0.85), 0.85 * line);")
+    before = tp.ctx.program(vertex_shader=_with_defines(tp._vs, TERRAIN_TRACK=1),
+                            fragment_shader=_with_defines(fs[:a] + _TRACK_MATH_BEFORE + fs[b:], TERRAIN_MODE=0,
+                                                          TERRAIN_TRACK=1))
+    return key, tp._program(_MODE_ID["modulate"]), before
+
+
 def _sky_programs(sky):
     """``set(on)`` for the A/B: the sky pass's program (now) or the one it replaced (two exps and a
     pow(s, 900) at every sky pixel), each with its own vertex array."""
@@ -525,6 +551,12 @@ def scene_section(args, floor_ms: list) -> dict:
         r.shadows.resident_receivers = on
 
     track_progs = _track_programs(r.terrain.terrain)
+    track_math = _track_math_programs(r.terrain.terrain)
+
+    def set_track_math(on):
+        if track_math is not None:
+            key, now, before = track_math
+            r.terrain.terrain._programs[key] = now if on else r.terrain.terrain._apply(before)
 
     def set_track_per_vertex(on):
         if track_progs is not None:
@@ -578,6 +610,8 @@ def scene_section(args, floor_ms: list) -> dict:
                 "shadow mips: a framebuffer (and a rasterizer wait) per level"),
                ("terrain", set_track_per_vertex, "terrain: track distance looked up per vertex",
                 "terrain: track distance looked up per pixel"),
+               ("terrain", set_track_math, "terrain: the track's tint and dye lines with one division a pixel",
+                "terrain: ... a smoothstep and two divisions a pixel"),
                ("shadow receivers", set_receiver_clip, "receivers cut to the shadow frustum (clip distances)",
                 "receivers: whole triangles, discard outside the frustum"),
                ("shadow receivers", set_resident_receivers, "receivers: the terrain's resident blocks by index",
@@ -611,6 +645,7 @@ def scene_section(args, floor_ms: list) -> dict:
     for label, setter, now_name, before_name in changes:
         if label == "objects" and r.objects is None or label == "shadow casters" and compute_mips is None \
                 or setter is set_track_per_vertex and track_progs is None \
+                or setter is set_track_math and track_math is None \
                 or setter is set_object_lod_levels and errors_four is None or label == "shadow receivers" and \
                 (r.shadows is None or r.shadows.soft):
             continue

@@ -16,11 +16,14 @@ vec3 base_color(vec2 uv, float track_d) {
     if (u_track_on == 1) {
         float d = track_d;
         float ad = abs(d);
-        float w = max(fwidth(d), 1e-4);
-        float groomed = 1.0 - smoothstep(u_track_half - 1.0, u_track_half, ad);
-        c *= mix(vec3(1.0), vec3(0.95, 0.97, 1.0), groomed);  // groomed snow: a little cooler
-        float hw = 0.3;
-        float line = clamp((hw - abs(ad - u_track_half)) / w + 0.5, 0.0, 1.0) * min(1.0, 2.0 * hw / w);
+        // (one division a pixel: the screen width of a metre of d, inverted once; smoothstep over the
+        // metre inside the lips written out, its span being 1; the tint as 1 - (0.05, 0.03, 0) g)
+        float iw = 1.0 / max(fwidth(d), 1e-4);
+        float t = clamp(ad - (u_track_half - 1.0), 0.0, 1.0);
+        float groomed = 1.0 - t * t * (3.0 - 2.0 * t);
+        c *= vec3(1.0) - vec3(0.05, 0.03, 0.0) * groomed;  // groomed snow: a little cooler (0.95, 0.97, 1)
+        float hw = 0.3;  // the dye lines' half width, metres
+        float line = clamp((hw - abs(ad - u_track_half)) * iw + 0.5, 0.0, 1.0) * min(1.0, 2.0 * hw * iw);
         c = mix(c, vec3(0.18, 0.32, 0.85), 0.85 * line);
     }
     return c;
