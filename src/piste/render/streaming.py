@@ -1940,7 +1940,7 @@ class StreamingRenderer:
                 self._indirect = self.ctx.buffer(reserve=max(2 * len(data), 4096), dynamic=True)
             self._indirect.write(data)
         # back faces culled (a height field seen from above hides its back faces behind front ones;
-        # skirts face out of their tile or block, :func:`_border_sides`; zippers hold both windings)
+        # skirts face out of their tile, :func:`_border_sides`; zippers are drawn two-sided)
         self.ctx.front_face, self.ctx.cull_face = "ccw", "back"
         self.ctx.enable(moderngl.CULL_FACE)
         culling = True
