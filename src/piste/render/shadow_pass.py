@@ -12,11 +12,13 @@ Per rider ``i`` (all numpy until the draw):
 3. :func:`shadow_patches`: the terrain patches whose control-point boxes meet that frustum
    (the frustum's six planes against the patch bounds, :func:`piste.render.frame.cull_boxes`),
    restricted to the patches tessellated this frame;
-4. :meth:`ShadowPass.draw_receivers`: the extra pass: only those patches' triangles (gathered from
-   this frame's :class:`piste.terrain.TerrainMesh`) drawn again with the terrain's depth
-   (``invariant`` positions, GL_LEQUAL, a tiny bias), the texture projected by the sun's matrix,
-   multiplying the frame buffer (blend ``DST_COLOR, ZERO``) by ``shade`` where the texture is
-   covered.  Points outside the tile or in front of the rider (nearer the sun) are left alone.
+4. :meth:`ShadowPass.draw_receivers`: the extra pass: only those patches' triangles drawn again
+   with the terrain's depth (``invariant`` positions, GL_LEQUAL, a tiny bias), the texture
+   projected by the sun's matrix, multiplying the frame buffer (blend ``DST_COLOR, ZERO``) by
+   ``shade`` where the texture is covered.  Points outside the tile or in front of the rider
+   (nearer the sun) are left alone.  A resident terrain's triangles are drawn from its vertex blocks
+   on the GPU by index (:func:`resident_shadow_triangles`, geomorphed as the terrain is); a streamed
+   :class:`piste.terrain.TerrainMesh`'s are gathered and uploaded (:func:`shadow_triangles`).
 
 The stats report the patches per rider and per frame (:attr:`ShadowPass.patch_counts`).
 
@@ -35,6 +37,7 @@ API
     shadow_matrices(centers, radius, sun_direction, reach=40.0) -> (n, 4, 4) light view-projections
     shadow_patches(patch_lo, patch_hi, light_vp, candidates=None) -> list of (k_i,) patch ids
     shadow_triangles(mesh, patch_lists) -> positions, indices, per-rider (first, count)
+    resident_shadow_triangles(mesh, patch_lists) -> indices into the resident blocks, per-rider (first, count)
     area_light_visibility(points, triangles, sun_direction, sun_radius, rays=64) -> (p,) visibility
     ShadowPass(ctx, n_max=6, tile=128, soft=False, sun_radius=0.27)
 """
