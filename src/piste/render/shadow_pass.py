@@ -52,6 +52,7 @@ import numpy.typing as npt
 
 from piste.errors import RenderError
 from piste.render.context import Offscreen, load_shader, set_depth_write
+from piste.render.terrain_pass import RESIDENT_FORMAT
 from piste.render.textures import MipLevels
 from piste.terrain.query import height_at
 from piste.world.camera import look_at, orthographic
@@ -603,8 +604,6 @@ class ShadowPass:
     def _resident_receiver(self, buffer: moderngl.Buffer, idx: np.ndarray) -> tuple[Any, Any]:
         """The resident receivers' program and a vertex array over the terrain's ``buffer`` with this
         frame's ``idx`` written into its (orphaned) index buffer."""
-        from piste.render.terrain_pass import RESIDENT_FORMAT
-
         if self._receiver_res is None:
             vs = load_shader("shadow_receiver.vert.glsl").replace("#version 330 core\n",
                                                                   "#version 330 core\n#define RECEIVER_RESIDENT 1\n", 1)
