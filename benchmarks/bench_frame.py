@@ -15,7 +15,7 @@ Sections (every configuration interleaved frame by frame in one process; medians
    full scene, without shadows / specular, and a per-pass profile (``glFinish`` around each pass:
    what llvmpipe spends in each); then each scene change A/B on its own pass (the objects' per-mode
    programs with per-instance attributes, levels of detail against full meshes and at <= 1 px against
-   <= 0.5 px of error, 6 levels a kind against 4, back faces culled for closed solids, and, as an upper bound for impostors,
+   <= 0.5 px of error, 6 levels a kind against 4, and, as an upper bound for impostors,
    the instances under 8 px of radius left out; the terrain's back-face culling, whole
    back-facing patches left out by normal cones (off by default: no gain measured), error-driven
    edges (flat, 2 corners, or coarsest where under 1 px, and 1 px against 0.5 px), visibility sets and per-vertex track distance; the shadow mips by compute dispatches, level l read as an image; the shadow
@@ -514,9 +514,6 @@ def scene_section(args, floor_ms: list) -> dict:
     def set_cull(on):
         r.terrain.terrain.cull_back = on
 
-    def set_object_cull(on):
-        r.objects.cull_closed = on
-
     lod_now = r.objects.lod_pixels if r.objects is not None else 0.0  # the scene's setting (the default)
 
     def set_object_lod(on):
@@ -594,8 +591,6 @@ def scene_section(args, floor_ms: list) -> dict:
                 "objects: levels of detail, <= 0.5 px of error"),
                ("objects", set_object_lod_levels, "objects: up to 6 levels a kind (rocks down to 10 triangles)",
                 "objects: up to 4 levels a kind"),
-               ("objects", set_object_cull, "objects: back faces culled where the mesh is a closed solid",
-                "objects: every triangle drawn"),
                ("terrain", set_cull, "terrain: back faces culled", "terrain: back faces drawn"),
                ("terrain", set_cone_cull, "terrain: every visible patch sent (the default)",
                 "terrain: wholly back-facing patches left out (normal cones, off)"),

@@ -67,7 +67,7 @@ if TYPE_CHECKING:
 
     from piste.lighting.lights import Lights
 
-__all__ = ["ObjectPass", "ObjectGroups", "instance_rows", "light_uniforms", "MAX_POINT_LIGHTS", "closed_outward"]
+__all__ = ["ObjectPass", "ObjectGroups", "instance_rows", "light_uniforms", "MAX_POINT_LIGHTS"]
 
 MAX_POINT_LIGHTS = 12
 _MODES = {"dynamic": 0, "baked": 1, "points": 2}
@@ -88,28 +88,6 @@ def _pack_rows(rows: np.ndarray) -> np.ndarray:
     out = np.ascontiguousarray(rows[:, :13, :], dtype=np.float32).copy()
     out[:, 4:8, 3] = rows[:, 13, :]
     return out
-
-
-def closed_outward(positions: npt.ArrayLike, indices: npt.ArrayLike) -> bool:
-    """Whether the triangles ``indices (t, 3)`` over ``positions (v, 3)`` bound a closed solid with
-    their counter-clockwise sides outwards: every directed edge used once and its reverse once (a
-    closed, consistently wound surface in index space) and a positive signed volume.  Seen from
-    outside, every back-facing triangle of such a mesh lies behind a front-facing one, so culling
-    back faces leaves its pixels as they were (and skips rasterizing about half its triangles)."""
-    tri = np.asarray(indices, dtype=np.int64).reshape(-1, 3)
-    if len(tri) == 0:
-        return False
-    e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
-    n = int(tri.max()) + 1
-    key = np.sort(e[:, 0] * n + e[:, 1])
-    if (key[1:] == key[:-1]).any():  # a directed edge twice: not a consistently wound 2-manifold
-        return False
-    rev = e[:, 1] * n + e[:, 0]
-    at = np.minimum(np.searchsorted(key, rev), len(key) - 1)
-    if not (key[at] == rev).all():  # an edge without its twin: an open border
-        return False
-    p = np.asarray(positions, dtype=np.float64)[tri]
-    return bool(np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() > 0.0)
 
 
 def instance_rows(objects: ObjectSet) -> np.ndarray:
@@ -157,13 +135,6 @@ def light_uniforms(lights: Lights) -> dict:
             cone[i, :2] = (np.cos(np.radians(light.outer_angle)), np.cos(np.radians(light.inner_angle)))
     return {"u_n_lights": len(direct), "u_lpos": pos, "u_ldir": dirs, "u_lcol": col, "u_lcone": cone,
             "u_world_ambient": tuple(float(x) for x in lights.ambient_color())}
-
-
-def _mirrored(matrix: np.ndarray) -> np.ndarray:
-    """``(n,) bool``: the instances whose object -> world matrices ``(n, 4, 4)`` mirror (negative
-    determinant: their triangles' winding flips on screen)."""
-    m = np.asarray(matrix, dtype=np.float64).reshape(-1, 4, 4)
-    return np.linalg.det(m[:, :3, :3]) < 0.0 if len(m) else np.zeros(0, bool)
 
 
 def _concat_lights(parts) -> VertexLights | None:
@@ -366,15 +337,9 @@ class ObjectPass:
         self.inst.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.lod_pixels = float(lod_pixels)
         self.kinds = []
-        #: back faces culled for the (kind, level) meshes that bound closed solids (:func:`closed_outward`;
-        #: not blended, not alpha-tested, no mirroring instance in the draw): the same pixels, about half
-        #: their triangles never rasterized.  False: every triangle drawn (bench_frame.py's A/B)
-        self.cull_closed = True
         for k, name in enumerate(objects.kinds):
             m = objects.meshes[name]
-            decoded = m.decode()[0]
-            lods = m.lods or object_lods(decoded, m.indices)  # (a bundle's mesh: the chain stored with it)
-            solid = not self.alpha_test and name not in objects.blend
+            lods = m.lods or object_lods(m.decode()[0], m.indices)  # (a bundle's mesh: the chain stored with it)
             # every level's indices in one buffer, level after level (drawn with ``first``)
             idx = np.concatenate([lv.indices.reshape(-1) for lv in lods]).astype(m.indices.dtype)
             sizes = [lv.indices.size for lv in lods]
@@ -384,7 +349,6 @@ class ObjectPass:
                    ctx.buffer(np.ascontiguousarray(idx).tobytes())]
             count = max(int(np.count_nonzero(objects.kind == k)), 1)
             self.kinds.append({"mesh": m, "buffers": buf, "baked": None, "lods": lods,
-                               "closed": [solid and closed_outward(decoded, lv.indices) for lv in lods],
                                "first": np.cumsum([0] + sizes[:-1]).tolist(), "sizes": sizes,
                                "instances": [ctx.buffer(reserve=count * _INSTANCE_BYTES) for _ in lods]})
         n_levels = max((len(info["lods"]) for info in self.kinds), default=1)
@@ -392,7 +356,6 @@ class ObjectPass:
         for k, info in enumerate(self.kinds):
             self.lod_errors[k, :len(info["lods"])] = [lv.error for lv in info["lods"]]
         self.scale = instance_scale(objects.matrix) if len(objects) else np.zeros(0)
-        self.mirrored = _mirrored(objects.matrix)
         self.lod_counts = np.zeros(n_levels, np.int64)  # instances drawn at each level last frame
         self._points = None
         self.colors = None
@@ -548,8 +511,7 @@ class ObjectPass:
                 k, lv = divmod(int(group_of[a]), n_lv)
                 if key is not None:  # the run's rows into its (kind, level) instance buffer, used by this draw alone
                     self.kinds[k]["instances"][lv].write(np.ascontiguousarray(self.packed[order[a:b]]).tobytes())
-                cull = self.cull_closed and self.kinds[k]["closed"][lv] and not self.mirrored[order[a:b]].any()
-                self._draw_kind(p, key, k, int(a), int(b - a), mode, False, lv, cull=cull)
+                self._draw_kind(p, key, k, int(a), int(b - a), mode, False, lv)
         if len(trans):
             p = self._uniforms(key, True, vp, eye, fog, mode, light_only)
             ctx.enable(moderngl.BLEND)
@@ -615,7 +577,6 @@ class ObjectPass:
             rows[idx, 13, 3] = np.arange(len(idx))
         self.rows, self.packed = rows, _pack_rows(rows)
         self.scale = instance_scale(objs.matrix) if len(objs) else np.zeros(0)
-        self.mirrored = _mirrored(objs.matrix)
         import moderngl
 
         if len(objs) > self.inst.height:  # the generic program's instance texture
@@ -674,11 +635,9 @@ class ObjectPass:
                         p[name].value = val
         return p
 
-    def _draw_kind(self, p, key, k: int, start: int, count: int, mode: str, blend: bool, level: int = 0,
-                   cull: bool = False) -> None:
+    def _draw_kind(self, p, key, k: int, start: int, count: int, mode: str, blend: bool, level: int = 0) -> None:
         """``count`` instances of kind ``k`` at LOD ``level`` (rows ``start..`` of the instance texture
-        for the generic program; the (kind, level) instance buffer for a specialised one); ``cull``:
-        with back faces culled (counter-clockwise front faces)."""
+        for the generic program; the (kind, level) instance buffer for a specialised one)."""
         import moderngl
 
         info = self.kinds[k]
@@ -692,16 +651,8 @@ class ObjectPass:
                 p[name].value = value
         if mode == "baked":
             info["baked"].use(2)
-        if cull:
-            self.ctx.front_face = "ccw"
-            self.ctx.cull_face = "back"
-            self.ctx.enable(moderngl.CULL_FACE)
-        try:
-            self._vao(key, k, blend, level).render(moderngl.TRIANGLES, vertices=info["sizes"][level],
-                                                   first=info["first"][level], instances=count)
-        finally:
-            if cull:
-                self.ctx.disable(moderngl.CULL_FACE)
+        self._vao(key, k, blend, level).render(moderngl.TRIANGLES, vertices=info["sizes"][level],
+                                               first=info["first"][level], instances=count)
         self.drawn += count
         self.triangles += count * info["lods"][level].n_triangles
 
