@@ -135,3 +135,59 @@ def test_bad_object_level_chains_name_the_member(tmp_path):
     with pytest.raises(FormatError) as e:
         _furnished(tmp_path, change={"objects/meshes/tree/lod_indices": idx}).objects()
     assert "objects/meshes/tree/lod_indices.npy" in str(e.value) and "past the mesh" in str(e.value)
+
+
+def _with_track(tmp_path, texel=None, field=None):
+    """The minimal bundle with a centre line and the track texture the build stores for it."""
+    from piste.render.textures import TRACK_TEXEL, track_field, track_texels
+
+    path, arrays = _minimal(tmp_path)
+    b = load_bundle(path)
+    line = np.array([[3.0, 6.0, 0.0], [2.5, 3.0, 0.0], [3.0, 0.0, 0.0]])
+    f, rect = track_field(line, b.net.bounds)
+    arrays = dict(arrays, **{"terrain/centerline": line, "terrain/track_field": track_texels(f) if field is None else field,
+                             "terrain/track_rect": rect})
+    man = {k: v for k, v in b.manifest.items() if k not in ("format", "members")}
+    man["terrain"] = dict(man["terrain"], track_texel=TRACK_TEXEL if texel is None else texel)
+    return load_bundle(write_bundle(tmp_path / "track.piste", man, arrays)), f, rect
+
+
+def test_the_stored_track_texture_is_what_the_renderer_would_upload(tmp_path):
+    from piste.render.textures import track_texels
+
+    b, f, rect = _with_track(tmp_path)
+    field, r = b.track_texture()
+    assert field.dtype == np.float16 and np.array_equal(field, track_texels(f)) and np.array_equal(r, rect)
+    assert track_texels(field) is field  # the terrain pass uploads it as it is
+
+
+def test_a_track_texture_of_another_spacing_is_recomputed_and_a_bad_one_names_the_member(tmp_path):
+    b, _, _ = _with_track(tmp_path, texel=0.5)
+    assert b.track_texture() is None
+    b, f, _ = _with_track(tmp_path, field=np.zeros((3, 3), np.float16))
+    with pytest.raises(FormatError) as e:
+        b.track_texture()
+    assert "terrain/track_field.npy" in str(e.value) and "float16" in str(e.value)
+
+
+def test_a_preview_draws_the_stored_track_texture_without_computing_it(tmp_path, gl, monkeypatch):
+    import piste.render.frame as frame
+    from piste.pipeline.preview import ScenePreview
+
+    b, _, _ = _with_track(tmp_path)
+    p = ScenePreview(b, size=(64, 48), ctx=gl)
+    try:
+        want = p.render(b.camera("c"))
+    finally:
+        p.release()
+
+    def refuse(*a, **k):
+        raise AssertionError("track_field computed at set-up although the bundle stores it")
+
+    monkeypatch.setattr(frame, "track_field", refuse)
+    p = ScenePreview(b, size=(64, 48), ctx=gl)
+    try:
+        assert np.array_equal(p.render(b.camera("c")), want)
+        assert p.terrain.terrain.track is not None
+    finally:
+        p.release()

@@ -128,3 +128,18 @@ def test_track_field_bits_of_the_whole_field_computed_at_once(down):
     ref = (-ref if down else ref).astype(np.float32)
     assert np.array_equal(field.view(np.uint32), ref.view(np.uint32))
     assert np.array_equal(rect, [-500.0, -200.0, -500.0 + w * 0.75, -200.0 + h * 0.75])
+
+
+def test_track_texels_are_the_clipped_float16_field_and_a_stored_one_is_taken_as_it_is():
+    from piste.render.textures import TRACK_CLIP, track_texels
+
+    f = np.array([[-5000.0, -999.9, 0.0, 12.34], [np.nan, 1000.0, 1e6, -np.inf]], np.float32)
+    t = track_texels(f)
+    assert t.dtype == np.float16
+    assert np.array_equal(t, np.clip(f, -TRACK_CLIP, TRACK_CLIP).astype(np.float16), equal_nan=True)
+    ok = t[:1].copy()
+    assert track_texels(ok) is ok  # in range: uploaded as stored, no copy
+    for bad in (np.array([[np.inf, 0.0]], np.float16), np.array([[1100.0, 0.0]], np.float16)):
+        assert np.array_equal(track_texels(bad), np.clip(bad.astype(np.float32), -TRACK_CLIP, TRACK_CLIP).astype(np.float16))
+    nan = np.array([[np.nan, 1.0]], np.float16)
+    assert np.isnan(track_texels(nan)[0, 0]) and track_texels(nan)[0, 1] == 1.0

@@ -90,8 +90,9 @@ RESIDENT_MEMBER = "terrain/resident_blocks"
 #: members written without compression: big, read at every start, and inflating them cost a fresh
 #: process about as much as computing them (13 MB of blocks: 46 ms to inflate, 2 ms to CRC, 6 ms to
 #: hash); the light-map atlas (3.1 MB of float32, deflated only to 45 %: 10 ms to inflate) and the
-#: control points (1 MB, deflated to 32 %: 2.5 ms) likewise, for 2.3 MB more file at the default course
-STORED_MEMBERS = frozenset({RESIDENT_MEMBER, "lightmap/atlas", "terrain/control_points"})
+#: control points (1 MB, deflated to 32 %: 2.5 ms) likewise, for 2.3 MB more file at the default course;
+#: the track's float16 field (1.4 MB: a view, hashed, never inflated) too
+STORED_MEMBERS = frozenset({RESIDENT_MEMBER, "lightmap/atlas", "terrain/control_points", "terrain/track_field"})
 
 
 def _sha256(data: bytes | memoryview) -> str:

@@ -65,6 +65,7 @@ from piste.pipeline.ssx_rider import load_mpf_rider
 from piste.pipeline.visibility import (Visibility, camera_eyes, compute_visibility, culling_report,
                                        scene_eye_heights)
 from piste.render.shadow_pass import sun_visibility
+from piste.render.textures import TRACK_TEXEL, track_field, track_texels
 from piste.terrain.net import TOPOLOGY_FORMAT, PatchNet
 from piste.world.camera import Camera, camera_planes, track_camera
 from piste.world.course import track_centerline
@@ -386,12 +387,18 @@ def _store_terrain(ctx: BuildContext, out: StepOutput) -> None:
     arrays["terrain/uv"] = ta["uv"] if net.uv is None else net.uv  # (a net built with uv keeps it)
     # the welded topology, so a load need not weld and match edges again (~0.1 s of a fresh process)
     arrays.update({f"terrain/{k}": v for k, v in net.topology().items()})
+    track = {}
     if centerline is not None:
         arrays["terrain/centerline"] = centerline
+        # the groomed track's projected texture as the terrain pass uploads it (float16, clipped),
+        # made here instead of in every fresh process's renderer set-up (~3-5 ms)
+        field, rect = track_field(centerline, net.bounds, texel=TRACK_TEXEL)
+        arrays["terrain/track_field"], arrays["terrain/track_rect"] = track_texels(field), rect
+        track = {"track_texel": TRACK_TEXEL}
     lo, hi = net.bounds
     ctx.manifest["terrain"] = {"name": tm["name"], "tol": tm["tol"], "kind": ctx.scene.terrain.kind, "patches": len(net),
                                "topology": TOPOLOGY_FORMAT, "bounds": [[float(x) for x in lo], [float(x) for x in hi]],
-                               "key": ctx.terrain_key}
+                               "key": ctx.terrain_key, **track}
 
 
 # -------------------------------------------------------------- terrain LOD error table

@@ -12,7 +12,7 @@ API
     load_bundle(path, verify=True, warm=False) -> Bundle
     Bundle                 ``.net``, ``.lightmap``, ``.lights``, ``.cameras``, ``.visibility``, ``.centerline``,
                            ``.objects()``, ``.vertex_colors()``, ``.rider_model()``, ``.rider_lods()``,
-                           ``.arrays``, ``.manifest``, ``.camera(name)``
+                           ``.track_texture()``, ``.arrays``, ``.manifest``, ``.camera(name)``
     bundle_from_data(BundleData) -> Bundle
     lights_from_dict(d) -> Lights          ``Lights.to_dict()`` back (infinite ranges may be "inf")
     camera_from_dict(d) -> Camera          :func:`piste.formats.bundle.camera_to_dict` back
@@ -51,6 +51,7 @@ from piste.lighting.lights import AmbientLight, DirectionalLight, Lights, PointL
 from piste.lighting.vertex import choose_lights_many
 from piste.pipeline.characters import lods_from_arrays, model_from_arrays
 from piste.pipeline.visibility import Visibility
+from piste.render.textures import TRACK_TEXEL
 from piste.terrain.lod import LEVELS, STORED_ERROR_LEVELS, keep_patch_errors, patch_error_table
 from piste.terrain.net import TOPOLOGY_ARRAYS, TOPOLOGY_FORMAT, PatchNet
 from piste.terrain.resident import (RESIDENT_FLOATS, RESIDENT_FORMAT, ResidentTerrain, keep_resident, resident_fits,
@@ -279,6 +280,28 @@ class Bundle:
         self._cache["rider_lods"] = lods
         return lods
 
+
+    def track_texture(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The track's projected texture as the build stored it: ``(field (H, W) float16, rect (4,)
+        float64)``, :func:`piste.render.textures.track_field` of :attr:`centerline` over the net's
+        bounds as :func:`~piste.render.textures.track_texels` uploads it (a renderer's set-up need not
+        compute it: ~3-5 ms of a fresh process), or None when the bundle has none or made it at another
+        grid spacing (the renderer then computes it).  FormatError naming the member when it does not
+        fit the net's bounds at that spacing."""
+        info = self.manifest.get("terrain") or {}
+        f, rect = self.arrays.get("terrain/track_field"), self.arrays.get("terrain/track_rect")
+        if f is None or rect is None or self.centerline is None or info.get("track_texel") != TRACK_TEXEL:
+            return None
+        lo, hi = (np.asarray(b, dtype=np.float64)[:2] for b in self.net.bounds)
+        w, h = (max(int(np.ceil((hi[i] - lo[i]) / TRACK_TEXEL)), 2) for i in (0, 1))
+        want = np.array([lo[0], lo[1], lo[0] + w * TRACK_TEXEL, lo[1] + h * TRACK_TEXEL])
+        if f.dtype != np.float16 or f.shape != (h, w):
+            raise FormatError(self.path, f"expected the track field as a ({h}, {w}) float16 array (the net's bounds at "
+                                         f"{TRACK_TEXEL} m texels), got {f.shape} {f.dtype}", field="terrain/track_field.npy")
+        if np.shape(rect) != (4,) or not np.array_equal(np.asarray(rect, dtype=np.float64), want):
+            raise FormatError(self.path, f"expected the track field's rectangle {want.tolist()} (the net's bounds), got "
+                                         f"{np.asarray(rect).tolist()}", field="terrain/track_rect.npy")
+        return f, want
 
     def sun_visibility(self, direction: npt.ArrayLike) -> tuple[np.ndarray, tuple[float, ...]] | None:
         """Where the terrain sees a sun shining along ``direction`` (3,), as the build stored it

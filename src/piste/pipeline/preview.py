@@ -441,8 +441,8 @@ class ScenePreview:
         lod = man.get("lod", {})
         morph = opt["lod_morph"] if opt["lod_morph"] is not None else lod.get("morph", True)
         kw = {"lod_near": lod.get("near"), "lod_far": lod.get("far"), "lod_morph": bool(morph)}
-        if bundle.centerline is not None:
-            kw.update(track=bundle.centerline, track_half_width=TRACK_HALF_WIDTH)
+        if bundle.centerline is not None:  # (with the track's texture when the build stored it)
+            kw.update(track=bundle.centerline, track_half_width=TRACK_HALF_WIDTH, track_texture=bundle.track_texture())
         if "terrain/base_texture" in bundle.arrays:  # an SSX level's own textures (pipeline.ssx_level)
             kw["base_texture"] = bundle.arrays["terrain/base_texture"]
         atlas = bundle.lightmap.atlas if opt["lightmap"] == "bundle" else opt["lightmap"]
@@ -478,6 +478,8 @@ class ScenePreview:
                 self.scene = track_scene(bundle, opt["start"], opt["casts"])
             else:
                 self.scene = BundleScene(bundle)
+            if self.scene.net is not bundle.net:  # (a scene of its own: the stored track texture is the bundle net's)
+                kw.pop("track_texture", None)
             terrain = terrain_renderer(bundle, self.render_size, self.ctx, atlas, opt["lightmap"], opt["stream_wait"], kw)
             sun = getattr(self.scene, "sun", None)  # the build's sun visibility when it is this scene's
             sunlight = bundle.sun_visibility(sun.direction) \

@@ -133,6 +133,9 @@ class TerrainRenderer:
         distance alone
     track : (k, 3) centre line of a groomed track to mark on the snow (projected texture), or None
     track_half_width : metres from the centre line to the track's dye lines
+    track_texture : ``(field (H, W), rect (4,))``: ``track``'s projected texture as computed before
+        (a bundle stores :func:`piste.render.textures.track_field` of its centre line, as float16
+        :func:`~piste.render.textures.track_texels`), used instead of computing it; None: computed
     lod_morph : geomorph between LOD levels (False: the talk's exact positions, which pop); None: on
         (the runtime passes the CLI's ``--lod-morph`` or the scene file's ``[lod] morph``)
     resident : keep every patch's vertices on the GPU and send only index lists (False: tessellate
@@ -150,7 +153,7 @@ class TerrainRenderer:
     def __init__(self, net, size=(640, 448), ctx=None, lightmap="placeholder", base_texture=None,
                  lod_near: float | None = None, lod_far: float | None = None, track=None,
                  track_half_width: float = 16.0, lod_morph: bool | None = None, resident: bool = True,
-                 lod_error: float | None = LOD_ERROR_PX):
+                 lod_error: float | None = LOD_ERROR_PX, track_texture: tuple[Any, Any] | None = None):
         self.net = net
         self.lod_morph = morph_setting(lod_morph)
         self.resident = bool(resident)
@@ -167,8 +170,9 @@ class TerrainRenderer:
         self.terrain = TerrainPass(self.ctx, lightmap=lightmap, base_texture=base_texture)
         # back-face culling only where it cannot cost a picture: every patch faces up
         self.terrain.cull_back = faces_up(net)
-        if track is not None:
-            self.terrain.set_track(*track_field(track, net.bounds), half_width=track_half_width)
+        if track is not None:  # (``track_texture``: the field and rect a bundle stores for this track)
+            self.terrain.set_track(*(track_texture if track_texture is not None else track_field(track, net.bounds)),
+                                   half_width=track_half_width)
         self.sky = SkyPass(self.ctx)
         self.lod_kwargs = {k: v for k, v in (("near", lod_near), ("far", lod_far)) if v is not None}
         if lod_error is None:

@@ -31,7 +31,7 @@ import numpy as np
 
 from piste.errors import ConfigError, RenderError
 from piste.render.context import load_shader, set_depth_write
-from piste.render.textures import LOD_COLORS, mipmapped_texture, snow_texture
+from piste.render.textures import LOD_COLORS, mipmapped_texture, snow_texture, track_texels
 from piste.terrain.resident import ResidentMesh
 
 if TYPE_CHECKING:
@@ -256,7 +256,8 @@ class TerrainPass:
         Parameters
         ----------
         field : (H, W) float signed distance across the track in metres (see
-            :func:`piste.render.textures.track_field`), or None to remove the track
+            :func:`piste.render.textures.track_field`; uploaded as :func:`~piste.render.textures.track_texels`
+            makes it), or None to remove the track
         rect : (x0, y0, x1, y1) world rectangle of the field
         half_width : metres from the centre line to the dye lines
         """
@@ -268,7 +269,7 @@ class TerrainPass:
         if field is None:
             self._set_uniforms(u_track_on=0)
             return
-        f = np.clip(np.asarray(field, dtype=np.float32), -1000.0, 1000.0).astype(np.float16)
+        f = track_texels(field)  # (a bundle's stored float16 field as it is)
         if f.ndim != 2:
             raise RenderError(f"track field: expected an (H, W) array, got {f.shape}")
         h, w = f.shape
