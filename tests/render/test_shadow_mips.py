@@ -113,3 +113,20 @@ def test_shadow_pass_levels_equal_the_framebuffer_path(gl):
             assert np.array_equal(a, b), f"level {level}"
     finally:
         sp.release()
+
+
+def test_releasing_a_shadow_pass_after_its_casters_leaves_the_context_usable(gl):
+    """render_casters leaves the shadow framebuffer bound; releasing the pass must unbind it first,
+    or moderngl re-binds the deleted framebuffer when it makes the next one (GL_INVALID_OPERATION:
+    a renderer made after a shadowed one failed with "uploading a 256x256 texture's mip levels")."""
+    sp = ShadowPass(gl, n_max=2, tile=128)
+    pos = np.random.default_rng(5).normal(0.0, 0.5, (2, 30, 3)).astype(np.float32)
+    sp.render_casters(pos, np.arange(30, dtype=np.uint32).reshape(10, 3), np.stack([np.eye(4)] * 2))
+    assert gl.fbo is sp.fbo  # (what made the failure: the pass's framebuffer still bound)
+    assert gl.error == "GL_NO_ERROR"
+    sp.release()
+    target = Offscreen(gl, (16, 16))
+    try:
+        assert gl.error == "GL_NO_ERROR"
+    finally:
+        target.release()

@@ -33,7 +33,7 @@ import numpy as np
 import numpy.typing as npt
 
 from piste.errors import ConfigError
-from piste.render.context import Offscreen, load_shader
+from piste.render.context import Offscreen, load_shader, release_framebuffer
 from piste.render.dof import DofPass
 
 if TYPE_CHECKING:
@@ -220,15 +220,14 @@ class AATarget(Offscreen):
         self.screen.use()  # (an overlay drawn next lands on the screen)
 
     def release(self) -> None:
-        if self.ctx.fbo is self.fbo or self.ctx.fbo is self.out[0]:
+        if self.ctx.fbo is self.out[0]:
             (self.ctx.screen or self.ctx.detect_framebuffer(0)).use()
         for obj in (self._vao, self._prog, self._dof):
             if obj is not None:
                 obj.release()
         self._dof = None
         if self.fbo is not self.out[0]:
-            for obj in (self.fbo, self.color, self.depth):
-                obj.release()
+            release_framebuffer(self.ctx, self.fbo, self.color, self.depth)
         for obj in self.out:
             obj.release()
         self._vao = self._prog = None

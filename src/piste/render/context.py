@@ -34,7 +34,7 @@ from piste.formats.atomic import atomic_path
 if TYPE_CHECKING:
     import moderngl
 
-__all__ = ["create_context", "Offscreen", "save_png", "load_shader", "check_gl_error", "set_depth_write", "APT_PACKAGES"]
+__all__ = ["create_context", "Offscreen", "save_png", "load_shader", "check_gl_error", "set_depth_write", "release_framebuffer", "APT_PACKAGES"]
 
 #: Debian/Ubuntu packages that provide headless OpenGL through EGL (Mesa llvmpipe without a GPU)
 APT_PACKAGES = ("libegl1", "libgl1", "libgl1-mesa-dri")
@@ -212,13 +212,18 @@ class Offscreen:
     def release(self) -> None:
         if not self._owned:
             return
-        # unbind first: moderngl re-binds the "current" framebuffer when it creates the next one,
-        # and binding a deleted one is GL_INVALID_OPERATION
-        if self.ctx.fbo is self.fbo:
-            (self.ctx.screen or self.ctx.detect_framebuffer(0)).use()
-        for obj in (self.fbo, self.color, self.depth):
-            if obj is not None:
-                obj.release()
+        release_framebuffer(self.ctx, self.fbo, self.color, self.depth)
+
+
+def release_framebuffer(ctx: moderngl.Context, fbo: moderngl.Framebuffer, *attachments: Any) -> None:
+    """Release ``fbo`` and its ``attachments`` (None skipped), unbinding it first when bound:
+    moderngl binds the "current" framebuffer again after it creates the next one, and binding a
+    deleted one is GL_INVALID_OPERATION (the next ``ctx.framebuffer`` would fail)."""
+    if ctx.fbo is fbo:
+        (ctx.screen or ctx.detect_framebuffer(0)).use()
+    for obj in (fbo, *attachments):
+        if obj is not None:
+            obj.release()
 
 
 def save_png(path: str | os.PathLike[str], image: npt.ArrayLike) -> Path:

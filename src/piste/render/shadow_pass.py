@@ -51,7 +51,7 @@ import numpy as np
 import numpy.typing as npt
 
 from piste.errors import RenderError
-from piste.render.context import Offscreen, load_shader, set_depth_write
+from piste.render.context import Offscreen, load_shader, release_framebuffer, set_depth_write
 from piste.render.terrain_pass import RESIDENT_FORMAT
 from piste.render.textures import MipLevels
 from piste.terrain.query import height_at
@@ -715,7 +715,8 @@ class ShadowPass:
         for m in (self._mips, self._mips_cs):
             if m is not None:
                 m.release()
-        for obj in (self.fbo, self.texture, self.caster, self.receiver, self.sunlit):
+        release_framebuffer(self.ctx, self.fbo, self.texture)  # (render_casters leaves it bound)
+        for obj in (self.caster, self.receiver, self.sunlit):
             obj.release()
 
 
