@@ -299,10 +299,11 @@ def main(argv=None) -> None:
             shutil.rmtree(tmp, ignore_errors=True)
 
 
-def _streamed_frame(s, wait: bool, cam, k: int, times: list, split: dict, tris: list) -> None:
+def _streamed_frame(s, wait: bool, cam, k: int, times: list, split: dict, tris: list, calls: dict | None = None) -> None:
     """One frame of StreamingRenderer ``s`` (its own GL context) split into paging (``update``, the
     wait included), GL calls (``submit``) and GPU work with the read-back (``gpu``); frames 0 and 1
-    are warm-up (not recorded)."""
+    are warm-up (not recorded).  ``calls``: lists of the frame's GL work counts (draw calls, indirect
+    commands, light-map binds, uniform writes, culling switches; :attr:`StreamingRenderer.stats`)."""
     with s.ctx:
         t0 = time.perf_counter()
         c = cam.with_aspect(*s.size)
@@ -318,6 +319,8 @@ def _streamed_frame(s, wait: bool, cam, k: int, times: list, split: dict, tris: 
         for key, a, b in (("update", t0, t1), ("submit", t1, t2), ("gpu", t2, t3)):
             split[key].append((b - a) * 1e3)
         tris.append(s.stats["triangles"])
+        for key in (calls or {}):
+            calls[key].append(s.stats.get(key, 0))
 
 
 def _course_frame(course, line, u: float, k: int, times: list, tris: list) -> None:
@@ -360,6 +363,8 @@ def _streaming(tmp: Path, rows, frames: int, flags: str = "") -> None:
             t = {k: [] for k in ("live", "waited", "course")}
             split = {k: {"update": [], "submit": [], "gpu": []} for k in ("live", "waited")}
             tris = {"live": [], "waited": [], "course": []}
+            calls = {k: {n: [] for n in ("draws", "commands", "light_binds", "uniform_writes", "cull_switches")}
+                     for k in ("live", "waited")}
             resident = 0
             try:
                 cams = list(fly_path(rs["live"].cache.index, frames + 2))
@@ -370,7 +375,8 @@ def _streaming(tmp: Path, rows, frames: int, flags: str = "") -> None:
                         if name == "course":
                             _course_frame(course, line, 0.1 + 0.4 * k / len(cams), k, t[name], tris[name])
                         else:
-                            _streamed_frame(rs[name], name == "waited", cam, k, t[name], split[name], tris[name])
+                            _streamed_frame(rs[name], name == "waited", cam, k, t[name], split[name], tris[name],
+                                            calls[name])
                     resident = max(resident, rs["live"].stats["resident_bytes"], rs["waited"].stats["resident_bytes"])
             finally:
                 for s in rs.values():
@@ -386,9 +392,11 @@ def _streaming(tmp: Path, rows, frames: int, flags: str = "") -> None:
                   f"{np.median(t['waited']) / mc:.2f}; resident {resident / 2**20:.1f} MiB of 256  [{flags}]")
             for name in ("live", "waited"):
                 sp = split[name]
+                work = ", ".join(f"{int(np.median(v)):,} {n.replace('_', ' ')}" for n, v in calls[name].items())
                 print(f"    {name:6s} split (medians): paging {np.median(sp['update']):.1f} ms, GL calls "
                       f"{np.median(sp['submit']):.1f} ms, GPU + read {np.median(sp['gpu']):.1f} ms; triangles "
-                      f"{int(np.median(tris[name])):,} a frame (course {int(np.median(tris['course'])):,})  [{flags}]")
+                      f"{int(np.median(tris[name])):,} a frame (course {int(np.median(tris['course'])):,}); GL work a "
+                      f"frame (medians): {work}  [{flags}]")
             ratio = float(np.median(t["live"])) / mc
             record("large", f"streamed frame, {r['patches']:,}-patch world at 100 m/s (live) vs the default course's "
                    f"[{flags}]", "<= 1.2x", f"{np.median(t['live']):.1f} ms", f"{mc:.1f} ms", f"{ratio:.2f}x",

@@ -145,3 +145,49 @@ def test_far_block_strides_follow_their_error():
     got = cache.block_strides(eye, 300.0, np.array([1, 1]), 3.0)
     assert got.tolist() == [1, 2, 8]
     assert cache.block_strides(eye, 300.0, np.array([4, 1]), 3.0).tolist() == [4, 4, 8]  # at least the tile's
+
+
+def test_border_strides_read_from_the_block_grid_equal_each_neighbours(world, gl):
+    """The neighbours' block strides along a tile's sides sliced from the frame's world grid of
+    blocks equal those looked up neighbour by neighbour, whichever tiles are drawn by block."""
+    r = S.StreamingRenderer(world, size=SIZE, ctx=gl)
+    try:
+        rng = np.random.default_rng(1)
+        tiles = r.cache.tiles
+        assert len(tiles) == 4
+        seen = 0
+        for _ in range(6):
+            st = rng.choice(np.array(S.FAR_STRIDES), len(r.cache._blk["lo"]))
+            block_tiles = {t for t in tiles if rng.random() < 0.7}
+            grid = r._border_grid(st, block_tiles)
+            for t in tiles:
+                want = r._border_strides(t, st, block_tiles)
+                got = r._border_strides(t, st, block_tiles, grid)
+                assert [g.tolist() for g in got] == [w.tolist() for w in want]
+                seen += sum(int(w.astype(bool).sum()) for w in want)
+        assert seen > 0  # (some sides had neighbours drawn by block)
+    finally:
+        r.close()
+
+
+def test_tiles_are_drawn_nearest_first_each_in_one_go(world, gl, monkeypatch):
+    """A frame binds each drawn tile's light map once (its draws together, zippers last) and the
+    tiles nearest the eye first (what they hide fails the depth test unshaded); the counts of
+    draws and state changes in :attr:`stats` are the calls made."""
+    r = S.StreamingRenderer(world, size=SIZE, ctx=gl, near_radius=-1.0)
+    try:
+        bound: list = []
+        light = r._light
+        monkeypatch.setattr(r, "_light", lambda t: bound.append(t) or light(t))
+        lo, hi = r.cache.lo.min(0), r.cache.hi.max(0)
+        eye = np.array([hi[0] - 100.0, hi[1] - 100.0, hi[2] + 200.0])  # over the last tile, looking back
+        cam = Camera(eye, np.array([lo[0], lo[1], lo[2]]), near=1.0, far=6000.0)
+        r.render(cam, wait=True)
+        assert bound[0] == r.cache.tiles[-1]
+        assert len(bound) == len(set(bound)) == r.stats["light_binds"] >= 2
+        d = r.cache.distances(cam.eye)[[r.cache.tile_index[t] for t in bound]]
+        assert (np.diff(d) >= 0).all()
+        assert r.stats["draws"] >= len(bound) and r.stats["commands"] >= r.stats["draws"] - len(bound)
+        assert r.stats["cull_switches"] <= 2 * len(bound) + 1
+    finally:
+        r.close()

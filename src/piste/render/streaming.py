@@ -100,6 +100,7 @@ from piste.render.textures import mipmapped_texture, snow_texture
 from piste.render.video import VideoWriter
 from piste.terrain.bezier import evaluate, grid_params
 from piste.terrain.cull import patch_tree
+from piste.terrain.lod import FLAT_LEVEL, patch_error_table
 from piste.terrain.tessellate import tessellate
 from piste.terrain.tiles import (MAX_TILE_OBJECTS, TileError, TileGrid, TileStore, read_tile_objects, tile_entries,
                                  triangulated_heights)
@@ -557,8 +558,6 @@ def patch_level_errors(control_points: np.ndarray) -> np.ndarray:
     mesh (3 samples a side), both split along the (0, 0)-(1, 1) diagonal as the streamed meshes
     are: ``(n, 2)`` float64 metres (:func:`piste.terrain.lod.patch_error_table`, the course's
     per-patch LOD errors; on a height field the distance at the same ``(u, v)`` is vertical)."""
-    from piste.terrain.lod import FLAT_LEVEL, patch_error_table
-
     cp = np.asarray(control_points, dtype=np.float64)
     return patch_error_table(_Patches(cp), (FLAT_LEVEL, MID_SAMPLES)) if len(cp) else np.zeros((0, 2))
 
@@ -1648,15 +1647,57 @@ class StreamingRenderer:
 
     def _block_shape(self, t) -> tuple[int, int]:
         """``(by, bx)``: the far blocks of tile ``t``."""
-        py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
-        return -(-(py1 - py0) // FAR_BLOCK), -(-(px1 - px0) // FAR_BLOCK)
+        shapes = self.__dict__.setdefault("_bshape", {})
+        got = shapes.get(t)
+        if got is None:
+            py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
+            got = shapes[t] = (-(-(py1 - py0) // FAR_BLOCK), -(-(px1 - px0) // FAR_BLOCK))
+        return got
 
-    def _border_strides(self, t, strides: np.ndarray, block_tiles: set) -> tuple:
+    def _block_grid(self) -> tuple:
+        """Where every far block of :attr:`TileCache.tiles` lies in the world's grid of blocks (tile
+        ``(ty, tx)``'s block ``(r, c)`` at row ``ty B + r``, column ``tx B + c``, ``B`` blocks a full
+        tile side, one empty row and column around): ``(flat index (nb,) int64, grid shape, {tile:
+        (row, column) of its first block})``, made once."""
+        got = self.__dict__.get("_bgrid")
+        if got is None:
+            c = self.cache
+            per = -(-c.grid.tile_patches // FAR_BLOCK)
+            shape = (c.grid.shape[0] * per + 2, c.grid.shape[1] * per + 2)
+            flat, first = [], {}
+            for t in c.tiles:
+                by, bx = self._block_shape(t)
+                r0, c0 = t[0] * per + 1, t[1] * per + 1
+                first[t] = (r0, c0)
+                flat.append(((r0 + np.arange(by))[:, None] * shape[1] + (c0 + np.arange(bx))[None, :]).reshape(-1))
+            flat_a = np.concatenate(flat).astype(np.int64) if flat else np.zeros(0, np.int64)
+            got = self.__dict__["_bgrid"] = (flat_a, shape, first)
+        return got
+
+    def _border_grid(self, strides: np.ndarray, block_tiles: set) -> np.ndarray:
+        """The world's grid of far blocks (:meth:`_block_grid`): each block's stride ``strides (nb,)``
+        where its tile is among ``block_tiles`` (drawn by blocks this frame), else 0; ``(rows, cols)``
+        int64, what :meth:`_border_strides` reads its neighbours' strides from."""
+        flat, shape, _ = self._block_grid()
+        g = np.zeros(shape, np.int64)
+        if block_tiles:
+            tm = np.zeros(len(self.cache.tiles), bool)
+            tm[[self.cache.tile_index[t] for t in block_tiles]] = True
+            bm = np.repeat(tm, np.diff(self.cache.block_start))
+            g.reshape(-1)[flat[bm]] = np.asarray(strides)[bm]
+        return g
+
+    def _border_strides(self, t, strides: np.ndarray, block_tiles: set, grid: np.ndarray | None = None) -> tuple:
         """The strides ``(bx,), (by,), (bx,), (by,)`` of the blocks of tile ``t``'s south, east, north
         and west neighbours along its sides (:func:`block_runs`' ``border``), 0 where a neighbour is
         not among ``block_tiles`` (drawn by blocks this frame) or its blocks do not line up;
-        ``strides`` every block's (:meth:`TileCache.block_strides`)."""
+        ``strides`` every block's (:meth:`TileCache.block_strides`); ``grid``: :meth:`_border_grid`
+        of them (sliced instead of looking at each neighbour: the same strides)."""
         by, bx = self._block_shape(t)
+        if grid is not None:
+            r0, c0 = self._block_grid()[2][t]
+            return (grid[r0 - 1, c0:c0 + bx], grid[r0:r0 + by, c0 + bx], grid[r0 + by, c0:c0 + bx],
+                    grid[r0:r0 + by, c0 - 1])
         ty, tx = t
         out = []
         for (dy, dx), n, edge in (((-1, 0), bx, lambda g: g[-1]), ((0, 1), by, lambda g: g[:, 0]),
@@ -1819,6 +1860,10 @@ class StreamingRenderer:
         pixel_scale = self.lod_scale(cam.fov_y)
         morph = self.cache.morph_factors(cam.eye, pixel_scale, self.pixel_error)
         todo = self.cache.draw_list(cam.eye, visible, pixel_scale=pixel_scale)
+        if len(todo) > 1:  # nearest first: what they hide fails the depth test before it is shaded
+            dist = self.cache.distances(cam.eye)[[self.cache.tile_index[t] for t, _, _ in todo]]
+            todo = [todo[i] for i in np.argsort(dist, kind="stable")]
+        order = {t: i for i, (t, _, _) in enumerate(todo)}  # (the jobs of a tile together, in this order)
         sets = self.visibility and self.cache.sets_hold(cam.eye, {t: level for t, level, _ in todo})
         drawn["vis_off"] = int(self.visibility and not sets)  # the sets' tiles drawn too coarse this frame
         drawn["mid_far_patches"] = drawn["frustum_culled"] = 0
@@ -1835,6 +1880,7 @@ class StreamingRenderer:
                    else None for t, level, _ in todo}
         block_tiles = set() if blocks is None else {  # the far tiles drawn by block
             t for t, level, mesh in todo if level.startswith("far") and seen_of[t] is None and mesh.blocks is not None}
+        bgrid = self._border_grid(blocks[0], block_tiles) if block_tiles else None
         for t, level, mesh in todo:
             key = (t, level)
             live.add(key)
@@ -1849,7 +1895,7 @@ class StreamingRenderer:
                 i = self.cache.tile_index[t]
                 st = blocks[0][self.cache.block_start[i]:self.cache.block_start[i + 1]]
                 vis = blocks[1][self.cache.block_start[i]:self.cache.block_start[i + 1]]
-                border = self._border_strides(t, blocks[0], block_tiles)
+                border = self._border_strides(t, blocks[0], block_tiles, bgrid)
                 bkey = (st.tobytes(), np.packbits(vis).tobytes(), b"|".join(b.tobytes() for b in border))
                 got = self._far_runs.get(t)
                 if got is None or got[0] != bkey:
@@ -1932,6 +1978,7 @@ class StreamingRenderer:
             ncmd += len(mine) + len(grid)
             drawn["mid_far_patches"] += int((inside & coarse).sum())
             drawn["triangles"] += (int(mine[:, 0].sum()) + int(grid[:, 0].sum())) // 3
+        drawn["commands"] = ncmd  # indirect draw commands (runs) this frame
         if commands:
             data = np.concatenate(commands).tobytes()
             if self._indirect is None or self._indirect.size < len(data):
@@ -1945,21 +1992,32 @@ class StreamingRenderer:
         self.ctx.enable(moderngl.CULL_FACE)
         culling = True
         last: tuple = (None, None, None)  # the tile, u_morph and u_verr set last (jobs of a tile come together)
+        # a tile's zippers after its other draws (one culling switch a tile, not one a stride)
+        jobs.sort(key=lambda j: j[1] == "zip")
+        jobs.sort(key=lambda j: order.get(j[0], 0))
+        u_origin, u_light_uv, u_morph, u_verr = (self.prog[n] for n in ("u_origin", "u_light_uv", "u_morph", "u_verr"))
+        state = {"draws": 0, "light_binds": 0, "uniform_writes": 0, "cull_switches": 0}
         for t, kind, mesh, vao, run, vmorph in jobs:
             if (kind != "zip") != culling:  # zippers are seen from both sides
                 culling = not culling
                 (self.ctx.enable if culling else self.ctx.disable)(moderngl.CULL_FACE)
+                state["cull_switches"] += 1
             if t != last[0]:
                 tex, origin, luv = self._light(t)
                 tex.use(1)
-                self.prog["u_origin"].value = origin
-                self.prog["u_light_uv"].value = luv
+                u_origin.value = origin
+                u_light_uv.value = luv
+                state["light_binds"] += 1
+                state["uniform_writes"] += 2
             um = 1.0 if kind in ("far", "zip") or mesh.targets is None else morph.get(t, 1.0)
             if um != last[1]:
-                self.prog["u_morph"].value = um
+                u_morph.value = um
+                state["uniform_writes"] += 1
             if vmorph != last[2]:
-                self.prog["u_verr"].value = vmorph
+                u_verr.value = vmorph
+                state["uniform_writes"] += 1
             last = (t, um, vmorph)
+            state["draws"] += 1
             if isinstance(run, int):  # indices of a vertex array (a visibility set's, glued patches'; -1: all)
                 vao.render(moderngl.TRIANGLES, vertices=run)
             elif run is None:  # a whole mesh
@@ -1975,7 +2033,7 @@ class StreamingRenderer:
         if self.sky is not None and sky:
             self.sky.draw(vp)  # last: only where no tile was drawn
         image = self.fbo.read()[..., :3].copy() if read else None
-        self.stats = {**drawn, "resident_bytes": self.cache.resident_bytes, "ms": (time.perf_counter() - t0) * 1e3}
+        self.stats = {**drawn, **state, "resident_bytes": self.cache.resident_bytes, "ms": (time.perf_counter() - t0) * 1e3}
         return image
 
     def close(self) -> None:
