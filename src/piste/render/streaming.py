@@ -750,6 +750,15 @@ def patch_corner_errors(mesh: TileMesh, grid_shape: tuple) -> np.ndarray | None:
     return _patch_reduce(e, (ny, nx), r, np.maximum).reshape(-1).astype(np.float64)
 
 
+def _pad1(a: np.ndarray) -> np.ndarray:
+    """``a (h, w)`` with a border of zeros (False) one wide: ``(h + 2, w + 2)`` (``np.pad(a, 1)``
+    without its per-call overhead, which the per-frame tile loops pay many times)."""
+    a = np.asarray(a)
+    out = np.zeros((a.shape[0] + 2, a.shape[1] + 2), a.dtype)
+    out[1:-1, 1:-1] = a
+    return out
+
+
 def entry_runs(mask: np.ndarray, first: np.ndarray, count: np.ndarray) -> np.ndarray:
     """Indirect draw commands ``(k, 5)`` uint32 (count, instances, first index, base vertex, base
     instance: ``glMultiDrawElementsIndirect``'s) drawing the entries ``mask (m,) bool`` of an index
@@ -776,7 +785,12 @@ def patch_runs(inside: np.ndarray, patch_triangles: int, total_triangles: int, s
     if order is not None:
         m = m[order]
     n, pt = len(m), int(patch_triangles)
-    out = entry_runs(m, np.arange(n) * pt, np.full(n, pt))
+    # (entry_runs of equal entries back to back: a run's first patch and its length)
+    d = np.diff(np.concatenate([[False], m, [False]]).astype(np.int8))
+    start, end = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    out = np.zeros((len(start) if pt > 0 else 0, 5), np.uint32)
+    if len(out):
+        out[:, 0], out[:, 1], out[:, 2] = (end - start) * pt * 3, 1, start * pt * 3
     rest = int(total_triangles) - n * pt
     if skirts and rest > 0:
         out = np.concatenate([out, np.array([[rest * 3, 1, n * pt * 3, 0, 0]], np.uint32)])
@@ -798,7 +812,7 @@ def block_runs(mesh: TileMesh, grid_shape: tuple, strides: np.ndarray, drawn: np
     by, bx = -(-ny // FAR_BLOCK), -(-nx // FAR_BLOCK)
     st = np.asarray(strides).reshape(by, bx)
     sel = (np.asarray(drawn, bool) & (np.asarray(strides) == stride)).reshape(by, bx)
-    pad = np.pad(st, 1, constant_values=0)  # 0: beyond the tile's border (no stride)
+    pad = _pad1(st)  # 0: beyond the tile's border (no stride)
     if border is not None:
         pad[0, 1:-1], pad[1:-1, -1], pad[-1, 1:-1], pad[1:-1, 0] = border
     other = np.stack([pad[:-2, 1:-1], pad[1:-1, 2:], pad[2:, 1:-1], pad[1:-1, :-2]], -1)  # south, east, north, west
@@ -1527,6 +1541,15 @@ def world_fog_density(cache: TileCache) -> float:
     return DEFAULT_FOG_DENSITY * min(1.0, FOG_REFERENCE_SIZE / max(diag, 1e-9))
 
 
+@functools.lru_cache(maxsize=64)
+def _patch_blocks(ny: int, nx: int) -> np.ndarray:
+    """The far block of each patch of a ``(ny, nx)``-patch tile (row-major): ``(ny nx,)`` int64, read-only."""
+    bx = -(-nx // FAR_BLOCK)
+    out = ((np.arange(ny) // FAR_BLOCK)[:, None] * bx + (np.arange(nx) // FAR_BLOCK)[None, :]).reshape(-1)
+    out.flags.writeable = False
+    return out
+
+
 def _boxes_visible(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Axis-aligned boxes ``lo, hi (n, 3)`` against inward frustum planes ``(6, 4)`` (the positive
     vertex test): ``(n,)`` bool, False only for boxes wholly outside one plane."""
@@ -1593,7 +1616,9 @@ class StreamingRenderer:
         self.mix_levels = self.ctx.version_code >= 430
         self._boxes: dict = {}  # (tile, level) -> (mesh id, patch_boxes)
         self._indirect = None  # the frame's indirect draw commands
-        self._far_runs: dict = {}  # tile -> ((block strides, blocks in view), {stride: commands})
+        #: tile -> (key: its blocks' and neighbours' strides and its blocks in view, [(stride, "far" or
+        #: "zip", commands, triangles)], blocks out of view)
+        self._far_runs: dict = {}
         self._glue: dict = {}  # (tile, level) -> (index buffer, vertex array, mesh id): the glued patches
         self._coarse_runs: dict = {}  # tile -> ((strides, in view), [(job, commands)]): a near tile's far blocks
         self.stats: dict = {}
@@ -1637,12 +1662,15 @@ class StreamingRenderer:
 
     def _patch_boxes(self, key, mesh: TileMesh):
         """:func:`patch_boxes` of a resident mesh and its :func:`patch_corner_errors` (made once while
-        the mesh stays resident): ``(centre, half extent, errors or None)``."""
+        the mesh stays resident): ``(centre, half extent, errors or None, low corner, high corner)``."""
         got = self._boxes.get(key)
         if got is None or got[0] != id(mesh):
             py0, py1, px0, px1 = self.cache.grid.patch_range(*key[0])
             shape = (py1 - py0, px1 - px0)
-            got = self._boxes[key] = (id(mesh), (*patch_boxes(mesh, shape), patch_corner_errors(mesh, shape)))
+            boxes = patch_boxes(mesh, shape)  # (drawn this way only with them: a patch-major mesh)
+            assert boxes is not None, f"tile {key[0]}: its {key[1]} mesh is not patch-major"
+            c, h = boxes
+            got = self._boxes[key] = (id(mesh), (c, h, patch_corner_errors(mesh, shape), c - h, c + h))
         return got[1]
 
     def _block_shape(self, t) -> tuple[int, int]:
@@ -1687,6 +1715,15 @@ class StreamingRenderer:
             g.reshape(-1)[flat[bm]] = np.asarray(strides)[bm]
         return g
 
+    def _block_ring(self, t, grid: np.ndarray) -> np.ndarray:
+        """Tile ``t``'s blocks in ``grid`` (:meth:`_border_grid`) with the ring of its neighbours'
+        blocks along its sides around them (the corners, diagonal neighbours, 0): ``(by + 2, bx + 2)``
+        int64, a copy (what a far tile's draws depend on besides which blocks are in view)."""
+        (r0, c0), (by, bx) = self._block_grid()[2][t], self._block_shape(t)
+        ring = grid[r0 - 1:r0 + by + 1, c0 - 1:c0 + bx + 1].copy()
+        ring[::by + 1, ::bx + 1] = 0
+        return ring
+
     def _border_strides(self, t, strides: np.ndarray, block_tiles: set, grid: np.ndarray | None = None) -> tuple:
         """The strides ``(bx,), (by,), (bx,), (by,)`` of the blocks of tile ``t``'s south, east, north
         and west neighbours along its sides (:func:`block_runs`' ``border``), 0 where a neighbour is
@@ -1695,9 +1732,8 @@ class StreamingRenderer:
         of them (sliced instead of looking at each neighbour: the same strides)."""
         by, bx = self._block_shape(t)
         if grid is not None:
-            r0, c0 = self._block_grid()[2][t]
-            return (grid[r0 - 1, c0:c0 + bx], grid[r0:r0 + by, c0 + bx], grid[r0 + by, c0:c0 + bx],
-                    grid[r0:r0 + by, c0 - 1])
+            ring = self._block_ring(t, grid)
+            return ring[0, 1:-1], ring[1:-1, -1], ring[-1, 1:-1], ring[1:-1, 0]
         ty, tx = t
         out = []
         for (dy, dx), n, edge in (((-1, 0), bx, lambda g: g[-1]), ((0, 1), by, lambda g: g[:, 0]),
@@ -1720,7 +1756,7 @@ class StreamingRenderer:
         py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
         ny, nx = py1 - py0, px1 - px0
         by, bx = -(-ny // FAR_BLOCK), -(-nx // FAR_BLOCK)
-        pb = ((np.arange(ny) // FAR_BLOCK)[:, None] * bx + (np.arange(nx) // FAR_BLOCK)[None, :]).reshape(-1)
+        pb = _patch_blocks(ny, nx)
         i = self.cache.tile_index[t]
         sl = slice(self.cache.block_start[i], self.cache.block_start[i + 1])
         full = (np.bincount(pb, weights=~np.asarray(coarse, bool), minlength=by * bx) == 0) & (blocks[0][sl] > 1)
@@ -1739,7 +1775,7 @@ class StreamingRenderer:
                 main, zips = block_runs(fk, (ny, nx), st, vis, k)
                 vao = self._vao((t, f"far{k}"), fk)
                 out += [((t, what, fk, vao), cmd) for what, cmd in (("far", main), ("zip", zips)) if len(cmd)]
-        pad = np.pad(st.reshape(by, bx), 1)
+        pad = _pad1(st.reshape(by, bx))
         other = np.stack([pad[:-2, 1:-1], pad[1:-1, 2:], pad[2:, 1:-1], pad[1:-1, :-2]], -1)  # south, east, north, west
         f1 = self.cache.far[t][1]
         z = zip_runs(f1, ~full, other, 1)
@@ -1895,25 +1931,27 @@ class StreamingRenderer:
                 i = self.cache.tile_index[t]
                 st = blocks[0][self.cache.block_start[i]:self.cache.block_start[i + 1]]
                 vis = blocks[1][self.cache.block_start[i]:self.cache.block_start[i + 1]]
-                border = self._border_strides(t, blocks[0], block_tiles, bgrid)
-                bkey = (st.tobytes(), np.packbits(vis).tobytes(), b"|".join(b.tobytes() for b in border))
+                # (its blocks' strides and its neighbours' along its sides: the grid around it, corners cleared)
+                ring = self._block_ring(t, bgrid)
+                bkey = (ring.tobytes(), np.packbits(vis).tobytes())
                 got = self._far_runs.get(t)
                 if got is None or got[0] != bkey:
+                    border = (ring[0, 1:-1], ring[1:-1, -1], ring[-1, 1:-1], ring[1:-1, 0])
                     py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
                     runs = {k: block_runs(self.cache.far[t][k], (py1 - py0, px1 - px0), st, vis, k, border)
                             for k in FAR_STRIDES if (vis & (st == k)).any()}
-                    got = self._far_runs[t] = (bkey, runs)
-                for k, pair in got[1].items():
+                    draws = [(k, what, cmd, int(cmd[:, 0].sum()) // 3) for k, pair in runs.items()
+                             for what, cmd in zip(("far", "zip"), pair) if len(cmd)]  # (the zippers two-sided)
+                    got = self._far_runs[t] = (bkey, draws, len(vis) - int(np.count_nonzero(vis)))
+                for k, what, cmd, ntri in got[1]:
                     fk = self.cache.far[t][k]
-                    for what, cmd in zip(("far", "zip"), pair):  # (the zippers two-sided)
-                        if len(cmd):
-                            jobs.append((t, what, fk, self._vao((t, f"far{k}"), fk), (ncmd, len(cmd)), 0.0))
-                            commands.append(cmd)
-                            ncmd += len(cmd)
-                            drawn["triangles"] += int(cmd[:, 0].sum()) // 3
+                    jobs.append((t, what, fk, self._vao((t, f"far{k}"), fk), (ncmd, len(cmd)), 0.0))
+                    commands.append(cmd)
+                    ncmd += len(cmd)
+                    drawn["triangles"] += ntri
                 drawn["far_patches"] += self.cache.patches[t]
                 drawn["far_blocks"] += int(len(st))
-                drawn["far_blocks_culled"] += int((~vis).sum())
+                drawn["far_blocks_culled"] += got[2]
                 continue
             if not (self.mix_levels and mesh.patch_triangles and (verr or level == "far1")):
                 if seen is not None and mesh.patch_triangles and not seen.all():
@@ -1934,8 +1972,8 @@ class StreamingRenderer:
             vao = self._vao(key, mesh)
             py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
             po = patch_order(py1 - py0, px1 - px0)  # the mesh's patch order
-            c, h, perr = self._patch_boxes(key, mesh)
-            inside = _boxes_visible(planes, c - h, c + h)
+            c, h, perr, blo, bhi = self._patch_boxes(key, mesh)
+            inside = _boxes_visible(planes, blo, bhi)
             drawn["frustum_culled"] += int((~inside).sum())
             if seen is not None:
                 drawn["vis_culled"] += int((~seen).sum())
@@ -1961,7 +1999,7 @@ class StreamingRenderer:
                 inside = inside & ~own
             # the mesh's patches beside a corner-grid patch are glued to its edge (:func:`glue_indices`)
             ny, nx = py1 - py0, px1 - px0
-            cg = np.pad(coarse.reshape(ny, nx), 1)  # (a neighbour beyond the tile's border: not coarse)
+            cg = _pad1(coarse.reshape(ny, nx))  # (a neighbour beyond the tile's border: not coarse)
             fine = (inside & ~coarse).reshape(ny, nx)
             glued = fine[..., None] & np.stack([cg[:-2, 1:-1], cg[1:-1, 2:], cg[2:, 1:-1], cg[1:-1, :-2]], -1)
             gl = glued.any(-1).reshape(-1)
