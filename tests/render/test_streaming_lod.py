@@ -10,6 +10,8 @@ import pytest
 
 from piste.pipeline.tiled_build import SyntheticSource, build_tiles, synthetic_spec
 from piste.render import streaming as S
+from piste.terrain.query import height_at
+from piste.terrain.tiles import tile_net
 from piste.world.camera import Camera
 
 MAGENTA = (1.0, 0.0, 1.0)
@@ -189,5 +191,74 @@ def test_tiles_are_drawn_nearest_first_each_in_one_go(world, gl, monkeypatch):
         assert (np.diff(d) >= 0).all()
         assert r.stats["draws"] >= len(bound) and r.stats["commands"] >= r.stats["draws"] - len(bound)
         assert r.stats["cull_switches"] <= 2 * len(bound) + 1
+    finally:
+        r.close()
+
+
+def _under_terrain(img: np.ndarray) -> np.ndarray:
+    """``(h, w) bool``: background pixels with terrain above them in their column."""
+    bg = (np.asarray(img) == (255, 0, 255)).all(-1)
+    above = np.maximum.accumulate(~bg, axis=0)
+    return bg & np.vstack([np.zeros((1, bg.shape[1]), bool), above[:-1]])
+
+
+def _deepest_below_surface(cache, cam, pixels, size, step: float = 2.0) -> np.ndarray:
+    """For each pixel ``(k, 2)`` (row, column) of an image of ``size`` from ``cam``: how far its
+    ray dips below the exact surface of the tiles (metres, > 0: it meets the terrain) before it
+    leaves the world or the far plane."""
+    nets = {t: tile_net(cache.store, *t) for t in cache.tiles}
+    c = cam.with_aspect(*size)
+    inv = np.linalg.inv(c.view_projection())
+    ts = np.arange(c.near, c.far, step)
+    out = []
+    for py, px in pixels:
+        ndc = [(px + 0.5) / size[0] * 2 - 1, 1 - (py + 0.5) / size[1] * 2]
+        a, b = inv @ [*ndc, -1.0, 1.0], inv @ [*ndc, 1.0, 1.0]
+        d = b[:3] / b[3] - a[:3] / a[3]
+        p = c.eye + ts[:, None] * (d / np.linalg.norm(d))
+        z = np.full(len(p), np.nan)
+        for t, net in nets.items():
+            x0, y0, x1, y1 = cache.grid.tile_bounds_xy(*t)
+            m = (p[:, 0] >= x0) & (p[:, 0] < x1) & (p[:, 1] >= y0) & (p[:, 1] < y1)
+            if m.any():
+                z[m] = height_at(net, p[m, :2])[0]
+        out.append(np.nanmax(np.concatenate([[0.0], z - p[:, 2]])))
+    return np.asarray(out)
+
+
+def test_no_background_under_terrain_and_cracks_are_rays_into_the_surface(world, gl, monkeypatch):
+    """Low views across the world (over the tops, and near the ground) show no background under
+    terrain; where the far blocks' zippers are gone the cracks that open do, and their rays are
+    ones that meet the exact surface (how background under terrain in a large world's views is told
+    from sky seen past its edge or its far plane: those rays pass over the surface)."""
+    r = S.StreamingRenderer(world, size=SIZE, ctx=gl, background=MAGENTA, sky=False)
+    try:
+        cams = _low_cameras(r.cache, 8, seed=5)
+        rng = np.random.default_rng(2)
+        lo, hi = r.cache.lo.min(0), r.cache.hi.max(0)
+        for _ in range(8):  # 2 to 30 m over the snow, looking across it
+            x, y = rng.uniform(lo[:2] + 100.0, hi[:2] - 100.0)
+            z = float(height_at(tile_net(r.cache.store, *r.cache.grid.tile_of(x, y)), np.array([[x, y]]))[0][0])
+            a = rng.uniform(0.0, 2.0 * np.pi)
+            eye = np.array([x, y, z + rng.uniform(2.0, 30.0)])
+            cams.append(Camera(eye, eye + np.array([np.cos(a), np.sin(a), rng.uniform(-0.3, 0.05)]) * 1000.0,
+                               near=1.0, far=6000.0))
+        assert [int(_under_terrain(r.render(cam, wait=True)).sum()) for cam in cams] == [0] * len(cams)
+        # the control: far tiles only, strides 1 and 8 side by side without zippers: cracks, and
+        # their rays go into the surface
+        r.close()
+        r = S.StreamingRenderer(world, size=SIZE, ctx=gl, background=MAGENTA, sky=False, near_radius=-1.0,
+                                pixel_error=None)
+        checker = np.where(np.arange(len(r.cache._blk["lo"])) % 2 == 0, 1, 8)
+        monkeypatch.setattr(r.cache, "block_strides", lambda eye, scale, tiles, error=3.0: checker)
+        for t in r.cache.tiles:
+            for mesh in r.cache.far[t].values():
+                mesh.blocks["zip_count"] = np.zeros_like(mesh.blocks["zip_count"])
+        deep = []
+        for cam in _steep_cameras(r.cache):
+            px = np.argwhere(_under_terrain(r.render(cam, wait=True)))[:10]
+            if len(px):
+                deep.append(_deepest_below_surface(r.cache, cam, px, SIZE).max())
+        assert deep and min(deep) > 1.0
     finally:
         r.close()
