@@ -3,6 +3,7 @@
     python benchmarks/bench_large.py [--quick] [--sizes 10000 100000] [--million] [--workers 2]
                                      [--res 4] [--no-shadows] [--frames 60] [--repeats 1]
                                      [--dem [SIDE]] [--dem-only] [--dem-dtype float32|uint16]
+                                     [--low-views N]
 
 For every size (patches; a square world at 3 samples a patch side, 10 m spacing, tiles of 64 x 64
 patches) it builds the world from scratch in a child process -- fit, bake (light maps with shadow
@@ -222,6 +223,10 @@ def main(argv=None) -> None:
                          "tile by tile (windowed reads): time and peak RSS")
     ap.add_argument("--dem-only", action="store_true", help="only the DEM benchmark (with --dem)")
     ap.add_argument("--dem-dtype", choices=["float32", "uint16"], default="float32", help="the DEM's sample type")
+    ap.add_argument("--low-views", type=int, default=0, metavar="N",
+                    help="also render N random low views of the largest world (eyes 10-120 m over its top, "
+                         "looking 22 degrees down, far 6 km) and check every background pixel under terrain "
+                         "along its ray against the exact surface: a crack or sky past the edge or far plane")
     ap.add_argument("--dem-tile-patches", type=int, default=64, help="patches a tile side for the DEM fit (default 64)")
     args = ap.parse_args(argv)
     sizes = [10_000] if args.quick else list(args.sizes)
@@ -292,6 +297,8 @@ def main(argv=None) -> None:
             print(f"\nscaling exponent (local build time ~ patches^k): k = {slope:.2f}  [{flags}]")
         if frames > 0:
             _streaming(tmp, rows, frames, flags)
+        if args.low_views and rows:
+            _low_views(tmp, rows[-1], args.low_views, flags)
         if args.dem:
             _dem(tmp, args.dem, args.dem_dtype, args.dem_tile_patches)
     finally:
@@ -334,6 +341,85 @@ def _course_frame(course, line, u: float, k: int, times: list, tris: list) -> No
     if k >= 2:
         times.append((t1 - t0) * 1e3)
         tris.append(f.triangles)
+
+
+def _low_views(tmp: Path, row: dict, n: int, flags: str = "", seed: int = 0) -> None:
+    """Background pixels under terrain (background with terrain above it in its column) in ``n``
+    random low views of a world (the cameras of tests/render/test_streaming_lod.py), each pixel's
+    ray marched every 2 m against the exact surface of the tiles (their fitted patches): a ray that
+    goes below the surface by more than the far levels' error at that distance (``pixel_error``
+    pixels) + 1 m is a crack (it should have met terrain), one below it by less grazes a ridge the
+    coarser levels lie under (a silhouette of the levels), one that leaves the world or reaches the
+    far plane over it is background rightly seen past the world's edge or far plane."""
+    import numpy as np
+
+    from piste.render import StreamingRenderer
+    from piste.terrain.query import height_at
+    from piste.terrain.tiles import tile_net
+    from piste.world.camera import Camera
+
+    side = int(round(math.sqrt(row["patches"])))
+    r = StreamingRenderer(tmp / f"local_{side}", size=(640, 448), background=(1.0, 0.0, 1.0), sky=False)
+    nets: dict = {}
+    try:
+        rng = np.random.default_rng(seed)
+        lo, hi = r.cache.lo.min(0), r.cache.hi.max(0)
+        counts = {"pixels": 0, "views": 0, "crack": 0, "graze": 0, "past the edge": 0,
+                  "past the far plane": 0}
+        deepest = 0.0
+        for _ in range(n):
+            x, y = rng.uniform(lo[:2] + 200.0, hi[:2] - 200.0)
+            a = rng.uniform(0.0, 2.0 * np.pi)
+            eye = np.array([x, y, hi[2] + rng.uniform(10.0, 120.0)])
+            cam = Camera(eye, eye + np.array([np.cos(a), np.sin(a), 0.0]) * 1500.0 - [0.0, 0.0, 600.0],
+                         near=1.0, far=6000.0)
+            bg = (r.render(cam, wait=True) == (255, 0, 255)).all(-1)
+            above = np.maximum.accumulate(~bg, axis=0)
+            under = bg & np.vstack([np.zeros((1, bg.shape[1]), bool), above[:-1]])
+            counts["pixels"] += int(under.sum())
+            counts["views"] += bool(under.any())
+            c = cam.with_aspect(640, 448)
+            inv = np.linalg.inv(c.view_projection())
+            ts = np.arange(c.near, c.far, 2.0)
+            for py, px in np.argwhere(under):
+                ndc = [(px + 0.5) / 640 * 2 - 1, 1 - (py + 0.5) / 448 * 2]
+                p0, p1 = inv @ [*ndc, -1.0, 1.0], inv @ [*ndc, 1.0, 1.0]
+                d = p1[:3] / p1[3] - p0[:3] / p0[3]
+                p = c.eye + ts[:, None] * (d / np.linalg.norm(d))
+                z = np.full(len(p), np.nan)
+                tiles = {}
+                for i, (qx, qy) in enumerate(p[:, :2]):
+                    try:
+                        t = r.cache.grid.tile_of(float(qx), float(qy))
+                    except Exception:  # (outside the grid)
+                        continue
+                    if t in r.cache.tile_index:
+                        tiles.setdefault(t, []).append(i)
+                for t, ii in tiles.items():
+                    if t not in nets:
+                        nets[t] = tile_net(r.cache.store, *t)
+                    z[ii] = height_at(nets[t], p[ii, :2])[0]
+                below = z - p[:, 2]  # metres the ray is under the exact surface
+                # (the far levels may lie below the surface by their error: pixel_error pixels at the distance)
+                allowed = ts * float(r.pixel_error or 0.0) / r.lod_scale(c.fov_y) + 1.0
+                if (below > allowed).any():
+                    counts["crack"] += 1
+                    deepest = max(deepest, float(np.nanmax(below)))
+                elif (below > 1.0).any():
+                    counts["graze"] += 1
+                elif np.isnan(z).any():
+                    counts["past the edge"] += 1
+                else:
+                    counts["past the far plane"] += 1
+        print(f"\nlow views: {n} random low views of the {row['patches']:,}-patch world (eyes 10-120 m over its "
+              f"top, 22 degrees down, far 6 km): {counts['pixels']:,} background pixels under terrain in "
+              f"{counts['views']} views; along their rays {counts['crack']} go under the exact surface by more than "
+              f"the far levels' error there + 1 m (cracks, deepest {deepest:.1f} m), "
+              f"{counts['graze']} graze it within that error (silhouettes of the "
+              f"levels), {counts['past the edge']} leave the world over it, {counts['past the far plane']} "
+              f"reach the far plane over it  [{flags}]")
+    finally:
+        r.close()
 
 
 def _streaming(tmp: Path, rows, frames: int, flags: str = "") -> None:
