@@ -53,3 +53,72 @@ def test_lods_weld_flat_shaded_meshes(gltf_model):
     lods = make_lods(mesh)
     assert lods[2].n_triangles <= 0.3 * mesh.n_triangles
     assert lods[0].n_matrices > lods[1].n_matrices > lods[2].n_matrices
+
+
+# ---------------------------------------------------------------- geometric error of a level (rider LOD by pixels)
+def _dense_distance(points, positions, indices, n=4000):
+    """A reference: each point's distance to a dense sampling of every triangle (>= the true distance)."""
+    rng = np.random.default_rng(1)
+    uv = rng.random((n, 2))
+    flip = uv.sum(1) > 1
+    uv[flip] = 1 - uv[flip]
+    uv = np.concatenate([uv, [[0, 0], [1, 0], [0, 1], [0.5, 0], [0, 0.5], [0.5, 0.5]]])
+    c = np.asarray(positions, float)[np.asarray(indices, int)]
+    samples = (c[:, None, 0] + uv[None, :, :1] * (c[:, None, 1] - c[:, None, 0])
+               + uv[None, :, 1:] * (c[:, None, 2] - c[:, None, 0])).reshape(-1, 3)
+    return np.array([np.linalg.norm(samples - p, axis=1).min() for p in np.asarray(points, float)])
+
+
+def test_surface_distance_exact_on_a_triangle():
+    from piste.character.lod import surface_distance
+
+    pos = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    tri = np.array([[0, 1, 2]])
+    pts = np.array([[0.2, 0.2, 0.5],    # over the face: its height
+                    [-1.0, -1.0, 0.0],  # beyond corner 0: to the corner
+                    [0.5, -2.0, 1.0],   # beside edge 0-1: to the edge
+                    [1.0, 1.0, 0.0],    # beyond the hypotenuse
+                    [0.1, 0.1, 0.0]])   # on the face
+    want = [0.5, np.sqrt(2.0), np.sqrt(5.0), np.sqrt(0.5), 0.0]
+    assert np.allclose(surface_distance(pts, pos, tri), want, atol=1e-12)
+    # a degenerate triangle (a segment) measures to its edges
+    seg = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0]], float)
+    assert np.isclose(surface_distance([[1.0, 3.0, 4.0]], seg, tri)[0], 5.0)
+    with pytest.raises(ConfigError, match="no triangles"):
+        surface_distance(pts, pos, np.zeros((0, 3), int))
+
+
+def test_surface_distance_matches_a_dense_sampling():
+    from piste.character.lod import max_surface_distance, surface_distance
+
+    rng = np.random.default_rng(0)
+    pos = rng.normal(size=(30, 3))
+    tri = rng.integers(0, 30, size=(40, 3))
+    pts = rng.normal(size=(300, 3)) * 1.5
+    d = surface_distance(pts, pos, tri)
+    ref = _dense_distance(pts, pos, tri)
+    assert (d <= ref + 1e-9).all()  # never above a point of the surface
+    assert np.abs(d - ref).max() < 0.05  # (the sampling's spacing)
+    # the pruned maximum is the brute-force maximum, exactly
+    assert max_surface_distance(pts, pos, tri, k=2, batch=16) == pytest.approx(d.max(), abs=1e-12)
+
+
+def test_lod_errors_are_the_two_way_distance(rider_lods):
+    from piste.character.lod import lod_errors, surface_distance
+
+    err = lod_errors(rider_lods)
+    assert err[0] == 0.0 and (np.diff(err) >= 0).all() and err[-1] > 0
+    full = rider_lods[0].mesh
+    fp, ft = full.positions.astype(float), full.indices.astype(int)
+    m = rider_lods[1].mesh
+    mp, mt = m.positions.astype(float), m.indices.astype(int)
+    one = surface_distance(np.concatenate([fp, fp[ft].mean(1)]), mp, mt).max()
+    other = surface_distance(np.concatenate([mp, mp[mt].mean(1)]), fp, ft).max()
+    assert err[1] == pytest.approx(max(one, other), abs=1e-12)
+
+
+@pytest.fixture(scope="module")
+def rider_lods():
+    from piste.character import default_rider
+
+    return make_lods(default_rider(0).meshes[0])

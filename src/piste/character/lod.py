@@ -26,7 +26,7 @@ from piste.character.model import SkinnedMesh
 from piste.character.palette import Palette, palette as make_palette
 from piste.errors import ConfigError
 
-__all__ = ["LOD", "LOD_NAMES", "simplify_mesh", "compact_mesh", "make_lods"]
+__all__ = ["LOD", "LOD_NAMES", "simplify_mesh", "compact_mesh", "make_lods", "lod_errors", "surface_distance", "max_surface_distance"]
 
 LOD_NAMES = ("high", "medium", "low")
 
@@ -125,3 +125,136 @@ def make_lods(mesh: SkinnedMesh, ratios: Sequence[float] = (1.0, 0.5, 0.25), ste
         m, e = simplify_mesh(mesh, max(1, int(round(r * mesh.n_triangles))), target_error)
         out.append(LOD(name, m, make_palette(m, s, max_bones), float(r), float(s), e))
     return out
+
+
+def _point_triangle_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Distance ``(...,)`` from points ``p (..., 3)`` to triangles ``a, b, c (..., 3)`` (broadcast):
+    the projection on the plane where it falls inside the triangle, else the nearest point of its
+    three edges (degenerate triangles: their edges).  Component by component (no ``(..., 3)``
+    temporaries: ~4x faster than dot products over a last axis of 3)."""
+    px, py, pz = (p[..., i] for i in range(3))
+    ax, ay, az = (a[..., i] for i in range(3))
+    ux, uy, uz = (b[..., i] - a[..., i] for i in range(3))  # ab
+    vx, vy, vz = (c[..., i] - a[..., i] for i in range(3))  # ac
+    wx, wy, wz = px - ax, py - ay, pz - az  # ap
+    uu, uv, vv = ux * ux + uy * uy + uz * uz, ux * vx + uy * vy + uz * vz, vx * vx + vy * vy + vz * vz
+    uw, vw = ux * wx + uy * wy + uz * wz, vx * wx + vy * wy + vz * wz
+    den = uu * vv - uv * uv
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s_, t_ = (vv * uw - uv * vw) / den, (uu * vw - uv * uw) / den  # barycentric (b, c)
+        dx, dy, dz = wx - s_ * ux - t_ * vx, wy - s_ * uy - t_ * vy, wz - s_ * uz - t_ * vz
+        face = np.sqrt(dx * dx + dy * dy + dz * dz)
+        inside = (den > 0) & (s_ >= 0) & (t_ >= 0) & (s_ + t_ <= 1)
+        best = np.full(np.shape(den), np.inf)
+        # the edges a-b, a-c (from a) and b-c: the nearest point on each, parameters clamped to [0, 1]
+        for ex, ey, ez, ox, oy, oz, ee in ((ux, uy, uz, wx, wy, wz, uu), (vx, vy, vz, wx, wy, wz, vv),
+                                           (vx - ux, vy - uy, vz - uz, wx - ux, wy - uy, wz - uz, None)):
+            ee = ex * ex + ey * ey + ez * ez if ee is None else ee
+            tt = np.clip((ex * ox + ey * oy + ez * oz) / np.maximum(ee, 1e-300), 0.0, 1.0)
+            qx, qy, qz = ox - tt * ex, oy - tt * ey, oz - tt * ez
+            d = qx * qx + qy * qy + qz * qz
+            best = np.minimum(best, d)
+    out: np.ndarray = np.where(inside, face, np.sqrt(best))
+    return out
+
+
+def _surface_bounds(pts: np.ndarray, corners: np.ndarray, k: int) -> np.ndarray:
+    """An upper bound ``(n,)`` of each point's distance to the triangles ``corners (t, 3, 3)``: the
+    nearest of the ``k`` triangles with the nearest centroids (a k-d tree) and of the corners
+    themselves (they lie on the surface)."""
+    from scipy.spatial import cKDTree
+
+    kk = min(int(k), len(corners))
+    _, near = cKDTree(corners.mean(axis=1)).query(pts, k=kk)
+    c = corners[np.asarray(near).reshape(len(pts), kk)]  # (n, k, 3, 3)
+    upper = _point_triangle_distance(pts[:, None, :], c[..., 0, :], c[..., 1, :], c[..., 2, :]).min(axis=1)
+    return np.minimum(upper, cKDTree(np.unique(corners.reshape(-1, 3), axis=0)).query(pts)[0])
+
+
+def _exact_distance(pts: np.ndarray, corners: np.ndarray, upper: np.ndarray | None = None, chunk: int = 256) -> np.ndarray:
+    """Each point's distance ``(n,)`` to the nearest of the triangles ``corners (t, 3, 3)``, exactly.
+    With ``upper (n,)`` (bounds from :func:`_surface_bounds`) only the triangles whose bounding
+    sphere about their centroid comes nearer than the bound are measured (no other can hold a
+    nearer point); without, every pair, ``chunk`` points a batch."""
+    from scipy.spatial.distance import cdist
+
+    out = np.empty(len(pts))
+    centre = corners.mean(axis=1)
+    rad = np.sqrt(((corners - centre[:, None]) ** 2).sum(axis=2)).max(axis=1)  # (t,)
+    for s in range(0, len(pts), chunk):
+        p = pts[s:s + chunk]
+        if upper is None:
+            out[s:s + chunk] = _point_triangle_distance(p[:, None, :], corners[None, :, 0], corners[None, :, 1],
+                                                        corners[None, :, 2]).min(axis=1)
+            continue
+        u = upper[s:s + chunk]
+        pi, ti = np.nonzero(cdist(p, centre) - rad[None] <= u[:, None])  # (candidate pairs)
+        d = _point_triangle_distance(p[pi], corners[ti, 0], corners[ti, 1], corners[ti, 2])
+        o = u.copy()
+        np.minimum.at(o, pi, d)
+        out[s:s + chunk] = o
+    return out
+
+
+def _mesh_corners(positions: npt.ArrayLike, indices: npt.ArrayLike) -> np.ndarray:
+    pos = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    tri = np.asarray(indices, dtype=np.int64).reshape(-1, 3)
+    if len(tri) == 0:
+        raise ConfigError("surface distance: the mesh has no triangles")
+    return pos[tri]
+
+
+def surface_distance(points: npt.ArrayLike, positions: npt.ArrayLike, indices: npt.ArrayLike) -> np.ndarray:
+    """Exact distance ``(n,) float64`` from each of ``points (n, 3)`` to the surface of the mesh
+    ``positions (v, 3)``, ``indices (t, 3)`` (the nearest point of any triangle; brute force,
+    vectorised in batches)."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    return _exact_distance(pts, _mesh_corners(positions, indices))
+
+
+def max_surface_distance(points: npt.ArrayLike, positions: npt.ArrayLike, indices: npt.ArrayLike, k: int = 8,
+                         batch: int = 256) -> float:
+    """The largest of :func:`surface_distance` over ``points (n, 3)`` (exactly), without measuring
+    every point against every triangle: an upper bound per point (:func:`_surface_bounds`), then
+    exact distances in descending order of the bounds, ``batch`` points at a time, until the
+    largest exact distance found is at least every bound left."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(pts) == 0:
+        return 0.0
+    corners = _mesh_corners(positions, indices)
+    upper = _surface_bounds(pts, corners, k)
+    order = np.argsort(-upper)
+    best = 0.0
+    for s in range(0, len(pts), int(batch)):
+        if best >= upper[order[s]]:
+            break
+        sel = order[s:s + batch]
+        best = max(best, float(_exact_distance(pts[sel], corners, upper[sel]).max()))
+    return best
+
+
+def lod_errors(lods: Sequence[LOD]) -> np.ndarray:
+    """Each level's geometric error ``(l,) float64`` in model units against level 0 (the full mesh),
+    for choosing a level by its projected size (:func:`piste.world.object_lod.choose_lods`).
+
+    A Hausdorff-like distance, both ways, in the bind pose: the largest distance from the full
+    mesh's vertices and triangle centroids to the level's surface, and from the level's vertices
+    and triangle centroids to the full surface (:func:`max_surface_distance`).  Level 0 is 0;
+    the errors are made non-decreasing (a level is never counted finer than one before it).
+    """
+    if not lods:
+        return np.zeros(0)
+    full = lods[0].mesh
+    fpos = np.asarray(full.positions, dtype=np.float64)
+    ftri = np.asarray(full.indices, dtype=np.int64).reshape(-1, 3)
+    fpts = np.concatenate([fpos, fpos[ftri].mean(axis=1)])
+    out = np.zeros(len(lods))
+    for i, lod in enumerate(lods[1:], start=1):
+        pos = np.asarray(lod.mesh.positions, dtype=np.float64)
+        tri = np.asarray(lod.mesh.indices, dtype=np.int64).reshape(-1, 3)
+        if len(tri) == 0:
+            out[i] = np.inf
+            continue
+        pts = np.concatenate([pos, pos[tri].mean(axis=1)])
+        out[i] = max(max_surface_distance(fpts, pos, tri), max_surface_distance(pts, fpos, ftri))
+    return np.maximum.accumulate(out)

@@ -179,8 +179,9 @@ class BundleScene(Scene):
         self.camera_kw = {}
         self.visibility = bundle.visibility
 
-    def update(self, t: float, aspect: float = 640.0 / 448.0, fov_y: float = 60.0, camera: Camera | None = None) -> Any:
-        sf = super().update(t, aspect=aspect, fov_y=fov_y, camera=camera)
+    def update(self, t: float, aspect: float = 640.0 / 448.0, fov_y: float = 60.0, camera: Camera | None = None,
+               height_px: float = 448.0) -> Any:
+        sf = super().update(t, aspect=aspect, fov_y=fov_y, camera=camera, height_px=height_px)
         if self.visibility is not None and len(sf.objects_visible):
             keep = self.visibility.objects_at(sf.camera.eye)
             if keep is not None:

@@ -220,11 +220,11 @@ class SceneRenderer:
         tr = self.tracer
         t0 = time.perf_counter()
         with tr.span("scene update"):
-            sf = self.scene.update(t, aspect=w / h, camera=camera)
+            sf = self.scene.update(t, aspect=w / h, camera=camera, height_px=h)
         cam = sf.camera
         # the other models' riders, seen by the same camera
         with tr.span("casts + faces"):
-            frames = [sf] + [c.update(t, aspect=w / h, camera=cam) for c in self.casts[1:]]
+            frames = [sf] + [c.update(t, aspect=w / h, camera=cam, height_px=h) for c in self.casts[1:]]
             for c, f, faces in zip(self.casts, frames, self.faces):
                 if faces:
                     self._add_faces(c, f, faces, t, t if face_time is None else face_time)

@@ -8,7 +8,12 @@ LOD, culling and tessellation):
 
 1. **animation**: every rider's pose from the pre-sampled clip tables, rider matrices on the exact
    surface (:class:`piste.world.riders.RiderSet`);
-2. **character LOD**: ``high`` / ``medium`` / ``low`` by distance to the camera (``lod_distances``);
+2. **character LOD**: ``high`` / ``medium`` / ``low`` per rider, the coarsest whose error projects
+   under ``lod_pixels`` (default 1 px, the objects' rule: :func:`piste.world.object_lod.choose_lods`
+   on the rider's bounding sphere) -- each level's error (:meth:`Scene.rider_lod_errors`, once) is
+   its bind-pose Hausdorff-like distance to the full mesh plus how far its coarser palette moves its
+   vertices from the full palette's in sampled poses; ``lod_pixels=0``: by distance to the camera
+   (``lod_distances``, what it was);
 3. **skinning** on the CPU with the SSX Tricky blended-matrix palette (one palette per LOD, the
    rider's world matrix folded into the palette, so vertices come out in world space): the riders
    of one LOD in one call; every rider also at the low LOD for its projected shadow;
@@ -20,7 +25,8 @@ Pure numpy (no OpenGL): the render passes take a :class:`SceneFrame`.
 API
 ---
 Scene.default(seed=0, lights=None, n_objects="default")   the default course scene
-Scene.update(t, aspect=640/448) -> SceneFrame
+Scene.update(t, aspect=640/448, height_px=448) -> SceneFrame
+Scene.rider_lod_errors() -> (l,) float64 metres            each rider LOD's error (computed once)
 SceneFrame                                                one frame's CPU results + timings (ms)
 """
 
@@ -37,6 +43,7 @@ import numpy.typing as npt
 # bundle's scene brings its own model, and a bundle render does not import the batcher
 from piste import character as _character
 from piste.character import BlendedMesh, make_lods
+from piste.character.lod import lod_errors
 from piste.character.model import Model, SkinnedMesh
 from piste.errors import ConfigError
 from piste.graph import connected_parts
@@ -45,15 +52,22 @@ from piste.lighting.vertex import choose_lights_many
 from piste.scene_data import Camera
 from piste.terrain.net import PatchNet
 from piste.world.course import TRACK_HALF_WIDTH, default_course, track_centerline
+from piste.world.object_lod import DEFAULT_LOD_PIXELS, choose_lods
 from piste.world.objects import ObjectSet, place_objects
 from piste.world.riders import RiderSet, RiderState, follow_camera
 
-__all__ = ["Scene", "SceneFrame", "LOD_DISTANCES", "sun_light", "orient_outward"]
+__all__ = ["Scene", "SceneFrame", "LOD_DISTANCES", "RIDER_LOD_PIXELS", "sun_light", "orient_outward"]
 
 #: the chase camera's distance behind the followed rider (metres)
 CAMERA_BEHIND = 6.0
 #: camera distances (metres) where riders switch from high to medium and from medium to low
 LOD_DISTANCES = (14.0, 35.0)
+#: the largest projected error a rider's level of detail may show (pixels; the objects' rule).  The
+#: default rider's levels: ~24 mm (medium) and ~44 mm (low) of error, so at 640x448 and 60 degrees
+#: the chased rider (~6 m) keeps the full mesh, the medium level from ~9 m, the low from ~17 m
+RIDER_LOD_PIXELS = DEFAULT_LOD_PIXELS
+#: the seconds whose poses measure how far each level's palette moves its vertices (every rider)
+_PALETTE_POSE_TIMES = (0.0, 1.3)
 
 
 def sun_light(lights: Lights) -> DirectionalLight | None:
@@ -107,7 +121,7 @@ class SceneFrame:
     ----------
     t : seconds;  camera : piste.world.camera.Camera
     riders : piste.world.riders.RiderState
-    rider_lod : (n,) int, 0 high / 1 medium / 2 low
+    rider_lod : (n,) int, 0 high / 1 medium / 2 low (by projected error, or by distance: ``Scene.lod_pixels``)
     skinned : list (per LOD) of ``(rider indices (k,), positions (k, v, 3) float32, normals (k, v, 3) float32)``
         in world space
     shadow : ``(positions (n, v_low, 3), normals)`` every rider at the low LOD (shadow casters)
@@ -137,9 +151,15 @@ class Scene:
     model : the rider Model (default: :func:`piste.character.default_rider`)
     objects : an ObjectSet (or None for none)
     follow : the rider the camera chases
-    lod_distances : (high -> medium, medium -> low) metres
+    lod_distances : (high -> medium, medium -> low) metres: the rule when ``lod_pixels`` is 0
+    lod_pixels : (attribute) the projected error a rider's level may show, pixels (:data:`RIDER_LOD_PIXELS`);
+        0 or less: levels by ``lod_distances``
     riders_kw : passed to :class:`piste.world.riders.RiderSet` (``start``, ``speed``, ``pack``)
     """
+
+    #: pixels of projected error a rider's level may show (0: by ``lod_distances``); a class default so
+    #: scenes that set themselves up otherwise (a bundle's) have it too
+    lod_pixels: float = RIDER_LOD_PIXELS
 
     def __init__(self, net: PatchNet, centerline: npt.ArrayLike, lights: Lights, model: Model | None = None,
                  objects: ObjectSet | None = None, follow: int = 0,
@@ -190,23 +210,89 @@ class Scene:
             })
         return out
 
+    # ------------------------------------------------------------------ rider LOD
+    def rider_lod_errors(self) -> np.ndarray:
+        """Each rider level's error ``(l,) float64`` in metres (level 0: 0), computed once per set of
+        levels: the bind-pose Hausdorff-like distance to the full mesh (:func:`piste.character.lod.lod_errors`)
+        plus the largest distance between a level's vertex skinned with the level's palette and the
+        same vertex skinned with the full mesh's, over every rider in the poses at
+        ``_PALETTE_POSE_TIMES`` (the coarser weight steps move vertices by ~1-2 cm)."""
+        key = tuple(id(lod) for lod in self.lods)
+        cached = self.__dict__.get("_rider_lod_errors")
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        geo = lod_errors(self.lods)
+        pal = np.zeros(len(self.lods))
+        full = np.asarray(self.lods[0].mesh.positions, np.float64)
+        if len(self.lods) > 1 and len(self.riders) and len(full):
+            from scipy.spatial import cKDTree
+
+            tree = cKDTree(full)
+            skins = np.concatenate([self.riders.state(t).skin for t in _PALETTE_POSE_TIMES])
+            p0, _ = self.skinners[0].apply_many(skins, normalize=False)
+            for level in range(1, len(self.lods)):
+                d, idx = tree.query(np.asarray(self.lods[level].mesh.positions, np.float64))
+                same = d <= 1e-6  # the level's vertices that are the full mesh's (all, for a simplified one)
+                p, _ = self.skinners[level].apply_many(skins, normalize=False)
+                if same.any():
+                    pal[level] = float(np.linalg.norm(p[:, same] - p0[:, idx[same]], axis=2).max())
+        # rounded up to 0.1 mm: the same levels whichever skinning path (numba or numpy, last bits) measured them
+        err = np.ceil(np.maximum.accumulate(geo + pal) * 1e4) / 1e4
+        self.__dict__["_rider_lod_errors"] = (key, err)
+        return err
+
+    def rider_radius(self) -> float:
+        """The bounding-sphere radius (metres) about ``anchor + 0.9 normal`` the LOD choice projects: half
+        the full mesh's bind-pose diagonal plus 0.25 (riders lift and spin; the shadow casters' sphere)."""
+        key = id(self.lods[0])
+        cached = self.__dict__.get("_rider_radius")
+        if cached is None or cached[0] != key:
+            b = self.lods[0].mesh.bounds()
+            cached = (key, 0.5 * float(np.linalg.norm(np.asarray(b[1]) - np.asarray(b[0]))) + 0.25)
+            self.__dict__["_rider_radius"] = cached
+        return cached[1]
+
+    def choose_rider_lods(self, state: RiderState, cam: Camera, height_px: float = 448.0) -> np.ndarray:
+        """Each rider's level ``(n,) int64``: the coarsest whose error (:meth:`rider_lod_errors`) projects
+        under :attr:`lod_pixels` on a viewport ``height_px`` high, at the nearest depth of the rider's
+        bounding sphere (:func:`piste.world.object_lod.choose_lods`); with ``lod_pixels <= 0``, by the
+        anchor's distance to the eye (``lod_distances``)."""
+        if self.lod_pixels <= 0:
+            d = np.linalg.norm(state.anchor - cam.eye, axis=1)
+            return np.searchsorted(np.asarray(self.lod_distances), d).astype(np.int64)  # 0, 1, 2
+        centers = state.anchor + 0.9 * state.normal
+        n = len(centers)
+        if getattr(cam, "ortho_height", None) is None:
+            # what choose_lods reads of a perspective view-projection (its focal scale, and the view depth
+            # as clip w), without building the whole matrix (~0.1 ms of look_at and perspective a frame)
+            fwd = np.asarray(cam.target, np.float64) - np.asarray(cam.eye, np.float64)
+            fwd /= np.linalg.norm(fwd)
+            vp = np.zeros((4, 4))
+            vp[1, 1] = 1.0 / np.tan(np.radians(float(cam.fov_y)) * 0.5)
+            vp[3, :3], vp[3, 3] = fwd, -float(fwd @ np.asarray(cam.eye, np.float64))
+        else:
+            vp = cam.view_projection()
+        return choose_lods(self.rider_lod_errors(), centers, np.full(n, self.rider_radius()), np.ones(n),
+                           vp, float(height_px), self.lod_pixels)
+
     # ------------------------------------------------------------------ a frame
     def camera(self, state: RiderState, aspect: float = 640.0 / 448.0, fov_y: float = 60.0) -> Camera:
         kw = {"behind": CAMERA_BEHIND, "height": 2.6, "look_ahead": 9.0}
         kw.update(self.camera_kw)
         return follow_camera(state, self.follow, net=self.net, aspect=aspect, fov_y=fov_y, far=4000.0, **kw)
 
-    def update(self, t: float, aspect: float = 640.0 / 448.0, fov_y: float = 60.0, camera: Camera | None = None) -> SceneFrame:
+    def update(self, t: float, aspect: float = 640.0 / 448.0, fov_y: float = 60.0, camera: Camera | None = None,
+               height_px: float = 448.0) -> SceneFrame:
         """The CPU work of one frame at ``t`` seconds (see the module docstring).  ``camera``
-        overrides the chase camera."""
+        overrides the chase camera; ``height_px``: the viewport's height (the riders' LOD projects
+        its error in pixels of it)."""
         tm: dict[str, float] = {}
         t0 = time.perf_counter()
         st = self.riders.state(t, camera_rider=self.follow if camera is None else None,
                                camera_behind=self.camera_kw.get("behind", CAMERA_BEHIND))
         cam = camera if camera is not None else self.camera(st, aspect, fov_y)
         t1 = time.perf_counter()
-        d = np.linalg.norm(st.anchor - cam.eye, axis=1)
-        lod = np.searchsorted(np.asarray(self.lod_distances), d)  # 0, 1, 2
+        lod = self.choose_rider_lods(st, cam, height_px)
         skinned = []
         for level, sk in enumerate(self.skinners):
             idx = np.nonzero(lod == level)[0]
@@ -218,8 +304,13 @@ class Scene:
         low_idx, low_pos, low_nrm = skinned[-1]
         if len(low_idx) == len(st):
             shadow = (low_pos, low_nrm)
-        else:
-            shadow = self.skinners[-1].apply_many(st.skin, normalize=False)
+        else:  # the riders drawn at the low level already have their casters; the others skinned for them
+            rest = np.nonzero(lod != len(self.skinners) - 1)[0]
+            rpos, rnrm = self.skinners[-1].apply_many(st.skin[rest], normalize=False)
+            spos, snrm = (np.empty((len(st),) + a.shape[1:], np.float32) for a in (rpos, rnrm))
+            spos[rest], snrm[rest] = rpos, rnrm
+            spos[low_idx], snrm[low_idx] = low_pos, low_nrm
+            shadow = (spos, snrm)
         t2 = time.perf_counter()
         lights = choose_lights_many(self.lights, st.anchor + st.normal)  # at the rider's middle
         t3 = time.perf_counter()

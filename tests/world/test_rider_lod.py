@@ -1,0 +1,111 @@
+"""Riders' levels of detail chosen by their error in pixels (the objects' rule), not by distance."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from piste.scene_data import Camera
+
+
+@pytest.fixture(scope="module")
+def scene():
+    from piste.world.scene import Scene
+
+    return Scene.default(0, objects=False)
+
+
+def _looking_at(state, eye_offset):
+    """A camera ``eye_offset`` from rider 0's middle, looking at it."""
+    mid = state.anchor[0] + 0.9 * state.normal[0]
+    return Camera(eye=mid + np.asarray(eye_offset, float), target=mid)
+
+
+def test_errors_grow_with_the_level_and_include_the_palette(scene):
+    from piste.character.lod import lod_errors
+
+    err = scene.rider_lod_errors()
+    geo = lod_errors(scene.lods)
+    assert err.shape == (len(scene.lods),) and err[0] == 0.0
+    assert (np.diff(err) > 0).all()
+    # the coarser palettes move vertices too: the error is more than the bind-pose distance alone
+    assert (err[1:] > geo[1:] + 1e-3).all()
+    assert scene.rider_lod_errors() is err  # computed once
+
+
+def test_near_rider_full_mesh_far_rider_coarser(scene):
+    st = scene.riders.state(0.0)
+    err = scene.rider_lod_errors()
+    r = scene.rider_radius()
+    f = 1.0 / np.tan(np.radians(30.0)) * 0.5 * 448.0  # pixels per metre at depth 1
+    levels = []
+    for dist in (r + 2.0, r + f * err[1] * 1.2, r + f * err[-1] * 1.2, 400.0):
+        cam = _looking_at(st, [dist, 0.0, 0.0])
+        levels.append(int(scene.choose_rider_lods(st, cam, 448)[0]))
+    assert levels[0] == 0  # near: the full mesh
+    assert levels[1] >= 1 and levels[2] == len(err) - 1 and levels[3] == len(err) - 1
+    assert levels == sorted(levels)  # farther never finer
+    # the same rider on a taller viewport (more pixels per metre) keeps a finer level
+    cam = _looking_at(st, [r + f * err[1] * 1.2, 0.0, 0.0])
+    assert int(scene.choose_rider_lods(st, cam, 448 * 4)[0]) < levels[1]
+
+
+def test_a_larger_pixel_bound_never_draws_more_triangles(scene):
+    tris = np.array([lod.n_triangles for lod in scene.lods])
+    keep = scene.lod_pixels
+    try:
+        for t in (0.0, 1.5, 4.0):
+            counts = []
+            for px in (0.25, 0.5, 1.0, 2.0, 8.0):
+                scene.lod_pixels = px
+                f = scene.update(t)
+                counts.append(int(tris[f.rider_lod].sum()))
+                # every rider is skinned at the level chosen for it
+                for level, (idx, pos, _) in enumerate(f.skinned):
+                    assert (f.rider_lod[idx] == level).all() and pos.shape[1] == scene.lods[level].mesh.n_vertices
+            assert all(a >= b for a, b in zip(counts, counts[1:])), counts
+            assert counts[0] > counts[-1]
+    finally:
+        scene.lod_pixels = keep
+
+
+def test_zero_pixels_is_the_distance_rule_and_default_is_by_pixels(scene):
+    from piste.world.scene import RIDER_LOD_PIXELS
+
+    assert scene.lod_pixels == RIDER_LOD_PIXELS == 1.0
+    f = scene.update(0.0)
+    assert f.rider_lod[0] == 0  # the chased rider: full mesh
+    assert f.rider_lod.max() == len(scene.lods) - 1  # the pack's far riders: the coarsest
+    keep = scene.lod_pixels
+    try:
+        scene.lod_pixels = 0.0
+        g = scene.update(0.0)
+    finally:
+        scene.lod_pixels = keep
+    d = np.linalg.norm(g.riders.anchor - g.camera.eye, axis=1)
+    assert (g.rider_lod == np.searchsorted(np.asarray(scene.lod_distances), d)).all()
+    # the default scene: the pixel rule draws fewer rider triangles than the distance rule
+    tris = np.array([lod.n_triangles for lod in scene.lods])
+    assert tris[f.rider_lod].sum() < tris[g.rider_lod].sum()
+
+
+def test_choice_is_the_objects_rule_and_casters_stay_the_coarsest(scene):
+    from piste.world.object_lod import choose_lods
+
+    keep = scene.lod_pixels
+    try:
+        for t in (0.0, 2.0):
+            f = scene.update(t)
+            st, cam = f.riders, f.camera
+            for px in (0.3, 1.0, 2.5):
+                scene.lod_pixels = px
+                n = len(st)
+                want = choose_lods(scene.rider_lod_errors(), st.anchor + 0.9 * st.normal, np.full(n, scene.rider_radius()),
+                                   np.ones(n), cam.view_projection(), 448.0, px)
+                assert (scene.choose_rider_lods(st, cam, 448) == want).all()
+            scene.lod_pixels = keep
+            # the shadow casters: every rider at the coarsest level (never finer than what is drawn)
+            low, _ = scene.skinners[-1].apply_many(st.skin, normalize=False)
+            assert np.array_equal(f.shadow[0], low)
+    finally:
+        scene.lod_pixels = keep
