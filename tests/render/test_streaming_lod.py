@@ -262,3 +262,35 @@ def test_no_background_under_terrain_and_cracks_are_rays_into_the_surface(world,
         assert deep and min(deep) > 1.0
     finally:
         r.close()
+
+
+def test_command_indices_are_what_the_commands_draw():
+    """The indices a list of indirect commands draws, back to back (instances 0: none; base vertex
+    added), and a command beyond the buffer is refused."""
+    idx = np.arange(30, dtype=np.uint32).reshape(10, 3)
+    cmd = np.array([[6, 1, 3, 0, 0], [3, 0, 12, 0, 0], [3, 1, 24, 100, 0]], np.uint32)
+    assert S.command_indices(idx, cmd).tolist() == [3, 4, 5, 6, 7, 8, 124, 125, 126]
+    assert len(S.command_indices(idx, np.zeros((0, 5), np.uint32))) == 0
+    with pytest.raises(ValueError, match="reach index"):
+        S.command_indices(idx, np.array([[6, 1, 27, 0, 0]], np.uint32))
+
+
+def test_far_tiles_draw_their_runs_as_index_lists_with_the_same_picture(world, gl):
+    """Far tiles drawn by block from one index list a stride and kind draw the picture the
+    multi-draw of their runs does, with fewer indirect commands."""
+    r = S.StreamingRenderer(world, size=SIZE, ctx=gl, near_radius=-1.0, pixel_error=None)
+    try:
+        for cam in _low_cameras(r.cache, 4, seed=7) + _steep_cameras(r.cache)[:2]:
+            r.far_indices = True
+            a = r.render(cam, wait=True)
+            sa = dict(r.stats)
+            r.far_indices = False
+            r._far_runs.clear()
+            b = r.render(cam, wait=True)
+            sb = dict(r.stats)
+            r._far_runs.clear()
+            assert np.array_equal(a, b)
+            assert sa["triangles"] == sb["triangles"] and sa["draws"] == sb["draws"]
+            assert sa["far_blocks"] > 0 and sa["commands"] < sb["commands"]
+    finally:
+        r.close()

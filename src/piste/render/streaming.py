@@ -118,7 +118,7 @@ __all__ = ["TileCache", "StreamingRenderer", "StreamingTerrain", "TileMesh", "ne
            "render_flight", "TileSets", "light_grid", "stride_errors", "chord_error", "visible_indices", "world_fog_density",
            "object_instance_bytes", "object_kind_heights", "OBJECT_MIN_PIXELS", "patch_order", "patch_level_errors",
            "vertex_errors", "glue_indices", "far_blocks", "block_runs", "patch_runs", "entry_runs", "FAR_BLOCK",
-           "LOD_REFERENCE_LINES"]
+           "LOD_REFERENCE_LINES", "command_indices"]
 
 _log = logging.getLogger(__name__)
 
@@ -773,6 +773,26 @@ def entry_runs(mask: np.ndarray, first: np.ndarray, count: np.ndarray) -> np.nda
     out = np.zeros((int(keep.sum()), 5), np.uint32)
     out[:, 0], out[:, 1], out[:, 2] = n[keep], 1, first[start][keep] * 3
     return out
+
+
+def command_indices(indices: np.ndarray, commands: np.ndarray) -> np.ndarray:
+    """The vertex indices ``(m,)`` uint32 that indirect draw commands ``commands (k, 5)`` uint32
+    (:func:`entry_runs`': count, instances, first index, base vertex, base instance) draw from the
+    index buffer ``indices (t, 3)`` uint32, in command order, base vertices added: what one
+    ``glDrawElements`` draws instead of the ``k`` draws of a multi-draw."""
+    c = np.asarray(commands, np.int64).reshape(-1, 5)
+    flat = np.asarray(indices).reshape(-1)
+    cnt = c[:, 0] * (c[:, 1] > 0)
+    total = int(cnt.sum())
+    if total == 0:
+        return np.zeros(0, np.uint32)
+    if (c[:, 2] + cnt > len(flat))[cnt > 0].any():
+        raise ValueError(f"draw commands reach index {int((c[:, 2] + cnt).max())} of a buffer of {len(flat)}")
+    at = np.arange(total, dtype=np.int64) + np.repeat(c[:, 2] - (np.cumsum(cnt) - cnt), cnt)
+    out = flat[at]
+    if c[:, 3].any():
+        out = out + np.repeat(c[:, 3], cnt)
+    return out.astype(np.uint32, copy=False)
 
 
 def patch_runs(inside: np.ndarray, patch_triangles: int, total_triangles: int, skirts: bool = True,
@@ -1620,6 +1640,10 @@ class StreamingRenderer:
         #: "zip", commands, triangles)], blocks out of view)
         self._far_runs: dict = {}
         self._glue: dict = {}  # (tile, level) -> (index buffer, vertex array, mesh id): the glued patches
+        #: far tiles drawn by block draw each stride's runs from one index list of their own
+        #: (:meth:`_far_index_draws`); False: by a multi-draw of the runs
+        self.far_indices = True
+        self._far_gpu: dict = {}  # (tile, stride) -> (index buffer, vertex array, mesh id)
         self._coarse_runs: dict = {}  # tile -> ((strides, in view), [(job, commands)]): a near tile's far blocks
         self.stats: dict = {}
 
@@ -1784,6 +1808,36 @@ class StreamingRenderer:
         self._coarse_runs[t] = (ckey, out)
         return full[pb], out
 
+    def _far_index_draws(self, t, draws: list) -> list:
+        """Far tile ``t``'s ``draws`` ``[(stride, "far" or "zip", commands, triangles)]`` with each
+        stride's commands gathered into one index list (:func:`command_indices`) in the tile's index
+        buffer of that stride (rewritten when they change; grown when short), its commands replaced
+        by ``(vertex array, first index, indices)``: one glDrawElements a stride and kind instead of
+        a multi-draw of tens of runs (llvmpipe sets up every draw of a multi-draw on its own)."""
+        out = []
+        for k in sorted({d[0] for d in draws}):
+            mine = [d for d in draws if d[0] == k]
+            fk = self.cache.far[t][k]
+            parts = [command_indices(fk.indices, cmd) for _, _, cmd, _ in mine]
+            data = np.concatenate(parts).tobytes()
+            self._vao((t, f"far{k}"), fk)  # the vertex buffers
+            got = self._far_gpu.get((t, k))
+            if got is None or got[2] != id(fk) or got[0].size < len(data):
+                if got is not None:
+                    got[1].release()
+                    got[0].release()
+                ibo = self.ctx.buffer(reserve=max(2 * len(data), 4096), dynamic=True)
+                g = self._gpu[(t, f"far{k}")]
+                vao = self.ctx.vertex_array(self.prog, self._attributes(g[0], g[4]), index_buffer=ibo,
+                                            index_element_size=4)
+                got = self._far_gpu[(t, k)] = (ibo, vao, id(fk))
+            got[0].write(data)
+            at = 0
+            for (_, what, _, ntri), idx in zip(mine, parts):
+                out.append((k, what, (got[1], at, len(idx)), ntri))
+                at += len(idx)
+        return out
+
     def _glue_vao(self, key, mesh: TileMesh, idx: np.ndarray):
         """A vertex array drawing ``idx (t, 3)`` uint32 of near or middle ``mesh`` (its glued patches,
         :func:`glue_indices`) through the mesh's vertex buffers, its index buffer rewritten each
@@ -1942,12 +1996,17 @@ class StreamingRenderer:
                             for k in FAR_STRIDES if (vis & (st == k)).any()}
                     draws = [(k, what, cmd, int(cmd[:, 0].sum()) // 3) for k, pair in runs.items()
                              for what, cmd in zip(("far", "zip"), pair) if len(cmd)]  # (the zippers two-sided)
+                    if self.far_indices:  # each stride's runs as one list of indices (kept while they stay)
+                        draws = self._far_index_draws(t, draws)
                     got = self._far_runs[t] = (bkey, draws, len(vis) - int(np.count_nonzero(vis)))
                 for k, what, cmd, ntri in got[1]:
                     fk = self.cache.far[t][k]
-                    jobs.append((t, what, fk, self._vao((t, f"far{k}"), fk), (ncmd, len(cmd)), 0.0))
-                    commands.append(cmd)
-                    ncmd += len(cmd)
+                    if isinstance(cmd, tuple):  # (vertex array, first index, indices) of :meth:`_far_index_draws`
+                        jobs.append((t, what, fk, cmd[0], ("at", cmd[1], cmd[2]), 0.0))
+                    else:
+                        jobs.append((t, what, fk, self._vao((t, f"far{k}"), fk), (ncmd, len(cmd)), 0.0))
+                        commands.append(cmd)
+                        ncmd += len(cmd)
                     drawn["triangles"] += ntri
                 drawn["far_patches"] += self.cache.patches[t]
                 drawn["far_blocks"] += int(len(st))
@@ -2060,6 +2119,8 @@ class StreamingRenderer:
                 vao.render(moderngl.TRIANGLES, vertices=run)
             elif run is None:  # a whole mesh
                 vao.render(moderngl.TRIANGLES, vertices=3 * mesh.whole_triangles)
+            elif run[0] == "at":  # indices [first, first + count) of the vertex array's own buffer
+                vao.render(moderngl.TRIANGLES, vertices=run[2], first=run[1])
             elif run[1]:
                 vao.render_indirect(self._indirect, moderngl.TRIANGLES, count=run[1], first=run[0])
         with self.cache._lock:
@@ -2075,6 +2136,10 @@ class StreamingRenderer:
         return image
 
     def close(self) -> None:
+        for ibo, vao, _ in self._far_gpu.values():
+            vao.release()
+            ibo.release()
+        self._far_gpu.clear()
         for key in list(self._gpu):
             self._release(key)
         for tex, _, _ in self._lights.values():
