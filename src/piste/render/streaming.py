@@ -1578,6 +1578,18 @@ def _boxes_visible(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.nda
     return (far + np.asarray(planes, dtype=np.float64)[:, 3] >= 0.0).all(-1)
 
 
+def _boxes_visible_cols(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """:func:`_boxes_visible` of boxes given by columns, ``lo, hi (3, n)`` float64 (contiguous):
+    plane by plane on whole columns (no matrix products: ~2x faster on a tile's 4,096 patches)."""
+    out = np.ones(lo.shape[1], bool)
+    for nx, ny, nz, w in np.asarray(planes, dtype=np.float64):
+        f = (hi[0] if nx > 0 else lo[0]) * nx
+        f += (hi[1] if ny > 0 else lo[1]) * ny
+        f += (hi[2] if nz > 0 else lo[2]) * nz
+        out &= f >= -w
+    return out
+
+
 class StreamingRenderer:
     """Renders a tiled world through a :class:`TileCache` (headless EGL by default).
 
@@ -1686,7 +1698,8 @@ class StreamingRenderer:
 
     def _patch_boxes(self, key, mesh: TileMesh):
         """:func:`patch_boxes` of a resident mesh and its :func:`patch_corner_errors` (made once while
-        the mesh stays resident): ``(centre, half extent, errors or None, low corner, high corner)``."""
+        the mesh stays resident): ``(centre, half extent, errors or None, low corner, high corner)``,
+        each ``(3, n)`` float64 by columns (contiguous, :func:`_boxes_visible_cols`)."""
         got = self._boxes.get(key)
         if got is None or got[0] != id(mesh):
             py0, py1, px0, px1 = self.cache.grid.patch_range(*key[0])
@@ -1694,7 +1707,8 @@ class StreamingRenderer:
             boxes = patch_boxes(mesh, shape)  # (drawn this way only with them: a patch-major mesh)
             assert boxes is not None, f"tile {key[0]}: its {key[1]} mesh is not patch-major"
             c, h = boxes
-            got = self._boxes[key] = (id(mesh), (c, h, patch_corner_errors(mesh, shape), c - h, c + h))
+            cols = [np.ascontiguousarray(a.T, dtype=np.float64) for a in (c, h, c - h, c + h)]
+            got = self._boxes[key] = (id(mesh), (cols[0], cols[1], patch_corner_errors(mesh, shape), cols[2], cols[3]))
         return got[1]
 
     def _block_shape(self, t) -> tuple[int, int]:
@@ -2032,7 +2046,7 @@ class StreamingRenderer:
             py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
             po = patch_order(py1 - py0, px1 - px0)  # the mesh's patch order
             c, h, perr, blo, bhi = self._patch_boxes(key, mesh)
-            inside = _boxes_visible(planes, blo, bhi)
+            inside = _boxes_visible_cols(planes, blo, bhi)
             drawn["frustum_culled"] += int((~inside).sum())
             if seen is not None:
                 drawn["vis_culled"] += int((~seen).sum())
@@ -2045,8 +2059,13 @@ class StreamingRenderer:
                 ncmd += len(mine)
                 drawn["triangles"] += int(mine[:, 0].sum()) // 3
                 continue
-            d = np.sqrt((np.maximum(np.abs(c - e) - h, 0.0) ** 2).sum(1))  # metres to each patch's box
-            coarse = perr * verr <= d
+            d2 = 0.0  # squared metres to each patch's box
+            for j in range(3):
+                q = np.abs(c[j] - e[j])
+                q -= h[j]
+                np.maximum(q, 0.0, out=q)
+                d2 = d2 + q * q
+            coarse = (perr * verr) ** 2 <= d2
             far = self.cache.far[t][1]
             if seen is None and blocks is not None:  # blocks wholly on the corner grid at a coarser stride
                 own, bjobs = self._coarse_blocks(t, coarse, blocks)
