@@ -294,3 +294,16 @@ def test_far_tiles_draw_their_runs_as_index_lists_with_the_same_picture(world, g
             assert sa["far_blocks"] > 0 and sa["commands"] < sb["commands"]
     finally:
         r.close()
+
+
+def test_boxes_by_columns_are_culled_as_boxes_by_rows():
+    """The frustum test of boxes given by columns keeps exactly the boxes the row test keeps."""
+    rng = np.random.default_rng(4)
+    c, h = rng.uniform(-500.0, 500.0, (2000, 3)), rng.uniform(1.0, 40.0, (2000, 3))
+    for _ in range(5):
+        eye = rng.uniform(-200.0, 200.0, 3)
+        planes = Camera(eye, eye + rng.normal(size=3) * 100.0, near=1.0, far=600.0).frustum_planes()
+        want = S._boxes_visible(planes, c - h, c + h)
+        got = S._boxes_visible_cols(planes, np.ascontiguousarray((c - h).T), np.ascontiguousarray((c + h).T))
+        assert 0 < want.sum() < len(want)
+        assert np.array_equal(got, want)

@@ -298,6 +298,16 @@ def patch_order(ny: int, nx: int) -> np.ndarray:
     return out
 
 
+@functools.lru_cache(maxsize=64)
+def _patch_rank(ny: int, nx: int) -> np.ndarray:
+    """Where each patch (row-major id) comes in :func:`patch_order`: ``(n,)`` int64, read-only."""
+    order = patch_order(ny, nx)
+    rank = np.empty(ny * nx, np.int64)
+    rank[order] = np.arange(ny * nx)
+    rank.flags.writeable = False
+    return rank
+
+
 def _stride_index(n: int, stride: int) -> np.ndarray:
     """``0, stride, 2 stride, ...`` and always the last of ``n``."""
     i = np.arange(0, n, stride)
@@ -677,9 +687,7 @@ def glue_indices(mesh: TileMesh, grid_shape: tuple, glued: np.ndarray) -> np.nda
     r = int(round(np.sqrt(pt / 2.0)))
     cols = nx * r + 1
     g = np.asarray(glued, bool).reshape(ny * nx, 4)
-    order = patch_order(ny, nx)
-    rank = np.empty(ny * nx, np.int64)
-    rank[order] = np.arange(ny * nx)
+    order, rank = patch_order(ny, nx), _patch_rank(ny, nx)
     p = order[g[order].any(1)]  # (k,) the patches with a glued side, in mesh order
     if not len(p):
         return np.zeros((0, 3), np.uint32)
@@ -2079,9 +2087,10 @@ class StreamingRenderer:
             ny, nx = py1 - py0, px1 - px0
             cg = _pad1(coarse.reshape(ny, nx))  # (a neighbour beyond the tile's border: not coarse)
             fine = (inside & ~coarse).reshape(ny, nx)
-            glued = fine[..., None] & np.stack([cg[:-2, 1:-1], cg[1:-1, 2:], cg[2:, 1:-1], cg[1:-1, :-2]], -1)
-            gl = glued.any(-1).reshape(-1)
+            sides = (cg[:-2, 1:-1], cg[1:-1, 2:], cg[2:, 1:-1], cg[1:-1, :-2])  # south, east, north, west
+            gl = (fine & (sides[0] | sides[1] | sides[2] | sides[3])).reshape(-1)
             if gl.any():
+                glued = fine[..., None] & np.stack(sides, -1)
                 gvao, ntri = self._glue_vao(key, mesh, glue_indices(mesh, (ny, nx), glued))
                 jobs.append((t, kind, mesh, gvao, 3 * ntri, verr))
                 drawn["triangles"] += ntri
