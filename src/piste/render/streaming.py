@@ -81,6 +81,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import math
 import queue
 import threading
 import time
@@ -1492,6 +1493,16 @@ class TileCache:
             out = np.where(self._stride_err[:, j] <= allowed, k, out)
         return out
 
+    def block_columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The far blocks' boxes and errors (:attr:`_blk`) by columns, contiguous: ``lo, hi (3, nb)``,
+        ``err (len(FAR_STRIDES) - 1, nb)`` float64 (made once)."""
+        got = self.__dict__.get("_blk_cols")
+        if got is None or got[0] is not self._blk["lo"]:
+            cols = tuple(np.ascontiguousarray(np.asarray(self._blk[k], dtype=np.float64).reshape(-1, w).T)
+                         for k, w in (("lo", 3), ("hi", 3), ("err", len(FAR_STRIDES) - 1)))
+            got = self.__dict__["_blk_cols"] = (self._blk["lo"], cols)
+        return got[1]
+
     def block_strides(self, eye: npt.ArrayLike, pixel_scale: float, tile_strides: np.ndarray,
                       pixel_error: float = FAR_PIXEL_ERROR) -> np.ndarray:
         """The stride of every far block (:attr:`block_start`, :func:`far_blocks`) seen from ``eye``
@@ -1499,12 +1510,16 @@ class TileCache:
         nearest point (``pixel_scale`` pixels a radian), at least its tile's ``tile_strides (n,)``
         (:meth:`far_strides`, by the tile's largest error at its nearest point); ``(nb,)`` int."""
         eye = np.asarray(eye, dtype=np.float64).reshape(3)
-        lo, hi = self._blk["lo"], self._blk["hi"]
-        d = np.maximum(np.maximum(lo - eye, eye - hi), 0.0)
-        allowed = np.sqrt((d * d).sum(1)) * pixel_error / max(float(pixel_scale), 1e-9)
-        out = np.ones(len(lo), np.int64)
+        lo, hi, err = self.block_columns()
+        d2 = np.zeros(lo.shape[1])
+        for j in range(3):  # (by columns: a million-patch world has ~16k blocks)
+            q = np.maximum(lo[j] - eye[j], eye[j] - hi[j])
+            np.maximum(q, 0.0, out=q)
+            d2 += q * q
+        allowed = np.sqrt(d2) * pixel_error / max(float(pixel_scale), 1e-9)
+        out = np.ones(lo.shape[1], np.int64)
         for j, k in enumerate(FAR_STRIDES[1:]):
-            out = np.where(self._blk["err"][:, j] <= allowed, k, out)
+            out[err[j] <= allowed] = k
         return np.maximum(out, np.repeat(np.asarray(tile_strides, np.int64), np.diff(self.block_start)))
 
     def morph_factors(self, eye: npt.ArrayLike, pixel_scale: float, pixel_error: float | None) -> dict:
@@ -1518,17 +1533,17 @@ class TileCache:
             level = dict(self.near_level)
         if pixel_error is None or not level:
             return {t: 1.0 for t in level}
-        e = np.asarray(eye, dtype=np.float64)
-        index = {t: i for i, t in enumerate(self.tiles)}
+        e = [float(x) for x in np.asarray(eye, dtype=np.float64).reshape(3)]
         out = {}
-        for t, k in level.items():
-            i = index.get(t)
+        for t, k in level.items():  # (a few tiles: plain floats)
+            i = self.tile_index.get(t)
             if i is None:
                 continue
-            d = np.maximum(np.maximum(self.lo[i] - e, e - self.hi[i]), 0.0)
+            lo, hi = self.lo[i].tolist(), self.hi[i].tolist()
+            d = math.sqrt(sum(max(a - x, x - b, 0.0) ** 2 for a, b, x in zip(lo, hi, e)))
             err = self.mid_error[t] if k > MID_SAMPLES else self.chord_error[t]
-            px = err * float(pixel_scale) / max(float(np.sqrt((d * d).sum())), 1e-9)
-            out[t] = float(np.clip(px / float(pixel_error) - 1.0, 0.0, 1.0))
+            px = err * float(pixel_scale) / max(d, 1e-9)
+            out[t] = min(max(px / float(pixel_error) - 1.0, 0.0), 1.0)
         return out
 
     def draw_list(self, eye: npt.ArrayLike | None = None, mask: np.ndarray | None = None, pixel_scale: float | None = None) -> list:
@@ -1985,8 +2000,9 @@ class StreamingRenderer:
         blocks = None  # far tiles by block: every block's stride and whether its box is in view
         drawn["far_blocks"] = drawn["far_blocks_culled"] = 0
         if self.mix_levels and len(self.cache.tiles):
+            blo, bhi, _ = self.cache.block_columns()
             blocks = (self.cache.block_strides(e, pixel_scale, self.cache.far_strides(e, pixel_scale)),
-                      _boxes_visible(planes, self.cache._blk["lo"], self.cache._blk["hi"]))
+                      _boxes_visible_cols(planes, blo, bhi))
         jobs, commands, ncmd = [], [], 0  # what each tile draws (all the indirect commands first)
         seen_of = {t: self.cache.visible_patches(t, cam.eye) if sets and (not level.startswith("far") or level == "far1")
                    else None for t, level, _ in todo}
