@@ -109,3 +109,44 @@ def test_choice_is_the_objects_rule_and_casters_stay_the_coarsest(scene):
             assert np.array_equal(f.shadow[0], low)
     finally:
         scene.lod_pixels = keep
+
+
+def test_a_bundles_levels_carry_their_error_measured_at_build():
+    """The character step stores each level's error (meta ``distance``); a scene on those levels uses it
+    as stored (no measuring at its first frame), and it is what measuring them again gives."""
+    from dataclasses import replace
+
+    from piste.character import default_rider
+    from piste.character.lod import pose_skins, screen_errors
+    from piste.pipeline.characters import character_arrays, lods_from_arrays, model_from_arrays
+    from piste.world.scene import Scene
+
+    arrays, meta = character_arrays(default_rider(0))
+    a = {f"characters/rider/{k}": v for k, v in arrays.items()}
+    model = model_from_arrays(a, "characters/rider/", meta)
+    lods = lods_from_arrays(a, "characters/rider/", meta, model)
+    stored = np.array([lod.distance for lod in lods])
+    assert stored[0] == 0.0 and (np.diff(stored) > 0).all()
+    np.testing.assert_array_equal(stored, screen_errors(lods, pose_skins(model)))
+    # a scene takes the stored values as they are (made-up ones here: it must not measure them again)
+    scene = Scene.default(0, objects=False, model=model)
+    scene.lods = [replace(lod, distance=d) for lod, d in zip(lods, (0.0, 0.5, 0.75))]
+    np.testing.assert_array_equal(scene.rider_lod_errors(), [0.0, 0.5, 0.75])
+    # a bundle from before the errors were stored: measured on use
+    meta_old = {**meta, "lods": [{k: v for k, v in info.items() if k != "distance"} for info in meta["lods"]]}
+    old = lods_from_arrays(a, "characters/rider/", meta_old, model)
+    assert all(lod.distance is None for lod in old)
+
+
+def test_the_built_in_riders_measured_errors_are_current(scene):
+    """MEASURED_ERRORS spares a fresh process measuring the built-in rider's levels at its first frame:
+    the entry must be what measuring them gives now (update it when the rider or its levels change)."""
+    from piste.character.lod import MEASURED_ERRORS, lod_digest, pose_skins, screen_errors
+
+    d = lod_digest(scene.lods, scene.model)
+    assert d in MEASURED_ERRORS, f"the built-in rider's levels changed: add MEASURED_ERRORS[{d!r}]"
+    assert MEASURED_ERRORS[d] == tuple(float(x) for x in screen_errors(scene.lods, pose_skins(scene.model)))
+    # other levels of the same model (another palette step) are not found: measured on use
+    from piste.character.lod import make_lods
+
+    assert lod_digest(make_lods(scene.lods[0].mesh, steps=0.1), scene.model) not in MEASURED_ERRORS

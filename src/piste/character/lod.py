@@ -11,7 +11,14 @@ API
 - ``simplify_mesh(mesh, target_triangles, target_error=0.05, lock_border=False) -> SkinnedMesh``
 - ``compact_mesh(mesh, indices) -> SkinnedMesh``: keep only the vertices ``indices`` use
 - ``make_lods(mesh, ratios=(1.0, 0.5, 0.25), steps=(0.1, 0.2, 0.25), max_bones=3) -> list[LOD]``
-- ``LOD``: ``name``, ``mesh``, ``palette``, ``ratio``, ``step``, ``error``
+- ``LOD``: ``name``, ``mesh``, ``palette``, ``ratio``, ``step``, ``error``, ``distance``
+- ``lod_errors(lods) -> (l,)``: each level's bind-pose Hausdorff-like distance to level 0 (metres)
+- ``palette_errors(lods, skins) -> (l,)``: how far each level's palette moves its vertices from level 0's
+- ``pose_skins(model, per_clip=3) -> (k, b, 4, 4)``: skin matrices of poses sampled from the model's clips
+- ``screen_errors(lods, skins) -> (l,)``: the error a level shows, for choosing it by pixels (the sum)
+- ``lod_digest(lods, model) -> str``: what :func:`screen_errors` of ``pose_skins(model)`` depends on, hashed;
+  ``MEASURED_ERRORS[digest]``: the built-in rider's, measured once (a test keeps it current)
+- ``surface_distance`` / ``max_surface_distance``: exact point-to-mesh distances (vectorised, pruned)
 """
 
 from __future__ import annotations
@@ -22,19 +29,35 @@ from dataclasses import dataclass, replace
 import numpy as np
 import numpy.typing as npt
 
-from piste.character.model import SkinnedMesh
+from piste.character.animation import sample_poses
+from piste.character.model import Model, SkinnedMesh
 from piste.character.palette import Palette, palette as make_palette
+from piste.character.skeleton import world_from_local
+from piste.character.skinning import BlendedMesh
 from piste.errors import ConfigError
+from piste.transforms import compose_trs
 
-__all__ = ["LOD", "LOD_NAMES", "simplify_mesh", "compact_mesh", "make_lods", "lod_errors", "surface_distance", "max_surface_distance"]
+__all__ = ["LOD", "LOD_NAMES", "simplify_mesh", "compact_mesh", "make_lods", "lod_errors", "surface_distance", "max_surface_distance",
+           "palette_errors", "pose_skins", "screen_errors", "lod_digest", "MEASURED_ERRORS"]
 
 LOD_NAMES = ("high", "medium", "low")
+
+#: :func:`screen_errors` already measured, by :func:`lod_digest` of the levels and the model: the built-in
+#: rider's levels as :class:`piste.world.scene.Scene` makes them (``default_rider(0)``, ``make_lods``
+#: defaults), so a fresh process's first frame does not measure them again (~0.27 s with scipy's k-d tree
+#: import; a bundle's character step stores its own, ``LOD.distance``).  Levels not listed are measured
+#: on use; tests/world/test_rider_lod.py checks the entry against a fresh measure.
+MEASURED_ERRORS: dict[str, tuple[float, ...]] = {
+    "f611891b9f4e429aefe56066702a2fdc": (0.0, 0.0288, 0.0517),  # default_rider(0): high / medium / low
+}
 
 
 @dataclass
 class LOD:
     """One level: ``mesh`` (a SkinnedMesh), its ``palette``, the triangle ``ratio`` asked for,
-    the weight ``step`` of its palette and meshoptimizer's relative ``error`` (0 for the original)."""
+    the weight ``step`` of its palette and meshoptimizer's relative ``error`` (0 for the original);
+    ``distance``: the error it shows in metres (:func:`screen_errors`: geometry and palette against
+    level 0), measured where it was built (a bundle's character step), or None (measured on use)."""
 
     name: str
     mesh: SkinnedMesh
@@ -42,6 +65,7 @@ class LOD:
     ratio: float
     step: float
     error: float
+    distance: float | None = None
 
     @property
     def n_triangles(self) -> int:
@@ -258,3 +282,97 @@ def lod_errors(lods: Sequence[LOD]) -> np.ndarray:
         pts = np.concatenate([pos, pos[tri].mean(axis=1)])
         out[i] = max(max_surface_distance(fpts, pos, tri), max_surface_distance(pts, fpos, ftri))
     return np.maximum.accumulate(out)
+
+
+def pose_skins(model: Model, per_clip: int = 3) -> np.ndarray:
+    """Skin matrices ``(k, b, 4, 4) float64`` (bind space -> model space) of poses sampled from every clip
+    of ``model``: ``per_clip`` times evenly over each clip's duration (the first at 0), clips in name
+    order; the rest pose alone when the model has no clips.  Raises ConfigError without a skeleton."""
+    sk = model.skeleton
+    if sk is None:
+        raise ConfigError(f"model {model.name!r} has no skeleton: no poses to measure its levels in")
+    clips = [model.clips[k] for k in sorted(model.clips)]
+    out = []
+    for clip in clips:
+        times = np.arange(int(per_clip)) * (float(clip.duration) / max(int(per_clip), 1))
+        tr, rot, sc = sample_poses(clip, times, sk)
+        out.append(compose_trs(tr, rot, sc))
+    if not out:
+        rest = sk.rest_pose()
+        out.append(compose_trs(np.asarray(rest.translation)[None], np.asarray(rest.rotation)[None],
+                               np.asarray(rest.scale)[None]))
+    local = np.concatenate(out)
+    skins: np.ndarray = world_from_local(local, sk.parents, sk.levels) @ sk.inverse_bind
+    return skins
+
+
+def palette_errors(lods: Sequence[LOD], skins: npt.ArrayLike) -> np.ndarray:
+    """How far each level's own palette moves its vertices ``(l,) float64`` (metres; level 0: 0): the
+    largest distance, over the poses ``skins (k, b, 4, 4)``, between a level's vertex skinned with the
+    level's palette and the same vertex (the level-0 vertex at the same bind position) skinned with
+    level 0's.  Vertices with no twin in level 0 are not counted."""
+    sk = np.asarray(skins, dtype=np.float64)
+    out = np.zeros(len(lods))
+    if len(lods) < 2 or len(sk) == 0:
+        return out
+    full = np.ascontiguousarray(lods[0].mesh.positions, dtype=np.float32)
+    p0, _ = BlendedMesh(lods[0].palette, lods[0].mesh.positions, lods[0].mesh.normals).apply_many(sk, normalize=False)
+    for i, lod in enumerate(lods[1:], start=1):
+        pos = np.ascontiguousarray(lod.mesh.positions, dtype=np.float32)
+        # each vertex's twin in level 0: the same position (one sort of both sets' rows)
+        _, first, inv = np.unique(np.concatenate([full, pos]), axis=0, return_index=True, return_inverse=True)
+        inv = inv.reshape(-1)
+        twin = first[inv[len(full):]]
+        has = twin < len(full)
+        if not has.any():
+            continue
+        p, _ = BlendedMesh(lod.palette, lod.mesh.positions, lod.mesh.normals).apply_many(sk, normalize=False)
+        out[i] = float(np.linalg.norm(p[:, has].astype(np.float64) - p0[:, twin[has]], axis=2).max())
+    return out
+
+
+def screen_errors(lods: Sequence[LOD], skins: npt.ArrayLike) -> np.ndarray:
+    """The error each level shows ``(l,) float64`` in metres, for choosing a level by its projected size:
+    :func:`lod_errors` (geometry, bind pose) plus :func:`palette_errors` (the coarser palettes in the
+    poses ``skins``), made non-decreasing and rounded up to 0.1 mm (the same value from a bundle as
+    measured again: the last bits of float32 skinning do not flip a choice)."""
+    err = np.maximum.accumulate(lod_errors(lods) + palette_errors(lods, skins))
+    out: np.ndarray = np.ceil(err * 1e4) / 1e4
+    return out
+
+
+def lod_digest(lods: Sequence[LOD], model: Model) -> str:
+    """A hash (hex) of everything :func:`screen_errors` of :func:`pose_skins` ``(model)`` reads: each
+    level's positions, triangles and palette, and the model's skeleton and clips (key times and values),
+    for looking the errors up in :data:`MEASURED_ERRORS` (~0.2 ms)."""
+    import hashlib
+
+    h = hashlib.blake2b(digest_size=16)
+
+    def add(x: object) -> None:
+        a = np.ascontiguousarray(x)
+        h.update(str((a.dtype.str, a.shape)).encode())
+        h.update(a.tobytes())
+
+    for lod in lods:
+        for x in (lod.mesh.positions, lod.mesh.indices, lod.palette.index, lod.palette.bones, lod.palette.weights,
+                  lod.palette.units):
+            add(x)
+    sk = model.skeleton
+    if sk is not None:
+        for x in (sk.parents, sk.inverse_bind, sk.rest_translation, sk.rest_rotation, sk.rest_scale):
+            add(x)
+        h.update(repr(list(sk.names)).encode())
+    for name in sorted(model.clips):
+        clip = model.clips[name]
+        h.update(repr((name, float(clip.duration))).encode())
+        for bone in sorted(clip.tracks):
+            for path in sorted(clip.tracks[bone]):
+                tr = clip.tracks[bone][path]
+                h.update(repr((bone, path, tr.interpolation)).encode())
+                add(tr.times)
+                add(tr.values)
+                for tangents in (tr.in_tangents, getattr(tr, "out_tangents", None)):
+                    if tangents is not None:
+                        add(tangents)
+    return h.hexdigest()

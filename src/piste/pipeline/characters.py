@@ -33,7 +33,7 @@ import numpy as np
 # the mesh batcher, the stripifier and the LOD maker (the character step's) and the glTF material
 # through the packages' lazy names (PEP 562): a bundle load reads their results, it does not import them
 from piste import character as _character
-from piste.character.lod import LOD
+from piste.character.lod import LOD, pose_skins, screen_errors
 from piste.character.model import Clip, Model, Skeleton, SkinnedMesh, Track
 from piste.character.palette import Palette
 from piste.errors import ConfigError, FormatError
@@ -49,7 +49,8 @@ __all__ = ["character_arrays", "model_from_arrays", "lods_from_arrays", "merged_
 
 CLIP_RATE = 30.0
 #: what the character step writes (part of its cache key): 2 = morph targets per LOD
-CHARACTERS_VERSION = 4  # 3: several primitives keep their own base colours (one packed texture); 4: material
+CHARACTERS_VERSION = 5  # 3: several primitives keep their own base colours (one packed texture); 4: material;
+#                        5: each LOD's screen-space error ("distance", metres: riders' LOD by pixels)
 DEFAULT_STEPS = (0.1, 0.2, 0.25)
 
 
@@ -106,6 +107,9 @@ def character_arrays(model: Model, ratios: Sequence[float] = (1.0, 0.5, 0.25), s
     lods = getattr(model, "lods", None)  # a model that ships its own LODs (an .mpf's Body3000/1500/750)
     if not lods or len(lods) != len(ratios):
         lods = _character.make_lods(mesh, ratios=ratios, steps=steps, max_bones=max_bones)
+    # each level's error on screen (geometry + palette in the clips' poses), measured here once rather than
+    # at every renderer's first frame (~0.27 s of a fresh process with scipy's k-d tree import)
+    distance = screen_errors(lods, pose_skins(model))
     a: dict = {
         "skeleton/parents": sk.parents.astype(np.int32),
         "skeleton/rest_translation": sk.rest_translation,
@@ -152,7 +156,8 @@ def character_arrays(model: Model, ratios: Sequence[float] = (1.0, 0.5, 0.25), s
         a[p + "strips"] = np.concatenate(strips).astype(np.int32) if strips else np.zeros(0, np.int32)
         strip_len = int(sum(len(s) for s in strips))
         meta["lods"].append({"name": lod.name, "ratio": float(lod.ratio), "step": float(lod.step),
-                             "error": float(lod.error), "triangles": int(m.n_triangles), "vertices": int(m.n_vertices),
+                             "error": float(lod.error), "distance": float(distance[i]),
+                             "triangles": int(m.n_triangles), "vertices": int(m.n_vertices),
                              "palette": int(pal.size), "batches": len(batches), "strip_indices": strip_len})
     return a, meta
 
@@ -218,5 +223,7 @@ def lods_from_arrays(arrays: dict, prefix: str, meta: dict, model: Model | None 
                            **_morphs(arrays, f"{prefix}lod{i}/", meta))
         pal = Palette(g("palette_bones"), g("palette_weights"), g("palette_units"), g("palette_index"),
                       float(info["step"]), int(meta.get("max_bones", 3)))
-        out.append(LOD(info["name"], mesh, pal, float(info["ratio"]), float(info["step"]), float(info["error"])))
+        d = info.get("distance")  # (bundles from before CHARACTERS_VERSION 5: None, measured on use)
+        out.append(LOD(info["name"], mesh, pal, float(info["ratio"]), float(info["step"]), float(info["error"]),
+                       float(d) if d is not None else None))
     return out

@@ -10,9 +10,9 @@ LOD, culling and tessellation):
    surface (:class:`piste.world.riders.RiderSet`);
 2. **character LOD**: ``high`` / ``medium`` / ``low`` per rider, the coarsest whose error projects
    under ``lod_pixels`` (default 1 px, the objects' rule: :func:`piste.world.object_lod.choose_lods`
-   on the rider's bounding sphere) -- each level's error (:meth:`Scene.rider_lod_errors`, once) is
-   its bind-pose Hausdorff-like distance to the full mesh plus how far its coarser palette moves its
-   vertices from the full palette's in sampled poses; ``lod_pixels=0``: by distance to the camera
+   on the rider's bounding sphere) -- each level's error (:meth:`Scene.rider_lod_errors`: stored in a
+   bundle, else measured once) is its bind-pose Hausdorff-like distance to the full mesh plus how far
+   its coarser palette moves its vertices in the clips' poses; ``lod_pixels=0``: by distance to the camera
    (``lod_distances``, what it was);
 3. **skinning** on the CPU with the SSX Tricky blended-matrix palette (one palette per LOD, the
    rider's world matrix folded into the palette, so vertices come out in world space): the riders
@@ -43,7 +43,7 @@ import numpy.typing as npt
 # bundle's scene brings its own model, and a bundle render does not import the batcher
 from piste import character as _character
 from piste.character import BlendedMesh, make_lods
-from piste.character.lod import lod_errors
+from piste.character.lod import MEASURED_ERRORS, lod_digest, pose_skins, screen_errors
 from piste.character.model import Model, SkinnedMesh
 from piste.errors import ConfigError
 from piste.graph import connected_parts
@@ -66,8 +66,6 @@ LOD_DISTANCES = (14.0, 35.0)
 #: default rider's levels: ~24 mm (medium) and ~44 mm (low) of error, so at 640x448 and 60 degrees
 #: the chased rider (~6 m) keeps the full mesh, the medium level from ~9 m, the low from ~17 m
 RIDER_LOD_PIXELS = DEFAULT_LOD_PIXELS
-#: the seconds whose poses measure how far each level's palette moves its vertices (every rider)
-_PALETTE_POSE_TIMES = (0.0, 1.3)
 
 
 def sun_light(lights: Lights) -> DirectionalLight | None:
@@ -212,32 +210,24 @@ class Scene:
 
     # ------------------------------------------------------------------ rider LOD
     def rider_lod_errors(self) -> np.ndarray:
-        """Each rider level's error ``(l,) float64`` in metres (level 0: 0), computed once per set of
-        levels: the bind-pose Hausdorff-like distance to the full mesh (:func:`piste.character.lod.lod_errors`)
-        plus the largest distance between a level's vertex skinned with the level's palette and the
-        same vertex skinned with the full mesh's, over every rider in the poses at
-        ``_PALETTE_POSE_TIMES`` (the coarser weight steps move vertices by ~1-2 cm)."""
+        """Each rider level's error ``(l,) float64`` in metres (level 0: 0): the levels' ``distance`` where
+        they were measured when built (a bundle's character step), else measured once here the same way
+        (:func:`piste.character.lod.screen_errors` in the poses of the model's clips:
+        :func:`~piste.character.lod.pose_skins`; ~0.1-0.3 s): the bind-pose Hausdorff-like distance to
+        the full mesh plus how far the level's coarser palette moves its vertices."""
         key = tuple(id(lod) for lod in self.lods)
         cached = self.__dict__.get("_rider_lod_errors")
         if cached is not None and cached[0] == key:
             return cached[1]
-        geo = lod_errors(self.lods)
-        pal = np.zeros(len(self.lods))
-        full = np.asarray(self.lods[0].mesh.positions, np.float64)
-        if len(self.lods) > 1 and len(self.riders) and len(full):
-            from scipy.spatial import cKDTree
-
-            tree = cKDTree(full)
-            skins = np.concatenate([self.riders.state(t).skin for t in _PALETTE_POSE_TIMES])
-            p0, _ = self.skinners[0].apply_many(skins, normalize=False)
-            for level in range(1, len(self.lods)):
-                d, idx = tree.query(np.asarray(self.lods[level].mesh.positions, np.float64))
-                same = d <= 1e-6  # the level's vertices that are the full mesh's (all, for a simplified one)
-                p, _ = self.skinners[level].apply_many(skins, normalize=False)
-                if same.any():
-                    pal[level] = float(np.linalg.norm(p[:, same] - p0[:, idx[same]], axis=2).max())
-        # rounded up to 0.1 mm: the same levels whichever skinning path (numba or numpy, last bits) measured them
-        err = np.ceil(np.maximum.accumulate(geo + pal) * 1e4) / 1e4
+        stored = [getattr(lod, "distance", None) for lod in self.lods]
+        if all(d is not None for d in stored):
+            err = np.asarray(stored, dtype=np.float64)
+        else:  # the built-in rider's, measured once (MEASURED_ERRORS), or measured now
+            known = MEASURED_ERRORS.get(lod_digest(self.lods, self.model))
+            if known is not None and len(known) == len(self.lods):
+                err = np.asarray(known, dtype=np.float64)
+            else:
+                err = screen_errors(self.lods, pose_skins(self.model))
         self.__dict__["_rider_lod_errors"] = (key, err)
         return err
 
