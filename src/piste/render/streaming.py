@@ -1672,7 +1672,8 @@ class StreamingRenderer:
         self._boxes: dict = {}  # (tile, level) -> (mesh id, patch_boxes)
         self._indirect = None  # the frame's indirect draw commands
         #: tile -> (key: its blocks' and neighbours' strides and its blocks in view, [(stride, "far" or
-        #: "zip", commands, triangles)], blocks out of view)
+        #: "zip", commands, triangles)], blocks out of view); (tile, stride) -> (key: that stride's blocks
+        #: in view and their neighbours' strides, its part of those draws)
         self._far_runs: dict = {}
         self._glue: dict = {}  # (tile, level) -> (index buffer, vertex array, mesh id): the glued patches
         #: far tiles drawn by block draw each stride's runs from one index list of their own
@@ -2029,13 +2030,23 @@ class StreamingRenderer:
                 got = self._far_runs.get(t)
                 if got is None or got[0] != bkey:
                     border = (ring[0, 1:-1], ring[1:-1, -1], ring[-1, 1:-1], ring[1:-1, 0])
+                    other = np.stack([ring[:-2, 1:-1], ring[1:-1, 2:], ring[2:, 1:-1], ring[1:-1, :-2]], -1).reshape(-1, 4)
                     py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
-                    runs = {k: block_runs(self.cache.far[t][k], (py1 - py0, px1 - px0), st, vis, k, border)
-                            for k in FAR_STRIDES if (vis & (st == k)).any()}
-                    draws = [(k, what, cmd, int(cmd[:, 0].sum()) // 3) for k, pair in runs.items()
-                             for what, cmd in zip(("far", "zip"), pair) if len(cmd)]  # (the zippers two-sided)
-                    if self.far_indices:  # each stride's runs as one list of indices (kept while they stay)
-                        draws = self._far_index_draws(t, draws)
+                    draws = []
+                    for k in FAR_STRIDES:  # a stride's draws depend only on its blocks in view and their neighbours
+                        sel = vis & (st == k)
+                        if not sel.any():
+                            continue
+                        kkey = (np.packbits(sel).tobytes(), other[sel].tobytes())
+                        gk = self._far_runs.get((t, k))
+                        if gk is None or gk[0] != kkey:
+                            pair = block_runs(self.cache.far[t][k], (py1 - py0, px1 - px0), st, vis, k, border)
+                            dk = [(k, what, cmd, int(cmd[:, 0].sum()) // 3)  # (the zippers two-sided)
+                                  for what, cmd in zip(("far", "zip"), pair) if len(cmd)]
+                            if self.far_indices and dk:  # one list of indices (kept while they stay)
+                                dk = self._far_index_draws(t, dk)
+                            gk = self._far_runs[(t, k)] = (kkey, dk)
+                        draws += gk[1]
                     got = self._far_runs[t] = (bkey, draws, len(vis) - int(np.count_nonzero(vis)))
                 for k, what, cmd, ntri in got[1]:
                     fk = self.cache.far[t][k]
