@@ -150,3 +150,33 @@ def test_the_built_in_riders_measured_errors_are_current(scene):
     from piste.character.lod import make_lods
 
     assert lod_digest(make_lods(scene.lods[0].mesh, steps=0.1), scene.model) not in MEASURED_ERRORS
+
+
+def test_scene_file_sets_the_riders_pixel_bound(tmp_path):
+    from piste.errors import ConfigError
+    from piste.world.scene_file import load_scene
+
+    p = tmp_path / "s.toml"
+    p.write_text("")
+    assert load_scene(p).lod.character_pixels == 1.0
+    p.write_text("[lod]\ncharacter_pixels = 0\n")
+    assert load_scene(p).lod.character_pixels == 0.0  # the distances of [lod] character
+    p.write_text("[lod]\ncharacter_pixels = -1\n")
+    with pytest.raises(ConfigError, match="character_pixels"):
+        load_scene(p)
+
+
+def test_a_bundles_pixel_bound_reaches_its_riders():
+    """The manifest's lod.character_pixels (the settings step writes [lod] character_pixels) is what the
+    runtime's riders take; a bundle without it: the default."""
+    from piste.pipeline.bundle_objects import load_bundle
+    from piste.pipeline.default_scene import build_default_scene
+    from piste.pipeline.preview import track_scene
+    from piste.world.scene import RIDER_LOD_PIXELS
+
+    b = load_bundle(build_default_scene(0, progress=False).path)
+    lod = b.manifest.setdefault("lod", {})
+    lod.pop("character_pixels", None)
+    assert track_scene(b).lod_pixels == RIDER_LOD_PIXELS
+    lod["character_pixels"] = 0.0
+    assert track_scene(b).lod_pixels == 0.0

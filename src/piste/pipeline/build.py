@@ -704,7 +704,7 @@ def _make_settings(ctx: BuildContext) -> StepOutput:
     lod, render = scene.lod, scene.render
     return {}, {
         "lod": {"near": lod.near, "far": lod.far, "character": list(lod.character), "ratios": list(lod.ratios),
-                "morph": bool(lod.morph)},
+                "morph": bool(lod.morph), "character_pixels": float(lod.character_pixels)},
         "render": {"size": list(render.size), "lightmap_mode": render.lightmap_mode, "fog": render.fog,
                    "face": render.face, "object_lod": render.object_lod, "aa": render.aa, "dof": render.dof,
                    "soft_shadows": render.soft_shadows, "occlusion": render.occlusion},

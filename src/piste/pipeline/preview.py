@@ -67,7 +67,7 @@ from piste.world.course import TRACK_HALF_WIDTH
 from piste.world.object_lod import DEFAULT_LOD_PIXELS
 from piste.world.objects import place_objects
 from piste.world.riders import DEFAULT_PACK, ClipTable, RiderState, pack_for, rider_model
-from piste.world.scene import LOD_DISTANCES, Scene, sun_light
+from piste.world.scene import LOD_DISTANCES, RIDER_LOD_PIXELS, Scene, sun_light
 
 if TYPE_CHECKING:
     import moderngl
@@ -171,11 +171,13 @@ class BundleScene(Scene):
         if character is not None and cid != first:  # a cast: riders only
             self.objects = None
             self.lod_distances = tuple(man.get("lod", {}).get("character", LOD_DISTANCES))
+            self.lod_pixels = float(man.get("lod", {}).get("character_pixels", RIDER_LOD_PIXELS))
             self.camera_kw = {}
             self.visibility = None
             return
         self.objects = bundle.objects()
         self.lod_distances = tuple(man.get("lod", {}).get("character", LOD_DISTANCES))
+        self.lod_pixels = float(man.get("lod", {}).get("character_pixels", RIDER_LOD_PIXELS))
         self.camera_kw = {}
         self.visibility = bundle.visibility
 
@@ -299,6 +301,9 @@ def track_scene(bundle: Bundle, start: float | None = None, casts: Iterable[tupl
     scene = Scene(net, line, lights, objects=objs, start=at, pack=rows)
     scene.casts = [Scene(net, line, lights, model=m, pack=rows, start=at) for m, rows in casts]
     scene.lod_distances = tuple(bundle.manifest.get("lod", {}).get("character", scene.lod_distances))
+    scene.lod_pixels = float(bundle.manifest.get("lod", {}).get("character_pixels", RIDER_LOD_PIXELS))
+    for c in scene.casts:
+        c.lod_distances, c.lod_pixels = scene.lod_distances, scene.lod_pixels
     return scene
 
 

@@ -44,7 +44,9 @@ scene file.  Every table and key is optional except where noted::
                                   # the game's; the default for an ssx_pbd terrain)
     near = 60.0                   # terrain: edges nearer than this get 8 vertices,
     far = 180.0                   #   nearer than far 6, the rest 4
-    character = [14.0, 35.0]      # riders: high -> medium -> low LOD distances
+    character = [14.0, 35.0]      # riders: high -> medium -> low LOD distances (when character_pixels = 0)
+    character_pixels = 1.0        # riders: each takes the coarsest LOD whose error projects under this many
+                                  #   pixels (the objects' rule); 0 = by the distances above
     ratios = [1.0, 0.5, 0.25]     # riders: triangle ratio of each LOD
     morph = true                  # terrain: geomorph between 4/6/8 (false: the talk's popping;
                                   #   `--lod-morph on|off` on demo/render/view overrides)
@@ -391,6 +393,7 @@ class LodSpec:
     character: tuple[float, float] = (14.0, 35.0)
     ratios: tuple[float, ...] = (1.0, 0.5, 0.25)
     morph: bool = True  # geomorph terrain vertices between levels (False: the talk's exact popping)
+    character_pixels: float = 1.0  # riders' LOD by projected error (pixels); 0: by ``character`` distances
 
 
 @dataclass
@@ -729,13 +732,14 @@ def _parse_lightmap(lm: SceneTable, scene: SceneFile) -> LightmapSpec:
 
 
 def _parse_lod(lo: SceneTable, scene: SceneFile) -> LodSpec:
-    lo.allow({"near", "far", "character", "ratios", "morph", "preset"})
+    lo.allow({"near", "far", "character", "ratios", "morph", "preset", "character_pixels"})
     preset = lo.get("preset", "str", "ssx_tricky" if scene.terrain.kind == "ssx_pbd" else "piste")
     if preset not in LOD_PRESETS:
         raise lo.error("preset", f"expected one of {', '.join(map(repr, LOD_PRESETS))}, got {preset!r}")
     spec = LodSpec(lo.get("near", "float", LOD_PRESETS[preset][0]), lo.get("far", "float", LOD_PRESETS[preset][1]),
                    lo.get("character", "vec2", (14.0, 35.0)), lo.get("ratios", "floats", (1.0, 0.5, 0.25)),
-                   lo.get("morph", "bool", True))
+                   lo.get("morph", "bool", True), lo.get("character_pixels", "float", 1.0))
+    _bounded(lo, "character_pixels", spec.character_pixels, 0.0, 64.0, "pixels")
     if not 0 <= spec.near <= spec.far:
         raise lo.error("far", f"expected 0 <= near <= far, got near={spec.near}, far={spec.far}")
     _bounded(lo, "far", spec.far, 0.0, MAX_FAR, "metres")
