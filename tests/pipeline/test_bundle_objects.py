@@ -191,3 +191,66 @@ def test_a_preview_draws_the_stored_track_texture_without_computing_it(tmp_path,
         assert p.terrain.terrain.track is not None
     finally:
         p.release()
+
+
+def _with_texels(tmp_path, texels=None, name="texels.piste"):
+    """The minimal bundle with a varied atlas (over-bright, -0.0, 0) and the float16 texels the build
+    stores for it (``texels``: stored instead; ``False``: none, as an older bundle)."""
+    from piste.render.textures import light_texels
+
+    path, arrays = _minimal(tmp_path)
+    b = load_bundle(path)
+    atlas = np.random.default_rng(3).uniform(0.0, 2.5, (20, 20, 3)).astype(np.float32)
+    atlas[0, 0], atlas[1, 1] = -0.0, 0.0
+    arrays = dict(arrays, **{"lightmap/atlas": atlas})
+    if texels is not False:
+        arrays["lightmap/texels"] = light_texels(atlas) if texels is None else texels
+    man = {k: v for k, v in b.manifest.items() if k not in ("format", "members")}
+    return load_bundle(write_bundle(tmp_path / name, man, arrays)), atlas
+
+
+def test_the_stored_light_map_texels_are_what_the_renderer_would_upload(tmp_path):
+    from piste.render.textures import light_texels
+
+    b, atlas = _with_texels(tmp_path)
+    t = b.lightmap_texels()
+    assert t is b.arrays["lightmap/texels"] and t.dtype == np.float16 and t.shape == (20, 20, 3)
+    assert np.array_equal(t.view(np.uint16), light_texels(atlas).view(np.uint16))  # bit for bit (-0.0 kept)
+    assert light_texels(t) is t  # the terrain pass uploads it as it is
+    old, _ = _with_texels(tmp_path, texels=False, name="old.piste")
+    assert old.lightmap_texels() is old.lightmap.atlas  # an older bundle: the atlas, converted at upload
+    b.lightmap.atlas = np.zeros((20, 20, 3), np.float32)  # replaced after loading: the new atlas, not stale texels
+    assert b.lightmap_texels() is b.lightmap.atlas
+
+
+@pytest.mark.parametrize("texels, says", [(np.zeros((20, 20, 3), np.float32), "float16"),
+                                          (np.zeros((20, 19, 3), np.float16), "(20, 20, 3)"),
+                                          (np.full((20, 20, 3), np.inf, np.float16), "finite"),
+                                          (np.full((20, 20, 3), -1.0, np.float16), "negative")])
+def test_bad_light_map_texels_name_the_member(tmp_path, texels, says):
+    b, _ = _with_texels(tmp_path, texels=texels)
+    with pytest.raises(FormatError) as e:
+        b.lightmap_texels()
+    assert "lightmap/texels.npy" in str(e.value) and says in str(e.value)
+
+
+def test_a_preview_draws_the_stored_light_map_texels_as_it_draws_the_atlas(tmp_path, gl, monkeypatch):
+    import piste.render.terrain_pass as terrain_pass
+    from piste.pipeline.preview import ScenePreview
+
+    convert = terrain_pass.light_texels
+
+    def only_stored(a):
+        assert a.dtype == np.float16, "the float32 atlas converted at set-up although the bundle stores its texels"
+        return convert(a)
+
+    images = []
+    for texels, name in ((False, "old.piste"), (None, "new.piste")):
+        b, _ = _with_texels(tmp_path, texels=texels, name=name)
+        p = ScenePreview(b, size=(64, 48), ctx=gl)
+        try:
+            images.append(p.render(b.camera("c")))
+        finally:
+            p.release()
+        monkeypatch.setattr(terrain_pass, "light_texels", only_stored)  # (for the bundle with texels)
+    assert np.array_equal(images[0], images[1])

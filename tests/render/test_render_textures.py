@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from piste.errors import ValidationError
+from piste.errors import RenderError, ValidationError
 from piste.render.textures import SUN_DIRECTION, lightmap_atlas_size, placeholder_lightmap, snow_texture
 from piste.terrain import PatchNet
 
@@ -143,3 +143,18 @@ def test_track_texels_are_the_clipped_float16_field_and_a_stored_one_is_taken_as
         assert np.array_equal(track_texels(bad), np.clip(bad.astype(np.float32), -TRACK_CLIP, TRACK_CLIP).astype(np.float16))
     nan = np.array([[np.nan, 1.0]], np.float16)
     assert np.isnan(track_texels(nan)[0, 0]) and track_texels(nan)[0, 1] == 1.0
+
+
+def test_light_texels_clip_and_keep_stored_texels_as_they_are():
+    from piste.render.textures import LIGHT_CLIP, light_texels, light_texels_in_range
+
+    a = np.array([[[0.25, 1.5, 70000.0, 0.5], [-0.0, 0.0, 3.0, 1.0]]], np.float32)  # (1, 2, 4): RGBA
+    t = light_texels(a)
+    assert t.dtype == np.float16 and t.shape == (1, 2, 3)
+    assert np.array_equal(t, np.array([[[0.25, 1.5, LIGHT_CLIP], [0.0, 0.0, 3.0]]], np.float16))
+    assert light_texels(t) is t and light_texels_in_range(t)  # (-0.0 stays in range)
+    neg = np.array([[[-0.5, 1.0, 1.0]]], np.float32)
+    assert np.array_equal(light_texels(neg), np.array([[[0.0, 1.0, 1.0]]], np.float16))  # clipped, as before
+    assert not light_texels_in_range(neg.astype(np.float16))
+    with pytest.raises(RenderError, match="finite"):
+        light_texels(np.array([[[np.nan, 1.0, 1.0]]], np.float16))

@@ -91,8 +91,10 @@ RESIDENT_MEMBER = "terrain/resident_blocks"
 #: process about as much as computing them (13 MB of blocks: 46 ms to inflate, 2 ms to CRC, 6 ms to
 #: hash); the light-map atlas (3.1 MB of float32, deflated only to 45 %: 10 ms to inflate) and the
 #: control points (1 MB, deflated to 32 %: 2.5 ms) likewise, for 2.3 MB more file at the default course;
-#: the track's float16 field (1.4 MB: a view, hashed, never inflated) too
-STORED_MEMBERS = frozenset({RESIDENT_MEMBER, "lightmap/atlas", "terrain/control_points", "terrain/track_field"})
+#: the track's float16 field (1.4 MB: a view, hashed, never inflated) and the light map's float16
+#: texels as uploaded (1.6 MB) too
+STORED_MEMBERS = frozenset({RESIDENT_MEMBER, "lightmap/atlas", "terrain/control_points", "terrain/track_field",
+                            "lightmap/texels"})
 
 
 def _sha256(data: bytes | memoryview) -> str:

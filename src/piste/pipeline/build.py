@@ -65,7 +65,7 @@ from piste.pipeline.ssx_rider import load_mpf_rider
 from piste.pipeline.visibility import (Visibility, camera_eyes, compute_visibility, culling_report,
                                        scene_eye_heights)
 from piste.render.shadow_pass import sun_visibility
-from piste.render.textures import TRACK_TEXEL, track_field, track_texels
+from piste.render.textures import TRACK_TEXEL, light_texels, track_field, track_texels
 from piste.terrain.net import TOPOLOGY_FORMAT, PatchNet
 from piste.world.camera import Camera, camera_planes, track_camera
 from piste.world.course import track_centerline
@@ -465,6 +465,9 @@ def _store_lightmap(ctx: BuildContext, out: StepOutput) -> None:
     lm_spec, arrays = ctx.scene.lightmap, ctx.arrays
     arrays["lightmap/atlas"] = la["atlas"]
     arrays["lightmap/rects"] = la["rects"]
+    # the atlas as the terrain pass uploads it (float16 RGB, clipped), so a fresh process's renderer
+    # set-up need not convert 3 MB of float32 (~2-4 ms): Bundle.lightmap_texels
+    arrays["lightmap/texels"] = light_texels(la["atlas"])
     if "base_texture" in la:
         arrays["terrain/base_texture"] = la["base_texture"]
     if "source" in la:  # an SSX level's stored Cs / As texels (ps2 mode, piste.render.ssx_pass)

@@ -12,7 +12,7 @@ API
     load_bundle(path, verify=True, warm=False) -> Bundle
     Bundle                 ``.net``, ``.lightmap``, ``.lights``, ``.cameras``, ``.visibility``, ``.centerline``,
                            ``.objects()``, ``.vertex_colors()``, ``.rider_model()``, ``.rider_lods()``,
-                           ``.track_texture()``, ``.arrays``, ``.manifest``, ``.camera(name)``
+                           ``.track_texture()``, ``.lightmap_texels()``, ``.arrays``, ``.manifest``, ``.camera(name)``
     bundle_from_data(BundleData) -> Bundle
     lights_from_dict(d) -> Lights          ``Lights.to_dict()`` back (infinite ranges may be "inf")
     camera_from_dict(d) -> Camera          :func:`piste.formats.bundle.camera_to_dict` back
@@ -51,7 +51,7 @@ from piste.lighting.lights import AmbientLight, DirectionalLight, Lights, PointL
 from piste.lighting.vertex import choose_lights_many
 from piste.pipeline.characters import lods_from_arrays, model_from_arrays
 from piste.pipeline.visibility import Visibility
-from piste.render.textures import TRACK_TEXEL
+from piste.render.textures import LIGHT_CLIP, TRACK_TEXEL, light_texels_in_range
 from piste.terrain.lod import LEVELS, STORED_ERROR_LEVELS, keep_patch_errors, patch_error_table
 from piste.terrain.net import TOPOLOGY_ARRAYS, TOPOLOGY_FORMAT, PatchNet
 from piste.terrain.resident import (RESIDENT_FLOATS, RESIDENT_FORMAT, ResidentTerrain, keep_resident, resident_fits,
@@ -302,6 +302,25 @@ class Bundle:
             raise FormatError(self.path, f"expected the track field's rectangle {want.tolist()} (the net's bounds), got "
                                          f"{np.asarray(rect).tolist()}", field="terrain/track_rect.npy")
         return f, want
+
+    def lightmap_texels(self) -> np.ndarray:
+        """The light map as the terrain pass uploads it: the build's stored ``lightmap/texels``
+        (``(H, W, 3) float16``, :func:`piste.render.textures.light_texels` of the atlas: a renderer's
+        set-up need not convert the float32 atlas, ~2-4 ms of a fresh process), or :attr:`lightmap`'s
+        atlas itself when the bundle has no texels (an older bundle) or the atlas was replaced after
+        loading (the renderer converts it).  FormatError naming the member when the stored texels are
+        not the atlas's shape in float16 or hold a texel outside ``[0, LIGHT_CLIP]`` (NaN, inf, negative)."""
+        atlas, t = self.lightmap.atlas, self.arrays.get("lightmap/texels")
+        if t is None or atlas is not self.arrays.get("lightmap/atlas"):
+            return atlas
+        want = (*np.shape(atlas)[:2], 3)
+        if t.dtype != np.float16 or t.shape != want:
+            raise FormatError(self.path, f"expected the light-map texels as a {want} float16 array (the atlas's "
+                                         f"size), got {t.shape} {t.dtype}", field="lightmap/texels.npy")
+        if not light_texels_in_range(t):
+            raise FormatError(self.path, f"expected light-map texels in [0, {LIGHT_CLIP}] (finite, not negative)",
+                              field="lightmap/texels.npy")
+        return t
 
     def sun_visibility(self, direction: npt.ArrayLike) -> tuple[np.ndarray, tuple[float, ...]] | None:
         """Where the terrain sees a sun shining along ``direction`` (3,), as the build stored it

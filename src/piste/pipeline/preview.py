@@ -451,7 +451,8 @@ class ScenePreview:
             kw.update(track=bundle.centerline, track_half_width=TRACK_HALF_WIDTH, track_texture=bundle.track_texture())
         if "terrain/base_texture" in bundle.arrays:  # an SSX level's own textures (pipeline.ssx_level)
             kw["base_texture"] = bundle.arrays["terrain/base_texture"]
-        atlas = bundle.lightmap.atlas if opt["lightmap"] == "bundle" else opt["lightmap"]
+        # (the build's float16 texels, as uploaded, when it stored them)
+        atlas = bundle.lightmap_texels() if opt["lightmap"] == "bundle" else opt["lightmap"]
         self.lightmap_mode = opt["lightmap_mode"] or man.get("render", {}).get("lightmap_mode", "modulate")
         mode = opt["object_lighting"]
         colors = bundle.vertex_colors()

@@ -31,7 +31,7 @@ import numpy as np
 
 from piste.errors import ConfigError, RenderError
 from piste.render.context import load_shader, set_depth_write
-from piste.render.textures import LOD_COLORS, mipmapped_texture, snow_texture, track_texels
+from piste.render.textures import LOD_COLORS, light_texels, mipmapped_texture, snow_texture, track_texels
 from piste.terrain.resident import ResidentMesh
 
 if TYPE_CHECKING:
@@ -236,12 +236,8 @@ class TerrainPass:
             raise RenderError(f"light-map atlas: expected an (H, W, 3|4) uint8 or float image, got {a.shape} {a.dtype}")
         if a.dtype == np.uint8:  # 0 .. 255/128: in the half-float range
             rgb = (a[..., :3].astype(np.float32) / (128.0 if half_bright else 255.0)).astype(np.float16)
-        else:  # min/max (NaN and inf show in them) instead of isfinite + a clip of every texel: ~1 ms less
-            lo, hi = (float(a.min()), float(a.max())) if a.size else (0.0, 0.0)
-            if not (np.isfinite(lo) and np.isfinite(hi)):
-                raise RenderError("light-map atlas: values must be finite")
-            rgb = a[..., :3] if 0.0 <= lo and hi <= 65000.0 else np.clip(a[..., :3], 0.0, 65000.0)
-            rgb = rgb.astype(np.float16)
+        else:  # (a bundle's stored float16 texels as they are)
+            rgb = light_texels(a)
         if self.light is not None:
             self.light.release()
         h, w = rgb.shape[:2]

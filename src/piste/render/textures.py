@@ -15,6 +15,7 @@ API
                              (a stand-in until baked light maps exist)
     lightmap_atlas_size      (W, H) of the atlas a net's ``lightmap_rect`` describes
     track_field              (H, W) float32 signed distance across a track (metres), a projected texture
+    light_texels             (H, W, 3) float16 light-map texels as the terrain pass uploads them
     mip_chain                the mip levels of an (H, W, C) uint8 image, as Mesa's glGenerateMipmap makes them
     mipmapped_texture        a moderngl texture with its mip levels computed on the CPU and uploaded
     MipLevels                a render target's mip levels redrawn on the GPU by piste's own shader
@@ -42,7 +43,7 @@ if TYPE_CHECKING:
     from piste.terrain.net import PatchNet
 
 __all__ = ["snow_texture", "compute_snow_texture", "SNOW_FILE", "placeholder_lightmap", "lightmap_atlas_size",
-           "track_field", "track_texels", "TRACK_TEXEL", "TRACK_CLIP", "mip_chain",
+           "track_field", "track_texels", "TRACK_TEXEL", "TRACK_CLIP", "light_texels", "light_texels_in_range", "LIGHT_CLIP", "mip_chain",
            "mipmapped_texture", "MipLevels", "LOD_COLORS", "SUN_DIRECTION"]
 
 #: debug colours (RGB uint8) by patch kind: 4x4 green, 6x6 yellow, 8x8 red, glue (non-uniform) blue
@@ -202,6 +203,36 @@ def track_texels(field: npt.ArrayLike) -> np.ndarray:
             int((f.view(np.uint16) & np.uint16(0x7FFF)).max()) <= _TRACK_CLIP_BITS:
         return f
     return np.clip(np.asarray(field, dtype=np.float32), -TRACK_CLIP, TRACK_CLIP).astype(np.float16)
+
+
+#: the brightest light-map texel the terrain pass uploads (half floats; brighter is clipped: :func:`light_texels`)
+LIGHT_CLIP = 65000.0
+#: ``LIGHT_CLIP`` as float16 bits: a float16 atlas whose bits are all at most this is in [+0, LIGHT_CLIP]
+LIGHT_CLIP_BITS = int(np.array(LIGHT_CLIP, np.float16).view(np.uint16))
+
+
+def light_texels_in_range(texels: np.ndarray) -> bool:
+    """Whether every float16 texel is in ``[-0, LIGHT_CLIP]`` (no NaN, inf nor negative value),
+    judged on its bits (``-0.0``, which a clip of ``-0.0`` keeps, is ``0x8000``)."""
+    v = texels.view(np.uint16)
+    return not v.size or int(v.max()) <= LIGHT_CLIP_BITS or not bool(((v > LIGHT_CLIP_BITS) & (v != 0x8000)).any())
+
+
+def light_texels(atlas: npt.ArrayLike) -> np.ndarray:
+    """A float light-map atlas ``(H, W, 3|4)`` (linear light) as the terrain pass uploads it:
+    ``(H, W, 3) float16``, its RGB clipped to ``[0, LIGHT_CLIP]``.  A float16 ``(H, W, 3)`` atlas
+    already in range (what a bundle stores: this function's result at build time, ``lightmap/texels``)
+    is returned as it is, checked on its bits (~0.3 ms; numpy's float16 min/max cost ~15 ms).
+    RenderError when a texel is NaN or infinite."""
+    a = np.asarray(atlas)
+    if a.dtype == np.float16 and a.ndim == 3 and a.shape[2] == 3 and a.size and light_texels_in_range(a):
+        return a
+    # min/max (NaN and inf show in them) instead of isfinite + a clip of every texel: ~1 ms less
+    lo, hi = (float(a.min()), float(a.max())) if a.size else (0.0, 0.0)
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        raise RenderError("light-map atlas: values must be finite")
+    rgb = a[..., :3] if 0.0 <= lo and hi <= LIGHT_CLIP else np.clip(a[..., :3], 0.0, LIGHT_CLIP)
+    return rgb.astype(np.float16)
 
 
 def track_field(centerline: npt.ArrayLike, bounds: tuple[npt.ArrayLike, npt.ArrayLike], texel: float = TRACK_TEXEL) -> tuple[np.ndarray, np.ndarray]:
