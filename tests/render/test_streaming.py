@@ -65,8 +65,8 @@ def test_per_frame_choices_match_the_per_tile_formulas(world):
             for scale in (50.0, 400.0, 3000.0):
                 allowed = np.sqrt((np.maximum(np.maximum(cache.lo - eye, eye - cache.hi), 0.0) ** 2).sum(1)) \
                     * S.FAR_PIXEL_ERROR / scale
-                want = [max([1] + [k for k in S.FAR_STRIDES[1:]
-                                   if cache.far_error[t][k] + cache.chord_error[t] <= allowed[i]])
+                want = [max([1] + [k for j, k in enumerate(S.FAR_STRIDES[1:])  # its blocks' largest error fits
+                                   if cache.blocks[t]["err"][:, j].max() <= allowed[i]])
                         for i, t in enumerate(cache.tiles)]
                 assert cache.far_strides(eye, scale).tolist() == want
                 seen |= set(want)

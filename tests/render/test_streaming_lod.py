@@ -5,6 +5,8 @@ draws far fewer triangles than near tiles at full detail, with the same picture 
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 
@@ -142,6 +144,7 @@ def test_far_block_strides_follow_their_error():
                   "err": np.array([[1.0, 2.0, 4.0], [5.0, 20.0, 40.0], [5.0, 20.0, 40.0]]),
                   "patches": np.array([64, 64, 64])}
     cache.block_start = np.array([0, 2, 3])
+    cache._lock = threading.Lock()
     eye = np.array([5.0, 5.0, 5.0])  # inside block 0; 995 m and 4995 m from the others
     # 3 px at 300 px a radian: 0.01 m of error a metre
     got = cache.block_strides(eye, 300.0, np.array([1, 1]), 3.0)

@@ -93,6 +93,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from piste.errors import ConfigError, FormatError
+from piste.render.block_errors import block_stride_errors, corner_stride_errors
 from piste.render.context import Offscreen, create_context, save_png
 from piste.render.frame import DEFAULT_FOG_DENSITY, FOG_REFERENCE_SIZE, Frame
 from piste.render.sky_pass import HORIZON, SkyPass
@@ -1103,6 +1104,11 @@ class TileCache:
                 self.chord_error[t] = chord_error(lit["far_positions"])
                 self.mid_error[t] = self.chord_error[t] / 4.0
             self.blocks[t] = far_blocks(lit["far_positions"], self._depth(t), self.chord_error[t], grids)
+            # the stride choice's errors: until the loader measures them against the tile's patches
+            # (:meth:`_load_block_errors`), the exact distance between the corner grid's triangulations
+            # plus the tile's chord error (a bound by the triangle inequality, not the local estimate)
+            self.blocks[t]["err"] = (corner_stride_errors(lit["far_positions"][..., 2], FAR_BLOCK, FAR_STRIDES[1:])
+                                     + self.chord_error[t])
             self._far_bytes += sum(m.nbytes for m in self.far[t].values()) + self.light[t].nbytes
             self._note_objects(t, lit)
         if self.bad:  # only tiles with a far stand-in are drawn
@@ -1114,14 +1120,19 @@ class TileCache:
         # (n, len(FAR_STRIDES) - 1), metres
         self._chord = np.array([self.chord_error.get(t, 0.0) for t in self.tiles], dtype=np.float64)
         self._mid = np.array([self.mid_error.get(t, 0.0) for t in self.tiles], dtype=np.float64)
-        self._stride_err = np.array([[self.far_error[t][k] + self.chord_error[t] for k in FAR_STRIDES[1:]]
-                                     for t in self.tiles], dtype=np.float64).reshape(-1, len(FAR_STRIDES) - 1)
+        # (each stride's largest block error: the tile's far level bounds its blocks' strides from below)
+        self._stride_err = np.array([self.blocks[t]["err"].max(0) for t in self.tiles],
+                                    dtype=np.float64).reshape(-1, len(FAR_STRIDES) - 1)
         # the far blocks of every tile of :attr:`tiles`, concatenated: tile i's at [block_start[i], block_start[i+1])
         nb = [len(self.blocks[t]["patches"]) for t in self.tiles]
         self.block_start = np.concatenate([[0], np.cumsum(nb)]).astype(np.int64)
         self.tile_index = {t: i for i, t in enumerate(self.tiles)}
         self._blk = {k: np.concatenate([self.blocks[t][k] for t in self.tiles]) if self.tiles else
                      np.zeros((0, 3) if k != "patches" else 0) for k in ("lo", "hi", "err", "patches")}
+        #: tiles whose block errors the loader has measured against their patches
+        #: (:func:`piste.render.block_errors.block_stride_errors`), and those queued for it
+        self.exact_errors: set = set()
+        self._errors_pending: set = set()
         if self._far_bytes > self.budget:
             raise ConfigError(f"streaming budget {self.budget / 2**20:.1f} MiB is below the far field's "
                               f"{self._far_bytes / 2**20:.1f} MiB: raise it")
@@ -1317,6 +1328,9 @@ class TileCache:
                 if what == 1:
                     self._load_objects(t)
                     continue
+                if what == 2:
+                    self._load_block_errors(t)
+                    continue
                 with self._lock:
                     samples = self._wanted.get(t)
                 if samples is not None:
@@ -1337,8 +1351,35 @@ class TileCache:
                 self.errors.append(exc)
             finally:
                 with self._lock:
-                    (self._objects_pending if what == 1 else self._pending).discard(t)
+                    (self._objects_pending if what == 1 else self._errors_pending if what == 2
+                     else self._pending).discard(t)
                 self._queue.task_done()
+
+    def _load_block_errors(self, t) -> None:
+        """Measure tile ``t``'s far blocks' stride errors against its fitted patches (the loader
+        thread: :func:`piste.render.block_errors.block_stride_errors`, exact on a lattice of 9 points
+        a patch side plus a curvature margin) and use them in place of the first bound (the corner
+        grids' distance plus the tile's chord error); a fit that does not read back keeps the first."""
+        i = self.tile_index.get(t)
+        if i is None or t in self.bad:
+            return
+        py0, py1, px0, px1 = self.grid.patch_range(*t)
+        try:
+            cp = self._read("fit", t, ("control_points",))["control_points"]
+            corner_z = self._read("lit", t, ("far_positions",))["far_positions"][..., 2]
+        except TileError as exc:  # the first bound stays (a near mesh of the tile will report it)
+            _log.debug("%s (block errors kept from the corner grid)", exc)
+            return
+        err = block_stride_errors(cp, corner_z, (py1 - py0, px1 - px0), FAR_BLOCK, FAR_STRIDES[1:])
+        s, e = int(self.block_start[i]), int(self.block_start[i + 1])
+        with self._lock:
+            self.blocks[t]["err"] = err
+            self._blk["err"][s:e] = err
+            cols = self.__dict__.get("_blk_cols")
+            if cols is not None:
+                cols[1][2][:, s:e] = err.T
+            self._stride_err[i] = err.max(0)
+            self.exact_errors.add(t)
 
     def _load_objects(self, t) -> None:
         """Read tile ``t``'s objects (the loader thread) and keep them while still wanted (their
@@ -1456,6 +1497,12 @@ class TileCache:
             todo += [(d, 1, t) for d, t in objs_want if t not in self.objects and t not in self._objects_pending]
             self._pending.update(t for _, what, t in todo if what == 0)
             self._objects_pending.update(t for _, what, t in todo if what == 1)
+        if len(self.exact_errors) + len(self._errors_pending) < len(self.tiles):  # block errors, nearest first
+            with self._lock:
+                more = [(float(dist[i]), 2, t) for i, t in enumerate(self.tiles)
+                        if t not in self.exact_errors and t not in self._errors_pending and t not in self.bad]
+                self._errors_pending.update(t for _, _, t in more)
+            todo = todo + more
         for item in todo:
             self._queue.put(item)
 
@@ -1464,7 +1511,7 @@ class TileCache:
         t0 = time.perf_counter()
         while True:
             with self._lock:
-                busy = bool(self._pending or self._objects_pending)
+                busy = bool(self._pending or self._objects_pending or self._errors_pending)
             if not busy:
                 break
             if time.perf_counter() - t0 > timeout:
@@ -1498,9 +1545,10 @@ class TileCache:
         ``err (len(FAR_STRIDES) - 1, nb)`` float64 (made once)."""
         got = self.__dict__.get("_blk_cols")
         if got is None or got[0] is not self._blk["lo"]:
-            cols = tuple(np.ascontiguousarray(np.asarray(self._blk[k], dtype=np.float64).reshape(-1, w).T)
-                         for k, w in (("lo", 3), ("hi", 3), ("err", len(FAR_STRIDES) - 1)))
-            got = self.__dict__["_blk_cols"] = (self._blk["lo"], cols)
+            with self._lock:  # (the loader writes measured errors into both)
+                cols = tuple(np.ascontiguousarray(np.asarray(self._blk[k], dtype=np.float64).reshape(-1, w).T)
+                             for k, w in (("lo", 3), ("hi", 3), ("err", len(FAR_STRIDES) - 1)))
+                got = self.__dict__["_blk_cols"] = (self._blk["lo"], cols)
         return got[1]
 
     def block_strides(self, eye: npt.ArrayLike, pixel_scale: float, tile_strides: np.ndarray,

@@ -1,0 +1,137 @@
+"""Per-block stride errors of a far tile, measured against its fitted patches.
+
+A far tile (:func:`piste.render.streaming.far_mesh`) is drawn by blocks of ``FAR_BLOCK x
+FAR_BLOCK`` patches, each at a corner stride ``k``: the triangulation of every ``k``-th patch
+corner (the tile's last row and column always kept), two triangles a cell split along the
+``(r, c) -> (r+1, c+1)`` diagonal.  :func:`block_stride_errors` gives, for every block and
+stride, the largest vertical distance between the tile's true surface (its bicubic patches
+``control_points (n, 4, 4, 3)``) and that triangulation over the block:
+
+* the surface is evaluated exactly on a lattice of ``samples`` points a patch side (patch corners
+  and edges included, so every vertex of every stride's triangulation and every point of a square
+  stride cell's diagonal that falls on the lattice), and the triangulation there exactly (the
+  triangle each lattice point lies in, by the mesh's own diagonal rule);
+* between lattice points, the difference (surface minus a plane) moves from its lattice values
+  by at most the linear-interpolation error of the surface, bounded per patch by its control
+  points: ``h**2 / 8 * (max|z_ss| + max|z_tt|) + h**2 / 4 * max|z_st|`` with ``h`` the lattice
+  step (``z_ss`` of a cubic Bezier patch is ``6 x`` the second differences of its control heights
+  along ``s`` weighted by quadratic Bernstein terms: at most ``6 max|second difference|``; ``z_st``
+  at most ``9 max|mixed difference|``).  That margin is added to every patch's lattice maximum.
+
+So the bound covers the whole fitted surface over the block where the triangulation is one plane
+on a lattice cell (everywhere for square stride cells, whose diagonals run along lattice cells'
+diagonals; the margin's mixed term covers a lattice cell split by the diagonal); in the short
+trailing cells of a tile whose patch count is not a multiple of the stride, a diagonal can cut a
+lattice cell off its corners, and there the bound is the lattice maximum plus the same margin
+(second order in ``h``: ``samples = 9`` makes it about 1/64 of a patch's chord error).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from piste.terrain.bezier import bernstein
+
+__all__ = ["block_stride_errors", "corner_stride_errors", "surface_lattice", "triangulated_at", "BLOCK_ERROR_SAMPLES"]
+
+#: lattice points a patch side at which the surface is compared (the build's ``far_error`` uses 9)
+BLOCK_ERROR_SAMPLES = 9
+
+
+def _stride_index(n: int, stride: int) -> np.ndarray:
+    i = np.arange(0, n, stride)
+    return i if i[-1] == n - 1 else np.append(i, n - 1)
+
+
+def surface_lattice(control_points: np.ndarray, grid_shape: tuple, samples: int = BLOCK_ERROR_SAMPLES
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The fitted surface of a tile of ``grid_shape = (ny, nx)`` patches (``control_points (ny nx, 4,
+    4, 3)``, patch ``row * nx + col``, ``[patch, a (x), b (y)]``) on ``samples`` points a patch
+    side: ``z (ny samples, nx samples)`` float64 heights, ``gy (ny samples,)`` and ``gx (nx
+    samples,)`` the lattice's coordinates in corner-grid units (patch row / column + fraction)."""
+    ny, nx = grid_shape
+    cp = np.asarray(control_points, dtype=np.float64)[..., 2].reshape(ny * nx, 4, 4)
+    f = np.linspace(0.0, 1.0, samples)
+    b = bernstein(f)  # (m, 4)
+    z = np.einsum("pab,ja,ib->pij", cp, b, b, optimize=True)  # [patch, i (y), j (x)]
+    z = z.reshape(ny, nx, samples, samples).transpose(0, 2, 1, 3).reshape(ny * samples, nx * samples)
+    gy = (np.arange(ny)[:, None] + f[None, :]).ravel()
+    gx = (np.arange(nx)[:, None] + f[None, :]).ravel()
+    return z, gy, gx
+
+
+def triangulated_at(corner_z: np.ndarray, stride: int, gy: np.ndarray, gx: np.ndarray) -> np.ndarray:
+    """The height of the stride-``stride`` triangulation of the corner heights ``corner_z (ny+1,
+    nx+1)`` (as :func:`piste.render.streaming.far_mesh` draws it) at the lattice ``gy (R,)`` x
+    ``gx (C,)`` (corner-grid units): ``(R, C)`` float64."""
+    z = np.asarray(corner_z, dtype=np.float64)
+    ri, ci = _stride_index(z.shape[0], stride), _stride_index(z.shape[1], stride)
+    jy = np.clip(np.searchsorted(ri, gy, side="right") - 1, 0, len(ri) - 2)
+    jx = np.clip(np.searchsorted(ci, gx, side="right") - 1, 0, len(ci) - 2)
+    fy = ((gy - ri[jy]) / (ri[jy + 1] - ri[jy]))[:, None]
+    fx = ((gx - ci[jx]) / (ci[jx + 1] - ci[jx]))[None, :]
+    r0, r1, c0, c1 = ri[jy][:, None], ri[jy + 1][:, None], ci[jx][None, :], ci[jx + 1][None, :]
+    z00, z01, z10, z11 = z[r0, c0], z[r0, c1], z[r1, c0], z[r1, c1]
+    lower = fx >= fy  # the triangle (r, c), (r, c+1), (r+1, c+1)
+    return np.where(lower, z00 + fx * (z01 - z00) + fy * (z11 - z01), z00 + fy * (z10 - z00) + fx * (z11 - z10))
+
+
+def _patch_margin(control_points: np.ndarray, samples: int) -> np.ndarray:
+    """Per patch ``(n,)``: how far the surface can leave its lattice values' interpolant inside a
+    lattice cell (step ``h = 1 / (samples - 1)``), from its control heights (module docstring)."""
+    cz = np.asarray(control_points, dtype=np.float64)[..., 2]  # (n, 4 (x), 4 (y))
+    daa = np.abs(cz[:, 2:] - 2.0 * cz[:, 1:-1] + cz[:, :-2]).max(axis=(1, 2))
+    dbb = np.abs(cz[:, :, 2:] - 2.0 * cz[:, :, 1:-1] + cz[:, :, :-2]).max(axis=(1, 2))
+    dab = np.abs(cz[:, 1:, 1:] - cz[:, 1:, :-1] - cz[:, :-1, 1:] + cz[:, :-1, :-1]).max(axis=(1, 2))
+    h = 1.0 / (samples - 1)
+    return h * h / 8.0 * 6.0 * (daa + dbb) + h * h / 4.0 * 9.0 * dab
+
+
+def _reduce(a: np.ndarray, step: int, axis: int) -> np.ndarray:
+    n = a.shape[axis]
+    return np.maximum.reduceat(a, np.arange(0, n, step), axis=axis)
+
+
+def block_stride_errors(control_points: np.ndarray, corner_z: np.ndarray, grid_shape: tuple, block: int,
+                        strides: tuple, samples: int = BLOCK_ERROR_SAMPLES) -> np.ndarray:
+    """For every block of ``block x block`` patches of a tile (``grid_shape (ny, nx)`` patches, its
+    fitted ``control_points (ny nx, 4, 4, 3)`` and corner heights ``corner_z (ny+1, nx+1)``) and
+    every stride of ``strides``: a bound on the largest vertical distance between the surface and
+    the stride's triangulation over the block (module docstring), metres: ``(by bx, len(strides))``
+    float64, block ``row * bx + col``."""
+    ny, nx = grid_shape
+    m = samples
+    z, gy, gx = surface_lattice(control_points, grid_shape, m)
+    margin = _patch_margin(control_points, m).reshape(ny, nx)
+    margin = _reduce(_reduce(margin, block, 0), block, 1)  # (by, bx)
+    out = []
+    for k in strides:
+        e = np.abs(z - triangulated_at(corner_z, k, gy, gx))
+        e = _reduce(_reduce(e, block * m, 0), block * m, 1)  # (by, bx)
+        out.append((e + margin).ravel())
+    return np.stack(out, -1)
+
+
+def corner_stride_errors(corner_z: np.ndarray, block: int, strides: tuple) -> np.ndarray:
+    """For every block of ``block x block`` patches of a tile's corner heights ``corner_z (ny+1,
+    nx+1)`` and every stride of ``strides``: the largest vertical distance between the full corner
+    grid's triangulation (stride 1) and the stride's, over the block's corners (both border lines
+    included), metres: ``(by bx, len(strides))`` float64.  Where the stride's cells are square (every
+    cell but a tile's short trailing ones) the stride-1 triangulation refines the stride's (the
+    diagonals run the same way), so the difference is linear on each stride-1 triangle and this is
+    its exact maximum over the block; adding a bound on how far the surface leaves the stride-1
+    triangulation (the build's ``far_error``) bounds the surface's distance by the triangle
+    inequality (:class:`piste.render.streaming.TileCache`'s first errors, before the loader has
+    measured :func:`block_stride_errors`)."""
+    z = np.asarray(corner_z, dtype=np.float64)
+    gy, gx = np.arange(z.shape[0], dtype=np.float64), np.arange(z.shape[1], dtype=np.float64)
+    out = []
+    for k in strides:
+        e = np.abs(z - triangulated_at(z, k, gy, gx))
+        for axis in (0, 1):  # blocks share their border lines: each block's last line is the next one's first
+            n = e.shape[axis]
+            s = np.arange(0, n - 1, block)
+            last = np.take(e, np.minimum(s + block, n - 1), axis=axis)
+            e = np.maximum(np.maximum.reduceat(e, s, axis=axis), last)
+        out.append(e.ravel())
+    return np.stack(out, -1)
