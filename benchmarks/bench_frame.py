@@ -18,7 +18,7 @@ Sections (every configuration interleaved frame by frame in one process; medians
    <= 0.5 px of error, 6 levels a kind against 4, and, as an upper bound for impostors,
    the instances under 8 px of radius left out; the terrain's back-face culling, whole
    back-facing patches left out by normal cones (off by default: no gain measured), error-driven
-   edges (flat, 2 corners, or coarsest where under 1 px, and 1 px against 0.5 px), visibility sets and per-vertex track distance; the shadow mips by compute dispatches, level l read as an image; the shadow
+   edges (flat, 2 corners, or coarsest where under 1 px, and 1 px against 0.5 px), visibility sets and per-vertex track distance; the shadow mips by compute dispatches, level l read as an image; the shadow casters closed by caps and culled against every triangle both sides; the shadow
    receivers cut to their frusta by clip distances, and drawn from the terrain's resident blocks by index), with the pixels changed;
    then whole frames, without the per-pass syncs: the terrain flushed to llvmpipe's rasterizer threads
    as soon as it is issued against everything rasterized at the frame's end (wall and CPU time).
@@ -574,6 +574,9 @@ def scene_section(args, floor_ms: list) -> dict:
     def set_mips_image(on):
         r.shadows._mips_cs = compute_mips if on else mips_fetch
 
+    def set_cull_casters(on):
+        r.shadows.cull_casters = on
+
     set_sky = _sky_programs(r.terrain.sky)
 
     def set_cone_cull(on):  # (on: the default, every patch sent)
@@ -611,6 +614,8 @@ def scene_section(args, floor_ms: list) -> dict:
                 "shadow mips: level l read by texelFetch through a sampler"),
                ("shadow casters", set_compute_mips, "shadow mips: two levels a compute dispatch",
                 "shadow mips: a framebuffer (and a rasterizer wait) per level"),
+               ("shadow casters", set_cull_casters, "casters closed (holes capped), back faces culled",
+                "casters: every triangle, both sides"),
                ("terrain", set_track_per_vertex, "terrain: track distance looked up per vertex",
                 "terrain: track distance looked up per pixel"),
                ("terrain", set_track_math, "terrain: the track's tint and dye lines with one division a pixel",
@@ -646,7 +651,8 @@ def scene_section(args, floor_ms: list) -> dict:
     ab_res = []
     acc2, undo2 = _profile(r)
     for label, setter, now_name, before_name in changes:
-        if label == "objects" and r.objects is None or label == "shadow casters" and compute_mips is None \
+        if label == "objects" and r.objects is None or label == "shadow casters" and (
+                r.shadows is None or r.shadows.soft or compute_mips is None and setter is not set_cull_casters) \
                 or setter is set_track_per_vertex and track_progs is None \
                 or setter is set_track_math and track_math is None \
                 or setter is set_object_lod_levels and errors_four is None or label == "shadow receivers" and \

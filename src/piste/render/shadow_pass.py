@@ -65,7 +65,7 @@ if TYPE_CHECKING:
     from piste.terrain.resident import ResidentMesh
     from piste.terrain.tessellate import TerrainMesh
 
-__all__ = ["shadow_matrices", "shadow_patches", "shadow_triangles", "resident_shadow_triangles", "ShadowPass", "SHADE", "sun_visibility",
+__all__ = ["closed_caster_indices", "shadow_matrices", "shadow_patches", "shadow_triangles", "resident_shadow_triangles", "ShadowPass", "SHADE", "sun_visibility",
            "area_light_visibility", "SUN_RADIUS", "ComputeMips"]
 
 #: colour multiplier in full shadow (what the sun adds over the sky's blue ambient is taken away)
@@ -76,6 +76,67 @@ SUN_RADIUS = 0.27
 
 _GL_CLIP_DISTANCE0 = 0x3000
 _MORPH_UNIT = 5  # the resident receivers' morph factors (3: the shadow texture, 4: the terrain's sunlight)
+
+
+def closed_caster_indices(indices: npt.ArrayLike, positions: npt.ArrayLike) -> np.ndarray:
+    """A caster's triangles closed by caps over its holes, to draw with back faces culled.
+
+    Parameters
+    ----------
+    indices : (t, 3) the caster's triangles;  positions : (v, 3) its vertices (any pose: welded by
+        position, so vertices split at UV / normal seams count as one)
+
+    Returns
+    -------
+    (t + c, 3) uint32: ``indices`` then ``c`` cap triangles, into the same vertices (nothing new to skin).
+
+    Why: the projected shadow is the casters' silhouette, and a *closed* oriented surface's silhouette is
+    covered by its front faces alone (a line that crosses the surface crosses it as often one way as the
+    other), so the caster pass can cull back faces and rasterize about half the triangles.  A rider's
+    parts are open (limbs and head end in holes inside the torso), so each hole is capped first: the
+    boundary of the triangles as a chain (the directed edges whose reverse is missing, with
+    multiplicity) is a set of loops; every boundary edge ``a -> b`` gets the triangle ``(b, a, o)``, ``o``
+    one vertex of its loop (its connected set of boundary edges): a fan that closes the loop whatever
+    its shape.  The culled silhouette is then the open mesh's plus where a cap shows past it (the holes
+    sit inside other parts: on the scene's riders a few texels of the 128-px tiles, tests/render/
+    test_shadow_casters_closed.py).
+    """
+    tri = np.asarray(indices, dtype=np.int64).reshape(-1, 3)
+    pos = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    if len(tri) == 0:
+        return np.zeros((0, 3), np.uint32)
+    if tri.min() < 0 or tri.max() >= len(pos):
+        raise RenderError(f"closed_caster_indices: indices must lie in 0..{len(pos) - 1}, got {tri.min()}..{tri.max()}")
+    _, first, weld = np.unique(pos, axis=0, return_index=True, return_inverse=True)
+    w = weld.reshape(-1)[tri]  # (t, 3) welded ids
+    nv = int(w.max()) + 1
+    e = np.stack([w[:, [0, 1]], w[:, [1, 2]], w[:, [2, 0]]], 1).reshape(-1, 2)
+    e = e[e[:, 0] != e[:, 1]]  # (degenerate triangles' zero-length edges close nothing)
+    # net count of each undirected edge's two directions: > 0 a -> b left over, < 0 b -> a
+    lo, hi = np.minimum(e[:, 0], e[:, 1]), np.maximum(e[:, 0], e[:, 1])
+    key, inv = np.unique(lo * nv + hi, return_inverse=True)
+    net = np.bincount(inv.reshape(-1), weights=np.where(e[:, 0] == lo, 1.0, -1.0), minlength=len(key)).astype(np.int64)
+    ka, kb = key // nv, key % nv
+    m = np.abs(net)
+    a = np.repeat(np.where(net > 0, ka, kb), m)  # boundary edges a -> b, each as often as it is left over
+    b = np.repeat(np.where(net > 0, kb, ka), m)
+    if len(a) == 0:
+        return np.ascontiguousarray(tri, dtype=np.uint32)
+    # loops: connected sets of boundary vertices (union-find by label propagation over the edges)
+    label = np.arange(nv)
+    while True:
+        low = np.minimum(label[a], label[b])
+        new = label.copy()
+        np.minimum.at(new, a, low)
+        np.minimum.at(new, b, low)
+        new = new[new]
+        if np.array_equal(new, label):
+            break
+        label = new
+    o = label[a]  # the loop's lowest vertex: the fan's apex
+    cap = np.stack([b, a, o], 1)
+    cap = cap[(a != o) & (b != o)]  # (the apex's own edges: degenerate)
+    return np.ascontiguousarray(np.concatenate([tri, first[cap]]), dtype=np.uint32)
 
 
 def sun_disc_directions(sun_direction: npt.ArrayLike, sun_radius: float, rays: int) -> np.ndarray:
@@ -508,6 +569,11 @@ class ShadowPass:
         self.sunlit = None
         self.set_sunlight(None)
         self._casts: dict = {}  # per caster group (one per rider model): its buffers
+        #: hard shadows: draw the casters closed by caps over their holes with back faces culled
+        #: (:func:`closed_caster_indices`: the same silhouettes from about half the triangles rasterized);
+        #: False: every triangle, both sides (bench_frame.py's A/B).  Soft shadows draw every triangle
+        #: (their nearest depth is not the culled surface's everywhere)
+        self.cull_casters = True
         self._recv = {"pos": None, "idx": None, "vao": None}
         self._recv_res: dict = {"idx": None, "vao": None, "buf": None}  # the resident path's index buffer
         self.light_vp = np.zeros((0, 4, 4))
@@ -528,16 +594,26 @@ class ShadowPass:
         if first + n > self.n_max:
             raise RenderError(f"shadow pass: {first + n} casters, room for {self.n_max}")
         ctx = self.ctx
-        c = self._casts.setdefault(group, {"pos": None, "idx": None, "vao": None, "nv": 0, "n": 0, "nt": 0})
-        if c["vao"] is None or c["nv"] != v or c["n"] != n:
-            for key in ("vao", "pos", "idx"):
+        c = self._casts.setdefault(group, {"pos": None, "idx": None, "vao": None, "nv": 0, "n": 0, "nt": 0,
+                                           "src": None, "idx_c": None, "vao_c": None, "nt_c": 0})
+        if c["vao"] is None or c["nv"] != v or c["n"] != n or (c["src"] is not indices and not np.array_equal(c["src"], indices)):
+            for key in ("vao", "pos", "idx", "vao_c", "idx_c"):
                 if c[key] is not None:
                     c[key].release()
-            idx = (np.asarray(indices, np.uint32)[None] + (np.arange(n, dtype=np.uint32) * v)[:, None, None]).reshape(-1)
+                    c[key] = None
+            offs = (np.arange(n, dtype=np.uint32) * v)[:, None, None]
+            idx = (np.asarray(indices, np.uint32)[None] + offs).reshape(-1)
             c["pos"] = ctx.buffer(reserve=max(pos.nbytes, 4), dynamic=True)
             c["idx"] = ctx.buffer(idx.tobytes() if len(idx) else b"\0\0\0\0")
             c["vao"] = ctx.vertex_array(self.caster, [(c["pos"], "3f", "in_pos")], c["idx"], index_element_size=4)
             c["nv"], c["n"], c["nt"] = v, n, int(np.asarray(indices).shape[0])
+            c["src"] = indices if isinstance(indices, np.ndarray) and not indices.flags.writeable else np.array(indices)
+            if n and v and len(idx):  # the closed casters, made once per model (the first rider's pose welds them)
+                closed = closed_caster_indices(indices, pos[0])
+                idx_c = (closed[None] + offs).reshape(-1)
+                c["idx_c"] = ctx.buffer(idx_c.tobytes())
+                c["vao_c"] = ctx.vertex_array(self.caster, [(c["pos"], "3f", "in_pos")], c["idx_c"], index_element_size=4)
+                c["nt_c"] = len(closed)
         if pos.nbytes:
             c["pos"].write(pos.tobytes())
         lvp = np.asarray(light_vp, dtype=np.float64).reshape(-1, 4, 4)
@@ -552,14 +628,20 @@ class ShadowPass:
         if self.soft:  # coverage: the largest; depth (alpha): the nearest
             ctx.enable(moderngl.BLEND)
             ctx.blend_equation = (moderngl.MAX, moderngl.MIN)
-        nt = 3 * c["nt"]
+        closed = self.cull_casters and not self.soft and c["vao_c"] is not None
+        vao, nt = (c["vao_c"], 3 * c["nt_c"]) if closed else (c["vao"], 3 * c["nt"])
+        if closed:
+            ctx.enable(moderngl.CULL_FACE)
+            ctx.cull_face = "back"
         for i in range(n):
             ctx.viewport = ((first + i) * self.tile, 0, self.tile, self.tile)
             self.caster["u_light_vp"].write(lvp[i].astype(np.float32).T.tobytes())
             if self.soft:
                 span, depth = _light_spans(lvp[i])
                 self.caster["u_depth_scale"].value = depth / span
-            c["vao"].render(moderngl.TRIANGLES, vertices=nt, first=i * nt)
+            vao.render(moderngl.TRIANGLES, vertices=nt, first=i * nt)
+        if closed:
+            ctx.disable(moderngl.CULL_FACE)
         if self.soft:
             ctx.blend_equation = moderngl.FUNC_ADD
             ctx.disable(moderngl.BLEND)
@@ -630,7 +712,9 @@ class ShadowPass:
 
     def read_tiles(self) -> np.ndarray:
         """The shadow texture ``(tile, n_max * tile) uint8`` coverage, top row first (debugging, tests)."""
-        data = np.frombuffer(self.texture.read(), np.uint8).reshape(self.tile, self.tile * self.n_max, 4)
+        # through the framebuffer: Texture.read() (glGetTexImage) of level 0 once the compute mips have
+        # bound the texture as an image returned the first frame's tiles again on llvmpipe (Mesa 24)
+        data = np.frombuffer(self.fbo.read(components=4), np.uint8).reshape(self.tile, self.tile * self.n_max, 4)
         return data[::-1, :, 0].copy()
 
     # ------------------------------------------------------------------ receivers
@@ -707,7 +791,7 @@ class ShadowPass:
 
     def release(self) -> None:
         for d in (*self._casts.values(), self._recv, self._recv_res):
-            for key in ("vao", "pos", "idx"):
+            for key in ("vao", "pos", "idx", "vao_c", "idx_c"):
                 if d.get(key) is not None:
                     d[key].release()
         if self._receiver_res is not None:
