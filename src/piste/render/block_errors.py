@@ -64,6 +64,14 @@ def triangulated_at(corner_z: np.ndarray, stride: int, gy: np.ndarray, gx: np.nd
     """The height of the stride-``stride`` triangulation of the corner heights ``corner_z (ny+1,
     nx+1)`` (as :func:`piste.render.streaming.far_mesh` draws it) at the lattice ``gy (R,)`` x
     ``gx (C,)`` (corner-grid units): ``(R, C)`` float64."""
+    return _planes(corner_z, stride, gy, gx)[0]
+
+
+def _planes(corner_z: np.ndarray, stride: int, gy: np.ndarray, gx: np.ndarray) -> tuple:
+    """:func:`triangulated_at` and, at every lattice point, both planes of its stride cell (the
+    triangle under ``fx >= fy`` and the other, extended over the cell) ``(R, C)``, each point's
+    distance from the cell's diagonal along x ``(R, C)`` (corner-grid units; 0 on it) and whether
+    its cell is square ``(R, C)`` bool."""
     z = np.asarray(corner_z, dtype=np.float64)
     ri, ci = _stride_index(z.shape[0], stride), _stride_index(z.shape[1], stride)
     jy = np.clip(np.searchsorted(ri, gy, side="right") - 1, 0, len(ri) - 2)
@@ -73,18 +81,58 @@ def triangulated_at(corner_z: np.ndarray, stride: int, gy: np.ndarray, gx: np.nd
     r0, r1, c0, c1 = ri[jy][:, None], ri[jy + 1][:, None], ci[jx][None, :], ci[jx + 1][None, :]
     z00, z01, z10, z11 = z[r0, c0], z[r0, c1], z[r1, c0], z[r1, c1]
     lower = fx >= fy  # the triangle (r, c), (r, c+1), (r+1, c+1)
-    return np.where(lower, z00 + fx * (z01 - z00) + fy * (z11 - z01), z00 + fy * (z10 - z00) + fx * (z11 - z10))
+    low = z00 + fx * (z01 - z00) + fy * (z11 - z01)
+    up = z00 + fy * (z10 - z00) + fx * (z11 - z10)
+    wy, wx = (ri[jy + 1] - ri[jy])[:, None], (ci[jx + 1] - ci[jx])[None, :]
+    return np.where(lower, low, up), low, up, (fx - fy) * wx, (wy == stride) & (wx == stride)
 
 
-def _patch_margin(control_points: np.ndarray, samples: int) -> np.ndarray:
-    """Per patch ``(n,)``: how far the surface can leave its lattice values' interpolant inside a
-    lattice cell (step ``h = 1 / (samples - 1)``), from its control heights (module docstring)."""
-    cz = np.asarray(control_points, dtype=np.float64)[..., 2]  # (n, 4 (x), 4 (y))
-    daa = np.abs(cz[:, 2:] - 2.0 * cz[:, 1:-1] + cz[:, :-2]).max(axis=(1, 2))
-    dbb = np.abs(cz[:, :, 2:] - 2.0 * cz[:, :, 1:-1] + cz[:, :, :-2]).max(axis=(1, 2))
-    dab = np.abs(cz[:, 1:, 1:] - cz[:, 1:, :-1] - cz[:, :-1, 1:] + cz[:, :-1, :-1]).max(axis=(1, 2))
+def _local_plane_margins(cz: np.ndarray, grid_shape: tuple, samples: int) -> np.ndarray:
+    """Per patch ``(ny, nx)``: the bilinear interpolation error ``h**2 / 8 (|z_ss| + |z_tt|)`` with
+    each lattice cell's own curvature: ``z_ss`` is linear in ``s`` and cubic in ``t``, so on a cell
+    it is at most its largest value at the cell's corners plus ``h**2 / 8 max|z_sstt|`` (``<= 36
+    max|second differences along s and t|`` of the control heights ``cz (n, 4, 4)``); likewise
+    ``z_tt``.  The largest over the patch's cells."""
+    ny, nx = grid_shape
+    m = samples
+    f = np.linspace(0.0, 1.0, m)
+    b = bernstein(f)
+    d2 = 6.0 * np.stack([1.0 - f, 3.0 * f - 2.0, 1.0 - 3.0 * f, f], -1)  # second derivatives of b (m, 4)
+    h = 1.0 / (m - 1)
+    four = np.abs(cz[:, 2:, 2:] - 2.0 * cz[:, 1:-1, 2:] + cz[:, :-2, 2:] - 2.0 * (cz[:, 2:, 1:-1] - 2.0 * cz[:, 1:-1, 1:-1]
+                  + cz[:, :-2, 1:-1]) + cz[:, 2:, :-2] - 2.0 * cz[:, 1:-1, :-2] + cz[:, :-2, :-2]).max(axis=(1, 2))
+    extra = h * h / 8.0 * 36.0 * four  # (n,)
+    out = np.zeros(len(cz))
+    for bs, bt in ((d2, b), (b, d2)):  # z_ss, then z_tt: [patch, i (t), j (s)]
+        d = np.abs(np.einsum("pab,ja,ib->pij", cz, bs, bt, optimize=True))
+        c = np.maximum(np.maximum(d[:, :-1, :-1], d[:, 1:, :-1]), np.maximum(d[:, :-1, 1:], d[:, 1:, 1:]))
+        out = out + c.reshape(len(cz), -1).max(1) + extra  # (the sum of the maxima bounds the max of the sums)
+    return (h * h / 8.0 * out).reshape(ny, nx)
+
+
+def _patch_margins(control_points: np.ndarray, grid_shape: tuple, samples: int, stride: int) -> tuple:
+    """Per patch ``(ny, nx)`` (a cell on one plane, a cell cut along its diagonal): how far the surface minus the stride's triangulation can leave the
+    largest of its lattice values inside a lattice cell (step ``h = 1 / (samples - 1)``), from the
+    patch's control heights: ``|z_ss| <= 6 max|second difference along s|``, likewise ``t``,
+    ``|z_st| <= 9 max|mixed difference|``.  A cell on one plane of the triangulation: the bilinear
+    interpolation error ``h**2 / 8 (|z_ss| + |z_tt|)``; a cell cut along its diagonal by the
+    triangulation's (patches on a square stride cell's diagonal, and every patch of a short
+    trailing cell): the linear interpolation error on a half cell (circumradius ``h / sqrt 2``)
+    ``h**2 / 4 (max(|z_ss|, |z_tt|) + |z_st|)``."""
+    ny, nx = grid_shape
+    cz = np.asarray(control_points, dtype=np.float64)[..., 2]  # (n, 4 (x: s), 4 (y: t))
+    zss = 6.0 * np.abs(cz[:, 2:] - 2.0 * cz[:, 1:-1] + cz[:, :-2]).max(axis=(1, 2))
+    ztt = 6.0 * np.abs(cz[:, :, 2:] - 2.0 * cz[:, :, 1:-1] + cz[:, :, :-2]).max(axis=(1, 2))
+    zst = 9.0 * np.abs(cz[:, 1:, 1:] - cz[:, 1:, :-1] - cz[:, :-1, 1:] + cz[:, :-1, :-1]).max(axis=(1, 2))
     h = 1.0 / (samples - 1)
-    return h * h / 8.0 * 6.0 * (daa + dbb) + h * h / 4.0 * 9.0 * dab
+    plane = np.minimum((h * h / 8.0 * (zss + ztt)).reshape(ny, nx), _local_plane_margins(cz, grid_shape, samples))
+    cut = (h * h / 4.0 * (np.maximum(zss, ztt) + zst)).reshape(ny, nx)
+    ri, ci = _stride_index(ny + 1, stride), _stride_index(nx + 1, stride)
+    jy = np.searchsorted(ri, np.arange(ny), side="right") - 1  # each patch row's stride cell
+    jx = np.searchsorted(ci, np.arange(nx), side="right") - 1
+    square = ((ri[jy + 1] - ri[jy]) == stride)[:, None] & ((ci[jx + 1] - ci[jx]) == stride)[None, :]
+    cut = np.maximum(cut, plane)
+    return np.where(square, plane, cut), cut
 
 
 def _reduce(a: np.ndarray, step: int, axis: int) -> np.ndarray:
@@ -102,13 +150,21 @@ def block_stride_errors(control_points: np.ndarray, corner_z: np.ndarray, grid_s
     ny, nx = grid_shape
     m = samples
     z, gy, gx = surface_lattice(control_points, grid_shape, m)
-    margin = _patch_margin(control_points, m).reshape(ny, nx)
-    margin = _reduce(_reduce(margin, block, 0), block, 1)  # (by, bx)
     out = []
     for k in strides:
-        e = np.abs(z - triangulated_at(corner_z, k, gy, gx))
-        e = _reduce(_reduce(e, block * m, 0), block * m, 1)  # (by, bx)
-        out.append((e + margin).ravel())
+        t, low, up, d, square = _planes(corner_z, k, gy, gx)
+        e = np.abs(z - t)
+        plane, cut = _patch_margins(control_points, grid_shape, m, k)
+        # a lattice cell cut along its diagonal by a square stride cell's: each half lies in one plane,
+        # bounded either by that plane's distance at the cell's four corners (extended past the
+        # diagonal) plus the bilinear margin, or by the distance at its three plus the half cell's
+        # margin: the smaller of the two bounds, a patch
+        near = square & (np.abs(d) <= 1.0 / (m - 1) + 1e-9)
+        ext = np.where(near, np.maximum(np.abs(z - low), np.abs(z - up)), e).reshape(ny, m, nx, m).max(axis=(1, 3))
+        e = e.reshape(ny, m, nx, m).max(axis=(1, 3))  # a patch
+        cut_patch = near.reshape(ny, m, nx, m).any(axis=(1, 3))
+        e = np.where(cut_patch, np.minimum(ext + plane, e + cut), e + plane)
+        out.append(_reduce(_reduce(e, block, 0), block, 1).ravel())
     return np.stack(out, -1)
 
 
