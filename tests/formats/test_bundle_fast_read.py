@@ -178,3 +178,44 @@ def test_stored_members_are_views_of_the_mapped_file(tmp_path):
     for name in STORED_MEMBERS & set(arrays):
         assert np.array_equal(got[name], arrays[name])
     assert np.array_equal(read_bundle(path).arrays["lightmap/atlas"], arrays["lightmap/atlas"] + 1)
+
+
+def test_big_stored_members_are_hashed_by_a_second_thread_and_checked_before_return(tmp_path, monkeypatch):
+    """The big uncompressed members that are not the terrain's go to a second thread's SHA-256 (here
+    every such member: the size bound at 0): the same arrays in the manifest's order, and a wrong byte or
+    hash still names the member; ``on_terrain`` is called before any of them is in the arrays."""
+    import threading
+
+    from piste.formats import bundle as fmt
+
+    monkeypatch.setattr(fmt._Hasher, "MIN_BYTES", 0)
+    hashed = []
+    real = fmt._sha256
+    monkeypatch.setattr(fmt, "_sha256", lambda data: hashed.append(threading.current_thread().name) or real(data))
+    path, _ = _bundle(tmp_path)
+    seen = {}
+    got = read_bundle(path, on_terrain=lambda man, part: seen.update(part))
+    plain = read_bundle(path, verify=False).arrays  # (no second thread when not verifying)
+    assert list(got.arrays) == list(plain)  # (the terrain's first, as read)
+    assert all(np.array_equal(got.arrays[n], a) and got.arrays[n].dtype == a.dtype for n, a in plain.items())
+    assert hashed.count("piste-bundle-sha256") == 2  # the atlas and the vertex blocks (not the terrain's)
+    assert "lightmap/atlas" not in seen and RESIDENT_MEMBER not in seen and "terrain/control_points" in seen
+    for member in ("lightmap/atlas", RESIDENT_MEMBER):
+        with zipfile.ZipFile(path) as zf:
+            info = zf.getinfo(member + ".npy")
+            offset = info.header_offset + 30 + len(info.filename.encode()) + len(info.extra) + info.compress_size - 3
+        raw = bytearray(path.read_bytes())
+        raw[offset] ^= 0x10
+        flipped = tmp_path / "flipped.piste"
+        flipped.write_bytes(bytes(raw))
+        with pytest.raises(FormatError, match="corrupt member") as e:
+            read_bundle(flipped)
+        assert e.value.field == member + ".npy"
+
+        def edit(name, data, man, member=member):
+            man["members"][member]["sha256"] = "0" * 64
+            return data
+
+        with pytest.raises(FormatError, match="checksum mismatch") as e:
+            read_bundle(_rewrite(path, tmp_path / "wrong.piste", edit))
+        assert e.value.field == member + ".npy"

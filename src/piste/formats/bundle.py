@@ -243,49 +243,128 @@ def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool,
     # blocks, in the background) while the light map, characters and objects are read
     first = [n for n in members if n in TERRAIN_MEMBERS]
     order = first + [n for n in members if n not in TERRAIN_MEMBERS]
-    for k, name in enumerate(order):
-        if on_terrain is not None and k == len(first):
+    # the big uncompressed members that are not the terrain's (the vertex blocks, the light map: ~19 MB,
+    # ~12 ms of SHA-256) are handed first to a second thread that hashes them (hashlib lets go of the
+    # GIL) while this one reads and checks the rest; each is checked, and only then parsed, before any
+    # is returned (nor are they given to ``on_terrain``)
+    background = _Hasher() if verify and mm is not None else None
+    deferred: list[tuple[str, Any, zipfile.ZipInfo, bool]] = []
+    if background is not None:
+        big = [n for n in order[len(first):] if n in STORED_MEMBERS]
+        for name in big:  # (a member that cannot go to the thread is read below in the order)
+            _read_member(path, zf, mm, infos, members, name, verify, out, background, deferred, hand_off=True)
+        handed = {d[0] for d in deferred}
+    try:
+        for k, name in enumerate(order):
+            if on_terrain is not None and k == len(first):
+                on_terrain(out)
+            if background is None or name not in handed:
+                _read_member(path, zf, mm, infos, members, name, verify, out, None, deferred)
+        if on_terrain is not None and len(first) == len(order):
             on_terrain(out)
-        info = members[name]
-        member = f"{name}.npy"
-        zi = infos.get(member)
-        if zi is None:
-            raise FormatError(path, "member listed in the manifest is missing", field=member)
-        if zi.file_size > MAX_MEMBER_BYTES:  # a zip bomb: checked before inflating
-            raise FormatError(path, f"member of {zi.file_size} bytes is larger than the limit of "
-                                    f"{MAX_MEMBER_BYTES}", field=member)
-        # uncompressed members: a view of the mapped file, checked once (by the SHA-256 when verifying,
-        # else by the zip's CRC-32); deflated ones: CRC-32 checked as they are inflated
-        try:
-            data = _mapped_member(mm, zi) if mm is not None else None
-            crc_checked = data is None or zi.compress_type != zipfile.ZIP_STORED
-            if data is None:
-                with zf.open(zi) as fh:
-                    data = fh.read()
-        except (zipfile.BadZipFile, zlib.error, OSError, EOFError) as exc:
-            raise FormatError(path, f"corrupt member ({exc})", field=member) from None
-        if len(data) != zi.file_size:
-            raise FormatError(path, f"corrupt member ({len(data)} bytes, the zip says {zi.file_size})", field=member)
-        if verify and _sha256(data) != info.get("sha256"):
-            if not crc_checked and zlib.crc32(data) != zi.CRC:  # a corrupt member, as zipfile says it
-                raise FormatError(path, f"corrupt member (Bad CRC-32 for file {member!r})", field=member)
-            raise FormatError(path, "checksum mismatch (the file is corrupt)", field=member)
-        if not verify and not crc_checked and zlib.crc32(data) != zi.CRC:
+    finally:
+        digests = background.digests() if background is not None else {}
+    for name, data, zi, crc_checked in deferred:
+        _check_member(path, zi, data, members[name], digests[name], crc_checked)
+        out[name] = _member_array(path, name, f"{name}.npy", data, members[name])
+    return {n: out[n] for n in order} if deferred else out
+
+
+class _Hasher:
+    """SHA-256 of bundle members in a second thread, in the order given (:func:`_read_arrays`)."""
+
+    #: uncompressed members at least this big go to the second thread (smaller ones: not worth a hand-off)
+    MIN_BYTES = 1 << 20
+
+    def __init__(self) -> None:
+        import queue
+        import threading
+
+        self._todo: Any = queue.SimpleQueue()
+        self._out: dict[str, str] = {}
+        self._thread = threading.Thread(target=self._run, name="piste-bundle-sha256", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while (job := self._todo.get()) is not None:
+            self._out[job[0]] = _sha256(job[1])
+
+    def add(self, name: str, data: bytes | memoryview) -> None:
+        self._todo.put((name, data))
+
+    def digests(self) -> dict[str, str]:
+        """Every added member's hex SHA-256 (waits for the thread)."""
+        self._todo.put(None)
+        self._thread.join()
+        return self._out
+
+
+def _check_member(path: Path, zi: zipfile.ZipInfo, data: bytes | memoryview, info: dict, digest: str | None,
+                  crc_checked: bool) -> None:
+    """FormatError naming the member when its SHA-256 (``digest``; None: not verifying) is not the
+    manifest's, or, not verifying, when an unchecked member's CRC-32 is not the zip's."""
+    member = zi.filename
+    if digest is not None and digest != info.get("sha256"):
+        if not crc_checked and zlib.crc32(data) != zi.CRC:  # a corrupt member, as zipfile says it
             raise FormatError(path, f"corrupt member (Bad CRC-32 for file {member!r})", field=member)
-        try:
-            a = _known_array(data, info, copy=name not in STORED_MEMBERS)
-            if a is None:  # not the header piste writes for that shape and dtype: numpy parses it
-                a = _view_array(data) if name in STORED_MEMBERS else np.lib.format.read_array(io.BytesIO(data),
-                                                                                              allow_pickle=False)
-        except Exception as exc:
-            raise FormatError(path, f"not a valid .npy array ({exc})", field=member) from None
-        if list(a.shape) != list(info.get("shape", [])) or a.dtype.str != info.get("dtype"):
-            raise FormatError(path, f"expected shape {info.get('shape')} dtype {info.get('dtype')}, got "
-                                    f"{list(a.shape)} {a.dtype.str}", field=member)
-        out[name] = a
-    if on_terrain is not None and len(first) == len(order):
-        on_terrain(out)
-    return out
+        raise FormatError(path, "checksum mismatch (the file is corrupt)", field=member)
+    if digest is None and not crc_checked and zlib.crc32(data) != zi.CRC:
+        raise FormatError(path, f"corrupt member (Bad CRC-32 for file {member!r})", field=member)
+
+
+def _member_array(path: Path, name: str, member: str, data: bytes | memoryview, info: dict) -> np.ndarray:
+    """The checked member's array, of the manifest's shape and dtype (FormatError naming it otherwise)."""
+    try:
+        a = _known_array(data, info, copy=name not in STORED_MEMBERS)
+        if a is None:  # not the header piste writes for that shape and dtype: numpy parses it
+            a = _view_array(data) if name in STORED_MEMBERS else np.lib.format.read_array(io.BytesIO(data),
+                                                                                          allow_pickle=False)
+    except Exception as exc:
+        raise FormatError(path, f"not a valid .npy array ({exc})", field=member) from None
+    if list(a.shape) != list(info.get("shape", [])) or a.dtype.str != info.get("dtype"):
+        raise FormatError(path, f"expected shape {info.get('shape')} dtype {info.get('dtype')}, got "
+                                f"{list(a.shape)} {a.dtype.str}", field=member)
+    return a
+
+
+def _read_member(path: Path, zf: zipfile.ZipFile, mm: mmap.mmap | None, infos: dict, members: dict, name: str,
+                 verify: bool, out: dict, background: _Hasher | None, deferred: list, hand_off: bool = False) -> None:
+    """Read, check and parse member ``name`` into ``out``, or, when it is a big uncompressed one not of
+    the terrain and ``background`` hashes, hand its hash to that thread and list it in ``deferred``
+    (``hand_off``: only that; a member that cannot go to the thread is left to the call in the read
+    order, a corrupt one raises FormatError naming it as that call would)."""
+    info = members[name]
+    member = f"{name}.npy"
+    zi = infos.get(member)
+    if zi is None:
+        raise FormatError(path, "member listed in the manifest is missing", field=member)
+    if zi.file_size > MAX_MEMBER_BYTES:  # a zip bomb: checked before inflating
+        raise FormatError(path, f"member of {zi.file_size} bytes is larger than the limit of "
+                                f"{MAX_MEMBER_BYTES}", field=member)
+    # uncompressed members: a view of the mapped file, checked once (by the SHA-256 when verifying,
+    # else by the zip's CRC-32); deflated ones: CRC-32 checked as they are inflated
+    if hand_off and (zi is None or zi.file_size > MAX_MEMBER_BYTES or zi.compress_type != zipfile.ZIP_STORED
+                     or zi.file_size < _Hasher.MIN_BYTES):
+        return
+    try:
+        data = _mapped_member(mm, zi) if mm is not None else None
+        crc_checked = data is None or zi.compress_type != zipfile.ZIP_STORED
+        if data is None:
+            with zf.open(zi) as fh:
+                data = fh.read()
+    except (zipfile.BadZipFile, zlib.error, OSError, EOFError) as exc:
+        raise FormatError(path, f"corrupt member ({exc})", field=member) from None
+    if len(data) != zi.file_size:
+        raise FormatError(path, f"corrupt member ({len(data)} bytes, the zip says {zi.file_size})", field=member)
+    if background is not None and name not in TERRAIN_MEMBERS and not crc_checked and \
+            len(data) >= _Hasher.MIN_BYTES:
+        background.add(name, data)
+        deferred.append((name, data, zi, crc_checked))
+        return
+    if hand_off:
+        return
+    _check_member(path, zi, data, info, _sha256(data) if verify else None, crc_checked)
+    out[name] = _member_array(path, name, member, data, info)
 
 
 def _known_array(data: bytes | memoryview, info: dict, copy: bool) -> np.ndarray | None:
