@@ -8,22 +8,28 @@ stride, the largest vertical distance between the tile's true surface (its bicub
 ``control_points (n, 4, 4, 3)``) and that triangulation over the block:
 
 * the surface is evaluated exactly on a lattice of ``samples`` points a patch side (patch corners
-  and edges included, so every vertex of every stride's triangulation and every point of a square
-  stride cell's diagonal that falls on the lattice), and the triangulation there exactly (the
+  and edges included, so every vertex of every stride's triangulation, and every point where a
+  square stride cell's diagonal crosses the lattice), and the triangulation there exactly (the
   triangle each lattice point lies in, by the mesh's own diagonal rule);
-* between lattice points, the difference (surface minus a plane) moves from its lattice values
-  by at most the linear-interpolation error of the surface, bounded per patch by its control
-  points: ``h**2 / 8 * (max|z_ss| + max|z_tt|) + h**2 / 4 * max|z_st|`` with ``h`` the lattice
-  step (``z_ss`` of a cubic Bezier patch is ``6 x`` the second differences of its control heights
-  along ``s`` weighted by quadratic Bernstein terms: at most ``6 max|second difference|``; ``z_st``
-  at most ``9 max|mixed difference|``).  That margin is added to every patch's lattice maximum.
+* inside a lattice cell lying on one plane of the triangulation, the difference (surface minus
+  that plane) is at most its largest corner value plus the bilinear interpolation error
+  ``h**2 / 8 (|z_ss| + |z_tt|)`` (``h`` the lattice step in patch parameters; the second
+  derivatives of the bicubic surface bounded on the cell: ``z_ss`` is linear in ``s``, so its
+  largest corner value plus ``h**2 / 8 |z_sstt|``, from the control heights' fourth differences,
+  or the whole patch's control-net bound ``6 max|second difference|`` if smaller);
+* a lattice cell cut along its diagonal by a square stride cell's diagonal: each half lies in one
+  plane, bounded by that plane extended over the cell (its distance at the four corners plus the
+  same margin) or by the half cell's linear interpolation error ``h**2 / 4 (max(|z_ss|, |z_tt|) +
+  |z_st|)`` over its three corners (circumradius ``h / sqrt 2``), whichever is smaller.
 
-So the bound covers the whole fitted surface over the block where the triangulation is one plane
-on a lattice cell (everywhere for square stride cells, whose diagonals run along lattice cells'
-diagonals; the margin's mixed term covers a lattice cell split by the diagonal); in the short
-trailing cells of a tile whose patch count is not a multiple of the stride, a diagonal can cut a
-lattice cell off its corners, and there the bound is the lattice maximum plus the same margin
-(second order in ``h``: ``samples = 9`` makes it about 1/64 of a patch's chord error).
+So the bound covers the whole fitted surface over the block for every square stride cell (all of
+a tile whose patch count is a multiple of the stride: the 64-patch tiles of the benchmark worlds
+but their last row and column of tiles).  In a tile's short trailing cells (``n`` patches not a
+multiple of the stride) the diagonal crosses lattice cells off their corners: there the bound is
+the lattice maximum plus the half-cell margin, which covers the surface where the cell's corners'
+triangle is the one drawn and is second order in ``h`` elsewhere (not proven there).  Measured on
+a rough synthetic world (hills 300 m high, 60 m patches): bound / densely sampled true distance
+<= 1.26 at stride 1, 1.15 at 2 and 1.1 at 4 and 8.
 """
 
 from __future__ import annotations
