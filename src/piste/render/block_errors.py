@@ -59,7 +59,7 @@ def surface_lattice(control_points: np.ndarray, grid_shape: tuple, samples: int 
     cp = np.asarray(control_points, dtype=np.float64)[..., 2].reshape(ny * nx, 4, 4)
     f = np.linspace(0.0, 1.0, samples)
     b = bernstein(f)  # (m, 4)
-    z = np.einsum("pab,ja,ib->pij", cp, b, b, optimize=True)  # [patch, i (y), j (x)]
+    z = b @ cp.transpose(0, 2, 1) @ b.T  # [patch, i (y), j (x)]: sum over a (x), b (y) of B_j(a) B_i(b) cp
     z = z.reshape(ny, nx, samples, samples).transpose(0, 2, 1, 3).reshape(ny * samples, nx * samples)
     gy = (np.arange(ny)[:, None] + f[None, :]).ravel()
     gx = (np.arange(nx)[:, None] + f[None, :]).ravel()
@@ -84,11 +84,16 @@ def _planes(corner_z: np.ndarray, stride: int, gy: np.ndarray, gx: np.ndarray) -
     jx = np.clip(np.searchsorted(ci, gx, side="right") - 1, 0, len(ci) - 2)
     fy = ((gy - ri[jy]) / (ri[jy + 1] - ri[jy]))[:, None]
     fx = ((gx - ci[jx]) / (ci[jx + 1] - ci[jx]))[None, :]
-    r0, r1, c0, c1 = ri[jy][:, None], ri[jy + 1][:, None], ci[jx][None, :], ci[jx + 1][None, :]
-    z00, z01, z10, z11 = z[r0, c0], z[r0, c1], z[r1, c0], z[r1, c1]
-    lower = fx >= fy  # the triangle (r, c), (r, c+1), (r+1, c+1)
-    low = z00 + fx * (z01 - z00) + fy * (z11 - z01)
-    up = z00 + fy * (z10 - z00) + fx * (z11 - z10)
+    zc = z[ri][:, ci]  # the stride's corners; each cell's plane coefficients, gathered row then column
+    dx, dy = zc[:, 1:] - zc[:, :-1], zc[1:] - zc[:-1]
+
+    def at(c: np.ndarray) -> np.ndarray:
+        return c.take(jy, axis=0).take(jx, axis=1)
+
+    z00 = at(zc[:-1, :-1])
+    low = z00 + fx * at(dx[:-1]) + fy * at(dy[:, 1:])  # the triangle (r, c), (r, c+1), (r+1, c+1)
+    up = z00 + fy * at(dy[:, :-1]) + fx * at(dx[1:])
+    lower = fx >= fy
     wy, wx = (ri[jy + 1] - ri[jy])[:, None], (ci[jx + 1] - ci[jx])[None, :]
     return np.where(lower, low, up), low, up, (fx - fy) * wx, (wy == stride) & (wx == stride)
 
@@ -110,15 +115,15 @@ def _local_plane_margins(cz: np.ndarray, grid_shape: tuple, samples: int) -> np.
     extra = h * h / 8.0 * 36.0 * four  # (n,)
     out = np.zeros(len(cz))
     for bs, bt in ((d2, b), (b, d2)):  # z_ss, then z_tt: [patch, i (t), j (s)]
-        d = np.abs(np.einsum("pab,ja,ib->pij", cz, bs, bt, optimize=True))
+        d = np.abs(bt @ cz.transpose(0, 2, 1) @ bs.T)  # [patch, i (t), j (s)]
         c = np.maximum(np.maximum(d[:, :-1, :-1], d[:, 1:, :-1]), np.maximum(d[:, :-1, 1:], d[:, 1:, 1:]))
         out = out + c.reshape(len(cz), -1).max(1) + extra  # (the sum of the maxima bounds the max of the sums)
     return (h * h / 8.0 * out).reshape(ny, nx)
 
 
-def _patch_margins(control_points: np.ndarray, grid_shape: tuple, samples: int, stride: int) -> tuple:
-    """Per patch ``(ny, nx)`` (a cell on one plane, a cell cut along its diagonal): how far the surface minus the stride's triangulation can leave the
-    largest of its lattice values inside a lattice cell (step ``h = 1 / (samples - 1)``), from the
+def _patch_margins(control_points: np.ndarray, grid_shape: tuple, samples: int) -> tuple:
+    """Per patch ``(ny, nx)``, for a cell on one plane and for a cell cut along its diagonal: how far
+    the surface minus the triangulation can leave the largest of its lattice values inside a lattice cell (step ``h = 1 / (samples - 1)``), from the
     patch's control heights: ``|z_ss| <= 6 max|second difference along s|``, likewise ``t``,
     ``|z_st| <= 9 max|mixed difference|``.  A cell on one plane of the triangulation: the bilinear
     interpolation error ``h**2 / 8 (|z_ss| + |z_tt|)``; a cell cut along its diagonal by the
@@ -133,12 +138,21 @@ def _patch_margins(control_points: np.ndarray, grid_shape: tuple, samples: int, 
     h = 1.0 / (samples - 1)
     plane = np.minimum((h * h / 8.0 * (zss + ztt)).reshape(ny, nx), _local_plane_margins(cz, grid_shape, samples))
     cut = (h * h / 4.0 * (np.maximum(zss, ztt) + zst)).reshape(ny, nx)
+    return plane, np.maximum(cut, plane)
+
+
+def _square_patches(grid_shape: tuple, stride: int) -> np.ndarray:
+    """``(ny, nx)`` bool: the patches in square cells of the stride (not a tile's short trailing ones)."""
+    ny, nx = grid_shape
     ri, ci = _stride_index(ny + 1, stride), _stride_index(nx + 1, stride)
     jy = np.searchsorted(ri, np.arange(ny), side="right") - 1  # each patch row's stride cell
     jx = np.searchsorted(ci, np.arange(nx), side="right") - 1
-    square = ((ri[jy + 1] - ri[jy]) == stride)[:, None] & ((ci[jx + 1] - ci[jx]) == stride)[None, :]
-    cut = np.maximum(cut, plane)
-    return np.where(square, plane, cut), cut
+    return ((ri[jy + 1] - ri[jy]) == stride)[:, None] & ((ci[jx + 1] - ci[jx]) == stride)[None, :]
+
+
+def _per_patch(a: np.ndarray, ny: int, nx: int, m: int) -> np.ndarray:
+    """The largest of each patch's ``m x m`` lattice values ``a (ny m, nx m)``: ``(ny, nx)``."""
+    return a.reshape(ny * m, nx, m).max(axis=2).reshape(ny, m, nx).max(axis=1)
 
 
 def _reduce(a: np.ndarray, step: int, axis: int) -> np.ndarray:
@@ -156,19 +170,20 @@ def block_stride_errors(control_points: np.ndarray, corner_z: np.ndarray, grid_s
     ny, nx = grid_shape
     m = samples
     z, gy, gx = surface_lattice(control_points, grid_shape, m)
+    plane0, cut = _patch_margins(control_points, grid_shape, m)
     out = []
     for k in strides:
         t, low, up, d, square = _planes(corner_z, k, gy, gx)
         e = np.abs(z - t)
-        plane, cut = _patch_margins(control_points, grid_shape, m, k)
+        plane = np.where(_square_patches(grid_shape, k), plane0, cut)
         # a lattice cell cut along its diagonal by a square stride cell's: each half lies in one plane,
         # bounded either by that plane's distance at the cell's four corners (extended past the
         # diagonal) plus the bilinear margin, or by the distance at its three plus the half cell's
         # margin: the smaller of the two bounds, a patch
         near = square & (np.abs(d) <= 1.0 / (m - 1) + 1e-9)
-        ext = np.where(near, np.maximum(np.abs(z - low), np.abs(z - up)), e).reshape(ny, m, nx, m).max(axis=(1, 3))
-        e = e.reshape(ny, m, nx, m).max(axis=(1, 3))  # a patch
-        cut_patch = near.reshape(ny, m, nx, m).any(axis=(1, 3))
+        ext = _per_patch(np.where(near, np.maximum(np.abs(z - low), np.abs(z - up)), e), ny, nx, m)
+        e = _per_patch(e, ny, nx, m)
+        cut_patch = _per_patch(near, ny, nx, m)
         e = np.where(cut_patch, np.minimum(ext + plane, e + cut), e + plane)
         out.append(_reduce(_reduce(e, block, 0), block, 1).ravel())
     return np.stack(out, -1)

@@ -1497,10 +1497,15 @@ class TileCache:
             todo += [(d, 1, t) for d, t in objs_want if t not in self.objects and t not in self._objects_pending]
             self._pending.update(t for _, what, t in todo if what == 0)
             self._objects_pending.update(t for _, what, t in todo if what == 1)
-        if len(self.exact_errors) + len(self._errors_pending) < len(self.tiles):  # block errors, nearest first
+        if len(self.exact_errors) + len(self._errors_pending) < len(self.tiles):
+            # block errors measured, nearest first, for the tiles where they can choose a stride: those
+            # whose blocks' largest error at the coarsest stride would show at the tile's nearest point
+            # (:meth:`block_strides` at FAR_PIXEL_ERROR); every tile without a pixel scale
+            need = (np.nonzero(self._stride_err[:, -1] * float(pixel_scale) > FAR_PIXEL_ERROR * d3)[0]
+                    if pixel_scale is not None else range(len(self.tiles)))
             with self._lock:
-                more = [(float(dist[i]), 2, t) for i, t in enumerate(self.tiles)
-                        if t not in self.exact_errors and t not in self._errors_pending and t not in self.bad]
+                more = [(float(dist[i]), 2, self.tiles[i]) for i in need if self.tiles[i] not in self.exact_errors
+                        and self.tiles[i] not in self._errors_pending and self.tiles[i] not in self.bad]
                 self._errors_pending.update(t for _, _, t in more)
             todo = todo + more
         for item in todo:
