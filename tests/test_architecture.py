@@ -278,7 +278,7 @@ def test_the_command_check_sees_one_command_importing_another(tmp_path, monkeypa
 
 # ----------------------------------------------------------------------------- every layer, written out
 #: the foundation (ARCHITECTURE.md's first row): imports nothing of piste's but itself
-FOUNDATION = ("errors", "extras", "transforms", "scene_data", "workers", "graph", "_jit")
+FOUNDATION = ("errors", "extras", "transforms", "scene_data", "workers", "graph", "_jit", "_data")
 _ABOVE_FOUNDATION = ("formats", "terrain", "character", "lighting", "world", "render", "pipeline", "commands", "cli")
 FORBIDDEN.update({name: _ABOVE_FOUNDATION for name in FOUNDATION})
 FORBIDDEN.update({

@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from piste._data import DataMethods
 from piste.errors import ValidationError
 from piste.transforms import frustum_planes, look_at, orthographic, perspective
 
@@ -39,8 +40,8 @@ __all__ = ["Camera", "AmbientLight", "DirectionalLight", "PointLight", "SpotLigh
            "KIND_OF_LIGHT", "MAX_LIGHT_VALUE", "MAX_COORDINATE"]
 
 
-@dataclass
-class Camera:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class Camera(DataMethods):
     """A pinhole camera (or an orthographic one when ``ortho_height`` is set).
 
     Attributes

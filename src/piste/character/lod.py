@@ -29,6 +29,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import numpy.typing as npt
 
+from piste._data import DataMethods
 from piste.character.animation import sample_poses
 from piste.character.model import Model, SkinnedMesh
 from piste.character.palette import Palette, palette as make_palette
@@ -52,8 +53,8 @@ MEASURED_ERRORS: dict[str, tuple[float, ...]] = {
 }
 
 
-@dataclass
-class LOD:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class LOD(DataMethods):
     """One level: ``mesh`` (a SkinnedMesh), its ``palette``, the triangle ``ratio`` asked for,
     the weight ``step`` of its palette and meshoptimizer's relative ``error`` (0 for the original);
     ``distance``: the error it shows in metres (:func:`screen_errors`: geometry and palette against

@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from piste._data import DataMethods
 from piste.character import animation as _anim
 from piste.character.coverage import check_coverage
 from piste.character.morph import vertex_normals
@@ -50,8 +51,8 @@ __all__ = ["Skeleton", "Pose", "Track", "Clip", "SkinnedMesh", "Model", "INTERPO
 INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
 
 
-@dataclass
-class Skeleton:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class Skeleton(DataMethods):
     """A bone hierarchy with its rest (node) pose and inverse bind matrices.
 
     Attributes
@@ -168,8 +169,8 @@ class Skeleton:
         return self.world_matrices(pose) @ self.inverse_bind
 
 
-@dataclass
-class Track:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class Track(DataMethods):
     """One animation channel.
 
     ``times (n,) float64`` strictly increasing key times in seconds; ``values (n, c) float64``
@@ -213,8 +214,8 @@ class Track:
         return _anim.sample_track(self, t, rotation=rotation)
 
 
-@dataclass
-class Clip:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class Clip(DataMethods):
     """An animation: tracks by bone name and morph-weight tracks by mesh.
 
     Attributes
@@ -295,8 +296,8 @@ class Clip:
         return _anim.sample_track(self.weight_tracks[key], t)
 
 
-@dataclass
-class SkinnedMesh:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class SkinnedMesh(DataMethods):
     """A triangle mesh with optional skin and morph targets (also used for unskinned meshes).
 
     Attributes
@@ -390,8 +391,8 @@ class SkinnedMesh:
         return np.stack([self.positions.min(0), self.positions.max(0)])
 
 
-@dataclass
-class Model:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class Model(DataMethods):
     """A loaded character or scene: skeleton (or None), meshes, clips, lights, cameras.
 
     ``clips`` is keyed by clip name (unnamed glTF animations become "animation0", ...).

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from piste._data import DataMethods
 from piste.errors import ValidationError
 
 # ``mesh`` below is a piste.character.model.SkinnedMesh, typed Any: model.py imports this module
@@ -68,8 +69,8 @@ def blend_morphs(mesh: Any, weights: npt.ArrayLike) -> tuple[np.ndarray, np.ndar
 
 
 # ---------------------------------------------------------------------------------------------- null bones
-@dataclass
-class NullBoneRig:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class NullBoneRig(DataMethods):
     """Translation-only ("null") bones approximating a mesh's morph targets.
 
     A vertex ``v`` listed in ``vertices`` moves by ``sum_i weights[r, i] * t[joints[r, i]]`` where

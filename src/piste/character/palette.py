@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from piste._data import DataMethods
 from piste.character.model import SkinnedMesh
 from piste.errors import ConfigError, ValidationError
 
@@ -124,8 +125,8 @@ def quantize_weights(joints: npt.ArrayLike, weights: npt.ArrayLike, step: float 
     return bones, units.astype(np.int32)
 
 
-@dataclass
-class Palette:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class Palette(DataMethods):
     """Unique quantized weight combinations of a mesh and each vertex's entry.
 
     Attributes

@@ -11,11 +11,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from piste._data import DataMethods
+
 __all__ = ["Pose"]
 
 
-@dataclass
-class Pose:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class Pose(DataMethods):
     """Local transforms of every bone: ``translation (b,3)``, ``rotation (b,4)`` xyzw, ``scale (b,3)``, float64."""
 
     translation: np.ndarray

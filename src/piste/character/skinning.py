@@ -52,6 +52,7 @@ from typing import Any, TypeVar
 import numpy as np
 from numpy.typing import ArrayLike
 
+from piste._data import DataMethods
 from piste.character.model import Clip, Model, SkinnedMesh
 from piste.character.palette import Palette, _top_weights, palette as _palette
 from piste.character.palette import palette as make_palette
@@ -206,8 +207,8 @@ def skin_exact(mesh: SkinnedMesh, bone_matrices: ArrayLike) -> tuple[np.ndarray,
     return pos.astype(np.float32), nrm.astype(np.float32)
 
 
-@dataclass
-class PostTransformMesh:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class PostTransformMesh(DataMethods):
     """SSX post-transform weighting data, precomputed once per mesh.
 
     Attributes

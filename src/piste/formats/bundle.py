@@ -61,6 +61,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
+from piste._data import DataMethods
 from piste.errors import FormatError
 from piste.formats.atomic import atomic_path
 from piste.formats.bundle_schema import MAX_MEMBER_BYTES, check_manifest
@@ -421,8 +422,8 @@ def camera_to_dict(cam: Any) -> dict:
             "ortho_height": None if cam.ortho_height is None else float(cam.ortho_height)}
 
 
-@dataclass
-class BundleData:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class BundleData(DataMethods):
     """A bundle's contents as read: ``path`` (Path), ``manifest`` (dict, version-checked) and
     ``arrays`` (``{member name: ndarray}``, each checked against the manifest's shape, dtype and
     SHA-256).  No objects are built here (see :func:`piste.pipeline.load_bundle`)."""

@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from piste._data import DataMethods
 from piste.errors import ValidationError
 from piste.scene_data import Lights
 from piste.terrain.bezier import eval_edges, grid_params
@@ -373,8 +374,8 @@ def decode_half_bright(texels: npt.ArrayLike) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- the result
-@dataclass
-class LightMap:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class LightMap(DataMethods):
     """A baked light-map atlas.
 
     Attributes

@@ -41,6 +41,7 @@ from functools import lru_cache
 import numpy as np
 import numpy.typing as npt
 
+from piste._data import DataMethods
 from piste.errors import ValidationError
 from piste.lighting.lights import Lights, light_terms, light_vectors
 from piste.scene_data import AnyLight
@@ -51,8 +52,8 @@ __all__ = ["VertexLights", "choose_lights", "choose_lights_many", "vertex_light"
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
-@dataclass
-class VertexLights:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class VertexLights(DataMethods):
     """The per-vertex light set of one character / object (or of ``m`` of them).
 
     Attributes

@@ -42,6 +42,7 @@ from typing import Any, TypeVar
 import numpy as np
 import numpy.typing as npt
 
+from piste._data import DataMethods
 from piste.character.lod import LOD
 from piste.character.model import Model
 from piste.errors import ConfigError, FormatError, PisteError
@@ -162,8 +163,8 @@ def _manifest_errors(fn: Callable[..., _T]) -> Callable[..., _T]:
     return wrapper
 
 
-@dataclass
-class Bundle:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class Bundle(DataMethods):
     """A loaded bundle.
 
     Attributes

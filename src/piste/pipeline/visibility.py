@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
+from piste._data import DataMethods
 from piste.errors import ConfigError, FormatError
 from piste.terrain.bezier import evaluate, grid_params
 from piste.terrain.query import height_at, ray_intersect
@@ -68,8 +69,8 @@ __all__ = ["Visibility", "compute_visibility", "culling_report", "patch_targets"
 MAX_VISIBILITY_WORK = 2 << 30
 
 
-@dataclass
-class Visibility:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class Visibility(DataMethods):
     """Per-cell visibility bitsets.
 
     Attributes

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from piste._data import DataMethods
 from piste.errors import ConfigError
 from piste.render.context import Offscreen, check_gl_error, create_context, flush, load_shader
 from piste.render.sky_pass import HORIZON, SkyPass
@@ -74,8 +75,8 @@ def scene_fog_density(net: PatchNet, density: float = DEFAULT_FOG_DENSITY) -> fl
     return float(density) * min(1.0, FOG_REFERENCE_SIZE / max(diag, 1e-9))
 
 
-@dataclass
-class Frame:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class Frame(DataMethods):
     """One rendered frame.
 
     Attributes

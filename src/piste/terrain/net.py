@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from piste._data import DataMethods
 from piste.errors import FormatError, ValidationError
 from piste.formats.atomic import atomic_path
 from piste.graph import connected_parts
@@ -148,8 +149,8 @@ def _weld_scipy(points: np.ndarray, tol: float) -> np.ndarray:
     return rank[labels]
 
 
-@dataclass
-class PatchNet:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class PatchNet(DataMethods):
     """A net of ``n`` bicubic Bézier patches.
 
     Attributes

@@ -51,6 +51,7 @@ from typing import Any, Literal, overload
 import numpy as np
 import numpy.typing as npt
 
+from piste._data import DataMethods
 from piste.errors import ValidationError
 from piste.terrain import _kernels
 from piste.terrain.bezier import bernstein, bernstein_derivative, evaluate
@@ -302,8 +303,8 @@ def _height_result(k: int, q: np.ndarray, p: np.ndarray, u: np.ndarray, v: np.nd
 
 
 # ---------------------------------------------------------------------------- ray_intersect
-@dataclass
-class RayHits:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class RayHits(DataMethods):
     """Result of :func:`ray_intersect` for ``k`` rays.
 
     hit (k,) bool;  t (k,) float64, ``position = origin + t * direction`` (inf for misses);

@@ -60,6 +60,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from piste._data import DataMethods
 from piste.errors import ConfigError, ValidationError
 from piste.terrain import _kernels
 from piste.terrain._kernels import frame_indices
@@ -192,8 +193,8 @@ def uniform_grids(net: PatchNet, levels: Iterable[int], patches: np.ndarray | sl
     return out
 
 
-@dataclass
-class ResidentMesh:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class ResidentMesh(DataMethods):
     """One frame of resident terrain.
 
     Attributes

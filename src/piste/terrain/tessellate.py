@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from piste._data import DataMethods
 from piste.errors import ConfigError, ValidationError
 from piste.terrain import _kernels
 from piste.terrain.bezier import (
@@ -52,8 +53,8 @@ RESTART = np.uint32(0xFFFFFFFF)
 MAX_LEVEL = 64
 
 
-@dataclass
-class TerrainMesh:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class TerrainMesh(DataMethods):
     """The tessellated terrain of one frame.
 
     Attributes

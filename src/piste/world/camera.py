@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from piste._data import DataMethods
 from piste.errors import ConfigError
 from piste.scene_data import Camera  # (the one camera type, in the foundation; re-exported here)
 from piste.transforms import frustum_planes, look_at, orthographic, perspective  # noqa: F401  (re-exported)
@@ -165,8 +166,8 @@ def warn_if_no_terrain(camera: Camera, lo: np.ndarray, hi: np.ndarray, name: str
     return reason
 
 
-@dataclass
-class FlyCamera:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class FlyCamera(DataMethods):
     """A free-flying camera for interactive viewing: position, yaw and pitch.
 
     Attributes

@@ -61,6 +61,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from piste._data import DataMethods
 from piste.character.morph import vertex_normals
 from piste.errors import ConfigError, ValidationError
 from piste.lighting.lights import Lights, shade
@@ -105,8 +106,8 @@ TILES = {
 
 
 # ------------------------------------------------------------------------------------ meshes
-@dataclass
-class ObjectMesh:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class ObjectMesh(DataMethods):
     """An uncompressed object mesh (object space, Z up).
 
     positions (v, 3) float32; normals (v, 3) float32 unit; uv (v, 2) float32; indices (t, 3) uint32
@@ -361,8 +362,8 @@ def oct_decode(q: npt.ArrayLike, bits: int = 8) -> np.ndarray:
     return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
-@dataclass
-class CompressedMesh:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class CompressedMesh(DataMethods):
     """An object mesh in its compressed vertex format (see the module docstring).
 
     Attributes
@@ -476,8 +477,8 @@ def transform_mesh(positions: npt.ArrayLike, normals: npt.ArrayLike, matrix: npt
 
 
 # ------------------------------------------------------------------------------- placement
-@dataclass
-class ObjectSet:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class ObjectSet(DataMethods):
     """Every object of a world: one compressed mesh per kind, instances as arrays.
 
     Attributes

@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from piste._data import DataMethods
 from piste.character import default_rider
 from piste.character.animation import sample_poses
 from piste.character.model import Model, Skeleton, SkinnedMesh
@@ -229,8 +230,8 @@ def surface_frame(net: PatchNet, xy: npt.ArrayLike, heading: npt.ArrayLike,
     return anchor, n, f
 
 
-@dataclass
-class RiderState:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class RiderState(DataMethods):
     """All riders at one instant.
 
     t : seconds;  anchor (n, 3) on the surface;  normal (n, 3);  forward (n, 3);

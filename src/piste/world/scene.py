@@ -42,6 +42,7 @@ import numpy.typing as npt
 # the default rider and the batcher through the package's lazy names (PEP 562), looked up where used: a
 # bundle's scene brings its own model, and a bundle render does not import the batcher
 from piste import character as _character
+from piste._data import DataMethods
 from piste.character import BlendedMesh, make_lods
 from piste.character.lod import MEASURED_ERRORS, lod_digest, pose_skins, screen_errors
 from piste.character.model import Model, SkinnedMesh
@@ -111,8 +112,8 @@ def orient_outward(mesh: SkinnedMesh) -> tuple[SkinnedMesh, int]:
     return out, int(inward.sum())
 
 
-@dataclass
-class SceneFrame:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class SceneFrame(DataMethods):
     """The CPU side of one frame.
 
     Attributes
