@@ -449,7 +449,8 @@ def _streaming(tmp: Path, rows, frames: int, flags: str = "") -> None:
             t = {k: [] for k in ("live", "waited", "course")}
             split = {k: {"update": [], "submit": [], "gpu": []} for k in ("live", "waited")}
             tris = {"live": [], "waited": [], "course": []}
-            calls = {k: {n: [] for n in ("draws", "commands", "light_binds", "uniform_writes", "cull_switches")}
+            calls = {k: {n: [] for n in ("draws", "commands", "light_binds", "uniform_writes", "cull_switches",
+                                           "far_block_triangles")}
                      for k in ("live", "waited")}
             resident = 0
             try:

@@ -2052,7 +2052,7 @@ class StreamingRenderer:
         err_scale = pixel_scale / self.pixel_error if self.pixel_error else None
         e = np.asarray(cam.eye, dtype=np.float64).reshape(3)
         blocks = None  # far tiles by block: every block's stride and whether its box is in view
-        drawn["far_blocks"] = drawn["far_blocks_culled"] = 0
+        drawn["far_blocks"] = drawn["far_blocks_culled"] = drawn["far_block_triangles"] = 0
         if self.mix_levels and len(self.cache.tiles):
             blo, bhi, _ = self.cache.block_columns()
             blocks = (self.cache.block_strides(e, pixel_scale, self.cache.far_strides(e, pixel_scale)),
@@ -2110,6 +2110,7 @@ class StreamingRenderer:
                         commands.append(cmd)
                         ncmd += len(cmd)
                     drawn["triangles"] += ntri
+                    drawn["far_block_triangles"] += ntri
                 drawn["far_patches"] += self.cache.patches[t]
                 drawn["far_blocks"] += int(len(st))
                 drawn["far_blocks_culled"] += got[2]
