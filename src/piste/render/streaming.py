@@ -1080,7 +1080,10 @@ class TileCache:
         #: worlds built without it, :func:`chord_error` and a quarter of it)
         self.chord_error: dict = {}
         self.mid_error: dict = {}
-        #: per tile: its far blocks' boxes and errors (:func:`far_blocks`)
+        #: per tile: its far blocks' boxes (:func:`far_blocks`) and ``"err" (nb, 3)`` each coarser
+        #: stride's error over each block, a bound (not :func:`far_blocks`' estimate): the corner grids'
+        #: distance plus the tile's chord error until the loader measures it against the tile's patches
+        #: (:func:`piste.render.block_errors.block_stride_errors`, :attr:`exact_errors`)
         self.blocks: dict = {}
         for t in sorted(self.bounds):
             try:
@@ -1533,7 +1536,7 @@ class TileCache:
 
     def far_strides(self, eye: npt.ArrayLike, pixel_scale: float, pixel_error: float = FAR_PIXEL_ERROR) -> np.ndarray:
         """The far level of every tile of :attr:`tiles` seen from ``eye`` ``(3,)``: the coarsest
-        stride whose height error (:func:`stride_errors` plus the corner grid's :attr:`chord_error`)
+        stride whose height error (its blocks' largest, :attr:`blocks`)
         projects to at most ``pixel_error`` pixels at the tile's nearest point, ``pixel_scale``
         pixels a radian (image height / (2 tan(fov_y / 2))); ``(n,)`` int."""
         eye = np.asarray(eye, dtype=np.float64)
