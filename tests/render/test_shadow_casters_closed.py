@@ -135,3 +135,63 @@ def test_rider_shadow_culled_matches(gl):
     finally:
         for p in sp.values():
             p.release()
+
+
+def test_tiles_drawn_only_where_asked(gl):
+    """``render_casters(draw=...)``: the riders left out keep a clear tile, the others' tiles are as drawn
+    with every rider."""
+    tri, pos = _open_box()
+    poses = np.stack([pos, pos + [3.0, 0.0, 0.0], pos + [0.0, 3.0, 0.0]]).astype(np.float32)
+    lvp = shadow_matrices(poses.mean(1).astype(np.float64), 1.2, np.array([0.3, 0.2, -1.0]))
+    sp = ShadowPass(gl, n_max=3, tile=64)
+    try:
+        sp.render_casters(poses, tri, lvp)
+        every = sp.read_tiles().astype(int)
+        sp.render_casters(poses, tri, lvp, draw=np.array([True, False, True]))
+        some = sp.read_tiles().astype(int)
+    finally:
+        sp.release()
+    assert (every[:, 64:128] > 0).sum() > 300
+    assert (some[:, 64:128] == 0).all()
+    np.testing.assert_array_equal(some[:, :64], every[:, :64])
+    np.testing.assert_array_equal(some[:, 128:], every[:, 128:])
+
+
+def test_scene_skips_the_casters_whose_shadows_are_out_of_view(gl):
+    """The scene draws a rider's caster tile only when its shadow frustum meets a patch drawn this frame;
+    the picture is the one with every tile drawn."""
+    from piste.render.scene_renderer import SceneRenderer
+    from piste.world.camera import Camera
+    from piste.world.scene import Scene
+
+    scene = Scene.default(0, objects=False)
+    r = SceneRenderer(scene, size=(160, 112), ctx=gl, lightmap=None, face=None)
+    r.terrain.resident_wait = True
+    sp = r.shadows
+    asked = []
+    real = sp.render_casters
+
+    def spy(*a, draw=None, **k):
+        asked.append(None if draw is None else np.asarray(draw, bool).copy())
+        return real(*a, draw=draw, **k)
+
+    try:
+        t = 2.0
+        st = scene.riders.state(t)
+        a = st.anchor[0]
+        f = np.append(st.track_dir[0], 0.0)
+        # a little ahead of rider 0, looking back up the course at it: the riders further down are
+        # behind the camera
+        cam = Camera(a + f * 4.0 + np.array([0.0, 0.0, 2.0]), a, fov_y=40.0, near=0.5, far=4000.0)
+        sp.render_casters = spy
+        im = r.render(t, camera=cam)
+        sp.render_casters = lambda *a, draw=None, **k: real(*a, **k)  # every tile drawn
+        every = r.render(t, camera=cam)
+    finally:
+        sp.render_casters = real
+        r.release()
+    mask = np.concatenate(asked)
+    per = np.asarray(im.stats["shadow_patches_per_rider"])
+    np.testing.assert_array_equal(mask, per > 0)
+    assert mask[0] and not mask.all(), per
+    np.testing.assert_array_equal(im.image, every.image)

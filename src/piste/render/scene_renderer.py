@@ -272,10 +272,12 @@ class SceneRenderer:
         if self.shadows is not None and sun is not None:
             with tr.gpu_pass("shadow casters"):
                 first = 0
+                # (a rider whose shadow frustum meets no patch drawn this frame: its tile is never sampled)
+                seen = np.array([len(p) > 0 for p in plan["patches"]], dtype=bool)
                 for g, (c, f) in enumerate(zip(self.casts, frames)):
                     k = len(f.riders)
                     self.shadows.render_casters(f.shadow[0], c.lods[-1].mesh.indices, light_vp[first:first + k],
-                                                first=first, group=g)
+                                                first=first, group=g, draw=seen[first:first + k])
                     first += k
         t4 = time.perf_counter()
         with tr.gpu_pass("terrain"):

@@ -581,12 +581,15 @@ class ShadowPass:
         self.triangles = 0
 
     # ------------------------------------------------------------------ casters
-    def render_casters(self, positions: np.ndarray, indices: np.ndarray, light_vp: np.ndarray, first: int = 0, group: int = 0) -> None:
+    def render_casters(self, positions: np.ndarray, indices: np.ndarray, light_vp: np.ndarray, first: int = 0, group: int = 0,
+                       draw: npt.ArrayLike | None = None) -> None:
         """Draw ``n`` riders' low-LOD meshes (``positions (n, v, 3)`` world space, shared
         ``indices (t, 3)``) into tiles ``first .. first + n - 1`` with ``light_vp (n, 4, 4)``.
 
         Several rider models: one call per model (``group`` names its buffers), the first with
-        ``first=0`` clears the texture, later ones add their tiles."""
+        ``first=0`` clears the texture, later ones add their tiles.  ``draw``: ``(n,) bool``, the riders
+        whose tiles are drawn (the scene passes those with shadow patches in view: no receiver samples
+        the others' tiles, left clear); default all."""
         import moderngl
 
         pos = np.ascontiguousarray(positions, dtype=np.float32)
@@ -633,7 +636,8 @@ class ShadowPass:
         if closed:
             ctx.enable(moderngl.CULL_FACE)
             ctx.cull_face = "back"
-        for i in range(n):
+        todo = range(n) if draw is None else np.flatnonzero(np.asarray(draw, dtype=bool).reshape(-1)[:n]).tolist()
+        for i in todo:
             ctx.viewport = ((first + i) * self.tile, 0, self.tile, self.tile)
             self.caster["u_light_vp"].write(lvp[i].astype(np.float32).T.tobytes())
             if self.soft:
