@@ -45,12 +45,22 @@ def _rewrite(src, dst, edit):
 
 
 def test_big_members_stored_the_rest_deflated(tmp_path):
-    path, arrays = _bundle(tmp_path)
+    """The members read at every start and every small one are stored; a big other one is deflated
+    (and reads back the same)."""
+    from piste.formats.bundle import SMALL_MEMBER_BYTES
+
+    _, arrays = _bundle(tmp_path)
+    arrays["a/big"] = np.zeros(SMALL_MEMBER_BYTES // 8 + 1)  # just over the bound
+    arrays["a/just_small"] = np.zeros((SMALL_MEMBER_BYTES - 128) // 8)  # (its .npy header: 128 bytes)
+    path = write_bundle(tmp_path / "big.piste", {"name": "x"}, arrays)
     assert {"lightmap/atlas", "terrain/control_points", RESIDENT_MEMBER} <= STORED_MEMBERS
     with zipfile.ZipFile(path) as zf:
         kinds = {i.filename[:-4]: i.compress_type for i in zf.infolist() if i.filename.endswith(".npy")}
-    assert {n for n, c in kinds.items() if c == zipfile.ZIP_STORED} == STORED_MEMBERS & set(arrays)
-    assert all(c == zipfile.ZIP_DEFLATED for n, c in kinds.items() if n not in STORED_MEMBERS)
+        assert zf.getinfo("manifest.json").compress_type == zipfile.ZIP_DEFLATED
+    assert {n for n, c in kinds.items() if c == zipfile.ZIP_DEFLATED} == {"a/big"}
+    got = read_bundle(path).arrays
+    assert all(np.array_equal(got[n], a) for n, a in arrays.items() if n != "a/scalar")
+    assert got["a/big"].flags.writeable and got["a/just_small"].flags.writeable  # (not in STORED_MEMBERS: copies)
 
 
 @pytest.mark.parametrize("verify", [True, False])
@@ -189,6 +199,7 @@ def test_big_stored_members_are_hashed_by_a_second_thread_and_checked_before_ret
     from piste.formats import bundle as fmt
 
     monkeypatch.setattr(fmt._Hasher, "MIN_BYTES", 0)
+    monkeypatch.setattr(fmt._Hasher, "HAND_OFF_SHARE", 1.0)
     hashed = []
     real = fmt._sha256
     monkeypatch.setattr(fmt, "_sha256", lambda data: hashed.append(threading.current_thread().name) or real(data))
