@@ -59,3 +59,39 @@ def test_pistes_mutable_data_classes_use_it():
     p = Pose(np.zeros((1, 3)), np.array([[0.0, 0.0, 0.0, 1.0]]), np.ones((1, 3)))
     assert repr(p).startswith("Pose(translation=array([[0., 0., 0.]]), rotation=")
     assert p == p and p != "pose"  # (two poses of other arrays raise, as the generated == does)
+
+
+def test_frozen_classes_hash_as_the_generated_method_does():
+    from piste._data import FrozenDataMethods
+
+    @dataclass(frozen=True)
+    class Generated:
+        a: int
+        b: tuple = ()
+        not_compared: float = field(default=0.0, compare=False)
+        not_hashed: str = field(default="x", hash=False)
+
+    @dataclass(frozen=True, repr=False, eq=False)
+    class Shared(FrozenDataMethods):
+        a: int
+        b: tuple = ()
+        not_compared: float = field(default=0.0, compare=False)
+        not_hashed: str = field(default="x", hash=False)
+
+    for args in [(1,), (2, (1, 2)), (3, (), 4.5, "y")]:
+        g, s = Generated(*args), Shared(*args)
+        assert hash(s) == hash(g) and repr(s) == repr(g).replace("Generated", "Shared", 1)
+        assert s == Shared(*args) and {s: 1}[Shared(*args)] == 1
+    assert Shared(1, (), 9.0) == Shared(1) and Shared(1, (), 0.0, "z") != Shared(1)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        Shared(1).a = 2  # type: ignore[misc]
+
+
+def test_pistes_lights_keep_their_hash_and_equality():
+    from piste.scene_data import AmbientLight, Lights, PointLight
+
+    a, b = PointLight((0.0, 0.0, 1.0), (1.0, 1.0, 1.0), 1.0), PointLight((0.0, 0.0, 1.0), (1.0, 1.0, 1.0), 1.0)
+    assert a == b and hash(a) == hash(b) and len({a, b}) == 1 and a != PointLight((0.0, 0.0, 2.0), (1.0, 1.0, 1.0), 1.0)
+    lights = Lights((AmbientLight((1.0, 1.0, 1.0), 0.5), a))
+    assert lights == Lights((AmbientLight((1.0, 1.0, 1.0), 0.5), b)) and hash(lights) == hash(Lights((AmbientLight((1.0, 1.0, 1.0), 0.5), b)))
+    assert repr(a).startswith("PointLight(position=(0.0, 0.0, 1.0), color=(1.0, 1.0, 1.0), intensity=1.0")

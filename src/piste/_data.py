@@ -8,13 +8,18 @@ bundle render's start for the ~28 mutable ones).  A class declared
 these shared methods instead: the same ``repr`` text (fields with ``repr=True``, the class's
 ``__qualname__``, ``...`` for a recursive reference), the same ``==`` (the ``compare=True`` fields as
 tuples, only against the very same class, else ``NotImplemented``) and, like any data class with
-``eq``, no hash.  Frozen data classes keep their generated methods (their hash comes from ``eq``).
+``eq``, no hash.  A frozen one declared ``@dataclass(frozen=True, repr=False, eq=False)`` with
+:class:`FrozenDataMethods` as a base also gets the hash a frozen data class with ``eq`` has (the
+tuple of its ``compare`` fields, or those with ``hash=True``); ``@dataclass`` still writes its
+``__init__`` and its frozen ``__setattr__`` / ``__delattr__``.
 
 API
 ---
 ::
 
-    DataMethods      base class: __repr__, __eq__, __hash__ = None
+    DataMethods          base class: __repr__, __eq__, __hash__ = None
+    FrozenDataMethods    base class of a ``@dataclass(frozen=True, repr=False, eq=False)``: __repr__, __eq__
+                         and the field hash ``@dataclass(frozen=True)`` writes
 """
 
 from __future__ import annotations
@@ -23,7 +28,7 @@ from dataclasses import fields
 from _thread import get_ident
 from typing import Any
 
-__all__ = ["DataMethods"]
+__all__ = ["DataMethods", "FrozenDataMethods"]
 
 #: the (object id, thread id) pairs whose ``repr`` is being made (a reference back to one shows ``...``)
 _RUNNING: set[tuple[int, int]] = set()
@@ -53,3 +58,13 @@ class DataMethods:
         return NotImplemented
 
     __hash__ = None  # type: ignore[assignment]
+
+
+class FrozenDataMethods(DataMethods):
+    """:class:`DataMethods` and the hash of a frozen data class with ``eq`` (see the module docstring)."""
+
+    __slots__ = ()
+
+    def __hash__(self) -> int:
+        return hash(tuple(getattr(self, f.name) for f in fields(self)  # type: ignore[arg-type]
+                          if (f.compare if f.hash is None else f.hash)))

@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from piste._data import DataMethods
+from piste._data import DataMethods, FrozenDataMethods
 from piste.errors import ValidationError
 from piste.transforms import frustum_planes, look_at, orthographic, perspective
 
@@ -177,8 +177,8 @@ def _check_fields(light: Any, kind: str) -> str:
     return w
 
 
-@dataclass(frozen=True)
-class AmbientLight:
+@dataclass(frozen=True, repr=False, eq=False)  # (repr / eq / hash: piste._data.FrozenDataMethods)
+class AmbientLight(FrozenDataMethods):
     """Light from everywhere: adds ``intensity * color`` to every point.  ``color (3,)`` linear RGB."""
 
     color: tuple = (1.0, 1.0, 1.0)
@@ -189,8 +189,8 @@ class AmbientLight:
         _check_fields(self, "ambient")
 
 
-@dataclass(frozen=True)
-class DirectionalLight:
+@dataclass(frozen=True, repr=False, eq=False)  # (repr / eq / hash: piste._data.FrozenDataMethods)
+class DirectionalLight(FrozenDataMethods):
     """A light at infinity (the sun).  ``direction (3,)``: the way the light travels (unit on
     construction); ``shadows``: whether the baker casts shadow rays for it."""
 
@@ -204,8 +204,8 @@ class DirectionalLight:
         _check_fields(self, "directional")
 
 
-@dataclass(frozen=True)
-class PointLight:
+@dataclass(frozen=True, repr=False, eq=False)  # (repr / eq / hash: piste._data.FrozenDataMethods)
+class PointLight(FrozenDataMethods):
     """A light at ``position (3,)`` reaching ``range`` model units with attenuation
     ``(1 - d/range) ** falloff``."""
 
@@ -221,8 +221,8 @@ class PointLight:
         _check_fields(self, "point")
 
 
-@dataclass(frozen=True)
-class SpotLight:
+@dataclass(frozen=True, repr=False, eq=False)  # (repr / eq / hash: piste._data.FrozenDataMethods)
+class SpotLight(FrozenDataMethods):
     """A point light restricted to a cone around ``direction (3,)`` (unit on construction).
 
     ``inner_angle`` / ``outer_angle``: half-angles of the full-intensity cone and of the cone
@@ -257,8 +257,8 @@ KIND_OF_LIGHT = {cls: kind for kind, cls in LIGHT_KINDS.items()}
 AnyLight = AmbientLight | DirectionalLight | PointLight | SpotLight
 
 
-@dataclass(frozen=True)
-class Lights:
+@dataclass(frozen=True, repr=False, eq=False)  # (repr / eq / hash: piste._data.FrozenDataMethods)
+class Lights(FrozenDataMethods):
     """An ordered collection of lights, kept in canonical order: ambient, directional, point, spot
     lights, each kind in the order given (the order of a TOML file).
 

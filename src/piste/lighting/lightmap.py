@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from piste._data import DataMethods
+from piste._data import DataMethods, FrozenDataMethods
 from piste.errors import ValidationError
 from piste.scene_data import Lights
 from piste.terrain.bezier import eval_edges, grid_params
@@ -67,8 +67,8 @@ __all__ = [
 
 
 # --------------------------------------------------------------------------- layout
-@dataclass(frozen=True)
-class AtlasLayout:
+@dataclass(frozen=True, repr=False, eq=False)  # (repr / eq / hash: piste._data.FrozenDataMethods)
+class AtlasLayout(FrozenDataMethods):
     """Where each patch's tile sits in the atlas.
 
     ``n`` patches, tiles of ``res x res`` texels plus ``gutter`` on each side, ``cols x rows`` cells.
