@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from piste._data import DataMethods
+from piste._data import DataMethods, FrozenDataMethods
 from piste.errors import ConfigError, ValidationError
 from piste.terrain import _kernels
 from piste.terrain.bezier import (
@@ -100,8 +100,8 @@ class TerrainMesh(DataMethods):
 
 
 # ---------------------------------------------------------------------------------------- shapes
-@dataclass(frozen=True)
-class Shape:
+@dataclass(frozen=True, repr=False, eq=False)  # (repr / eq / hash: piste._data.FrozenDataMethods)
+class Shape(FrozenDataMethods):
     """Cached tessellation of one combination of edge levels (its local vertex layout and triangles)."""
 
     levels: tuple

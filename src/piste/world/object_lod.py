@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from piste._data import FrozenDataMethods
 from piste.errors import ConfigError, ValidationError
 
 __all__ = ["ObjectLOD", "object_lods", "choose_lods", "instance_scale", "DEFAULT_LOD_PIXELS", "lod_arrays", "stored_lods",
@@ -44,8 +45,8 @@ LOD_ARRAYS = ("lod_indices", "lod_triangles", "lod_errors")
 DEFAULT_LOD_PIXELS = 1.0
 
 
-@dataclass(frozen=True)
-class ObjectLOD:
+@dataclass(frozen=True, repr=False, eq=False)  # (repr / eq / hash: piste._data.FrozenDataMethods)
+class ObjectLOD(FrozenDataMethods):
     """One level: ``indices (t, 3)`` into the kind's vertices and its absolute ``error`` (model
     units, 0 for the full mesh)."""
 
