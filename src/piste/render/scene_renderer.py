@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from piste._data import DataMethods
 from piste.character.animation import clip_time, sample_track
 from piste.character.morph import FaceSkin, face_weights
 from piste import render as _render  # (occlude_frame by its lazy name: imported when occlusion is on)
@@ -59,8 +60,8 @@ if TYPE_CHECKING:
 __all__ = ["SceneRenderer", "SceneImage", "summarize_scene"]
 
 
-@dataclass
-class SceneImage:
+@dataclass(repr=False, eq=False)  # (repr / eq: piste._data.DataMethods)
+class SceneImage(DataMethods):
     """One rendered frame of the scene.
 
     image : (H, W, 4) uint8 or None;  terrain : piste.render.Frame (terrain counts, timings)
