@@ -22,13 +22,18 @@ Sections (every configuration interleaved frame by frame in one process; medians
    receivers cut to their frusta by clip distances, and drawn from the terrain's resident blocks by index), with the pixels changed;
    then whole frames, without the per-pass syncs: the terrain flushed to llvmpipe's rasterizer threads
    as soon as it is issued against everything rasterized at the frame's end (wall and CPU time).
+   3b. **``piste render``'s runtime**: ``examples/scenes/default.toml`` built (the step cache beside it)
+   and drawn by the objects ``piste render SCENE --camera flight --frames N`` uses (``ScenePreview``
+   with the command's defaults, the flight camera's frame ``i`` of ``N`` at ``t = i / 30``), frames
+   read back, interleaved with the floor in the same context (also under ``--scene``; alone with
+   ``--render-only``).
 4. **Scaling**: frame time and CPU side against the number of patches (2,560 / 10k / 40k; the
    camera's far plane at 1 km caps the visible set; ``bench_terrain.py`` takes the CPU side to 160k)
    and riders (6 / 24 / 96), with the fitted exponent ``t ~ n^k``.
 
 Targets (issue 15): 60 fps (16.7 ms) for the completed scene, CPU side <= 4 ms, frame <= 4x floor.
 
-Run: ``.venv/bin/python benchmarks/bench_frame.py [--quick] [--frames N] [--size W H] [--scene]``
+Run: ``.venv/bin/python benchmarks/bench_frame.py [--quick] [--frames N] [--size W H] [--scene | --render-only]``
 """
 
 from __future__ import annotations
@@ -774,6 +779,83 @@ def scene_section(args, floor_ms: list) -> dict:
     return out
 
 
+# ---------------------------------------------------------------------------------------- piste render
+RENDER_SCENE = Path(__file__).resolve().parents[1] / "examples" / "scenes" / "default.toml"
+
+
+def render_runtime_section(args, camera: str = "flight") -> dict:
+    """``examples/scenes/default.toml`` through ``piste render``'s runtime, against the floor.
+
+    The command's code path (:func:`piste.commands.render.run`): the scene built with the step cache
+    beside it (``.piste-cache``; only the bundle goes to a temporary folder, not beside the scene
+    file where other processes may read it) and loaded with its terrain warming, as
+    :func:`piste.pipeline.open_scene.open_source` does for a ``.toml``; then
+    :func:`piste.pipeline.preview.render_frames`' objects: one :class:`ScenePreview` with the
+    options the command passes by default (the scene's size unless ``--size``, no trace, AA, DOF,
+    soft shadows or occlusion flags) and, frame ``i`` of ``n``, ``camera_at(bundle, camera, i, n)``
+    at ``t = i / 30`` (``--fps 30``), the frame read back.  ``render_frames`` makes its own context and
+    loops over every frame itself, so its loop body is called here instead, in the preview's context,
+    interleaved frame by frame with the :class:`Floor`.  The per-pass split: the renderer's own
+    timings (no extra syncs)."""
+    import tempfile
+
+    from piste.pipeline.build import build_scene
+    from piste.pipeline.bundle_objects import load_bundle
+    from piste.pipeline.preview import ScenePreview, camera_at
+
+    size = tuple(args.size)
+    n = args.frames
+    tmp = tempfile.TemporaryDirectory()  # (kept until the runtime is released)
+    t0 = time.perf_counter()
+    built = build_scene(RENDER_SCENE, out=Path(tmp.name) / "default.piste", progress=False)
+    t_build = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    bundle = load_bundle(built.path, warm=True)
+    p = ScenePreview(bundle, size=size, lod_morph=None, aa=None, supersample=1, trace=None, dof=None,
+                     soft_shadows=None, occlusion=None)
+    floor = Floor(p.ctx, size)
+    print(f"\n{RENDER_SCENE.relative_to(RENDER_SCENE.parents[2])}: build (step cache) {t_build:.2f} s, "
+          f"load + runtime set-up {time.perf_counter() - t0:.2f} s")
+    if p.renderer is not None:
+        p.renderer.terrain.resident_wait = True  # the steady state, not the first frames' background build
+    else:
+        p.terrain.resident_wait = True
+
+    def frame(i):
+        t1 = time.perf_counter()
+        p.render(camera_at(bundle, camera, i, n), i / 30.0)  # render_frames' loop body (fps 30, read back)
+        return (time.perf_counter() - t1) * 1e3
+
+    frame(0)  # warm-up: shaders, vertex blocks, caches
+    floor.run()
+    ms, fl_ms, timings = [], [], []
+    for i in range(n):  # interleaved frame by frame, the order alternated
+        if i % 2:
+            fl_ms.append(floor.run())
+            ms.append(frame(i))
+        else:
+            ms.append(frame(i))
+            fl_ms.append(floor.run())
+        timings.append(dict(getattr(p.frame, "timings", {}) or {}))
+    fl = med(fl_ms)
+    fm = med(ms)
+    what = f"{size[0]}x{size[1]}, --camera {camera}, {n} frames"
+    print(f"== {RENDER_SCENE.name} through `piste render`'s runtime ({what}), interleaved with the floor "
+          f"frame by frame (ms, median [min-max]) ==")
+    print(f"  frame  {rng_str(ms)} ms  {1e3 / fm:6.1f} fps  {fm / fl:5.2f}x the floor")
+    print(f"  floor  {rng_str(fl_ms)} ms")
+    cols = [c for c in ("cpu", "upload", "terrain_draw", "scene_draw", "readback", "total") if all(c in t for t in timings)]
+    if cols:
+        print("  the renderer's own split (medians ms): " + ", ".join(f"{c} {med([t[c] for t in timings]):.2f}"
+                                                                  for c in cols))
+    record("frame", "examples/scenes/default.toml via piste render's runtime vs machine floor", "<= 4x",
+           f"{fm:.1f} ms ({1e3 / fm:.0f} fps; {what})", f"floor {fl:.2f} ms", f"{fm / fl:.1f}x", fm <= 4 * fl)
+    floor.release()
+    p.release()
+    tmp.cleanup()
+    return {"frame": fm, "floor": fl}
+
+
 # ---------------------------------------------------------------------------------------- scaling
 def scaling_section(args) -> None:
     from piste.render import TerrainRenderer
@@ -862,17 +944,21 @@ def main(argv=None) -> int:
     ap.add_argument("--size", type=int, nargs=2, default=(640, 448))
     ap.add_argument("--scene", action="store_true", help="only the completed scene (no terrain-only or scaling runs)")
     ap.add_argument("--no-scaling", action="store_true", help="skip the scaling tables")
+    ap.add_argument("--render-only", action="store_true",
+                    help="only examples/scenes/default.toml through `piste render`'s runtime vs the floor")
     args = ap.parse_args(argv)
     args.frames = args.frames or (8 if args.quick else 30)
     from piste import _jit
 
     _jit.warm_up()  # compile / load the numba kernels before timing (else the first frames run numpy)
     floor_ms: list = []
-    if not args.scene:
+    if not (args.scene or args.render_only):
         terrain_section(args, floor_ms)
         effects_section(args)
-    scene_section(args, floor_ms)
-    if not (args.scene or args.no_scaling):
+    if not args.render_only:
+        scene_section(args, floor_ms)
+    render_runtime_section(args)
+    if not (args.scene or args.render_only or args.no_scaling):
         scaling_section(args)
     return 0
 
