@@ -796,7 +796,7 @@ def render_runtime_section(args, camera: str = "flight") -> dict:
     at ``t = i / 30`` (``--fps 30``), the frame read back.  ``render_frames`` makes its own context and
     loops over every frame itself, so its loop body is called here instead, in the preview's context,
     interleaved frame by frame with the :class:`Floor`.  The per-pass split: the renderer's own
-    timings (no extra syncs)."""
+    timings (no extra syncs), then a few frames with ``glFinish`` around each pass (:func:`_profile`)."""
     import tempfile
 
     from piste.pipeline.build import build_scene
@@ -843,11 +843,20 @@ def render_runtime_section(args, camera: str = "flight") -> dict:
     print(f"== {RENDER_SCENE.name} through `piste render`'s runtime ({what}), interleaved with the floor "
           f"frame by frame (ms, median [min-max]) ==")
     print(f"  frame  {rng_str(ms)} ms  {1e3 / fm:6.1f} fps  {fm / fl:5.2f}x the floor")
-    print(f"  floor  {rng_str(fl_ms)} ms")
+    print(f"  floor  {rng_str(fl_ms)} ms  (right after a frame {med(fl_ms[0::2]):.2f}, after a floor "
+          f"{med(fl_ms[1::2]) if n > 1 else float('nan'):.2f})")
     cols = [c for c in ("cpu", "upload", "terrain_draw", "scene_draw", "readback", "total") if all(c in t for t in timings)]
     if cols:
         print("  the renderer's own split (medians ms): " + ", ".join(f"{c} {med([t[c] for t in timings]):.2f}"
                                                                   for c in cols))
+    if p.renderer is not None:  # per pass, as the scene section profiles it (glFinish around each: a few extra frames)
+        acc, undo = _profile(p.renderer)
+        prof = []
+        for i in range(max(n // 2, 3)):
+            prof.append(frame(i))
+        undo()
+        print(f"  per pass (glFinish around each; frame {med(prof):.1f} ms with the extra syncs): " + ", ".join(
+            f"{label} {med(ts):.2f}" for label, ts in sorted(acc.items(), key=lambda kv: -med(kv[1]))))
     record("frame", "examples/scenes/default.toml via piste render's runtime vs machine floor", "<= 4x",
            f"{fm:.1f} ms ({1e3 / fm:.0f} fps; {what})", f"floor {fl:.2f} ms", f"{fm / fl:.1f}x", fm <= 4 * fl)
     floor.release()
