@@ -36,6 +36,15 @@ def test_help_lists_quick(script):
     assert "--quick" in res.stdout
 
 
+def test_frame_bench_offers_the_piste_render_runtime_section():
+    """bench_frame measures examples/scenes/default.toml through ``piste render``'s runtime (issue 23
+    item 2): alone with ``--render-only``, on a scene file that exists."""
+    res = subprocess.run([sys.executable, str(BENCH / "bench_frame.py"), "--help"], capture_output=True, text=True,
+                         timeout=60)
+    assert "--render-only" in res.stdout
+    assert _load("bench_frame").RENDER_SCENE.is_file()
+
+
 def test_embree_peer_missing_is_reported(monkeypatch, tmp_path, capsys):
     bake = _load("bench_bake")
     out = tmp_path / "rows.jsonl"
