@@ -75,6 +75,11 @@ def test_choose_lods_by_projected_error():
     rows = np.tile(errors, (5, 1))
     rows[:, 2:] = np.inf
     assert choose_lods(rows, centers, np.zeros(5), np.ones(5), vp, 448, 0.5).max() == 1
+    # wholly behind the eye: the coarsest level it has (the clamped depth used to give the full mesh);
+    # a sphere reaching in front of the eye still counts as near
+    back = np.array([[0.0, -12.0, 0.0], [0.0, -10.5, 0.0], [0.0, -12.0, 0.0]])
+    got = choose_lods(np.vstack([errors, errors, rows[0]]), back, np.array([1.0, 1.0, 1.0]), np.ones(3), vp, 448, 0.5)
+    assert got.tolist() == [3, 0, 1]
 
 
 def test_instance_scale():

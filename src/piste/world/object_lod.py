@@ -176,8 +176,9 @@ def choose_lods(errors: npt.ArrayLike, centers: npt.ArrayLike, radius: npt.Array
     max_pixels : the error allowed on screen (0 or less: always level 0)
 
     The distance is the instance's nearest view depth (centre depth minus radius, at least the
-    near-plane scale ``1e-3``), so an instance the camera is inside keeps its full mesh; an
-    orthographic view scales every depth alike.
+    near-plane scale ``1e-3``), so an instance the camera is inside keeps its full mesh; an instance
+    whose sphere lies wholly behind the eye (no pixel of it can show) takes its coarsest level (else
+    the clamped depth gave it the full mesh); an orthographic view scales every depth alike.
     """
     err = np.asarray(errors, dtype=np.float64)
     c = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
@@ -187,12 +188,16 @@ def choose_lods(errors: npt.ArrayLike, centers: npt.ArrayLike, radius: npt.Array
     err = np.broadcast_to(err, (n, err.shape[-1]))
     vp = np.asarray(view_projection, dtype=np.float64)
     f = float(np.linalg.norm(vp[1, :3]))  # 1 / tan(fov_y / 2) for a rigid view (2 / height: orthographic)
+    behind = np.zeros(n, bool)
     if np.abs(vp[3, :3]).max() > 0.0:  # perspective: clip w is the view depth
-        depth = c @ vp[3, :3] + vp[3, 3] - np.asarray(radius, dtype=np.float64)
-        depth = np.maximum(depth, 1e-3)
+        r = np.broadcast_to(np.asarray(radius, dtype=np.float64), (n,))
+        centre = c @ vp[3, :3] + vp[3, 3]
+        behind = centre + r <= 0.0
+        depth = np.maximum(centre - r, 1e-3)
     else:  # orthographic: the same scale at every depth
         depth = np.ones(n)
     px_per_unit = f * 0.5 * float(height_px) * np.asarray(scale, dtype=np.float64) / depth  # (n,)
     # level l is fine when err[l] * px_per_unit <= max_pixels; errors ascend, so count the fine ones
     ok = err * px_per_unit[:, None] <= float(max_pixels)
+    ok[behind] = np.isfinite(err[behind])  # (the coarsest level each has: inf pads missing levels)
     return np.maximum(ok.sum(axis=1) - 1, 0).astype(np.int64)
