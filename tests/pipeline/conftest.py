@@ -74,3 +74,15 @@ def small_scene(tmp_path):
         return p
 
     return make
+
+
+def mini_bundle_parts(net) -> tuple[dict, dict]:
+    """``(manifest, arrays)`` of a minimal bundle of ``net`` (terrain, a flat light map, one camera):
+    what tests of one stored member add theirs to before ``write_bundle``."""
+    arrays = {"terrain/control_points": net.control_points, "terrain/uv": net.uv,
+              "lightmap/atlas": np.full((20, 20, 3), 0.5, np.float32), "lightmap/rects": net.lightmap_rect}
+    man = {"name": "mini", "terrain": {"name": "mini", "tol": net.tol}, "lights": {},
+           "cameras": [{"name": "c", "eye": [-4.0, -6.0, 14.0], "target": [16.0, 16.0, 0.0], "up": [0.0, 0.0, 1.0],
+                        "fov_y": 60.0, "near": 0.1, "far": 200.0, "ortho_height": None}],
+           "lightmap": {"res": 8, "gutter": 1}}
+    return man, arrays

@@ -15,6 +15,7 @@ from piste.pipeline.build import build_scene
 from piste.pipeline.bundle_objects import LOD_ERRORS_FORMAT, LOD_ERRORS_MEMBER, load_bundle, lod_error_members
 from piste.terrain.lod import FLAT_LEVEL, LEVELS, STORED_ERROR_LEVELS, flat_bounds, keep_patch_errors, level_errors
 from piste.terrain.net import PatchNet
+from tests.pipeline.conftest import mini_bundle_parts
 
 
 def _net() -> PatchNet:
@@ -26,12 +27,7 @@ def _net() -> PatchNet:
 
 def _bundle(tmp_path, table: bool = True, name: str = "b.piste", edit=None):
     net = _net()
-    arrays = {"terrain/control_points": net.control_points, "terrain/uv": net.uv,
-              "lightmap/atlas": np.full((20, 20, 3), 0.5, np.float32), "lightmap/rects": net.lightmap_rect}
-    man = {"name": "mini", "terrain": {"name": "mini", "tol": net.tol}, "lights": {},
-           "cameras": [{"name": "c", "eye": [-4.0, -6.0, 14.0], "target": [16.0, 16.0, 0.0], "up": [0.0, 0.0, 1.0],
-                        "fov_y": 60.0, "near": 0.1, "far": 200.0, "ortho_height": None}],
-           "lightmap": {"res": 8, "gutter": 1}}
+    man, arrays = mini_bundle_parts(net)
     if table:
         la, meta = lod_error_members(net)
         arrays.update(la)

@@ -17,6 +17,7 @@ from piste.pipeline import load_bundle
 from piste.pipeline.bundle_objects import STORED_BLOCKS_BUDGET, resident_members
 from piste.terrain.net import PatchNet
 from piste.terrain.resident import RESIDENT_FORMAT, ResidentTerrain, resident_terrain
+from tests.pipeline.conftest import mini_bundle_parts
 
 
 def _net():
@@ -28,12 +29,7 @@ def _net():
 
 def _bundle(tmp_path, blocks=True, name="b.piste", edit=None):
     net = _net()
-    arrays = {"terrain/control_points": net.control_points, "terrain/uv": net.uv,
-              "lightmap/atlas": np.full((20, 20, 3), 0.5, np.float32), "lightmap/rects": net.lightmap_rect}
-    man = {"name": "mini", "terrain": {"name": "mini", "tol": net.tol}, "lights": {},
-           "cameras": [{"name": "c", "eye": [-4.0, -6.0, 14.0], "target": [16.0, 16.0, 0.0], "up": [0.0, 0.0, 1.0],
-                        "fov_y": 60.0, "near": 0.1, "far": 200.0, "ortho_height": None}],
-           "lightmap": {"res": 8, "gutter": 1}}
+    man, arrays = mini_bundle_parts(net)
     if blocks:
         ra, meta = resident_members(net)
         arrays.update(ra)
