@@ -4,7 +4,9 @@ machine's floor, per pass, and as the world grows.
 Sections (every configuration interleaved frame by frame in one process; medians with [min-max]):
 
 1. **Floor**: clear + one full-screen textured quad + read-back at the same size: what any frame
-   costs here.  Every frame time below is also printed as a multiple of it (target <= 4x).
+   costs here, timed the same way in every section (``Floor.steady``: between frames, one settling
+   run, then the median of four back to back).  Every frame time below is also printed as a multiple
+   of it (target <= 4x).
 2. **Terrain**: the default course flown down the track: the GPU-resident path with geomorphing
    (the default), without geomorphing, the CPU tessellation path (vertices streamed every frame),
    the PS2 two-pass light map, LOD off.
@@ -102,6 +104,15 @@ class Floor:
         self.target.read()
         return (time.perf_counter() - t0) * 1e3
 
+    def steady(self, runs: int = 4) -> float:
+        """The floor as every section times it, between its frames: one run to settle (the frame
+        before leaves llvmpipe's threads and the caches in its own state), then the median of ``runs``
+        back-to-back runs (ms).  The scene section and ``piste render``'s runtime section time their
+        floors this same way, so their ratios compare (a single run right after a frame reads
+        ~0.3-0.8 ms slower on this machine)."""
+        self.run()
+        return med([self.run() for _ in range(runs)])
+
     def release(self):
         for o in (self.vao, self.prog, self.tex):
             o.release()
@@ -149,7 +160,7 @@ def terrain_section(args, floor_ms: list) -> dict:
     for cam in cams:
         for name, (rr, k) in configs.items():
             res[name].append(rr.render(cam, **k))
-        floor_ms.append(floor.run())
+        floor_ms.append(floor.steady())
     cols = ("cull", "tessellate", "upload", "cpu", "draw", "readback", "total")
     print(f"\n== terrain, {args.frames} frames down the track (loaded machine: medians [min-max] ms) ==")
     head = f"{'configuration':31s} {'tris':>7s} " + " ".join(f"{c:>10s}" for c in cols) + f" {'fps':>6s} {'x floor':>8s}"
@@ -499,7 +510,7 @@ def scene_section(args, floor_ms: list) -> dict:
             im = one(i / 30.0, **kw)
             im.image = None
             ims[name].append(im)
-        floor_ms.append(floor.run())
+        floor_ms.append(floor.steady())
     # per-pass profile (extra glFinish calls: the sum is a little above the plain frame)
     acc, undo = _profile(r)
     prof_total = []
@@ -831,11 +842,11 @@ def render_runtime_section(args, camera: str = "flight") -> dict:
     ms, fl_ms, timings = [], [], []
     for i in range(n):  # interleaved frame by frame, the order alternated
         if i % 2:
-            fl_ms.append(floor.run())
+            fl_ms.append(floor.steady())
             ms.append(frame(i))
         else:
             ms.append(frame(i))
-            fl_ms.append(floor.run())
+            fl_ms.append(floor.steady())
         timings.append(dict(getattr(p.frame, "timings", {}) or {}))
     fl = med(fl_ms)
     fm = med(ms)
@@ -843,8 +854,8 @@ def render_runtime_section(args, camera: str = "flight") -> dict:
     print(f"== {RENDER_SCENE.name} through `piste render`'s runtime ({what}), interleaved with the floor "
           f"frame by frame (ms, median [min-max]) ==")
     print(f"  frame  {rng_str(ms)} ms  {1e3 / fm:6.1f} fps  {fm / fl:5.2f}x the floor")
-    print(f"  floor  {rng_str(fl_ms)} ms  (right after a frame {med(fl_ms[0::2]):.2f}, after a floor "
-          f"{med(fl_ms[1::2]) if n > 1 else float('nan'):.2f})")
+    print(f"  floor  {rng_str(fl_ms)} ms  (Floor.steady: one settling run, then the median of 4, between frames, "
+          "as in the scene section)")
     cols = [c for c in ("cpu", "upload", "terrain_draw", "scene_draw", "readback", "total") if all(c in t for t in timings)]
     if cols:
         print("  the renderer's own split (medians ms): " + ", ".join(f"{c} {med([t[c] for t in timings]):.2f}"
