@@ -50,6 +50,25 @@ def test_round_trip(tmp_path):
     assert m["shape"] == [20, 20, 3] and m["dtype"] == "<f4" and len(m["sha256"]) == 64
 
 
+def test_members_keep_their_shapes(tmp_path):
+    """A 0-d member comes back 0-d (np.ascontiguousarray would store it as shape (1,)), and a
+    transposed (non-contiguous) one with its own shape and values."""
+    from piste.terrain.net import PatchNet
+
+    g = np.zeros((7, 7, 3))
+    g[..., 0], g[..., 1] = np.meshgrid(np.arange(7.0), np.arange(7.0))
+    net = PatchNet.from_control_grid(g)
+    t = np.arange(12, dtype=np.float32).reshape(3, 4).T
+    arrays = {"terrain/control_points": net.control_points, "terrain/uv": net.uv,
+              "lightmap/atlas": np.full((4, 4, 3), 0.5, np.float32), "lightmap/rects": net.lightmap_rect,
+              "extra/scalar": np.float32(2.5), "extra/transposed": t}
+    path = write_bundle(tmp_path / "s.piste", {"name": "s", "terrain": {"name": "s", "tol": net.tol}}, arrays)
+    b = read_bundle(path)
+    assert b.manifest["members"]["extra/scalar"]["shape"] == []
+    assert b.arrays["extra/scalar"].shape == () and float(b.arrays["extra/scalar"]) == 2.5
+    assert b.arrays["extra/transposed"].shape == (4, 3) and np.array_equal(b.arrays["extra/transposed"], t)
+
+
 def test_load_bundle_here_is_deprecated(tmp_path):
     """``piste.formats.bundle.load_bundle`` still works (manifest and arrays) but points to the
     pipeline's loader, which builds the scene objects; the moved names say where they went."""

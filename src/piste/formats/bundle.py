@@ -111,9 +111,16 @@ def _sha256(data: bytes | memoryview) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
+def _c_order(arr: Any) -> np.ndarray:
+    """``arr`` as a C-contiguous array of its own shape (``np.ascontiguousarray`` makes a 0-d array
+    shape ``(1,)``: a scalar member would come back as a 1-element array)."""
+    a = np.asarray(arr)
+    return a if a.flags.c_contiguous else np.array(a, order="C")
+
+
 def _npy_bytes(arr: np.ndarray) -> bytes:
     buf = io.BytesIO()
-    np.lib.format.write_array(buf, np.ascontiguousarray(arr), allow_pickle=False)
+    np.lib.format.write_array(buf, _c_order(arr), allow_pickle=False)
     return buf.getvalue()
 
 
@@ -129,7 +136,7 @@ def write_bundle(path: str | os.PathLike[str], manifest: dict, arrays: dict, com
     blobs = {}
     members = {}
     for name in sorted(arrays):
-        a = np.ascontiguousarray(arrays[name])
+        a = _c_order(arrays[name])
         if a.dtype == object:
             raise FormatError(path, "object arrays cannot be stored", field=name)
         data = _npy_bytes(a)
