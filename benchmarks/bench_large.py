@@ -227,6 +227,10 @@ def main(argv=None) -> None:
                     help="also render N random low views of the largest world (eyes 10-120 m over its top, "
                          "looking 22 degrees down, far 6 km) and check every background pixel under terrain "
                          "along its ray against the exact surface: a crack or sky past the edge or far plane")
+    ap.add_argument("--cut-far", type=float, default=3000.0, metavar="M",
+                    help="split the streamed frame's ratio to the course into content and streaming: also time the "
+                         "flight with its far plane at M metres, and the same surface within M as one net drawn by the "
+                         "bundle runtime (default 3000; 0: not)")
     ap.add_argument("--dem-tile-patches", type=int, default=64, help="patches a tile side for the DEM fit (default 64)")
     args = ap.parse_args(argv)
     sizes = [10_000] if args.quick else list(args.sizes)
@@ -296,7 +300,7 @@ def main(argv=None) -> None:
             slope = float(np.polyfit(x, y, 1)[0])
             print(f"\nscaling exponent (local build time ~ patches^k): k = {slope:.2f}  [{flags}]")
         if frames > 0:
-            _streaming(tmp, rows, frames, flags)
+            _streaming(tmp, rows, frames, flags, args.cut_far or None)
         if args.low_views and rows:
             _low_views(tmp, rows[-1], args.low_views, flags)
         if args.dem:
@@ -325,13 +329,17 @@ def _streamed_frame(s, wait: bool, cam, k: int, times: list, split: dict, tris: 
         times.append((t3 - t0) * 1e3)
         for key, a, b in (("update", t0, t1), ("submit", t1, t2), ("gpu", t2, t3)):
             split[key].append((b - a) * 1e3)
+        if "driver" in split:  # the draw calls within submit (llvmpipe shades and bins vertices in them)
+            split["driver"].append(s.stats.get("draw_ms", 0.0))
         tris.append(s.stats["triangles"])
         for key in (calls or {}):
             calls[key].append(s.stats.get(key, 0))
 
 
-def _course_frame(course, line, u: float, k: int, times: list, tris: list) -> None:
-    """One frame of the default course's terrain at track parameter ``u`` (recorded from frame 2)."""
+def _course_frame(course, line, u: float, k: int, times: list, tris: list, split: dict | None = None) -> None:
+    """One frame of the default course's terrain at track parameter ``u`` (recorded from frame 2);
+    ``split``: its ``python`` (cull, LOD, index lists, upload) and ``gpu`` (GL calls, glFinish and
+    the read-back) milliseconds (:class:`piste.render.frame.Frame` ``timings``)."""
     from piste.world.camera import track_camera
 
     with course.ctx:
@@ -341,6 +349,23 @@ def _course_frame(course, line, u: float, k: int, times: list, tris: list) -> No
     if k >= 2:
         times.append((t1 - t0) * 1e3)
         tris.append(f.triangles)
+        if split is not None:
+            split["python"].append(f.timings["cpu"])
+            split["gpu"].append(f.timings["gpu"])
+
+
+def _bundle_frame(tr, cam, k: int, times: list, tris: list, split: dict) -> None:
+    """One frame of :class:`piste.render.TerrainRenderer` ``tr`` (the bundle runtime's terrain, its
+    own GL context) from ``cam``, read back; recorded from frame 2 like :func:`_course_frame`."""
+    with tr.ctx:
+        t0 = time.perf_counter()
+        f = tr.render(cam)
+        t1 = time.perf_counter()
+    if k >= 2:
+        times.append((t1 - t0) * 1e3)
+        tris.append(f.triangles)
+        split["python"].append(f.timings["cpu"])
+        split["gpu"].append(f.timings["gpu"])
 
 
 def _low_views(tmp: Path, row: dict, n: int, flags: str = "", seed: int = 0) -> None:
@@ -422,52 +447,86 @@ def _low_views(tmp: Path, row: dict, n: int, flags: str = "", seed: int = 0) -> 
         r.close()
 
 
-def _streaming(tmp: Path, rows, frames: int, flags: str = "") -> None:
+def _streaming(tmp: Path, rows, frames: int, flags: str = "", cut_far: float | None = 3000.0) -> None:
     """Frame times flying across each world: a 'live' renderer (the loader thread pages tiles while
     frames go on), a 'waited' one (each frame waits for its near tiles) and the default course's
     terrain frame (:class:`piste.render.TerrainRenderer`, same size, along its track), each in its own
-    GL context, interleaved frame by frame (their order rotated every frame), so the three share the
+    GL context, interleaved frame by frame (their order rotated every frame), so they share the
     machine's load alike.  Each streamed frame is split into paging (``update``, the wait included),
-    the GL calls (``submit``) and the GPU's work with the read-back (``gpu``: glFinish + read)."""
+    the GL calls (``submit``) and the GPU's work with the read-back (``gpu``: glFinish + read).
+
+    With ``cut_far`` (metres) two more renderers join the rotation, to split the streamed frame's
+    ratio to the course into content and streaming: 'cut', the waited streamed frame with the far
+    plane at ``cut_far``, and 'bundle', the same cameras over the same surface within ``cut_far``
+    (the world's fitted patches any of those frusta meet, :func:`piste.render.streaming.window_net`) drawn as one net by the
+    bundle runtime's terrain renderer.  waited / course = (waited / cut: terrain beyond ``cut_far``)
+    x (cut / bundle: streaming against the bundle runtime, the same content) x (bundle / course: this
+    world's terrain within ``cut_far`` against the course's, the same runtime)."""
     import numpy as np
 
     from piste.render import StreamingRenderer, TerrainRenderer
-    from piste.render.streaming import fly_path
+    from piste.render.streaming import fly_path, window_net
     from piste.world.course import default_course, track_centerline
 
     print(f"\nstreaming: {frames} frames flying at 100 m/s, 640x448, headless EGL (llvmpipe), pixels read back; "
           "'live': the loader thread pages tiles while frames go on (far stand-ins until loaded), 'waited': each "
-          "frame waits for its near tiles; both interleaved frame by frame with the default course (2,560 patches, "
-          "TerrainRenderer along its track), the three in a rotating order")
+          "frame waits for its near tiles; interleaved frame by frame with the default course (2,560 patches, "
+          "TerrainRenderer along its track)"
+          + ("" if not cut_far else f", 'cut' (waited, far plane {cut_far:,.0f} m) and 'bundle' (the same "
+             f"surface within {cut_far:,.0f} m as one net, TerrainRenderer, the same cameras)") + ", in a rotating order")
     line = track_centerline(0)
     course = TerrainRenderer(default_course(0), size=(640, 448))
     try:
         for r in rows:
             side = int(round(math.sqrt(r["patches"])))
             root = tmp / f"local_{side}"
+            names = ("live", "waited", "course") + (("cut", "bundle") if cut_far else ())
+            streamed = [n for n in ("live", "waited", "cut") if n in names]
+            # 'cut' shares the waited renderer's GL context and 'bundle' the course's (each llvmpipe context
+            # has its own rasterizer threads: five of them on 2 cores slowed every frame ~1.6x)
             rs = {name: StreamingRenderer(root, size=(640, 448), budget_bytes=256 << 20) for name in ("live", "waited")}
-            t = {k: [] for k in ("live", "waited", "course")}
-            split = {k: {"update": [], "submit": [], "gpu": []} for k in ("live", "waited")}
-            tris = {"live": [], "waited": [], "course": []}
+            if "cut" in streamed:
+                with rs["waited"].ctx:  # (GL objects are made in the current context)
+                    rs["cut"] = StreamingRenderer(root, size=(640, 448), budget_bytes=256 << 20, ctx=rs["waited"].ctx)
+            bundle = None
+            t: dict = {k: [] for k in names}
+            split = {k: {"update": [], "submit": [], "gpu": [], "driver": []} for k in streamed}
+            bsplit = {k: {"python": [], "gpu": []} for k in ("course", "bundle")}
+            tris: dict = {k: [] for k in names}
             calls = {k: {n: [] for n in ("draws", "commands", "light_binds", "uniform_writes", "cull_switches",
                                            "far_block_triangles")}
-                     for k in ("live", "waited")}
+                     for k in streamed}
             resident = 0
             try:
                 cams = list(fly_path(rs["live"].cache.index, frames + 2))
+                cut = list(fly_path(rs["live"].cache.index, frames + 2, far=cut_far)) if cut_far else []
+                if cut_far:
+                    t0 = time.perf_counter()
+                    net = window_net(root, cut)
+                    with course.ctx:
+                        bundle = TerrainRenderer(net, size=(640, 448), ctx=course.ctx)
+                        bundle.render(cut[0])  # its resident vertex blocks built before the timed frames
+                    print(f"  'bundle': {len(net):,} patches of the {r['patches']:,} meet a frustum of the path within "
+                          f"{cut_far:,.0f} m; net and resident blocks "
+                          f"{time.perf_counter() - t0:.1f} s  [{flags}]")
 
                 for k, cam in enumerate(cams):
-                    for j in range(3):  # the three in a rotating order
-                        name = ("live", "waited", "course")[(k + j) % 3]
+                    for j in range(len(names)):  # in a rotating order
+                        name = names[(k + j) % len(names)]
                         if name == "course":
-                            _course_frame(course, line, 0.1 + 0.4 * k / len(cams), k, t[name], tris[name])
+                            _course_frame(course, line, 0.1 + 0.4 * k / len(cams), k, t[name], tris[name],
+                                          bsplit[name])
+                        elif name == "bundle":
+                            _bundle_frame(bundle, cut[k], k, t[name], tris[name], bsplit[name])
                         else:
-                            _streamed_frame(rs[name], name == "waited", cam, k, t[name], split[name], tris[name],
-                                            calls[name])
+                            _streamed_frame(rs[name], name != "live", cut[k] if name == "cut" else cam, k, t[name],
+                                            split[name], tris[name], calls[name])
                     resident = max(resident, rs["live"].stats["resident_bytes"], rs["waited"].stats["resident_bytes"])
             finally:
                 for s in rs.values():
                     s.close()
+                if bundle is not None:
+                    bundle.release()
 
             def med(xs) -> str:
                 a = np.asarray(xs, dtype=np.float64)
@@ -477,19 +536,66 @@ def _streaming(tmp: Path, rows, frames: int, flags: str = "") -> None:
             print(f"  {r['patches']:>9,} patches: live frame median {med(t['live'])}, waited {med(t['waited'])}, "
                   f"default course {med(t['course'])}; ratios live {np.median(t['live']) / mc:.2f}, waited "
                   f"{np.median(t['waited']) / mc:.2f}; resident {resident / 2**20:.1f} MiB of 256  [{flags}]")
-            for name in ("live", "waited"):
+            for name in streamed:
                 sp = split[name]
                 work = ", ".join(f"{int(np.median(v)):,} {n.replace('_', ' ')}" for n, v in calls[name].items())
                 print(f"    {name:6s} split (medians): paging {np.median(sp['update']):.1f} ms, GL calls "
-                      f"{np.median(sp['submit']):.1f} ms, GPU + read {np.median(sp['gpu']):.1f} ms; triangles "
+                      f"{np.median(sp['submit']):.1f} ms (of which draw calls {np.median(sp['driver']):.1f}), "
+                      f"GPU + read {np.median(sp['gpu']):.1f} ms; triangles "
                       f"{int(np.median(tris[name])):,} a frame (course {int(np.median(tris['course'])):,}); GL work a "
                       f"frame (medians): {work}  [{flags}]")
             ratio = float(np.median(t["live"])) / mc
             record("large", f"streamed frame, {r['patches']:,}-patch world at 100 m/s (live) vs the default course's "
                    f"[{flags}]", "<= 1.2x", f"{np.median(t['live']):.1f} ms", f"{mc:.1f} ms", f"{ratio:.2f}x",
                    ratio <= 1.2)
+            if cut_far:
+                _decomposition(r["patches"], cut_far, t, split, bsplit, tris, flags)
     finally:
         course.release()
+
+
+def _decomposition(patches: int, cut_far: float, t: dict, split: dict, bsplit: dict, tris: dict, flags: str) -> None:
+    """Print and record the streamed frame's ratio to the course split into content and streaming
+    (see :func:`_streaming`): frame, Python (streamed: paging + GL calls; bundle runtime: cull, LOD,
+    index lists, upload) and GPU + read-back medians with ranges, triangles a frame, and the factors."""
+    import numpy as np
+
+    def m(xs) -> float:
+        return float(np.median(np.asarray(xs, dtype=np.float64)))
+
+    def rng(xs) -> str:
+        a = np.asarray(xs, dtype=np.float64)
+        return f"{np.median(a):5.1f} ms [{a.min():.1f}..{a.max():.1f}]"
+
+    sp = {n: split[n] for n in ("waited", "cut")}
+    py = {n: [a + b - c for a, b, c in zip(v["update"], v["submit"], v["driver"])] for n, v in sp.items()}
+    py.update({n: bsplit[n]["python"] for n in bsplit})
+    gpu = {n: [a + b for a, b in zip(v["driver"], v["gpu"])] for n, v in sp.items()}
+    gpu.update({n: bsplit[n]["gpu"] for n in bsplit})
+    what = {"waited": "streamed, far plane of the flight", "cut": f"streamed, far plane {cut_far:,.0f} m",
+            "bundle": f"bundle runtime, the same surface within {cut_far:,.0f} m",
+            "course": "bundle runtime, the default course"}
+    print(f"  decomposition of the {patches:,}-patch world's streamed frame (waited: every near tile loaded) "
+          f"against the course's, the same run (medians; Python: paging and the frame's lists, or the bundle "
+          f"runtime's cull, LOD, index lists and upload; draw calls: the driver, where llvmpipe shades and bins "
+          f"vertices):  [{flags}]")
+    for n in ("waited", "cut", "bundle", "course"):
+        print(f"    {n:6s} ({what[n]}): frame {rng(t[n])}, Python {m(py[n]):.1f} ms, draw calls + GPU + read "
+              f"{m(gpu[n]):.1f} ms, triangles {int(np.median(tris[n])):,}  [{flags}]")
+    mw, mcut, mb, mc = (m(t[n]) for n in ("waited", "cut", "bundle", "course"))
+    horizon, stream, content = mw / mcut, mcut / mb, mb / mc
+    print(f"    waited / course {mw / mc:.2f} = terrain beyond {cut_far:,.0f} m {horizon:.2f} (waited / cut) x "
+          f"streaming against the bundle runtime on the same content {stream:.2f} (cut / bundle) x this world's "
+          f"terrain within {cut_far:,.0f} m against the course's, same runtime {content:.2f} (bundle / course)  "
+          f"[{flags}]")
+    base = f"{patches:,}-patch world at 100 m/s"
+    record("large", f"streamed frame, {base}, far plane {cut_far:,.0f} m (waited) vs the same surface as one net "
+           f"(bundle runtime, same cameras): streaming's own share [{flags}]", "", f"{mcut:.1f} ms", f"{mb:.1f} ms",
+           f"{stream:.2f}x")
+    record("large", f"content: the same surface within {cut_far:,.0f} m as one net (bundle runtime, the flight's "
+           f"cameras) vs the default course's frame [{flags}]", "", f"{mb:.1f} ms", f"{mc:.1f} ms", f"{content:.2f}x")
+    record("large", f"content: streamed frame, {base}, its own far plane vs far plane {cut_far:,.0f} m (waited) "
+           f"[{flags}]", "", f"{mw:.1f} ms", f"{mcut:.1f} ms", f"{horizon:.2f}x")
 
 
 if __name__ == "__main__":

@@ -384,3 +384,28 @@ def test_middle_tiles_draw_their_far_patches_from_the_corner_grid(world, gl):
         assert S.glue_indices(mesh, (8, 8), np.zeros((64, 4), bool)).shape == (0, 3)
     finally:
         r.close()
+
+
+def test_window_net_holds_the_patches_in_view_bit_for_bit(world):
+    """The one-net reference of bench_large's decomposition: exactly the tiles' patches whose boxes
+    meet a camera's frustum (its own far plane), their control points unchanged; a farther far
+    plane takes more; no patch in view is an error."""
+    from piste.terrain.tiles import tile_net
+
+    store = TileStore(world)
+    grid = store.grid()
+    cams = _views(world)[:2]
+    near = [Camera(c.eye, c.target, near=1.0, far=800.0) for c in cams]
+    net = S.window_net(world, near)
+    every = np.concatenate([tile_net(store, *t).control_points for t in grid.tiles()])
+    lo, hi = every.min((1, 2)), every.max((1, 2))
+    want = np.zeros(len(every), bool)
+    for c in near:
+        want |= S._boxes_visible(c.with_aspect(640, 448).frustum_planes(), lo, hi)
+    assert 0 < want.sum() < len(every)
+    got = {a.tobytes() for a in net.control_points}
+    assert got == {a.tobytes() for a in every[want]}
+    assert len(S.window_net(world, cams)) > len(net)
+    away = [Camera(np.array([-5000.0, -5000.0, 100.0]), np.array([-6000.0, -6000.0, 100.0]), near=1.0, far=500.0)]
+    with pytest.raises(ConfigError, match="no patch"):
+        S.window_net(world, away)

@@ -103,6 +103,7 @@ from piste.render.video import VideoWriter
 from piste.terrain.bezier import evaluate, grid_params
 from piste.terrain.cull import patch_tree
 from piste.terrain.lod import FLAT_LEVEL, patch_error_table
+from piste.terrain.net import PatchNet
 from piste.terrain.tessellate import tessellate
 from piste.terrain.tiles import (MAX_TILE_OBJECTS, TileError, TileGrid, TileStore, read_tile_objects, tile_entries,
                                  triangulated_heights)
@@ -120,7 +121,7 @@ __all__ = ["TileCache", "StreamingRenderer", "StreamingTerrain", "TileMesh", "ne
            "render_flight", "TileSets", "light_grid", "stride_errors", "chord_error", "visible_indices", "world_fog_density",
            "object_instance_bytes", "object_kind_heights", "OBJECT_MIN_PIXELS", "patch_order", "patch_level_errors",
            "vertex_errors", "glue_indices", "far_blocks", "block_runs", "patch_runs", "entry_runs", "FAR_BLOCK",
-           "LOD_REFERENCE_LINES", "command_indices"]
+           "LOD_REFERENCE_LINES", "command_indices", "window_net"]
 
 _log = logging.getLogger(__name__)
 
@@ -2206,6 +2207,7 @@ class StreamingRenderer:
         jobs.sort(key=lambda j: order.get(j[0], 0))
         u_origin, u_light_uv, u_morph, u_verr = (self.prog[n] for n in ("u_origin", "u_light_uv", "u_morph", "u_verr"))
         state = {"draws": 0, "light_binds": 0, "uniform_writes": 0, "cull_switches": 0}
+        gl_s = 0.0  # seconds in the draw calls (the driver: llvmpipe shades and bins vertices there)
         for t, kind, mesh, vao, run, vmorph in jobs:
             if (kind != "zip") != culling:  # zippers are seen from both sides
                 culling = not culling
@@ -2227,6 +2229,7 @@ class StreamingRenderer:
                 state["uniform_writes"] += 1
             last = (t, um, vmorph)
             state["draws"] += 1
+            g0 = time.perf_counter()
             if isinstance(run, int):  # indices of a vertex array (a visibility set's, glued patches'; -1: all)
                 vao.render(moderngl.TRIANGLES, vertices=run)
             elif run is None:  # a whole mesh
@@ -2235,6 +2238,7 @@ class StreamingRenderer:
                 vao.render(moderngl.TRIANGLES, vertices=run[2], first=run[1])
             elif run[1]:
                 vao.render_indirect(self._indirect, moderngl.TRIANGLES, count=run[1], first=run[0])
+            gl_s += time.perf_counter() - g0
         with self.cache._lock:
             resident = {t: id(m) for t, m in self.cache.near.items()}
         for key in [k for k in self._gpu if k[1] in ("near", "mid") and k not in live
@@ -2242,9 +2246,13 @@ class StreamingRenderer:
             self._release(key)  # evicted (or replaced) near tiles leave the GPU too
         self.ctx.disable(moderngl.CULL_FACE)
         if self.sky is not None and sky:
+            g0 = time.perf_counter()
             self.sky.draw(vp)  # last: only where no tile was drawn
+            gl_s += time.perf_counter() - g0
         image = self.fbo.read()[..., :3].copy() if read else None
-        self.stats = {**drawn, **state, "resident_bytes": self.cache.resident_bytes, "ms": (time.perf_counter() - t0) * 1e3}
+        #: ``draw_ms``: the frame's draw calls (the tiles' and the sky's) as the driver took them
+        self.stats = {**drawn, **state, "resident_bytes": self.cache.resident_bytes, "draw_ms": gl_s * 1e3,
+                      "ms": (time.perf_counter() - t0) * 1e3}
         return image
 
     def close(self) -> None:
@@ -2500,3 +2508,38 @@ def render_flight(root: str | os.PathLike[str], out: str | os.PathLike[str] | No
         r.close()
     return {"frames": frames, "ms": times, "resident_mb": max(resident) / 2**20, "near": stats.get("near", 0),
             "far": stats.get("far", 0)}
+
+
+def window_net(root: str | os.PathLike[str], cameras: list, size: tuple[int, int] = (640, 448)) -> PatchNet:
+    """One :class:`piste.terrain.PatchNet` of a tiled world's fitted patches (the tiles' control
+    points, bit for bit) whose boxes meet the frustum of any of ``cameras`` (each with its own far
+    plane, its aspect set to ``size``): the surface a flight along them shows, as one net that the
+    bundle runtime (:class:`piste.render.TerrainRenderer`) can draw.  Only tiles within the largest
+    far plane of an eye (in x and y) are read.  ConfigError when no patch is in view."""
+    store = TileStore(root)
+    grid = store.grid()
+    cams = [c.with_aspect(*size) for c in cameras]
+    if not cams:
+        raise ConfigError(f"{root}: window_net needs at least one camera")
+    eyes = np.array([c.eye for c in cams], dtype=np.float64)
+    reach = max(float(c.far) for c in cams)
+    lo_xy, hi_xy = eyes[:, :2].min(0) - reach, eyes[:, :2].max(0) + reach
+    planes = [c.frustum_planes() for c in cams]
+    cps, uvs = [], []
+    for t in grid.tiles():
+        x0, y0, x1, y1 = grid.tile_bounds_xy(*t)
+        if x1 < lo_xy[0] or x0 > hi_xy[0] or y1 < lo_xy[1] or y0 > hi_xy[1]:
+            continue
+        a = store.read_fit(grid, *t)
+        cp = a["control_points"]
+        lo, hi = cp.min((1, 2)), cp.max((1, 2))  # (p, 3) the patches' boxes
+        keep = np.zeros(len(cp), bool)
+        for pl in planes:
+            keep |= _boxes_visible(pl, lo, hi)
+        cps.append(cp[keep])
+        uvs.append(a["uv"][keep])
+    if not cps or not sum(len(c) for c in cps):
+        raise ConfigError(f"{root}: no patch of the world is in view of the {len(cams)} cameras")
+    s = grid.samples_per_patch
+    return PatchNet(np.concatenate(cps), uv=np.concatenate(uvs), tol=1e-6 * s * min(grid.spacing),
+                    name=f"{Path(root).name}: the patches in view")
