@@ -230,3 +230,60 @@ def test_big_stored_members_are_hashed_by_a_second_thread_and_checked_before_ret
         with pytest.raises(FormatError, match="checksum mismatch") as e:
             read_bundle(_rewrite(path, tmp_path / "wrong.piste", edit))
         assert e.value.field == member + ".npy"
+
+
+def test_deferred_checks_name_the_corrupt_member_when_finished(tmp_path, monkeypatch):
+    """read_bundle_deferred: the big uncompressed members (here every one not the terrain's) are
+    checked in the second thread after it returns -- SHA-256 when verifying, else the zip's CRC-32 --
+    and ``finish()`` raises the FormatError naming a corrupt one (once; later calls do nothing); the
+    arrays are those read_bundle returns."""
+    import threading
+
+    from piste.formats import bundle as fmt
+
+    monkeypatch.setattr(fmt._Hasher, "MIN_BYTES", 0)
+    threads = []
+    real_run = fmt._Hasher._run
+    monkeypatch.setattr(fmt._Hasher, "_run", lambda self: threads.append(threading.current_thread().name) or real_run(self))
+    path, arrays = _bundle(tmp_path)
+    for verify in (True, False):
+        data, finish = fmt.read_bundle_deferred(path, verify=verify)
+        finish()
+        finish()
+        assert list(data.arrays) == list(read_bundle(path, verify=verify).arrays)
+        assert all(np.array_equal(data.arrays[n], a) for n, a in arrays.items())
+    assert threads.count("piste-bundle-sha256") >= 2  # (the CRC-32 too when not verifying)
+    with zipfile.ZipFile(path) as zf:
+        info = zf.getinfo(RESIDENT_MEMBER + ".npy")
+        offset = info.header_offset + 30 + len(info.filename.encode()) + len(info.extra) + info.compress_size - 3
+    raw = bytearray(path.read_bytes())
+    raw[offset] ^= 0x10
+    flipped = tmp_path / "flipped.piste"
+    flipped.write_bytes(bytes(raw))
+    for verify in (True, False):
+        data, finish = fmt.read_bundle_deferred(flipped, verify=verify)  # (returns: the check is pending)
+        with pytest.raises(FormatError, match="corrupt member") as e:
+            finish()
+        assert e.value.field == RESIDENT_MEMBER + ".npy"
+        finish()  # (reported once)
+        with pytest.raises(FormatError, match="corrupt member") as e:
+            read_bundle(flipped, verify=verify)
+        assert e.value.field == RESIDENT_MEMBER + ".npy"
+
+
+def test_a_corrupt_member_is_named_before_what_its_bytes_broke(tmp_path, monkeypatch):
+    """A handed-off member whose bad bytes make the reader (or the caller's own work) fail before its
+    check is reported as the corrupt member it is, not by what it broke."""
+    from piste.formats import bundle as fmt
+
+    monkeypatch.setattr(fmt._Hasher, "MIN_BYTES", 0)
+    path, _ = _bundle(tmp_path)
+
+    def edit(name, data, man):  # a bad .npy header in the atlas (its hash in the manifest is the old one)
+        return data.replace(b"'descr'", b"'descX'") if name == "lightmap/atlas.npy" else data
+
+    bad = _rewrite(path, tmp_path / "bad_header.piste", edit)
+    for reader in (read_bundle, lambda p: fmt.read_bundle_deferred(p)[1]()):
+        with pytest.raises(FormatError, match="checksum mismatch") as e:
+            reader(bad)
+        assert e.value.field == "lightmap/atlas.npy"

@@ -170,3 +170,28 @@ def test_a_damaged_stored_member_names_it(tmp_path):
         read_bundle(wrong)
     assert e.value.field == RESIDENT_MEMBER + ".npy" and "checksum mismatch" in str(e.value)
     assert read_bundle(wrong, verify=False).arrays[RESIDENT_MEMBER].shape == (len(_net()) * 116, 11)
+
+
+def test_a_corrupt_block_member_is_named_as_corrupt_not_as_bad_blocks(tmp_path, monkeypatch):
+    """load_bundle builds the objects while the big members are still being checked in the second
+    thread (read_bundle_deferred): bytes gone bad on disk in the stored blocks, which also break the
+    blocks' own check (a morph slot out of range), are still reported as the corrupt member they are
+    (its SHA-256 when verifying, the zip's CRC-32 when not), never as invalid blocks."""
+    from piste.formats import bundle as fmt
+
+    monkeypatch.setattr(fmt._Hasher, "MIN_BYTES", 0)  # (the mini bundle's blocks are small)
+    path, net = _bundle(tmp_path)
+    b = load_bundle(path, warm=True)  # (unchanged: loads)
+    with zipfile.ZipFile(path) as zf:
+        info = zf.getinfo(RESIDENT_MEMBER + ".npy")
+        start = info.header_offset + 30 + len(info.filename.encode()) + len(info.extra)
+        head = len(zf.read(info.filename)) - b.arrays[RESIDENT_MEMBER].nbytes
+    raw = bytearray(path.read_bytes())
+    at = start + head + (5 * 11 + 10) * 4  # vertex 5's morph slot (float32)
+    raw[at:at + 4] = np.float32(1e6).tobytes()
+    bad = tmp_path / "rot.piste"
+    bad.write_bytes(bytes(raw))
+    for verify in (True, False):
+        with pytest.raises(FormatError, match="corrupt member") as e:
+            load_bundle(bad, verify=verify, warm=True)
+        assert e.value.field == RESIDENT_MEMBER + ".npy"

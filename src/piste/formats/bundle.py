@@ -38,6 +38,7 @@ API
 BUNDLE_FORMAT                         "piste.bundle/2" (READ_FORMATS: also reads "piste.bundle/1")
 write_bundle(path, manifest, arrays)  atomic, deterministic (STORED_MEMBERS uncompressed)
 read_bundle(path, verify=True) -> BundleData   ``.path``, ``.manifest``, ``.arrays`` (checked)
+read_bundle_deferred(path, verify=True) -> (BundleData, finish)   the big members checked in the background
 read_manifest(path) -> dict           the manifest only (cheap)
 camera_to_dict(camera) -> dict        a camera's manifest entry (any object with eye/target/up/fov_y/...)
 load_bundle(path)                     deprecated here: use :func:`piste.pipeline.load_bundle`
@@ -67,7 +68,8 @@ from piste.formats.atomic import atomic_path
 from piste.formats.bundle_schema import MAX_MEMBER_BYTES, check_manifest
 from piste.formats.safe_io import loads_json, open_file
 
-__all__ = ["BUNDLE_FORMAT", "REQUIRED_MEMBERS", "TOPOLOGY_MEMBERS", "write_bundle", "read_bundle", "read_manifest", "BundleData",
+__all__ = ["BUNDLE_FORMAT", "REQUIRED_MEMBERS", "TOPOLOGY_MEMBERS", "write_bundle", "read_bundle", "read_bundle_deferred",
+           "read_manifest", "BundleData",
            "camera_to_dict", "load_bundle", "READ_FORMATS", "RESIDENT_MEMBER", "STORED_MEMBERS"]
 
 BUNDLE_FORMAT = "piste.bundle/2"
@@ -249,7 +251,12 @@ def _mapped_member(mm: mmap.mmap, zi: zipfile.ZipInfo) -> memoryview | bytes | N
 
 
 def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool,
-                 on_terrain: Callable[[dict], Any] | None = None) -> dict:
+                 on_terrain: Callable[[dict], Any] | None = None,
+                 hand_off_share: float | None = None) -> tuple[dict, Callable[[], None]]:
+    """The members' arrays (read, parsed) and ``finish()``, which waits for the second thread's checks
+    of the big uncompressed members it was handed and raises FormatError naming the first that fails
+    (see :func:`read_bundle_deferred`).  ``hand_off_share``: at most this share of the bytes to check
+    goes to that thread (default :attr:`_Hasher.HAND_OFF_SHARE`)."""
     out: dict[str, np.ndarray] = {}
     infos = {i.filename: i for i in zf.infolist()}  # the zip's index, read once
     mm = _mapped(zf)
@@ -258,51 +265,68 @@ def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool,
     first = [n for n in members if n in TERRAIN_MEMBERS]
     order = first + [n for n in members if n not in TERRAIN_MEMBERS]
     # big uncompressed members that are not the terrain's (the vertex blocks: 13 MB, ~8 ms of SHA-256)
-    # are handed first to a second thread that hashes them (hashlib lets go of the GIL) while this one
-    # reads and checks the rest; each is checked, and only then parsed, before any is returned (nor
-    # are they given to ``on_terrain``)
-    background = _Hasher() if verify and mm is not None else None
+    # are handed first to a second thread that checks them (SHA-256 when verifying, else the zip's
+    # CRC-32: hashlib and zlib let go of the GIL) while this one reads and checks the rest; they are
+    # parsed here, but given to ``on_terrain`` and returned only with the others (``finish`` checks them)
+    background = _Hasher(verify) if mm is not None else None
     deferred: list[tuple[str, Any, zipfile.ZipInfo, bool]] = []
+    handed: set[str] = set()
     if background is not None:
-        # the biggest first, while the thread's share of the bytes to hash stays at most HAND_OFF_SHARE
+        # the biggest first, while the thread's share of the bytes to check stays at most the share
         # (this thread has the inflating and parsing besides: the default course hands off the 13 MB
         # of vertex blocks, 60 % of its bytes)
         size = {n: infos[f"{n}.npy"].file_size if f"{n}.npy" in infos else 0 for n in order}
-        budget = _Hasher.HAND_OFF_SHARE * sum(size.values())
+        share = _Hasher.HAND_OFF_SHARE if hand_off_share is None else hand_off_share
+        budget = share * sum(size.values())
         for name in sorted((n for n in order[len(first):] if n in STORED_MEMBERS), key=lambda n: -size[n]):
             if size[name] <= budget:  # (a member that cannot go to the thread is read below in the order)
                 _read_member(path, zf, mm, infos, members, name, verify, out, background, deferred, hand_off=True)
                 budget -= size[name] if deferred and deferred[-1][0] == name else 0
         handed = {d[0] for d in deferred}
         background.start()
+    finished = False
+
+    def finish() -> None:
+        nonlocal finished
+        if finished:
+            return
+        finished = True
+        checks = background.digests() if background is not None else {}
+        for name, data, zi, crc_checked in deferred:
+            _check_member(path, zi, data, members[name], checks[name] if verify else None, crc_checked,
+                          crc=None if verify else checks[name])
+
     try:
         for k, name in enumerate(order):
             if on_terrain is not None and k == len(first):
                 on_terrain(out)
-            if background is None or name not in handed:
+            if name not in handed:
                 _read_member(path, zf, mm, infos, members, name, verify, out, None, deferred)
         if on_terrain is not None and len(first) == len(order):
             on_terrain(out)
-    finally:
-        digests = background.digests() if background is not None else {}
-    for name, data, zi, crc_checked in deferred:
-        _check_member(path, zi, data, members[name], digests[name], crc_checked)
-        out[name] = _member_array(path, name, f"{name}.npy", data, members[name])
-    return {n: out[n] for n in order} if deferred else out
+        for name, data, _zi, _crc in deferred:
+            out[name] = _member_array(path, name, f"{name}.npy", data, members[name])
+    except BaseException:
+        finish()  # a corrupt handed-off member is named as such, not by what its bytes broke
+        raise
+    return ({n: out[n] for n in order} if deferred else out), finish
 
 
 class _Hasher:
-    """SHA-256 of bundle members in a second thread, in the order added (:func:`_read_arrays`): the
-    members are added, then :meth:`start` hashes them all (no queue: ~0.8 ms of imports)."""
+    """Checks of bundle members in a second thread, in the order added (:func:`_read_arrays`): their
+    SHA-256 when verifying, else their CRC-32.  The members are added, then :meth:`start` checks them
+    all (no queue: ~0.8 ms of imports)."""
 
     #: uncompressed members at least this big go to the second thread (smaller ones: not worth a hand-off)
     MIN_BYTES = 1 << 20
-    #: at most this share of the bytes to hash goes to the second thread
+    #: at most this share of the bytes to check goes to the second thread when :func:`read_bundle`
+    #: waits for it (:func:`read_bundle_deferred` hands off every big uncompressed member)
     HAND_OFF_SHARE = 0.65
 
-    def __init__(self) -> None:
+    def __init__(self, verify: bool = True) -> None:
+        self._verify = verify
         self._jobs: list[tuple[str, bytes | memoryview]] = []
-        self._out: dict[str, str] = {}
+        self._out: dict[str, Any] = {}
         self._thread: Any = None
 
     def add(self, name: str, data: bytes | memoryview) -> None:
@@ -317,25 +341,26 @@ class _Hasher:
 
     def _run(self) -> None:
         for name, data in self._jobs:
-            self._out[name] = _sha256(data)
+            self._out[name] = _sha256(data) if self._verify else zlib.crc32(data)
 
-    def digests(self) -> dict[str, str]:
-        """Every added member's hex SHA-256 (waits for the thread)."""
+    def digests(self) -> dict[str, Any]:
+        """Every added member's hex SHA-256 (verifying) or CRC-32 (waits for the thread)."""
         if self._thread is not None:
             self._thread.join()
         return self._out
 
 
 def _check_member(path: Path, zi: zipfile.ZipInfo, data: bytes | memoryview, info: dict, digest: str | None,
-                  crc_checked: bool) -> None:
+                  crc_checked: bool, crc: int | None = None) -> None:
     """FormatError naming the member when its SHA-256 (``digest``; None: not verifying) is not the
-    manifest's, or, not verifying, when an unchecked member's CRC-32 is not the zip's."""
+    manifest's, or, not verifying, when an unchecked member's CRC-32 (``crc`` when already computed)
+    is not the zip's."""
     member = zi.filename
     if digest is not None and digest != info.get("sha256"):
         if not crc_checked and zlib.crc32(data) != zi.CRC:  # a corrupt member, as zipfile says it
             raise FormatError(path, f"corrupt member (Bad CRC-32 for file {member!r})", field=member)
         raise FormatError(path, "checksum mismatch (the file is corrupt)", field=member)
-    if digest is None and not crc_checked and zlib.crc32(data) != zi.CRC:
+    if digest is None and not crc_checked and (zlib.crc32(data) if crc is None else crc) != zi.CRC:
         raise FormatError(path, f"corrupt member (Bad CRC-32 for file {member!r})", field=member)
 
 
@@ -474,21 +499,45 @@ def read_bundle(path: str | os.PathLike[str], verify: bool = True,
     before), before the others are read: :func:`piste.pipeline.load_bundle` starts building the
     terrain's vertex blocks there.  An error in a later member still raises (after the call).
     """
+    data, finish = read_bundle_deferred(path, verify, on_terrain, hand_off_share=_Hasher.HAND_OFF_SHARE)
+    finish()
+    return data
+
+
+def read_bundle_deferred(path: str | os.PathLike[str], verify: bool = True,
+                         on_terrain: Callable[[dict, dict], Any] | None = None,
+                         hand_off_share: float = 1.0) -> tuple[BundleData, Callable[[], None]]:
+    """:func:`read_bundle`, but the checks of the big uncompressed members (SHA-256 when ``verify``,
+    else the zip's CRC-32: every one of at least 1 MiB that is not the terrain's, up to
+    ``hand_off_share`` of the bytes to check) go on in a second thread after this returns:
+    ``(data, finish)``, where ``finish()`` waits for them and raises the
+    :class:`~piste.errors.FormatError` naming the first member that fails (as :func:`read_bundle`
+    would have; later calls do nothing).  The arrays may be used before (e.g. turned into the scene's
+    objects, overlapping the ~10 ms of SHA-256 of the default course's 21 MB), but are trusted only
+    once ``finish()`` returned; a caller whose own work on them fails calls ``finish()`` first, so
+    that a corrupt member is named as such rather than by what its bytes broke
+    (:func:`piste.pipeline.load_bundle`).  Every other member is checked before this returns."""
     path = Path(path)
-    with _open(path) as zf:
-        man = _manifest(path, zf)
+    finish: Callable[[], None] = lambda: None  # noqa: E731
+    try:
+        with _open(path) as zf:
+            man = _manifest(path, zf)
 
-        def terrain_ready(part: dict) -> None:
-            if on_terrain is not None and all(n in part for n in _NET_MEMBERS):
-                _check_topology_members(path, man, part)
-                on_terrain(man, part)
+            def terrain_ready(part: dict) -> None:
+                if on_terrain is not None and all(n in part for n in _NET_MEMBERS):
+                    _check_topology_members(path, man, part)
+                    on_terrain(man, part)
 
-        arrays = _read_arrays(path, zf, man["members"], verify, terrain_ready if on_terrain is not None else None)
-    for need in REQUIRED_MEMBERS:
-        if need not in arrays:
-            raise FormatError(path, "required member is missing", field=f"{need}.npy")
-    _check_topology_members(path, man, arrays)
-    return BundleData(path, man, arrays)
+            arrays, finish = _read_arrays(path, zf, man["members"], verify,
+                                          terrain_ready if on_terrain is not None else None, hand_off_share)
+        for need in REQUIRED_MEMBERS:
+            if need not in arrays:
+                raise FormatError(path, "required member is missing", field=f"{need}.npy")
+        _check_topology_members(path, man, arrays)
+    except BaseException:
+        finish()
+        raise
+    return BundleData(path, man, arrays), finish
 
 
 def _check_topology_members(path: Path, man: dict, arrays: dict) -> None:
