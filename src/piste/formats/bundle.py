@@ -51,14 +51,13 @@ import io
 import json
 import mmap
 import os
-import struct
+import sys
 import warnings
-import zipfile
 import zlib
 from collections.abc import Callable, Collection, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 
@@ -67,6 +66,10 @@ from piste.errors import FormatError
 from piste.formats.atomic import atomic_path
 from piste.formats.bundle_schema import MAX_MEMBER_BYTES, check_manifest
 from piste.formats.safe_io import loads_json, open_file
+from piste.formats.ziplite import STORED, BadZip, ZipEntry, member_bytes, read_index
+
+if TYPE_CHECKING:
+    import zipfile
 
 __all__ = ["BUNDLE_FORMAT", "REQUIRED_MEMBERS", "TOPOLOGY_MEMBERS", "write_bundle", "read_bundle", "read_bundle_deferred",
            "read_manifest", "BundleData",
@@ -146,6 +149,8 @@ def write_bundle(path: str | os.PathLike[str], manifest: dict, arrays: dict, com
         members[name] = {"shape": list(a.shape), "dtype": a.dtype.str, "sha256": _sha256(data)}
     man["members"] = members
     text = (json.dumps(man, indent=1, sort_keys=True, allow_nan=False) + "\n").encode()
+    import zipfile  # (imported where used: a bundle render reads through piste.formats.ziplite)
+
     path = Path(path)
     with atomic_path(path) as tmp:
         with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=compresslevel) as zf:
@@ -160,10 +165,65 @@ def write_bundle(path: str | os.PathLike[str], manifest: dict, arrays: dict, com
     return path
 
 
+def _zip_errors() -> tuple[type[BaseException], ...]:
+    """What a corrupt archive raises: ziplite's and zlib's errors, I/O errors and, once it is imported
+    (an archive ziplite does not read), zipfile's (an ``except`` clause evaluates this only when an
+    exception is being matched)."""
+    zf = sys.modules.get("zipfile")
+    return (BadZip, zlib.error, OSError, EOFError) + ((zf.BadZipFile,) if zf is not None else ())
+
+
+class _Archive:
+    """An opened bundle: its file mapped read-only (POSIX) and indexed by :mod:`piste.formats.ziplite`
+    (no :mod:`zipfile` import: ~2.5 ms of a fresh process), or, for an archive ziplite does not read
+    (or a file that cannot be mapped), a :class:`zipfile.ZipFile`.  ``infolist()``, ``read(name)``,
+    ``open(entry)`` as zipfile's; ``mm``: the mapping or None."""
+
+    def __init__(self, fh: Any) -> None:
+        self.fh = fh
+        self.mm = _mapped(fh)
+        self._index = read_index(self.mm) if self.mm is not None else None
+        self._zf: zipfile.ZipFile | None = None
+        if self._index is None:
+            self._zip()  # (BadZipFile etc. for what is not a zip archive)
+
+    def _zip(self) -> zipfile.ZipFile:
+        """The archive as a :class:`zipfile.ZipFile` (opened on first use)."""
+        if self._zf is None:
+            import zipfile
+
+            self._zf = zipfile.ZipFile(self.fh)
+        return self._zf
+
+    def infolist(self) -> list[Any]:
+        return list(self._index) if self._index is not None else self._zip().infolist()
+
+    def read(self, name: str) -> bytes:
+        """Member ``name``'s bytes, its CRC-32 checked (KeyError when there is none)."""
+        if self._index is not None and self.mm is not None:
+            entry = next((e for e in self._index if e.filename == name), None)
+            if entry is None:
+                raise KeyError(name)
+            data = member_bytes(self.mm, entry)
+            if data is not None:
+                if entry.compress_type == STORED and zlib.crc32(data) != entry.CRC:
+                    raise BadZip(f"Bad CRC-32 for file {name!r}")
+                return bytes(data)
+        return self._zip().read(name)
+
+    def open(self, entry: Any) -> Any:
+        """Member ``entry`` as zipfile opens it (its CRC-32 checked as it is read)."""
+        return self._zip().open(entry.filename)
+
+    def close(self) -> None:
+        if self._zf is not None:
+            self._zf.close()
+
+
 @contextlib.contextmanager
-def _open(path: Path) -> Iterator[zipfile.ZipFile]:
-    """The bundle as a ZipFile, opened through :func:`piste.formats.safe_io.open_file` (regular
-    files only: a pipe or device is refused before a read, a link below a confinement root too)."""
+def _open(path: Path) -> Iterator[_Archive]:
+    """The bundle as an :class:`_Archive`, opened through :func:`piste.formats.safe_io.open_file`
+    (regular files only: a pipe or device is refused before a read, a link below a confinement root too)."""
     try:
         fh = open_file(path, what="bundle")
     except FormatError as exc:
@@ -175,19 +235,21 @@ def _open(path: Path) -> Iterator[zipfile.ZipFile]:
         raise
     with fh:
         try:
-            zf = zipfile.ZipFile(fh)
-        except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
+            zf = _Archive(fh)
+        except _zip_errors() + (ValueError,) as exc:
             raise FormatError(path, f"not a piste bundle (not a zip archive: {exc})") from None
-        with zf:
+        try:
             yield zf
+        finally:
+            zf.close()
 
 
-def _manifest(path: Path, zf: zipfile.ZipFile) -> dict:
+def _manifest(path: Path, zf: _Archive) -> dict:
     try:
         raw = zf.read("manifest.json")
     except KeyError:
         raise FormatError(path, "not a piste bundle: no manifest.json member", field="manifest.json") from None
-    except (zipfile.BadZipFile, zlib.error, OSError) as exc:
+    except _zip_errors() as exc:
         raise FormatError(path, f"corrupt member ({exc})", field="manifest.json") from None
     try:  # nesting bounded before parsing (safe_io), so no RecursionError
         man = loads_json(raw.decode("utf-8"), path, field="manifest.json")
@@ -212,45 +274,27 @@ def read_manifest(path: str | os.PathLike[str]) -> dict:
         return _manifest(path, zf)
 
 
-def _mapped(zf: zipfile.ZipFile) -> mmap.mmap | None:
-    """The bundle's file mapped read-only (POSIX), or None (then every member is read)."""
+def _mapped(fh: Any) -> mmap.mmap | None:
+    """The bundle's file mapped read-only (POSIX), or None (then every member is read by zipfile)."""
     if os.name != "posix":  # (elsewhere a mapped file could not be replaced by a rebuild while in use)
         return None
     try:
-        # (a closed zip's fp is None: the AttributeError below)
-        return mmap.mmap(zf.fp.fileno(), 0, access=mmap.ACCESS_READ)  # type: ignore[union-attr]
+        return mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
     except (AttributeError, OSError, ValueError, io.UnsupportedOperation):
         return None
 
 
-def _mapped_member(mm: mmap.mmap, zi: zipfile.ZipInfo) -> memoryview | bytes | None:
+def _mapped_member(mm: mmap.mmap, zi: ZipEntry | zipfile.ZipInfo) -> memoryview | bytes | None:
     """Member ``zi`` of the mapped file ``mm``: an uncompressed one as a view of the mapping (no copy:
     reading the 13 MB of vertex blocks into a fresh process's new memory cost ~10 ms more than
     mapping them; its CRC-32 not computed here), a deflated one inflated (at most its declared size)
     and its CRC-32 checked -- zipfile's per-member open/seek/read cost ~60 us a member.  None where
     its local header is not a plain one or another compression (zipfile then reads it and reports what
-    is wrong); zlib.error / BadZipFile when the data is corrupt."""
-    at = zi.header_offset
-    head = mm[at:at + 30]
-    if len(head) != 30 or head[:4] != b"PK\x03\x04" or zi.flag_bits & 1:
-        return None
-    n, extra = struct.unpack("<HH", head[26:30])
-    start = at + 30 + n + extra
-    if mm[at + 30:at + 30 + n] != zi.filename.encode() or start + zi.compress_size > len(mm):
-        return None
-    raw = memoryview(mm)[start:start + zi.compress_size]
-    if zi.compress_type == zipfile.ZIP_STORED:
-        return raw if zi.compress_size == zi.file_size else None
-    if zi.compress_type != zipfile.ZIP_DEFLATED:
-        return None
-    inflate = zlib.decompressobj(-15)
-    data = inflate.decompress(raw, zi.file_size + 1)  # bounded: a member inflating past its size is corrupt
-    if len(data) != zi.file_size or not inflate.eof or zlib.crc32(data) != zi.CRC:
-        raise zipfile.BadZipFile(f"Bad CRC-32 or size for file {zi.filename!r}")
-    return data
+    is wrong); zlib.error / BadZip when the data is corrupt (:func:`piste.formats.ziplite.member_bytes`)."""
+    return member_bytes(mm, zi)
 
 
-def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool,
+def _read_arrays(path: Path, zf: _Archive, members: dict, verify: bool,
                  on_terrain: Callable[[dict], Any] | None = None,
                  hand_off_share: float | None = None) -> tuple[dict, Callable[[], None]]:
     """The members' arrays (read, parsed) and ``finish()``, which waits for the second thread's checks
@@ -259,7 +303,7 @@ def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool,
     goes to that thread (default :attr:`_Hasher.HAND_OFF_SHARE`)."""
     out: dict[str, np.ndarray] = {}
     infos = {i.filename: i for i in zf.infolist()}  # the zip's index, read once
-    mm = _mapped(zf)
+    mm = zf.mm
     # the terrain's members first: ``on_terrain(out)`` can start on the net (e.g. the renderer's vertex
     # blocks, in the background) while the light map, characters and objects are read
     first = [n for n in members if n in TERRAIN_MEMBERS]
@@ -269,7 +313,7 @@ def _read_arrays(path: Path, zf: zipfile.ZipFile, members: dict, verify: bool,
     # CRC-32: hashlib and zlib let go of the GIL) while this one reads and checks the rest; they are
     # parsed here, but given to ``on_terrain`` and returned only with the others (``finish`` checks them)
     background = _Hasher(verify) if mm is not None else None
-    deferred: list[tuple[str, Any, zipfile.ZipInfo, bool]] = []
+    deferred: list[tuple[str, Any, Any, bool]] = []
     handed: set[str] = set()
     if background is not None:
         # the biggest first, while the thread's share of the bytes to check stays at most the share
@@ -350,7 +394,7 @@ class _Hasher:
         return self._out
 
 
-def _check_member(path: Path, zi: zipfile.ZipInfo, data: bytes | memoryview, info: dict, digest: str | None,
+def _check_member(path: Path, zi: Any, data: bytes | memoryview, info: dict, digest: str | None,
                   crc_checked: bool, crc: int | None = None) -> None:
     """FormatError naming the member when its SHA-256 (``digest``; None: not verifying) is not the
     manifest's, or, not verifying, when an unchecked member's CRC-32 (``crc`` when already computed)
@@ -379,7 +423,7 @@ def _member_array(path: Path, name: str, member: str, data: bytes | memoryview, 
     return a
 
 
-def _read_member(path: Path, zf: zipfile.ZipFile, mm: mmap.mmap | None, infos: dict, members: dict, name: str,
+def _read_member(path: Path, zf: _Archive, mm: mmap.mmap | None, infos: dict, members: dict, name: str,
                  verify: bool, out: dict, background: _Hasher | None, deferred: list, hand_off: bool = False) -> None:
     """Read, check and parse member ``name`` into ``out``, or, when it is a big uncompressed one not of
     the terrain and ``background`` hashes, hand its hash to that thread and list it in ``deferred``
@@ -395,16 +439,16 @@ def _read_member(path: Path, zf: zipfile.ZipFile, mm: mmap.mmap | None, infos: d
                                 f"{MAX_MEMBER_BYTES}", field=member)
     # uncompressed members: a view of the mapped file, checked once (by the SHA-256 when verifying,
     # else by the zip's CRC-32); deflated ones: CRC-32 checked as they are inflated
-    if hand_off and (zi is None or zi.file_size > MAX_MEMBER_BYTES or zi.compress_type != zipfile.ZIP_STORED
+    if hand_off and (zi is None or zi.file_size > MAX_MEMBER_BYTES or zi.compress_type != STORED
                      or zi.file_size < _Hasher.MIN_BYTES):
         return
     try:
         data = _mapped_member(mm, zi) if mm is not None else None
-        crc_checked = data is None or zi.compress_type != zipfile.ZIP_STORED
+        crc_checked = data is None or zi.compress_type != STORED
         if data is None:
             with zf.open(zi) as fh:
                 data = fh.read()
-    except (zipfile.BadZipFile, zlib.error, OSError, EOFError) as exc:
+    except _zip_errors() as exc:
         raise FormatError(path, f"corrupt member ({exc})", field=member) from None
     if len(data) != zi.file_size:
         raise FormatError(path, f"corrupt member ({len(data)} bytes, the zip says {zi.file_size})", field=member)

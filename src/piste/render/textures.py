@@ -34,6 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from piste.errors import RenderError, ValidationError
+from piste.formats.ziplite import read_npz
 from piste.render.context import load_shader
 from piste.terrain.bezier import grid_params
 
@@ -78,9 +79,8 @@ SNOW_FILE = Path(__file__).resolve().parents[1] / "data" / "snow_256.npz"
 @lru_cache(maxsize=1)
 def _stored_snow() -> np.ndarray | None:
     """:data:`SNOW_FILE`'s texture (read-only), or None when it is missing or not a (256, 256, 4) uint8."""
-    try:
-        with np.load(SNOW_FILE, allow_pickle=False) as z:
-            a = z["snow"]
+    try:  # (read without zipfile: piste.formats.ziplite)
+        a = read_npz(SNOW_FILE)["snow"]
     except (OSError, KeyError, ValueError):
         return None
     if a.shape != (256, 256, 4) or a.dtype != np.uint8:

@@ -62,6 +62,7 @@ import numpy.typing as npt
 
 from piste._data import DataMethods
 from piste.errors import ConfigError, ValidationError
+from piste.formats.ziplite import read_npz
 from piste.terrain import _kernels
 from piste.terrain._kernels import frame_indices
 from piste.terrain.cull import patch_tree
@@ -676,11 +677,11 @@ TEMPLATES_FILE = Path(__file__).resolve().parents[1] / "data" / "resident_templa
 def shipped_templates(levels: Sequence[int]) -> dict | None:
     """:func:`shape_templates` of ``levels`` from :data:`TEMPLATES_FILE`, or None when the file is
     missing, unreadable or for other levels (then the caller computes them)."""
-    try:
-        with np.load(TEMPLATES_FILE, allow_pickle=False) as z:
-            if tuple(int(x) for x in z["levels"]) != tuple(int(x) for x in levels):
-                return None
-            out = {k: z[k] for k in ("tmpl", "tmpl_start", "tmpl_count", "shape_kind", "shape_verts")}
+    try:  # (read without zipfile: piste.formats.ziplite)
+        z = read_npz(TEMPLATES_FILE)
+        if tuple(int(x) for x in z["levels"]) != tuple(int(x) for x in levels):
+            return None
+        out = {k: z[k] for k in ("tmpl", "tmpl_start", "tmpl_count", "shape_kind", "shape_verts")}
     except Exception:  # noqa: BLE001 - any unreadable file (OSError, EOFError, ValueError, a pickle refused): compute
         return None
     n = (len(levels) + 1) ** 4
