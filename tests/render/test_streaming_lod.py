@@ -314,6 +314,28 @@ def test_boxes_by_columns_are_culled_as_boxes_by_rows():
         assert np.array_equal(got, want)
 
 
+def test_boxes_in_a_bound_are_culled_as_without_it():
+    """With a box holding them all, the column test skips the planes the bound lies wholly inside and
+    culls all when it lies wholly outside one: the same boxes kept as without it, for eyes inside,
+    beside and far from the boxes (some planes skipped, some not, some frames culling all)."""
+    rng = np.random.default_rng(5)
+    c, h = rng.uniform(-300.0, 300.0, (4096, 3)), rng.uniform(1.0, 20.0, (4096, 3))
+    lo, hi = np.ascontiguousarray((c - h).T), np.ascontiguousarray((c + h).T)
+    bound = (lo.min(1), hi.max(1))
+    kinds = set()
+    for k in range(60):
+        eye = rng.uniform(-2500.0, 2500.0, 3) if k % 2 else rng.uniform(-250.0, 250.0, 3)
+        planes = Camera(eye, eye + rng.normal(size=3) * 100.0, near=1.0, far=rng.uniform(200.0, 5000.0)).frustum_planes()
+        want = S._boxes_visible_cols(planes, lo, hi)
+        assert np.array_equal(S._boxes_visible_cols(planes, lo, hi, bound), want)
+        n = planes[:, :3]
+        inside = (np.where(n > 0, bound[0], bound[1]) * n).sum(1) >= -planes[:, 3]  # planes skipped
+        outside = ((np.where(n > 0, bound[1], bound[0]) * n).sum(1) < -planes[:, 3]).any()  # all culled at once
+        kinds.add("cull all" if outside else "skip some" if 0 < inside.sum() < 6 and 0 < want.sum() < len(want)
+                  else "other")
+    assert {"cull all", "skip some"} <= kinds, kinds
+
+
 def _far_distance(cp: np.ndarray, g: np.ndarray, stride: int, per_patch: int = 24, seed: int = 0) -> np.ndarray:
     """The largest vertical distance, per far block, between a tile's patches ``cp (ny nx, 4, 4, 3)``
     and its far mesh at ``stride`` (the mesh's own triangles, found point by point): random points
@@ -416,3 +438,40 @@ def test_exact_block_errors_choose_strides_no_finer_than_the_estimate(world):
         assert coarser > 5 * max(finer, 1) and tris_new < 0.95 * tris_old
     finally:
         cache.close()
+
+
+def test_kept_glue_and_tile_bounds_draw_what_a_fresh_frame_draws(world, gl):
+    """Frames drawn one after another (glued patches' index lists kept while their sides stay, near and
+    middle tiles tested by their bound first) equal frames drawn between other views and frames
+    with ``tile_bounds`` off and the glue rebuilt every frame, pixel for pixel; the views glue
+    patches and draw tiles wholly from the corner grid by their bound."""
+    low = _low_cameras(S.TileCache(world), 8, seed=3)
+    cams = low + [Camera(c.eye + [0.0, 0.0, 800.0], c.target, near=1.0, far=6000.0) for c in low]  # (and higher)
+    a = S.StreamingRenderer(world, size=SIZE, ctx=gl, background=MAGENTA, sky=False)
+    b = S.StreamingRenderer(world, size=SIZE, ctx=gl, background=MAGENTA, sky=False)
+    try:
+        seq, glued, bound = [], 0, 0
+        for cam in cams + cams[::-1]:
+            seq.append(a.render(cam, wait=True))
+            glued += sum(got[4] for got in a._glue.values())
+            bound += a.stats["bound_coarse"]
+        other = _steep_cameras(b.cache)
+        mixed = []
+        for k, cam in enumerate(cams + cams[::-1]):
+            b.render(other[k % len(other)], wait=True)
+            mixed.append(b.render(cam, wait=True))
+        # the shortcuts off: every patch's own test, the glue rebuilt every frame
+        b.tile_bounds = False
+        plain = []
+        for cam in cams + cams[::-1]:
+            for got in b._glue.values():
+                got[1].release()
+                got[0].release()
+            b._glue.clear()
+            plain.append(b.render(cam, wait=True))
+        assert glued > 0 and bound > 0 and b.stats["bound_coarse"] == 0
+        for x, y, z in zip(seq, mixed, plain):
+            assert np.array_equal(x, y) and np.array_equal(x, z)
+    finally:
+        a.close()
+        b.close()

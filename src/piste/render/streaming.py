@@ -107,6 +107,7 @@ from piste.terrain.net import PatchNet
 from piste.terrain.tessellate import tessellate
 from piste.terrain.tiles import (MAX_TILE_OBJECTS, TileError, TileGrid, TileStore, read_tile_objects, tile_entries,
                                  triangulated_heights)
+from piste.transforms import frustum_planes
 from piste.world.camera import Camera
 from piste.world.objects import OBJECT_KINDS, make_mesh
 
@@ -1658,11 +1659,24 @@ def _boxes_visible(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.nda
     return (far + np.asarray(planes, dtype=np.float64)[:, 3] >= 0.0).all(-1)
 
 
-def _boxes_visible_cols(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+def _boxes_visible_cols(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                        bound: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """:func:`_boxes_visible` of boxes given by columns, ``lo, hi (3, n)`` float64 (contiguous):
-    plane by plane on whole columns (no matrix products: ~2x faster on a tile's 4,096 patches)."""
+    plane by plane on whole columns (no matrix products: ~2x faster on a tile's 4,096 patches).
+    ``bound``: ``(lo, hi) (3,)`` a box holding them all: a plane it lies wholly inside is not tested
+    box by box (every box is inside it), and one it lies wholly outside culls them all (the same
+    answer as without it)."""
     out = np.ones(lo.shape[1], bool)
-    for nx, ny, nz, w in np.asarray(planes, dtype=np.float64):
+    pl = np.asarray(planes, dtype=np.float64)
+    if bound is not None:
+        blo, bhi = bound
+        n = pl[:, :3]
+        near = (np.where(n > 0, blo, bhi) * n).sum(1)  # each plane's value at the bound's nearest and
+        far = (np.where(n > 0, bhi, blo) * n).sum(1)  # farthest corners (monotone: no box beyond them)
+        if (far < -pl[:, 3]).any():
+            return np.zeros(lo.shape[1], bool)
+        pl = pl[near < -pl[:, 3]]
+    for nx, ny, nz, w in pl:
         f = (hi[0] if nx > 0 else lo[0]) * nx
         f += (hi[1] if ny > 0 else lo[1]) * ny
         f += (hi[2] if nz > 0 else lo[2]) * nz
@@ -1732,11 +1746,16 @@ class StreamingRenderer:
         #: "zip", commands, triangles)], blocks out of view); (tile, stride) -> (key: that stride's blocks
         #: in view and their neighbours' strides, its part of those draws)
         self._far_runs: dict = {}
-        self._glue: dict = {}  # (tile, level) -> (index buffer, vertex array, mesh id): the glued patches
+        self._glue: dict = {}  # (tile, level) -> (index buffer, vertex array, mesh id, glued sides packed, triangles)
         #: far tiles drawn by block draw each stride's runs from one index list of their own
         #: (:meth:`_far_index_draws`); False: by a multi-draw of the runs
         self.far_indices = True
         self._far_gpu: dict = {}  # (tile, stride) -> (index buffer, vertex array, mesh id)
+        #: near and middle tiles test the box holding their patches first: against the frustum's
+        #: planes (those holding it whole are not tested patch by patch) and against the pixel error
+        #: (a tile whose largest corner-grid error fits at its nearest point is drawn wholly from the
+        #: corner grid); False: every patch on its own (the same draws, slower)
+        self.tile_bounds = True
         self._coarse_runs: dict = {}  # tile -> ((strides, in view), [(job, commands)]): a near tile's far blocks
         self.stats: dict = {}
 
@@ -1780,7 +1799,8 @@ class StreamingRenderer:
     def _patch_boxes(self, key, mesh: TileMesh):
         """:func:`patch_boxes` of a resident mesh and its :func:`patch_corner_errors` (made once while
         the mesh stays resident): ``(centre, half extent, errors or None, low corner, high corner)``,
-        each ``(3, n)`` float64 by columns (contiguous, :func:`_boxes_visible_cols`)."""
+        each ``(3, n)`` float64 by columns (contiguous, :func:`_boxes_visible_cols`), and ``(low,
+        high) (3,)`` the box holding them all (:meth:`_patch_bound`)."""
         got = self._boxes.get(key)
         if got is None or got[0] != id(mesh):
             py0, py1, px0, px1 = self.cache.grid.patch_range(*key[0])
@@ -1789,7 +1809,8 @@ class StreamingRenderer:
             assert boxes is not None, f"tile {key[0]}: its {key[1]} mesh is not patch-major"
             c, h = boxes
             cols = [np.ascontiguousarray(a.T, dtype=np.float64) for a in (c, h, c - h, c + h)]
-            got = self._boxes[key] = (id(mesh), (cols[0], cols[1], patch_corner_errors(mesh, shape), cols[2], cols[3]))
+            got = self._boxes[key] = (id(mesh), (cols[0], cols[1], patch_corner_errors(mesh, shape), cols[2], cols[3],
+                                                 (cols[2].min(1), cols[3].max(1))))
         return got[1]
 
     def _block_shape(self, t) -> tuple[int, int]:
@@ -1865,20 +1886,23 @@ class StreamingRenderer:
             out.append(np.asarray(e, np.int64) if e is not None and len(e) == n else np.zeros(n, np.int64))
         return tuple(out)
 
-    def _coarse_blocks(self, t, coarse: np.ndarray, blocks: tuple) -> tuple:
+    def _coarse_blocks(self, t, coarse: np.ndarray, blocks: tuple, every: bool = False) -> tuple:
         """The blocks of near or middle tile ``t`` whose patches are all ``coarse (n,) bool`` (every
         vertex fully on the corner grid) and whose far stride (``blocks``: every block's stride and
         whether it is in view, :meth:`draw`'s) is coarser than 1, drawn like a far tile's blocks; the
         other blocks' edges there are the corner grid's (its patches, or mesh patches glued to them),
         so the corner grid's zippers join them exactly.  ``(patches (n,) bool`` so drawn, ``[((t, kind,
-        mesh, vertex array), commands)])``."""
+        mesh, vertex array), commands)])``.  ``every``: ``coarse`` is all True (told, not counted)."""
         py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
         ny, nx = py1 - py0, px1 - px0
         by, bx = -(-ny // FAR_BLOCK), -(-nx // FAR_BLOCK)
         pb = _patch_blocks(ny, nx)
         i = self.cache.tile_index[t]
         sl = slice(self.cache.block_start[i], self.cache.block_start[i + 1])
-        full = (np.bincount(pb, weights=~np.asarray(coarse, bool), minlength=by * bx) == 0) & (blocks[0][sl] > 1)
+        if every:
+            full = blocks[0][sl] > 1
+        else:
+            full = (np.bincount(pb, weights=~np.asarray(coarse, bool), minlength=by * bx) == 0) & (blocks[0][sl] > 1)
         out: list = []
         if not full.any():
             return np.zeros(ny * nx, bool), out
@@ -1933,12 +1957,17 @@ class StreamingRenderer:
                 at += len(idx)
         return out
 
-    def _glue_vao(self, key, mesh: TileMesh, idx: np.ndarray):
-        """A vertex array drawing ``idx (t, 3)`` uint32 of near or middle ``mesh`` (its glued patches,
-        :func:`glue_indices`) through the mesh's vertex buffers, its index buffer rewritten each
-        frame (grown when short); ``(vertex array, triangles)``."""
+    def _glue_vao(self, key, mesh: TileMesh, glued: np.ndarray):
+        """A vertex array drawing near or middle ``mesh``'s patches with sides ``glued (ny, nx, 4)
+        bool`` (:func:`glue_indices`) through the mesh's vertex buffers, its index buffer rewritten
+        when they change (grown when short); ``(vertex array, triangles)``."""
         self._vao(key, mesh)  # the vertex buffers
         got = self._glue.get(key)
+        mark = np.packbits(glued).tobytes()
+        if got is not None and got[2] == id(mesh) and got[3] == mark:
+            return got[1], got[4]
+        py0, py1, px0, px1 = self.cache.grid.patch_range(*key[0])
+        idx = glue_indices(mesh, (py1 - py0, px1 - px0), glued)
         data = np.ascontiguousarray(idx, dtype=np.uint32).tobytes()
         if got is None or got[2] != id(mesh) or got[0].size < len(data):
             if got is not None:
@@ -1947,8 +1976,9 @@ class StreamingRenderer:
             ibo = self.ctx.buffer(reserve=max(2 * len(data), 4096), dynamic=True)
             g = self._gpu[key]
             vao = self.ctx.vertex_array(self.prog, self._attributes(g[0], g[4]), index_buffer=ibo, index_element_size=4)
-            got = self._glue[key] = (ibo, vao, id(mesh))
+            got = (ibo, vao, id(mesh))
         got[0].write(data)
+        self._glue[key] = (*got[:3], mark, len(idx))
         return got[1], len(idx)
 
     def _release(self, key) -> None:
@@ -2024,7 +2054,7 @@ class StreamingRenderer:
 
         t0 = time.perf_counter() if t0 is None else t0
         vp = cam.view_projection()
-        planes = cam.frustum_planes()
+        planes = frustum_planes(vp)  # (cam.frustum_planes() computes vp again)
         self.fbo.use()
         self.fbo.clear((*self.background, 1.0))
         self.ctx.enable(moderngl.DEPTH_TEST)
@@ -2051,7 +2081,7 @@ class StreamingRenderer:
         order = {t: i for i, (t, _, _) in enumerate(todo)}  # (the jobs of a tile together, in this order)
         sets = self.visibility and self.cache.sets_hold(cam.eye, {t: level for t, level, _ in todo})
         drawn["vis_off"] = int(self.visibility and not sets)  # the sets' tiles drawn too coarse this frame
-        drawn["mid_far_patches"] = drawn["frustum_culled"] = 0
+        drawn["mid_far_patches"] = drawn["frustum_culled"] = drawn["bound_coarse"] = 0
         # the per-vertex geomorph: pixels on screen of a metre of error at 1 m, over the limit
         err_scale = pixel_scale / self.pixel_error if self.pixel_error else None
         e = np.asarray(cam.eye, dtype=np.float64).reshape(3)
@@ -2138,8 +2168,8 @@ class StreamingRenderer:
             vao = self._vao(key, mesh)
             py0, py1, px0, px1 = self.cache.grid.patch_range(*t)
             po = patch_order(py1 - py0, px1 - px0)  # the mesh's patch order
-            c, h, perr, blo, bhi = self._patch_boxes(key, mesh)
-            inside = _boxes_visible_cols(planes, blo, bhi)
+            c, h, perr, blo, bhi, bound = self._patch_boxes(key, mesh)
+            inside = _boxes_visible_cols(planes, blo, bhi, bound if self.tile_bounds else None)
             drawn["frustum_culled"] += int((~inside).sum())
             if seen is not None:
                 drawn["vis_culled"] += int((~seen).sum())
@@ -2152,16 +2182,24 @@ class StreamingRenderer:
                 ncmd += len(mine)
                 drawn["triangles"] += int(mine[:, 0].sum()) // 3
                 continue
-            d2 = 0.0  # squared metres to each patch's box
-            for j in range(3):
-                q = np.abs(c[j] - e[j])
-                q -= h[j]
-                np.maximum(q, 0.0, out=q)
-                d2 = d2 + q * q
-            coarse = (perr * verr) ** 2 <= d2
+            # (the tile's largest error fitting at its bound, with a margin for rounding: every patch's
+            # own test would pass, each patch's box being no nearer)
+            q3 = np.maximum(np.maximum(bound[0] - e, e - bound[1]), 0.0)
+            if self.tile_bounds and (float(perr.max()) * verr) ** 2 * (1.0 + 1e-9) <= float(q3 @ q3) * (1.0 - 1e-9):
+                coarse = np.ones(len(perr), bool)
+                drawn["bound_coarse"] += 1
+            else:
+                d2 = 0.0  # squared metres to each patch's box
+                for j in range(3):
+                    q = np.abs(c[j] - e[j])
+                    q -= h[j]
+                    np.maximum(q, 0.0, out=q)
+                    d2 = d2 + q * q
+                coarse = (perr * verr) ** 2 <= d2
+            every = bool(coarse.all())
             far = self.cache.far[t][1]
             if seen is None and blocks is not None:  # blocks wholly on the corner grid at a coarser stride
-                own, bjobs = self._coarse_blocks(t, coarse, blocks)
+                own, bjobs = self._coarse_blocks(t, coarse, blocks, every)
                 for job, cmd in bjobs:
                     jobs.append((*job, (ncmd, len(cmd)), 0.0))
                     commands.append(cmd)
@@ -2170,13 +2208,15 @@ class StreamingRenderer:
                 inside = inside & ~own
             # the mesh's patches beside a corner-grid patch are glued to its edge (:func:`glue_indices`)
             ny, nx = py1 - py0, px1 - px0
-            cg = _pad1(coarse.reshape(ny, nx))  # (a neighbour beyond the tile's border: not coarse)
-            fine = (inside & ~coarse).reshape(ny, nx)
-            sides = (cg[:-2, 1:-1], cg[1:-1, 2:], cg[2:, 1:-1], cg[1:-1, :-2])  # south, east, north, west
-            gl = (fine & (sides[0] | sides[1] | sides[2] | sides[3])).reshape(-1)
+            gl = np.zeros(ny * nx, bool)
+            if not every:  # (every patch on the corner grid: none to glue)
+                cg = _pad1(coarse.reshape(ny, nx))  # (a neighbour beyond the tile's border: not coarse)
+                fine = (inside & ~coarse).reshape(ny, nx)
+                sides = (cg[:-2, 1:-1], cg[1:-1, 2:], cg[2:, 1:-1], cg[1:-1, :-2])  # south, east, north, west
+                gl = (fine & (sides[0] | sides[1] | sides[2] | sides[3])).reshape(-1)
             if gl.any():
                 glued = fine[..., None] & np.stack(sides, -1)
-                gvao, ntri = self._glue_vao(key, mesh, glue_indices(mesh, (ny, nx), glued))
+                gvao, ntri = self._glue_vao(key, mesh, glued)
                 jobs.append((t, kind, mesh, gvao, 3 * ntri, verr))
                 drawn["triangles"] += ntri
             mine = patch_runs(inside & ~coarse & ~gl, mesh.patch_triangles, mesh.whole_triangles, order=po)  # + skirts
