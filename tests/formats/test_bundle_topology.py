@@ -87,12 +87,19 @@ def _flip_one(a):
     return a
 
 
+def _flag_a_border_edge_degenerate(arrays, terrain):
+    a = arrays["terrain/edge_degenerate"].copy()
+    a[int(np.flatnonzero(arrays["terrain/edge_patches"][:, 1] < 0)[0])] = True
+    arrays["terrain/edge_degenerate"] = a
+
+
 @pytest.mark.parametrize("edit, member", [
     (_set("side_edge", lambda a: np.roll(a, 1)), "side_edge"),  # sides on the wrong edges
     (_set("side_edge", lambda a: a + 10**6), "side_edge"),  # out of range
     (_renumber_edges, "side_edge"),  # edges renumbered, side_edge not
     (_set("side_flip", _flip_one), "side_flip"),  # a side runs the wrong way along its edge
     (_set("edge_degenerate", lambda a: np.ones_like(a)), "edge_degenerate"),
+    (_flag_a_border_edge_degenerate, "edge_degenerate"),  # one side only: its four points must be equal
     (_set("corner_ids", lambda a: np.zeros_like(a)), "corner_ids"),
     (_set("edge_sides", lambda a: a + 5), "edge_sides"),
 ])
