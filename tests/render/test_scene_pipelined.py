@@ -41,6 +41,39 @@ def test_frames_match_render(gl):
         r.release()
 
 
+def test_frames_alternating_cameras_match_render(gl):
+    """Pipelined frames cannot be mixed up: two very different views alternate (the chase camera and
+    one high above the course looking down), and every pipelined picture, its counts and its camera
+    are those :meth:`SceneRenderer.render` gives for its own time and camera.  A frame issued, read
+    back or planned with its neighbour's camera, target, shadows or terrain fails here (consecutive
+    pictures differ in most pixels)."""
+    from piste.render.scene_renderer import SceneRenderer
+    from piste.world.camera import Camera
+    from piste.world.scene import Scene
+
+    scene = Scene.default(0)
+    r = SceneRenderer(scene, size=(160, 112), ctx=gl)
+    r.terrain.resident_wait = True
+    try:
+        lo, hi = scene.net.bounds
+        mid = (np.asarray(lo, float) + np.asarray(hi, float)) / 2.0
+        above = Camera(eye=mid + np.array([0.0, -40.0, 0.6 * float(hi[2] - lo[2]) + 250.0]), target=mid, far=8000.0)
+        times = [0.0, 0.1, 0.2, 0.3, 0.4, 0.5]
+        cams = [None if i % 2 == 0 else above for i in range(len(times))]
+        piped = list(r.frames(times, cameras=cams))
+        one = [r.render(t, camera=c) for t, c in zip(times, cams)]
+        for a, b in zip(one, piped):
+            d = np.abs(a.image.astype(int) - b.image.astype(int))
+            assert d.max() <= 1 and np.mean(d > 0) < 1e-3
+            assert a.stats == b.stats
+            np.testing.assert_allclose(b.scene.camera.eye, a.scene.camera.eye)
+        # the two views really differ: a frame shown for its neighbour would fail above
+        for a, b in zip(piped, piped[1:]):
+            assert np.mean(np.abs(a.image.astype(int) - b.image.astype(int)).max(axis=-1) > 16) > 0.2
+    finally:
+        r.release()
+
+
 @pytest.mark.parametrize("look", ["ahead", "sun", "down"])
 def test_sky_matches_the_per_pixel_ray(gl, look):
     """The sky pass (ray per vertex, interpolated) against the formula evaluated per pixel in numpy:
