@@ -1,6 +1,7 @@
 """Build benchmark: the default scene (examples/scenes/default.toml) built cold and warm, and loaded.
 
     python benchmarks/bench_build.py [--jobs N] [--no-render] [--quick] [--bundle B.piste [--runs N]]
+                                     [--baseline-src DIR]
 
 Prints the build time per step cold (empty cache) and warm (every step cached, the bundle rewritten
 byte-identical), the bundle's size, the time to load it (``load_bundle``) and to the first frame
@@ -14,7 +15,10 @@ same way: a fresh process that opens an EGL context, draws one textured quad at 
 it back (target: the bundle's first frame <= 1.5x that process), with moderngl's usual call and, the
 stricter peer the target is judged against, with its GL libraries named as piste's context names them.
 ``--quick``: one (cold) build, one fresh-process run.  ``--bundle B.piste``: only the fresh-process
-runs, on that bundle (no build), ``--runs`` of them.
+runs, on that bundle (no build), ``--runs`` of them.  ``--baseline-src DIR``: another copy of piste's
+sources (e.g. ``git archive REV src | tar -x -C /tmp/base``, then ``/tmp/base/src``) timed the same way
+in the same rounds (its own fresh process, ``PYTHONPATH=DIR``, the order rotated with the others): the
+before/after of a change, interleaved, with the per-round ratio.
 """
 
 from __future__ import annotations
@@ -112,7 +116,7 @@ print(t1 - t0)
 _CPU = "\nimport resource as _r\n_u = _r.getrusage(_r.RUSAGE_SELF)\nprint(_u.ru_utime + _u.ru_stime)\n"
 
 
-def fresh_first_frame(bundle: Path, runs: int) -> None:
+def fresh_first_frame(bundle: Path, runs: int, baseline_src: Path | None = None) -> None:
     """Bundle to first frame in a fresh Python process (after the interpreter starts).
 
     The processes use a byte-code cache (``PYTHONPYCACHEPREFIX``, a temporary folder, filled by one
@@ -124,7 +128,7 @@ def fresh_first_frame(bundle: Path, runs: int) -> None:
 
     import numpy as np
 
-    cpu: dict = {"piste": [], "peer": [], "named": []}  # the processes' CPU time (every thread), cached runs
+    cpu: dict = {"piste": [], "peer": [], "named": [], "base": []}  # the processes' CPU time (every thread), cached runs
     programs: list[int] = []  # the programs each run's first frame drew with
 
     def times(env, kind=None):
@@ -152,12 +156,18 @@ def fresh_first_frame(bundle: Path, runs: int) -> None:
         times(cached)  # fills the byte-code and shader caches (untimed)
         bare(cached)
         bare(cached, how="named")
-        res, src, cold, peer, named = [], [], [], [], []
+        based = None
+        if baseline_src is not None:  # the baseline sources first on the path (their byte code cached too)
+            based = {**cached, "PYTHONPATH": os.pathsep.join([str(baseline_src)] + [p for p in [cached.get("PYTHONPATH")] if p])}
+            times(based)
+        res, src, cold, peer, named, base = [], [], [], [], [], []
         for i in range(runs):  # interleaved, the order rotated
             jobs = [lambda: res.append(times(cached, "piste")), lambda: peer.append(bare(cached, "peer")),
                     lambda: named.append(bare(cached, "named", "named")),
                     lambda: src.append(times(source)[6]),
                     lambda i=i: cold.append(times({**cached, "MESA_SHADER_CACHE_DIR": str(Path(shaders) / str(i))})[6])]
+            if based is not None:
+                jobs.insert(1, lambda: base.append(times(based, "base")))
             k = i % len(jobs)
             for job in jobs[k:] + jobs[:k]:
                 job()
@@ -200,6 +210,14 @@ def fresh_first_frame(bundle: Path, runs: int) -> None:
     print(f"  the floor under piste's figure: numpy + moderngl imports + GL context + the frame's own work = {floor:.3f} s "
           f"= {floor / pn:.2f}x the stricter peer before any of piste's start-up work; that work (piste's imports, load, "
           f"set-up, the first frame's extra) is {m[5] - floor:.3f} s, and 1.5x leaves it {max(1.5 * pn - floor, 0.0):.3f} s")
+    if base:
+        b = np.array(base)[:, 1:]
+        mb = np.median(b, axis=0)
+        gain = b[:, 5] - a[:, 5]  # per round (the two ran in the same round)
+        print(f"  baseline sources ({baseline_src}), the same rounds: imports {mb[0]:.3f} s + GL context {mb[1]:.3f} s + "
+              f"load {mb[2]:.3f} s + renderer set-up {mb[3]:.3f} s + first frame {mb[4]:.3f} s = {mb[5]:.3f} s "
+              f"[{b[:, 5].min():.3f}-{b[:, 5].max():.3f}], {mb[5] / pn:.2f}x the stricter peer; these sources "
+              f"{np.median(gain) * 1e3:+.1f} ms faster per round [{gain.min() * 1e3:+.1f} to {gain.max() * 1e3:+.1f}]")
     cp, cq, cn = (float(np.median(cpu[k])) for k in ("piste", "peer", "named"))
     print(f"  CPU time of each whole process (user + sys, every thread: llvmpipe's too; the interpreter's start "
           f"included; less swayed by other processes than the wall times): piste {cp:.3f} s, the peer {cq:.3f} s "
@@ -217,9 +235,12 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="one cold build, one fresh-process run")
     ap.add_argument("--bundle", type=Path, help="time only the fresh-process first frame of this built bundle")
     ap.add_argument("--runs", type=int, default=5, help="fresh-process runs with --bundle (default 5)")
+    ap.add_argument("--baseline-src", type=Path, help="with --bundle: also time piste from these sources "
+                                                          "(a checkout's src folder), interleaved")
     args = ap.parse_args()
     if args.bundle is not None:
-        fresh_first_frame(args.bundle.resolve(), 1 if args.quick else max(1, args.runs))
+        fresh_first_frame(args.bundle.resolve(), 1 if args.quick else max(1, args.runs),
+                          args.baseline_src.resolve() if args.baseline_src is not None else None)
         return
 
     from piste.commands.build import format_result

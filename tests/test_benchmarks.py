@@ -45,6 +45,15 @@ def test_frame_bench_offers_the_piste_render_runtime_section():
     assert _load("bench_frame").RENDER_SCENE.is_file()
 
 
+def test_build_bench_offers_an_interleaved_baseline():
+    """bench_build times another copy of piste's sources in the same rounds (``--baseline-src``, issue
+    23 item 4: a cold-start change's before/after, interleaved)."""
+    res = subprocess.run([sys.executable, str(BENCH / "bench_build.py"), "--help"], capture_output=True, text=True,
+                         timeout=60)
+    assert "--baseline-src" in res.stdout
+    assert "baseline_src" in _load("bench_build").fresh_first_frame.__code__.co_varnames
+
+
 def test_embree_peer_missing_is_reported(monkeypatch, tmp_path, capsys):
     bake = _load("bench_bake")
     out = tmp_path / "rows.jsonl"
