@@ -109,11 +109,15 @@ SMALL_MEMBER_BYTES = 128 * 1024
 
 
 def _sha256(data: bytes | memoryview) -> str:
-    """Hex SHA-256 of ``data``.  hashlib (OpenSSL) is imported on first use: a bundle render, which does
-    not verify members, never loads it (tests/test_lazy_imports.py)."""
-    import hashlib
-
-    return hashlib.sha256(data).hexdigest()
+    """Hex SHA-256 of ``data``.  OpenSSL is loaded on first use (importing the runtime never loads it:
+    tests/test_lazy_imports.py), through ``_hashlib.openssl_sha256``, the very constructor
+    ``hashlib.sha256`` is where OpenSSL is there: importing hashlib itself also sets up every other
+    algorithm (~0.8 ms more of a fresh process's first load); hashlib where there is no ``_hashlib``."""
+    try:
+        from _hashlib import openssl_sha256 as sha256
+    except ImportError:  # (a Python built without OpenSSL: hashlib's own implementation)
+        from hashlib import sha256
+    return sha256(data).hexdigest()
 
 
 def _c_order(arr: Any) -> np.ndarray:
