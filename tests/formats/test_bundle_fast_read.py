@@ -287,3 +287,15 @@ def test_a_corrupt_member_is_named_before_what_its_bytes_broke(tmp_path, monkeyp
         with pytest.raises(FormatError, match="checksum mismatch") as e:
             reader(bad)
         assert e.value.field == "lightmap/atlas.npy"
+
+
+def test_the_member_hash_is_hashlibs_sha256():
+    """The reader's SHA-256 (OpenSSL's constructor, loaded without hashlib's other algorithms) is
+    hashlib.sha256's hex digest, for bytes and for views of a mapped file alike."""
+    import hashlib
+
+    from piste.formats.bundle import _sha256
+
+    data = np.random.default_rng(0).bytes(70_001)
+    assert _sha256(data) == _sha256(memoryview(data)[:]) == hashlib.sha256(data).hexdigest()
+    assert _sha256(b"") == hashlib.sha256(b"").hexdigest()
