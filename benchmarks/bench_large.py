@@ -3,7 +3,7 @@
     python benchmarks/bench_large.py [--quick] [--sizes 10000 100000] [--million] [--workers 2]
                                      [--res 4] [--no-shadows] [--frames 60] [--repeats 1]
                                      [--dem [SIDE]] [--dem-only] [--dem-dtype float32|uint16]
-                                     [--low-views N]
+                                     [--low-views N] [--cut-far M]
 
 For every size (patches; a square world at 3 samples a patch side, 10 m spacing, tiles of 64 x 64
 patches) it builds the world from scratch in a child process -- fit, bake (light maps with shadow
@@ -17,6 +17,15 @@ linear) and streaming frame times flying across the largest world at 100 m/s (he
 loaded before its frame, interleaved frame by frame with the default course's frame; each streamed
 frame split into paging, GL calls and GPU + read-back).  The tiles of the
 Dask build are compared byte for byte with the local ones.
+
+The streamed frame's ratio to the course is then split into content and streaming (``--cut-far M``,
+default 3,000 m; 0: not): two more renderers join the interleaved rotation, the waited flight with
+its far plane at M ('cut') and the same surface within M as one net (the world's fitted patches
+that any of those frusta meet, :func:`piste.render.streaming.window_net`) drawn by the bundle
+runtime's terrain renderer with the same cameras ('bundle').  waited / course = (waited / cut:
+terrain beyond M) x (cut / bundle: streaming against the bundle runtime on the same content) x
+(bundle / course: this world's terrain within M against the course's, the same runtime); each
+with its frame, Python, draw calls + GPU + read-back and triangles.
 
 The Dask time excludes starting the cluster and the workers' first imports (printed beside it).
 ``--million`` adds the 1,000,000-patch world (3,001 x 3,001 samples): minutes on 2 cores.
