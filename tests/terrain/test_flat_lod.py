@@ -175,3 +175,24 @@ def test_flat_numba_and_numpy_frames_bit_identical():
             assert np.array_equal(fa, b.factors)
             flat |= bool((a.patch_levels == 2).any())
     assert flat
+
+
+def test_patch_bounds_computed_once_for_what_is_kept_from_them(monkeypatch):
+    """The flat level's edge boxes and the culling tree are kept on the net, and so are the per-patch
+    bounds both are made from: computed once (two folds, min and max), the same values."""
+    import piste.terrain.net as net_mod
+    from piste.terrain.cull import patch_tree
+
+    net = grid_net(4, 5, seed=3)
+    want = net.patch_bounds
+    folds = []
+    real = net_mod._fold
+    monkeypatch.setattr(net_mod, "_fold", lambda *a: folds.append(1) or real(*a))
+    tree = patch_tree(net)
+    err, lo, hi = lod.flat_bounds(net)
+    assert len(folds) == 2
+    assert all(np.array_equal(a, b) for a, b in zip(lod.kept_patch_bounds(net), want))
+    assert np.array_equal(tree.lo_sorted, want[0][tree.order])
+    ep = net.edge_patches
+    other = np.where(ep[:, 1] >= 0, ep[:, 1], ep[:, 0])
+    assert np.array_equal(lo, np.minimum(want[0][ep[:, 0]], want[0][other]))

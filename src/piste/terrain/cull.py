@@ -29,6 +29,7 @@ import numpy.typing as npt
 
 from piste.errors import ValidationError
 from piste.terrain import _kernels
+from piste.terrain.lod import kept_patch_bounds
 
 if TYPE_CHECKING:
     from piste.terrain.net import PatchNet
@@ -170,7 +171,7 @@ def patch_tree(net: PatchNet, leaf: int = 16) -> PatchTree:
     """The :class:`PatchTree` of ``net``'s patch bounds, built on first use and kept on the net."""
     t = net.__dict__.get("_patch_tree")
     if t is None or t.leaf != leaf:
-        lo, hi = net.patch_bounds
+        lo, hi = kept_patch_bounds(net)
         t = PatchTree(lo, hi, leaf)
         net.__dict__["_patch_tree"] = t
     return t

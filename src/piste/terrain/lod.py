@@ -156,6 +156,16 @@ def level_errors(net: _Net, n: int) -> np.ndarray:
     return e
 
 
+def kept_patch_bounds(net: _Net) -> tuple[np.ndarray, np.ndarray]:
+    """``net.patch_bounds`` computed once for what is kept on the net from it (:func:`flat_bounds`,
+    :func:`piste.terrain.cull.patch_tree`: each computed it, ~0.5 ms a call at 2.5k patches) and
+    kept on the net like them: ``(min (n, 3), max (n, 3))`` float64."""
+    b = net.__dict__.get("_patch_bounds")
+    if b is None:
+        b = net.__dict__["_patch_bounds"] = net.patch_bounds
+    return b
+
+
 def flat_bounds(net: _Net) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What the flat level decides on, per edge (computed once, kept on the net):
     ``(err (e,) float64, lo (e, 3) float64, hi (e, 3) float64)``: the larger flatness error of the
@@ -165,7 +175,7 @@ def flat_bounds(net: _Net) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         err = level_errors(net, FLAT_LEVEL)
         ep = np.asarray(net.edge_patches, dtype=np.int64)
         other = np.where(ep[:, 1] >= 0, ep[:, 1], ep[:, 0])
-        plo, phi = net.patch_bounds
+        plo, phi = kept_patch_bounds(net)
         lo = np.ascontiguousarray(np.minimum(plo[ep[:, 0]], plo[other]), dtype=np.float64)
         hi = np.ascontiguousarray(np.maximum(phi[ep[:, 0]], phi[other]), dtype=np.float64)
         fb = (np.ascontiguousarray(err), lo, hi)
