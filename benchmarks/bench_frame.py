@@ -23,7 +23,10 @@ Sections (every configuration interleaved frame by frame in one process; medians
    edges (flat, 2 corners, or coarsest where under 1 px, and 1 px against 0.5 px), visibility sets and per-vertex track distance; the shadow mips by compute dispatches, level l read as an image; the shadow casters closed by caps and culled against every triangle both sides; the shadow
    receivers cut to their frusta by clip distances, and drawn from the terrain's resident blocks by index), with the pixels changed;
    then whole frames, without the per-pass syncs: the terrain flushed to llvmpipe's rasterizer threads
-   as soon as it is issued against everything rasterized at the frame's end (wall and CPU time).
+   as soon as it is issued against everything rasterized at the frame's end (wall and CPU time);
+   then blocks of 10 frames, order rotated: one at a time (``render``), pipelined (``frames``) and
+   the GL work alone (each frame planned untimed, then issued, waited for and read back: the bound
+   under any change to piste's CPU side).
    3b. **``piste render``'s runtime**: ``examples/scenes/default.toml`` built (the step cache beside it)
    and drawn by the objects ``piste render SCENE --camera flight --frames N`` uses (``ScenePreview``
    with the command's defaults, the flight camera's frame ``i`` of ``N`` at ``t = i / 30``), frames
@@ -89,6 +92,8 @@ class Floor:
         self.tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self.prog = ctx.program(vertex_shader=_FLOOR_VS, fragment_shader=_FLOOR_FS)
         self.vao = ctx.vertex_array(self.prog, [])
+        #: each steady() call's settling run: a single floor right after a frame (the method before 2026-11-27)
+        self.after_frame: list[float] = []
 
     def run(self) -> float:
         import moderngl
@@ -110,7 +115,7 @@ class Floor:
         back-to-back runs (ms).  The scene section and ``piste render``'s runtime section time their
         floors this same way, so their ratios compare (a single run right after a frame reads
         ~0.3-0.8 ms slower on this machine)."""
-        self.run()
+        self.after_frame.append(self.run())
         return med([self.run() for _ in range(runs)])
 
     def release(self):
@@ -711,22 +716,48 @@ def scene_section(args, floor_ms: list) -> dict:
     frag_times, frag_screens = _terrain_fragment_costs(r, one, max(args.frames // 2, 5))
     # one frame at a time (render: plan, draw, wait, read) against pipelined frames (frames: the next
     # frame planned while the GL draws this one), wall time per frame over blocks of 10, interleaved
-    modes = {"one at a time": [], "pipelined": []}
-    for b in range(max(args.frames // 5, 3)):
-        ts = [(b * 10 + i) / 30.0 for i in range(10)]
-        t1 = time.perf_counter()
+    # and the GL work alone: each frame planned first (untimed, then glFinish), then issued, waited for
+    # and read back -- what no change to piste's CPU side (planning, culling, skinning, LOD) can go under
+    modes = {"one at a time": [], "pipelined": [], "GL work alone": []}
+
+    def one_at_a_time(ts):
         for t in ts:
             r.render(t)
-        modes["one at a time"].append((time.perf_counter() - t1) * 1e3 / len(ts))
-        t1 = time.perf_counter()
+
+    def pipelined(ts):
         for _ in r.frames(ts):
             pass
-        modes["pipelined"].append((time.perf_counter() - t1) * 1e3 / len(ts))
+
+    def gl_alone(ts) -> float:
+        spent = 0.0
+        for t in ts:
+            plan = r._plan(t)
+            r.ctx.finish()
+            t1 = time.perf_counter()
+            r._issue(plan)
+            r._finish(plan, True)
+            spent += time.perf_counter() - t1
+        return spent
+
+    for b in range(max(args.frames // 5, 3)):
+        ts = [(b * 10 + i) / 30.0 for i in range(10)]
+        names = list(modes)
+        for j in range(len(names)):  # the order rotated every block
+            name = names[(b + j) % len(names)]
+            t1 = time.perf_counter()
+            if name == "GL work alone":
+                spent = gl_alone(ts)
+            else:
+                (one_at_a_time if name == "one at a time" else pipelined)(ts)
+                spent = time.perf_counter() - t1
+            modes[name].append(spent * 1e3 / len(ts))
     cols = ("animation", "lod_skinning", "lights", "objects", "terrain_cull", "tessellate", "shadow_cull", "cpu",
             "upload", "terrain_draw", "scene_draw", "readback", "total")
     short = ("anim", "skin", "lights", "objcull", "t.cull", "t.index", "shadcull", "CPU", "upload", "terrain", "scene",
              "read", "frame")
     fl = med(floor_ms)
+    print(f"\nfloor (Floor.steady) {rng_str(floor_ms)} ms; a single floor right after a frame (the settling runs, "
+          f"the method before 2026-11-27) {rng_str(floor.after_frame)} ms")
     print(f"\n== completed scene, {args.frames} frames (t = i / 30 s), medians ms (loaded machine) ==")
     head = f"{'configuration':14s} " + " ".join(f"{c:>8s}" for c in short) + f" {'fps':>6s} {'x floor':>8s}"
     print(head + "\n" + "-" * len(head))
@@ -771,8 +802,12 @@ def scene_section(args, floor_ms: list) -> dict:
     print("\n== one frame at a time vs pipelined (wall time a frame over blocks of 10 frames, interleaved) ==")
     for name, ts in modes.items():
         print(f"  {name:14s} {rng_str(ts)} ms  ({1e3 / med(ts):5.1f} fps, {med(ts) / fl:5.2f}x the floor)")
-    print(f"  pipelined / one at a time: {med(modes['pipelined']) / med(modes['one at a time']):.2f}x")
+    print(f"  pipelined / one at a time: {med(modes['pipelined']) / med(modes['one at a time']):.2f}x; the GL work "
+          f"alone is {med(modes['GL work alone']) / med(modes['one at a time']):.2f}x a whole frame")
     best = min(med(modes["pipelined"]), med(modes["one at a time"]))
+    glw = med(modes["GL work alone"])
+    record("frame", "completed scene: its GL work alone (a planned frame issued, waited for, read back) vs machine "
+           "floor", "(bound)", f"{glw:.1f} ms", f"floor {fl:.2f} ms", f"{glw / fl:.1f}x", None)
     print(f"\nfull scene: {full['rider_triangles']:.0f} rider + {full['object_triangles']:.0f} object + "
           f"{full['terrain_triangles']:.0f} terrain triangles, {full['objects_drawn']:.0f} objects")
     print(f"target 60 fps = 16.7 ms: {best:.1f} ms a frame, the faster of the two ({1e3 / best:.1f} fps, "
@@ -855,7 +890,7 @@ def render_runtime_section(args, camera: str = "flight") -> dict:
           f"frame by frame (ms, median [min-max]) ==")
     print(f"  frame  {rng_str(ms)} ms  {1e3 / fm:6.1f} fps  {fm / fl:5.2f}x the floor")
     print(f"  floor  {rng_str(fl_ms)} ms  (Floor.steady: one settling run, then the median of 4, between frames, "
-          "as in the scene section)")
+          f"as in the scene section; the settling runs, right after a frame: {rng_str(floor.after_frame)} ms)")
     cols = [c for c in ("cpu", "upload", "terrain_draw", "scene_draw", "readback", "total") if all(c in t for t in timings)]
     if cols:
         print("  the renderer's own split (medians ms): " + ", ".join(f"{c} {med([t[c] for t in timings]):.2f}"
