@@ -196,3 +196,7 @@ def test_patch_bounds_computed_once_for_what_is_kept_from_them(monkeypatch):
     ep = net.edge_patches
     other = np.where(ep[:, 1] >= 0, ep[:, 1], ep[:, 0])
     assert np.array_equal(lo, np.minimum(want[0][ep[:, 0]], want[0][other]))
+    folds.clear()
+    for a, b in zip(lod.kept_bounds(net), net.bounds):  # the net's bounds from them: no fold, the same values
+        assert a.shape == (3,) and a.dtype == np.float64 and np.array_equal(a, b)
+    assert not folds

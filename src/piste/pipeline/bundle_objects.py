@@ -53,7 +53,7 @@ from piste.lighting.vertex import choose_lights_many
 from piste.pipeline.characters import lods_from_arrays, model_from_arrays
 from piste.pipeline.visibility import Visibility
 from piste.render.textures import LIGHT_CLIP, TRACK_TEXEL, light_texels_in_range
-from piste.terrain.lod import LEVELS, STORED_ERROR_LEVELS, keep_patch_errors, patch_error_table
+from piste.terrain.lod import LEVELS, STORED_ERROR_LEVELS, keep_patch_errors, kept_bounds, patch_error_table
 from piste.terrain.net import TOPOLOGY_ARRAYS, TOPOLOGY_FORMAT, PatchNet
 from piste.terrain.resident import (RESIDENT_FLOATS, RESIDENT_FORMAT, ResidentTerrain, keep_resident, resident_fits,
                                     resident_terrain)
@@ -293,7 +293,8 @@ class Bundle(DataMethods):
         f, rect = self.arrays.get("terrain/track_field"), self.arrays.get("terrain/track_rect")
         if f is None or rect is None or self.centerline is None or info.get("track_texel") != TRACK_TEXEL:
             return None
-        lo, hi = (np.asarray(b, dtype=np.float64)[:2] for b in self.net.bounds)
+        # (the net's bounds from its per-patch bounds, which the renderer's culling tree keeps anyway)
+        lo, hi = (np.asarray(b, dtype=np.float64)[:2] for b in kept_bounds(self.net))
         w, h = (max(int(np.ceil((hi[i] - lo[i]) / TRACK_TEXEL)), 2) for i in (0, 1))
         want = np.array([lo[0], lo[1], lo[0] + w * TRACK_TEXEL, lo[1] + h * TRACK_TEXEL])
         if f.dtype != np.float16 or f.shape != (h, w):

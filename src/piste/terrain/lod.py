@@ -166,6 +166,14 @@ def kept_patch_bounds(net: _Net) -> tuple[np.ndarray, np.ndarray]:
     return b
 
 
+def kept_bounds(net: _Net) -> tuple[np.ndarray, np.ndarray]:
+    """``net.bounds`` (the same values: min and max are exact) reduced from :func:`kept_patch_bounds`:
+    ``(min (3,), max (3,))`` float64, ~20 us once the patch bounds are kept (``net.bounds`` reads
+    every control point: ~0.3-0.7 ms at 2.5k patches)."""
+    lo, hi = kept_patch_bounds(net)
+    return lo.min(axis=0), hi.max(axis=0)
+
+
 def flat_bounds(net: _Net) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What the flat level decides on, per edge (computed once, kept on the net):
     ``(err (e,) float64, lo (e, 3) float64, hi (e, 3) float64)``: the larger flatness error of the
