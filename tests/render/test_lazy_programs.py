@@ -153,3 +153,43 @@ def test_light_map_atlas_clipped_to_the_half_float_range(gl):
             assert np.array_equal(got, (raw / (128.0 if half else 255.0)).astype(np.float32).astype(np.float16))
     finally:
         tp.release()
+
+
+@pytest.mark.parametrize("soft", [False, True])
+def test_gathered_receiver_program_compiled_when_first_used(gl, soft):
+    """The shadow receivers' program over gathered vertices is made at first use (a frame over the
+    resident terrain draws only the resident one), with the uniforms set before it existed."""
+    from piste.render.shadow_pass import ShadowPass
+
+    sp = ShadowPass(gl, n_max=1, tile=64, soft=soft)
+    try:
+        assert sp._receiver is None  # nothing at set-up
+        sp.set_sunlight(np.ones((4, 4), np.float32), (-10.0, -20.0, 30.0, 40.0))
+        assert sp._receiver is None
+        p = sp.receiver
+        assert p is sp._receiver and sp.receiver is p  # made once
+        assert p["u_sun_rect"].value == pytest.approx((-10.0, -20.0, 40.0, 60.0))
+        assert p["u_sunlit"].value == 4 and p["u_shadow"].value == 3
+        sp.set_sunlight(np.ones((4, 4), np.float32), (0.0, 0.0, 1.0, 2.0))  # later changes reach it
+        assert p["u_sun_rect"].value == pytest.approx((0.0, 0.0, 1.0, 2.0))
+    finally:
+        sp.release()
+
+
+def test_released_before_receiver_program_made(gl):
+    from piste.render.shadow_pass import ShadowPass
+
+    ShadowPass(gl, n_max=1, tile=64).release()  # (no gathered receiver program to release)
+
+
+@pytest.mark.parametrize("name", ["shadow_receiver.frag.glsl", "shadow_receiver_soft.frag.glsl"])
+def test_receiver_fragment_shaders_read_all_of_v_world(name):
+    """Both receiver fragment shaders read v_world's three components (z times a factor that is
+    exactly 1): their interpolated inputs are then the terrain's and the objects' (two full vec4
+    slots), and llvmpipe reuses those programs' triangle-setup function instead of compiling one
+    more at the receivers' first draw (it keeps no setup function in its shader cache)."""
+    from piste.render.context import load_shader
+
+    code = "\n".join(line.split("//")[0] for line in load_shader(name).splitlines())
+    assert "in vec3 v_world;" in code and "v_world.xy" in code
+    assert "step(-3.0e38, v_world.z)" in code

@@ -24,7 +24,7 @@ from piste.render.terrain_pass import TerrainPass
 from piste.render.terrain_mode import TerrainMode
 from piste.render.textures import placeholder_lightmap, track_field
 from piste.terrain.cull import patch_tree
-from piste.terrain.lod import FLAT_ERROR
+from piste.terrain.lod import FLAT_ERROR, kept_patch_bounds
 from piste.terrain.resident import morph_setting, resident_fits, resident_terrain
 from piste.terrain.tessellate import tessellate
 
@@ -182,7 +182,7 @@ class TerrainRenderer:
             if not (np.isfinite(lod_error) and lod_error > 0):
                 raise ConfigError(f"lod_error must be a positive number of pixels or None, got {lod_error!r}")
             self.lod_kwargs["flat_error"] = float(lod_error) * FLAT_ERROR / FLAT_ERROR_PX
-        self.bounds = net.patch_bounds
+        self.bounds = kept_patch_bounds(net)  # (the same values, kept on the net: computed once a process)
         lo, hi = self.bounds
         self._centre = np.ascontiguousarray(((lo + hi) / 2.0).T)  # (3, n): boxes as centre +- half
         self._half = np.ascontiguousarray(((hi - lo) / 2.0).T)

@@ -558,13 +558,13 @@ class ShadowPass:
         self.caster = ctx.program(vertex_shader=load_shader("shadow_caster.vert.glsl"),
                                   fragment_shader=load_shader(f"shadow_caster{soft_name}.frag.glsl"))
         self._receiver_fs = load_shader(f"shadow_receiver{soft_name}.frag.glsl")
-        self.receiver = ctx.program(vertex_shader=load_shader("shadow_receiver.vert.glsl"),
-                                    fragment_shader=self._receiver_fs)
-        # the uniforms both receiver programs share (the resident one is compiled on first use)
+        # the gathered receivers' program (:attr:`receiver`), compiled at its first use like the resident
+        # one: a frame over resident terrain never draws it (~0.3 ms of a fresh process's set-up)
+        self._receiver: Any = None
+        # the uniforms both receiver programs share (each is compiled on first use)
         self._receiver_uniforms: dict = {"u_shadow": 3, "u_sunlit": 4, "u_morph": _MORPH_UNIT}
         if self.soft:
             self._receiver_uniforms.update(u_tan=float(np.tan(np.radians(sun_radius))), u_texel=1.0 / self.tile)
-        self._set_receiver_uniforms(self.receiver)
         #: draw the receivers from the terrain's resident vertex blocks by index where the frame's
         #: terrain is resident (``draw_receivers(terrain=...)``); False: gather, morph and upload the
         #: shadowed patches' vertices every frame (the same pixels; bench_frame.py's A/B)
@@ -682,9 +682,22 @@ class ShadowPass:
         self.sunlit.repeat_x = self.sunlit.repeat_y = False
         x0, y0, x1, y1 = (float(v) for v in rect)
         self._receiver_uniforms["u_sun_rect"] = (x0, y0, max(x1 - x0, 1e-9), max(y1 - y0, 1e-9))
-        for p in (self.receiver, self._receiver_res):
+        for p in (self._receiver, self._receiver_res):
             if p is not None:
                 self._set_receiver_uniforms(p)
+
+    @property
+    def receiver(self) -> Any:
+        """The receivers' program over gathered (uploaded) vertices, compiled at first use."""
+        if self._receiver is None:
+            self._receiver = self.ctx.program(vertex_shader=load_shader("shadow_receiver.vert.glsl"),
+                                              fragment_shader=self._receiver_fs)
+            self._set_receiver_uniforms(self._receiver)
+        return self._receiver
+
+    @receiver.setter
+    def receiver(self, program: Any) -> None:
+        self._receiver = program
 
     def _set_receiver_uniforms(self, p: Any) -> None:
         for name, value in self._receiver_uniforms.items():
@@ -808,8 +821,9 @@ class ShadowPass:
             if m is not None:
                 m.release()
         release_framebuffer(self.ctx, self.fbo, self.texture)  # (render_casters leaves it bound)
-        for obj in (self.caster, self.receiver, self.sunlit):
-            obj.release()
+        for obj in (self.caster, self._receiver, self.sunlit):
+            if obj is not None:
+                obj.release()
 
 
 def shadow_on_plane(ctx: moderngl.Context, positions: np.ndarray, indices: np.ndarray, sun_direction: npt.ArrayLike,

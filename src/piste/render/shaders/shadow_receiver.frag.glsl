@@ -16,6 +16,7 @@ void main() {
     vec2 t = v_light.xy * 0.5 + 0.5;
     bool inside = all(greaterThanEqual(t, vec2(0.0))) && all(lessThanEqual(t, vec2(1.0))) && abs(v_light.z) <= 1.0;
     float s = texture(u_shadow, u_tile.xy + t * u_tile.zw).r
-            * texture(u_sunlit, (v_world.xy - u_sun_rect.xy) / u_sun_rect.zw).r * (inside ? 1.0 : 0.0);
+            * texture(u_sunlit, (v_world.xy - u_sun_rect.xy) / u_sun_rect.zw).r * (inside ? 1.0 : 0.0)
+            * step(-3.0e38, v_world.z);  // exactly 1: see shadow_receiver_soft.frag.glsl
     f_color = vec4(mix(vec3(1.0), u_shade, s), 1.0);
 }
