@@ -193,3 +193,23 @@ def test_receiver_fragment_shaders_read_all_of_v_world(name):
     code = "\n".join(line.split("//")[0] for line in load_shader(name).splitlines())
     assert "in vec3 v_world;" in code and "v_world.xy" in code
     assert "step(-3.0e38, v_world.z)" in code
+
+
+def _fragment_inputs(name: str) -> list[str]:
+    from piste.render.context import load_shader
+
+    code = "\n".join(line.split("//")[0] for line in load_shader(name).splitlines())
+    return [line.split()[-2] for line in code.splitlines() if line.strip().startswith(("in ", "flat in "))]
+
+
+@pytest.mark.parametrize("name", ["shadow_caster.frag.glsl", "shadow_caster_soft.frag.glsl"])
+def test_caster_fragment_shaders_take_the_skys_inputs(name):
+    """The shadow casters' fragment shaders read one interpolated vec3 (times a factor exactly 1),
+    the sky's set of inputs: llvmpipe reuses the sky's triangle-setup function rather than compiling
+    one more at the casters' first draw.  (Their pictures: tests/render/test_soft_shadows.py and the
+    other shadow tests.)"""
+    from piste.render.context import load_shader
+
+    assert _fragment_inputs(name) == _fragment_inputs("sky.frag.glsl") == ["vec3"]
+    assert "step(-3.0e38, min(v_setup.x, min(v_setup.y, v_setup.z)))" in load_shader(name)
+    assert "v_setup = in_pos;" in load_shader("shadow_caster.vert.glsl")
