@@ -57,3 +57,18 @@ def test_a_tie_takes_the_first_colour_in_rgb_order():
     assert (out[ys[1::2], xs[1::2], :3] == JACKETS[1]).all()
     assert np.array_equal(out[ys[0::2][: len(ys) // 2], xs[0::2][: len(ys) // 2], :3],
                           tex[ys[0::2][: len(ys) // 2], xs[0::2][: len(ys) // 2], :3])
+
+
+def test_near_is_the_max_over_channels():
+    """``_near`` (one channel at a time, what specular_map and rider_textures select texels with)
+    is ``abs(rgb - colour).max(-1) <= tol`` exactly, at and around the tolerance's edge."""
+    from piste.render.character_pass import _near
+
+    rng = np.random.default_rng(3)
+    colour = np.array([200, 120, 30])
+    rgb = np.clip(colour + rng.integers(-4, 5, (64, 48, 3)), 0, 255)
+    for dtype in (np.int16, np.int32):
+        got = _near(rgb.astype(dtype), colour)
+        assert np.array_equal(got, np.abs(rgb - colour).max(-1) <= 2)
+        assert got.any() and not got.all()
+    assert np.array_equal(_near(rgb.astype(np.int32), colour, tol=0), (rgb == colour).all(-1))

@@ -66,6 +66,15 @@ JACKETS = ((214, 52, 38), (30, 120, 200), (250, 180, 30), (40, 160, 90), (150, 6
 SHININESS = 32.0
 
 
+def _near(rgb: np.ndarray, colour: npt.ArrayLike, tol: int = 2) -> np.ndarray:
+    """``(H, W) bool``: texels of ``rgb (H, W, 3)`` (int16/int32) within ``tol`` of ``colour (3,)`` on
+    every channel, i.e. ``abs(rgb - colour).max(-1) <= tol``, one channel at a time (numpy's max
+    over a last axis of 3 cost ~0.6 ms a 128 x 128 atlas, ~3 ms of a fresh process's set-up)."""
+    c = [int(x) for x in np.asarray(colour).reshape(3)]
+    return ((np.abs(rgb[..., 0] - c[0]) <= tol) & (np.abs(rgb[..., 1] - c[1]) <= tol)
+            & (np.abs(rgb[..., 2] - c[2]) <= tol))
+
+
 def specular_map(texture: npt.ArrayLike) -> np.ndarray:
     """The default rider's specular map, ``(H, W, 4) uint8`` matching its texture atlas.
 
@@ -96,7 +105,7 @@ def specular_map(texture: npt.ArrayLike) -> np.ndarray:
     out[m, 0], out[m, 1] = 204, 200
     out[m & (np.abs(lv - 0.5) > 0.3), 0] = 230
     m, lu, lv = tile("head")
-    lens = m & (np.abs(rgb - np.array([255, 150, 30])).max(-1) <= 2)  # the goggle lens colour
+    lens = m & _near(rgb, (255, 150, 30))  # the goggle lens colour
     strap = m & (np.abs(lv - 0.74) < 0.03) & ~lens
     out[strap, 0], out[strap, 1] = 128, 120
     out[lens, 0], out[lens, 1] = 255, 255
@@ -126,8 +135,8 @@ def rider_textures(texture: npt.ArrayLike, n: int) -> list[np.ndarray]:
     keys, counts = np.unique(rgb[mask] @ np.array([1 << 16, 1 << 8, 1]), return_counts=True)
     key = int(keys[counts.argmax()])
     base = np.array([key >> 16, (key >> 8) & 255, key & 255])
-    body = mask & (np.abs(rgb - base).max(-1) <= 2)
-    zip_ = mask & (np.abs(rgb - (base * 0.6).astype(np.int32)).max(-1) <= 2)
+    body = mask & _near(rgb, base)
+    zip_ = mask & _near(rgb, (base * 0.6).astype(np.int32))
     for i in range(1, n):
         c = np.array(JACKETS[i % len(JACKETS)])
         t = tex.copy()
