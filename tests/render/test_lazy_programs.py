@@ -202,14 +202,16 @@ def _fragment_inputs(name: str) -> list[str]:
     return [line.split()[-2] for line in code.splitlines() if line.strip().startswith(("in ", "flat in "))]
 
 
-@pytest.mark.parametrize("name", ["shadow_caster.frag.glsl", "shadow_caster_soft.frag.glsl"])
-def test_caster_fragment_shaders_take_the_skys_inputs(name):
-    """The shadow casters' fragment shaders read one interpolated vec3 (times a factor exactly 1),
-    the sky's set of inputs: llvmpipe reuses the sky's triangle-setup function rather than compiling
-    one more at the casters' first draw.  (Their pictures: tests/render/test_soft_shadows.py and the
-    other shadow tests.)"""
+@pytest.mark.parametrize("name", ["shadow_caster.frag.glsl", "shadow_caster_soft.frag.glsl", "sky.frag.glsl"])
+def test_caster_and_sky_fragment_shaders_take_the_receivers_inputs(name):
+    """The shadow casters' and the sky's fragment shaders read two interpolated vec3s (the extra one
+    times a factor exactly 1), the receivers' set of inputs, which llvmpipe packs as the terrain's and
+    the objects' (two vec4 slots, all read): it reuses one triangle-setup function for all of them
+    rather than compiling one more at each first draw.  (Their pictures: tests/render/test_soft_shadows.py,
+    the other shadow tests and the sky's.)"""
     from piste.render.context import load_shader
 
-    assert _fragment_inputs(name) == _fragment_inputs("sky.frag.glsl") == ["vec3"]
-    assert "step(-3.0e38, min(v_setup.x, min(v_setup.y, v_setup.z)))" in load_shader(name)
-    assert "v_setup = in_pos;" in load_shader("shadow_caster.vert.glsl")
+    assert _fragment_inputs(name) == _fragment_inputs("shadow_receiver_soft.frag.glsl") == ["vec3", "vec3"]
+    assert "step(-3.0e38, min(" in load_shader(name) and "v_setup.z" in load_shader(name)
+    vs = load_shader("sky.vert.glsl" if name.startswith("sky") else "shadow_caster.vert.glsl")
+    assert "v_setup = " in vs

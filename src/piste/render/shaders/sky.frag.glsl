@@ -9,6 +9,9 @@ uniform vec3 u_horizon;
 uniform vec3 u_zenith;
 uniform vec3 u_sun;
 in vec3 v_ray;
+in vec3 v_setup;  // the near point (any finite vec3): x a factor exactly 1, so that the sky's interpolated
+                  // inputs are the terrain's and llvmpipe reuses its triangle-setup function (see
+                  // shadow_caster.vert.glsl)
 out vec4 f_color;
 void main() {
     vec3 d = normalize(v_ray);
@@ -29,5 +32,5 @@ void main() {
         float s512 = s256 * s256;
         c += vec3(1.0, 0.95, 0.85) * (0.25 * s24 + 0.6 * (s512 * s256 * s128 * s4));
     }
-    f_color = vec4(min(c, vec3(1.0)), 1.0);
+    f_color = vec4(min(c, vec3(1.0)), 1.0) * step(-3.0e38, min(v_setup.x, min(v_setup.y, v_setup.z)));
 }
