@@ -31,6 +31,19 @@ def _bundle(tmp_path, name="b.piste"):
     return write_bundle(tmp_path / name, {"name": "x"}, arrays), arrays
 
 
+def _flipped(path, member, tmp_path):
+    """A copy of bundle ``path`` (``tmp_path / "flipped.piste"``) with one bit flipped three bytes
+    before the end of ``member``'s data."""
+    with zipfile.ZipFile(path) as zf:
+        info = zf.getinfo(member + ".npy")
+        offset = info.header_offset + 30 + len(info.filename.encode()) + len(info.extra) + info.compress_size - 3
+    raw = bytearray(path.read_bytes())
+    raw[offset] ^= 0x10
+    flipped = tmp_path / "flipped.piste"
+    flipped.write_bytes(bytes(raw))
+    return flipped
+
+
 def _rewrite(src, dst, edit):
     """Copy bundle ``src`` to ``dst`` with ``edit(name, data, manifest) -> data`` applied to each member."""
     with zipfile.ZipFile(src) as zf:
@@ -123,13 +136,7 @@ def test_a_flipped_byte_is_a_corrupt_member_whether_verifying_or_not(tmp_path, m
     stored member whose SHA-256 failed, by the reader), verified or not; a right CRC with a wrong
     SHA-256: "checksum mismatch"."""
     path, _ = _bundle(tmp_path)
-    with zipfile.ZipFile(path) as zf:
-        info = zf.getinfo(member + ".npy")
-        offset = info.header_offset + 30 + len(info.filename.encode()) + len(info.extra) + info.compress_size - 3
-    raw = bytearray(path.read_bytes())
-    raw[offset] ^= 0x10
-    flipped = tmp_path / "flipped.piste"
-    flipped.write_bytes(bytes(raw))
+    flipped = _flipped(path, member, tmp_path)
     for verify in (True, False):
         with pytest.raises(FormatError, match="corrupt member") as e:
             read_bundle(flipped, verify=verify)
@@ -212,13 +219,7 @@ def test_big_stored_members_are_hashed_by_a_second_thread_and_checked_before_ret
     assert hashed.count("piste-bundle-sha256") == 2  # the atlas and the vertex blocks (not the terrain's)
     assert "lightmap/atlas" not in seen and RESIDENT_MEMBER not in seen and "terrain/control_points" in seen
     for member in ("lightmap/atlas", RESIDENT_MEMBER):
-        with zipfile.ZipFile(path) as zf:
-            info = zf.getinfo(member + ".npy")
-            offset = info.header_offset + 30 + len(info.filename.encode()) + len(info.extra) + info.compress_size - 3
-        raw = bytearray(path.read_bytes())
-        raw[offset] ^= 0x10
-        flipped = tmp_path / "flipped.piste"
-        flipped.write_bytes(bytes(raw))
+        flipped = _flipped(path, member, tmp_path)
         with pytest.raises(FormatError, match="corrupt member") as e:
             read_bundle(flipped)
         assert e.value.field == member + ".npy"
@@ -253,13 +254,7 @@ def test_deferred_checks_name_the_corrupt_member_when_finished(tmp_path, monkeyp
         assert list(data.arrays) == list(read_bundle(path, verify=verify).arrays)
         assert all(np.array_equal(data.arrays[n], a) for n, a in arrays.items())
     assert threads.count("piste-bundle-sha256") >= 2  # (the CRC-32 too when not verifying)
-    with zipfile.ZipFile(path) as zf:
-        info = zf.getinfo(RESIDENT_MEMBER + ".npy")
-        offset = info.header_offset + 30 + len(info.filename.encode()) + len(info.extra) + info.compress_size - 3
-    raw = bytearray(path.read_bytes())
-    raw[offset] ^= 0x10
-    flipped = tmp_path / "flipped.piste"
-    flipped.write_bytes(bytes(raw))
+    flipped = _flipped(path, RESIDENT_MEMBER, tmp_path)
     for verify in (True, False):
         data, finish = fmt.read_bundle_deferred(flipped, verify=verify)  # (returns: the check is pending)
         with pytest.raises(FormatError, match="corrupt member") as e:
