@@ -154,6 +154,68 @@ def test_far_block_strides_follow_their_error():
     assert cache.block_strides(eye, 300.0, np.array([4, 1]), 3.0).tolist() == [4, 4, 8]  # at least the tile's
 
 
+def test_far_blocks_follow_the_renderers_pixel_error(world, gl):
+    """The far tiles' blocks take their strides at the renderer's ``pixel_error`` (they were always
+    chosen at 3 px): with only far tiles (a budget the far field just fits), a larger pixel error
+    draws the far blocks coarser (fewer triangles), a smaller one finer, every block at the stride
+    :meth:`TileCache.block_strides` gives at that error, without cracks; the default (3 px) draws the
+    same pixels as ``pixel_error=None`` (far blocks at ``FAR_PIXEL_ERROR``)."""
+    c = S.TileCache(world)
+    try:
+        budget = c._far_bytes + 1024  # no room for a near or middle mesh: every tile far
+    finally:
+        c.close()
+    cams = _steep_cameras(c) + _low_cameras(c, 6, seed=7)
+    r = S.StreamingRenderer(world, size=SIZE, ctx=gl, background=MAGENTA, sky=False, budget_bytes=budget)
+    try:
+        assert r.pixel_error == S.FAR_PIXEL_ERROR == r.far_pixel_error
+        default = [r.render(cam, wait=True) for cam in cams]
+        used: list = []
+        chosen = r.cache.block_strides
+
+        def spy(*args):
+            used.append(chosen(*args))
+            return used[-1]
+
+        r.cache.block_strides = spy
+        tris, strides = {}, {}
+        for pe in (1.0, S.FAR_PIXEL_ERROR, 9.0):
+            r.pixel_error = pe
+            tris[pe], strides[pe] = 0, []
+            for k, cam in enumerate(cams):
+                img = r.render(cam, wait=True)
+                assert r.stats["near"] == r.stats["mid"] == 0 and r.stats["far_blocks"] > 0
+                if k < 4:  # steep views: only terrain, whatever the strides
+                    assert _magenta(img) == 0
+                tris[pe] += r.stats["far_block_triangles"]
+                e, scale = np.asarray(cam.eye, dtype=np.float64), r.lod_scale(cam.fov_y)
+                want = S.TileCache.block_strides(r.cache, e, scale, r.cache.far_strides(e, scale, pe), pe)
+                assert np.array_equal(used[-1], want)  # what the frame drew its blocks at
+                strides[pe].append(want)
+        assert tris[1.0] > tris[S.FAR_PIXEL_ERROR] > tris[9.0], tris
+        fine, mid, coarse = (np.concatenate(strides[pe]) for pe in (1.0, S.FAR_PIXEL_ERROR, 9.0))
+        assert (fine <= mid).all() and (mid <= coarse).all() and (fine < mid).any() and (mid < coarse).any()
+        r.pixel_error = S.FAR_PIXEL_ERROR
+        assert all(np.array_equal(a, r.render(cam, wait=True)) for a, cam in zip(default, cams))
+    finally:
+        r.close()
+    n = S.StreamingRenderer(world, size=SIZE, ctx=gl, background=MAGENTA, sky=False, budget_bytes=budget,
+                            pixel_error=None)
+    try:
+        assert n.far_pixel_error == S.FAR_PIXEL_ERROR
+        assert all(np.array_equal(a, n.render(cam, wait=True)) for a, cam in zip(default, cams))
+    finally:
+        n.close()
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), float("inf"), "3", True])
+def test_a_bad_pixel_error_is_a_config_error(world, bad):
+    from piste.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="pixel_error: expected a number of pixels > 0"):
+        S.StreamingRenderer(world, size=SIZE, pixel_error=bad)
+
+
 def test_border_strides_read_from_the_block_grid_equal_each_neighbours(world, gl):
     """The neighbours' block strides along a tile's sides sliced from the frame's world grid of
     blocks equal those looked up neighbour by neighbour, whichever tiles are drawn by block."""
@@ -395,6 +457,22 @@ def test_block_errors_bound_the_surfaces_distance_from_each_stride(world):
             assert (bound[:, j] <= 1.35 * true + 0.5).all(), (m, k, bound[:, j] / true)
 
 
+def _local_estimate(far_positions: np.ndarray, chord: float) -> np.ndarray:
+    """The block errors the streaming renderer once chose strides by (``far_blocks``' old ``err``):
+    each coarser stride's bilinear error against the corner grid over the block plus a chord
+    estimate (a quarter of the largest second difference of the corner heights around the block, at
+    most the tile's ``chord``): ``(nb, 3)`` metres."""
+    z = np.asarray(far_positions, dtype=np.float64)[..., 2]
+    sd = np.zeros_like(z)
+    sd[1:-1] = np.abs(z[2:] - 2.0 * z[1:-1] + z[:-2])
+    sd[:, 1:-1] = np.maximum(sd[:, 1:-1], np.abs(z[:, 2:] - 2.0 * z[:, 1:-1] + z[:, :-2]))
+    sd = np.maximum(sd, np.maximum(np.roll(sd, 1, 0), np.roll(sd, -1, 0)))
+    sd = np.maximum(sd, np.maximum(np.roll(sd, 1, 1), np.roll(sd, -1, 1)))
+    ch = np.minimum(S._block_reduce(sd, np.maximum) / 4.0, chord)
+    grids = S.stride_error_grids(far_positions)
+    return np.stack([S._block_reduce(grids[k], np.maximum) + ch for k in S.FAR_STRIDES[1:]], -1).reshape(-1, 3)
+
+
 def test_exact_block_errors_choose_strides_no_finer_than_the_estimate(world):
     """Against the local estimate they replace (corner-grid bilinear error plus a chord estimate with
     a 2x safety factor), the measured errors draw fewer triangles over many eyes, and any block drawn
@@ -408,7 +486,7 @@ def test_exact_block_errors_choose_strides_no_finer_than_the_estimate(world):
         for t in cache.tiles:
             cp = cache._read("fit", t, ("control_points",))["control_points"]
             lit = cache._read("lit", t, ("far_positions", "far_error"))
-            old.append(S.far_blocks(lit["far_positions"], 10.0, float(lit["far_error"][0]))["err"])
+            old.append(_local_estimate(lit["far_positions"], float(lit["far_error"][0])))
             true.append(np.stack([_far_distance(cp, lit["far_positions"], k) for k in S.FAR_STRIDES[1:]], -1))
         old, true = np.concatenate(old), np.concatenate(true)
         assert (cache._blk["err"] >= true).all()

@@ -33,7 +33,8 @@ glued to its edge (:func:`glue_indices`: the side's inner vertices collapsed ont
 the course's glue patches zip to a flat neighbour), so they share the edge, not a T-junction.
 
 A far tile is drawn by block of ``FAR_BLOCK`` x ``FAR_BLOCK`` patches, each at the coarsest stride
-whose error fits ``FAR_PIXEL_ERROR`` pixels at the block (:meth:`TileCache.block_strides`), blocks
+whose error fits the renderer's ``pixel_error`` pixels at the block (``FAR_PIXEL_ERROR`` by default;
+:meth:`TileCache.block_strides`, :attr:`StreamingRenderer.far_pixel_error`), blocks
 out of the frustum left out; where a block meets a coarser one (in its tile or across the border of
 another far tile) it draws its zipper to it, a fan from the coarser side's vertices over its own
 edge that fills the gap between the two exactly (:func:`far_mesh`, :func:`block_runs`).  Near,
@@ -498,24 +499,14 @@ def _block_reduce(grid: np.ndarray, op) -> np.ndarray:
     return out
 
 
-def far_blocks(far_positions: np.ndarray, depth: float, chord: float, grids: dict | None = None) -> dict:
-    """What a far tile's blocks (:func:`far_mesh`) are chosen by, from its corner grid ``(ny+1, nx+1,
-    3)``: ``lo, hi (nb, 3)`` their boxes (skirts included, ``depth``), ``err (nb, 3)`` each coarser
-    stride's height error (:func:`stride_error_grids`) over the block plus its corner grid's chord
-    error (a quarter of the corner heights' largest second difference there, as :func:`chord_error`,
-    at most the tile's ``chord``), metres, and ``patches (nb,)``."""
+def far_blocks(far_positions: np.ndarray, depth: float) -> dict:
+    """The far blocks of a tile (:func:`far_mesh`, :data:`FAR_BLOCK` patches a side) from its corner
+    grid ``(ny+1, nx+1, 3)``: ``lo, hi (nb, 3)`` their boxes (skirts included, ``depth`` metres
+    below) and ``patches (nb,)``, block ``row * bx + col``.  Their stride errors are measured apart
+    (:func:`piste.render.block_errors.corner_stride_errors` at load,
+    :func:`piste.render.block_errors.block_stride_errors` by the loader: :class:`TileCache`)."""
     g = np.asarray(far_positions, dtype=np.float64)
     z = g[..., 2]
-    sd = np.zeros_like(z)  # per corner: the largest second difference through it, along x or y
-    if z.shape[0] >= 3:
-        sd[1:-1] = np.abs(z[2:] - 2.0 * z[1:-1] + z[:-2])
-    if z.shape[1] >= 3:
-        sd[:, 1:-1] = np.maximum(sd[:, 1:-1], np.abs(z[:, 2:] - 2.0 * z[:, 1:-1] + z[:, :-2]))
-    sd = np.maximum(sd, np.maximum(np.roll(sd, 1, 0), np.roll(sd, -1, 0)))  # (the border corners: a neighbour's)
-    sd = np.maximum(sd, np.maximum(np.roll(sd, 1, 1), np.roll(sd, -1, 1)))
-    ch = np.minimum(_block_reduce(sd, np.maximum) / 4.0, float(chord))
-    grids = stride_error_grids(g) if grids is None else grids
-    err = np.stack([_block_reduce(grids[k], np.maximum) + ch for k in FAR_STRIDES[1:]], -1)
     rows, cols = z.shape
     rs, cs = np.arange(0, rows - 1, FAR_BLOCK), np.arange(0, cols - 1, FAR_BLOCK)
     re, ce = np.minimum(rs + FAR_BLOCK, rows - 1), np.minimum(cs + FAR_BLOCK, cols - 1)
@@ -524,8 +515,7 @@ def far_blocks(far_positions: np.ndarray, depth: float, chord: float, grids: dic
     shape = (len(rs), len(cs))
     lo = np.stack([np.broadcast_to(x0, shape), np.broadcast_to(y0, shape), _block_reduce(z, np.minimum) - depth], -1)
     hi = np.stack([np.broadcast_to(x1, shape), np.broadcast_to(y1, shape), _block_reduce(z, np.maximum)], -1)
-    return {"lo": lo.reshape(-1, 3), "hi": hi.reshape(-1, 3), "err": err.reshape(-1, len(FAR_STRIDES) - 1),
-            "patches": ((re - rs)[:, None] * (ce - cs)[None, :]).reshape(-1)}
+    return {"lo": lo.reshape(-1, 3), "hi": hi.reshape(-1, 3), "patches": ((re - rs)[:, None] * (ce - cs)[None, :]).reshape(-1)}
 
 
 def chord_error(far_positions: np.ndarray) -> float:
@@ -1083,7 +1073,7 @@ class TileCache:
         self.chord_error: dict = {}
         self.mid_error: dict = {}
         #: per tile: its far blocks' boxes (:func:`far_blocks`) and ``"err" (nb, 3)`` each coarser
-        #: stride's error over each block, a bound (not :func:`far_blocks`' estimate): the corner grids'
+        #: stride's error over each block, a bound: the corner grids'
         #: distance plus the tile's chord error until the loader measures it against the tile's patches
         #: (:func:`piste.render.block_errors.block_stride_errors`, :attr:`exact_errors`)
         self.blocks: dict = {}
@@ -1101,17 +1091,16 @@ class TileCache:
             py0, py1, px0, px1 = self.grid.patch_range(*t)
             self.far[t] = {k: far_mesh(lit, self._depth(t), k) for k in FAR_STRIDES}
             self.light[t] = light_grid(lit["texels"], (py1 - py0, px1 - px0))
-            grids = stride_error_grids(lit["far_positions"])
-            self.far_error[t] = {k: float(e.max()) for k, e in grids.items()}
+            self.far_error[t] = stride_errors(lit["far_positions"])
             if "far_error" in lit:  # measured by the build (tiled_build.far_errors)
                 self.chord_error[t], self.mid_error[t] = (float(x) for x in lit["far_error"])
             else:  # a world built before it: estimated from the corner grid
                 self.chord_error[t] = chord_error(lit["far_positions"])
                 self.mid_error[t] = self.chord_error[t] / 4.0
-            self.blocks[t] = far_blocks(lit["far_positions"], self._depth(t), self.chord_error[t], grids)
+            self.blocks[t] = far_blocks(lit["far_positions"], self._depth(t))
             # the stride choice's errors: until the loader measures them against the tile's patches
             # (:meth:`_load_block_errors`), the exact distance between the corner grid's triangulations
-            # plus the tile's chord error (a bound by the triangle inequality, not the local estimate)
+            # plus the tile's chord error (a bound by the triangle inequality)
             self.blocks[t]["err"] = (corner_stride_errors(lit["far_positions"][..., 2], FAR_BLOCK, FAR_STRIDES[1:])
                                      + self.chord_error[t])
             self._far_bytes += sum(m.nbytes for m in self.far[t].values()) + self.light[t].nbytes
@@ -1505,8 +1494,8 @@ class TileCache:
         if len(self.exact_errors) + len(self._errors_pending) < len(self.tiles):
             # block errors measured, nearest first, for the tiles where they can choose a stride: those
             # whose blocks' largest error at the coarsest stride would show at the tile's nearest point
-            # (:meth:`block_strides` at FAR_PIXEL_ERROR); every tile without a pixel scale
-            need = (np.nonzero(self._stride_err[:, -1] * float(pixel_scale) > FAR_PIXEL_ERROR * d3)[0]
+            # (:meth:`block_strides` at ``pixel_error``); every tile without a pixel scale
+            need = (np.nonzero(self._stride_err[:, -1] * float(pixel_scale) > float(pixel_error) * d3)[0]
                     if pixel_scale is not None else range(len(self.tiles)))
             with self._lock:
                 more = [(float(dist[i]), 2, self.tiles[i]) for i in need if self.tiles[i] not in self.exact_errors
@@ -1604,16 +1593,17 @@ class TileCache:
             out[t] = min(max(px / float(pixel_error) - 1.0, 0.0), 1.0)
         return out
 
-    def draw_list(self, eye: npt.ArrayLike | None = None, mask: np.ndarray | None = None, pixel_scale: float | None = None) -> list:
+    def draw_list(self, eye: npt.ArrayLike | None = None, mask: np.ndarray | None = None, pixel_scale: float | None = None,
+                  pixel_error: float = FAR_PIXEL_ERROR) -> list:
         """``[(tile, level, TileMesh)]``: a near mesh where one is resident, else the far one at the
         stride for ``eye`` (``"far1"``, ``"far2"``, ...; the full corner grid without ``eye``):
-        by screen error with ``pixel_scale`` (:meth:`far_strides`), else by distance
-        (:meth:`far_stride`); ``mask (n,)`` bool keeps only those of :attr:`tiles`."""
+        by screen error with ``pixel_scale`` (:meth:`far_strides` at ``pixel_error`` pixels), else by
+        distance (:meth:`far_stride`); ``mask (n,)`` bool keeps only those of :attr:`tiles`."""
         with self._lock:
             near = dict(self.near)
             level = dict(self.near_level)
         if eye is not None and pixel_scale is not None:
-            strides = self.far_strides(eye, pixel_scale)
+            strides = self.far_strides(eye, pixel_scale, pixel_error)
         elif eye is not None:
             d = self.distances(eye) / self.far_lod_distance
             strides = np.select([d < k for k in FAR_STRIDES[:-1]], FAR_STRIDES[:-1], FAR_STRIDES[-1])
@@ -1698,7 +1688,9 @@ class StreamingRenderer:
         the same terrain uses); the tiles also fade to it over the last fifth of the far plane
     sky : draw the sky gradient (:class:`piste.render.sky_pass.SkyPass`) where no tile is
     pixel_error : tiles whose far grid would be off by more than this many pixels get near meshes
-        (evaluated patches), nearest first under the budget; None: only those within ``near_radius``
+        (evaluated patches), nearest first under the budget; None: only those within ``near_radius``.
+        The far tiles' blocks take the coarsest stride whose error fits it too (None:
+        ``FAR_PIXEL_ERROR``; :attr:`far_pixel_error`); a number > 0
     visibility : near tiles draw only the patches their visibility sets (built with ``cell > 0``)
         say an eye over the tile and within the sets' band can see (:attr:`stats` ``vis_culled``)
     """
@@ -1707,6 +1699,9 @@ class StreamingRenderer:
                  ctx=None, background=SKY, fog_density: float | None = None, sky: bool = True,
                  pixel_error: float | None = FAR_PIXEL_ERROR, visibility: bool = True, near_samples: int | None = None,
                  object_distance: float | None = None):
+        if pixel_error is not None and (isinstance(pixel_error, bool) or not isinstance(pixel_error, (int, float, np.floating))
+                                        or not 0.0 < float(pixel_error) < math.inf):
+            raise ConfigError(f"{root}: pixel_error: expected a number of pixels > 0 (or None), got {pixel_error!r}")
         self.cache = TileCache(root, budget_bytes=budget_bytes, near_radius=near_radius, near_samples=near_samples,
                                object_distance=object_distance)
         self.ctx = ctx or create_context()
@@ -2025,6 +2020,13 @@ class StreamingRenderer:
         self.update(cam, wait)
         return self.draw(cam, read, t0)
 
+    @property
+    def far_pixel_error(self) -> float:
+        """The pixels of error the far tiles' and far blocks' strides may show
+        (:meth:`TileCache.far_strides`, :meth:`TileCache.block_strides`): :attr:`pixel_error`, or
+        ``FAR_PIXEL_ERROR`` where that is None (near meshes only within ``near_radius``)."""
+        return FAR_PIXEL_ERROR if self.pixel_error is None else float(self.pixel_error)
+
     def lod_scale(self, fov_y: float) -> float:
         """Pixels a radian the levels' errors are counted in (``pixel_error`` pixels at this scale):
         the target's own, but at least a ``LOD_REFERENCE_LINES``-line frame's, so a smaller target
@@ -2074,7 +2076,8 @@ class StreamingRenderer:
         drawn["culled"] = int((~visible).sum())
         pixel_scale = self.lod_scale(cam.fov_y)
         morph = self.cache.morph_factors(cam.eye, pixel_scale, self.pixel_error)
-        todo = self.cache.draw_list(cam.eye, visible, pixel_scale=pixel_scale)
+        far_error = self.far_pixel_error  # the far tiles' and blocks' strides
+        todo = self.cache.draw_list(cam.eye, visible, pixel_scale=pixel_scale, pixel_error=far_error)
         if len(todo) > 1:  # nearest first: what they hide fails the depth test before it is shaded
             dist = self.cache.distances(cam.eye)[[self.cache.tile_index[t] for t, _, _ in todo]]
             todo = [todo[i] for i in np.argsort(dist, kind="stable")]
@@ -2089,7 +2092,7 @@ class StreamingRenderer:
         drawn["far_blocks"] = drawn["far_blocks_culled"] = drawn["far_block_triangles"] = 0
         if self.mix_levels and len(self.cache.tiles):
             blo, bhi, _ = self.cache.block_columns()
-            blocks = (self.cache.block_strides(e, pixel_scale, self.cache.far_strides(e, pixel_scale)),
+            blocks = (self.cache.block_strides(e, pixel_scale, self.cache.far_strides(e, pixel_scale, far_error), far_error),
                       _boxes_visible_cols(planes, blo, bhi))
         jobs, commands, ncmd = [], [], 0  # what each tile draws (all the indirect commands first)
         seen_of = {t: self.cache.visible_patches(t, cam.eye) if sets and (not level.startswith("far") or level == "far1")
