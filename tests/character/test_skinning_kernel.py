@@ -30,6 +30,34 @@ def test_compiled_blend_bit_identical_to_sparse(normalize):
     assert np.array_equal(one[0], ref[0]) and np.array_equal(one[1], ref[1])
 
 
+
+@pytest.mark.skipif(skinning._blend_nb is None, reason="numba not installed: only the scipy/numpy path exists")
+@pytest.mark.parametrize("normalize", [True, False])
+def test_numpy_path_while_numba_loads_gives_the_compiled_bits(normalize, monkeypatch):
+    """A fresh process skins its first frames with numpy while numba loads in the background (no
+    scipy matrix built: ``use_numba=None`` and the kernel not ready), then with the kernel.  Both must
+    give the same bits, or the riders' pixels change at a moment set by the warm-up's timing: the
+    first frames of ``piste render --frames N`` differed from the later ones, and from run to run,
+    by up to 145 grey levels (issue 23: an einsum summed in another order, an ulp apart)."""
+    _jit.warm_up()
+    rider = default_rider()
+    sk, me = rider.skeleton, rider.meshes[0]
+    mats = np.stack([sk.skin_matrices(rider.clips[n].sample(0.3 * i + 0.1, loop=True))
+                     for i, n in enumerate(["ride", "grab", "spin"])])
+    bm = BlendedMesh.build(me, 0.25, 3)
+    a = bm.apply_many(mats, normalize=normalize, use_numba=True)
+    one = bm.apply(mats[1], normalize=normalize, use_numba=True)
+    monkeypatch.setattr(skinning._blend_nb, "ready", lambda: False)  # as while numba loads
+    b = bm.apply_many(mats, normalize=normalize)
+    two = bm.apply(mats[1], normalize=normalize)
+    assert bm._sparse is None  # (the path a fresh process takes, not the scipy product)
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    assert np.array_equal(one[0], two[0]) and np.array_equal(one[1], two[1])
+    # the numpy reference without scipy (use_sparse=False) is that same path
+    c = BlendedMesh.build(me, 0.25, 3, use_sparse=False).apply_many(mats, normalize=normalize, use_numba=False)
+    assert np.array_equal(a[0], c[0]) and np.array_equal(a[1], c[1])
+
+
 def _six_palettes(bm, rider):
     sk = rider.skeleton
     mats = np.stack([sk.skin_matrices(rider.clips[n].sample(0.2 * i + 0.1, loop=True))

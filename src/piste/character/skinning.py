@@ -296,8 +296,6 @@ class BlendedMesh:
         self._pos3, self._nrm3 = p, n  # (v, 3) float32 each, for the compiled kernel
         self._index = np.ascontiguousarray(palette.index, dtype=np.int64)
         self._run_start, self._run_entry = _runs(self._index)  # the compiled kernel's vertex runs
-        self._pos_h = np.concatenate([p, np.ones((v, 1), np.float32)], axis=1)  # (v, 4)
-        self._nrm_h = np.concatenate([n, np.zeros((v, 1), np.float32)], axis=1)  # (v, 4)
         self._matrices = np.empty((palette.size, 3, 4), np.float32)
         # palette generation as one small GEMM: (p, b) weights @ (b, 12) bone matrices
         nb = int(palette.bones.max()) + 1 if palette.size else 1
@@ -410,19 +408,30 @@ class BlendedMesh:
                 for i in range(n):
                     normalize_rows(nrm[i])
             return pos.astype(np.float32, copy=False), nrm.astype(np.float32, copy=False)
-        if use_numba is False or _blend_nb is None:  # the reference (while numba loads: the einsum below)
+        if use_numba is False or _blend_nb is None:  # the reference (while numba loads: _blend_numpy, the same bits)
             self._make_sparse()
         if self._sparse is not None:
             out = np.ascontiguousarray((self._sparse @ pal.reshape(n, -1).T).T)  # (n, 6v)
             pos = out[:, : 3 * v].reshape(n, v, 3)
             nrm = out[:, 3 * v:].reshape(n, v, 3)
         else:
-            g = pal[:, self.palette.index]  # (n, v, 3, 4)
-            pos = np.einsum("nvij,vj->nvi", g, self._pos_h)
-            nrm = np.einsum("nvij,vj->nvi", g, self._nrm_h)
+            pos, nrm = self._blend_numpy(pal[:, self.palette.index])
         if normalize:
             for i in range(n):  # per instance: each nrm[i] is a contiguous (v, 3) view
                 normalize_rows(nrm[i])
+        return pos, nrm
+
+    def _blend_numpy(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and unnormalised normals ``(..., v, 3) float32`` from each vertex's palette
+        matrix ``g (..., v, 3, 4) float32``, in the compiled kernel's float32 order
+        (``a00 x + a01 y + a02 z + a03``, left to right: the same bits as :func:`_blend_py` and the
+        sparse product).  The path a fresh process takes while numba loads in the background: an
+        einsum here summed in another order and moved about a quarter of the coordinates by an ulp, so the
+        riders of its first frames differed from the later frames' (issue 23)."""
+        x, y, z = (self._pos3[:, j, None] for j in range(3))
+        a, b, c = (self._nrm3[:, j, None] for j in range(3))
+        pos = g[..., 0] * x + g[..., 1] * y + g[..., 2] * z + g[..., 3]
+        nrm = g[..., 0] * a + g[..., 1] * b + g[..., 2] * c
         return pos, nrm
 
     def apply(self, skin_matrices: ArrayLike, normalize: bool = True, use_numba: bool | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -441,9 +450,7 @@ class BlendedMesh:
             pos = out[: 3 * v].reshape(v, 3)
             nrm = out[3 * v:].reshape(v, 3)
         else:
-            g = m[self.palette.index]
-            pos = np.einsum("vij,vj->vi", g, self._pos_h)
-            nrm = np.einsum("vij,vj->vi", g, self._nrm_h)
+            pos, nrm = self._blend_numpy(m[self.palette.index])
         if normalize:
             normalize_rows(nrm)
         return pos, nrm
