@@ -208,6 +208,29 @@ def test_far_blocks_follow_the_renderers_pixel_error(world, gl):
         n.close()
 
 
+def test_streaming_terrain_passes_its_pixel_error_to_the_far_blocks(world, gl):
+    """The runtime's tiled terrain (:class:`StreamingTerrain`, what ``piste render|view WORLD.tiles``
+    draw with) takes a ``pixel_error`` to its streaming renderer: a larger one draws the far blocks
+    coarser than the default, from the same camera."""
+    c = S.TileCache(world)
+    try:
+        budget, net = c._far_bytes + 1024, tile_net(c.store, *c.tiles[0])
+    finally:
+        c.close()
+    tris = {}
+    for pe in (S.FAR_PIXEL_ERROR, 9.0):
+        st = S.StreamingTerrain(world, net, size=SIZE, ctx=gl, budget_bytes=budget, pixel_error=pe)
+        try:
+            assert st.streaming.far_pixel_error == pe
+            tris[pe] = 0
+            for cam in _low_cameras(st.streaming.cache, 4, seed=11):
+                st.render(cam)
+                tris[pe] += st.streaming.stats["far_block_triangles"]
+        finally:
+            st.release()
+    assert tris[9.0] < tris[S.FAR_PIXEL_ERROR], tris
+
+
 @pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), float("inf"), "3", True])
 def test_a_bad_pixel_error_is_a_config_error(world, bad):
     from piste.errors import ConfigError

@@ -2343,13 +2343,14 @@ class StreamingTerrain:
         set and the drawn one agree)
     object_distance : metres within which tiles' objects are paged (None: by their size on screen,
         :class:`TileCache`)
+    pixel_error : the levels' and far blocks' error on screen, pixels (see :class:`StreamingRenderer`)
     """
 
     def __init__(self, root, net, size=(640, 448), ctx=None, budget_bytes: int = 256 << 20,
                  near_radius: float | None = None, wait: bool = True, objects=None,
-                 object_distance: float | None = None):
+                 object_distance: float | None = None, pixel_error: float | None = FAR_PIXEL_ERROR):
         self.streaming = StreamingRenderer(root, size=size, budget_bytes=budget_bytes, near_radius=near_radius,
-                                           ctx=ctx, sky=True, object_distance=object_distance)
+                                           ctx=ctx, sky=True, object_distance=object_distance, pixel_error=pixel_error)
         self.objects = objects if objects is not None and hasattr(objects, "groups") else None
         self._paged_eye = None  # the eye the tiles were last paged for
         if self.objects is not None:
@@ -2512,10 +2513,10 @@ def fly_path(index: dict, frames: int, fps: float = 30.0, speed: float = 100.0, 
 def render_flight(root: str | os.PathLike[str], out: str | os.PathLike[str] | None = None,
                   size: tuple[int, int] = (640, 448), frames: int = 1, fps: float = 30.0, speed: float = 100.0,
                   budget_mb: float = 256.0, video: str | os.PathLike[str] | None = None, wait: bool = True,
-                  progress: bool = False, camera: Camera | None = None) -> dict:
+                  progress: bool = False, camera: Camera | None = None, pixel_error: float | None = FAR_PIXEL_ERROR) -> dict:
     """``piste render WORLD.tiles``: fly across a tiled world; PNG of the first frame, optional MP4.
     ``camera``: a :class:`~piste.world.camera.Camera` that stays put for every frame instead of the
-    flight (:func:`fly_path`).
+    flight (:func:`fly_path`); ``pixel_error``: :class:`StreamingRenderer`'s.
 
     Returns ``{"frames", "ms" (per frame), "resident_mb" (max), "near", "far"}``.
     """
@@ -2526,7 +2527,7 @@ def render_flight(root: str | os.PathLike[str], out: str | os.PathLike[str] | No
         raise ConfigError(f"{root}: no such tiled world (build one: piste build SCENE with terrain.tiles)")
     if speed <= 0 or budget_mb <= 0:
         raise ConfigError(f"speed and budget must be > 0, got {speed} and {budget_mb}")
-    r = StreamingRenderer(root, size=size, budget_bytes=int(budget_mb * 2**20))
+    r = StreamingRenderer(root, size=size, budget_bytes=int(budget_mb * 2**20), pixel_error=pixel_error)
     times, resident = [], []
     try:
         with contextlib.ExitStack() as stack:
