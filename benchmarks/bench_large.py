@@ -435,7 +435,7 @@ def _low_views(tmp: Path, row: dict, n: int, flags: str = "", seed: int = 0) -> 
                     z[ii] = height_at(nets[t], p[ii, :2])[0]
                 below = z - p[:, 2]  # metres the ray is under the exact surface
                 # (the far levels may lie below the surface by their error: pixel_error pixels at the distance)
-                allowed = ts * float(r.pixel_error or 0.0) / r.lod_scale(c.fov_y) + 1.0
+                allowed = ts * float(r.far_pixel_error) / r.lod_scale(c.fov_y) + 1.0
                 if (below > allowed).any():
                     counts["crack"] += 1
                     deepest = max(deepest, float(np.nanmax(below)))
