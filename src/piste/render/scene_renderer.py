@@ -173,7 +173,11 @@ class SceneRenderer:
         draws riders and objects with their per-vertex light only (tests); ``debug`` is the terrain's
         debug view (e.g. "lod"); ``count_rider_pixels`` counts the riders' pixels that pass the depth
         test (an occlusion query: ``stats["rider_pixels"]``); ``face_time`` is the face animation's
-        time (default ``t``)."""
+        time (default ``t``).  The picture depends only on these arguments, not on the frames drawn
+        before (no LOD hysteresis, distance-based geomorphing): a fresh process's first frames, drawn
+        with numpy while numba loads in the background, are byte-identical to the same frames later
+        (tests/render/test_scene_pipelined.py).  (With ``terrain.resident_wait = False`` the first
+        frames take the CPU terrain path until the resident blocks are built: a few grey levels off.)"""
         with self.tracer.frame():  # (a no-op inside a frame the caller opened)
             plan = self._plan(t, camera=camera, lod=lod, lightmap_mode=lightmap_mode, debug=debug, face_time=face_time)
             self._issue(plan, fog=fog, light_only=light_only, count_rider_pixels=count_rider_pixels)
@@ -183,7 +187,7 @@ class SceneRenderer:
                cameras: Sequence[Camera | None] | None = None, lod: bool = True,
                lightmap_mode: str = "modulate", face_times: Sequence[float | None] | None = None) -> Iterator[SceneImage]:
         """Render the scene at each of ``times``, pipelined: yields a :class:`SceneImage` per time, the
-        same pictures as :meth:`render`.  While the GL rasterizes frame ``i`` (handed over with
+        same pictures as :meth:`render`, byte for byte, whatever was drawn before.  While the GL rasterizes frame ``i`` (handed over with
         ``glFlush``, not waited for), the CPU work of frame ``i + 1`` (animation, skinning, LOD,
         culling, shadow frustums) runs; then frame ``i`` is read back.  (On llvmpipe only that planning
         can overlap: it bins a frame on the calling thread and rasterizes it after the flush;
