@@ -66,7 +66,7 @@ from piste.errors import FormatError
 from piste.formats.atomic import atomic_path
 from piste.formats.bundle_schema import MAX_MEMBER_BYTES, check_manifest
 from piste.formats.safe_io import loads_json, open_file
-from piste.formats.ziplite import STORED, BadZip, ZipEntry, member_bytes, read_index
+from piste.formats.ziplite import STORED, BadZip, member_bytes, read_index
 
 if TYPE_CHECKING:
     import zipfile
@@ -288,16 +288,6 @@ def _mapped(fh: Any) -> mmap.mmap | None:
         return None
 
 
-def _mapped_member(mm: mmap.mmap, zi: ZipEntry | zipfile.ZipInfo) -> memoryview | bytes | None:
-    """Member ``zi`` of the mapped file ``mm``: an uncompressed one as a view of the mapping (no copy:
-    reading the 13 MB of vertex blocks into a fresh process's new memory cost ~10 ms more than
-    mapping them; its CRC-32 not computed here), a deflated one inflated (at most its declared size)
-    and its CRC-32 checked -- zipfile's per-member open/seek/read cost ~60 us a member.  None where
-    its local header is not a plain one or another compression (zipfile then reads it and reports what
-    is wrong); zlib.error / BadZip when the data is corrupt (:func:`piste.formats.ziplite.member_bytes`)."""
-    return member_bytes(mm, zi)
-
-
 def _read_arrays(path: Path, zf: _Archive, members: dict, verify: bool,
                  on_terrain: Callable[[dict], Any] | None = None,
                  hand_off_share: float | None = None) -> tuple[dict, Callable[[], None]]:
@@ -447,7 +437,9 @@ def _read_member(path: Path, zf: _Archive, mm: mmap.mmap | None, infos: dict, me
                      or zi.file_size < _Hasher.MIN_BYTES):
         return
     try:
-        data = _mapped_member(mm, zi) if mm is not None else None
+        # (a view of the mapping: reading the 13 MB of vertex blocks into new memory cost a fresh
+        # process ~10 ms more; None where the local header is not a plain one: zipfile reads it)
+        data = member_bytes(mm, zi) if mm is not None else None
         crc_checked = data is None or zi.compress_type != STORED
         if data is None:
             with zf.open(zi) as fh:
