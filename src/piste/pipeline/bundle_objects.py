@@ -438,9 +438,6 @@ def load_bundle(path: str | os.PathLike[str], verify: bool = True, warm: bool = 
     # corrupt member is named as such even when what its bytes broke raised first
     data, finish = read_bundle_deferred(path, verify, on_terrain=terrain_ready)
     try:
-        bundle = bundle_from_data(data, warm=warm, net=early.get("net"))
-    except BaseException:
-        finish()
-        raise
-    finish()
-    return bundle
+        return bundle_from_data(data, warm=warm, net=early.get("net"))
+    finally:
+        finish()  # (raises the corrupt member's FormatError, also over what its bytes broke)
