@@ -216,8 +216,8 @@ def fresh_first_frame(bundle: Path, runs: int, baseline_src: Path | None = None)
         gain = b[:, 5] - a[:, 5]  # per round (the two ran in the same round)
         print(f"  baseline sources ({baseline_src}), the same rounds: imports {mb[0]:.3f} s + GL context {mb[1]:.3f} s + "
               f"load {mb[2]:.3f} s + renderer set-up {mb[3]:.3f} s + first frame {mb[4]:.3f} s = {mb[5]:.3f} s "
-              f"[{b[:, 5].min():.3f}-{b[:, 5].max():.3f}], {mb[5] / pn:.2f}x the stricter peer; these sources "
-              f"{np.median(gain) * 1e3:+.1f} ms faster per round [{gain.min() * 1e3:+.1f} to {gain.max() * 1e3:+.1f}]")
+              f"[{b[:, 5].min():.3f}-{b[:, 5].max():.3f}], {mb[5] / pn:.2f}x the stricter peer; the sources under test "
+              f"(piste's figure above) {np.median(gain) * 1e3:+.1f} ms faster than them per round [{gain.min() * 1e3:+.1f} to {gain.max() * 1e3:+.1f}]")
     cp, cq, cn = (float(np.median(cpu[k])) for k in ("piste", "peer", "named"))
     print(f"  CPU time of each whole process (user + sys, every thread: llvmpipe's too; the interpreter's start "
           f"included; less swayed by other processes than the wall times): piste {cp:.3f} s, the peer {cq:.3f} s "
